@@ -1,0 +1,44 @@
+//! Planning and control firmware of an automated car, after Polack et al.,
+//! *Guaranteeing Consistency in a Motion Planning and Control Architecture Using a
+//! Kinematic Bicycle Model* (ACC 2018).
+//!
+//! `no_std`, no heap, no `alloc`, no recursion; every size is a compile-time
+//! constant. One module per concept of the paper:
+//!
+//! | module | concept |
+//! |---|---|
+//! | [`reference_path`] | centre line: arc length, projection, heading, curvature |
+//! | [`bicycle`] | kinematic bicycle model, its discretisation and Jacobians |
+//! | [`validity`] | the validity limit `δ_max(V)` keeping `a_y ≤ 0.5·μ·g` |
+//! | [`velocity_planner`] | local velocity planner, `V_heur` |
+//! | [`obstacles`] | obstacle manager: one forbidden parabola per obstacle |
+//! | [`qp`] | our dense active-set QP solver |
+//! | [`mpc`] | the local MPC planner (linearise, condense, solve) |
+//! | [`pid`] | PID controller |
+//! | [`low_level`] | low-level control: torque dispatch, `δ = δ_ol + δ_cl` |
+//! | [`plan`], [`state_estimate`] | the two resources the tasks share |
+//! | [`tasks`] | the 100 Hz `control` and 10 Hz `plan` tasks |
+//!
+//! The maths is generic over [`Real`] (`f32` on the ECU). Units are SI (m, s,
+//! rad, N, N·m, kg); vehicle frame x forward, y left; yaw counter-clockwise.
+#![cfg_attr(not(test), no_std)]
+
+pub mod real;
+
+pub mod bicycle;
+pub mod low_level;
+pub mod mpc;
+pub mod obstacles;
+pub mod pid;
+pub mod plan;
+pub mod qp;
+pub mod reference_path;
+pub mod state_estimate;
+pub mod tasks;
+pub mod validity;
+pub mod velocity_planner;
+
+pub use real::Real;
+
+/// Standard gravity, m/s².
+pub const G: f32 = 9.81;

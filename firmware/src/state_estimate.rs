@@ -1,0 +1,61 @@
+//! The state estimate: what the vehicle's sensors and estimator hand to both tasks.
+
+use crate::Real;
+
+/// Vehicle state as measured/estimated at one instant (SI units).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StateEstimate<T> {
+    /// Time of the measurement, µs since start.
+    pub stamp_us: u64,
+    /// Global X position of the centre of gravity, m.
+    pub x_m: T,
+    /// Global Y position of the centre of gravity, m.
+    pub y_m: T,
+    /// Yaw angle, rad (counter-clockwise, not wrapped).
+    pub psi_rad: T,
+    /// Longitudinal speed in the vehicle frame, m/s.
+    pub vx_mps: T,
+    /// Lateral speed in the vehicle frame (positive to the left), m/s.
+    pub vy_mps: T,
+    /// Yaw rate, rad/s.
+    pub yaw_rate_radps: T,
+    /// Front steering angle currently applied, rad.
+    pub delta_rad: T,
+}
+
+impl<T: Real> StateEstimate<T> {
+    /// An all-zero estimate at time 0; a valid `const` initialiser.
+    pub const fn zeroed() -> Self {
+        Self {
+            stamp_us: 0,
+            x_m: T::ZERO,
+            y_m: T::ZERO,
+            psi_rad: T::ZERO,
+            vx_mps: T::ZERO,
+            vy_mps: T::ZERO,
+            yaw_rate_radps: T::ZERO,
+            delta_rad: T::ZERO,
+        }
+    }
+
+    /// Speed over ground `V = sqrt(vx² + vy²)`, m/s, signed by `vx`.
+    pub fn speed_mps(&self) -> T {
+        let v = self.vx_mps.hypot(self.vy_mps);
+        if self.vx_mps < T::ZERO {
+            -v
+        } else {
+            v
+        }
+    }
+
+    /// True when every field is finite (NaN and ±∞ are refused by the tasks).
+    pub fn is_finite(&self) -> bool {
+        self.x_m.is_finite()
+            && self.y_m.is_finite()
+            && self.psi_rad.is_finite()
+            && self.vx_mps.is_finite()
+            && self.vy_mps.is_finite()
+            && self.yaw_rate_radps.is_finite()
+            && self.delta_rad.is_finite()
+    }
+}

@@ -1,0 +1,2 @@
+//! `host-sim` command line.
+fn main() {}
