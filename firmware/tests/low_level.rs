@@ -1,0 +1,584 @@
+//! Tests of the low-level controllers (`firmware::low_level`).
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::field_reassign_with_default,
+    missing_docs
+)]
+
+use firmware::low_level::{
+    control, safe_actuation, wrap_pi, Actuation, ControlFault, LowLevelConfig, LowLevelConfigError,
+    LowLevelState, Mode,
+};
+use firmware::pid::{self, PidState};
+use firmware::plan::{Plan, HORIZON};
+use firmware::state_estimate::StateEstimate;
+
+const DT_U: f64 = 0.2;
+const US: u64 = 1_000_000;
+
+/// A straight plan along X at constant speed `v`, stamped at `stamp_us`.
+fn straight_plan(stamp_us: u64, v: f64) -> Plan<f64> {
+    let mut p = Plan::zeroed();
+    p.stamp_us = stamp_us;
+    p.dt_s = DT_U;
+    for (k, n) in p.nodes.iter_mut().enumerate() {
+        n.v_mps = v;
+        n.x_m = v * DT_U * k as f64;
+        n.s_m = n.x_m;
+    }
+    p
+}
+
+fn est(v: f64, psi: f64) -> StateEstimate<f64> {
+    StateEstimate {
+        vx_mps: v,
+        psi_rad: psi,
+        ..StateEstimate::zeroed()
+    }
+}
+
+fn cfg_no_ff() -> LowLevelConfig<f64> {
+    let mut c = LowLevelConfig::default();
+    c.accel_feedforward = false;
+    c
+}
+
+fn sum(a: &Actuation<f64>) -> f64 {
+    a.wheel_torque_nm.iter().sum()
+}
+
+#[test]
+fn default_config_is_valid_in_both_precisions() {
+    assert_eq!(LowLevelConfig::<f64>::default().validate(), Ok(()));
+    assert_eq!(LowLevelConfig::<f32>::default().validate(), Ok(()));
+    let mut c = LowLevelConfig::<f64>::default();
+    c.mass_kg = 0.0;
+    assert_eq!(c.validate(), Err(LowLevelConfigError::InvalidVehicle));
+    let mut c = LowLevelConfig::<f64>::default();
+    c.steer_limit_rad = f64::NAN;
+    assert_eq!(c.validate(), Err(LowLevelConfigError::InvalidSteeringLimit));
+    let mut c = LowLevelConfig::<f64>::default();
+    c.yaw_pid.kp = -1.0;
+    assert!(matches!(c.validate(), Err(LowLevelConfigError::YawPid(_))));
+    let mut c = LowLevelConfig::<f64>::default();
+    c.stop_decel_mps2 = 0.0;
+    assert_eq!(c.validate(), Err(LowLevelConfigError::InvalidStopDecel));
+}
+
+#[test]
+fn traction_goes_to_front_wheels_and_total_equals_pid_output() {
+    let cfg = cfg_no_ff();
+    let mut st = LowLevelState::new();
+    let plan = straight_plan(0, 10.0);
+    // Car slower than planned → traction.
+    let a = control(&cfg, &mut st, &plan, &est(9.0, 0.0), 0).unwrap();
+    let [fl, fr, rl, rr] = a.wheel_torque_nm;
+    assert!(fl > 0.0);
+    assert_eq!(fl, fr);
+    assert_eq!((rl, rr), (0.0, 0.0));
+    // The same PID, alone, gives the same total.
+    let mut ps = PidState::new();
+    let u = pid::update(&cfg.speed_pid, &mut ps, 10.0, 9.0, cfg.period_s).unwrap();
+    assert!((sum(&a) - u).abs() < 1e-9, "{} vs {u}", sum(&a));
+    assert_eq!(a.torque_total_nm, sum(&a));
+    assert_eq!(a.torque_ff_nm, 0.0);
+}
+
+#[test]
+fn braking_goes_equally_to_all_four_wheels() {
+    let cfg = cfg_no_ff();
+    let mut st = LowLevelState::new();
+    let plan = straight_plan(0, 10.0);
+    let a = control(&cfg, &mut st, &plan, &est(11.0, 0.0), 0).unwrap();
+    let w = a.wheel_torque_nm;
+    assert!(w[0] < 0.0);
+    assert!(w.iter().all(|&t| t == w[0]));
+    let mut ps = PidState::new();
+    let u = pid::update(&cfg.speed_pid, &mut ps, 10.0, 11.0, cfg.period_s).unwrap();
+    assert!((sum(&a) - u).abs() < 1e-9);
+}
+
+#[test]
+fn torque_is_limited_and_feedforward_adds_m_a_r() {
+    let cfg = LowLevelConfig::<f64>::default();
+    let mut st = LowLevelState::new();
+    let mut plan = straight_plan(0, 10.0);
+    for u in plan.inputs.iter_mut() {
+        u[0] = 2.0;
+    }
+    // On the planned speed: the torque is the feed-forward alone.
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 0).unwrap();
+    assert!((a.torque_ff_nm - 1500.0 * 2.0 * 0.3).abs() < 1e-9);
+    assert!((a.torque_total_nm - 900.0).abs() < 1e-9);
+    // Far too slow: total traction saturates at the limit.
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(0.0, 0.0), 0).unwrap();
+    assert_eq!(a.torque_total_nm, cfg.max_traction_torque_nm);
+    // Far too fast: total braking saturates at the limit.
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(30.0, 0.0), 0).unwrap();
+    assert!((sum(&a) + cfg.max_braking_torque_nm).abs() < 1e-9);
+}
+
+#[test]
+fn v_ref_is_linearly_interpolated() {
+    let cfg = cfg_no_ff();
+    let mut plan = straight_plan(5 * US, 10.0);
+    plan.nodes[3].v_mps = 10.0;
+    plan.nodes[4].v_mps = 12.0;
+    // Midpoint of interval 3: t = 3.5·0.2 = 0.7 s.
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 5 * US + 700_000).unwrap();
+    assert!((a.v_ref_mps - 11.0).abs() < 1e-12, "{}", a.v_ref_mps);
+    // A quarter of the way.
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 5 * US + 650_000).unwrap();
+    assert!((a.v_ref_mps - 10.5).abs() < 1e-12);
+    assert_eq!(a.mode, Mode::Following);
+}
+
+#[test]
+fn delta_ol_starts_at_plan_delta_and_integrates_the_first_rate() {
+    let cfg = cfg_no_ff();
+    let mut plan = straight_plan(US, 10.0);
+    plan.nodes[0].delta_rad = 0.1;
+    plan.inputs[0][1] = 0.3;
+    for k in 1..=HORIZON {
+        plan.nodes[k].delta_rad = 0.1 + 0.3 * DT_U;
+    }
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), US).unwrap();
+    assert!(a.new_plan);
+    assert_eq!(a.delta_ol_rad, 0.1);
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), US + 50_000).unwrap();
+    assert!(!a.new_plan);
+    assert!((a.delta_ol_rad - (0.1 + 0.3 * 0.05)).abs() < 1e-12);
+    // Next interval: rate 0 → holds δ_1.
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), US + 300_000).unwrap();
+    assert!((a.delta_ol_rad - (0.1 + 0.3 * DT_U)).abs() < 1e-12);
+
+    // A new plan restarts δ_ol from its own node 0.
+    let mut p2 = plan;
+    p2.stamp_us = US + 310_000;
+    p2.nodes[0].delta_rad = -0.05;
+    let a = control(&cfg, &mut st, &p2, &est(10.0, 0.0), US + 310_000).unwrap();
+    assert!(a.new_plan);
+    assert_eq!(a.delta_ol_rad, -0.05);
+    assert_eq!(st.plans_seen, 2);
+}
+
+#[test]
+fn car_yawed_right_of_plan_steers_left() {
+    let cfg = cfg_no_ff();
+    let plan = straight_plan(0, 10.0);
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, -0.1), 0).unwrap();
+    assert!(a.yaw_error_rad < 0.0);
+    assert!(a.delta_cl_rad > 0.0, "δ_cl = {}", a.delta_cl_rad);
+    // K_P·0.1 + one integration step K_I·0.1·Δt, no D on the first step.
+    assert!((a.delta_cl_rad - (0.1 + 0.5 * 0.1 * 0.01)).abs() < 1e-12);
+    // Yawing right at 0.5 rad/s while aligned: projected error −0.1 → steer left.
+    let mut st = LowLevelState::new();
+    let mut e = est(10.0, 0.0);
+    e.yaw_rate_radps = -0.5;
+    let a = control(&cfg, &mut st, &plan, &e, 0).unwrap();
+    assert!((a.yaw_error_rad + 0.1).abs() < 1e-12);
+    assert!(a.delta_rad > 0.0);
+    // And the mirror image.
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.1), 0).unwrap();
+    assert!(a.delta_rad < 0.0);
+}
+
+#[test]
+fn yaw_error_is_wrapped() {
+    let cfg = cfg_no_ff();
+    let mut plan = straight_plan(0, 10.0);
+    for n in plan.nodes.iter_mut() {
+        n.psi_rad = 3.1;
+    }
+    let mut st = LowLevelState::new();
+    // −3.1 is 0.0832 rad to the left of 3.1 across ±π.
+    let a = control(&cfg, &mut st, &plan, &est(10.0, -3.1), 0).unwrap();
+    let expected = 2.0 * std::f64::consts::PI - 6.2;
+    assert!((a.yaw_error_rad - expected).abs() < 1e-12);
+    assert!(a.delta_rad < 0.0);
+    assert!((wrap_pi(std::f64::consts::PI) - std::f64::consts::PI).abs() < 1e-15);
+    assert!((wrap_pi(-std::f64::consts::PI) - std::f64::consts::PI).abs() < 1e-15);
+    assert!((wrap_pi(7.0f64) - (7.0 - 2.0 * std::f64::consts::PI)).abs() < 1e-12);
+    assert!((wrap_pi(-100.0f32) - (-100.0 + 32.0 * std::f32::consts::PI)).abs() < 1e-4);
+}
+
+#[test]
+fn steering_saturates_at_the_mechanical_limit_without_windup() {
+    let cfg = cfg_no_ff();
+    let mut plan = straight_plan(0, 10.0);
+    for n in plan.nodes.iter_mut() {
+        n.delta_rad = 0.55;
+    }
+    let mut st = LowLevelState::new();
+    // Car far right of the plan for 2 s: δ_cl wants +0.3, only 0.05 is left.
+    for k in 0..200u64 {
+        let a = control(&cfg, &mut st, &plan, &est(10.0, -0.5), k * 10_000).unwrap();
+        assert_eq!(a.delta_rad, cfg.steer_limit_rad);
+        assert!((a.delta_cl_rad - 0.05).abs() < 1e-12);
+    }
+    // P alone (0.5) is beyond the window: the integrator did not grow.
+    assert_eq!(st.yaw_pid.integral, 0.0);
+    // Error reverses: the command leaves the limit at once.
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.1), 2_000_000).unwrap();
+    assert!(a.delta_rad < cfg.steer_limit_rad - 0.05);
+}
+
+#[test]
+fn steering_rate_limit() {
+    let mut cfg = cfg_no_ff();
+    cfg.steer_rate_limit_radps = 1.0;
+    let mut plan = straight_plan(0, 10.0);
+    let mut st = LowLevelState::new();
+    control(&cfg, &mut st, &plan, &est(10.0, 0.0), 0).unwrap();
+    for n in plan.nodes.iter_mut() {
+        n.delta_rad = 0.4;
+    }
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 10_000).unwrap();
+    assert!((a.delta_rad - 0.01).abs() < 1e-12, "{}", a.delta_rad);
+}
+
+#[test]
+fn stale_plan_stops_the_car() {
+    let cfg = cfg_no_ff();
+    let plan = straight_plan(0, 12.0);
+    let mut st = LowLevelState::new();
+    let mut modes = Vec::new();
+    let mut last_v = f64::INFINITY;
+    let mut reached_zero_at = None;
+    for k in 0..1000u64 {
+        let now = k * 10_000;
+        let a = control(&cfg, &mut st, &plan, &est(12.0, 0.0), now).unwrap();
+        if modes.last() != Some(&a.mode) {
+            modes.push(a.mode);
+        }
+        if a.mode == Mode::Stopping {
+            assert!(a.v_ref_mps <= last_v);
+            assert!(a.v_ref_mps < 12.0);
+            last_v = a.v_ref_mps;
+            if a.v_ref_mps == 0.0 && reached_zero_at.is_none() {
+                reached_zero_at = Some(now);
+            }
+        } else {
+            assert_eq!(a.v_ref_mps, 12.0);
+        }
+    }
+    assert_eq!(
+        modes,
+        vec![Mode::Following, Mode::Extrapolating, Mode::Stopping]
+    );
+    // 12 m/s at 3 m/s² → zero 4 s after the end of the 3.2 s plan.
+    let t0 = reached_zero_at.unwrap() as f64 * 1e-6;
+    assert!((t0 - 7.2).abs() < 0.011, "zero at {t0}");
+    assert_eq!(last_v, 0.0);
+}
+
+#[test]
+fn stopping_with_feedforward_brakes_and_holds_the_last_arc() {
+    let cfg = LowLevelConfig::<f64>::default();
+    let mut plan = straight_plan(0, 10.0);
+    // Last interval turning left at 0.2 rad/s with δ = 0.05.
+    for (k, n) in plan.nodes.iter_mut().enumerate() {
+        n.psi_rad = 0.04 * k as f64;
+        n.delta_rad = 0.05;
+    }
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.64), 4_000_000).unwrap();
+    assert_eq!(a.mode, Mode::Stopping);
+    assert!((a.v_ref_mps - (10.0 - 3.0 * 0.8)).abs() < 1e-9);
+    assert!((a.torque_ff_nm + 1500.0 * 3.0 * 0.3).abs() < 1e-9);
+    assert!(a.torque_total_nm < 0.0);
+    assert_eq!(a.delta_ol_rad, 0.05);
+    // ψ^r continues on the arc: at s = 1.0 s, ∫V^r/V_N = 1 − 3/(2·10) = 0.85 s.
+    assert!((a.psi_ref_rad - (0.64 + 0.2 * 0.85)).abs() < 1e-9);
+    // Long after: the reference is at rest, its yaw stays where the stop ends.
+    let a = control(&cfg, &mut st, &plan, &est(0.0, 0.64), 60_000_000).unwrap();
+    assert_eq!(a.v_ref_mps, 0.0);
+    assert!((a.psi_ref_rad - (0.64 + 0.2 * 10.0 / 6.0)).abs() < 1e-9);
+}
+
+#[test]
+fn nan_estimate_is_refused_and_safe_actuation_holds_steering() {
+    let cfg = cfg_no_ff();
+    let mut plan = straight_plan(0, 10.0);
+    for n in plan.nodes.iter_mut() {
+        n.delta_rad = 0.1;
+    }
+    let mut st = LowLevelState::new();
+    let ok = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 0).unwrap();
+    let before = st;
+    for bad in [
+        est(f64::NAN, 0.0),
+        est(10.0, f64::INFINITY),
+        StateEstimate {
+            yaw_rate_radps: f64::NAN,
+            ..est(10.0, 0.0)
+        },
+    ] {
+        assert_eq!(
+            control(&cfg, &mut st, &plan, &bad, 10_000),
+            Err(ControlFault::NonFiniteEstimate)
+        );
+        assert_eq!(st, before);
+    }
+    let safe = safe_actuation(&cfg, &st);
+    assert_eq!(safe.mode, Mode::Safe);
+    assert_eq!(safe.delta_rad, ok.delta_rad);
+    let w = safe.wheel_torque_nm;
+    assert!(w.iter().all(|&t| t == w[0] && t < 0.0));
+    assert!((sum(&safe) + cfg.safe_brake_torque_nm).abs() < 1e-9);
+    // Before any command: steering held at 0.
+    let fresh = safe_actuation(&cfg, &LowLevelState::new());
+    assert_eq!(fresh.delta_rad, 0.0);
+    assert_eq!(
+        Actuation::safe(0.2f32, 1000.0).wheel_torque_nm,
+        [-250.0f32; 4]
+    );
+}
+
+#[test]
+fn non_finite_or_empty_plan_is_refused() {
+    let cfg = cfg_no_ff();
+    let mut st = LowLevelState::new();
+    let e = est(10.0, 0.0);
+    let mut plan = straight_plan(0, 10.0);
+    plan.nodes[HORIZON].y_m = f64::NAN;
+    assert_eq!(
+        control(&cfg, &mut st, &plan, &e, 0),
+        Err(ControlFault::NonFinitePlan)
+    );
+    let mut plan = straight_plan(0, 10.0);
+    plan.inputs[7][0] = f64::NEG_INFINITY;
+    assert_eq!(
+        control(&cfg, &mut st, &plan, &e, 0),
+        Err(ControlFault::NonFinitePlan)
+    );
+    let mut plan = straight_plan(0, 10.0);
+    plan.dt_s = f64::NAN;
+    assert_eq!(
+        control(&cfg, &mut st, &plan, &e, 0),
+        Err(ControlFault::NonFinitePlan)
+    );
+    assert_eq!(
+        control(&cfg, &mut st, &Plan::zeroed(), &e, 0),
+        Err(ControlFault::InvalidPlan)
+    );
+    assert_eq!(st, LowLevelState::new());
+}
+
+#[test]
+fn clock_behind_plan_is_handled() {
+    let cfg = cfg_no_ff();
+    let mut plan = straight_plan(10 * US, 10.0);
+    plan.nodes[0].v_mps = 9.0;
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 9 * US).unwrap();
+    assert!((a.plan_age_s + 1.0).abs() < 1e-9);
+    assert_eq!(a.mode, Mode::Following);
+    assert_eq!(a.v_ref_mps, 9.0);
+    // And a control clock that goes backwards between calls.
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 8 * US).unwrap();
+    assert!(a.delta_rad.is_finite());
+    // Extreme stamps.
+    let a = control(
+        &cfg,
+        &mut st,
+        &straight_plan(u64::MAX, 1.0),
+        &est(1.0, 0.0),
+        0,
+    )
+    .unwrap();
+    assert!(a.plan_age_s < 0.0);
+    let a = control(
+        &cfg,
+        &mut st,
+        &straight_plan(0, 1.0),
+        &est(1.0, 0.0),
+        u64::MAX,
+    )
+    .unwrap();
+    assert_eq!(a.mode, Mode::Stopping);
+    assert_eq!(a.v_ref_mps, 0.0);
+}
+
+#[test]
+fn f32_runs_and_agrees_with_f64() {
+    let c32 = LowLevelConfig::<f32>::default();
+    let c64 = LowLevelConfig::<f64>::default();
+    let p64 = straight_plan(0, 10.0);
+    let mut p32 = Plan::<f32>::zeroed();
+    p32.dt_s = 0.2;
+    for (a, b) in p32.nodes.iter_mut().zip(p64.nodes.iter()) {
+        a.v_mps = b.v_mps as f32;
+        a.x_m = b.x_m as f32;
+        a.psi_rad = 0.01;
+    }
+    let mut p64b = p64;
+    for n in p64b.nodes.iter_mut() {
+        n.psi_rad = 0.01f32 as f64;
+    }
+    let (mut s32, mut s64) = (LowLevelState::new(), LowLevelState::new());
+    let e32 = StateEstimate {
+        vx_mps: 9.5f32,
+        ..StateEstimate::zeroed()
+    };
+    for k in 0..50u64 {
+        let a = control(&c32, &mut s32, &p32, &e32, k * 10_000).unwrap();
+        let b = control(&c64, &mut s64, &p64b, &est(9.5, 0.0), k * 10_000).unwrap();
+        assert!((a.torque_total_nm as f64 - b.torque_total_nm).abs() < 1e-2);
+        assert!((a.delta_rad as f64 - b.delta_rad).abs() < 1e-6);
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Closed-loop smoke test.
+
+/// Reference: constant speed `v` on a circle of radius `r` (left turn; straight
+/// line for `r = ∞`), starting at the origin heading +X. Rear-axle kinematics.
+struct Reference {
+    v: f64,
+    r: f64,
+    wheelbase: f64,
+}
+
+impl Reference {
+    fn at(&self, t: f64) -> (f64, f64, f64) {
+        let s = self.v * t;
+        if self.r.is_infinite() {
+            return (s, 0.0, 0.0);
+        }
+        let psi = s / self.r;
+        (self.r * psi.sin(), self.r * (1.0 - psi.cos()), psi)
+    }
+    fn delta(&self) -> f64 {
+        (self.wheelbase / self.r).atan()
+    }
+    fn plan(&self, stamp_us: u64) -> Plan<f64> {
+        let mut p = Plan::zeroed();
+        p.stamp_us = stamp_us;
+        p.dt_s = DT_U;
+        let t0 = stamp_us as f64 * 1e-6;
+        for (k, n) in p.nodes.iter_mut().enumerate() {
+            let (x, y, psi) = self.at(t0 + DT_U * k as f64);
+            n.x_m = x;
+            n.y_m = y;
+            n.psi_rad = psi;
+            n.v_mps = self.v;
+            n.s_m = self.v * (t0 + DT_U * k as f64);
+            n.delta_rad = self.delta();
+        }
+        p
+    }
+}
+
+/// A car unlike the planner's model: steering 15 % less effective (understeer),
+/// a 50 ms steering lag, drag and rolling resistance, 1500 kg on 0.3 m wheels.
+struct Car {
+    x: f64,
+    y: f64,
+    psi: f64,
+    v: f64,
+    delta: f64,
+    wheelbase: f64,
+}
+
+impl Car {
+    fn yaw_rate(&self) -> f64 {
+        self.v * (0.85 * self.delta).tan() / self.wheelbase
+    }
+    fn step(&mut self, a: &Actuation<f64>, dt: f64) {
+        let torque: f64 = a.wheel_torque_nm.iter().sum();
+        let resist = 0.5 * 1.225 * 0.31 * 2.2 * self.v * self.v + 0.015 * 1500.0 * 9.81;
+        let accel = (torque / 0.3 - resist) / 1500.0;
+        self.delta += (a.delta_rad - self.delta) * dt / 0.05;
+        let r = self.yaw_rate();
+        self.x += self.v * self.psi.cos() * dt;
+        self.y += self.v * self.psi.sin() * dt;
+        self.psi += r * dt;
+        self.v = (self.v + accel * dt).max(0.0);
+    }
+    fn estimate(&self, now_us: u64) -> StateEstimate<f64> {
+        StateEstimate {
+            stamp_us: now_us,
+            x_m: self.x,
+            y_m: self.y,
+            psi_rad: self.psi,
+            vx_mps: self.v,
+            vy_mps: 0.0,
+            yaw_rate_radps: self.yaw_rate(),
+            delta_rad: self.delta,
+        }
+    }
+}
+
+/// Runs 20 s; returns (max |yaw error| after 2 s, max |speed error| after 2 s,
+/// max distance to the reference path).
+fn closed_loop(radius: f64) -> (f64, f64, f64) {
+    let reference = Reference {
+        v: 10.0,
+        r: radius,
+        wheelbase: 2.65,
+    };
+    let cfg = LowLevelConfig::<f64>::default();
+    cfg.validate().unwrap();
+    let mut st = LowLevelState::new();
+    let mut car = Car {
+        x: 0.0,
+        y: 0.0,
+        psi: 0.0,
+        v: 10.0,
+        delta: reference.delta(),
+        wheelbase: 2.65,
+    };
+    let mut plan = reference.plan(0);
+    let (mut max_yaw, mut max_v, mut max_dist) = (0.0f64, 0.0f64, 0.0f64);
+    for k in 0..2000u64 {
+        let now = k * 10_000;
+        if k % 10 == 0 {
+            plan = reference.plan(now);
+        }
+        let a = control(&cfg, &mut st, &plan, &car.estimate(now), now).unwrap();
+        assert_eq!(a.mode, Mode::Following);
+        let t = now as f64 * 1e-6;
+        let (_, _, psi_r) = reference.at(t);
+        if k >= 200 {
+            max_yaw = max_yaw.max(wrap_pi(car.psi - psi_r).abs());
+            max_v = max_v.max((car.v - 10.0).abs());
+        }
+        let dist = if radius.is_infinite() {
+            car.y.abs()
+        } else {
+            ((car.x.powi(2) + (car.y - radius).powi(2)).sqrt() - radius).abs()
+        };
+        max_dist = max_dist.max(dist);
+        for _ in 0..10 {
+            car.step(&a, 0.001);
+        }
+    }
+    (max_yaw, max_v, max_dist)
+}
+
+#[test]
+fn closed_loop_straight_line() {
+    let (yaw, v, dist) = closed_loop(f64::INFINITY);
+    assert!(yaw < 1e-3, "yaw error {yaw}");
+    assert!(v < 0.05, "speed error {v}");
+    assert!(dist < 0.05, "distance {dist}");
+}
+
+#[test]
+fn closed_loop_constant_radius_arc() {
+    let (yaw, v, dist) = closed_loop(30.0);
+    println!("arc: yaw {yaw} rad, speed {v} m/s, distance {dist} m");
+    assert!(yaw < 0.02, "yaw error {yaw}");
+    assert!(v < 0.1, "speed error {v}");
+    assert!(dist < 1.0, "distance {dist}");
+}
