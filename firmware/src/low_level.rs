@@ -80,10 +80,15 @@
 //! # Cost
 //!
 //! No trigonometric function at all: one `sqrt` (the speed), one `floor` (the yaw
-//! wrap) and about six divisions; about 140 operations to check that the whole
-//! plan is finite, about 60 for the two interpolations and 60 for the two PIDs.
-//! Roughly 300 floating-point operations, of the order of one to two thousand
-//! cycles on the Cortex-M4F in `f32` (libm's `sqrtf` is a software routine).
+//! wrap), fourteen divisions (eight here, three in each PID update) and about 300
+//! other floating-point operations (about 140 of them check that the whole plan is
+//! finite, 60 are the two interpolations, 60 the two PIDs). Static count for
+//! `f32` on `thumbv7em-none-eabihf` (release, LTO): about 740 Thumb-2 instructions
+//! for `control` itself, mostly straight-line, plus two calls to
+//! [`pid::update_within`] (about 230 instructions each, a few branches taken), libm's
+//! software `sqrtf` (about 105) and `floorf` (about 35): of the order of 1,000
+//! instructions executed, 1,500 cycles with the 14-cycle `VDIV.F32`s, about 9 µs
+//! at 168 MHz. No call to `f64` or integer-division routines.
 
 use crate::pid::{self, PidConfig, PidConfigError, PidState};
 use crate::plan::{Plan, HORIZON};
