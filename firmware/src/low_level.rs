@@ -100,9 +100,11 @@ use crate::Real;
 pub struct LowLevelConfig<T> {
     /// Speed loop: input m/s, output **total** wheel torque N·m (sum over the four
     /// wheels, positive driving forward). Its output limits apply on top of
-    /// `max_traction_torque_nm` / `max_braking_torque_nm`.
+    /// `max_traction_torque_nm` / `max_braking_torque_nm`. Its `sample_time_s` is
+    /// not used by [`control`] (see `period_s`).
     pub speed_pid: PidConfig<T>,
-    /// Yaw loop: input rad (projected yaw), output `δ_cl` rad (positive left).
+    /// Yaw loop: input rad (projected yaw), output `δ_cl` rad (positive left). Its
+    /// `sample_time_s` is not used by [`control`] (see `period_s`).
     pub yaw_pid: PidConfig<T>,
     /// Adds the feed-forward torque `m·a_plan·r_eff` (not in the paper).
     pub accel_feedforward: bool,

@@ -332,3 +332,59 @@ fn f32_and_f64_agree() {
     }
     assert!((y32 as f64 - y64).abs() < 1e-4);
 }
+
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn any_mode() -> impl Strategy<Value = AntiWindup<f64>> {
+        prop_oneof![
+            Just(AntiWindup::None),
+            Just(AntiWindup::Conditional),
+            (0.01f64..2.0).prop_map(|t| AntiWindup::BackCalculation { tracking_time_s: t }),
+        ]
+    }
+
+    proptest! {
+        // Fixed seed: the test is deterministic; nothing written to disk.
+        #![proptest_config(ProptestConfig {
+            rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed_2018),
+            failure_persistence: None,
+            cases: 256,
+            ..ProptestConfig::default()
+        })]
+        /// Whatever the finite inputs: the output stays within its limits, the
+        /// integrator within its own, and with conditional integration the
+        /// integrator never moves further in the direction of a saturation.
+        #[test]
+        fn output_and_integrator_stay_bounded(
+            kp in 0.0f64..50.0, ki in 0.0f64..50.0, kd in 0.0f64..5.0, tf in 0.0f64..0.5,
+            mode in any_mode(),
+            steps in prop::collection::vec((-100.0f64..100.0, -100.0f64..100.0, 1e-4f64..0.1), 1..200),
+        ) {
+            let mut cfg = PidConfig::new(kp, ki, kd, 0.01);
+            cfg.derivative_filter_s = tf;
+            cfg.output_min = -5.0;
+            cfg.output_max = 7.0;
+            cfg.integral_min = -3.0;
+            cfg.integral_max = 4.0;
+            cfg.anti_windup = mode;
+            prop_assert!(cfg.validate().is_ok());
+            let mut st = PidState::new();
+            for (r, y, dt) in steps {
+                let before = st.integral;
+                let u = update(&cfg, &mut st, r, y, dt).unwrap();
+                prop_assert!((-5.0..=7.0).contains(&u));
+                prop_assert!((-3.0..=4.0).contains(&st.integral));
+                if mode == AntiWindup::Conditional {
+                    if u == 7.0 && y < r {
+                        prop_assert!(st.integral <= before);
+                    }
+                    if u == -5.0 && y > r {
+                        prop_assert!(st.integral >= before);
+                    }
+                }
+            }
+        }
+    }
+}
