@@ -554,9 +554,41 @@ impl Car {
     }
 }
 
-/// Runs 20 s from an initial yaw `psi0` (rad) off the plan; returns (max |yaw error| after 2 s, max |speed error| after 2 s,
+fn to_f32(p: &Plan<f64>) -> Plan<f32> {
+    let mut q = Plan::<f32>::zeroed();
+    q.stamp_us = p.stamp_us;
+    q.dt_s = p.dt_s as f32;
+    for (a, b) in q.nodes.iter_mut().zip(p.nodes.iter()) {
+        a.s_m = b.s_m as f32;
+        a.x_m = b.x_m as f32;
+        a.y_m = b.y_m as f32;
+        a.v_mps = b.v_mps as f32;
+        a.psi_rad = b.psi_rad as f32;
+        a.delta_rad = b.delta_rad as f32;
+    }
+    for (a, b) in q.inputs.iter_mut().zip(p.inputs.iter()) {
+        *a = [b[0] as f32, b[1] as f32];
+    }
+    q
+}
+
+fn est_f32(e: &StateEstimate<f64>) -> StateEstimate<f32> {
+    StateEstimate {
+        stamp_us: e.stamp_us,
+        x_m: e.x_m as f32,
+        y_m: e.y_m as f32,
+        psi_rad: e.psi_rad as f32,
+        vx_mps: e.vx_mps as f32,
+        vy_mps: e.vy_mps as f32,
+        yaw_rate_radps: e.yaw_rate_radps as f32,
+        delta_rad: e.delta_rad as f32,
+    }
+}
+
+/// Runs 20 s from an initial yaw `psi0` (rad) off the plan, the controller in
+/// `f32` if `single`, else `f64`; returns (max |yaw error| after 2 s, max |speed error| after 2 s,
 /// max distance to the reference path).
-fn closed_loop(radius: f64, psi0: f64) -> (f64, f64, f64) {
+fn closed_loop(radius: f64, psi0: f64, single: bool) -> (f64, f64, f64) {
     let reference = Reference {
         v: 10.0,
         r: radius,
@@ -565,6 +597,8 @@ fn closed_loop(radius: f64, psi0: f64) -> (f64, f64, f64) {
     let cfg = LowLevelConfig::<f64>::default();
     cfg.validate().unwrap();
     let mut st = LowLevelState::new();
+    let cfg32 = LowLevelConfig::<f32>::default();
+    let mut st32 = LowLevelState::<f32>::new();
     let mut car = Car {
         x: 0.0,
         y: 0.0,
@@ -580,8 +614,25 @@ fn closed_loop(radius: f64, psi0: f64) -> (f64, f64, f64) {
         if k % 10 == 0 {
             plan = reference.plan(now);
         }
-        let a = control(&cfg, &mut st, &plan, &car.estimate(now), now).unwrap();
-        assert_eq!(a.mode, Mode::Following);
+        let a = if single {
+            let a = control(
+                &cfg32,
+                &mut st32,
+                &to_f32(&plan),
+                &est_f32(&car.estimate(now)),
+                now,
+            )
+            .unwrap();
+            Actuation {
+                wheel_torque_nm: a.wheel_torque_nm.map(f64::from),
+                delta_rad: f64::from(a.delta_rad),
+                ..Actuation::safe(0.0, 0.0)
+            }
+        } else {
+            let a = control(&cfg, &mut st, &plan, &car.estimate(now), now).unwrap();
+            assert_eq!(a.mode, Mode::Following);
+            a
+        };
         let t = now as f64 * 1e-6;
         let (_, _, psi_r) = reference.at(t);
         if k >= 200 {
@@ -604,18 +655,22 @@ fn closed_loop(radius: f64, psi0: f64) -> (f64, f64, f64) {
 #[test]
 fn closed_loop_straight_line() {
     // Starts yawed 0.05 rad to the left: the yaw loop brings it back.
-    let (yaw, v, dist) = closed_loop(f64::INFINITY, 0.05);
-    println!("straight: yaw {yaw} rad, speed {v} m/s, distance {dist} m");
-    assert!(yaw < 0.01, "yaw error {yaw}");
-    assert!(v < 0.05, "speed error {v}");
-    assert!(dist < 0.5, "distance {dist}");
+    for single in [false, true] {
+        let (yaw, v, dist) = closed_loop(f64::INFINITY, 0.05, single);
+        println!("straight (f32: {single}): yaw {yaw} rad, speed {v} m/s, distance {dist} m");
+        assert!(yaw < 0.01, "yaw error {yaw}");
+        assert!(v < 0.05, "speed error {v}");
+        assert!(dist < 0.5, "distance {dist}");
+    }
 }
 
 #[test]
 fn closed_loop_constant_radius_arc() {
-    let (yaw, v, dist) = closed_loop(30.0, 0.0);
-    println!("arc: yaw {yaw} rad, speed {v} m/s, distance {dist} m");
-    assert!(yaw < 0.02, "yaw error {yaw}");
-    assert!(v < 0.1, "speed error {v}");
-    assert!(dist < 1.0, "distance {dist}");
+    for single in [false, true] {
+        let (yaw, v, dist) = closed_loop(30.0, 0.0, single);
+        println!("arc (f32: {single}): yaw {yaw} rad, speed {v} m/s, distance {dist} m");
+        assert!(yaw < 0.02, "yaw error {yaw}");
+        assert!(v < 0.1, "speed error {v}");
+        assert!(dist < 1.0, "distance {dist}");
+    }
 }
