@@ -356,9 +356,8 @@ struct Workspace<T, const N: usize, const M: usize, const W: usize, const WL: us
     n: usize,
     /// Current (dual-feasible) multipliers of the working set (`W`).
     lam: [T; W],
-    /// Multipliers solving the working-set system (`W`).
-    lam_star: [T; W],
-    /// Scratch (`W`): right-hand sides, rank-one vectors, null-space direction.
+    /// Scratch (`W`): right-hand side then `λ*` of the working-set system, rank-one
+    /// vectors, null-space direction.
     tmp: [T; W],
     /// Packed `LDLᵀ` of the working-set matrix: row `r` at `r(r+1)/2`, holding
     /// `L[r][0..r]` then `D[r]`.
@@ -421,7 +420,6 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 }; W],
                 n: 0,
                 lam: [T::ZERO; W],
-                lam_star: [T::ZERO; W],
                 tmp: [T::ZERO; W],
                 ldl: [T::ZERO; WL],
                 v: [T::ZERO; N],
@@ -860,7 +858,6 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         for r in pos..(n - 1) {
             self.ws[r] = self.ws[r + 1];
             self.lam[r] = self.lam[r + 1];
-            self.lam_star[r] = self.lam_star[r + 1];
         }
         let nn = n - 1;
         self.n = nn;
@@ -907,7 +904,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
     }
 
-    /// `λ*` for the current working set, into `lam_star`; false if not finite.
+    /// `λ*` for the current working set, into `tmp`; false if not finite.
     fn solve_lam_star(&mut self, p: &QpProblem<T, N, M>) -> bool {
         for k in 0..self.n {
             let e = self.ws[k];
@@ -920,12 +917,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             self.tmp[k] = -(b + dot_from(row, &self.v, st));
         }
         self.ldl_solve_tmp();
-        let mut ok = true;
-        for k in 0..self.n {
-            self.lam_star[k] = self.tmp[k];
-            ok &= self.tmp[k].is_finite();
-        }
-        ok
+        self.tmp.iter().take(self.n).all(|v| v.is_finite())
     }
 
     fn is_equality(p: &QpProblem<T, N, M>, c: ConstraintIndex) -> bool {
@@ -1021,7 +1013,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                     continue;
                 }
                 let sg = sign::<T>(e.side);
-                let ls = sg * self.lam_star[k];
+                let ls = sg * self.tmp[k];
                 if ls < -tols.dual {
                     let l = (sg * self.lam[k]).max(T::ZERO);
                     let ratio = l / (l - ls);
@@ -1032,7 +1024,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
             if let Some((pos, alpha)) = block {
                 for k in 0..self.n {
-                    let mut l = self.lam[k] + alpha * (self.lam_star[k] - self.lam[k]);
+                    let mut l = self.lam[k] + alpha * (self.tmp[k] - self.lam[k]);
                     let e = self.ws[k];
                     if !Self::is_equality(p, e.index) && sign::<T>(e.side) * l < T::ZERO {
                         l = T::ZERO;
@@ -1044,7 +1036,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 continue;
             }
             for k in 0..self.n {
-                self.lam[k] = self.lam_star[k];
+                self.lam[k] = self.tmp[k];
             }
             self.primal(p, &mut sol.x);
             let Some(e) = self.most_violated(p, &sol.x, tols.primal) else {
