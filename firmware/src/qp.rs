@@ -72,6 +72,12 @@
 //! multipliers come out with the wrong sign leave through ordinary removal steps
 //! (starting from `λ = 0`, which is dual feasible).
 
+// Index loops mirror the maths of the factorisations; the ranges are bounded by the
+// const sizes and the working-set count (≤ W).
+#![allow(clippy::needless_range_loop)]
+// `!(a > b)` is meant: it is also true when `a` is NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::Real;
 
 /// Length of the packed `LDLᵀ` storage for a working-set capacity `w`: `w(w+1)/2`.
@@ -512,8 +518,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         };
         self.solution.status = status;
         match status {
-            QpStatus::Optimal | QpStatus::IterationLimit | QpStatus::Infeasible
-            | QpStatus::WorkingSetFull | QpStatus::NumericalError => {
+            QpStatus::Optimal
+            | QpStatus::IterationLimit
+            | QpStatus::Infeasible
+            | QpStatus::WorkingSetFull
+            | QpStatus::NumericalError => {
                 self.work.output(&self.problem, &mut self.solution);
             }
             _ => {
@@ -537,6 +546,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize> D
     }
 }
 
+#[inline]
+fn is_nan<T: Real>(v: T) -> bool {
+    v.partial_cmp(&v).is_none()
+}
+
 /// Input checks; `None` if the problem is acceptable.
 fn validate<T: Real, const N: usize, const M: usize>(p: &QpProblem<T, N, M>) -> Option<QpStatus> {
     if p.m > M {
@@ -549,11 +563,11 @@ fn validate<T: Real, const N: usize, const M: usize>(p: &QpProblem<T, N, M>) -> 
     let mut bad_bound = false;
     let mut nan = false;
     for (&l, &h) in p.x_lo.iter().zip(p.x_hi.iter()) {
-        nan |= l != l || h != h;
+        nan |= is_nan(l) || is_nan(h);
         bad_bound |= l > h || l == T::INFINITY || h == -T::INFINITY;
     }
     for ((&l, &h), &s) in p.lo.iter().zip(p.hi.iter()).zip(p.soft.iter()).take(p.m) {
-        nan |= l != l || h != h || !s.is_finite();
+        nan |= is_nan(l) || is_nan(h) || !s.is_finite();
         bad_bound |= l > h || l == T::INFINITY || h == -T::INFINITY || s < T::ZERO;
     }
     if !finite || nan {
@@ -731,7 +745,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
             ConstraintIndex::Row(i) => {
                 let i = i as usize;
-                (i < p.m && i < M, self.row_state.get(i).is_some_and(|s| s.is_some()))
+                (
+                    i < p.m && i < M,
+                    self.row_state.get(i).is_some_and(|s| s.is_some()),
+                )
             }
         };
         if !in_range || active {
@@ -957,11 +974,17 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let mut consider = |val: T, lo: T, hi: T, index: ConstraintIndex| {
             if lo - val > best {
                 best = lo - val;
-                cand = Some(ActiveConstraint { index, side: Side::Lower });
+                cand = Some(ActiveConstraint {
+                    index,
+                    side: Side::Lower,
+                });
             }
             if val - hi > best {
                 best = val - hi;
-                cand = Some(ActiveConstraint { index, side: Side::Upper });
+                cand = Some(ActiveConstraint {
+                    index,
+                    side: Side::Upper,
+                });
             }
         };
         for j in 0..N {

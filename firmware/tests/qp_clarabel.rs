@@ -1,6 +1,12 @@
 //! Agreement of the QP solver with clarabel (f64 interior point) on random problems with
 //! fixed seeds and on hand-made ones: `x` and the objective to 1e-6.
-#![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![allow(
+    missing_docs,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::needless_range_loop
+)]
 
 mod qp_util;
 
@@ -23,10 +29,19 @@ fn compare(p: &QpProblem<f64, N, M>, s: &mut Solver, label: &str) {
     let (ok, xr, objr) = clarabel_solve(p);
     assert!(ok, "{label}: clarabel did not solve");
     let ours = objective(p, s.solution());
-    let dx = s.solution().x.iter().zip(&xr).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    let dx = s
+        .solution()
+        .x
+        .iter()
+        .zip(&xr)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
     let xscale = 1.0 + xr.iter().map(|v| v.abs()).fold(0.0, f64::max);
     assert!(dx <= TOL * xscale, "{label}: |x − x_clarabel|∞ = {dx:e}");
-    assert!((ours - objr).abs() <= TOL * (1.0 + objr.abs()), "{label}: objective {ours} vs clarabel {objr}");
+    assert!(
+        (ours - objr).abs() <= TOL * (1.0 + objr.abs()),
+        "{label}: objective {ours} vs clarabel {objr}"
+    );
 }
 
 #[test]
@@ -39,14 +54,27 @@ fn agrees_with_clarabel_on_random_problems() {
         let mix = match seed % 3 {
             0 => Mix::plain(M),
             1 => Mix::all(M),
-            _ => Mix { m: (seed as usize) % (M + 1), p_soft: 0.5, p_degenerate: 0.3, p_eq: 0.2, p_fixed: 0.2, tight: seed % 2 == 0 },
+            _ => Mix {
+                m: (seed as usize) % (M + 1),
+                p_soft: 0.5,
+                p_degenerate: 0.3,
+                p_eq: 0.2,
+                p_fixed: 0.2,
+                tight: seed % 2 == 0,
+            },
         };
         let p = random_problem::<N, M>(&mut rng, mix);
         compare(&p, &mut s, &format!("seed {seed}"));
         active += s.working_set().len();
     }
-    println!("mean working-set size at the optimum: {:.1}", active as f64 / 300.0);
-    assert!(active > 300 * 3, "the random problems should have active constraints");
+    println!(
+        "mean working-set size at the optimum: {:.1}",
+        active as f64 / 300.0
+    );
+    assert!(
+        active > 300 * 3,
+        "the random problems should have active constraints"
+    );
 }
 
 #[test]

@@ -1,6 +1,12 @@
 //! KKT conditions of the QP solver on random and hand-made problems (f64), and every
 //! failure status.
-#![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![allow(
+    missing_docs,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::needless_range_loop
+)]
 
 mod qp_util;
 
@@ -155,7 +161,11 @@ fn conflicting_soft_rows_are_never_infeasible_and_can_exceed_n() {
     let mut s = Small::new();
     s.settings.warm_start = false;
     solve_and_check(&mut s, &p).unwrap();
-    assert!(s.working_set().len() > N, "{} active", s.working_set().len());
+    assert!(
+        s.working_set().len() > N,
+        "{} active",
+        s.working_set().len()
+    );
     // Weighted mean: x0 = (3 + Σ ρ_k k) / (1 + Σ ρ_k).
     let num: f64 = 3.0 + (0..12).map(|k| (1.0 + k as f64) * k as f64).sum::<f64>();
     let den: f64 = 1.0 + (0..12).map(|k| 1.0 + k as f64).sum::<f64>();
@@ -187,7 +197,12 @@ fn duplicated_and_dependent_active_rows() {
     p.push_row(&[2.0, 2.0, 0.0, 0.0, 0.0, 0.0], f64::NEG_INFINITY, 2.0, 0.0);
     p.push_row(&e0(), f64::NEG_INFINITY, 0.75, 0.0);
     p.push_row(&[0.0, 1.0, 0.0, 0.0, 0.0, 0.0], 0.25, f64::INFINITY, 0.0);
-    p.push_row(&[1.0, 2.0, 0.0, 0.0, 0.0, 0.0], f64::NEG_INFINITY, 1.25, 0.0);
+    p.push_row(
+        &[1.0, 2.0, 0.0, 0.0, 0.0, 0.0],
+        f64::NEG_INFINITY,
+        1.25,
+        0.0,
+    );
     p.x_hi[0] = 0.75;
     let mut s = Small::new();
     solve_and_check(&mut s, &p).unwrap();

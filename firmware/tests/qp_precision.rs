@@ -1,6 +1,12 @@
 //! The same well-conditioned problems solved in f32 and f64: the f32 solution agrees
 //! with the f64 one within `1e-3 · (1 + |x|∞)` in `x` and `1e-3 · (1 + |J|)` in cost.
-#![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![allow(
+    missing_docs,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::needless_range_loop
+)]
 
 mod qp_util;
 
@@ -46,7 +52,14 @@ fn f32_agrees_with_f64() {
     for seed in 0..300u64 {
         let mut rng = Rng::new(50_000 + seed);
         // Well conditioned: no degenerate rows; soft rows and equalities allowed.
-        let mix = Mix { m: M, p_soft: 0.3, p_degenerate: 0.0, p_eq: 0.1, p_fixed: 0.1, tight: true };
+        let mix = Mix {
+            m: M,
+            p_soft: 0.3,
+            p_degenerate: 0.0,
+            p_eq: 0.1,
+            p_fixed: 0.1,
+            tight: true,
+        };
         let mut p = random_problem::<N, M>(&mut rng, mix);
         for j in 0..N {
             p.h[j][j] += 1.0;
@@ -59,7 +72,12 @@ fn f32_agrees_with_f64() {
         let x64 = s64.solution().x;
         let x32 = s32.solution().x;
         let scale = 1.0 + x64.iter().map(|v| v.abs()).fold(0.0, f64::max);
-        let dx = x64.iter().zip(&x32).map(|(a, b)| (a - *b as f64).abs()).fold(0.0, f64::max) / scale;
+        let dx = x64
+            .iter()
+            .zip(&x32)
+            .map(|(a, b)| (a - *b as f64).abs())
+            .fold(0.0, f64::max)
+            / scale;
         let j64 = s64.solution().objective;
         let dj = (j64 - s32.solution().objective as f64).abs() / (1.0 + j64.abs());
         worst = worst.max(dx).max(dj);

@@ -1,5 +1,11 @@
 //! Memory footprint of the solver at the MPC's sizes.
-#![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![allow(
+    missing_docs,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::needless_range_loop
+)]
 
 use firmware::qp::{ldl_len, QpSolver};
 

@@ -1,11 +1,19 @@
 //! Warm start: on sequences of slowly changing problems a warm start takes fewer
 //! iterations in total than a cold start, and any given working set (shifted, stale,
 //! inconsistent) still leads to the optimum.
-#![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![allow(
+    missing_docs,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::needless_range_loop
+)]
 
 mod qp_util;
 
-use firmware::qp::{ldl_len, ActiveConstraint, ConstraintIndex, QpProblem, QpSolver, QpStatus, Side};
+use firmware::qp::{
+    ldl_len, ActiveConstraint, ConstraintIndex, QpProblem, QpSolver, QpStatus, Side,
+};
 use proptest::prelude::*;
 use qp_util::{kkt_residual, random_problem, Mix, Rng};
 
@@ -30,7 +38,14 @@ fn warm_start_takes_fewer_iterations_on_drifting_problems() {
     let mut total_warm = 0u32;
     for seed in 0..10u64 {
         let mut rng = Rng::new(777 + seed);
-        let mix = Mix { m: M, p_soft: 0.3, p_degenerate: 0.0, p_eq: 0.05, p_fixed: 0.05, tight: true };
+        let mix = Mix {
+            m: M,
+            p_soft: 0.3,
+            p_degenerate: 0.0,
+            p_eq: 0.05,
+            p_fixed: 0.05,
+            tight: true,
+        };
         let base = random_problem::<N, M>(&mut rng, mix);
         let df: Vec<f64> = (0..N).map(|_| rng.range(-0.05, 0.05)).collect();
         let dx0: Vec<f64> = (0..N).map(|_| rng.range(-0.01, 0.01)).collect();
@@ -54,13 +69,25 @@ fn warm_start_takes_fewer_iterations_on_drifting_problems() {
             total_cold += solve_checked(&mut cold, &p, &format!("cold seed {seed} k {k}"));
             total_warm += solve_checked(&mut warm, &p, &format!("warm seed {seed} k {k}"));
             // Same optimum either way.
-            let dx = cold.solution().x.iter().zip(warm.solution().x.iter()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            let dx = cold
+                .solution()
+                .x
+                .iter()
+                .zip(warm.solution().x.iter())
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
             assert!(dx < 1e-8, "seed {seed} k {k}: cold/warm differ by {dx:e}");
         }
     }
     println!("drifting problems, 10 × 40 solves: cold {total_cold} iterations, warm {total_warm}");
-    assert!(total_warm < total_cold, "warm {total_warm} ≥ cold {total_cold}");
-    assert!(2 * total_warm < total_cold, "warm start should at least halve the work here");
+    assert!(
+        total_warm < total_cold,
+        "warm {total_warm} ≥ cold {total_cold}"
+    );
+    assert!(
+        2 * total_warm < total_cold,
+        "warm start should at least halve the work here"
+    );
 }
 
 /// An MPC-like tracking problem over a receding horizon: x_j is the input at step j,
@@ -101,7 +128,10 @@ fn shifted_working_set_on_a_receding_horizon() {
                     ConstraintIndex::Row(i) if i as usize == N - 1 => return None,
                     ConstraintIndex::Row(i) => ConstraintIndex::Row(i - 1),
                 };
-                Some(ActiveConstraint { index, side: e.side })
+                Some(ActiveConstraint {
+                    index,
+                    side: e.side,
+                })
             })
             .collect()
     }

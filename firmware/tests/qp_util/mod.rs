@@ -1,6 +1,13 @@
 //! Shared helpers of the QP tests: a deterministic problem generator, a KKT checker
 //! and a clarabel reference solve.
-#![allow(dead_code, missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![allow(
+    dead_code,
+    missing_docs,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::needless_range_loop
+)]
 
 use firmware::qp::{QpProblem, QpSolution};
 
@@ -49,10 +56,24 @@ pub struct Mix {
 
 impl Mix {
     pub fn plain(m: usize) -> Self {
-        Mix { m, p_soft: 0.0, p_degenerate: 0.0, p_eq: 0.0, p_fixed: 0.0, tight: true }
+        Mix {
+            m,
+            p_soft: 0.0,
+            p_degenerate: 0.0,
+            p_eq: 0.0,
+            p_fixed: 0.0,
+            tight: true,
+        }
     }
     pub fn all(m: usize) -> Self {
-        Mix { m, p_soft: 0.25, p_degenerate: 0.2, p_eq: 0.1, p_fixed: 0.1, tight: true }
+        Mix {
+            m,
+            p_soft: 0.25,
+            p_degenerate: 0.2,
+            p_eq: 0.1,
+            p_fixed: 0.1,
+            tight: true,
+        }
     }
 }
 
@@ -65,7 +86,9 @@ pub fn random_problem<const N: usize, const M: usize>(
     let mut p = QpProblem::<f64, N, M>::new();
     let x0: Vec<f64> = (0..N).map(|_| rng.range(-1.0, 1.0)).collect();
     // H = GᵀG + μI.
-    let g: Vec<Vec<f64>> = (0..N).map(|_| (0..N).map(|_| rng.range(-1.0, 1.0)).collect()).collect();
+    let g: Vec<Vec<f64>> = (0..N)
+        .map(|_| (0..N).map(|_| rng.range(-1.0, 1.0)).collect())
+        .collect();
     let mu = rng.range(0.05, 1.0);
     for r in 0..N {
         for c in 0..N {
@@ -104,7 +127,11 @@ pub fn random_problem<const N: usize, const M: usize>(
         if degenerate {
             let p1 = rng.below(i);
             let p2 = rng.below(i);
-            let (c1, c2) = if rng.unif() < 0.5 { (1.0, 0.0) } else { (rng.range(-2.0, 2.0), rng.range(-2.0, 2.0)) };
+            let (c1, c2) = if rng.unif() < 0.5 {
+                (1.0, 0.0)
+            } else {
+                (rng.range(-2.0, 2.0), rng.range(-2.0, 2.0))
+            };
             for j in 0..N {
                 a[j] = c1 * p.a[p1][j] + c2 * p.a[p2][j];
             }
@@ -129,7 +156,12 @@ pub fn random_problem<const N: usize, const M: usize>(
         };
         // Soft rows may be shifted away from x0 (they need not be satisfiable).
         let shift = if soft { rng.range(-1.0, 1.0) } else { 0.0 };
-        p.push_row(&a, lo + shift, hi + shift, if soft { rng.range(0.5, 50.0) } else { 0.0 });
+        p.push_row(
+            &a,
+            lo + shift,
+            hi + shift,
+            if soft { rng.range(0.5, 50.0) } else { 0.0 },
+        );
     }
     p
 }
@@ -162,43 +194,86 @@ pub fn kkt_residual<const N: usize, const M: usize>(
             r += p.a[i][j] * s.lambda_rows[i];
             scale += (p.a[i][j] * s.lambda_rows[i]).abs();
         }
-        note(r.abs() / (1.0 + scale), format!("stationarity j={j}: {r:e}"));
+        note(
+            r.abs() / (1.0 + scale),
+            format!("stationarity j={j}: {r:e}"),
+        );
     }
-    let act = |val: f64, lo: f64, hi: f64, lam: f64, rho: f64, name: String, note: &mut dyn FnMut(f64, String)| {
+    let act = |val: f64,
+               lo: f64,
+               hi: f64,
+               lam: f64,
+               rho: f64,
+               name: String,
+               note: &mut dyn FnMut(f64, String)| {
         let slack = if rho > 0.0 { lam.abs() / rho } else { 0.0 };
         let sc = 1.0 + val.abs();
         // Primal feasibility (with the slack).
-        note((lo - slack - val).max(0.0) / sc, format!("{name}: below lo {val} < {lo} - {slack}"));
-        note((val - hi - slack).max(0.0) / sc, format!("{name}: above hi {val} > {hi} + {slack}"));
+        note(
+            (lo - slack - val).max(0.0) / sc,
+            format!("{name}: below lo {val} < {lo} - {slack}"),
+        );
+        note(
+            (val - hi - slack).max(0.0) / sc,
+            format!("{name}: above hi {val} > {hi} + {slack}"),
+        );
         // Dual sign + complementarity: λ > 0 only at hi (+λ/ρ), λ < 0 only at lo (+λ/ρ).
         let shift = if rho > 0.0 { lam / rho } else { 0.0 };
         if lam > 0.0 {
-            note((val - hi - shift).abs() * lam.abs().min(1.0) / sc, format!("{name}: λ={lam} > 0 but val {val} ≠ hi {hi} + {shift}"));
+            note(
+                (val - hi - shift).abs() * lam.abs().min(1.0) / sc,
+                format!("{name}: λ={lam} > 0 but val {val} ≠ hi {hi} + {shift}"),
+            );
             if !hi.is_finite() {
                 note(lam, format!("{name}: λ={lam} > 0 at infinite hi"));
             }
         } else if lam < 0.0 {
-            note((val - lo - shift).abs() * lam.abs().min(1.0) / sc, format!("{name}: λ={lam} < 0 but val {val} ≠ lo {lo} + {shift}"));
+            note(
+                (val - lo - shift).abs() * lam.abs().min(1.0) / sc,
+                format!("{name}: λ={lam} < 0 but val {val} ≠ lo {lo} + {shift}"),
+            );
             if !lo.is_finite() {
                 note(-lam, format!("{name}: λ={lam} < 0 at infinite lo"));
             }
         }
     };
     for j in 0..N {
-        act(x[j], p.x_lo[j], p.x_hi[j], s.lambda_bounds[j], 0.0, format!("bound {j}"), &mut note);
+        act(
+            x[j],
+            p.x_lo[j],
+            p.x_hi[j],
+            s.lambda_bounds[j],
+            0.0,
+            format!("bound {j}"),
+            &mut note,
+        );
     }
     for i in 0..p.m {
         let val: f64 = (0..N).map(|j| p.a[i][j] * x[j]).sum();
-        act(val, p.lo[i], p.hi[i], s.lambda_rows[i], p.soft[i], format!("row {i}"), &mut note);
+        act(
+            val,
+            p.lo[i],
+            p.hi[i],
+            s.lambda_rows[i],
+            p.soft[i],
+            format!("row {i}"),
+            &mut note,
+        );
     }
     // Objective as reported.
     let obj = objective(p, s);
-    note((obj - s.objective).abs() / (1.0 + obj.abs()), format!("objective {obj} vs reported {}", s.objective));
+    note(
+        (obj - s.objective).abs() / (1.0 + obj.abs()),
+        format!("objective {obj} vs reported {}", s.objective),
+    );
     (worst, what)
 }
 
 /// ½xᵀHx + fᵀx + Σ ½ρ s² with s = |λ|/ρ.
-pub fn objective<const N: usize, const M: usize>(p: &QpProblem<f64, N, M>, s: &QpSolution<f64, N, M>) -> f64 {
+pub fn objective<const N: usize, const M: usize>(
+    p: &QpProblem<f64, N, M>,
+    s: &QpSolution<f64, N, M>,
+) -> f64 {
     let x = &s.x;
     let mut c = 0.0;
     for r in 0..N {
@@ -218,9 +293,13 @@ pub fn objective<const N: usize, const M: usize>(p: &QpProblem<f64, N, M>, s: &Q
 }
 
 /// Reference solve with clarabel: returns (status solved?, x, objective).
-pub fn clarabel_solve<const N: usize, const M: usize>(p: &QpProblem<f64, N, M>) -> (bool, Vec<f64>, f64) {
+pub fn clarabel_solve<const N: usize, const M: usize>(
+    p: &QpProblem<f64, N, M>,
+) -> (bool, Vec<f64>, f64) {
     use clarabel::algebra::CscMatrix;
-    use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+    use clarabel::solver::{
+        DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+    };
     let soft: Vec<usize> = (0..p.m).filter(|&i| p.soft[i] > 0.0).collect();
     let nv = N + soft.len();
     // P (upper triangle), q.
