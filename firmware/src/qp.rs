@@ -962,29 +962,31 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
     }
 
-    /// Most violated inactive constraint (beyond `tol`), given `u` and `x`.
+    /// Most violated inactive constraint (beyond `tol`), given `u` and `x`. `skip` is
+    /// chosen only if no other constraint is violated (anti-cycling).
     fn most_violated(
         &self,
         p: &QpProblem<T, N, M>,
         x: &[T; N],
         tol: T,
+        skip: Option<ConstraintIndex>,
     ) -> Option<ActiveConstraint> {
         let mut best = tol;
         let mut cand = None;
+        let mut fallback = None;
         let mut consider = |val: T, lo: T, hi: T, index: ConstraintIndex| {
-            if lo - val > best {
-                best = lo - val;
-                cand = Some(ActiveConstraint {
-                    index,
-                    side: Side::Lower,
-                });
-            }
-            if val - hi > best {
-                best = val - hi;
-                cand = Some(ActiveConstraint {
-                    index,
-                    side: Side::Upper,
-                });
+            let (viol, side) = if lo - val > val - hi {
+                (lo - val, Side::Lower)
+            } else {
+                (val - hi, Side::Upper)
+            };
+            if Some(index) == skip {
+                if viol > tol {
+                    fallback = Some(ActiveConstraint { index, side });
+                }
+            } else if viol > best {
+                best = viol;
+                cand = Some(ActiveConstraint { index, side });
             }
         };
         for j in 0..N {
@@ -998,7 +1000,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 consider(val, p.lo[i], p.hi[i], ConstraintIndex::Row(i as u16));
             }
         }
-        cand
+        cand.or(fallback)
     }
 
     /// Refactors from scratch (dropping dependent entries); counts it.
@@ -1017,6 +1019,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         tols: Tols<T>,
         sol: &mut QpSolution<T, N, M>,
     ) -> QpStatus {
+        // Anti-cycling: a constraint that left by a zero-length step (degenerate dual)
+        // is re-added only if no other constraint is violated, until the next addition.
+        let mut blocked: Option<ConstraintIndex> = None;
         loop {
             if sol.iterations >= settings.max_iter {
                 return QpStatus::IterationLimit;
@@ -1054,6 +1059,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                     }
                     self.lam[k] = l;
                 }
+                blocked = if alpha > T::ZERO {
+                    None
+                } else {
+                    Some(self.ws[pos].index)
+                };
                 self.remove(pos);
                 sol.removed += 1;
                 continue;
@@ -1062,18 +1072,20 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.lam[k] = self.tmp[k];
             }
             self.primal(p, &mut sol.x);
-            let Some(e) = self.most_violated(p, &sol.x, tols.primal) else {
+            let Some(e) = self.most_violated(p, &sol.x, tols.primal, blocked) else {
                 return QpStatus::Optimal;
             };
-            match self.add(p, e, tols, sol) {
-                Ok(()) => {}
-                Err(st) => return st,
+            blocked = None;
+            if let Err(st) = self.add(p, e, tols, sol) {
+                return st;
             }
         }
     }
 
-    /// Adds the violated constraint `e`; handles linear dependence by a step along the
-    /// dual null-space direction and a swap.
+    /// Adds the violated constraint `e`. If it depends linearly on the working set,
+    /// moves `λ` along the dual null-space direction (which keeps `u` and raises the
+    /// dual cost) until a multiplier reaches zero, removes that constraint and tries
+    /// again (at most `W` times); no multiplier reaching zero means infeasible.
     fn add(
         &mut self,
         p: &QpProblem<T, N, M>,
@@ -1081,71 +1093,72 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         tols: Tols<T>,
         sol: &mut QpSolution<T, N, M>,
     ) -> Result<(), QpStatus> {
-        let mut res = self.append(p, e, tols);
-        if res == Err(AppendError::Singular) && self.updates > 0 {
-            // The small pivot may be accumulated rounding: refactor and retry.
-            self.refactor(p, tols, sol);
-            res = self.append(p, e, tols);
-        }
-        match res {
-            Ok(()) => {
-                self.lam[self.n - 1] = T::ZERO;
-                sol.added += 1;
-                Ok(())
+        let sigma = sign::<T>(e.side);
+        // Multiplier the new constraint has accumulated over null-space steps.
+        let mut lam_e = T::ZERO;
+        let mut refactored = false;
+        for _ in 0..=W {
+            match self.append(p, e, tols) {
+                Ok(()) => {
+                    self.lam[self.n - 1] = lam_e;
+                    sol.added += 1;
+                    return Ok(());
+                }
+                Err(AppendError::Full) => return Err(QpStatus::WorkingSetFull),
+                Err(AppendError::Singular) => {}
             }
-            Err(AppendError::Full) => Err(QpStatus::WorkingSetFull),
-            Err(AppendError::Singular) => {
-                // Null-space direction: λ_e grows by t·σ, λ_W by t·σ·c with
-                // c = −(M_WW + D)⁻¹ M_{W,e} = −L⁻ᵀ L_new.
-                let n = self.n;
-                let s = row_start(n);
-                for r in (0..n).rev() {
-                    let mut acc = -self.ldl[s + r];
-                    for k in (r + 1)..n {
-                        acc -= self.ldl[row_start(k) + r] * self.tmp[k];
-                    }
-                    self.tmp[r] = acc;
+            if !refactored && self.updates > 0 {
+                // The small pivot may be accumulated rounding: refactor and retry.
+                refactored = true;
+                self.refactor(p, tols, sol);
+                continue;
+            }
+            // Null-space direction: λ_e grows by t·σ, λ_W by t·σ·c with
+            // c = −(M_WW + D)⁻¹ M_{W,e} = −L⁻ᵀ L_new.
+            let n = self.n;
+            let s = row_start(n);
+            let mut cmax = T::ZERO;
+            for r in (0..n).rev() {
+                let mut acc = -self.ldl[s + r];
+                for k in (r + 1)..n {
+                    acc -= self.ldl[row_start(k) + r] * self.tmp[k];
                 }
-                let sigma = sign::<T>(e.side);
-                let mut block: Option<(usize, T)> = None;
-                for k in 0..n {
-                    let ek = self.ws[k];
-                    if Self::is_equality(p, ek.index) {
-                        continue;
-                    }
-                    let sg = sign::<T>(ek.side);
-                    let rate = sg * sigma * self.tmp[k];
-                    if rate < T::ZERO {
-                        let t = (sg * self.lam[k]).max(T::ZERO) / -rate;
-                        if block.is_none_or(|(_, r)| t < r) {
-                            block = Some((k, t));
-                        }
-                    }
+                self.tmp[r] = acc;
+                cmax = cmax.max(acc.abs());
+            }
+            // Rates below this are rounding noise of a zero coefficient.
+            let noise = tols.pivot * (T::ONE + cmax);
+            let mut block: Option<(usize, T)> = None;
+            for k in 0..n {
+                let ek = self.ws[k];
+                if Self::is_equality(p, ek.index) {
+                    continue;
                 }
-                let Some((pos, t)) = block else {
-                    return Err(QpStatus::Infeasible);
-                };
-                for k in 0..n {
-                    let mut l = self.lam[k] + t * sigma * self.tmp[k];
-                    let ek = self.ws[k];
-                    if !Self::is_equality(p, ek.index) && sign::<T>(ek.side) * l < T::ZERO {
-                        l = T::ZERO;
+                let sg = sign::<T>(ek.side);
+                let rate = sg * sigma * self.tmp[k];
+                if rate < -noise {
+                    let t = (sg * self.lam[k]).max(T::ZERO) / -rate;
+                    if block.is_none_or(|(_, r)| t < r) {
+                        block = Some((k, t));
                     }
-                    self.lam[k] = l;
-                }
-                self.remove(pos);
-                sol.removed += 1;
-                match self.append(p, e, tols) {
-                    Ok(()) => {
-                        self.lam[self.n - 1] = t * sigma;
-                        sol.added += 1;
-                        Ok(())
-                    }
-                    Err(AppendError::Full) => Err(QpStatus::WorkingSetFull),
-                    Err(AppendError::Singular) => Err(QpStatus::NumericalError),
                 }
             }
+            let Some((pos, t)) = block else {
+                return Err(QpStatus::Infeasible);
+            };
+            for k in 0..n {
+                let mut l = self.lam[k] + t * sigma * self.tmp[k];
+                let ek = self.ws[k];
+                if !Self::is_equality(p, ek.index) && sign::<T>(ek.side) * l < T::ZERO {
+                    l = T::ZERO;
+                }
+                self.lam[k] = l;
+            }
+            lam_e += t * sigma;
+            self.remove(pos);
+            sol.removed += 1;
         }
+        Err(QpStatus::NumericalError)
     }
 
     /// Writes `x`, multipliers and cost for the current iterate.
