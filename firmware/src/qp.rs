@@ -1191,3 +1191,140 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         sol.working_set_len = self.n as u16;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::panic)]
+    use super::*;
+
+    type S = QpSolver<f64, 5, 8, 8, { ldl_len(8) }>;
+
+    /// Deterministic pseudo-random numbers in [-1, 1).
+    fn lcg(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+
+    fn filled(seed: u64) -> S {
+        let mut s = S::new();
+        let mut st = seed;
+        let p = s.problem_mut();
+        let mut g = [[0.0; 5]; 5];
+        for r in g.iter_mut() {
+            for v in r.iter_mut() {
+                *v = lcg(&mut st);
+            }
+        }
+        for r in 0..5 {
+            for c in 0..5 {
+                p.h[r][c] =
+                    (0..5).map(|k| g[k][r] * g[k][c]).sum::<f64>() + if r == c { 0.3 } else { 0.0 };
+            }
+            p.f[r] = lcg(&mut st);
+            p.x_lo[r] = -1.0;
+            p.x_hi[r] = 1.0;
+        }
+        for i in 0..8 {
+            let mut a = [0.0; 5];
+            for v in a.iter_mut() {
+                *v = lcg(&mut st);
+            }
+            let soft = if i % 3 == 0 { 2.0 + lcg(&mut st) } else { 0.0 };
+            p.push_row(&a, -1.0, 1.0, soft);
+        }
+        s
+    }
+
+    #[test]
+    fn cholesky_inverse_is_inverse() {
+        let mut s = filled(3);
+        let h = s.problem.h;
+        assert!(factor_h(&mut s.problem.h));
+        let ri = &s.problem.h;
+        // H · R⁻¹ R⁻ᵀ = I.
+        for r in 0..5 {
+            for c in 0..5 {
+                let mut v = 0.0;
+                for k in 0..5 {
+                    let hk = if k >= r { h[r][k] } else { h[k][r] };
+                    let mut inv = 0.0;
+                    for q in 0..5 {
+                        inv += ri[k][q] * ri[c][q];
+                    }
+                    v += hk * inv;
+                }
+                let want = if r == c { 1.0 } else { 0.0 };
+                assert!((v - want).abs() < 1e-10, "({r},{c}) = {v}");
+            }
+        }
+    }
+
+    /// Removing an entry by downdate gives the same factor as factorising the
+    /// remaining working set from scratch.
+    #[test]
+    fn remove_matches_refactor() {
+        for seed in 0..20u64 {
+            let mut s = filled(seed);
+            assert!(factor_h(&mut s.problem.h));
+            transform(&mut s.problem, &mut s.work.v);
+            let tols = QpSettings::<f64>::new(10).effective();
+            let set = [
+                ConstraintIndex::Row(0),
+                ConstraintIndex::Bound(1),
+                ConstraintIndex::Row(3),
+                ConstraintIndex::Row(4),
+                ConstraintIndex::Bound(3),
+                ConstraintIndex::Row(6),
+                ConstraintIndex::Row(2),
+            ];
+            for &c in &set {
+                let e = ActiveConstraint {
+                    index: c,
+                    side: Side::Upper,
+                };
+                s.work.append(&s.problem, e, tols).unwrap();
+            }
+            for pos in [2usize, 0, 4] {
+                s.work.remove(pos);
+                let n = s.work.n;
+                let down = s.work.ldl;
+                let dropped = s.work.rebuild(&s.problem, tols, n);
+                assert_eq!(dropped, 0);
+                assert_eq!(s.work.n, n);
+                for k in 0..ldl_len(n) {
+                    assert!(
+                        (down[k] - s.work.ldl[k]).abs() < 1e-10,
+                        "seed {seed} pos {pos} k {k}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn dependent_rows_are_refused_by_append() {
+        let mut s = filled(1);
+        let a0 = s.problem.a[0];
+        s.problem.a[1] = a0;
+        s.problem.soft[0] = 0.0;
+        s.problem.soft[1] = 0.0;
+        assert!(factor_h(&mut s.problem.h));
+        transform(&mut s.problem, &mut s.work.v);
+        let tols = QpSettings::<f64>::new(10).effective();
+        let e = |i| ActiveConstraint {
+            index: ConstraintIndex::Row(i),
+            side: Side::Upper,
+        };
+        assert_eq!(s.work.append(&s.problem, e(0), tols), Ok(()));
+        assert_eq!(
+            s.work.append(&s.problem, e(1), tols),
+            Err(AppendError::Singular)
+        );
+        // A soft copy is not dependent: its pivot is at least 1/ρ.
+        s.problem.soft[1] = 4.0;
+        assert_eq!(s.work.append(&s.problem, e(1), tols), Ok(()));
+        assert!((s.work.ldl[row_start(1) + 1] - 0.25).abs() < 1e-12);
+    }
+}
