@@ -329,3 +329,67 @@ fn working_set_full() {
     assert_eq!(s.solve(), QpStatus::WorkingSetFull);
     assert!(s.solution().x.iter().all(|v| v.is_finite()));
 }
+
+/// Contradictions injected into a random feasible problem, in three forms.
+fn inject_contradiction(p: &mut QpProblem<f64, N2, M2>, rng: &mut Rng, kind: usize) {
+    let mut c = [0.0; N2];
+    for v in c.iter_mut() {
+        *v = rng.range(-1.0, 1.0);
+    }
+    let t = rng.range(-2.0, 2.0);
+    match kind {
+        0 => {
+            // c·x ≥ t + 0.1 and (k c)·x ≤ k t.
+            let k = rng.range(0.2, 5.0);
+            p.push_row(&c, t + 0.1, f64::INFINITY, 0.0);
+            let kc = c.map(|v| k * v);
+            p.push_row(&kc, f64::NEG_INFINITY, k * t, 0.0);
+        }
+        1 => {
+            // r1 ≥ 1, r2 ≥ 1, r1 + r2 ≤ 1.5 (a hidden combination).
+            let mut d = [0.0; N2];
+            for v in d.iter_mut() {
+                *v = rng.range(-1.0, 1.0);
+            }
+            let s: [f64; N2] = core::array::from_fn(|j| c[j] + d[j]);
+            p.push_row(&c, 1.0, f64::INFINITY, 0.0);
+            p.push_row(&s, f64::NEG_INFINITY, 1.5, 0.0);
+            p.push_row(&d, 1.0, 2.0, 0.0);
+        }
+        _ => {
+            // x_j ≥ 1 by its bound and 2 x_j ≤ 1 by a row.
+            let j = rng.below(N2);
+            p.x_lo[j] = 1.0;
+            p.x_hi[j] = p.x_hi[j].max(2.0);
+            let mut e = [0.0; N2];
+            e[j] = 2.0;
+            p.push_row(&e, f64::NEG_INFINITY, 1.0, 0.0);
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    /// Hard contradictions give `Infeasible` (never a panic, a finite point); the same
+    /// rows made soft give an optimum satisfying the KKT conditions.
+    #[test]
+    fn infeasible_sets_are_detected(seed in any::<u64>(), m in 0usize..=(M2 - 3), kind in 0usize..3) {
+        let mut rng = Rng::new(seed);
+        let mut p = random_problem::<N2, M2>(&mut rng, Mix { m, ..Mix::all(m) });
+        let m0 = p.m;
+        inject_contradiction(&mut p, &mut rng, kind);
+        let mut s = Box::new(Medium::new());
+        s.settings.warm_start = false;
+        *s.problem_mut() = p.clone();
+        prop_assert_eq!(s.solve(), QpStatus::Infeasible);
+        prop_assert!(s.solution().x.iter().all(|v| v.is_finite()));
+        // Soften the injected rows: now solvable (unless kind 2's bound conflicts remain).
+        if kind < 2 {
+            for i in m0..p.m {
+                p.soft[i] = 10.0;
+            }
+            if let Err(e) = solve_and_check(&mut s, &p) { prop_assert!(false, "softened: {}", e); }
+        }
+    }
+}
