@@ -59,6 +59,12 @@
 //! factorisation). When a small pivot may come from accumulated rounding, or a solve
 //! gives non-finite multipliers, the factor is recomputed from scratch (counted).
 //!
+//! **Cost.** Per solve: Cholesky and in-place inverse of `H` (`N³/3` multiply-adds),
+//! transformation of the rows (`m·N²/2`). Per iteration: `O(m·N)` for the constraint
+//! values, `O(|W|·N + |W|²)` for the multipliers and the factor update. The counters of
+//! [`QpSolution`] (iterations, additions, removals, refactorisations) are
+//! deterministic, so a time budget can be derived from them.
+//!
 //! **Storage.** The solver owns the problem; [`QpSolver::solve`] overwrites `H` with
 //! `R⁻¹` (upper triangle, lower triangle zeroed) and the rows `a_i` with `a_i R⁻¹`, so
 //! the caller refills them before every solve (the MPC rebuilds them anyway). Nothing is
@@ -124,10 +130,12 @@ pub enum QpStatus {
     NotSolved,
     /// KKT conditions hold within the tolerances.
     Optimal,
-    /// `max_iter` iterations ran out. The returned point is the current dual iterate's
-    /// primal point: it minimises the Lagrangian at multipliers of the right signs
-    /// (stationarity and dual feasibility hold, and complementarity on the working
-    /// set), but constraints may be violated; its cost is a lower bound of the optimum.
+    /// `max_iter` iterations ran out. The returned point is the primal point of the
+    /// current dual iterate: `x` minimises the Lagrangian at the returned multipliers,
+    /// which have the right signs and are zero off the working set (stationarity
+    /// `Hx + f + Aᵀλ + λ_bounds = 0` and dual feasibility hold). Constraints may be
+    /// violated, including those of the working set when the last step was a partial
+    /// one; the caller should check the violation it can accept.
     IterationLimit,
     /// The hard constraints cannot all hold (a dual ray was found). `x` is the last
     /// iterate, as for [`QpStatus::IterationLimit`].
@@ -135,7 +143,7 @@ pub enum QpStatus {
     /// `H` is not (numerically) positive definite: its Cholesky factorisation failed.
     NotConvex,
     /// Factor trouble that refactoring could not fix (non-finite multipliers, or a
-    /// swap after a singular step that still gave a singular matrix).
+    /// dependent constraint still dependent after `W` null-space swaps).
     NumericalError,
     /// NaN or ±∞ in `H`, `f`, a used row of `A` or a soft weight, or NaN in a bound.
     NonFiniteInput,

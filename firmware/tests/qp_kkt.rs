@@ -304,7 +304,7 @@ fn iteration_limit_gives_finite_dual_feasible_point() {
     let sol = s.solution();
     assert_eq!(sol.iterations, 2);
     assert!(sol.x.iter().all(|v| v.is_finite()));
-    // Stationarity and dual feasibility hold at the iterate; the cost is a lower bound.
+    // Stationarity and dual feasibility hold at the iterate.
     for j in 0..N2 {
         let mut r = p.f[j] + sol.lambda_bounds[j];
         for k in 0..N2 {
@@ -315,6 +315,24 @@ fn iteration_limit_gives_finite_dual_feasible_point() {
         }
         assert!(r.abs() < 1e-9, "stationarity {r}");
     }
+    // Signs: λ > 0 only at a finite upper side, λ < 0 only at a finite lower side.
+    for i in 0..p.m {
+        let l = sol.lambda_rows[i];
+        assert!(!(l > 0.0) || p.hi[i].is_finite(), "row {i}: λ = {l}");
+        assert!(!(l < 0.0) || p.lo[i].is_finite(), "row {i}: λ = {l}");
+    }
+    for j in 0..N2 {
+        let l = sol.lambda_bounds[j];
+        assert!(!(l > 0.0) || p.x_hi[j].is_finite(), "bound {j}: λ = {l}");
+        assert!(!(l < 0.0) || p.x_lo[j].is_finite(), "bound {j}: λ = {l}");
+    }
+    let nonzero = sol
+        .lambda_rows
+        .iter()
+        .chain(sol.lambda_bounds.iter())
+        .filter(|l| **l != 0.0)
+        .count();
+    assert!(nonzero <= s.working_set().len());
 }
 
 #[test]
