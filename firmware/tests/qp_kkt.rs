@@ -318,13 +318,13 @@ fn iteration_limit_gives_finite_dual_feasible_point() {
     // Signs: λ > 0 only at a finite upper side, λ < 0 only at a finite lower side.
     for i in 0..p.m {
         let l = sol.lambda_rows[i];
-        assert!(!(l > 0.0) || p.hi[i].is_finite(), "row {i}: λ = {l}");
-        assert!(!(l < 0.0) || p.lo[i].is_finite(), "row {i}: λ = {l}");
+        assert!(l <= 0.0 || p.hi[i].is_finite(), "row {i}: λ = {l}");
+        assert!(l >= 0.0 || p.lo[i].is_finite(), "row {i}: λ = {l}");
     }
     for j in 0..N2 {
         let l = sol.lambda_bounds[j];
-        assert!(!(l > 0.0) || p.x_hi[j].is_finite(), "bound {j}: λ = {l}");
-        assert!(!(l < 0.0) || p.x_lo[j].is_finite(), "bound {j}: λ = {l}");
+        assert!(l <= 0.0 || p.x_hi[j].is_finite(), "bound {j}: λ = {l}");
+        assert!(l >= 0.0 || p.x_lo[j].is_finite(), "bound {j}: λ = {l}");
     }
     let nonzero = sol
         .lambda_rows
