@@ -284,14 +284,15 @@ impl<T: Real> BicycleGeometry<T> {
             let step = self.discretize(&acc.x_next, u, h);
             let mut a = [[T::ZERO; NX]; NX];
             let mut b = step.b;
-            for i in 0..NX {
-                for kk in 0..NX {
-                    let s_ik = step.a[i][kk];
-                    for j in 0..NX {
-                        a[i][j] += s_ik * acc.a[kk][j];
+            for ((a_row, b_row), s_row) in a.iter_mut().zip(b.iter_mut()).zip(step.a.iter()) {
+                for ((s_ik, acc_a_row), acc_b_row) in
+                    s_row.iter().zip(acc.a.iter()).zip(acc.b.iter())
+                {
+                    for (aij, acc_kj) in a_row.iter_mut().zip(acc_a_row.iter()) {
+                        *aij += *s_ik * *acc_kj;
                     }
-                    for j in 0..NU {
-                        b[i][j] += s_ik * acc.b[kk][j];
+                    for (bij, acc_kj) in b_row.iter_mut().zip(acc_b_row.iter()) {
+                        *bij += *s_ik * *acc_kj;
                     }
                 }
             }
