@@ -1,4 +1,23 @@
-//! Kinematic bicycle model of the paper (its Equation 1), with `ṡ = V`.
+//! Kinematic bicycle model of the paper (its Equation 1), with `ṡ = V`, and its
+//! discretisation for the MPC.
+//!
+//! State `ξ = [s, X, Y, V, ψ, δ]` (m, m, m, m/s, rad, rad; indices [`S`], [`X`],
+//! [`Y`], [`V`], [`PSI`], [`DELTA`]), input `u = [u1, u2]` (acceleration m/s²,
+//! steering rate rad/s; [`U_ACCEL`], [`U_STEER_RATE`]):
+//!
+//! ```text
+//! ṡ = V          Ẋ = V·cos(ψ + β(δ))      Ẏ = V·sin(ψ + β(δ))
+//! V̇ = u1         ψ̇ = V·sin(β(δ)) / l_r     δ̇ = u2
+//! β(δ) = atan(tan δ · l_r / (l_f + l_r))
+//! ```
+//!
+//! [`BicycleGeometry::discretize`] integrates one interval with the input held
+//! (classical RK4) and returns the exact Jacobians `A = ∂ξ⁺/∂ξ`, `B = ∂ξ⁺/∂u` of
+//! that discrete map, propagated through the four stages by the chain rule.
+//! Transcendental functions are the expensive part on the ECU (libm's `sinf`
+//! and `sincosf` compute in `f64`), so a step makes 3 `tan`, 3 `sqrt` and
+//! 4 `sin_cos` calls and no `atan`: `sin β = t/√(1+t²)`, `cos β = 1/√(1+t²)`
+//! with `t = tan δ · l_r/(l_f + l_r)`, and `ψ + β` through the addition formulas.
 
 use crate::Real;
 
@@ -21,4 +40,279 @@ impl<T: Real> BicycleGeometry<T> {
     pub fn beta_rad(&self, delta_rad: T) -> T {
         (delta_rad.tan() * self.l_r_m / self.wheelbase_m()).atan()
     }
+}
+
+/// Number of states of `ξ = [s, X, Y, V, ψ, δ]`.
+pub const NX: usize = 6;
+/// Number of inputs of `u = [u1, u2]`.
+pub const NU: usize = 2;
+
+/// Index of the curvilinear abscissa `s` (m) in the state.
+pub const S: usize = 0;
+/// Index of the global X position of the centre of gravity (m) in the state.
+pub const X: usize = 1;
+/// Index of the global Y position of the centre of gravity (m) in the state.
+pub const Y: usize = 2;
+/// Index of the speed `V` (m/s) in the state.
+pub const V: usize = 3;
+/// Index of the yaw angle `ψ` (rad, counter-clockwise, not wrapped) in the state.
+pub const PSI: usize = 4;
+/// Index of the front steering angle `δ` (rad, positive left) in the state.
+pub const DELTA: usize = 5;
+
+/// Index of the acceleration `u1` (m/s²) in the input.
+pub const U_ACCEL: usize = 0;
+/// Index of the steering rate `u2` (rad/s) in the input.
+pub const U_STEER_RATE: usize = 1;
+
+/// State `ξ = [s m, X m, Y m, V m/s, ψ rad, δ rad]` (index with [`S`], [`X`], …).
+pub type State<T> = [T; NX];
+/// Input `u = [u1 m/s², u2 rad/s]` (index with [`U_ACCEL`], [`U_STEER_RATE`]).
+pub type Input<T> = [T; NU];
+
+/// The state of a plan node as an array `ξ = [s, X, Y, V, ψ, δ]`.
+pub fn state_from_node<T: Real>(n: &crate::plan::PlanNode<T>) -> State<T> {
+    [n.s_m, n.x_m, n.y_m, n.v_mps, n.psi_rad, n.delta_rad]
+}
+
+/// A plan node from a state array `ξ = [s, X, Y, V, ψ, δ]`.
+pub fn node_from_state<T: Real>(x: &State<T>) -> crate::plan::PlanNode<T> {
+    crate::plan::PlanNode {
+        s_m: x[S],
+        x_m: x[X],
+        y_m: x[Y],
+        v_mps: x[V],
+        psi_rad: x[PSI],
+        delta_rad: x[DELTA],
+    }
+}
+
+/// One step of the discrete model `ξ⁺ = F(ξ, u)` and its Jacobians at `(ξ, u)`.
+///
+/// Row-major: `a[i][j] = ∂ξ⁺_i/∂ξ_j` (dimensionless or in the ratio of the two
+/// states' units), `b[i][j] = ∂ξ⁺_i/∂u_j` (state unit per input unit). The MPC's
+/// linearisation is `ξ⁺ ≈ x_next + a·(ξ − ξ̄) + b·(u − ū)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Discretization<T> {
+    /// `F(ξ, u)`, the state after the step (same units as [`State`]).
+    pub x_next: State<T>,
+    /// `∂F/∂ξ`, 6×6, row `i` = output state `i`.
+    pub a: [[T; NX]; NX],
+    /// `∂F/∂u`, 6×2, row `i` = output state `i`, column `j` = input `j`.
+    pub b: [[T; NU]; NX],
+}
+
+/// Quantities of one evaluation of `f` that depend on `δ` only: from one `tan`
+/// and one `sqrt`.
+#[derive(Clone, Copy)]
+struct SteerTerms<T> {
+    /// `sin β`.
+    sin_b: T,
+    /// `cos β`.
+    cos_b: T,
+    /// `dβ/dδ`.
+    dbeta: T,
+}
+
+impl<T: Real> SteerTerms<T> {
+    /// `β = atan(k·tan δ)`, `k = l_r/(l_f + l_r)`: `cos β = 1/√(1 + t²)`,
+    /// `sin β = t·cos β`, `dβ/dδ = k·(1 + tan²δ)/(1 + t²)` with `t = k·tan δ`.
+    /// Transcendental calls: 1 `tan`, 1 `sqrt`.
+    #[inline]
+    fn new(k: T, delta: T) -> Self {
+        let td = delta.tan();
+        let t = k * td;
+        let q = T::ONE + t * t;
+        let cos_b = T::ONE / q.sqrt();
+        Self {
+            sin_b: t * cos_b,
+            cos_b,
+            dbeta: k * (T::ONE + td * td) / q,
+        }
+    }
+}
+
+/// `f(ξ, u)` and the non-zero partial derivatives of `f` with respect to the
+/// state at one RK4 stage. Transcendental calls: 1 `sin_cos` (of `ψ`).
+#[derive(Clone, Copy)]
+struct Stage<T> {
+    f: State<T>,
+    /// `∂Ẋ/∂V, ∂Ẋ/∂ψ, ∂Ẋ/∂δ`.
+    dx: [T; 3],
+    /// `∂Ẏ/∂V, ∂Ẏ/∂ψ, ∂Ẏ/∂δ`.
+    dy: [T; 3],
+    /// `∂ψ̇/∂V, ∂ψ̇/∂δ`.
+    dpsi: [T; 2],
+}
+
+#[inline]
+fn stage<T: Real>(inv_lr: T, x: &State<T>, u: &Input<T>, st: &SteerTerms<T>) -> Stage<T> {
+    let v = x[V];
+    let (sp, cp) = x[PSI].sin_cos();
+    // cos(ψ + β), sin(ψ + β) by the addition formulas: no call for β itself.
+    let c = cp * st.cos_b - sp * st.sin_b;
+    let s = sp * st.cos_b + cp * st.sin_b;
+    Stage {
+        f: [
+            v,
+            v * c,
+            v * s,
+            u[U_ACCEL],
+            v * st.sin_b * inv_lr,
+            u[U_STEER_RATE],
+        ],
+        dx: [c, -v * s, -v * s * st.dbeta],
+        dy: [s, v * c, v * c * st.dbeta],
+        dpsi: [st.sin_b * inv_lr, v * st.cos_b * st.dbeta * inv_lr],
+    }
+}
+
+/// `dk = J·M + [0 | B_c]`: derivative of a stage's `k = f(ξ_stage, u)` with
+/// respect to `[ξ; u]` (6×8), given `M = ∂ξ_stage/∂[ξ; u]`.
+#[inline]
+fn stage_derivative<T: Real>(g: &Stage<T>, m: &[[T; NX + NU]; NX]) -> [[T; NX + NU]; NX] {
+    let mut dk = [[T::ZERO; NX + NU]; NX];
+    for j in 0..NX + NU {
+        let mv = m[V][j];
+        let mp = m[PSI][j];
+        let md = m[DELTA][j];
+        dk[S][j] = mv;
+        dk[X][j] = g.dx[0] * mv + g.dx[1] * mp + g.dx[2] * md;
+        dk[Y][j] = g.dy[0] * mv + g.dy[1] * mp + g.dy[2] * md;
+        dk[PSI][j] = g.dpsi[0] * mv + g.dpsi[1] * md;
+    }
+    dk[V][NX + U_ACCEL] = T::ONE;
+    dk[DELTA][NX + U_STEER_RATE] = T::ONE;
+    dk
+}
+
+impl<T: Real> BicycleGeometry<T> {
+    /// Continuous dynamics `ξ̇ = f(ξ, u)` of the paper's Equation 1 with `ṡ = V`:
+    /// `[V, V·cos(ψ+β), V·sin(ψ+β), u1, V·sin β / l_r, u2]` (units of the state per
+    /// second). Transcendental calls: 1 `tan`, 1 `sqrt`, 1 `sin_cos`.
+    pub fn dynamics(&self, x: &State<T>, u: &Input<T>) -> State<T> {
+        let k = self.l_r_m / self.wheelbase_m();
+        let st = SteerTerms::new(k, x[DELTA]);
+        stage(T::ONE / self.l_r_m, x, u, &st).f
+    }
+
+    /// One classical RK4 step of length `dt_s` (s) of [`Self::dynamics`] with the
+    /// input held constant, and its exact Jacobians (the chain rule through the
+    /// four stages, not finite differences).
+    ///
+    /// Cost: 3 `tan` (the stages 2 and 3 share `δ + u2·dt/2`), 3 `sqrt`,
+    /// 4 `sin_cos`, no `atan` (`sin β`, `cos β` come from `tan δ` algebraically,
+    /// `cos(ψ+β)` and `sin(ψ+β)` from the addition formulas), 1 division by `l_r`,
+    /// and about 600 multiply-adds for the Jacobians.
+    pub fn discretize(&self, x: &State<T>, u: &Input<T>, dt_s: T) -> Discretization<T> {
+        let k = self.l_r_m / self.wheelbase_m();
+        let inv_lr = T::ONE / self.l_r_m;
+        let h2 = dt_s * T::HALF;
+        // δ at the stages: δ, δ + h/2·u2 (twice), δ + h·u2 (δ̇ = u2 is constant).
+        let st1 = SteerTerms::new(k, x[DELTA]);
+        let st23 = SteerTerms::new(k, x[DELTA] + h2 * u[U_STEER_RATE]);
+        let st4 = SteerTerms::new(k, x[DELTA] + dt_s * u[U_STEER_RATE]);
+
+        let mut ident = [[T::ZERO; NX + NU]; NX];
+        for (i, row) in ident.iter_mut().enumerate() {
+            row[i] = T::ONE;
+        }
+        let advance = |x: &State<T>, kf: &State<T>, c: T| {
+            let mut y = *x;
+            for (yi, ki) in y.iter_mut().zip(kf.iter()) {
+                *yi += c * *ki;
+            }
+            y
+        };
+        let advance_m = |dk: &[[T; NX + NU]; NX], c: T| {
+            let mut m = ident;
+            for (mr, dr) in m.iter_mut().zip(dk.iter()) {
+                for (mv, dv) in mr.iter_mut().zip(dr.iter()) {
+                    *mv += c * *dv;
+                }
+            }
+            m
+        };
+
+        let g1 = stage(inv_lr, x, u, &st1);
+        let dk1 = stage_derivative(&g1, &ident);
+        let x2 = advance(x, &g1.f, h2);
+        let g2 = stage(inv_lr, &x2, u, &st23);
+        let dk2 = stage_derivative(&g2, &advance_m(&dk1, h2));
+        let x3 = advance(x, &g2.f, h2);
+        let g3 = stage(inv_lr, &x3, u, &st23);
+        let dk3 = stage_derivative(&g3, &advance_m(&dk2, h2));
+        let x4 = advance(x, &g3.f, dt_s);
+        let g4 = stage(inv_lr, &x4, u, &st4);
+        let dk4 = stage_derivative(&g4, &advance_m(&dk3, dt_s));
+
+        let w = dt_s / T::lit(6.0);
+        let mut out = Discretization {
+            x_next: *x,
+            a: [[T::ZERO; NX]; NX],
+            b: [[T::ZERO; NU]; NX],
+        };
+        for i in 0..NX {
+            out.x_next[i] += w * (g1.f[i] + T::TWO * (g2.f[i] + g3.f[i]) + g4.f[i]);
+            for j in 0..NX + NU {
+                let d =
+                    ident[i][j] + w * (dk1[i][j] + T::TWO * (dk2[i][j] + dk3[i][j]) + dk4[i][j]);
+                if j < NX {
+                    out.a[i][j] = d;
+                } else {
+                    out.b[i][j - NX] = d;
+                }
+            }
+        }
+        out
+    }
+
+    /// `substeps` RK4 steps of `dt_s / substeps` each (at least 1), chaining the
+    /// Jacobians (`A = A₂·A₁`, `B = A₂·B₁ + B₂`). Cost: `substeps` times that of
+    /// [`Self::discretize`] plus one 6×6 by 6×8 product per extra substep.
+    pub fn discretize_substeps(
+        &self,
+        x: &State<T>,
+        u: &Input<T>,
+        dt_s: T,
+        substeps: usize,
+    ) -> Discretization<T> {
+        let n = substeps.max(1);
+        let h = dt_s / T::from_usize(n);
+        let mut acc = self.discretize(x, u, h);
+        for _ in 1..n {
+            let step = self.discretize(&acc.x_next, u, h);
+            let mut a = [[T::ZERO; NX]; NX];
+            let mut b = step.b;
+            for ((a_row, b_row), s_row) in a.iter_mut().zip(b.iter_mut()).zip(step.a.iter()) {
+                for ((s_ik, acc_a_row), acc_b_row) in
+                    s_row.iter().zip(acc.a.iter()).zip(acc.b.iter())
+                {
+                    for (aij, acc_kj) in a_row.iter_mut().zip(acc_a_row.iter()) {
+                        *aij += *s_ik * *acc_kj;
+                    }
+                    for (bij, acc_kj) in b_row.iter_mut().zip(acc_b_row.iter()) {
+                        *bij += *s_ik * *acc_kj;
+                    }
+                }
+            }
+            acc = Discretization {
+                x_next: step.x_next,
+                a,
+                b,
+            };
+        }
+        acc
+    }
+}
+
+/// Free-function form of [`BicycleGeometry::discretize`]: one RK4 step of
+/// `dt_s` (s) from state `x` under input `u`, with analytic Jacobians.
+pub fn discretize<T: Real>(
+    geom: &BicycleGeometry<T>,
+    x: &State<T>,
+    u: &Input<T>,
+    dt_s: T,
+) -> Discretization<T> {
+    geom.discretize(x, u, dt_s)
 }

@@ -1,1 +1,1338 @@
-//! (being written)
+//! Our dense dual active-set QP solver (the MPC's optimiser).
+//!
+//! # Problem solved
+//!
+//! ```text
+//!   minimise    ½ xᵀ H x + fᵀ x + Σ_{i soft} ½ ρ_i s_i²          x ∈ ℝᴺ
+//!   subject to  x_lo ≤ x ≤ x_hi                               (simple bounds)
+//!               lo_i ≤ a_iᵀ x ≤ hi_i            i = 0..m, row i hard (ρ_i = 0)
+//!               lo_i − s_i ≤ a_iᵀ x ≤ hi_i + s_i  i = 0..m, row i soft (ρ_i > 0)
+//! ```
+//!
+//! `H` symmetric positive definite (only its upper triangle is read), bounds may be
+//! `±∞`, `lo = hi` makes an equality. The slack `s_i ≥ 0` of a soft row is never a
+//! variable: it is implicit in the dual (below).
+//!
+//! # Method: dual active set, after DAQP (Arnström, Bemporad, Axehill 2022)
+//!
+//! With the Cholesky factor `H = RᵀR` (`R` upper) and `u = R x`, the cost becomes
+//! `½‖u + v‖² − ½‖v‖²` with `v = R⁻ᵀ f`, and a constraint row `a` becomes
+//! `m̃ = R⁻ᵀ a` (row `a R⁻¹` of `M̃ = A R⁻¹`; a bound on `x_j` has the row `j` of `R⁻¹`).
+//! For a working set `W` of constraints held at one of their sides, `b_k` the bound of
+//! that side, the Lagrangian `½‖u+v‖² + Σ_k λ_k (m̃_kᵀu − b_k)` gives
+//! `u = −v − M̃_Wᵀ λ`, and the multipliers solve
+//!
+//! ```text
+//!   (M̃_W M̃_Wᵀ + D_W) λ = −d_W,    d_k = b_k + m̃_kᵀ v,
+//! ```
+//!
+//! with the sign convention `λ_k ≥ 0` at an upper side, `λ_k ≤ 0` at a lower side,
+//! free for an equality.
+//!
+//! **Soft rows.** Relaxing `m̃ᵀu ≤ hi` to `m̃ᵀu − s ≤ hi` with `½ρ s²` added to the
+//! cost adds `λ(m̃ᵀu − s − hi) + ½ρs²` to the Lagrangian; stationarity in `s` gives
+//! `ρ s = λ`, so `s = λ/ρ ≥ 0` (at a lower side, `s = −λ/ρ`). The active row then
+//! reads `m̃ᵀu = b + λ/ρ` in both cases, and substituting `u` gives the system above
+//! with `D_W = diag(1/ρ_k)` on the soft rows (0 on hard ones). So a soft row costs
+//! nothing more than a hard one: its working-set matrix only gains `1/ρ` on the
+//! diagonal, it stays positive definite however many soft rows are active (more than
+//! `N` of them may be), and a problem whose rows are all soft is never infeasible.
+//!
+//! **Why dual.** `λ = 0` (the unconstrained optimum `u = −v`) is dual feasible, so no
+//! phase 1 is needed; every iterate is dual feasible and the dual cost rises, so the
+//! method ends at the first primal-feasible iterate; an infeasible problem shows as a
+//! dual ray (a violated constraint that depends linearly on the working set and whose
+//! multiplier can grow without any other reaching zero).
+//!
+//! **Iteration.** Solve for `λ*` on the working set. If some `λ*_k` has the wrong sign,
+//! step `λ ← λ + α(λ* − λ)` to the first multiplier reaching zero and remove that
+//! constraint. Otherwise take `λ = λ*`, form `u` and add the most violated inactive
+//! constraint (violation above `primal_tol`); none: optimal, `x = R⁻¹u`. If the new
+//! row makes the working-set matrix singular (tiny relative pivot: it depends linearly
+//! on the hard rows of `W`), move `λ` along the null-space direction, which keeps `u`
+//! and raises the dual cost, until a multiplier reaches zero, and swap that constraint
+//! for the new one; if no multiplier can reach zero, the problem is infeasible.
+//!
+//! **Factors.** `LDLᵀ` of the working-set matrix, packed by rows: a row is appended
+//! when a constraint enters (`O(|W|·N + |W|²)`), and a constraint leaves by deleting its
+//! row and column and a rank-one update of the trailing block (`O(|W|²)`, no new
+//! factorisation). When a small pivot may come from accumulated rounding, or a solve
+//! gives non-finite multipliers, the factor is recomputed from scratch (counted).
+//!
+//! **Cost.** Per solve: Cholesky and in-place inverse of `H` (`N³/3` multiply-adds),
+//! transformation of the rows (`m·N²/2`). Per iteration: `O(m·N)` for the constraint
+//! values, `O(|W|·N + |W|²)` for the multipliers and the factor update. The counters of
+//! [`QpSolution`] (iterations, additions, removals, refactorisations) are
+//! deterministic, so a time budget can be derived from them.
+//!
+//! **Storage.** The solver owns the problem; [`QpSolver::solve`] overwrites `H` with
+//! `R⁻¹` (upper triangle, lower triangle zeroed) and the rows `a_i` with `a_i R⁻¹`, so
+//! the caller refills them before every solve (the MPC rebuilds them anyway). Nothing is
+//! allocated; there is no recursion; the sizes are const generics checked at compile
+//! time.
+//!
+//! **Warm start.** With [`QpSettings::warm_start`], a solve starts from the working
+//! set of the previous solve, or the one given with [`QpSolver::set_working_set`]
+//! (e.g. shifted by one MPC step). Entries that are out of range, duplicated, at an
+//! infinite bound or linearly dependent on earlier entries are dropped; entries whose
+//! multipliers come out with the wrong sign leave through ordinary removal steps
+//! (starting from `λ = 0`, which is dual feasible).
+
+// Index loops mirror the maths of the factorisations; the ranges are bounded by the
+// const sizes and the working-set count (≤ W).
+#![allow(clippy::needless_range_loop)]
+// `!(a > b)` is meant: it is also true when `a` is NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use crate::Real;
+
+/// Length of the packed `LDLᵀ` storage for a working-set capacity `w`: `w(w+1)/2`.
+///
+/// Use it for the last const parameter of [`QpSolver`]: `QpSolver<f32, 32, 96, 48,
+/// { ldl_len(48) }>`.
+pub const fn ldl_len(w: usize) -> usize {
+    w * (w + 1) / 2
+}
+
+/// Which side of a constraint is held active.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// The lower bound (`x_j = x_lo_j`, or `a_iᵀx = lo_i`, minus the slack if soft);
+    /// its multiplier is `≤ 0`.
+    Lower,
+    /// The upper bound (`x_j = x_hi_j`, or `a_iᵀx = hi_i`, plus the slack if soft);
+    /// its multiplier is `≥ 0`.
+    Upper,
+}
+
+/// A constraint of the problem.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConstraintIndex {
+    /// The simple bound on variable `j` (`0 ≤ j < N`).
+    Bound(u16),
+    /// The general row `i` (`0 ≤ i < m`).
+    Row(u16),
+}
+
+/// One entry of the working set: a constraint held at one side (6 bytes, `Copy`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ActiveConstraint {
+    /// The constraint.
+    pub index: ConstraintIndex,
+    /// The side at which it is held (for an equality, the side it was violated at).
+    pub side: Side,
+}
+
+/// How a solve ended. Every exit is one of these; the solver never panics.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum QpStatus {
+    /// No solve has run since the solver was created.
+    NotSolved,
+    /// KKT conditions hold within the tolerances.
+    Optimal,
+    /// `max_iter` iterations ran out. The returned point is the primal point of the
+    /// current dual iterate: `x` minimises the Lagrangian at the returned multipliers,
+    /// which have the right signs and are zero off the working set (stationarity
+    /// `Hx + f + Aᵀλ + λ_bounds = 0` and dual feasibility hold). Constraints may be
+    /// violated, including those of the working set when the last step was a partial
+    /// one; the caller should check the violation it can accept.
+    IterationLimit,
+    /// The hard constraints cannot all hold (a dual ray was found). `x` is the last
+    /// iterate, as for [`QpStatus::IterationLimit`].
+    Infeasible,
+    /// `H` is not (numerically) positive definite: its Cholesky factorisation failed.
+    NotConvex,
+    /// Factor trouble that refactoring could not fix (non-finite multipliers, or a
+    /// dependent constraint still dependent after `W` null-space swaps).
+    NumericalError,
+    /// NaN or ±∞ in `H`, `f`, a used row of `A` or a soft weight, or NaN in a bound.
+    NonFiniteInput,
+    /// `m > M`, some `lo > hi`, a lower bound `+∞` or upper bound `−∞`, a negative
+    /// soft weight, or the problem data were consumed by a previous solve and not
+    /// refilled (see [`QpSolver::problem_mut`]).
+    InvalidInput,
+    /// A constraint had to enter a working set already holding `W` constraints.
+    WorkingSetFull,
+}
+
+/// Solver settings (tolerances in the units of the constraint values).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct QpSettings<T> {
+    /// Largest constraint violation accepted as feasible (absolute, in the units of
+    /// `a_iᵀx` and `x_j`). `0` means the precision default `√ε` (1.5e-8 for `f64`,
+    /// 3.5e-4 for `f32`).
+    pub primal_tol: T,
+    /// A multiplier counts as of the wrong sign below `−dual_tol`. `0` means the
+    /// precision default `√ε`.
+    pub dual_tol: T,
+    /// Relative pivot threshold: a constraint entering the working set is linearly
+    /// dependent if its `LDLᵀ` pivot is below `pivot_tol` times its diagonal entry.
+    /// `0` means the precision default `1000 ε` (2.2e-13 `f64`, 1.2e-4 `f32`).
+    pub pivot_tol: T,
+    /// Iteration cap (one iteration adds or removes one constraint, or swaps one after
+    /// a singular step). Bounds the worst-case time of a solve.
+    pub max_iter: u32,
+    /// Start from the working set left by the previous solve (or set with
+    /// [`QpSolver::set_working_set`]) instead of an empty one.
+    pub warm_start: bool,
+}
+
+impl<T: Real> QpSettings<T> {
+    /// Precision-default tolerances, `max_iter` iterations, warm start on.
+    pub const fn new(max_iter: u32) -> Self {
+        Self {
+            primal_tol: T::ZERO,
+            dual_tol: T::ZERO,
+            pivot_tol: T::ZERO,
+            max_iter,
+            warm_start: true,
+        }
+    }
+
+    fn effective(&self) -> Tols<T> {
+        let sqrt_eps = T::EPSILON.sqrt();
+        let pick = |v: T, d: T| if v > T::ZERO { v } else { d };
+        Tols {
+            primal: pick(self.primal_tol, sqrt_eps),
+            dual: pick(self.dual_tol, sqrt_eps),
+            pivot: pick(self.pivot_tol, T::lit(1000.0) * T::EPSILON),
+        }
+    }
+}
+
+#[derive(Clone, Copy)]
+struct Tols<T> {
+    primal: T,
+    dual: T,
+    pivot: T,
+}
+
+/// The problem data, filled in place by the caller (see [`QpSolver::problem_mut`]).
+///
+/// `N` variables, capacity `M` general rows of which the first `m` are used.
+#[derive(Clone, Debug)]
+pub struct QpProblem<T, const N: usize, const M: usize> {
+    /// Hessian `H` (`N×N`, symmetric positive definite; only the upper triangle
+    /// `h[r][c]`, `c ≥ r`, is read). Overwritten by `R⁻¹` during a solve.
+    pub h: [[T; N]; N],
+    /// Linear cost `f` (`N`).
+    pub f: [T; N],
+    /// General rows: `a[i]` is `a_iᵀ` (`M×N`, rows `0..m` used). Overwritten by
+    /// `a_iᵀ R⁻¹` during a solve.
+    pub a: [[T; N]; M],
+    /// Row lower bounds `lo_i` (`M`; `−∞` for none).
+    pub lo: [T; M],
+    /// Row upper bounds `hi_i` (`M`; `+∞` for none; `lo_i = hi_i` for an equality).
+    pub hi: [T; M],
+    /// Variable lower bounds (`N`; `−∞` for none).
+    pub x_lo: [T; N],
+    /// Variable upper bounds (`N`; `+∞` for none; equal to `x_lo` fixes the variable).
+    pub x_hi: [T; N],
+    /// Soft weight `ρ_i` of each row (`M`): `0` hard, `> 0` soft with penalty
+    /// `½ ρ_i s_i²` on its slack `s_i` (in cost units per squared row unit).
+    pub soft: [T; M],
+    /// Number of rows in use, `m ≤ M`.
+    pub m: usize,
+}
+
+impl<T: Real, const N: usize, const M: usize> QpProblem<T, N, M> {
+    /// An empty problem: `H = 0`, `f = 0`, no rows, all bounds infinite, all rows hard.
+    pub const fn new() -> Self {
+        Self {
+            h: [[T::ZERO; N]; N],
+            f: [T::ZERO; N],
+            a: [[T::ZERO; N]; M],
+            lo: [T::ZERO; M],
+            hi: [T::ZERO; M],
+            x_lo: [T::ZERO; N],
+            x_hi: [T::ZERO; N],
+            soft: [T::ZERO; M],
+            m: 0,
+        }
+        .with_free_bounds()
+    }
+
+    const fn with_free_bounds(mut self) -> Self {
+        let mut j = 0;
+        while j < N {
+            self.x_lo[j] = T::NEG_INFINITY;
+            self.x_hi[j] = T::INFINITY;
+            j += 1;
+        }
+        let mut i = 0;
+        while i < M {
+            self.lo[i] = T::NEG_INFINITY;
+            self.hi[i] = T::INFINITY;
+            i += 1;
+        }
+        self
+    }
+
+    /// Resets to [`QpProblem::new`]'s empty problem, in place.
+    pub fn clear(&mut self) {
+        for r in self.h.iter_mut() {
+            r.fill(T::ZERO);
+        }
+        self.f.fill(T::ZERO);
+        for r in self.a.iter_mut() {
+            r.fill(T::ZERO);
+        }
+        self.lo.fill(-T::INFINITY);
+        self.hi.fill(T::INFINITY);
+        self.x_lo.fill(-T::INFINITY);
+        self.x_hi.fill(T::INFINITY);
+        self.soft.fill(T::ZERO);
+        self.m = 0;
+    }
+
+    /// Appends a row `lo ≤ aᵀx ≤ hi` with soft weight `soft` (`0` = hard) at index `m`
+    /// and returns that index, or `None` if `M` rows are already in use.
+    pub fn push_row(&mut self, a: &[T; N], lo: T, hi: T, soft: T) -> Option<usize> {
+        let i = self.m;
+        let row = self.a.get_mut(i)?;
+        *row = *a;
+        if let (Some(l), Some(h), Some(s)) =
+            (self.lo.get_mut(i), self.hi.get_mut(i), self.soft.get_mut(i))
+        {
+            *l = lo;
+            *h = hi;
+            *s = soft;
+        }
+        self.m = i + 1;
+        Some(i)
+    }
+}
+
+impl<T: Real, const N: usize, const M: usize> Default for QpProblem<T, N, M> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// The result of a solve.
+#[derive(Clone, Debug)]
+pub struct QpSolution<T, const N: usize, const M: usize> {
+    /// Primal point `x` (`N`); see [`QpStatus`] for what it satisfies on each exit.
+    pub x: [T; N],
+    /// Row multipliers `λ_i` (`M`, first `m` meaningful): `≥ 0` at an active upper
+    /// side, `≤ 0` at an active lower side, `0` if inactive. With the bound
+    /// multipliers, `H x + f + Aᵀ λ + λ_bounds = 0`. A soft row's slack is
+    /// `|λ_i| / ρ_i`.
+    pub lambda_rows: [T; M],
+    /// Bound multipliers (`N`), same sign convention.
+    pub lambda_bounds: [T; N],
+    /// Cost `½xᵀHx + fᵀx + Σ ½ρ_i s_i²` at `x`.
+    pub objective: T,
+    /// How the solve ended.
+    pub status: QpStatus,
+    /// Iterations (each adds, removes or swaps one constraint).
+    pub iterations: u32,
+    /// Constraints added to the working set (warm-start re-activations not counted).
+    pub added: u32,
+    /// Constraints removed from the working set.
+    pub removed: u32,
+    /// `LDLᵀ` factorisations recomputed from scratch (warm-start build not counted).
+    pub refactorizations: u32,
+    /// Working-set size at exit.
+    pub working_set_len: u16,
+}
+
+impl<T: Real, const N: usize, const M: usize> QpSolution<T, N, M> {
+    /// A zero solution with status [`QpStatus::NotSolved`].
+    pub const fn new() -> Self {
+        Self {
+            x: [T::ZERO; N],
+            lambda_rows: [T::ZERO; M],
+            lambda_bounds: [T::ZERO; N],
+            objective: T::ZERO,
+            status: QpStatus::NotSolved,
+            iterations: 0,
+            added: 0,
+            removed: 0,
+            refactorizations: 0,
+            working_set_len: 0,
+        }
+    }
+}
+
+impl<T: Real, const N: usize, const M: usize> Default for QpSolution<T, N, M> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Solver workspace: the working set, its factor and per-constraint flags.
+#[derive(Clone, Debug)]
+struct Workspace<T, const N: usize, const M: usize, const W: usize, const WL: usize> {
+    /// Working set entries `0..n`.
+    ws: [ActiveConstraint; W],
+    /// Entries in use.
+    n: usize,
+    /// Current (dual-feasible) multipliers of the working set (`W`).
+    lam: [T; W],
+    /// Scratch (`W`): right-hand side then `λ*` of the working-set system, rank-one
+    /// vectors, null-space direction.
+    tmp: [T; W],
+    /// Packed `LDLᵀ` of the working-set matrix: row `r` at `r(r+1)/2`, holding
+    /// `L[r][0..r]` then `D[r]`.
+    ldl: [T; WL],
+    /// `v = R⁻ᵀ f` (`N`).
+    v: [T; N],
+    /// `u = R x` (`N`).
+    u: [T; N],
+    /// Side at which each row is active (`M`).
+    row_state: [Option<Side>; M],
+    /// Side at which each bound is active (`N`).
+    bound_state: [Option<Side>; N],
+    /// Appends since the last from-scratch factorisation.
+    updates: u32,
+}
+
+/// The solver: settings, problem, workspace and solution in one value (for a
+/// `static` on the ECU).
+///
+/// `N` variables, `M` general-row capacity, `W` working-set capacity, `WL` must be
+/// [`ldl_len`]`(W)` (checked at compile time).
+#[derive(Clone, Debug)]
+pub struct QpSolver<T, const N: usize, const M: usize, const W: usize, const WL: usize> {
+    /// Settings, read at each solve.
+    pub settings: QpSettings<T>,
+    problem: QpProblem<T, N, M>,
+    work: Workspace<T, N, M, W, WL>,
+    solution: QpSolution<T, N, M>,
+    /// The problem's `H` and rows hold factor data from the last solve.
+    consumed: bool,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum AppendError {
+    Singular,
+    Full,
+}
+
+impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
+    QpSolver<T, N, M, W, WL>
+{
+    const SIZES_OK: () = {
+        assert!(WL == W * (W + 1) / 2, "WL must be ldl_len(W)");
+        assert!(N >= 1 && W >= 1);
+        assert!(N <= u16::MAX as usize && M <= u16::MAX as usize);
+    };
+
+    /// A solver with an empty problem, default settings (`max_iter = 4(N+M)`, warm
+    /// start on) and an empty working set. `const`, so it can initialise a `static`.
+    pub const fn new() -> Self {
+        #[allow(clippy::let_unit_value)]
+        let () = Self::SIZES_OK;
+        Self {
+            settings: QpSettings::new((4 * (N + M)) as u32),
+            problem: QpProblem::new(),
+            work: Workspace {
+                ws: [ActiveConstraint {
+                    index: ConstraintIndex::Bound(0),
+                    side: Side::Lower,
+                }; W],
+                n: 0,
+                lam: [T::ZERO; W],
+                tmp: [T::ZERO; W],
+                ldl: [T::ZERO; WL],
+                v: [T::ZERO; N],
+                u: [T::ZERO; N],
+                row_state: [None; M],
+                bound_state: [None; N],
+                updates: 0,
+            },
+            solution: QpSolution::new(),
+            consumed: false,
+        }
+    }
+
+    /// The problem, to fill in place before a solve. A solve overwrites `h` and the
+    /// used rows of `a`: write both (and anything else that changed) before every
+    /// solve. Calling this marks the data as refilled.
+    pub fn problem_mut(&mut self) -> &mut QpProblem<T, N, M> {
+        self.consumed = false;
+        &mut self.problem
+    }
+
+    /// The problem (after a solve, `h` holds `R⁻¹` and `a` holds `A R⁻¹`).
+    pub fn problem(&self) -> &QpProblem<T, N, M> {
+        &self.problem
+    }
+
+    /// The result of the last solve.
+    pub fn solution(&self) -> &QpSolution<T, N, M> {
+        &self.solution
+    }
+
+    /// The working set left by the last solve (or set by
+    /// [`QpSolver::set_working_set`]), in order of entry.
+    pub fn working_set(&self) -> &[ActiveConstraint] {
+        self.work.ws.get(..self.work.n).unwrap_or(&[])
+    }
+
+    /// Sets the working set the next (warm-started) solve starts from; keeps at most
+    /// `W` entries and returns how many were kept. Entries are validated at the solve.
+    pub fn set_working_set(&mut self, set: &[ActiveConstraint]) -> usize {
+        let k = set.len().min(W);
+        for (d, s) in self.work.ws.iter_mut().zip(set.iter()) {
+            *d = *s;
+        }
+        self.work.n = k;
+        k
+    }
+
+    /// Empties the working set.
+    pub fn clear_working_set(&mut self) {
+        self.work.n = 0;
+    }
+
+    /// The slack `s_i = |λ_i|/ρ_i` of soft row `i` in the last solution (0 for a hard
+    /// or unused row).
+    pub fn slack(&self, i: usize) -> T {
+        match (self.problem.soft.get(i), self.solution.lambda_rows.get(i)) {
+            (Some(&rho), Some(&l)) if rho > T::ZERO && i < self.problem.m => l.abs() / rho,
+            _ => T::ZERO,
+        }
+    }
+
+    /// Solves the problem held in the solver; returns the status (also in
+    /// [`QpSolver::solution`]). Consumes `H` and the rows (see
+    /// [`QpSolver::problem_mut`]).
+    pub fn solve(&mut self) -> QpStatus {
+        let s = &mut self.solution;
+        s.iterations = 0;
+        s.added = 0;
+        s.removed = 0;
+        s.refactorizations = 0;
+        let status = if self.consumed {
+            QpStatus::InvalidInput
+        } else {
+            self.consumed = true;
+            match validate(&self.problem) {
+                Some(st) => st,
+                None => {
+                    if !factor_h(&mut self.problem.h) {
+                        QpStatus::NotConvex
+                    } else {
+                        transform(&mut self.problem, &mut self.work.v);
+                        let tols = self.settings.effective();
+                        self.work.start(&self.problem, &self.settings, tols);
+                        self.work
+                            .iterate(&self.problem, &self.settings, tols, &mut self.solution)
+                    }
+                }
+            }
+        };
+        self.solution.status = status;
+        match status {
+            QpStatus::Optimal
+            | QpStatus::IterationLimit
+            | QpStatus::Infeasible
+            | QpStatus::WorkingSetFull
+            | QpStatus::NumericalError => {
+                self.work.output(&self.problem, &mut self.solution);
+            }
+            _ => {
+                self.work.n = 0;
+                self.solution.x.fill(T::ZERO);
+                self.solution.lambda_rows.fill(T::ZERO);
+                self.solution.lambda_bounds.fill(T::ZERO);
+                self.solution.objective = T::ZERO;
+                self.solution.working_set_len = 0;
+            }
+        }
+        status
+    }
+}
+
+impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize> Default
+    for QpSolver<T, N, M, W, WL>
+{
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[inline]
+fn is_nan<T: Real>(v: T) -> bool {
+    v.partial_cmp(&v).is_none()
+}
+
+/// Input checks; `None` if the problem is acceptable.
+fn validate<T: Real, const N: usize, const M: usize>(p: &QpProblem<T, N, M>) -> Option<QpStatus> {
+    if p.m > M {
+        return Some(QpStatus::InvalidInput);
+    }
+    let rows = p.a.get(..p.m).unwrap_or(&[]);
+    let finite = p.h.iter().all(|r| r.iter().all(|v| v.is_finite()))
+        && p.f.iter().all(|v| v.is_finite())
+        && rows.iter().all(|r| r.iter().all(|v| v.is_finite()));
+    let mut bad_bound = false;
+    let mut nan = false;
+    for (&l, &h) in p.x_lo.iter().zip(p.x_hi.iter()) {
+        nan |= is_nan(l) || is_nan(h);
+        bad_bound |= l > h || l == T::INFINITY || h == -T::INFINITY;
+    }
+    for ((&l, &h), &s) in p.lo.iter().zip(p.hi.iter()).zip(p.soft.iter()).take(p.m) {
+        nan |= is_nan(l) || is_nan(h) || !s.is_finite();
+        bad_bound |= l > h || l == T::INFINITY || h == -T::INFINITY || s < T::ZERO;
+    }
+    if !finite || nan {
+        Some(QpStatus::NonFiniteInput)
+    } else if bad_bound {
+        Some(QpStatus::InvalidInput)
+    } else {
+        None
+    }
+}
+
+/// Cholesky `H = RᵀR` in the upper triangle, then `R ← R⁻¹` in place, lower triangle
+/// zeroed. False if a pivot is not clearly positive.
+fn factor_h<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> bool {
+    let tiny = T::EPSILON * T::from_usize(N);
+    for j in 0..N {
+        // Column j of R: R[k][j] for k ≤ j, from H[k][j] (upper triangle).
+        let mut d = h[j][j];
+        let scale = d.abs();
+        for k in 0..j {
+            d -= h[k][j] * h[k][j];
+        }
+        if !(d > tiny * scale) || !d.is_finite() {
+            return false;
+        }
+        let rjj = d.sqrt();
+        h[j][j] = rjj;
+        for i in (j + 1)..N {
+            let mut s = h[j][i];
+            for k in 0..j {
+                s -= h[k][j] * h[k][i];
+            }
+            h[j][i] = s / rjj;
+        }
+    }
+    // In-place inverse of the upper-triangular R, column by column.
+    for j in 0..N {
+        let inv = T::ONE / h[j][j];
+        h[j][j] = inv;
+        // Column j above the diagonal: x = Rinv[0..j][0..j] * R[0..j][j], scaled by −inv.
+        for i in 0..j {
+            let mut s = T::ZERO;
+            for k in i..j {
+                s += h[i][k] * h[k][j];
+            }
+            h[i][j] = s;
+        }
+        for i in 0..j {
+            h[i][j] = -h[i][j] * inv;
+        }
+    }
+    for (r, row) in h.iter_mut().enumerate() {
+        for v in row.iter_mut().take(r) {
+            *v = T::ZERO;
+        }
+    }
+    true
+}
+
+/// `a_i ← a_iᵀ R⁻¹` for the used rows, and `v = R⁻ᵀ f`.
+fn transform<T: Real, const N: usize, const M: usize>(p: &mut QpProblem<T, N, M>, v: &mut [T; N]) {
+    let rinv = &p.h;
+    for row in p.a.iter_mut().take(p.m) {
+        for j in (0..N).rev() {
+            let mut s = T::ZERO;
+            for k in 0..=j {
+                s += row[k] * rinv[k][j];
+            }
+            row[j] = s;
+        }
+    }
+    for j in 0..N {
+        let mut s = T::ZERO;
+        for k in 0..=j {
+            s += p.f[k] * rinv[k][j];
+        }
+        v[j] = s;
+    }
+}
+
+#[inline]
+fn sign<T: Real>(side: Side) -> T {
+    match side {
+        Side::Lower => -T::ONE,
+        Side::Upper => T::ONE,
+    }
+}
+
+#[inline]
+fn row_start(r: usize) -> usize {
+    r * (r + 1) / 2
+}
+
+/// The transformed row of a constraint and the index of its first possible nonzero.
+#[inline]
+fn con_row<T: Real, const N: usize, const M: usize>(
+    p: &QpProblem<T, N, M>,
+    c: ConstraintIndex,
+) -> (&[T; N], usize) {
+    match c {
+        ConstraintIndex::Bound(j) => {
+            let j = j as usize;
+            (&p.h[j], j)
+        }
+        ConstraintIndex::Row(i) => (&p.a[i as usize], 0),
+    }
+}
+
+#[inline]
+fn dot_from<T: Real, const N: usize>(a: &[T; N], b: &[T; N], start: usize) -> T {
+    let mut s = T::ZERO;
+    for (x, y) in a.iter().zip(b.iter()).skip(start) {
+        s += *x * *y;
+    }
+    s
+}
+
+/// Entry of the working-set matrix `m̃_c1ᵀ m̃_c2`.
+#[inline]
+fn mdot<T: Real, const N: usize, const M: usize>(
+    p: &QpProblem<T, N, M>,
+    c1: ConstraintIndex,
+    c2: ConstraintIndex,
+) -> T {
+    let (r1, s1) = con_row(p, c1);
+    let (r2, s2) = con_row(p, c2);
+    dot_from(r1, r2, s1.max(s2))
+}
+
+/// `1/ρ` for a soft row, else 0.
+#[inline]
+fn delta<T: Real, const N: usize, const M: usize>(p: &QpProblem<T, N, M>, c: ConstraintIndex) -> T {
+    match c {
+        ConstraintIndex::Row(i) => {
+            let rho = p.soft[i as usize];
+            if rho > T::ZERO {
+                T::ONE / rho
+            } else {
+                T::ZERO
+            }
+        }
+        ConstraintIndex::Bound(_) => T::ZERO,
+    }
+}
+
+/// `(lo, hi)` of a constraint.
+#[inline]
+fn bounds_of<T: Real, const N: usize, const M: usize>(
+    p: &QpProblem<T, N, M>,
+    c: ConstraintIndex,
+) -> (T, T) {
+    match c {
+        ConstraintIndex::Bound(j) => (p.x_lo[j as usize], p.x_hi[j as usize]),
+        ConstraintIndex::Row(i) => (p.lo[i as usize], p.hi[i as usize]),
+    }
+}
+
+impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
+    Workspace<T, N, M, W, WL>
+{
+    fn state_mut(&mut self, c: ConstraintIndex) -> Option<&mut Option<Side>> {
+        match c {
+            ConstraintIndex::Bound(j) => self.bound_state.get_mut(j as usize),
+            ConstraintIndex::Row(i) => self.row_state.get_mut(i as usize),
+        }
+    }
+
+    /// Whether entry `e` may be in the working set of problem `p` (in range, bound of
+    /// its side finite, not already active).
+    fn admissible(&self, p: &QpProblem<T, N, M>, e: ActiveConstraint) -> bool {
+        let (in_range, active) = match e.index {
+            ConstraintIndex::Bound(j) => {
+                let j = j as usize;
+                (j < N, self.bound_state.get(j).is_some_and(|s| s.is_some()))
+            }
+            ConstraintIndex::Row(i) => {
+                let i = i as usize;
+                (
+                    i < p.m && i < M,
+                    self.row_state.get(i).is_some_and(|s| s.is_some()),
+                )
+            }
+        };
+        if !in_range || active {
+            return false;
+        }
+        let (lo, hi) = bounds_of(p, e.index);
+        match e.side {
+            Side::Lower => lo.is_finite(),
+            Side::Upper => hi.is_finite(),
+        }
+    }
+
+    /// Starts a solve: clears the flags and (warm start) re-activates the given
+    /// working set with `λ = 0`, dropping inadmissible or dependent entries.
+    fn start(&mut self, p: &QpProblem<T, N, M>, settings: &QpSettings<T>, tols: Tols<T>) {
+        let count = if settings.warm_start { self.n } else { 0 };
+        self.rebuild(p, tols, count);
+        self.lam.fill(T::ZERO);
+    }
+
+    /// Rebuilds the factor from entries `ws[0..count]` (and their `lam`), dropping
+    /// inadmissible and linearly dependent entries. Returns how many were dropped.
+    fn rebuild(&mut self, p: &QpProblem<T, N, M>, tols: Tols<T>, count: usize) -> usize {
+        self.row_state.fill(None);
+        self.bound_state.fill(None);
+        self.n = 0;
+        self.updates = 0;
+        let mut dropped = 0;
+        for r in 0..count.min(W) {
+            let e = self.ws[r];
+            let l = self.lam[r];
+            if !self.admissible(p, e) {
+                dropped += 1;
+                continue;
+            }
+            let k = self.n;
+            match self.append(p, e, tols) {
+                Ok(()) => self.lam[k] = l,
+                Err(_) => dropped += 1,
+            }
+        }
+        self.updates = 0;
+        dropped
+    }
+
+    /// Appends constraint `e` as row `n` of the factor. On `Singular`, the row `n` of
+    /// the packed storage holds `L_new = D⁻¹L⁻¹ M_{W,e}` but `n` is unchanged.
+    fn append(
+        &mut self,
+        p: &QpProblem<T, N, M>,
+        e: ActiveConstraint,
+        tols: Tols<T>,
+    ) -> Result<(), AppendError> {
+        let n = self.n;
+        if n >= W {
+            return Err(AppendError::Full);
+        }
+        let s = row_start(n);
+        // b_l = M_{l,e}
+        for l in 0..n {
+            self.ldl[s + l] = mdot(p, self.ws[l].index, e.index);
+        }
+        // Forward solve with the unit lower L: y = L⁻¹ b.
+        for l in 0..n {
+            let sl = row_start(l);
+            let mut acc = self.ldl[s + l];
+            for k in 0..l {
+                acc -= self.ldl[sl + k] * self.ldl[s + k];
+            }
+            self.ldl[s + l] = acc;
+        }
+        let diag = mdot(p, e.index, e.index) + delta(p, e.index);
+        let mut dn = diag;
+        for l in 0..n {
+            let dl = self.ldl[row_start(l) + l];
+            let y = self.ldl[s + l];
+            let lv = y / dl;
+            self.ldl[s + l] = lv;
+            dn -= y * lv;
+        }
+        self.ldl[s + n] = dn;
+        if !(dn > tols.pivot * diag) || !dn.is_finite() {
+            return Err(AppendError::Singular);
+        }
+        self.ws[n] = e;
+        if let Some(st) = self.state_mut(e.index) {
+            *st = Some(e.side);
+        }
+        self.n = n + 1;
+        self.updates += 1;
+        Ok(())
+    }
+
+    /// Removes working-set entry `p` (and its multiplier): deletes its row and column
+    /// of `LDLᵀ` and updates the trailing block by a rank-one update.
+    fn remove(&mut self, pos: usize) {
+        let n = self.n;
+        if pos >= n {
+            return;
+        }
+        let e = self.ws[pos];
+        if let Some(st) = self.state_mut(e.index) {
+            *st = None;
+        }
+        let mut alpha = self.ldl[row_start(pos) + pos];
+        // z (new indices pos..n-1) = old column pos of L below the diagonal.
+        for r in (pos + 1)..n {
+            self.tmp[r - 1] = self.ldl[row_start(r) + pos];
+        }
+        // Shift rows pos+1..n up by one, dropping column pos (destinations precede
+        // sources, so a forward copy is safe).
+        for r in (pos + 1)..n {
+            let src = row_start(r);
+            let dst = row_start(r - 1);
+            let mut k = 0;
+            for c in 0..=r {
+                if c == pos {
+                    continue;
+                }
+                self.ldl[dst + k] = self.ldl[src + c];
+                k += 1;
+            }
+        }
+        for r in pos..(n - 1) {
+            self.ws[r] = self.ws[r + 1];
+            self.lam[r] = self.lam[r + 1];
+        }
+        let nn = n - 1;
+        self.n = nn;
+        // Rank-one update of the trailing block (rows/cols pos..nn) by alpha z zᵀ.
+        for j in pos..nn {
+            let pj = self.tmp[j];
+            if pj == T::ZERO {
+                continue;
+            }
+            let dj_idx = row_start(j) + j;
+            let dj = self.ldl[dj_idx];
+            let dnew = dj + alpha * pj * pj;
+            let beta = pj * alpha / dnew;
+            alpha = dj * alpha / dnew;
+            self.ldl[dj_idx] = dnew;
+            for r in (j + 1)..nn {
+                let idx = row_start(r) + j;
+                self.tmp[r] -= pj * self.ldl[idx];
+                self.ldl[idx] += beta * self.tmp[r];
+            }
+        }
+    }
+
+    /// Solves `(M_WW + D) x = tmp` in place in `tmp[0..n]`.
+    fn ldl_solve_tmp(&mut self) {
+        let n = self.n;
+        for r in 0..n {
+            let s = row_start(r);
+            let mut acc = self.tmp[r];
+            for k in 0..r {
+                acc -= self.ldl[s + k] * self.tmp[k];
+            }
+            self.tmp[r] = acc;
+        }
+        for r in 0..n {
+            self.tmp[r] /= self.ldl[row_start(r) + r];
+        }
+        for r in (0..n).rev() {
+            let mut acc = self.tmp[r];
+            for k in (r + 1)..n {
+                acc -= self.ldl[row_start(k) + r] * self.tmp[k];
+            }
+            self.tmp[r] = acc;
+        }
+    }
+
+    /// `λ*` for the current working set, into `tmp`; false if not finite.
+    fn solve_lam_star(&mut self, p: &QpProblem<T, N, M>) -> bool {
+        for k in 0..self.n {
+            let e = self.ws[k];
+            let (lo, hi) = bounds_of(p, e.index);
+            let b = match e.side {
+                Side::Lower => lo,
+                Side::Upper => hi,
+            };
+            let (row, st) = con_row(p, e.index);
+            self.tmp[k] = -(b + dot_from(row, &self.v, st));
+        }
+        self.ldl_solve_tmp();
+        self.tmp.iter().take(self.n).all(|v| v.is_finite())
+    }
+
+    fn is_equality(p: &QpProblem<T, N, M>, c: ConstraintIndex) -> bool {
+        let (lo, hi) = bounds_of(p, c);
+        lo == hi
+    }
+
+    /// `u = −v − M̃_Wᵀ λ`, and `x = R⁻¹ u` into `x`.
+    fn primal(&mut self, p: &QpProblem<T, N, M>, x: &mut [T; N]) {
+        for (u, v) in self.u.iter_mut().zip(self.v.iter()) {
+            *u = -*v;
+        }
+        for k in 0..self.n {
+            let l = self.lam[k];
+            if l == T::ZERO {
+                continue;
+            }
+            let (row, st) = con_row(p, self.ws[k].index);
+            for (u, r) in self.u.iter_mut().zip(row.iter()).skip(st) {
+                *u -= l * *r;
+            }
+        }
+        for (j, xj) in x.iter_mut().enumerate() {
+            *xj = dot_from(&p.h[j], &self.u, j);
+        }
+    }
+
+    /// Most violated inactive constraint (beyond `tol`), given `u` and `x`. `skip` is
+    /// chosen only if no other constraint is violated (anti-cycling).
+    fn most_violated(
+        &self,
+        p: &QpProblem<T, N, M>,
+        x: &[T; N],
+        tol: T,
+        skip: Option<ConstraintIndex>,
+    ) -> Option<ActiveConstraint> {
+        let mut best = tol;
+        let mut cand = None;
+        let mut fallback = None;
+        let mut consider = |val: T, lo: T, hi: T, index: ConstraintIndex| {
+            let (viol, side) = if lo - val > val - hi {
+                (lo - val, Side::Lower)
+            } else {
+                (val - hi, Side::Upper)
+            };
+            if Some(index) == skip {
+                if viol > tol {
+                    fallback = Some(ActiveConstraint { index, side });
+                }
+            } else if viol > best {
+                best = viol;
+                cand = Some(ActiveConstraint { index, side });
+            }
+        };
+        for j in 0..N {
+            if self.bound_state[j].is_none() {
+                consider(x[j], p.x_lo[j], p.x_hi[j], ConstraintIndex::Bound(j as u16));
+            }
+        }
+        for i in 0..p.m.min(M) {
+            if self.row_state[i].is_none() {
+                let val = dot_from(&p.a[i], &self.u, 0);
+                consider(val, p.lo[i], p.hi[i], ConstraintIndex::Row(i as u16));
+            }
+        }
+        cand.or(fallback)
+    }
+
+    /// Refactors from scratch (dropping dependent entries); counts it.
+    fn refactor(&mut self, p: &QpProblem<T, N, M>, tols: Tols<T>, sol: &mut QpSolution<T, N, M>) {
+        let n = self.n;
+        let dropped = self.rebuild(p, tols, n);
+        sol.refactorizations += 1;
+        sol.removed += dropped as u32;
+    }
+
+    /// The main loop; returns the exit status (the solution is written by `output`).
+    fn iterate(
+        &mut self,
+        p: &QpProblem<T, N, M>,
+        settings: &QpSettings<T>,
+        tols: Tols<T>,
+        sol: &mut QpSolution<T, N, M>,
+    ) -> QpStatus {
+        // Anti-cycling: a constraint that left by a zero-length step (degenerate dual)
+        // is re-added only if no other constraint is violated, until the next addition.
+        let mut blocked: Option<ConstraintIndex> = None;
+        loop {
+            if sol.iterations >= settings.max_iter {
+                return QpStatus::IterationLimit;
+            }
+            sol.iterations += 1;
+            if !self.solve_lam_star(p) {
+                self.refactor(p, tols, sol);
+                if !self.solve_lam_star(p) {
+                    return QpStatus::NumericalError;
+                }
+            }
+            // Blocking multiplier on the way from λ to λ*.
+            let mut block: Option<(usize, T)> = None;
+            for k in 0..self.n {
+                let e = self.ws[k];
+                if Self::is_equality(p, e.index) {
+                    continue;
+                }
+                let sg = sign::<T>(e.side);
+                let ls = sg * self.tmp[k];
+                if ls < -tols.dual {
+                    let l = (sg * self.lam[k]).max(T::ZERO);
+                    let ratio = l / (l - ls);
+                    if block.is_none_or(|(_, r)| ratio < r) {
+                        block = Some((k, ratio));
+                    }
+                }
+            }
+            if let Some((pos, alpha)) = block {
+                for k in 0..self.n {
+                    let mut l = self.lam[k] + alpha * (self.tmp[k] - self.lam[k]);
+                    let e = self.ws[k];
+                    if !Self::is_equality(p, e.index) && sign::<T>(e.side) * l < T::ZERO {
+                        l = T::ZERO;
+                    }
+                    self.lam[k] = l;
+                }
+                blocked = if alpha > T::ZERO {
+                    None
+                } else {
+                    Some(self.ws[pos].index)
+                };
+                self.remove(pos);
+                sol.removed += 1;
+                continue;
+            }
+            for k in 0..self.n {
+                self.lam[k] = self.tmp[k];
+            }
+            self.primal(p, &mut sol.x);
+            let Some(e) = self.most_violated(p, &sol.x, tols.primal, blocked) else {
+                return QpStatus::Optimal;
+            };
+            blocked = None;
+            if let Err(st) = self.add(p, e, tols, sol) {
+                return st;
+            }
+        }
+    }
+
+    /// Adds the violated constraint `e`. If it depends linearly on the working set,
+    /// moves `λ` along the dual null-space direction (which keeps `u` and raises the
+    /// dual cost) until a multiplier reaches zero, removes that constraint and tries
+    /// again (at most `W` times); no multiplier reaching zero means infeasible.
+    fn add(
+        &mut self,
+        p: &QpProblem<T, N, M>,
+        e: ActiveConstraint,
+        tols: Tols<T>,
+        sol: &mut QpSolution<T, N, M>,
+    ) -> Result<(), QpStatus> {
+        let sigma = sign::<T>(e.side);
+        // Multiplier the new constraint has accumulated over null-space steps.
+        let mut lam_e = T::ZERO;
+        let mut refactored = false;
+        for _ in 0..=W {
+            match self.append(p, e, tols) {
+                Ok(()) => {
+                    self.lam[self.n - 1] = lam_e;
+                    sol.added += 1;
+                    return Ok(());
+                }
+                Err(AppendError::Full) => return Err(QpStatus::WorkingSetFull),
+                Err(AppendError::Singular) => {}
+            }
+            if !refactored && self.updates > 0 {
+                // The small pivot may be accumulated rounding: refactor and retry.
+                refactored = true;
+                self.refactor(p, tols, sol);
+                continue;
+            }
+            // Null-space direction: λ_e grows by t·σ, λ_W by t·σ·c with
+            // c = −(M_WW + D)⁻¹ M_{W,e} = −L⁻ᵀ L_new.
+            let n = self.n;
+            let s = row_start(n);
+            let mut cmax = T::ZERO;
+            for r in (0..n).rev() {
+                let mut acc = -self.ldl[s + r];
+                for k in (r + 1)..n {
+                    acc -= self.ldl[row_start(k) + r] * self.tmp[k];
+                }
+                self.tmp[r] = acc;
+                cmax = cmax.max(acc.abs());
+            }
+            // Rates below this are rounding noise of a zero coefficient.
+            let noise = tols.pivot * (T::ONE + cmax);
+            let mut block: Option<(usize, T)> = None;
+            for k in 0..n {
+                let ek = self.ws[k];
+                if Self::is_equality(p, ek.index) {
+                    continue;
+                }
+                let sg = sign::<T>(ek.side);
+                let rate = sg * sigma * self.tmp[k];
+                if rate < -noise {
+                    let t = (sg * self.lam[k]).max(T::ZERO) / -rate;
+                    if block.is_none_or(|(_, r)| t < r) {
+                        block = Some((k, t));
+                    }
+                }
+            }
+            let Some((pos, t)) = block else {
+                return Err(QpStatus::Infeasible);
+            };
+            for k in 0..n {
+                let mut l = self.lam[k] + t * sigma * self.tmp[k];
+                let ek = self.ws[k];
+                if !Self::is_equality(p, ek.index) && sign::<T>(ek.side) * l < T::ZERO {
+                    l = T::ZERO;
+                }
+                self.lam[k] = l;
+            }
+            lam_e += t * sigma;
+            self.remove(pos);
+            sol.removed += 1;
+        }
+        Err(QpStatus::NumericalError)
+    }
+
+    /// Writes `x`, multipliers and cost for the current iterate.
+    fn output(&mut self, p: &QpProblem<T, N, M>, sol: &mut QpSolution<T, N, M>) {
+        self.primal(p, &mut sol.x);
+        sol.lambda_rows.fill(T::ZERO);
+        sol.lambda_bounds.fill(T::ZERO);
+        let mut soft_cost = T::ZERO;
+        for k in 0..self.n {
+            let l = self.lam[k];
+            match self.ws[k].index {
+                ConstraintIndex::Bound(j) => {
+                    if let Some(d) = sol.lambda_bounds.get_mut(j as usize) {
+                        *d = l;
+                    }
+                }
+                ConstraintIndex::Row(i) => {
+                    if let Some(d) = sol.lambda_rows.get_mut(i as usize) {
+                        *d = l;
+                    }
+                    soft_cost += T::HALF * l * l * delta(p, self.ws[k].index);
+                }
+            }
+        }
+        let mut c = T::ZERO;
+        for (u, v) in self.u.iter().zip(self.v.iter()) {
+            c += *u * (T::HALF * *u + *v);
+        }
+        sol.objective = c + soft_cost;
+        sol.working_set_len = self.n as u16;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::panic)]
+    use super::*;
+
+    type S = QpSolver<f64, 5, 8, 8, { ldl_len(8) }>;
+
+    /// Deterministic pseudo-random numbers in [-1, 1).
+    fn lcg(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+
+    fn filled(seed: u64) -> S {
+        let mut s = S::new();
+        let mut st = seed;
+        let p = s.problem_mut();
+        let mut g = [[0.0; 5]; 5];
+        for r in g.iter_mut() {
+            for v in r.iter_mut() {
+                *v = lcg(&mut st);
+            }
+        }
+        for r in 0..5 {
+            for c in 0..5 {
+                p.h[r][c] =
+                    (0..5).map(|k| g[k][r] * g[k][c]).sum::<f64>() + if r == c { 0.3 } else { 0.0 };
+            }
+            p.f[r] = lcg(&mut st);
+            p.x_lo[r] = -1.0;
+            p.x_hi[r] = 1.0;
+        }
+        for i in 0..8 {
+            let mut a = [0.0; 5];
+            for v in a.iter_mut() {
+                *v = lcg(&mut st);
+            }
+            let soft = if i % 3 == 0 { 2.0 + lcg(&mut st) } else { 0.0 };
+            p.push_row(&a, -1.0, 1.0, soft);
+        }
+        s
+    }
+
+    #[test]
+    fn cholesky_inverse_is_inverse() {
+        let mut s = filled(3);
+        let h = s.problem.h;
+        assert!(factor_h(&mut s.problem.h));
+        let ri = &s.problem.h;
+        // H · R⁻¹ R⁻ᵀ = I.
+        for r in 0..5 {
+            for c in 0..5 {
+                let mut v = 0.0;
+                for k in 0..5 {
+                    let hk = if k >= r { h[r][k] } else { h[k][r] };
+                    let mut inv = 0.0;
+                    for q in 0..5 {
+                        inv += ri[k][q] * ri[c][q];
+                    }
+                    v += hk * inv;
+                }
+                let want = if r == c { 1.0 } else { 0.0 };
+                assert!((v - want).abs() < 1e-10, "({r},{c}) = {v}");
+            }
+        }
+    }
+
+    /// Removing an entry by downdate gives the same factor as factorising the
+    /// remaining working set from scratch.
+    #[test]
+    fn remove_matches_refactor() {
+        for seed in 0..20u64 {
+            let mut s = filled(seed);
+            assert!(factor_h(&mut s.problem.h));
+            transform(&mut s.problem, &mut s.work.v);
+            let tols = QpSettings::<f64>::new(10).effective();
+            let set = [
+                ConstraintIndex::Row(0),
+                ConstraintIndex::Bound(1),
+                ConstraintIndex::Row(3),
+                ConstraintIndex::Row(4),
+                ConstraintIndex::Bound(3),
+                ConstraintIndex::Row(6),
+                ConstraintIndex::Row(2),
+            ];
+            for &c in &set {
+                let e = ActiveConstraint {
+                    index: c,
+                    side: Side::Upper,
+                };
+                s.work.append(&s.problem, e, tols).unwrap();
+            }
+            for pos in [2usize, 0, 4] {
+                s.work.remove(pos);
+                let n = s.work.n;
+                let down = s.work.ldl;
+                let dropped = s.work.rebuild(&s.problem, tols, n);
+                assert_eq!(dropped, 0);
+                assert_eq!(s.work.n, n);
+                for k in 0..ldl_len(n) {
+                    assert!(
+                        (down[k] - s.work.ldl[k]).abs() < 1e-10,
+                        "seed {seed} pos {pos} k {k}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn dependent_rows_are_refused_by_append() {
+        let mut s = filled(1);
+        let a0 = s.problem.a[0];
+        s.problem.a[1] = a0;
+        s.problem.soft[0] = 0.0;
+        s.problem.soft[1] = 0.0;
+        assert!(factor_h(&mut s.problem.h));
+        transform(&mut s.problem, &mut s.work.v);
+        let tols = QpSettings::<f64>::new(10).effective();
+        let e = |i| ActiveConstraint {
+            index: ConstraintIndex::Row(i),
+            side: Side::Upper,
+        };
+        assert_eq!(s.work.append(&s.problem, e(0), tols), Ok(()));
+        assert_eq!(
+            s.work.append(&s.problem, e(1), tols),
+            Err(AppendError::Singular)
+        );
+        // A soft copy is not dependent: its pivot is at least 1/ρ.
+        s.problem.soft[1] = 4.0;
+        assert_eq!(s.work.append(&s.problem, e(1), tols), Ok(()));
+        assert!((s.work.ldl[row_start(1) + 1] - 0.25).abs() < 1e-12);
+    }
+}

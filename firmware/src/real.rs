@@ -45,6 +45,8 @@ pub trait Real:
     const EPSILON: Self;
     /// +∞.
     const INFINITY: Self;
+    /// −∞ (a const, for `const fn` initialisers where `-INFINITY` is not available).
+    const NEG_INFINITY: Self;
     /// Largest finite value.
     const MAX: Self;
 
@@ -136,6 +138,7 @@ macro_rules! impl_real {
             const PI: Self = core::f64::consts::PI as $t;
             const EPSILON: Self = <$t>::EPSILON;
             const INFINITY: Self = <$t>::INFINITY;
+            const NEG_INFINITY: Self = <$t>::NEG_INFINITY;
             const MAX: Self = <$t>::MAX;
 
             #[inline]

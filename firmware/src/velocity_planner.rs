@@ -1,1 +1,119 @@
-//! (being written)
+//! Local velocity planner: the heuristic speed `V_heur` of the paper's
+//! Section III-A (its Equation 3) that the MPC's speed cost tracks.
+//!
+//! ```text
+//! V_heur = min( sqrt(a_y,frac · μ · g · R_min),  V_max,  V + ΔV )
+//! ```
+//!
+//! * `R_min = 1 / κ_max`, with `κ_max` the largest `|κ|` of the reference path
+//!   over the preview distance `d = max(V, V_floor) · T_prev` ahead of the queried
+//!   abscissa ([`ReferencePath::max_abs_curvature_between`]); on a straight
+//!   (`κ_max = 0`) the first term is infinite. `a_y,frac = 0.5` (the paper) keeps
+//!   the lateral acceleration in the validity domain of the kinematic model, the
+//!   same bound as [`crate::validity`]. `V_floor` keeps a useful preview at low
+//!   speed (the car must see a hairpin before it starts).
+//! * `V_max = min(V_cap, a_stop · T_H)` with `a_stop = min(a_brake, μ·g)`: the
+//!   paper's "maximum speed on straights such that the car can still stop by the
+//!   end of the MPC horizon" (`V/a_stop ≤ T_H`). Defaults: `T_H = HORIZON ·
+//!   PLAN_DT_S = 3.2 s` and `a_brake = 8 m/s²`, the magnitude of the MPC's hard
+//!   deceleration bound (the paper's `u1 ≥ −8 m/s²`), so `V_max = 25.6 m/s` at
+//!   `μ = 1`; limiting by `μ·g` lowers it on a slippery road, where the car cannot
+//!   brake at 8 m/s². A comfort planner would set `a_brake` to a fraction of 8.
+//! * `V + ΔV` lets the MPC accelerate gradually from the current speed `V`.
+//!
+//! As the paper remarks, `V_heur` is a target for a cost term, not a dynamically
+//! feasible profile; the MPC does not have to track it exactly.
+
+use crate::plan::{HORIZON, PLAN_DT_S};
+use crate::reference_path::ReferencePath;
+use crate::Real;
+
+/// Settings of the local velocity planner (units in each field).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VelocityPlannerSettings<T> {
+    /// Speed increment over the current speed, `ΔV`, m/s.
+    pub delta_v_mps: T,
+    /// Preview time `T_prev` over which the path's curvature is looked at, s.
+    pub preview_time_s: T,
+    /// Lowest speed used for the preview distance, `V_floor`, m/s.
+    pub preview_speed_floor_mps: T,
+    /// Fraction of `μ·g` allowed as lateral acceleration (the paper's 0.5).
+    pub ay_fraction: T,
+    /// User speed cap `V_cap` (legal limit, track limit), m/s.
+    pub v_cap_mps: T,
+    /// Deceleration used for "can stop within the horizon", `a_brake`, m/s² (positive).
+    pub brake_decel_mps2: T,
+    /// The MPC horizon `T_H`, s.
+    pub horizon_s: T,
+}
+
+impl<T: Real> Default for VelocityPlannerSettings<T> {
+    /// `ΔV = 3 m/s`, `T_prev = T_H = 3.2 s`, `V_floor = 5 m/s`, fraction 0.5,
+    /// `V_cap = 30 m/s`, `a_brake = 8 m/s²`, `T_H = HORIZON · PLAN_DT_S = 3.2 s`.
+    fn default() -> Self {
+        let horizon_s = T::from_usize(HORIZON) * T::lit(PLAN_DT_S);
+        Self {
+            delta_v_mps: T::lit(3.0),
+            preview_time_s: horizon_s,
+            preview_speed_floor_mps: T::lit(5.0),
+            ay_fraction: T::HALF,
+            v_cap_mps: T::lit(30.0),
+            brake_decel_mps2: T::lit(8.0),
+            horizon_s,
+        }
+    }
+}
+
+impl<T: Real> VelocityPlannerSettings<T> {
+    /// `V_max = min(V_cap, min(a_brake, μ·g) · T_H)`, m/s, for friction `mu`
+    /// (dimensionless; negative or NaN counts as 0).
+    pub fn v_max_mps(&self, mu: T) -> T {
+        let mu = mu.max(T::ZERO);
+        let a_stop = self
+            .brake_decel_mps2
+            .min(mu * T::lit(crate::G))
+            .max(T::ZERO);
+        self.v_cap_mps.min(a_stop * self.horizon_s).max(T::ZERO)
+    }
+
+    /// Speed at which a turn of curvature `kappa_1pm` (1/m, either sign) reaches
+    /// the lateral limit `ay_fraction·μ·g`: `sqrt(ay_fraction·μ·g/|κ|)`, m/s
+    /// (`+∞` on a straight).
+    pub fn curve_speed_mps(&self, kappa_1pm: T, mu: T) -> T {
+        let k = kappa_1pm.abs();
+        let ay = self.ay_fraction * mu.max(T::ZERO) * T::lit(crate::G);
+        if k <= T::ZERO {
+            return T::INFINITY;
+        }
+        (ay.max(T::ZERO) / k).sqrt()
+    }
+
+    /// Preview distance `max(V, V_floor) · T_prev` ahead of the query, m.
+    pub fn preview_distance_m(&self, v_now_mps: T) -> T {
+        v_now_mps.max(self.preview_speed_floor_mps).max(T::ZERO) * self.preview_time_s.max(T::ZERO)
+    }
+}
+
+/// `V_heur`, m/s, at the path abscissa `s_node_m` (m; any value, wrapped on a
+/// closed path) for the current speed `v_now_mps` (m/s; negative counts as 0)
+/// and friction `mu`: `min(sqrt(a_y,frac·μ·g·R_min), V_max, V + ΔV)` with
+/// `R_min` over `[s_node, s_node + preview distance]`. Never negative. An empty
+/// path has no curvature: the result is then `min(V_max, V + ΔV)`.
+///
+/// The MPC calls it once per prediction node (one curvature scan of the preview
+/// window each, `O(vertices in the window)`, one `sqrt`).
+pub fn v_heur<T: Real, const CAP: usize>(
+    settings: &VelocityPlannerSettings<T>,
+    path: &ReferencePath<T, CAP>,
+    s_node_m: T,
+    v_now_mps: T,
+    mu: T,
+) -> T {
+    let v = v_now_mps.max(T::ZERO);
+    let d = settings.preview_distance_m(v);
+    let kappa = path.max_abs_curvature_between(s_node_m, s_node_m + d);
+    let curve = settings.curve_speed_mps(kappa, mu);
+    let v_max = settings.v_max_mps(mu);
+    let v_inc = v + settings.delta_v_mps.max(T::ZERO);
+    curve.min(v_max).min(v_inc).max(T::ZERO)
+}

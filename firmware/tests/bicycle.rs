@@ -1,0 +1,184 @@
+//! Tests of the kinematic bicycle model and its RK4 discretisation.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+use firmware::bicycle::{
+    discretize, node_from_state, state_from_node, BicycleGeometry, Discretization, DELTA, NU, NX,
+    PSI, S, V, X, Y,
+};
+use proptest::prelude::*;
+
+fn geom() -> BicycleGeometry<f64> {
+    BicycleGeometry {
+        l_f_m: 1.2,
+        l_r_m: 1.6,
+    }
+}
+
+/// Central finite differences of the discrete map.
+fn fd(
+    g: &BicycleGeometry<f64>,
+    x: &[f64; 6],
+    u: &[f64; 2],
+    dt: f64,
+    n: usize,
+) -> Discretization<f64> {
+    let base = g.discretize_substeps(x, u, dt, n);
+    let mut a = [[0.0; NX]; NX];
+    let mut b = [[0.0; NU]; NX];
+    let h = 1e-6;
+    for j in 0..NX {
+        let (mut xp, mut xm) = (*x, *x);
+        xp[j] += h;
+        xm[j] -= h;
+        let p = g.discretize_substeps(&xp, u, dt, n).x_next;
+        let m = g.discretize_substeps(&xm, u, dt, n).x_next;
+        for i in 0..NX {
+            a[i][j] = (p[i] - m[i]) / (2.0 * h);
+        }
+    }
+    for j in 0..NU {
+        let (mut up, mut um) = (*u, *u);
+        up[j] += h;
+        um[j] -= h;
+        let p = g.discretize_substeps(x, &up, dt, n).x_next;
+        let m = g.discretize_substeps(x, &um, dt, n).x_next;
+        for i in 0..NX {
+            b[i][j] = (p[i] - m[i]) / (2.0 * h);
+        }
+    }
+    Discretization {
+        x_next: base.x_next,
+        a,
+        b,
+    }
+}
+
+fn assert_jacobians_match(x: [f64; 6], u: [f64; 2], dt: f64, n: usize) {
+    let g = geom();
+    let an = g.discretize_substeps(&x, &u, dt, n);
+    let num = fd(&g, &x, &u, dt, n);
+    for i in 0..NX {
+        for j in 0..NX {
+            assert!(
+                (an.a[i][j] - num.a[i][j]).abs() < 1e-6 * (1.0 + num.a[i][j].abs()),
+                "A[{i}][{j}]: {} vs {} at x={x:?} u={u:?}",
+                an.a[i][j],
+                num.a[i][j]
+            );
+        }
+        for j in 0..NU {
+            assert!(
+                (an.b[i][j] - num.b[i][j]).abs() < 1e-6 * (1.0 + num.b[i][j].abs()),
+                "B[{i}][{j}]: {} vs {}",
+                an.b[i][j],
+                num.b[i][j]
+            );
+        }
+    }
+}
+
+#[test]
+fn jacobians_match_finite_differences() {
+    for (x, u) in [
+        ([0.0, 0.0, 0.0, 15.0, 0.0, 0.0], [0.0, 0.0]),
+        ([12.0, 3.0, -4.0, 15.0, 0.7, 0.05], [1.5, -0.3]),
+        ([100.0, -50.0, 20.0, 6.0, -2.5, -0.3], [-8.0, 0.5]),
+        ([5.0, 1.0, 1.0, 0.5, 3.0, 0.45], [6.0, 0.2]),
+        ([5.0, 1.0, 1.0, 25.0, 10.0, -0.02], [-3.0, -0.5]),
+    ] {
+        assert_jacobians_match(x, u, 0.2, 1);
+        assert_jacobians_match(x, u, 0.2, 3);
+    }
+}
+
+proptest! {
+    #[test]
+    fn jacobians_match_finite_differences_anywhere(
+        v in 0.0f64..35.0, psi in -7.0f64..7.0, delta in -0.5f64..0.5,
+        a in -8.0f64..6.0, r in -0.5f64..0.5, n in 1usize..4,
+    ) {
+        assert_jacobians_match([3.0, 10.0, -2.0, v, psi, delta], [a, r], 0.2, n);
+    }
+}
+
+#[test]
+fn straight_line_is_exact() {
+    let g = geom();
+    let d = discretize(&g, &[0.0, 1.0, 2.0, 10.0, 0.0, 0.0], &[2.0, 0.0], 0.2);
+    // s and X follow V·t + a·t²/2 exactly (RK4 is exact for quadratics).
+    assert!((d.x_next[S] - (2.0 + 0.04)).abs() < 1e-12);
+    assert!((d.x_next[X] - (1.0 + 2.0 + 0.04)).abs() < 1e-12);
+    assert!((d.x_next[Y] - 2.0).abs() < 1e-12);
+    assert!((d.x_next[V] - 10.4).abs() < 1e-12);
+    assert_eq!(d.x_next[PSI], 0.0);
+    assert_eq!(d.b[V][0], 0.2);
+    assert_eq!(d.b[DELTA][1], 0.2);
+}
+
+#[test]
+fn constant_steering_follows_the_kinematic_circle() {
+    // R = l_r / sin β; the centre of gravity stays on that circle.
+    let g = geom();
+    let delta: f64 = 0.1;
+    let beta = g.beta_rad(delta);
+    let r = g.l_r_m / beta.sin();
+    let mut x = [0.0, 0.0, 0.0, 10.0, 0.0, delta];
+    // Centre of the circle: left of the velocity direction ψ + β.
+    let c = [-r * beta.sin(), r * beta.cos()];
+    for _ in 0..50 {
+        x = g.discretize(&x, &[0.0, 0.0], 0.2).x_next;
+        let d = ((x[X] - c[0]).powi(2) + (x[Y] - c[1]).powi(2)).sqrt();
+        assert!((d - r).abs() < 1e-6 * r, "{d} vs {r}");
+    }
+    assert!((x[PSI] - 10.0 * 10.0 / r).abs() < 1e-9);
+    // ψ̇ agrees with the continuous model.
+    let f = g.dynamics(&[0.0, 0.0, 0.0, 10.0, 0.0, delta], &[0.0, 0.0]);
+    assert!((f[PSI] - 10.0 / r).abs() < 1e-12);
+}
+
+#[test]
+fn substeps_converge_at_fourth_order() {
+    let g = geom();
+    let x = [0.0, 0.0, 0.0, 12.0, 0.3, 0.2];
+    let u = [1.0, -0.4];
+    let reference = g.discretize_substeps(&x, &u, 0.2, 256).x_next;
+    let err = |n: usize| {
+        let y = g.discretize_substeps(&x, &u, 0.2, n).x_next;
+        (0..NX)
+            .map(|i| (y[i] - reference[i]).abs())
+            .fold(0.0, f64::max)
+    };
+    let (e1, e2, e4) = (err(1), err(2), err(4));
+    assert!(e1 < 1e-4, "{e1}");
+    // Halving the step divides the error by about 2⁴ = 16.
+    assert!(e1 / e2 > 10.0 && e1 / e2 < 24.0, "{e1} {e2}");
+    assert!(e2 / e4 > 10.0 && e2 / e4 < 24.0, "{e2} {e4}");
+}
+
+#[test]
+fn f32_agrees_with_f64_and_is_deterministic() {
+    let g32 = BicycleGeometry {
+        l_f_m: 1.2f32,
+        l_r_m: 1.6,
+    };
+    let x = [1.0f32, 2.0, 3.0, 14.0, 0.4, 0.1];
+    let u = [0.5f32, 0.3];
+    let d1 = g32.discretize(&x, &u, 0.2);
+    let d2 = g32.discretize(&x, &u, 0.2);
+    assert_eq!(format!("{d1:?}"), format!("{d2:?}"));
+    let d64 = geom().discretize(&x.map(f64::from), &u.map(f64::from), 0.2);
+    for i in 0..NX {
+        assert!(
+            (f64::from(d1.x_next[i]) - d64.x_next[i]).abs() < 1e-4 * (1.0 + d64.x_next[i].abs())
+        );
+        for j in 0..NX {
+            assert!((f64::from(d1.a[i][j]) - d64.a[i][j]).abs() < 1e-4 * (1.0 + d64.a[i][j].abs()));
+        }
+    }
+}
+
+#[test]
+fn plan_node_round_trip() {
+    let x = [1.0, 2.0, 3.0, 4.0, 5.0, 0.1];
+    assert_eq!(state_from_node(&node_from_state(&x)), x);
+}

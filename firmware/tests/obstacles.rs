@@ -1,0 +1,315 @@
+//! Tests of the obstacle manager: minimal parabolas, side choice, errors.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+use core::f64::consts::PI;
+use firmware::obstacles::{
+    build_parabola, constraint_value_and_gradient, minimal_apex, Obstacle, ObstacleError,
+    ObstacleManager, ObstacleSettings, Parabola, Side, MAX_OBSTACLES,
+};
+use firmware::reference_path::ReferencePath;
+use proptest::prelude::*;
+
+/// Straight open path along X from −100 m to 200 m, half-widths 4 m each side.
+fn straight() -> ReferencePath<f64, 64> {
+    let pts: Vec<[f64; 2]> = (0..=30).map(|i| [-100.0 + 10.0 * i as f64, 0.0]).collect();
+    let w = vec![[4.0, 4.0]; pts.len()];
+    let mut p = ReferencePath::new();
+    p.load(&pts, Some(&w), false).unwrap();
+    p
+}
+
+fn boxed(x0: f64, x1: f64, y0: f64, y1: f64) -> Obstacle<f64> {
+    Obstacle::from_vertices(7, &[[x0, y0], [x1, y0], [x1, y1], [x0, y1]]).unwrap()
+}
+
+/// Global position of a point given in the parabola frame.
+fn global(p: &Parabola<f64>, xi: f64, eta: f64) -> [f64; 2] {
+    let t = p.tangent;
+    [
+        p.origin_m[0] + xi * t[0] - eta * t[1],
+        p.origin_m[1] + xi * t[1] + eta * t[0],
+    ]
+}
+
+/// Every inflated vertex is inside (g ≤ 0), one touches the boundary (minimal
+/// height), and no other ξ0 gives a lower apex (minimal over ξ0).
+fn check_minimal(par: &Parabola<f64>, o: &Obstacle<f64>, s: &ObstacleSettings<f64>) {
+    let sigma = par.sigma();
+    let mut pts = vec![];
+    let mut gmax = f64::NEG_INFINITY;
+    for v in &o.vertices {
+        let (xi, eta) = par.to_local(*v);
+        for dx in [-s.half_car_length_m, s.half_car_length_m] {
+            let q = global(par, xi + dx, eta + sigma * s.lateral_margin_m());
+            let (g, _) = constraint_value_and_gradient(par, q);
+            assert!(g <= 1e-9, "inflated vertex outside: g = {g}");
+            gmax = gmax.max(g);
+            pts.push((xi + dx, sigma * eta + s.lateral_margin_m()));
+        }
+        // The raw vertex is deeper inside by at least the margin.
+        let (g, _) = constraint_value_and_gradient(par, *v);
+        assert!(g <= -s.lateral_margin_m() + 1e-9);
+    }
+    assert!(gmax > -1e-9, "apex not tight: {gmax}");
+    let a = sigma * par.eta_apex_m;
+    let f = |x0: f64| {
+        pts.iter()
+            .map(|(xi, e)| e + par.steepness_1pm * (xi - x0).powi(2))
+            .fold(f64::NEG_INFINITY, f64::max)
+    };
+    for k in -4000..=4000 {
+        let x0 = par.xi0_m + k as f64 * 0.005;
+        assert!(
+            f(x0) >= a - 1e-9,
+            "lower apex at ξ0 = {x0}: {} < {a}",
+            f(x0)
+        );
+    }
+}
+
+#[test]
+fn obstacle_on_the_right_is_passed_on_its_left() {
+    let path = straight();
+    let s = ObstacleSettings::default();
+    let o = boxed(48.0, 52.0, -3.0, -1.5);
+    let par = build_parabola(&s, &path, 0, &o).unwrap();
+    assert_eq!(par.side, Side::Left);
+    // The path starts at X = −100 m: s = X + 100.
+    assert!((par.xi0_m + par.s_m - 150.0).abs() < 1e-9);
+    // Symmetric box: apex over its middle, above its top by the margin and by
+    // c·(half length of the box + half car length)².
+    let expected =
+        -1.5 + s.lateral_margin_m() + s.steepness_1pm * (2.0 + s.half_car_length_m).powi(2);
+    assert!((par.eta_apex_m - expected).abs() < 1e-9);
+    check_minimal(&par, &o, &s);
+    // η_a ≈ 0.07 m: the car passes 0.5 m left of the centre line, not on it.
+    assert!(par.constraint_value_and_gradient([50.0, 0.5]).0 > 0.0);
+    assert!(par.constraint_value_and_gradient([50.0, 0.0]).0 < 0.0);
+}
+
+#[test]
+fn obstacle_on_the_left_is_passed_on_its_right() {
+    let path = straight();
+    let s = ObstacleSettings::default();
+    let o = Obstacle::from_vertices(1, &[[30.0, 1.0], [33.0, 2.5], [29.0, 3.5]]).unwrap();
+    let par = build_parabola(&s, &path, 0, &o).unwrap();
+    assert_eq!(par.side, Side::Right);
+    check_minimal(&par, &o, &s);
+    // Set by the lowest vertex (30, 1) alone: apex over it.
+    let expected = 1.0 - s.lateral_margin_m() - s.steepness_1pm * s.half_car_length_m.powi(2);
+    assert!((par.eta_apex_m - expected).abs() < 1e-9);
+    assert!((par.xi0_m + par.s_m - 130.0).abs() < 1e-9);
+    // Forbidden region above: a point further left is inside.
+    assert!(par.constraint_value_and_gradient([31.0, 3.9]).0 < 0.0);
+    assert!(par.constraint_value_and_gradient([31.0, -1.0]).0 > 0.0);
+}
+
+#[test]
+fn obstacle_across_the_centre_line_goes_to_the_roomier_side() {
+    let path = straight();
+    let s = ObstacleSettings::default();
+    // More room on the right (3.5 m) than on the left (2.5 m).
+    let o = boxed(60.0, 62.0, -0.5, 1.5);
+    let par = build_parabola(&s, &path, 0, &o).unwrap();
+    assert_eq!(par.side, Side::Right);
+    check_minimal(&par, &o, &s);
+    // Mirror image: more room on the left.
+    let o2 = boxed(60.0, 62.0, -1.5, 0.5);
+    let par2 = build_parabola(&s, &path, 0, &o2).unwrap();
+    assert_eq!(par2.side, Side::Left);
+    check_minimal(&par2, &o2, &s);
+    assert!((par2.eta_apex_m + par.eta_apex_m).abs() < 1e-9);
+    assert!((par2.xi0_m - par.xi0_m).abs() < 1e-9);
+}
+
+#[test]
+fn irregular_obstacle_apex_is_off_centre_and_minimal() {
+    let path = straight();
+    let s = ObstacleSettings::default();
+    let o = Obstacle::from_vertices(
+        3,
+        &[
+            [10.0, -3.5],
+            [14.0, -1.0],
+            [15.0, -2.0],
+            [22.0, -2.6],
+            [18.0, -3.9],
+        ],
+    )
+    .unwrap();
+    let par = build_parabola(&s, &path, 0, &o).unwrap();
+    assert_eq!(par.side, Side::Left);
+    check_minimal(&par, &o, &s);
+}
+
+#[test]
+fn blocked_road_reports_the_obstacle_and_the_missing_room() {
+    let path = straight();
+    let s = ObstacleSettings::default();
+    let o = boxed(80.0, 82.0, -3.0, 3.0);
+    let e = build_parabola(&s, &path, 4, &o).unwrap_err();
+    match e {
+        ObstacleError::RoadBlocked {
+            obstacle,
+            missing_m,
+        } => {
+            assert_eq!(obstacle, 4);
+            // 1 m free each side, 2.1 m needed.
+            assert!((missing_m - (s.required_room_m() - 1.0)).abs() < 1e-9);
+        }
+        other => panic!("{other:?}"),
+    }
+    // The manager keeps a best-effort parabola and reports the error.
+    let mut m = ObstacleManager::new();
+    let r = m.update(&s, &path, &[boxed(48.0, 52.0, -3.0, -1.5), o]);
+    assert!(matches!(
+        r,
+        Err(ObstacleError::RoadBlocked { obstacle: 1, .. })
+    ));
+    assert_eq!(m.parabolas().len(), 2);
+}
+
+#[test]
+fn bad_vertices_are_errors() {
+    let path = straight();
+    let s = ObstacleSettings::default();
+    let o = Obstacle::from_vertices(2, &[[1.0, 1.0], [2.0, f64::NAN]]).unwrap();
+    assert_eq!(
+        build_parabola(&s, &path, 5, &o),
+        Err(ObstacleError::NonFiniteVertex {
+            obstacle: 5,
+            vertex: 1
+        })
+    );
+    let empty = Obstacle::from_vertices(2, &[]).unwrap();
+    assert_eq!(
+        build_parabola(&s, &path, 0, &empty),
+        Err(ObstacleError::NoVertices { obstacle: 0 })
+    );
+    assert!(matches!(
+        Obstacle::from_vertices(2, &[[0.0, 0.0]; 9]),
+        Err(ObstacleError::TooManyVertices { count: 9, .. })
+    ));
+    let bad = ObstacleSettings {
+        steepness_1pm: 0.0,
+        ..s
+    };
+    assert_eq!(
+        build_parabola(&bad, &path, 0, &boxed(0.0, 1.0, -3.0, -2.0)),
+        Err(ObstacleError::InvalidSettings)
+    );
+    let empty_path: ReferencePath<f64, 8> = ReferencePath::new();
+    assert_eq!(
+        build_parabola(&s, &empty_path, 0, &boxed(0.0, 1.0, -3.0, -2.0)),
+        Err(ObstacleError::PathEmpty)
+    );
+    let many = vec![boxed(0.0, 1.0, -3.0, -2.0); MAX_OBSTACLES + 1];
+    let mut m = ObstacleManager::new();
+    assert!(matches!(
+        m.update(&s, &path, &many),
+        Err(ObstacleError::TooManyObstacles { count: 17, .. })
+    ));
+    assert_eq!(m.parabolas().len(), MAX_OBSTACLES);
+}
+
+#[test]
+fn gradient_matches_finite_differences() {
+    let path = straight();
+    let s = ObstacleSettings::default();
+    for o in [boxed(48.0, 52.0, -3.0, -1.5), boxed(30.0, 31.0, 1.0, 2.0)] {
+        let par = build_parabola(&s, &path, 0, &o).unwrap();
+        for p in [[40.0, 0.5], [55.0, -2.0], [50.0, 3.0]] {
+            let (_, grad) = par.constraint_value_and_gradient(p);
+            let h = 1e-6;
+            let gx = (par.constraint_value_and_gradient([p[0] + h, p[1]]).0
+                - par.constraint_value_and_gradient([p[0] - h, p[1]]).0)
+                / (2.0 * h);
+            let gy = (par.constraint_value_and_gradient([p[0], p[1] + h]).0
+                - par.constraint_value_and_gradient([p[0], p[1] - h]).0)
+                / (2.0 * h);
+            assert!((gx - grad[0]).abs() < 1e-6 && (gy - grad[1]).abs() < 1e-6);
+        }
+    }
+}
+
+#[test]
+fn relevance_window_covers_where_the_region_reaches_the_road() {
+    let path = straight();
+    let s = ObstacleSettings::default();
+    let par = build_parabola(&s, &path, 0, &boxed(48.0, 52.0, -3.0, -1.5)).unwrap();
+    assert!(par.reaches_road);
+    let (a, b) = par.s_range_m();
+    // The boundary meets the right road edge (η = −4) at the ends of the range.
+    let r = ((par.eta_apex_m + 4.0) / s.steepness_1pm).sqrt();
+    assert!((b - a - 2.0 * r).abs() < 1e-9);
+    // s = X + 100 on this path.
+    assert!(par.is_relevant([50.0, 0.0]) && par.is_relevant_at_s(&path, 150.0));
+    assert!(!par.is_relevant([50.0 + r + 1.0, 0.0]));
+    assert!(!par.is_relevant_at_s(&path, 150.0 - r - 1.0));
+    assert!(par.overlaps_s_window(&path, 100.0, 140.0));
+    assert!(!par.overlaps_s_window(&path, 180.0, 220.0));
+    // An obstacle off the road never matters.
+    let off = build_parabola(&s, &path, 0, &boxed(48.0, 52.0, -12.0, -10.0)).unwrap();
+    assert!(!off.reaches_road && !off.is_relevant([50.0, -6.0]));
+}
+
+#[test]
+fn curved_closed_path_frame_and_wrap() {
+    // Circle of radius 50 m, counter-clockwise, default widths (3.5 m).
+    let pts: Vec<[f64; 2]> = (0..200)
+        .map(|i| {
+            let a = 2.0 * PI * i as f64 / 200.0;
+            [50.0 * a.cos(), 50.0 * a.sin()]
+        })
+        .collect();
+    let mut path: ReferencePath<f64, 256> = ReferencePath::new();
+    path.load(&pts, None, true).unwrap();
+    let s = ObstacleSettings::default();
+    // Obstacle outside the circle (to the right of a left turn) at angle 1 rad.
+    let a: f64 = 1.0;
+    let o = Obstacle::from_vertices(
+        9,
+        &[
+            [52.0 * a.cos(), 52.0 * a.sin()],
+            [53.0 * (a + 0.02).cos(), 53.0 * (a + 0.02).sin()],
+            [53.0 * a.cos(), 53.0 * a.sin()],
+        ],
+    )
+    .unwrap();
+    let par = build_parabola(&s, &path, 0, &o).unwrap();
+    assert_eq!(par.side, Side::Left);
+    check_minimal(&par, &o, &s);
+    assert!((par.s_m - 50.0 * a).abs() < 0.5);
+    let l = path.length_m();
+    assert!(par.is_relevant_at_s(&path, par.s_m + 3.0 * l));
+    assert!(par.overlaps_s_window(&path, par.s_m + 2.0 * l - 10.0, par.s_m + 2.0 * l + 5.0));
+}
+
+#[test]
+fn f32_parabolas_are_deterministic() {
+    let pts: Vec<[f32; 2]> = (0..=30).map(|i| [-100.0 + 10.0 * i as f32, 0.0]).collect();
+    let mut path: ReferencePath<f32, 64> = ReferencePath::new();
+    path.load(&pts, None, false).unwrap();
+    let s = ObstacleSettings::<f32>::default();
+    let o = Obstacle::from_vertices(1, &[[48.0f32, -3.0], [52.0, -3.0], [50.0, -1.5]]).unwrap();
+    let a = build_parabola(&s, &path, 0, &o).unwrap();
+    let b = build_parabola(&s, &path, 0, &o).unwrap();
+    assert_eq!(format!("{a:?}"), format!("{b:?}"));
+    assert!((a.eta_apex_m - (-1.5 + 1.2 + 0.02 * 2.3 * 2.3)).abs() < 1e-5);
+}
+
+proptest! {
+    #[test]
+    fn minimal_apex_is_the_global_minimum(
+        pts in proptest::collection::vec((-20.0f64..20.0, -5.0f64..5.0), 1..16),
+        c in 0.005f64..0.5,
+    ) {
+        let (x0, a) = minimal_apex(&pts, c).unwrap();
+        let f = |x: f64| pts.iter().map(|(xi, e)| e + c * (xi - x).powi(2)).fold(f64::NEG_INFINITY, f64::max);
+        prop_assert!((f(x0) - a).abs() < 1e-12);
+        for k in -2000..=2000 {
+            let x = k as f64 * 0.02;
+            prop_assert!(f(x) >= a - 1e-9);
+        }
+    }
+}

@@ -1,0 +1,154 @@
+//! The same well-conditioned problems solved in f32 and f64: the f32 solution agrees
+//! with the f64 one within `1e-3 · (1 + |x|∞)` in `x` and `1e-3 · (1 + |J|)` in cost.
+#![allow(
+    missing_docs,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::needless_range_loop
+)]
+
+mod qp_util;
+
+use firmware::qp::{ldl_len, QpProblem, QpSolver, QpStatus};
+use qp_util::{random_problem, Mix, Rng};
+
+const N: usize = 10;
+const M: usize = 24;
+const W: usize = 30;
+
+/// Stated f32-vs-f64 tolerance (relative to 1 + max |x|).
+const TOL32: f64 = 1e-3;
+
+fn to_f32(p: &QpProblem<f64, N, M>) -> QpProblem<f32, N, M> {
+    let mut q = QpProblem::<f32, N, M>::new();
+    for r in 0..N {
+        for c in 0..N {
+            q.h[r][c] = p.h[r][c] as f32;
+        }
+        q.f[r] = p.f[r] as f32;
+        q.x_lo[r] = p.x_lo[r] as f32;
+        q.x_hi[r] = p.x_hi[r] as f32;
+    }
+    for i in 0..M {
+        for c in 0..N {
+            q.a[i][c] = p.a[i][c] as f32;
+        }
+        q.lo[i] = p.lo[i] as f32;
+        q.hi[i] = p.hi[i] as f32;
+        q.soft[i] = p.soft[i] as f32;
+    }
+    q.m = p.m;
+    q
+}
+
+#[test]
+fn f32_agrees_with_f64() {
+    let mut s64 = Box::new(QpSolver::<f64, N, M, W, { ldl_len(W) }>::new());
+    let mut s32 = Box::new(QpSolver::<f32, N, M, W, { ldl_len(W) }>::new());
+    s64.settings.warm_start = false;
+    s32.settings.warm_start = false;
+    let mut worst = 0.0f64;
+    for seed in 0..300u64 {
+        let mut rng = Rng::new(50_000 + seed);
+        // Well conditioned: no degenerate rows; soft rows and equalities allowed.
+        let mix = Mix {
+            m: M,
+            p_soft: 0.3,
+            p_degenerate: 0.0,
+            p_eq: 0.1,
+            p_fixed: 0.1,
+            tight: true,
+        };
+        let mut p = random_problem::<N, M>(&mut rng, mix);
+        for j in 0..N {
+            p.h[j][j] += 1.0;
+        }
+        let q = to_f32(&p);
+        *s64.problem_mut() = p;
+        *s32.problem_mut() = q;
+        assert_eq!(s64.solve(), QpStatus::Optimal, "seed {seed} f64");
+        assert_eq!(s32.solve(), QpStatus::Optimal, "seed {seed} f32");
+        let x64 = s64.solution().x;
+        let x32 = s32.solution().x;
+        let scale = 1.0 + x64.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        let dx = x64
+            .iter()
+            .zip(&x32)
+            .map(|(a, b)| (a - *b as f64).abs())
+            .fold(0.0, f64::max)
+            / scale;
+        let j64 = s64.solution().objective;
+        let dj = (j64 - s32.solution().objective as f64).abs() / (1.0 + j64.abs());
+        worst = worst.max(dx).max(dj);
+        assert!(dx < TOL32, "seed {seed}: relative |Δx| = {dx:e}");
+        assert!(dj < TOL32, "seed {seed}: relative |ΔJ| = {dj:e}");
+    }
+    println!("worst relative f32/f64 difference over 300 problems: {worst:e}");
+}
+
+/// At the MPC's sizes (N = 32, M = 96, W = 48): f32 and f64 agree and the work is
+/// reported.
+#[test]
+fn mpc_sized_problems_f32_vs_f64() {
+    const N: usize = 32;
+    const M: usize = 96;
+    const W: usize = 48;
+    let mut s64 = Box::new(QpSolver::<f64, N, M, W, { ldl_len(W) }>::new());
+    let mut s32 = Box::new(QpSolver::<f32, N, M, W, { ldl_len(W) }>::new());
+    s64.settings.warm_start = false;
+    s32.settings.warm_start = false;
+    let (mut it32, mut it64, mut worst_it) = (0u32, 0u32, 0u32);
+    let mut worst = 0.0f64;
+    for seed in 0..40u64 {
+        let mut rng = Rng::new(90_000 + seed);
+        let mix = Mix {
+            m: 72,
+            p_soft: 0.3,
+            p_degenerate: 0.0,
+            p_eq: 0.05,
+            p_fixed: 0.0,
+            tight: false,
+        };
+        let mut p = random_problem::<N, M>(&mut rng, mix);
+        for j in 0..N {
+            p.h[j][j] += 2.0;
+        }
+        let mut q = QpProblem::<f32, N, M>::new();
+        for r in 0..N {
+            for c in 0..N {
+                q.h[r][c] = p.h[r][c] as f32;
+            }
+            q.f[r] = p.f[r] as f32;
+            q.x_lo[r] = p.x_lo[r] as f32;
+            q.x_hi[r] = p.x_hi[r] as f32;
+        }
+        for i in 0..M {
+            for c in 0..N {
+                q.a[i][c] = p.a[i][c] as f32;
+            }
+            q.lo[i] = p.lo[i] as f32;
+            q.hi[i] = p.hi[i] as f32;
+            q.soft[i] = p.soft[i] as f32;
+        }
+        q.m = p.m;
+        *s64.problem_mut() = p;
+        *s32.problem_mut() = q;
+        assert_eq!(s64.solve(), QpStatus::Optimal, "seed {seed} f64");
+        assert_eq!(s32.solve(), QpStatus::Optimal, "seed {seed} f32");
+        it64 += s64.solution().iterations;
+        it32 += s32.solution().iterations;
+        worst_it = worst_it.max(s32.solution().iterations);
+        let x64 = s64.solution().x;
+        let scale = 1.0 + x64.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        let dx = x64
+            .iter()
+            .zip(s32.solution().x.iter())
+            .map(|(a, b)| (a - *b as f64).abs())
+            .fold(0.0, f64::max)
+            / scale;
+        worst = worst.max(dx);
+        assert!(dx < TOL32, "seed {seed}: relative |Δx| = {dx:e}");
+    }
+    println!("N=32, M=96 cold solves: f64 {it64} iterations, f32 {it32} (worst {worst_it}); worst relative |Δx| {worst:e}");
+}

@@ -1,0 +1,314 @@
+//! Tests of the reference path: arc length, heading, curvature, projection, errors.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+use core::f64::consts::PI;
+use firmware::reference_path::{PathError, ReferencePath};
+use proptest::prelude::*;
+
+fn circle(r: f64, n: usize, ccw: bool) -> Vec<[f64; 2]> {
+    (0..n)
+        .map(|i| {
+            let a = 2.0 * PI * i as f64 / n as f64;
+            let a = if ccw { a } else { -a };
+            [r * a.cos(), r * a.sin()]
+        })
+        .collect()
+}
+
+fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol
+}
+
+#[test]
+fn circle_length_heading_and_curvature() {
+    let r = 50.0;
+    let n = 100;
+    let mut p: ReferencePath<f64, 256> = ReferencePath::new();
+    p.load(&circle(r, n, true), None, true).unwrap();
+    assert!(p.is_closed());
+    let chord = 2.0 * r * (PI / n as f64).sin();
+    assert!(close(p.length_m(), chord * n as f64, 1e-9));
+    assert!(close(p.total_turning_rad(), 2.0 * PI, 1e-9));
+    for k in 0..37 {
+        let s = k as f64 * 9.3;
+        assert!(
+            close(p.curvature_at(s), 1.0 / r, 1e-9),
+            "s={s}: {}",
+            p.curvature_at(s)
+        );
+    }
+    // Heading at vertex 0 is tangent (+Y), grows by 2π per lap and is continuous.
+    assert!(close(p.heading_at(0.0), PI / 2.0, 1e-9));
+    let l = p.length_m();
+    assert!(close(
+        p.heading_at(10.0 + l),
+        p.heading_at(10.0) + 2.0 * PI,
+        1e-9
+    ));
+    let mut prev = p.heading_at(-l);
+    for k in 1..2000 {
+        let s = -l + k as f64 * 3.0 * l / 2000.0;
+        let h = p.heading_at(s);
+        assert!(h > prev && h - prev < 0.05, "s={s}");
+        prev = h;
+    }
+}
+
+#[test]
+fn clockwise_circle_has_negative_curvature() {
+    let mut p: ReferencePath<f64, 256> = ReferencePath::new();
+    p.load(&circle(20.0, 60, false), None, true).unwrap();
+    assert!(close(p.curvature_at(5.0), -1.0 / 20.0, 1e-9));
+    assert!(close(p.total_turning_rad(), -2.0 * PI, 1e-9));
+}
+
+#[test]
+fn noisy_circle_curvature_is_filtered_by_the_window() {
+    // Points every ~0.5 m with ±2 cm of deterministic noise.
+    let r = 30.0;
+    let n = 377;
+    let pts: Vec<[f64; 2]> = circle(r, n, true)
+        .iter()
+        .enumerate()
+        .map(|(i, q)| {
+            let e = 0.02 * ((i * 7919 % 13) as f64 / 6.0 - 1.0);
+            [q[0] * (1.0 + e / r), q[1] * (1.0 + e / r)]
+        })
+        .collect();
+    let mut p: ReferencePath<f64, 512> = ReferencePath::new();
+    p.set_curvature_half_window_m(4.0);
+    p.load(&pts, None, true).unwrap();
+    for k in 0..50 {
+        let kappa = p.curvature_at(k as f64 * 3.7);
+        assert!((kappa * r - 1.0).abs() < 0.1, "{kappa}");
+    }
+    // A window shorter than the noise scale would be much worse.
+    let mut q: ReferencePath<f64, 512> = ReferencePath::new();
+    q.set_curvature_half_window_m(0.01);
+    q.load(&pts, None, true).unwrap();
+    assert!((q.max_abs_curvature_1pm() * r - 1.0).abs() > 0.2);
+}
+
+#[test]
+fn closing_duplicate_is_dropped_and_s_wraps() {
+    let mut pts = vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]];
+    pts.push(pts[0]);
+    let mut p: ReferencePath<f64, 8> = ReferencePath::new();
+    p.load(&pts, None, true).unwrap();
+    assert_eq!(p.len(), 4);
+    assert!(close(p.length_m(), 40.0, 1e-12));
+    assert_eq!(p.position_at(45.0), [5.0, 0.0]);
+    assert_eq!(p.position_at(-5.0), [0.0, 5.0]);
+    assert_eq!(p.position_at(35.0), [0.0, 5.0]);
+    assert!(close(p.wrap_s(-5.0), 35.0, 1e-12));
+    assert!(close(p.unwrap_s(1.0, 79.0), 81.0, 1e-12));
+    assert!(close(p.unwrap_s(39.0, 41.0), 39.0, 1e-12));
+}
+
+#[test]
+fn open_path_extrapolates_positions_and_clamps_the_rest() {
+    let pts = [[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [20.0, 10.0]];
+    let w = [[1.0, 2.0], [1.0, 2.0], [3.0, 4.0], [3.0, 4.0]];
+    let mut p: ReferencePath<f64, 8> = ReferencePath::new();
+    p.load(&pts, Some(&w), false).unwrap();
+    assert!(!p.is_closed());
+    assert!(close(p.length_m(), 30.0, 1e-12));
+    assert_eq!(p.position_at(-3.0), [-3.0, 0.0]);
+    assert_eq!(p.position_at(35.0), [20.0, 15.0]);
+    assert!(close(p.heading_at(-3.0), 0.0, 1e-12));
+    assert!(close(p.heading_at(100.0), PI / 2.0, 1e-12));
+    assert!(close(p.heading_at(20.0), PI / 4.0, 1e-12));
+    let wd = p.widths_at(15.0).unwrap();
+    assert!(close(wd.right_m, 2.0, 1e-12) && close(wd.left_m, 3.0, 1e-12));
+    // Left turn at the corner.
+    assert!(p.curvature_at(20.0) > 0.0);
+    assert!(close(p.curvature_at(5.0), 0.0, 1e-12));
+}
+
+#[test]
+fn max_abs_curvature_between_sees_the_curve_ahead() {
+    // Straight of 100 m then a left arc of radius 10 m (closed by a generic return).
+    let mut pts = vec![];
+    for i in 0..=50 {
+        pts.push([2.0 * i as f64, 0.0]);
+    }
+    for k in 1..=30 {
+        let a = PI * k as f64 / 30.0;
+        pts.push([100.0 + 10.0 * a.sin(), 10.0 - 10.0 * a.cos()]);
+    }
+    let mut p: ReferencePath<f64, 128> = ReferencePath::new();
+    p.load(&pts, None, false).unwrap();
+    assert!(p.max_abs_curvature_between(0.0, 80.0) < 1e-9);
+    let k = p.max_abs_curvature_between(50.0, 120.0);
+    assert!(close(k, 0.1, 0.01), "{k}");
+    assert!(close(p.max_abs_curvature_between(120.0, 50.0), k, 0.0));
+    // Range beyond the end is clamped.
+    assert!(close(p.max_abs_curvature_between(125.0, 1e4), 0.1, 0.01));
+}
+
+#[test]
+fn projection_of_a_circle_point() {
+    let r = 50.0;
+    let mut p: ReferencePath<f64, 512> = ReferencePath::new();
+    p.load(&circle(r, 400, true), None, true).unwrap();
+    let a: f64 = 1.0;
+    let q = [(r + 2.0) * a.cos(), (r + 2.0) * a.sin()];
+    let pr = p.project(q, None).unwrap();
+    assert!(close(pr.s_m, r * a, 0.01), "{}", pr.s_m);
+    assert!(close(pr.lateral_m, -2.0, 0.01));
+    assert!(close(pr.heading_rad, a + PI / 2.0, 1e-3));
+    assert!(close(pr.curvature_1pm, 1.0 / r, 1e-9));
+    // With a hint two laps on, s stays on that lap.
+    let pr2 = p
+        .project(q, Some(r * a + 2.0 * p.length_m() + 3.0))
+        .unwrap();
+    assert!(close(pr2.s_m, pr.s_m + 2.0 * p.length_m(), 1e-9));
+    assert!(close(pr2.heading_rad, pr.heading_rad + 4.0 * PI, 1e-9));
+}
+
+#[test]
+fn hint_keeps_the_projection_on_the_right_branch() {
+    // A hairpin: out along y = 0, back along y = 4.
+    let mut pts = vec![];
+    for i in 0..=100 {
+        pts.push([i as f64, 0.0]);
+    }
+    for k in 1..20 {
+        let a = PI * k as f64 / 20.0;
+        pts.push([100.0 + 2.0 * a.sin(), 2.0 - 2.0 * a.cos()]);
+    }
+    for i in 0..=100 {
+        pts.push([(100 - i) as f64, 4.0]);
+    }
+    let mut p: ReferencePath<f64, 256> = ReferencePath::new();
+    p.load(&pts, None, false).unwrap();
+    let q = [50.0, 1.5];
+    let g = p.project(q, None).unwrap();
+    assert!(close(g.s_m, 50.0, 1e-9) && close(g.lateral_m, 1.5, 1e-9));
+    let s_back = 100.0 + PI * 2.0 + 50.0;
+    let h = p.project(q, Some(s_back + 5.0)).unwrap();
+    assert!((h.s_m - s_back).abs() < 0.1, "{}", h.s_m);
+    assert!(close(h.lateral_m, 2.5, 1e-9));
+    assert!(close(h.heading_rad, PI, 1e-9));
+}
+
+#[test]
+fn load_errors_name_the_bad_point() {
+    let mut p: ReferencePath<f64, 4> = ReferencePath::new();
+    assert_eq!(
+        p.load(&[[0.0, 0.0], [1.0, 0.0]], None, false),
+        Err(PathError::TooFewPoints { count: 2 })
+    );
+    assert_eq!(
+        p.load(&[[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]], None, true),
+        Err(PathError::TooFewPoints { count: 2 })
+    );
+    assert_eq!(
+        p.load(
+            &[[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [2.0, 1.0]],
+            None,
+            false
+        ),
+        Err(PathError::RepeatedPoint { index: 2 })
+    );
+    assert_eq!(
+        p.load(&[[0.0, 0.0], [1.0, 0.0], [2.0, f64::NAN]], None, false),
+        Err(PathError::NonFinite { index: 2 })
+    );
+    assert_eq!(
+        p.load(
+            &[[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0], [4.0, 0.0]],
+            None,
+            false
+        ),
+        Err(PathError::TooManyPoints {
+            count: 5,
+            capacity: 4
+        })
+    );
+    // Five points of which the last closes the loop fit in 4.
+    assert!(p
+        .load(
+            &[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]],
+            None,
+            true
+        )
+        .is_ok());
+    assert_eq!(
+        p.load(
+            &[[0.0, 0.0], [1.0, 0.0], [2.0, 1.0]],
+            Some(&[[1.0, 1.0], [1.0, -0.1], [1.0, 1.0]]),
+            false
+        ),
+        Err(PathError::NegativeWidth { index: 1 })
+    );
+    assert_eq!(
+        p.load_track(
+            &[
+                [0.0, 0.0, 1.0, 1.0],
+                [1.0, 0.0, f64::INFINITY, 1.0],
+                [2.0, 1.0, 1.0, 1.0]
+            ],
+            false
+        ),
+        Err(PathError::NonFinite { index: 1 })
+    );
+    assert_eq!(
+        p.load(
+            &[[0.0, 0.0], [1.0, 0.0], [2.0, 1.0]],
+            Some(&[[1.0, 1.0]]),
+            false
+        ),
+        Err(PathError::WidthCountMismatch {
+            points: 3,
+            widths: 1
+        })
+    );
+    // After an error the path is empty and queries stay defined.
+    assert!(p.is_empty());
+    assert_eq!(p.position_at(3.0), [0.0, 0.0]);
+    assert!(p.project([1.0, 1.0], None).is_none());
+    assert_eq!(p.max_abs_curvature_between(0.0, 10.0), 0.0);
+}
+
+#[test]
+fn f32_path_in_a_static_like_const() {
+    static EMPTY: ReferencePath<f32, 64> = ReferencePath::new();
+    assert!(EMPTY.is_empty());
+    let mut p: ReferencePath<f32, 64> = ReferencePath::new();
+    let pts: Vec<[f32; 2]> = circle(25.0, 48, true)
+        .iter()
+        .map(|q| [q[0] as f32, q[1] as f32])
+        .collect();
+    p.load(&pts, None, true).unwrap();
+    assert!((p.curvature_at(7.0) - 0.04).abs() < 1e-4);
+    let pr = p.project([0.0, -24.0], Some(100.0)).unwrap();
+    assert!((pr.lateral_m - 1.0).abs() < 1e-2);
+}
+
+proptest! {
+    #[test]
+    fn project_inverts_position_plus_normal_offset(s in 0.0f64..300.0, lat in -3.0f64..3.0) {
+        // Closed loop: two straights and two half-circles of radius 20 m.
+        let mut pts = vec![];
+        for i in 0..50 { pts.push([i as f64 * 2.0, -20.0]); }
+        for k in 0..40 { let a = PI * k as f64 / 40.0 - PI / 2.0; pts.push([100.0 + 20.0 * a.cos(), 20.0 * a.sin()]); }
+        for i in 0..50 { pts.push([100.0 - i as f64 * 2.0, 20.0]); }
+        for k in 0..40 { let a = PI * k as f64 / 40.0 + PI / 2.0; pts.push([20.0 * a.cos(), 20.0 * a.sin()]); }
+        let mut p: ReferencePath<f64, 256> = ReferencePath::new();
+        p.load(&pts, None, true).unwrap();
+        // Offset along the normal of the segment containing s.
+        let seg = p.project(p.position_at(s), Some(s)).unwrap();
+        let v = p.vertex(seg.segment).unwrap();
+        let w = p.vertex((seg.segment + 1) % p.len()).unwrap();
+        let l = ((w[0] - v[0]).powi(2) + (w[1] - v[1]).powi(2)).sqrt();
+        let n = [-(w[1] - v[1]) / l, (w[0] - v[0]) / l];
+        let base = p.position_at(s);
+        let q = [base[0] + lat * n[0], base[1] + lat * n[1]];
+        let pr = p.project(q, Some(s)).unwrap();
+        // Exact unless the offset point lies nearer a neighbouring segment (inside of a bend).
+        prop_assert!((pr.lateral_m.abs() - lat.abs()).abs() < 1e-6 || pr.lateral_m.abs() < lat.abs());
+        prop_assert!((pr.s_m - s).abs() < 0.2 * lat.abs() + 1e-6);
+        prop_assert!(pr.lateral_m * lat >= -1e-9);
+    }
+}
