@@ -15,9 +15,11 @@
 //! (classical RK4) and returns the exact Jacobians `A = ∂ξ⁺/∂ξ`, `B = ∂ξ⁺/∂u` of
 //! that discrete map, propagated through the four stages by the chain rule.
 //! Transcendental functions are the expensive part on the ECU (libm's `sinf`
-//! and `sincosf` compute in `f64`), so a step makes 3 `tan`, 3 `sqrt` and
-//! 4 `sin_cos` calls and no `atan`: `sin β = t/√(1+t²)`, `cos β = 1/√(1+t²)`
-//! with `t = tan δ · l_r/(l_f + l_r)`, and `ψ + β` through the addition formulas.
+//! and `sincosf` compute in `f64`), so a step makes 1 `sin_cos`, 1 `tan` and
+//! 3 `sqrt` calls and no `atan`: `sin β = t/√(1+t²)`, `cos β = 1/√(1+t²)` with
+//! `t = tan δ · l_r/(l_f + l_r)`, `ψ + β` through the addition formulas, and the
+//! later RK4 stages' `tan δ`, `sin ψ`, `cos ψ` by addition formulas from the first
+//! stage's (see [`BicycleGeometry::discretize`]).
 
 use crate::Real;
 
@@ -103,7 +105,7 @@ pub struct Discretization<T> {
 }
 
 /// Quantities of one evaluation of `f` that depend on `δ` only: from one `tan`
-/// and one `sqrt`.
+/// and one `sqrt` ([`SteerTerms::new`]) or from `tan δ` and one `sqrt`.
 #[derive(Clone, Copy)]
 struct SteerTerms<T> {
     /// `sin β`.
@@ -120,7 +122,12 @@ impl<T: Real> SteerTerms<T> {
     /// Transcendental calls: 1 `tan`, 1 `sqrt`.
     #[inline]
     fn new(k: T, delta: T) -> Self {
-        let td = delta.tan();
+        Self::from_tan(k, delta.tan())
+    }
+
+    /// As [`Self::new`] from `tan δ` (1 `sqrt`, no other call).
+    #[inline]
+    fn from_tan(k: T, td: T) -> Self {
         let t = k * td;
         let q = T::ONE + t * t;
         let cos_b = T::ONE / q.sqrt();
@@ -133,7 +140,7 @@ impl<T: Real> SteerTerms<T> {
 }
 
 /// `f(ξ, u)` and the non-zero partial derivatives of `f` with respect to the
-/// state at one RK4 stage. Transcendental calls: 1 `sin_cos` (of `ψ`).
+/// state at one RK4 stage, given `(sin ψ, cos ψ)` of the stage. No call.
 #[derive(Clone, Copy)]
 struct Stage<T> {
     f: State<T>,
@@ -146,9 +153,14 @@ struct Stage<T> {
 }
 
 #[inline]
-fn stage<T: Real>(inv_lr: T, x: &State<T>, u: &Input<T>, st: &SteerTerms<T>) -> Stage<T> {
+fn stage<T: Real>(
+    inv_lr: T,
+    x: &State<T>,
+    u: &Input<T>,
+    st: &SteerTerms<T>,
+    (sp, cp): (T, T),
+) -> Stage<T> {
     let v = x[V];
-    let (sp, cp) = x[PSI].sin_cos();
     // cos(ψ + β), sin(ψ + β) by the addition formulas: no call for β itself.
     let c = cp * st.cos_b - sp * st.sin_b;
     let s = sp * st.cos_b + cp * st.sin_b;
@@ -186,6 +198,66 @@ fn stage_derivative<T: Real>(g: &Stage<T>, m: &[[T; NX + NU]; NX]) -> [[T; NX + 
     dk
 }
 
+/// Largest increment (rad) for which [`small_sin_cos`] uses its series.
+const SMALL_ANGLE_RAD: f32 = 0.5;
+
+/// `(sin d, cos d)` of a small angle `d` (rad) by Taylor series (degree 13 and
+/// 14; truncation error below 3e-17 for `|d| ≤ 0.5`, i.e. at the rounding level
+/// of `f64`), no libm call; `None` above [`SMALL_ANGLE_RAD`] or for non-finite `d`.
+#[inline]
+fn small_sin_cos<T: Real>(d: T) -> Option<(T, T)> {
+    if !d.is_finite() || d.abs() > T::lit(SMALL_ANGLE_RAD) {
+        return None;
+    }
+    let d2 = d * d;
+    // Horner: each factor is 1 − d²/((k+1)(k+2))·(rest).
+    let term = |div: f64, rest: T| T::ONE - d2 * T::from_f64(1.0 / div) * rest;
+    let s = d * term(
+        6.0,
+        term(
+            20.0,
+            term(42.0, term(72.0, term(110.0, term(156.0, T::ONE)))),
+        ),
+    );
+    let c = term(
+        2.0,
+        term(
+            12.0,
+            term(
+                30.0,
+                term(56.0, term(90.0, term(132.0, term(182.0, T::ONE)))),
+            ),
+        ),
+    );
+    Some((s, c))
+}
+
+/// `(sin(a + d), cos(a + d))` from `(sin a, cos a)` and a small increment `d`
+/// (rad) by the addition formulas; falls back to one `sin_cos` call when `|d|`
+/// exceeds [`SMALL_ANGLE_RAD`].
+#[inline]
+fn sin_cos_of_sum<T: Real>((sa, ca): (T, T), a: T, d: T) -> (T, T) {
+    match small_sin_cos(d) {
+        Some((sd, cd)) => (sa * cd + ca * sd, ca * cd - sa * sd),
+        None => (a + d).sin_cos(),
+    }
+}
+
+/// `tan(a + d)` from `tan a` and a small increment `d` (rad):
+/// `(tan a + tan d)/(1 − tan a·tan d)`; falls back to one `tan` call when `|d|`
+/// exceeds [`SMALL_ANGLE_RAD`] or the denominator is under 0.1 (`a + d` near ±π/2).
+#[inline]
+fn tan_of_sum<T: Real>(ta: T, a: T, d: T) -> T {
+    if let Some((sd, cd)) = small_sin_cos(d) {
+        let td = sd / cd;
+        let den = T::ONE - ta * td;
+        if den.abs() >= T::lit(0.1) {
+            return (ta + td) / den;
+        }
+    }
+    (a + d).tan()
+}
+
 impl<T: Real> BicycleGeometry<T> {
     /// Continuous dynamics `ξ̇ = f(ξ, u)` of the paper's Equation 1 with `ṡ = V`:
     /// `[V, V·cos(ψ+β), V·sin(ψ+β), u1, V·sin β / l_r, u2]` (units of the state per
@@ -193,25 +265,39 @@ impl<T: Real> BicycleGeometry<T> {
     pub fn dynamics(&self, x: &State<T>, u: &Input<T>) -> State<T> {
         let k = self.l_r_m / self.wheelbase_m();
         let st = SteerTerms::new(k, x[DELTA]);
-        stage(T::ONE / self.l_r_m, x, u, &st).f
+        stage(T::ONE / self.l_r_m, x, u, &st, x[PSI].sin_cos()).f
     }
 
     /// One classical RK4 step of length `dt_s` (s) of [`Self::dynamics`] with the
     /// input held constant, and its exact Jacobians (the chain rule through the
     /// four stages, not finite differences).
     ///
-    /// Cost: 3 `tan` (the stages 2 and 3 share `δ + u2·dt/2`), 3 `sqrt`,
-    /// 4 `sin_cos`, no `atan` (`sin β`, `cos β` come from `tan δ` algebraically,
-    /// `cos(ψ+β)` and `sin(ψ+β)` from the addition formulas), 1 division by `l_r`,
-    /// and about 600 multiply-adds for the Jacobians.
+    /// Cost: **1 `sin_cos`, 1 `tan`, 3 `sqrt`**, no `atan`, and about 700
+    /// multiply-adds (most for the Jacobians):
+    /// * `sin β`, `cos β` come from `tan δ` algebraically (1 `sqrt` per distinct
+    ///   `δ`: stages 2 and 3 share `δ + u2·dt/2`);
+    /// * `tan δ` at the later stages comes from the tangent addition formula and
+    ///   `sin ψ`, `cos ψ` at the later stages from the sine/cosine addition
+    ///   formulas, the increments' sines and cosines by a Taylor series (exact to
+    ///   about 2e-11 for increments up to 0.5 rad);
+    /// * only if an increment exceeds 0.5 rad (`|u2|·dt` or `|ψ̇|·dt`; e.g.
+    ///   `ψ̇ > 2.5 rad/s` at `dt = 0.2 s`, far outside the validity domain) does
+    ///   that stage fall back to a `tan` or `sin_cos` call: worst case 3 `tan` and
+    ///   4 `sin_cos`.
     pub fn discretize(&self, x: &State<T>, u: &Input<T>, dt_s: T) -> Discretization<T> {
         let k = self.l_r_m / self.wheelbase_m();
         let inv_lr = T::ONE / self.l_r_m;
         let h2 = dt_s * T::HALF;
         // δ at the stages: δ, δ + h/2·u2 (twice), δ + h·u2 (δ̇ = u2 is constant).
-        let st1 = SteerTerms::new(k, x[DELTA]);
-        let st23 = SteerTerms::new(k, x[DELTA] + h2 * u[U_STEER_RATE]);
-        let st4 = SteerTerms::new(k, x[DELTA] + dt_s * u[U_STEER_RATE]);
+        // tan of the later ones by the addition formula from tan δ (one call).
+        let td1 = x[DELTA].tan();
+        let td23 = tan_of_sum(td1, x[DELTA], h2 * u[U_STEER_RATE]);
+        let td4 = tan_of_sum(td1, x[DELTA], dt_s * u[U_STEER_RATE]);
+        let st1 = SteerTerms::from_tan(k, td1);
+        let st23 = SteerTerms::from_tan(k, td23);
+        let st4 = SteerTerms::from_tan(k, td4);
+        // sin/cos of ψ at the stages by the addition formulas from ψ (one call).
+        let sc1 = x[PSI].sin_cos();
 
         let mut ident = [[T::ZERO; NX + NU]; NX];
         for (i, row) in ident.iter_mut().enumerate() {
@@ -234,16 +320,34 @@ impl<T: Real> BicycleGeometry<T> {
             m
         };
 
-        let g1 = stage(inv_lr, x, u, &st1);
+        let g1 = stage(inv_lr, x, u, &st1, sc1);
         let dk1 = stage_derivative(&g1, &ident);
         let x2 = advance(x, &g1.f, h2);
-        let g2 = stage(inv_lr, &x2, u, &st23);
+        let g2 = stage(
+            inv_lr,
+            &x2,
+            u,
+            &st23,
+            sin_cos_of_sum(sc1, x[PSI], x2[PSI] - x[PSI]),
+        );
         let dk2 = stage_derivative(&g2, &advance_m(&dk1, h2));
         let x3 = advance(x, &g2.f, h2);
-        let g3 = stage(inv_lr, &x3, u, &st23);
+        let g3 = stage(
+            inv_lr,
+            &x3,
+            u,
+            &st23,
+            sin_cos_of_sum(sc1, x[PSI], x3[PSI] - x[PSI]),
+        );
         let dk3 = stage_derivative(&g3, &advance_m(&dk2, h2));
         let x4 = advance(x, &g3.f, dt_s);
-        let g4 = stage(inv_lr, &x4, u, &st4);
+        let g4 = stage(
+            inv_lr,
+            &x4,
+            u,
+            &st4,
+            sin_cos_of_sum(sc1, x[PSI], x4[PSI] - x[PSI]),
+        );
         let dk4 = stage_derivative(&g4, &advance_m(&dk3, dt_s));
 
         let w = dt_s / T::lit(6.0);

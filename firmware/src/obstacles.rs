@@ -284,6 +284,21 @@ impl<T: Real> Parabola<T> {
         (g, [k * t[0] - sigma * t[1], k * t[1] + sigma * t[0]])
     }
 
+    /// The constraint linearised at the global point `p_bar` (m), as a half-plane
+    /// `n·p ≥ r` in the global position `p = [X, Y]`: returns `(n, r)` with
+    /// `n = ∇g(p̄)` (dimensionless) and `r = ∇g(p̄)·p̄ − g(p̄)` (m). The MPC adds
+    /// its slack to the left-hand side. `g` is convex in `p`, so the half-plane is
+    /// conservative: every point it allows is outside the parabola.
+    pub fn linearized_half_plane(&self, p_bar: [T; 2]) -> ([T; 2], T) {
+        let (g, n) = self.constraint_value_and_gradient(p_bar);
+        (n, n[0] * p_bar[0] + n[1] * p_bar[1] - g)
+    }
+
+    /// True when the global point `p` (m) is strictly inside the forbidden region.
+    pub fn contains(&self, p: [T; 2]) -> bool {
+        self.constraint_value_and_gradient(p).0 < T::ZERO
+    }
+
     /// True when a constraint row is needed at the global point `p` (m): the
     /// forbidden region reaches the road at the `ξ` of `p`.
     pub fn is_relevant(&self, p: [T; 2]) -> bool {

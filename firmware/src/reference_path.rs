@@ -46,7 +46,23 @@
 //!
 //! Fixed capacity `CAP` points, no heap. [`ReferencePath::new`] is a `const fn`
 //! so the path can live in a `static`; [`ReferencePath::load`] fills it in place.
-//! The memory is about `CAP · 11` scalars.
+//! The memory is `CAP · 10` scalars plus a few fields.
+//!
+//! # Example
+//!
+//! ```
+//! use firmware::reference_path::ReferencePath;
+//!
+//! // A 20 m square, closed (the repeated first point is dropped).
+//! let pts = [[0.0f32, 0.0], [20.0, 0.0], [20.0, 20.0], [0.0, 20.0], [0.0, 0.0]];
+//! let mut path: ReferencePath<f32, 64> = ReferencePath::new();
+//! path.load(&pts, None, true).unwrap();
+//! assert_eq!(path.length_m(), 80.0);
+//! // The car 1 m left of the first side, hint from the last plan's s (lap 2).
+//! let pr = path.project([5.0, 1.0], Some(84.0)).unwrap();
+//! assert_eq!((pr.s_m, pr.lateral_m), (85.0, 1.0));
+//! assert_eq!(path.position_at(pr.s_m), [5.0, 0.0]);
+//! ```
 
 use crate::Real;
 

@@ -23,6 +23,20 @@
 //!
 //! As the paper remarks, `V_heur` is a target for a cost term, not a dynamically
 //! feasible profile; the MPC does not have to track it exactly.
+//!
+//! # Example
+//!
+//! ```
+//! use firmware::reference_path::ReferencePath;
+//! use firmware::velocity_planner::{v_heur, VelocityPlannerSettings};
+//!
+//! let pts: Vec<[f64; 2]> = (0..50).map(|i| [2.0 * i as f64, 0.0]).collect();
+//! let mut path: ReferencePath<f64, 64> = ReferencePath::new();
+//! path.load(&pts, None, false).unwrap();
+//! let settings = VelocityPlannerSettings::default();
+//! // Straight: V + ΔV = 13 m/s (below V_max = 25.6 m/s at μ = 1).
+//! assert!((v_heur(&settings, &path, 10.0, 10.0, 1.0) - 13.0).abs() < 1e-9);
+//! ```
 
 use crate::plan::{HORIZON, PLAN_DT_S};
 use crate::reference_path::ReferencePath;

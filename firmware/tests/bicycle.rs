@@ -182,3 +182,57 @@ fn plan_node_round_trip() {
     let x = [1.0, 2.0, 3.0, 4.0, 5.0, 0.1];
     assert_eq!(state_from_node(&node_from_state(&x)), x);
 }
+
+/// Plain RK4 of Equation 1 with std's sin/cos/tan/atan, for reference.
+fn reference_rk4(g: &BicycleGeometry<f64>, x: [f64; 6], u: [f64; 2], dt: f64) -> [f64; 6] {
+    let f = |x: [f64; 6]| {
+        let beta = (x[DELTA].tan() * g.l_r_m / (g.l_f_m + g.l_r_m)).atan();
+        [
+            x[V],
+            x[V] * (x[PSI] + beta).cos(),
+            x[V] * (x[PSI] + beta).sin(),
+            u[0],
+            x[V] * beta.sin() / g.l_r_m,
+            u[1],
+        ]
+    };
+    let add = |x: [f64; 6], k: [f64; 6], c: f64| {
+        let mut y = x;
+        for i in 0..6 {
+            y[i] += c * k[i];
+        }
+        y
+    };
+    let k1 = f(x);
+    let k2 = f(add(x, k1, dt / 2.0));
+    let k3 = f(add(x, k2, dt / 2.0));
+    let k4 = f(add(x, k3, dt));
+    let mut y = x;
+    for i in 0..6 {
+        y[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
+    y
+}
+
+#[test]
+fn addition_formulas_match_plain_rk4_including_fallbacks() {
+    let g = geom();
+    for (x, u) in [
+        ([0.0, 0.0, 0.0, 15.0, 0.3, 0.1], [1.0, 0.4]),
+        ([0.0, 0.0, 0.0, 30.0, -4.0, -0.5], [-8.0, -0.5]),
+        // Steering increment 1 rad (> 0.5): tan fallback.
+        ([0.0, 0.0, 0.0, 10.0, 1.0, 0.0], [0.0, 5.0]),
+        // Yaw increment > 0.5 rad at the last stage: sin_cos fallback.
+        ([0.0, 0.0, 0.0, 30.0, 2.0, 0.6], [0.0, 0.0]),
+    ] {
+        let ours = g.discretize(&x, &u, 0.2).x_next;
+        let theirs = reference_rk4(&g, x, u, 0.2);
+        for i in 0..NX {
+            assert!(
+                (ours[i] - theirs[i]).abs() < 1e-10 * (1.0 + theirs[i].abs()),
+                "{i}: {ours:?} {theirs:?}"
+            );
+        }
+        assert_jacobians_match(x, u, 0.2, 1);
+    }
+}

@@ -313,3 +313,22 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn linearised_half_plane_is_tangent_and_conservative_outside() {
+    let path = straight();
+    let s = ObstacleSettings::default();
+    let par = build_parabola(&s, &path, 0, &boxed(48.0, 52.0, -3.0, -1.5)).unwrap();
+    let p_bar = [44.0, 0.5];
+    let (n, r) = par.linearized_half_plane(p_bar);
+    let (g, _) = par.constraint_value_and_gradient(p_bar);
+    assert!((n[0] * p_bar[0] + n[1] * p_bar[1] - r - g).abs() < 1e-12);
+    // g is convex in p, so its linearisation under-estimates it: any point the
+    // half-plane allows is outside the parabola.
+    for k in 0..200 {
+        let q = [30.0 + 0.2 * k as f64, -4.0 + 0.04 * k as f64];
+        if n[0] * q[0] + n[1] * q[1] >= r {
+            assert!(!par.contains(q), "{q:?}");
+        }
+    }
+}
