@@ -4,14 +4,16 @@
 //! `memory.x` would not be found by `cortex-m-rt`'s `link.x` without this.
 use std::{env, fs, path::PathBuf};
 
-fn main() {
+fn main() -> Result<(), String> {
     let target = env::var("TARGET").unwrap_or_default();
     println!("cargo:rerun-if-changed=../memory.x");
     if !target.starts_with("thumb") {
-        return;
+        return Ok(());
     }
-    let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    let memory = fs::read("../memory.x").expect("memory.x at the workspace root");
-    fs::write(out.join("memory.x"), memory).expect("OUT_DIR is writable");
+    let out = PathBuf::from(env::var_os("OUT_DIR").ok_or("cargo did not set OUT_DIR")?);
+    let memory =
+        fs::read("../memory.x").map_err(|e| format!("memory.x at the workspace root: {e}"))?;
+    fs::write(out.join("memory.x"), memory).map_err(|e| format!("writing to OUT_DIR: {e}"))?;
     println!("cargo:rustc-link-search={}", out.display());
+    Ok(())
 }

@@ -1,1 +1,808 @@
-//! (being written)
+//! The local MPC planner (the paper's Section III C).
+//!
+//! # Problem
+//!
+//! Over `N = HORIZON = 16` intervals of `Δt_u = 0.2 s`, with the kinematic bicycle
+//! state `ξ = [s, X, Y, V, ψ, δ]` and inputs `u = [u1 = a, u2 = δ̇]`:
+//!
+//! ```text
+//! min  Σ_{k=1..N} q_v (V_k − V_heur,k)² + q_Δ (δ_k − δ_ref,k)² + q_x e_x,k² + q_y e_y,k²
+//!    + Σ_{k=0..N−1} q_δ̇ u2,k² + q_a u1,k²
+//!    + Σ soft-constraint penalties  q_δtol δ_tol² + q_obs obs_tol² + q_road road_tol²
+//! s.t. ξ_{k+1} = F(ξ_k, u_k)  (RK4 discretisation of the kinematic bicycle, ṡ = V)
+//!      ξ_0 = the state estimate (s from its projection on the path)
+//!      u1 ∈ [−8, 6] m/s²,  u2 ∈ [−0.5, 0.5] rad/s                 (hard)
+//!      |δ_k| ≤ δ_max(V_k) + δ_tol,k                                (soft, validity)
+//!      −(w_right − b) − road_tol ≤ e_y,k ≤ (w_left − b) + road_tol  (soft, road limits)
+//!      g_o(X_k, Y_k) ≥ −obs_tol   for each obstacle parabola o     (soft)
+//! ```
+//!
+//! `e_x`, `e_y` are the longitudinal and lateral deviations of `(X_k, Y_k)` from the
+//! path point at `s_k`. The paper writes them as slack variables `x_tol`, `y_tol`
+//! bounded by a tolerance margin; with a zero margin those slacks equal `|e_x|`,
+//! `|e_y|` at the optimum, so we keep them in the objective exactly, as quadratic
+//! costs, and encode the road limits as separate soft rows. `δ_ref` is 0 as in the
+//! paper ([`SteeringReference::Zero`]) or, by default, the kinematic steering of the
+//! path curvature at `s_k` ([`SteeringReference::PathCurvature`]), which removes the
+//! steady bias of penalising a steering angle that a curve needs.
+//!
+//! # Method: real-time iteration, condensed, on our QP solver
+//!
+//! 1. Shift: the previous optimal inputs are re-sampled at the new release time
+//!    (averaged over each new interval), giving `ū`; a cold start uses `ū = 0` and
+//!    [`MpcSettings::cold_start_iterations`] Gauss–Newton passes.
+//! 2. Linearise: simulate `ξ̄` from `ξ_0` under `ū`; the Jacobians of the discrete map
+//!    give the sensitivities `S_k = ∂ξ_k/∂u` (6 × 32) recursively,
+//!    `S_{k+1} = A_k S_k + B_k E_k`, so `ξ_k ≈ ξ̄_k + S_k (u − ū)`.
+//! 3. Condense: every cost term and constraint is an affine function of `u` through a
+//!    row of `S_k`; costs add rank-one terms to `H`, constraints become rows of `A`.
+//!    The QP has the 32 inputs as variables and no state or slack variables: soft
+//!    constraints are handled inside the solver (a `1/ρ` on its dual diagonal).
+//! 4. Solve, warm-started from the previous working set, and re-simulate the
+//!    nonlinear model under the optimal inputs: that trajectory is the plan.
+//!
+//! All sizes are constants; the workspace [`Mpc`] is `const`-constructible for a
+//! `static` on the ECU.
+
+// Index loops mirror the maths of the condensing; all ranges are const-bounded.
+#![allow(clippy::needless_range_loop)]
+
+use crate::bicycle::{self, BicycleGeometry};
+use crate::obstacles::Parabola;
+use crate::plan::{Plan, HORIZON, PLAN_DT_S};
+use crate::qp::{ldl_len, QpProblem, QpSolution, QpSolver, QpStatus};
+use crate::reference_path::ReferencePath;
+use crate::state_estimate::StateEstimate;
+use crate::validity::{kinematic_steering_for_radius, ValidityLimit};
+use crate::velocity_planner::{self, VelocityPlannerSettings};
+use crate::Real;
+
+pub use crate::bicycle::{NU, NX};
+/// Number of QP variables: the inputs over the horizon.
+pub const NV: usize = NU * HORIZON;
+/// Constraint rows each node always has: validity (2) and road limits (1).
+pub const ROWS_PER_NODE: usize = 3;
+/// Capacity for obstacle rows over the whole horizon (one per obstacle and node
+/// where its parabola matters, nearest nodes first).
+pub const MAX_OBSTACLE_ROWS: usize = 32;
+/// Capacity of general QP rows.
+pub const NC: usize = ROWS_PER_NODE * HORIZON + MAX_OBSTACLE_ROWS;
+/// Working-set capacity of the QP solver.
+pub const WS: usize = 48;
+
+/// The QP solver sized for the MPC.
+pub type MpcQp<T> = QpSolver<T, NV, NC, WS, { ldl_len(WS) }>;
+/// The condensed QP, as handed to the solver.
+pub type MpcQpProblem<T> = QpProblem<T, NV, NC>;
+/// The QP's solution.
+pub type MpcQpSolution<T> = QpSolution<T, NV, NC>;
+
+use crate::bicycle::{DELTA as IDELTA, S as IS, V as IV, X as IX, Y as IY};
+
+/// Cost weights (the paper's `q_*`; each multiplies a squared quantity in SI units).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MpcWeights<T> {
+    /// On the speed error `V − V_heur`, per (m/s)² (paper: 4).
+    pub q_v: T,
+    /// On the steering `δ − δ_ref`, per rad² (paper: 10).
+    pub q_delta: T,
+    /// On the steering rate `δ̇`, per (rad/s)² (paper: 0.2).
+    pub q_delta_rate: T,
+    /// On the longitudinal path deviation `e_x`, per m² (paper: 5).
+    pub q_x: T,
+    /// On the lateral path deviation `e_y`, per m² (paper: 5).
+    pub q_y: T,
+    /// On the obstacle slack, per m² (paper: 100).
+    pub q_obs: T,
+    /// On the validity slack `δ_tol`, per rad² (paper: 100).
+    pub q_delta_tol: T,
+    /// On the road-limit slack, per m² (not in the paper: its road limits are the
+    /// `y_tol` margins).
+    pub q_road: T,
+    /// On the acceleration `u1`, per (m/s²)² (not in the paper; a small
+    /// regularisation that keeps the speed profile smooth).
+    pub q_accel: T,
+}
+
+impl<T: Real> Default for MpcWeights<T> {
+    /// The paper's weights except `q_δtol = q_obs = 10⁴` (paper: 100 each).
+    ///
+    /// The validity slack is in radians and small: at 15 m/s `δ_max` is 0.055 rad,
+    /// and a slack of 0.05 rad (a lateral acceleration almost twice the limit) costs,
+    /// at `q_δtol = 100`, as little as 0.1 m of lateral deviation at `q_y = 5`. At
+    /// 10⁴ a 10 % excess costs as much as 0.25 m of deviation: the limit binds, as the
+    /// paper intends. The obstacle slack then gets the same weight, so that the
+    /// planner never buys validity with clearance.
+    fn default() -> Self {
+        Self {
+            q_delta_tol: T::lit(1.0e4),
+            q_obs: T::lit(1.0e4),
+            ..Self::paper()
+        }
+    }
+}
+
+impl<T: Real> MpcWeights<T> {
+    /// The paper's weights exactly, plus the two small additions documented on the
+    /// fields (`q_road`, `q_accel`).
+    pub fn paper() -> Self {
+        Self {
+            q_v: T::lit(4.0),
+            q_delta: T::lit(10.0),
+            q_delta_rate: T::lit(0.2),
+            q_x: T::lit(5.0),
+            q_y: T::lit(5.0),
+            q_obs: T::lit(100.0),
+            q_delta_tol: T::lit(100.0),
+            q_road: T::lit(100.0),
+            q_accel: T::lit(0.05),
+        }
+    }
+}
+
+/// What the steering cost `q_Δ (δ − δ_ref)²` pulls the steering towards.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SteeringReference {
+    /// `δ_ref = 0`, as in the paper.
+    Zero,
+    /// `δ_ref` = the kinematic steering that follows the path's curvature at the
+    /// predicted abscissa (0 on straights, so equal to the paper there).
+    PathCurvature,
+}
+
+/// Settings of the MPC (kept apart from its workspace [`Mpc`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MpcSettings<T> {
+    /// Cost weights.
+    pub weights: MpcWeights<T>,
+    /// Bicycle geometry (`l_f`, `l_r`), m.
+    pub geometry: BicycleGeometry<T>,
+    /// Lower bound of the acceleration input `u1`, m/s² (paper: −8).
+    pub accel_min_mps2: T,
+    /// Upper bound of the acceleration input `u1`, m/s² (paper: 6).
+    pub accel_max_mps2: T,
+    /// Bound of the steering-rate input `|u2|`, rad/s (paper: 0.5).
+    pub steer_rate_max_radps: T,
+    /// Mechanical steering limit `|δ|`, rad.
+    pub delta_mech_max_rad: T,
+    /// Fraction of `μ·g` allowed as lateral acceleration (paper: 0.5).
+    pub ay_fraction: T,
+    /// Half of the vehicle's width, m (keeps the body inside the road limits).
+    pub half_width_m: T,
+    /// Extra distance kept from the road edge, m.
+    pub road_margin_m: T,
+    /// Local velocity planner settings.
+    pub velocity: VelocityPlannerSettings<T>,
+    /// Steering reference of the steering cost.
+    pub steering_reference: SteeringReference,
+    /// Linearise–solve passes on a cold start (no previous solution), ≥ 1.
+    pub cold_start_iterations: u8,
+    /// Iteration cap of the QP solver (bounds its worst-case time).
+    pub qp_max_iter: u32,
+}
+
+impl<T: Real> MpcSettings<T> {
+    /// The paper's settings (bounds, horizon, `0.5·μ·g`; weights from
+    /// [`MpcWeights::default`]) for a vehicle of the given geometry, mechanical
+    /// steering limit (rad) and width (m).
+    pub fn paper(geometry: BicycleGeometry<T>, delta_mech_max_rad: T, width_m: T) -> Self {
+        Self {
+            weights: MpcWeights::default(),
+            geometry,
+            accel_min_mps2: T::lit(-8.0),
+            accel_max_mps2: T::lit(6.0),
+            steer_rate_max_radps: T::lit(0.5),
+            delta_mech_max_rad,
+            ay_fraction: T::HALF,
+            half_width_m: T::HALF * width_m,
+            road_margin_m: T::lit(0.2),
+            velocity: VelocityPlannerSettings::default(),
+            steering_reference: SteeringReference::PathCurvature,
+            cold_start_iterations: 3,
+            qp_max_iter: 200,
+        }
+    }
+
+    fn validate(&self) -> Result<(), MpcError> {
+        let w = &self.weights;
+        let finite_nonneg = |x: T| x.is_finite() && x >= T::ZERO;
+        let ok = [
+            w.q_v,
+            w.q_delta,
+            w.q_delta_rate,
+            w.q_x,
+            w.q_y,
+            w.q_obs,
+            w.q_delta_tol,
+            w.q_road,
+            w.q_accel,
+            self.half_width_m,
+            self.road_margin_m,
+        ]
+        .iter()
+        .all(|&x| finite_nonneg(x))
+            && w.q_obs > T::ZERO
+            && w.q_delta_tol > T::ZERO
+            && w.q_road > T::ZERO
+            && (w.q_accel > T::ZERO || w.q_v > T::ZERO)
+            && (w.q_delta_rate > T::ZERO || w.q_delta > T::ZERO)
+            && self.accel_min_mps2.is_finite()
+            && self.accel_max_mps2.is_finite()
+            && self.accel_min_mps2 < self.accel_max_mps2
+            && self.steer_rate_max_radps.is_finite()
+            && self.steer_rate_max_radps > T::ZERO
+            && self.delta_mech_max_rad.is_finite()
+            && self.delta_mech_max_rad > T::ZERO
+            && self.ay_fraction.is_finite()
+            && self.ay_fraction > T::ZERO
+            && self.geometry.l_f_m.is_finite()
+            && self.geometry.l_f_m > T::ZERO
+            && self.geometry.l_r_m.is_finite()
+            && self.geometry.l_r_m > T::ZERO
+            && self.cold_start_iterations >= 1
+            && self.qp_max_iter >= 1;
+        if ok {
+            Ok(())
+        } else {
+            Err(MpcError::InvalidSettings)
+        }
+    }
+}
+
+/// Why an MPC step produced no plan.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MpcError {
+    /// The state estimate holds NaN or ±∞.
+    NonFiniteState,
+    /// `μ` is not a positive finite number.
+    InvalidFriction,
+    /// A setting is out of range (negative or non-finite weight, empty bounds…).
+    InvalidSettings,
+    /// The path is empty or the vehicle position could not be projected on it.
+    NoPath,
+    /// The QP solver did not reach an optimum (its status says why).
+    Qp(QpStatus),
+}
+
+/// What an MPC step did: work counters (deterministic, for the timing budget) and
+/// diagnostics.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MpcReport<T> {
+    /// Linearise–solve passes run (1 when warm).
+    pub passes: u32,
+    /// QP iterations, summed over the passes.
+    pub qp_iterations: u32,
+    /// Constraints added to the working set, summed.
+    pub qp_added: u32,
+    /// Constraints removed from the working set, summed.
+    pub qp_removed: u32,
+    /// Factorisations from scratch, summed.
+    pub qp_refactorizations: u32,
+    /// General QP rows of the last pass.
+    pub rows: u32,
+    /// Obstacle rows of the last pass.
+    pub obstacle_rows: u32,
+    /// Obstacle rows that did not fit in [`MAX_OBSTACLE_ROWS`] (farthest nodes dropped).
+    pub obstacle_rows_dropped: u32,
+    /// Working-set size at the optimum.
+    pub active_constraints: u32,
+    /// Whether the solve started from the previous solution.
+    pub warm: bool,
+    /// Largest validity slack `δ_tol` in the solution, rad (0: the limit holds).
+    pub max_validity_slack_rad: T,
+    /// Largest obstacle slack in the solution, m (0: all parabolas respected).
+    pub max_obstacle_slack_m: T,
+    /// Largest road-limit slack in the solution, m.
+    pub max_road_slack_m: T,
+}
+
+/// The MPC's workspace: the QP solver and the previous solution for the warm start.
+/// Build it with [`Mpc::new`] (`const`), keep it across steps.
+#[derive(Clone, Debug)]
+pub struct Mpc<T> {
+    solver: MpcQp<T>,
+    /// Optimal inputs of the last successful step.
+    u_prev: [[T; NU]; HORIZON],
+    /// Release time of the last successful step, µs.
+    prev_stamp_us: u64,
+    /// Predicted abscissa at each node of the last plan (projection hints), m.
+    s_prev: [T; HORIZON + 1],
+    have_prev: bool,
+    /// Nominal inputs of the current pass.
+    u_bar: [[T; NU]; HORIZON],
+    /// Row kind of each QP row of the current pass (for slack diagnostics).
+    row_kind: [RowKind; NC],
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum RowKind {
+    Validity,
+    Road,
+    Obstacle,
+}
+
+impl<T: Real> Default for Mpc<T> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<T: Real> Mpc<T> {
+    /// An empty workspace (cold). `const`, so it can initialise a `static`.
+    pub const fn new() -> Self {
+        Self {
+            solver: QpSolver::new(),
+            u_prev: [[T::ZERO; NU]; HORIZON],
+            prev_stamp_us: 0,
+            s_prev: [T::ZERO; HORIZON + 1],
+            have_prev: false,
+            u_bar: [[T::ZERO; NU]; HORIZON],
+            row_kind: [RowKind::Validity; NC],
+        }
+    }
+
+    /// Forgets the previous solution: the next step starts cold.
+    pub fn reset(&mut self) {
+        self.have_prev = false;
+        self.solver.clear_working_set();
+    }
+
+    /// The QP solver (its last problem data are consumed by the solve; its solution
+    /// and working set are readable).
+    pub fn solver(&self) -> &MpcQp<T> {
+        &self.solver
+    }
+
+    /// One MPC step: plans from `est` (released at `est.stamp_us`) along `path`,
+    /// around `obstacles`, on a road of friction `mu`; writes the plan into `plan`.
+    pub fn step<const CAP: usize>(
+        &mut self,
+        settings: &MpcSettings<T>,
+        path: &ReferencePath<T, CAP>,
+        obstacles: &[Parabola<T>],
+        est: &StateEstimate<T>,
+        mu: T,
+        plan: &mut Plan<T>,
+    ) -> Result<MpcReport<T>, MpcError> {
+        self.step_observed(settings, path, obstacles, est, mu, plan, |_| {}, |_| {})
+    }
+
+    /// [`Mpc::step`], calling `before(problem)` on each condensed QP before it is
+    /// solved and `after(solution)` after (to record the QPs; no cost otherwise).
+    #[allow(clippy::too_many_arguments)]
+    pub fn step_observed<const CAP: usize>(
+        &mut self,
+        settings: &MpcSettings<T>,
+        path: &ReferencePath<T, CAP>,
+        obstacles: &[Parabola<T>],
+        est: &StateEstimate<T>,
+        mu: T,
+        plan: &mut Plan<T>,
+        mut before: impl FnMut(&MpcQpProblem<T>),
+        mut after: impl FnMut(&MpcQpSolution<T>),
+    ) -> Result<MpcReport<T>, MpcError> {
+        settings.validate()?;
+        if !est.is_finite() {
+            return Err(MpcError::NonFiniteState);
+        }
+        if !(mu.is_finite() && mu > T::ZERO) {
+            return Err(MpcError::InvalidFriction);
+        }
+        let dt = T::lit(PLAN_DT_S);
+        let validity = ValidityLimit {
+            geometry: settings.geometry,
+            mu,
+            ay_fraction: settings.ay_fraction,
+            delta_mech_max_rad: settings.delta_mech_max_rad,
+        };
+
+        // 1. Shift the previous solution to the new release time.
+        let mut report = MpcReport::default();
+        let elapsed_s = if self.have_prev && est.stamp_us >= self.prev_stamp_us {
+            T::from_f64((est.stamp_us - self.prev_stamp_us) as f64 * 1e-6)
+        } else {
+            -T::ONE
+        };
+        let warm = elapsed_s >= T::ZERO && elapsed_s < dt * T::from_usize(HORIZON);
+        let s_hint = if warm {
+            Some(interpolate_nodes(&self.s_prev, elapsed_s / dt))
+        } else {
+            None
+        };
+        if warm {
+            shift_inputs(&self.u_prev, elapsed_s / dt, &mut self.u_bar);
+        } else {
+            self.u_bar = [[T::ZERO; NU]; HORIZON];
+            self.solver.clear_working_set();
+        }
+        report.warm = warm;
+
+        // Initial state.
+        let proj = path
+            .project([est.x_m, est.y_m], s_hint)
+            .ok_or(MpcError::NoPath)?;
+        let v0 = est.speed_mps();
+        let xi0: [T; NX] = [
+            proj.s_m,
+            est.x_m,
+            est.y_m,
+            v0,
+            est.psi_rad,
+            est.delta_rad
+                .clamp(-settings.delta_mech_max_rad, settings.delta_mech_max_rad),
+        ];
+
+        let passes = if warm {
+            1
+        } else {
+            settings.cold_start_iterations.max(1) as u32
+        };
+        let mut v_heur = [T::ZERO; HORIZON + 1];
+        for _ in 0..passes {
+            self.condense(
+                settings,
+                &validity,
+                path,
+                obstacles,
+                &xi0,
+                v0,
+                mu,
+                &mut v_heur,
+                &mut report,
+            );
+            self.solver.settings.max_iter = settings.qp_max_iter;
+            self.solver.settings.warm_start = true;
+            before(self.solver.problem());
+            let status = self.solver.solve();
+            let sol = self.solver.solution();
+            after(sol);
+            report.passes += 1;
+            report.qp_iterations += sol.iterations;
+            report.qp_added += sol.added;
+            report.qp_removed += sol.removed;
+            report.qp_refactorizations += sol.refactorizations;
+            report.active_constraints = sol.working_set_len as u32;
+            if status != QpStatus::Optimal {
+                return Err(MpcError::Qp(status));
+            }
+            for k in 0..HORIZON {
+                self.u_bar[k] = [sol.x[2 * k], sol.x[2 * k + 1]];
+            }
+        }
+        self.slack_diagnostics(&mut report);
+
+        // 4. The plan: the nonlinear model under the optimal inputs.
+        plan.stamp_us = est.stamp_us;
+        plan.dt_s = dt;
+        plan.v_heur_mps = v_heur;
+        let mut xi = xi0;
+        plan.nodes[0] = bicycle::node_from_state(&xi);
+        for k in 0..HORIZON {
+            let u = self.u_bar[k];
+            xi = settings.geometry.discretize(&xi, &u, dt).x_next;
+            plan.nodes[k + 1] = bicycle::node_from_state(&xi);
+            plan.inputs[k] = u;
+        }
+        for k in 0..=HORIZON {
+            self.s_prev[k] = plan.nodes[k].s_m;
+        }
+        self.u_prev = self.u_bar;
+        self.prev_stamp_us = est.stamp_us;
+        self.have_prev = true;
+        Ok(report)
+    }
+
+    /// Linearises around `ū` from `xi0` and writes the condensed QP into the solver.
+    #[allow(clippy::too_many_arguments)]
+    fn condense<const CAP: usize>(
+        &mut self,
+        st: &MpcSettings<T>,
+        validity: &ValidityLimit<T>,
+        path: &ReferencePath<T, CAP>,
+        obstacles: &[Parabola<T>],
+        xi0: &[T; NX],
+        v0: T,
+        mu: T,
+        v_heur: &mut [T; HORIZON + 1],
+        report: &mut MpcReport<T>,
+    ) {
+        let dt = T::lit(PLAN_DT_S);
+        let w = st.weights;
+        let two = T::TWO;
+        let u_bar = self.u_bar;
+        let qp = self.solver.problem_mut();
+        qp.m = 0;
+        for i in 0..NV {
+            qp.f[i] = T::ZERO;
+            for j in 0..NV {
+                qp.h[i][j] = T::ZERO;
+            }
+        }
+        // Input bounds and input costs.
+        for k in 0..HORIZON {
+            let (ia, ir) = (2 * k, 2 * k + 1);
+            qp.x_lo[ia] = st.accel_min_mps2;
+            qp.x_hi[ia] = st.accel_max_mps2;
+            qp.x_lo[ir] = -st.steer_rate_max_radps;
+            qp.x_hi[ir] = st.steer_rate_max_radps;
+            qp.h[ia][ia] += two * w.q_accel;
+            qp.h[ir][ir] += two * w.q_delta_rate;
+        }
+        v_heur[0] = velocity_planner::v_heur(&st.velocity, path, xi0[IS], v0, mu);
+
+        // Forward pass: nominal trajectory and sensitivities, node by node.
+        let mut sens = [[T::ZERO; NV]; NX];
+        let mut xbar = *xi0;
+        let mut rows = 0usize;
+        let mut obstacle_rows = 0usize;
+        let mut dropped = 0u32;
+        let mut row = [T::ZERO; NV];
+        let mut next = [[T::ZERO; NV]; NX];
+        for k in 0..HORIZON {
+            let lin = bicycle::discretize(&st.geometry, &xbar, &u_bar[k], dt);
+            // S_{k+1} = A S_k + B E_k (columns beyond 2k+1 stay zero).
+            let used = 2 * k;
+            for i in 0..NX {
+                for j in 0..used {
+                    let mut acc = T::ZERO;
+                    for l in 0..NX {
+                        acc += lin.a[i][l] * sens[l][j];
+                    }
+                    next[i][j] = acc;
+                }
+                next[i][used] = lin.b[i][0];
+                next[i][used + 1] = lin.b[i][1];
+            }
+            let ncols = used + 2;
+            for i in 0..NX {
+                sens[i][..ncols].copy_from_slice(&next[i][..ncols]);
+            }
+            xbar = lin.x_next;
+            let node = k + 1;
+
+            // Path frame at the predicted abscissa.
+            let s = xbar[IS];
+            let p = path.position_at(s);
+            let (sin_h, cos_h) = path.heading_at(s).sin_cos();
+            let kappa = path.curvature_at(s);
+            let (tx, ty, nx, ny) = (cos_h, sin_h, -sin_h, cos_h);
+            let (dx, dy) = (xbar[IX] - p[0], xbar[IY] - p[1]);
+            let ex = tx * dx + ty * dy;
+            let ey = nx * dx + ny * dy;
+
+            // Lateral deviation: e_y ≈ ē_y + nᵀδP − κ ē_x δs.
+            lin_row(
+                &sens,
+                ncols,
+                &[(IX, nx), (IY, ny), (IS, -kappa * ex)],
+                &mut row,
+            );
+            let d = ey - dot(&row, &u_bar, ncols);
+            add_cost(qp, &row, ncols, two * w.q_y, d);
+            // Road limits on the same row.
+            if let Some(wd) = path.widths_at(s) {
+                let keep = st.half_width_m + st.road_margin_m;
+                let hi = wd.left_m - keep;
+                let lo = -(wd.right_m - keep);
+                let (lo, hi) = if lo <= hi {
+                    (lo, hi)
+                } else {
+                    let mid = T::HALF * (lo + hi);
+                    (mid, mid)
+                };
+                if push_row(qp, &row, lo - d, hi - d, two * w.q_road) {
+                    self.row_kind[rows] = RowKind::Road;
+                    rows += 1;
+                }
+            }
+            // Longitudinal deviation: e_x ≈ ē_x + tᵀδP + (κ ē_y − 1) δs.
+            lin_row(
+                &sens,
+                ncols,
+                &[(IX, tx), (IY, ty), (IS, kappa * ey - T::ONE)],
+                &mut row,
+            );
+            let d = ex - dot(&row, &u_bar, ncols);
+            add_cost(qp, &row, ncols, two * w.q_x, d);
+
+            // Speed towards V_heur.
+            let vh = velocity_planner::v_heur(&st.velocity, path, s, v0, mu);
+            v_heur[node] = vh;
+            lin_row(&sens, ncols, &[(IV, T::ONE)], &mut row);
+            let d = xbar[IV] - dot(&row, &u_bar, ncols) - vh;
+            add_cost(qp, &row, ncols, two * w.q_v, d);
+
+            // Steering towards its reference.
+            let delta_ref = match st.steering_reference {
+                SteeringReference::Zero => T::ZERO,
+                SteeringReference::PathCurvature => path_steering(&st.geometry, kappa)
+                    .clamp(-st.delta_mech_max_rad, st.delta_mech_max_rad),
+            };
+            lin_row(&sens, ncols, &[(IDELTA, T::ONE)], &mut row);
+            let d = xbar[IDELTA] - dot(&row, &u_bar, ncols) - delta_ref;
+            add_cost(qp, &row, ncols, two * w.q_delta, d);
+
+            // Validity: ±δ ≤ δ_max(V̄) + δ_max'(V̄)(V − V̄) + δ_tol.
+            let (dmax, slope) = validity.delta_max_and_slope(xbar[IV]);
+            for sign in [T::ONE, -T::ONE] {
+                lin_row(&sens, ncols, &[(IDELTA, sign), (IV, -slope)], &mut row);
+                let nominal = sign * xbar[IDELTA] - slope * xbar[IV];
+                let d = nominal - dot(&row, &u_bar, ncols);
+                let hi = dmax - slope * xbar[IV] - d;
+                if push_row(qp, &row, -T::INFINITY, hi, two * w.q_delta_tol) {
+                    self.row_kind[rows] = RowKind::Validity;
+                    rows += 1;
+                }
+            }
+
+            // Obstacles: g(X, Y) ≥ 0 linearised at the nominal position.
+            for o in obstacles {
+                let pos = [xbar[IX], xbar[IY]];
+                if !o.is_relevant(pos) {
+                    continue;
+                }
+                if obstacle_rows >= MAX_OBSTACLE_ROWS {
+                    dropped += 1;
+                    continue;
+                }
+                let (g, grad) = o.constraint_value_and_gradient(pos);
+                lin_row(&sens, ncols, &[(IX, grad[0]), (IY, grad[1])], &mut row);
+                let d = g - dot(&row, &u_bar, ncols);
+                if push_row(qp, &row, -d, T::INFINITY, two * w.q_obs) {
+                    self.row_kind[rows] = RowKind::Obstacle;
+                    rows += 1;
+                    obstacle_rows += 1;
+                }
+            }
+        }
+        report.rows = rows as u32;
+        report.obstacle_rows = obstacle_rows as u32;
+        report.obstacle_rows_dropped = dropped;
+    }
+
+    fn slack_diagnostics(&self, report: &mut MpcReport<T>) {
+        let m = self.solver.problem().m.min(NC);
+        let (mut v, mut o, mut r) = (T::ZERO, T::ZERO, T::ZERO);
+        for i in 0..m {
+            let s = self.solver.slack(i);
+            match self.row_kind[i] {
+                RowKind::Validity => v = v.max(s),
+                RowKind::Obstacle => o = o.max(s),
+                RowKind::Road => r = r.max(s),
+            }
+        }
+        report.max_validity_slack_rad = v;
+        report.max_obstacle_slack_m = o;
+        report.max_road_slack_m = r;
+    }
+}
+
+/// Kinematic steering that follows curvature `kappa` (1/m), signed, rad.
+fn path_steering<T: Real>(geometry: &BicycleGeometry<T>, kappa: T) -> T {
+    if kappa == T::ZERO {
+        return T::ZERO;
+    }
+    let r = T::ONE / kappa.abs();
+    let d = kinematic_steering_for_radius(geometry, r).unwrap_or(T::HALF * T::PI);
+    if kappa > T::ZERO {
+        d
+    } else {
+        -d
+    }
+}
+
+/// `row = Σ coef · S[state]` over the first `ncols` columns (the rest zero).
+fn lin_row<T: Real>(sens: &[[T; NV]; NX], ncols: usize, terms: &[(usize, T)], row: &mut [T; NV]) {
+    for j in 0..NV {
+        row[j] = T::ZERO;
+    }
+    for &(state, coef) in terms {
+        if coef == T::ZERO {
+            continue;
+        }
+        if let Some(srow) = sens.get(state) {
+            for j in 0..ncols {
+                row[j] += coef * srow[j];
+            }
+        }
+    }
+}
+
+fn dot<T: Real>(row: &[T; NV], u: &[[T; NU]; HORIZON], ncols: usize) -> T {
+    let mut acc = T::ZERO;
+    for j in 0..ncols {
+        acc += row[j] * u[j / 2][j % 2];
+    }
+    acc
+}
+
+/// Adds `½·w·(rowᵀu + d)²` to the QP cost (upper triangle of `H`): `H += w·row·rowᵀ`,
+/// `f += w·d·row`. (`w = 2q` for a cost `q(·)²`.)
+fn add_cost<T: Real>(qp: &mut MpcQpProblem<T>, row: &[T; NV], ncols: usize, w: T, d: T) {
+    if w == T::ZERO {
+        return;
+    }
+    for i in 0..ncols {
+        let wi = w * row[i];
+        if wi == T::ZERO {
+            continue;
+        }
+        qp.f[i] += wi * d;
+        for j in i..ncols {
+            qp.h[i][j] += wi * row[j];
+        }
+    }
+}
+
+fn push_row<T: Real>(qp: &mut MpcQpProblem<T>, row: &[T; NV], lo: T, hi: T, rho: T) -> bool {
+    qp.push_row(row, lo, hi, rho).is_some()
+}
+
+/// Linear interpolation of node values at a fractional node index `t` (clamped).
+fn interpolate_nodes<T: Real>(values: &[T; HORIZON + 1], t: T) -> T {
+    let t = t.clamp(T::ZERO, T::from_usize(HORIZON));
+    let i = t.floor();
+    let f = t - i;
+    let i = (i.to_f32() as usize).min(HORIZON - 1);
+    values[i] + (values[i + 1] - values[i]) * f
+}
+
+/// Re-samples piecewise-constant inputs shifted by `shift` intervals: each new
+/// interval gets the average of the old inputs over it; past the end, the last.
+fn shift_inputs<T: Real>(old: &[[T; NU]; HORIZON], shift: T, new: &mut [[T; NU]; HORIZON]) {
+    for k in 0..HORIZON {
+        let a = shift + T::from_usize(k);
+        let b = a + T::ONE;
+        let mut acc = [T::ZERO; NU];
+        let j0 = a.floor();
+        let mut j = (j0.to_f32() as usize).min(HORIZON);
+        let mut t = a;
+        while t < b && j <= HORIZON {
+            let end = (T::from_usize(j) + T::ONE).min(b);
+            let src = old[j.min(HORIZON - 1)];
+            let wgt = end - t;
+            acc[0] += wgt * src[0];
+            acc[1] += wgt * src[1];
+            t = end;
+            j += 1;
+        }
+        if t < b {
+            let src = old[HORIZON - 1];
+            acc[0] += (b - t) * src[0];
+            acc[1] += (b - t) * src[1];
+        }
+        new[k] = acc;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shifting_by_half_an_interval_averages_neighbours() {
+        let mut old = [[0.0f64; NU]; HORIZON];
+        for k in 0..HORIZON {
+            old[k] = [k as f64, -(k as f64)];
+        }
+        let mut new = [[0.0; NU]; HORIZON];
+        shift_inputs(&old, 0.5, &mut new);
+        assert!((new[0][0] - 0.5).abs() < 1e-12);
+        assert!((new[3][1] + 3.5).abs() < 1e-12);
+        // The last interval extends the last input.
+        assert!((new[HORIZON - 1][0] - 15.0).abs() < 1e-12);
+        shift_inputs(&old, 0.0, &mut new);
+        assert_eq!(new, old);
+    }
+
+    #[test]
+    fn interpolation_between_nodes() {
+        let mut v = [0.0f32; HORIZON + 1];
+        for (k, x) in v.iter_mut().enumerate() {
+            *x = 2.0 * k as f32;
+        }
+        assert_eq!(interpolate_nodes(&v, 0.5), 1.0);
+        assert_eq!(interpolate_nodes(&v, 16.0), 32.0);
+        assert_eq!(interpolate_nodes(&v, 99.0), 32.0);
+    }
+}

@@ -89,7 +89,7 @@ pub trait Real:
     /// The smaller of two values (the non-NaN one if one is NaN).
     #[inline]
     fn min(self, other: Self) -> Self {
-        if other < self || self != self {
+        if other < self || self.partial_cmp(&self).is_none() {
             other
         } else {
             self
@@ -98,7 +98,7 @@ pub trait Real:
     /// The larger of two values (the non-NaN one if one is NaN).
     #[inline]
     fn max(self, other: Self) -> Self {
-        if other > self || self != self {
+        if other > self || self.partial_cmp(&self).is_none() {
             other
         } else {
             self

@@ -1,1 +1,222 @@
-//! (being written)
+//! The two tasks of the architecture, as library functions (RTIC v2 semantics).
+//!
+//! | task | period | priority | deadline | does |
+//! |---|---|---|---|---|
+//! | [`ControlTask::run`] | 10 ms (100 Hz) | high | 10 ms, budget a few thousand cycles | follows the current plan: speed PID → wheel torques, `δ = δ_ol + δ_cl` |
+//! | [`PlanTask::run`] | 100 ms (10 Hz) | low | 100 ms | `V_heur` → obstacle parabolas → MPC, into its own buffer |
+//!
+//! They share two resources: the latest [`StateEstimate`] and the current [`Plan`].
+//! `control` preempts `plan`. The planner computes into a buffer of its own,
+//! outside any lock, and publishes with [`PlanTask::publish`] — a swap of the two
+//! buffers, the only work done inside the critical section on the shared plan — so
+//! `control` is blocked at most by that swap. The RTIC application and the host
+//! simulator call these same functions.
+//!
+//! Faults: a plan whose MPC status is not optimal is not published (the previous
+//! one stays, and `control` keeps following it, shifted in time; when it runs out
+//! the low-level controller brings the car to a controlled stop). A non-finite
+//! state estimate is refused by both tasks and counted; `control` then applies the
+//! safe actuation (no traction, moderate braking, steering held).
+
+use crate::low_level::{self, Actuation, ControlFault, LowLevelConfig, LowLevelState};
+use crate::mpc::{Mpc, MpcError, MpcReport, MpcSettings};
+use crate::obstacles::ObstacleManager;
+use crate::plan::Plan;
+use crate::reference_path::ReferencePath;
+use crate::state_estimate::StateEstimate;
+use crate::Real;
+
+/// Period of the `control` task, µs.
+pub const CONTROL_PERIOD_US: u64 = 10_000;
+/// Period of the `plan` task, µs.
+pub const PLAN_PERIOD_US: u64 = 100_000;
+
+/// Counters of the `plan` task (deterministic).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PlanTaskStats {
+    /// Activations.
+    pub activations: u32,
+    /// Plans published.
+    pub published: u32,
+    /// Activations whose plan was not published (any [`MpcError`]).
+    pub failures: u32,
+    /// Of those, refused non-finite state estimates.
+    pub non_finite_estimates: u32,
+}
+
+/// The `plan` task's local resources: the reference path, the obstacle parabolas,
+/// the MPC workspace and the plan being computed. `CAP` is the path's point capacity.
+#[derive(Clone, Debug)]
+pub struct PlanTask<T, const CAP: usize> {
+    /// MPC settings.
+    pub settings: MpcSettings<T>,
+    /// Road friction coefficient `μ` the planner assumes, dimensionless.
+    pub mu: T,
+    /// The reference path (load it once before the first activation).
+    pub path: ReferencePath<T, CAP>,
+    /// Parabolas of the static obstacles (update after loading the path).
+    pub obstacles: ObstacleManager<T>,
+    mpc: Mpc<T>,
+    working: Plan<T>,
+    ready: bool,
+    /// Counters.
+    pub stats: PlanTaskStats,
+}
+
+impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
+    /// A planner with an empty path and no obstacles; `const` for a `static`.
+    pub const fn new(settings: MpcSettings<T>, mu: T) -> Self {
+        Self {
+            settings,
+            mu,
+            path: ReferencePath::new(),
+            obstacles: ObstacleManager::new(),
+            mpc: Mpc::new(),
+            working: Plan::zeroed(),
+            ready: false,
+            stats: PlanTaskStats {
+                activations: 0,
+                published: 0,
+                failures: 0,
+                non_finite_estimates: 0,
+            },
+        }
+    }
+
+    /// The MPC workspace (its solver holds the last QP's solution and working set).
+    pub fn mpc(&self) -> &Mpc<T> {
+        &self.mpc
+    }
+
+    /// The plan computed by the last successful activation, not yet published.
+    pub fn pending(&self) -> Option<&Plan<T>> {
+        if self.ready {
+            Some(&self.working)
+        } else {
+            None
+        }
+    }
+
+    /// One activation, released on `est` (read from the shared estimate under a
+    /// short lock by the caller). Computes outside any lock; on success the plan
+    /// waits in the task's buffer for [`PlanTask::publish`].
+    pub fn run(&mut self, est: &StateEstimate<T>) -> Result<MpcReport<T>, MpcError> {
+        self.run_observed(est, |_| {}, |_| {})
+    }
+
+    /// [`PlanTask::run`] with the MPC's QP observers (see [`Mpc::step_observed`]).
+    pub fn run_observed(
+        &mut self,
+        est: &StateEstimate<T>,
+        before: impl FnMut(&crate::mpc::MpcQpProblem<T>),
+        after: impl FnMut(&crate::mpc::MpcQpSolution<T>),
+    ) -> Result<MpcReport<T>, MpcError> {
+        self.stats.activations = self.stats.activations.wrapping_add(1);
+        self.ready = false;
+        let result = self.mpc.step_observed(
+            &self.settings,
+            &self.path,
+            self.obstacles.parabolas(),
+            est,
+            self.mu,
+            &mut self.working,
+            before,
+            after,
+        );
+        match result {
+            Ok(_) => self.ready = true,
+            Err(e) => {
+                self.stats.failures = self.stats.failures.wrapping_add(1);
+                if e == MpcError::NonFiniteState {
+                    self.stats.non_finite_estimates =
+                        self.stats.non_finite_estimates.wrapping_add(1);
+                }
+            }
+        }
+        result
+    }
+
+    /// Publishes the pending plan into the shared one by swapping buffers (call
+    /// inside the critical section on the shared plan). Returns false, leaving the
+    /// shared plan untouched, when there is nothing to publish.
+    pub fn publish(&mut self, shared: &mut Plan<T>) -> bool {
+        if !self.ready {
+            return false;
+        }
+        core::mem::swap(&mut self.working, shared);
+        self.ready = false;
+        self.stats.published = self.stats.published.wrapping_add(1);
+        true
+    }
+}
+
+/// Counters of the `control` task (deterministic).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ControlTaskStats {
+    /// Activations.
+    pub activations: u32,
+    /// Activations that applied the safe actuation.
+    pub safe_actuations: u32,
+    /// Of those, refused non-finite state estimates.
+    pub non_finite_estimates: u32,
+    /// Of those, no valid plan yet / a non-finite plan.
+    pub invalid_plans: u32,
+}
+
+/// The `control` task's local resources: configuration and controller state.
+#[derive(Clone, Debug)]
+pub struct ControlTask<T> {
+    /// Low-level controller configuration (validated by [`ControlTask::new`]).
+    pub config: LowLevelConfig<T>,
+    state: LowLevelState<T>,
+    /// Counters.
+    pub stats: ControlTaskStats,
+    /// The last fault, if the last activation applied the safe actuation.
+    pub last_fault: Option<ControlFault>,
+}
+
+impl<T: Real> ControlTask<T> {
+    /// A controller with a validated configuration.
+    pub fn new(config: LowLevelConfig<T>) -> Result<Self, low_level::LowLevelConfigError> {
+        config.validate()?;
+        Ok(Self {
+            config,
+            state: LowLevelState::new(),
+            stats: ControlTaskStats::default(),
+            last_fault: None,
+        })
+    }
+
+    /// The controller's state (PID states, plan being followed).
+    pub fn state(&self) -> &LowLevelState<T> {
+        &self.state
+    }
+
+    /// One 10 ms activation at `now_us` on `est` following `plan` (both read under
+    /// short locks by the caller). Never fails: on a fault (non-finite estimate,
+    /// no valid plan) it returns the safe actuation and counts it.
+    pub fn run(&mut self, est: &StateEstimate<T>, plan: &Plan<T>, now_us: u64) -> Actuation<T> {
+        self.stats.activations = self.stats.activations.wrapping_add(1);
+        match low_level::control(&self.config, &mut self.state, plan, est, now_us) {
+            Ok(a) => {
+                self.last_fault = None;
+                a
+            }
+            Err(fault) => {
+                self.stats.safe_actuations = self.stats.safe_actuations.wrapping_add(1);
+                match fault {
+                    ControlFault::NonFiniteEstimate => {
+                        self.stats.non_finite_estimates =
+                            self.stats.non_finite_estimates.wrapping_add(1)
+                    }
+                    ControlFault::NonFinitePlan | ControlFault::InvalidPlan => {
+                        self.stats.invalid_plans = self.stats.invalid_plans.wrapping_add(1)
+                    }
+                    ControlFault::Numerical => {}
+                }
+                self.last_fault = Some(fault);
+                low_level::safe_actuation(&self.config, &self.state)
+            }
+        }
+    }
+}

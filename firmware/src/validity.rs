@@ -18,6 +18,9 @@
 //! kinematic model allows any steering and the mechanical limit applies. The
 //! result never exceeds the mechanical limit.
 
+// `!(a > b)` is meant: it is also true when `a` is NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::bicycle::BicycleGeometry;
 use crate::Real;
 
@@ -98,6 +101,7 @@ pub fn kinematic_lateral_acceleration<T: Real>(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

@@ -1,0 +1,192 @@
+//! ECU measurement binary: runs MPC steps on the Cortex-M4F and prints what each
+//! costs, in instructions, under QEMU with `-icount shift=3` (see `.cargo/config.toml`).
+//!
+//! A stadium-shaped closed track (two 60 m straights, two 20 m-radius half circles)
+//! is built at start-up; a kinematic-bicycle stand-in for the car follows each plan
+//! for 100 ms before the next step, so the steps are those of a real receding
+//! horizon: one cold start, then warm starts through straights and curves.
+//!
+//! Run: `cargo run --release -p firmware --target thumbv7em-none-eabihf --features ecu --bin mpc_step`
+//! (alias `cargo ecu-mpc`). SysTick counts the 168 MHz virtual clock; with
+//! `shift=3` QEMU executes one instruction per 8 ns, so
+//! `instructions = ticks × (1/168 MHz) / 8 ns`.
+#![no_std]
+#![no_main]
+// Statics for the (large) planner workspace need one `unsafe` access at start-up.
+#![allow(unsafe_code)]
+
+use cortex_m::peripheral::{syst::SystClkSource, SYST};
+use cortex_m_rt::entry;
+use cortex_m_semihosting::{debug, hprintln};
+use firmware::bicycle::BicycleGeometry;
+use firmware::mpc::{Mpc, MpcSettings};
+use firmware::plan::Plan;
+use firmware::reference_path::ReferencePath;
+use firmware::state_estimate::StateEstimate;
+use stm32f4 as _;
+
+const PATH_CAP: usize = 256;
+const STEPS: usize = 60;
+
+static mut MPC: Mpc<f32> = Mpc::new();
+static mut PATH: ReferencePath<f32, PATH_CAP> = ReferencePath::new();
+static mut PLAN: Plan<f32> = Plan::zeroed();
+static mut POINTS: [[f32; 4]; PATH_CAP] = [[0.0; 4]; PATH_CAP];
+
+/// Stadium track: returns the number of points written.
+fn stadium(points: &mut [[f32; 4]; PATH_CAP]) -> usize {
+    let (straight, radius, ds) = (60.0f32, 20.0f32, 2.0f32);
+    let mut n = 0;
+    let mut push = |x: f32, y: f32| {
+        if let Some(p) = points.get_mut(n) {
+            *p = [x, y, 4.0, 4.0];
+            n += 1;
+        }
+    };
+    let arc_pts = (core::f32::consts::PI * radius / ds) as usize;
+    let line_pts = (straight / ds) as usize;
+    for i in 0..line_pts {
+        push(i as f32 * ds, 0.0);
+    }
+    for i in 0..arc_pts {
+        let a = -core::f32::consts::FRAC_PI_2 + core::f32::consts::PI * i as f32 / arc_pts as f32;
+        push(
+            straight + radius * libm::cosf(a),
+            radius + radius * libm::sinf(a),
+        );
+    }
+    for i in 0..line_pts {
+        push(straight - i as f32 * ds, 2.0 * radius);
+    }
+    for i in 0..arc_pts {
+        let a = core::f32::consts::FRAC_PI_2 + core::f32::consts::PI * i as f32 / arc_pts as f32;
+        push(radius * libm::cosf(a), radius + radius * libm::sinf(a));
+    }
+    n
+}
+
+fn ticks_between(start: u32, end: u32) -> u32 {
+    // SysTick counts down from its reload value.
+    start.wrapping_sub(end) & 0x00FF_FFFF
+}
+
+#[entry]
+fn main() -> ! {
+    let (mpc, path, plan, points) = unsafe {
+        (
+            &mut *core::ptr::addr_of_mut!(MPC),
+            &mut *core::ptr::addr_of_mut!(PATH),
+            &mut *core::ptr::addr_of_mut!(PLAN),
+            &mut *core::ptr::addr_of_mut!(POINTS),
+        )
+    };
+    let mut syst = match cortex_m::Peripherals::take() {
+        Some(p) => p.SYST,
+        None => exit(false),
+    };
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(0x00FF_FFFF);
+    syst.clear_current();
+    syst.enable_counter();
+
+    let n = stadium(points);
+    if path.load_track(&points[..n], true).is_err() {
+        hprintln!("mpc_step: track rejected");
+        exit(false);
+    }
+    let geometry = BicycleGeometry {
+        l_f_m: 1.2,
+        l_r_m: 1.6,
+    };
+    let settings = MpcSettings::paper(geometry, 0.6, 1.8);
+    let mut est = StateEstimate {
+        stamp_us: 0,
+        x_m: 0.0,
+        y_m: 0.0,
+        psi_rad: 0.0,
+        vx_mps: 15.0,
+        vy_mps: 0.0,
+        yaw_rate_radps: 0.0,
+        delta_rad: 0.0,
+    };
+    let (mut max_warm, mut sum_warm, mut cold, mut failures) = (0u32, 0u64, 0u32, 0u32);
+    let mut max_iter = 0u32;
+    for step in 0..STEPS {
+        let t0 = SYST::get_current();
+        let result = mpc.step(&settings, path, &[], &est, 1.0, plan);
+        let t1 = SYST::get_current();
+        let ticks = ticks_between(t0, t1);
+        match result {
+            Ok(report) => {
+                max_iter = max_iter.max(report.qp_iterations);
+                if step == 0 {
+                    cold = ticks;
+                } else {
+                    max_warm = max_warm.max(ticks);
+                    sum_warm += ticks as u64;
+                }
+            }
+            Err(_) => failures += 1,
+        }
+        // The car follows the plan for 100 ms (kinematic stand-in, 10 ms steps).
+        let mut xi = [
+            0.0,
+            est.x_m,
+            est.y_m,
+            est.speed_mps(),
+            est.psi_rad,
+            est.delta_rad,
+        ];
+        let u = plan.inputs[0];
+        for _ in 0..10 {
+            xi = geometry.discretize(&xi, &u, 0.01).x_next;
+        }
+        est = StateEstimate {
+            stamp_us: est.stamp_us + 100_000,
+            x_m: xi[1],
+            y_m: xi[2],
+            psi_rad: xi[4],
+            vx_mps: xi[3],
+            vy_mps: 0.0,
+            yaw_rate_radps: 0.0,
+            delta_rad: xi[5],
+        };
+    }
+    let to_instr = |ticks: u64| ticks * 1_000_000_000 / 168_000_000 / 8;
+    let mean_warm = sum_warm / (STEPS as u64 - 1);
+    hprintln!(
+        "mpc_step: steps={} failures={} max_qp_iterations={}",
+        STEPS,
+        failures,
+        max_iter
+    );
+    hprintln!("mpc_step: cold_instructions={}", to_instr(cold as u64));
+    hprintln!("mpc_step: warm_mean_instructions={}", to_instr(mean_warm));
+    hprintln!(
+        "mpc_step: warm_max_instructions={}",
+        to_instr(max_warm as u64)
+    );
+    hprintln!(
+        "mpc_step: mpc_workspace_bytes={}",
+        core::mem::size_of::<Mpc<f32>>()
+    );
+    exit(failures == 0)
+}
+
+fn exit(ok: bool) -> ! {
+    debug::exit(if ok {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+#[panic_handler]
+fn panic(_info: &core::panic::PanicInfo) -> ! {
+    // The ECU's only panic path: report and stop (the actuators are not driven here).
+    hprintln!("mpc_step: panic");
+    exit(false)
+}
