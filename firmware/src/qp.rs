@@ -51,9 +51,9 @@
 //! row makes the working-set matrix singular (tiny relative pivot: it depends linearly
 //! on the hard rows of `W`), move `λ` along the null-space direction, which keeps `u`
 //! and raises the dual cost, until a multiplier reaches zero, and swap that constraint
-//! for the new one; if no multiplier can reach zero, the problem is infeasible (or, if
-//! the pivot is small but above rounding level, the row is nearly but not exactly
-//! dependent and is added after all). Before `Optimal` is returned, the working-set
+//! for the new one; if no multiplier can reach zero, the problem is infeasible (in
+//! `f32`, if the pivot is small but above rounding level, the row is nearly but not
+//! exactly dependent and is added after all). Before `Optimal` is returned, the working-set
 //! constraints are checked to hold at the final point; if they do not (an inaccurate
 //! factor of a nearly singular working set), the factor is recomputed once, and a
 //! second failure gives `NumericalError` rather than a wrong optimum.
@@ -172,9 +172,9 @@ pub struct QpSettings<T> {
     pub dual_tol: T,
     /// Relative pivot threshold: a constraint entering the working set is treated as
     /// linearly dependent if its `LDLᵀ` pivot is below `pivot_tol` times its diagonal
-    /// entry (then a null-space swap is tried first; if no multiplier limits the ray
-    /// and the pivot is above rounding level, the row is taken as independent after
-    /// all). `0` means the precision default (1e-9 `f64`, 1.2e-4 `f32`).
+    /// entry (then a null-space swap is tried; in `f32`, if no multiplier limits the
+    /// ray and the pivot is above 6.4e-6, the row is taken as independent after all).
+    /// `0` means the precision default (1e-9 `f64`, 1.2e-4 `f32`).
     pub pivot_tol: T,
     /// Iteration cap (one iteration adds or removes one constraint, or swaps one after
     /// a singular step). Bounds the worst-case time of a solve.
@@ -205,7 +205,8 @@ impl<T: Real> QpSettings<T> {
         let (pivot, rounding) = if single {
             (T::lit(1.2e-4), T::lit(6.4e-6))
         } else {
-            (T::lit(1e-9), T::lit(1e-10))
+            // No forcing band in f64: it cost infeasibility detection on degenerate sets.
+            (T::lit(1e-9), T::lit(1e-9))
         };
         Tols {
             primal: pick(self.primal_tol, sqrt_eps),
