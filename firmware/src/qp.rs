@@ -83,6 +83,25 @@
 //! multipliers come out with the wrong sign leave through ordinary removal steps
 //! (starting from `λ = 0`, which is dual feasible).
 
+//!
+//! # Use
+//!
+//! ```
+//! use firmware::qp::{ldl_len, QpSolver, QpStatus};
+//! // 2 variables, up to 4 rows, working set of up to 4.
+//! let mut qp = QpSolver::<f64, 2, 4, 4, { ldl_len(4) }>::new();
+//! let p = qp.problem_mut(); // fill in place (refill H and rows before every solve)
+//! p.h = [[1.0, 0.0], [0.0, 1.0]];
+//! p.f = [-2.0, -2.0]; // unconstrained optimum (2, 2)
+//! p.x_hi = [1.5, f64::INFINITY]; // x0 ≤ 1.5
+//! p.push_row(&[1.0, 1.0], f64::NEG_INFINITY, 2.0, 0.0); // hard: x0 + x1 ≤ 2
+//! assert_eq!(qp.solve(), QpStatus::Optimal);
+//! let s = qp.solution();
+//! assert!((s.x[0] - 1.0).abs() < 1e-12 && (s.x[1] - 1.0).abs() < 1e-12);
+//! assert!((s.lambda_rows[0] - 1.0).abs() < 1e-12); // H x + f + Aᵀλ = 0
+//! // Next solve: refill, optionally shift `qp.working_set()` and `set_working_set` it.
+//! ```
+
 // Index loops mirror the maths of the factorisations; the ranges are bounded by the
 // const sizes and the working-set count (≤ W).
 #![allow(clippy::needless_range_loop)]
