@@ -51,7 +51,12 @@
 //! row makes the working-set matrix singular (tiny relative pivot: it depends linearly
 //! on the hard rows of `W`), move `λ` along the null-space direction, which keeps `u`
 //! and raises the dual cost, until a multiplier reaches zero, and swap that constraint
-//! for the new one; if no multiplier can reach zero, the problem is infeasible.
+//! for the new one; if no multiplier can reach zero, the problem is infeasible (in
+//! `f32`, if the pivot is small but above rounding level, the row is nearly but not
+//! exactly dependent and is added after all). Before `Optimal` is returned, the working-set
+//! constraints are checked to hold at the final point; if they do not (an inaccurate
+//! factor of a nearly singular working set), the factor is recomputed once, and a
+//! second failure gives `NumericalError` rather than a wrong optimum.
 //!
 //! **Factors.** `LDLᵀ` of the working-set matrix, packed by rows: a row is appended
 //! when a constraint enters (`O(|W|·N + |W|²)`), and a constraint leaves by deleting its
@@ -77,6 +82,25 @@
 //! infinite bound or linearly dependent on earlier entries are dropped; entries whose
 //! multipliers come out with the wrong sign leave through ordinary removal steps
 //! (starting from `λ = 0`, which is dual feasible).
+
+//!
+//! # Use
+//!
+//! ```
+//! use firmware::qp::{ldl_len, QpSolver, QpStatus};
+//! // 2 variables, up to 4 rows, working set of up to 4.
+//! let mut qp = QpSolver::<f64, 2, 4, 4, { ldl_len(4) }>::new();
+//! let p = qp.problem_mut(); // fill in place (refill H and rows before every solve)
+//! p.h = [[1.0, 0.0], [0.0, 1.0]];
+//! p.f = [-2.0, -2.0]; // unconstrained optimum (2, 2)
+//! p.x_hi = [1.5, f64::INFINITY]; // x0 ≤ 1.5
+//! p.push_row(&[1.0, 1.0], f64::NEG_INFINITY, 2.0, 0.0); // hard: x0 + x1 ≤ 2
+//! assert_eq!(qp.solve(), QpStatus::Optimal);
+//! let s = qp.solution();
+//! assert!((s.x[0] - 1.0).abs() < 1e-12 && (s.x[1] - 1.0).abs() < 1e-12);
+//! assert!((s.lambda_rows[0] - 1.0).abs() < 1e-12); // H x + f + Aᵀλ = 0
+//! // Next solve: refill, optionally shift `qp.working_set()` and `set_working_set` it.
+//! ```
 
 // Index loops mirror the maths of the factorisations; the ranges are bounded by the
 // const sizes and the working-set count (≤ W).
@@ -165,9 +189,11 @@ pub struct QpSettings<T> {
     /// A multiplier counts as of the wrong sign below `−dual_tol`. `0` means the
     /// precision default `√ε`.
     pub dual_tol: T,
-    /// Relative pivot threshold: a constraint entering the working set is linearly
-    /// dependent if its `LDLᵀ` pivot is below `pivot_tol` times its diagonal entry.
-    /// `0` means the precision default `1000 ε` (2.2e-13 `f64`, 1.2e-4 `f32`).
+    /// Relative pivot threshold: a constraint entering the working set is treated as
+    /// linearly dependent if its `LDLᵀ` pivot is below `pivot_tol` times its diagonal
+    /// entry (then a null-space swap is tried; in `f32`, if no multiplier limits the
+    /// ray and the pivot is above 6.4e-6, the row is taken as independent after all).
+    /// `0` means the precision default (1e-9 `f64`, 1.2e-4 `f32`).
     pub pivot_tol: T,
     /// Iteration cap (one iteration adds or removes one constraint, or swaps one after
     /// a singular step). Bounds the worst-case time of a solve.
@@ -192,10 +218,21 @@ impl<T: Real> QpSettings<T> {
     fn effective(&self) -> Tols<T> {
         let sqrt_eps = T::EPSILON.sqrt();
         let pick = |v: T, d: T| if v > T::ZERO { v } else { d };
+        // Single precision (ε ≈ 1.2e-7) or double (ε ≈ 2.2e-16); the pivot levels were
+        // tuned on degenerate random problems (tests/qp_precision.rs, tests/qp_kkt.rs).
+        let single = T::EPSILON > T::lit(1e-10);
+        let (pivot, rounding) = if single {
+            (T::lit(1.2e-4), T::lit(6.4e-6))
+        } else {
+            // No forcing band in f64: it cost infeasibility detection on degenerate sets.
+            (T::lit(1e-9), T::lit(1e-9))
+        };
         Tols {
             primal: pick(self.primal_tol, sqrt_eps),
             dual: pick(self.dual_tol, sqrt_eps),
-            pivot: pick(self.pivot_tol, T::lit(1000.0) * T::EPSILON),
+            pivot: pick(self.pivot_tol, pivot),
+            rounding: rounding.min(pick(self.pivot_tol, pivot)),
+            noise: sqrt_eps,
         }
     }
 }
@@ -205,6 +242,10 @@ struct Tols<T> {
     primal: T,
     dual: T,
     pivot: T,
+    /// Relative pivot at rounding level (`ε^¾`): below it a row is exactly dependent.
+    rounding: T,
+    /// Relative size below which a null-space coefficient is rounding noise (`√ε`).
+    noise: T,
 }
 
 /// The problem data, filled in place by the caller (see [`QpSolver::problem_mut`]).
@@ -386,6 +427,8 @@ struct Workspace<T, const N: usize, const M: usize, const W: usize, const WL: us
     bound_state: [Option<Side>; N],
     /// Appends since the last from-scratch factorisation.
     updates: u32,
+    /// Pivot of the last `append` relative to its diagonal entry.
+    last_rel_pivot: T,
 }
 
 /// The solver: settings, problem, workspace and solution in one value (for a
@@ -441,6 +484,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 row_state: [None; M],
                 bound_state: [None; N],
                 updates: 0,
+                last_rel_pivot: T::ZERO,
             },
             solution: QpSolution::new(),
             consumed: false,
@@ -838,8 +882,19 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             dn -= y * lv;
         }
         self.ldl[s + n] = dn;
+        self.last_rel_pivot = dn / diag;
         if !(dn > tols.pivot * diag) || !dn.is_finite() {
             return Err(AppendError::Singular);
+        }
+        self.commit(e);
+        Ok(())
+    }
+
+    /// Makes the row `n` written by `append` part of the factor.
+    fn commit(&mut self, e: ActiveConstraint) {
+        let n = self.n;
+        if n >= W {
+            return;
         }
         self.ws[n] = e;
         if let Some(st) = self.state_mut(e.index) {
@@ -847,7 +902,6 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         self.n = n + 1;
         self.updates += 1;
-        Ok(())
     }
 
     /// Removes working-set entry `p` (and its multiplier): deletes its row and column
@@ -1030,6 +1084,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // Anti-cycling: a constraint that left by a zero-length step (degenerate dual)
         // is re-added only if no other constraint is violated, until the next addition.
         let mut blocked: Option<ConstraintIndex> = None;
+        let mut checked_refactor = false;
         loop {
             if sol.iterations >= settings.max_iter {
                 return QpStatus::IterationLimit;
@@ -1081,7 +1136,17 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
             self.primal(p, &mut sol.x);
             let Some(e) = self.most_violated(p, &sol.x, tols.primal, blocked) else {
-                return QpStatus::Optimal;
+                // Optimal if the working set itself holds; if it does not, the factor is
+                // inaccurate: refactor (which also drops dependent entries) once and go on.
+                if self.working_set_holds(p, tols.primal) {
+                    return QpStatus::Optimal;
+                }
+                if checked_refactor {
+                    return QpStatus::NumericalError;
+                }
+                checked_refactor = true;
+                self.refactor(p, tols, sol);
+                continue;
             };
             blocked = None;
             if let Err(st) = self.add(p, e, tols, sol) {
@@ -1135,7 +1200,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 cmax = cmax.max(acc.abs());
             }
             // Rates below this are rounding noise of a zero coefficient.
-            let noise = tols.pivot * (T::ONE + cmax);
+            let noise = tols.noise * (T::ONE + cmax);
             let mut block: Option<(usize, T)> = None;
             for k in 0..n {
                 let ek = self.ws[k];
@@ -1152,6 +1217,17 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 }
             }
             let Some((pos, t)) = block else {
+                // No multiplier limits the ray. With an exactly dependent row the dual
+                // is unbounded: infeasible. With a small but real pivot (nearly
+                // dependent, not at rounding level) the dual is bounded along the ray:
+                // the row is taken as independent after all, with its small pivot.
+                let rel = self.last_rel_pivot;
+                if rel.is_finite() && rel > tols.rounding {
+                    self.commit(e);
+                    self.lam[self.n - 1] = lam_e;
+                    sol.added += 1;
+                    return Ok(());
+                }
                 return Err(QpStatus::Infeasible);
             };
             for k in 0..n {
@@ -1167,6 +1243,22 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             sol.removed += 1;
         }
         Err(QpStatus::NumericalError)
+    }
+
+    /// Whether every working-set constraint holds at `u`: `m̃_kᵀu = b_k + λ_k/ρ_k`
+    /// within `tol`.
+    fn working_set_holds(&self, p: &QpProblem<T, N, M>, tol: T) -> bool {
+        (0..self.n).all(|k| {
+            let e = self.ws[k];
+            let (lo, hi) = bounds_of(p, e.index);
+            let b = match e.side {
+                Side::Lower => lo,
+                Side::Upper => hi,
+            };
+            let (row, st) = con_row(p, e.index);
+            let val = dot_from(row, &self.u, st);
+            (val - b - self.lam[k] * delta(p, e.index)).abs() <= tol
+        })
     }
 
     /// Writes `x`, multipliers and cost for the current iterate.
