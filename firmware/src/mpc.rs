@@ -398,8 +398,10 @@ impl<T: Real> Mpc<T> {
 
         // 1. Shift the previous solution to the new release time.
         let mut report = MpcReport::default();
+        // Elapsed since the previous plan, s (integer µs first: no f64 on the ECU).
         let elapsed_s = if self.have_prev && est.stamp_us >= self.prev_stamp_us {
-            T::from_f64((est.stamp_us - self.prev_stamp_us) as f64 * 1e-6)
+            let us = (est.stamp_us - self.prev_stamp_us).min(u32::MAX as u64) as u32;
+            T::lit(us as f32) * T::lit(1e-6)
         } else {
             -T::ONE
         };
@@ -741,9 +743,8 @@ fn push_row<T: Real>(qp: &mut MpcQpProblem<T>, row: &[T; NV], lo: T, hi: T, rho:
 /// Linear interpolation of node values at a fractional node index `t` (clamped).
 fn interpolate_nodes<T: Real>(values: &[T; HORIZON + 1], t: T) -> T {
     let t = t.clamp(T::ZERO, T::from_usize(HORIZON));
-    let i = t.floor();
-    let f = t - i;
-    let i = (i.to_f32() as usize).min(HORIZON - 1);
+    let i = (t.floor().to_f32() as usize).min(HORIZON - 1);
+    let f = t - T::from_usize(i);
     values[i] + (values[i + 1] - values[i]) * f
 }
 

@@ -1246,7 +1246,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     }
 
     /// Whether every working-set constraint holds at `u`: `m̃_kᵀu = b_k + λ_k/ρ_k`
-    /// within `tol`.
+    /// within `tol` relative to `1 + |b_k + λ_k/ρ_k|`.
     fn working_set_holds(&self, p: &QpProblem<T, N, M>, tol: T) -> bool {
         (0..self.n).all(|k| {
             let e = self.ws[k];
@@ -1257,7 +1257,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             };
             let (row, st) = con_row(p, e.index);
             let val = dot_from(row, &self.u, st);
-            (val - b - self.lam[k] * delta(p, e.index)).abs() <= tol
+            let target = b + self.lam[k] * delta(p, e.index);
+            // Relative to the magnitudes involved: rows are formed in the working
+            // precision, so their rounding scales with them.
+            (val - target).abs() <= tol * (T::ONE + target.abs().max(val.abs()))
         })
     }
 

@@ -3,8 +3,16 @@
 //! The ECU computes in `f32` (the Cortex-M4F FPU is single precision; `f64` there
 //! is software-emulated and an order of magnitude slower). The host can run the
 //! same code in `f64` to measure what single precision costs in accuracy. Every
-//! algorithm of this crate is generic over [`Real`]; its transcendental functions
-//! come from `libm` (deterministic, bit-identical on every target).
+//! algorithm of this crate is generic over [`Real`].
+//!
+//! Transcendental functions are deterministic, bit-identical on every target, and
+//! in single precision they never touch `f64`: `libm`'s `sinf`, `cosf`, `tanf`,
+//! `asinf` and `hypotf` evaluate their kernels in `f64`, which the M4F emulates in
+//! software (about 1,200 instructions per `sinf`, and it links `__aeabi_d*`). For
+//! `f32` those five are computed here, in `f32` only ([`f32_math`]: Cody–Waite range
+//! reduction and the Cephes single-precision minimax polynomials, within 2·10⁻⁷ of
+//! the exact value for `|x| ≤ 8192`); `sqrtf`, `atanf`, `atan2f` and `floorf` come
+//! from `libm`, which computes them in `f32`. `f64` uses `libm` throughout.
 
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
@@ -217,16 +225,161 @@ impl_real!(
     f32,
     libm::sqrtf,
     libm::fabsf,
-    libm::sinf,
-    libm::cosf,
-    libm::sincosf,
-    libm::tanf,
+    f32_math::sin,
+    f32_math::cos,
+    f32_math::sin_cos,
+    f32_math::tan,
     libm::atanf,
     libm::atan2f,
-    libm::asinf,
-    libm::hypotf,
+    f32_math::asin,
+    f32_math::hypot,
     libm::floorf
 );
+
+/// Single-precision sine, cosine, tangent, arc sine and hypotenuse computed in
+/// `f32` only (no `f64` arithmetic, so no software double precision on the M4F).
+///
+/// Range reduction: `x = j·π/4 + z`, `|z| ≤ π/4`, with `π/4` split in three parts
+/// (Cody–Waite), exact enough for `|x| ≤ 8192`; beyond, results stay finite and
+/// bounded but lose accuracy. Kernels: the Cephes library's single-precision
+/// minimax polynomials (`sinf.c`, `tanf.c`, `asinf.c`, S. L. Moshier). Cost on the
+/// M4F: a few tens of FPU instructions each.
+// The Cephes coefficients are kept as published; `!(a <= b)` is meant (true for NaN).
+#[allow(clippy::excessive_precision, clippy::neg_cmp_op_on_partial_ord)]
+pub mod f32_math {
+    const FOUR_OVER_PI: f32 = 1.273_239_5;
+    const DP1: f32 = 0.785_156_25;
+    const DP2: f32 = 2.418_756_5e-4;
+    const DP3: f32 = 3.774_895e-8;
+    const PI_OVER_2: f32 = core::f32::consts::FRAC_PI_2;
+
+    /// `|x| = j·π/4 + z` with `j` even (octant pair, 0..=7 after masking) and `|z| ≤ π/4`.
+    #[inline]
+    fn reduce(a: f32) -> (f32, u32) {
+        let mut j = (a * FOUR_OVER_PI) as u32;
+        let mut y = j as f32;
+        if j & 1 == 1 {
+            j = j.wrapping_add(1);
+            y += 1.0;
+        }
+        let z = ((a - y * DP1) - y * DP2) - y * DP3;
+        (z, j & 7)
+    }
+
+    #[inline]
+    fn sin_kernel(z: f32, zz: f32) -> f32 {
+        ((-1.951_529_6e-4 * zz + 8.332_161e-3) * zz - 1.666_665_5e-1) * zz * z + z
+    }
+
+    #[inline]
+    fn cos_kernel(zz: f32) -> f32 {
+        ((2.443_315_7e-5 * zz - 1.388_731_6e-3) * zz + 4.166_664_6e-2) * zz * zz - 0.5 * zz + 1.0
+    }
+
+    /// Sine and cosine of `x` (rad), one range reduction.
+    pub fn sin_cos(x: f32) -> (f32, f32) {
+        if !x.is_finite() {
+            return (f32::NAN, f32::NAN);
+        }
+        let (z, j) = reduce(libm::fabsf(x));
+        let zz = z * z;
+        let (s, c) = (sin_kernel(z, zz), cos_kernel(zz));
+        // Octants 0..7 of |x|: (sin, cos) = (s, c), (c, -s), (-s, -c), (-c, s).
+        let (sin_abs, cos) = match j {
+            0 | 1 => (s, c),
+            2 | 3 => (c, -s),
+            4 | 5 => (-s, -c),
+            _ => (-c, s),
+        };
+        (if x < 0.0 { -sin_abs } else { sin_abs }, cos)
+    }
+
+    /// Sine of `x` (rad).
+    pub fn sin(x: f32) -> f32 {
+        sin_cos(x).0
+    }
+
+    /// Cosine of `x` (rad).
+    pub fn cos(x: f32) -> f32 {
+        sin_cos(x).1
+    }
+
+    /// Tangent of `x` (rad).
+    pub fn tan(x: f32) -> f32 {
+        if !x.is_finite() {
+            return f32::NAN;
+        }
+        let a = libm::fabsf(x);
+        let (z, j) = reduce(a);
+        let zz = z * z;
+        let mut y = if a > 1.0e-4 {
+            (((((9.385_402e-3 * zz + 3.119_922_3e-3) * zz + 2.443_013_5e-2) * zz + 5.341_128e-2)
+                * zz
+                + 1.333_88e-1)
+                * zz
+                + 3.333_315_7e-1)
+                * zz
+                * z
+                + z
+        } else {
+            z
+        };
+        if j & 2 != 0 {
+            y = -1.0 / y;
+        }
+        if x < 0.0 {
+            -y
+        } else {
+            y
+        }
+    }
+
+    /// Arc sine of `x`, rad, in `[−π/2, π/2]`; NaN outside `[−1, 1]`.
+    pub fn asin(x: f32) -> f32 {
+        let a = libm::fabsf(x);
+        if !(a <= 1.0) {
+            return f32::NAN;
+        }
+        if a < 1.0e-4 {
+            return x;
+        }
+        let (z, x2, flip) = if a > 0.5 {
+            let z = 0.5 * (1.0 - a);
+            (z, libm::sqrtf(z), true)
+        } else {
+            (a * a, a, false)
+        };
+        let mut r =
+            ((((4.216_32e-2 * z + 2.418_131_1e-2) * z + 4.547_002_6e-2) * z + 7.495_300_3e-2) * z
+                + 1.666_675_2e-1)
+                * z
+                * x2
+                + x2;
+        if flip {
+            r = PI_OVER_2 - (r + r);
+        }
+        if x < 0.0 {
+            -r
+        } else {
+            r
+        }
+    }
+
+    /// `sqrt(x² + y²)`, scaled so that it neither overflows nor underflows early.
+    pub fn hypot(x: f32, y: f32) -> f32 {
+        let (a, b) = (libm::fabsf(x), libm::fabsf(y));
+        if a.is_infinite() || b.is_infinite() {
+            return f32::INFINITY;
+        }
+        let (hi, lo) = if a >= b { (a, b) } else { (b, a) };
+        if !(hi > 0.0) {
+            // Both zero, or a NaN.
+            return hi + lo;
+        }
+        let r = lo / hi;
+        hi * libm::sqrtf(1.0 + r * r)
+    }
+}
 impl_real!(
     f64,
     libm::sqrt,
@@ -253,6 +406,36 @@ mod tests {
         assert_eq!(Real::min(f32::NAN, 2.0), 2.0);
         assert_eq!(Real::max(3.0f64, f64::NAN), 3.0);
         assert_eq!(Real::clamp(5.0f32, -1.0, 1.0), 1.0);
+    }
+
+    #[test]
+    fn f32_math_is_accurate() {
+        use super::f32_math;
+        let (mut es, mut ec, mut et, mut ea, mut eh) = (0f64, 0f64, 0f64, 0f64, 0f64);
+        let mut x = -200.0f32;
+        while x < 200.0 {
+            let xd = x as f64;
+            let (s, c) = f32_math::sin_cos(x);
+            es = es.max((s as f64 - xd.sin()).abs());
+            ec = ec.max((c as f64 - xd.cos()).abs());
+            let t = xd.tan();
+            if t.abs() < 50.0 {
+                et = et.max((f32_math::tan(x) as f64 - t).abs() / t.abs().max(1.0));
+            }
+            let u = (x / 200.0) as f64;
+            ea = ea.max((f32_math::asin(x / 200.0) as f64 - u.asin()).abs());
+            let h = f32_math::hypot(x, 3.0) as f64;
+            eh = eh.max((h - xd.hypot(3.0)).abs() / xd.hypot(3.0));
+            x += 0.000_731;
+        }
+        assert!(es < 2e-7 && ec < 2e-7, "sin {es:e} cos {ec:e}");
+        assert!(et < 4e-7, "tan {et:e}");
+        assert!(ea < 3e-7, "asin {ea:e}");
+        assert!(eh < 2e-7, "hypot {eh:e}");
+        assert!(f32_math::sin(f32::NAN).is_nan() && f32_math::cos(f32::INFINITY).is_nan());
+        assert!(f32_math::asin(1.5).is_nan());
+        assert_eq!(f32_math::hypot(0.0, 0.0), 0.0);
+        assert_eq!(f32_math::asin(1.0), core::f32::consts::FRAC_PI_2);
     }
 
     #[test]

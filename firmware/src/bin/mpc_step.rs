@@ -21,6 +21,7 @@ use cortex_m_semihosting::{debug, hprintln};
 use firmware::bicycle::BicycleGeometry;
 use firmware::mpc::{Mpc, MpcSettings};
 use firmware::plan::Plan;
+use firmware::real::f32_math;
 use firmware::reference_path::ReferencePath;
 use firmware::state_estimate::StateEstimate;
 use stm32f4 as _;
@@ -51,8 +52,8 @@ fn stadium(points: &mut [[f32; 4]; PATH_CAP]) -> usize {
     for i in 0..arc_pts {
         let a = -core::f32::consts::FRAC_PI_2 + core::f32::consts::PI * i as f32 / arc_pts as f32;
         push(
-            straight + radius * libm::cosf(a),
-            radius + radius * libm::sinf(a),
+            straight + radius * f32_math::cos(a),
+            radius + radius * f32_math::sin(a),
         );
     }
     for i in 0..line_pts {
@@ -60,7 +61,10 @@ fn stadium(points: &mut [[f32; 4]; PATH_CAP]) -> usize {
     }
     for i in 0..arc_pts {
         let a = core::f32::consts::FRAC_PI_2 + core::f32::consts::PI * i as f32 / arc_pts as f32;
-        push(radius * libm::cosf(a), radius + radius * libm::sinf(a));
+        push(
+            radius * f32_math::cos(a),
+            radius + radius * f32_math::sin(a),
+        );
     }
     n
 }
