@@ -61,16 +61,14 @@ fn setup() -> (Box<PlanTask<f64, CAP>>, ControlTask<f64>, Car) {
 /// Runs the loop for `seconds`; `fail_plans_from_s` makes every later plan fail
 /// (the planner is handed a non-finite friction); `nan_at_s` feeds one non-finite
 /// estimate.
-fn run(
-    seconds: f64,
-    fail_plans_from_s: Option<f64>,
-    nan_at_s: Option<f64>,
-) -> (
+type Outcome = (
     Box<PlanTask<f64, CAP>>,
     ControlTask<f64>,
     Car,
     Vec<(f64, Mode, f64)>,
-) {
+);
+
+fn run(seconds: f64, fail_plans_from_s: Option<f64>, nan_at_s: Option<f64>) -> Outcome {
     let (mut planner, mut control, mut car) = setup();
     let mut shared = Plan::zeroed();
     let mut trace = Vec::new();
