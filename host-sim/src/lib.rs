@@ -1,3 +1,19 @@
 //! Host simulator: the 9-DoF vehicle plant of the paper's Section IV, its tyres,
 //! tracks and scenarios, and the deterministic timeline that closes the loop on
 //! the `firmware` library.
+//!
+//! | module | concept |
+//! |---|---|
+//! | [`vehicle`] | vehicle parameters, TOML vehicle files and their validation |
+//! | [`tire`] | Pacejka 2002 Magic Formula, combined slip |
+//! | [`plant`] | the 9-DoF plant, RK4 at a fixed step |
+//! | [`validity`] | the paper's Figure 3: `δ_a` vs `δ_th` on circles (`validity` command) |
+//! | [`tire_table`] | tyre forces for a table of slips (`tire` command) |
+//! | [`plot`] | plotting helpers (embedded font) |
+
+pub mod plant;
+pub mod plot;
+pub mod tire;
+pub mod tire_table;
+pub mod validity;
+pub mod vehicle;

@@ -1,2 +1,31 @@
 //! `host-sim` command line.
-fn main() {}
+//!
+//! One subcommand per job, each implemented in its own library module: add a variant
+//! to [`Command`] and a line to `main` to add one.
+
+use clap::{Parser, Subcommand};
+
+/// Host simulator of the consistent MPC + PID vehicle controller.
+#[derive(Debug, Parser)]
+#[command(name = "host-sim", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Tyre forces (PAC2002 combined slip) for a CSV of slips: kappa,alpha_rad,fz_n,mu.
+    Tire(host_sim::tire_table::TireArgs),
+    /// The paper's Figure 3: steering of the 9-DoF plant vs the kinematic bicycle on
+    /// circles, up to the speed where the car cannot hold them.
+    Validity(host_sim::validity::ValidityArgs),
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    match &cli.command {
+        Command::Tire(args) => host_sim::tire_table::run(args),
+        Command::Validity(args) => host_sim::validity::run(args),
+    }
+}
