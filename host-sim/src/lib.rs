@@ -9,11 +9,17 @@
 //! | [`plant`] | the 9-DoF plant, RK4 at a fixed step |
 //! | [`validity`] | the paper's Figure 3: `δ_a` vs `δ_th` on circles (`validity` command) |
 //! | [`tire_table`] | tyre forces for a table of slips (`tire` command) |
+//! | [`track`] | track files (racetrack-database CSV), projection, curvature |
+//! | [`obstacle_file`] | obstacle files (`id,x_m,y_m`), polygon distances, footprints |
+//! | [`scenario`] | the built-in `paper` scenario and `--track`/`--obstacles` resolution |
 //! | [`plot`] | plotting helpers (embedded font) |
 
+pub mod obstacle_file;
 pub mod plant;
 pub mod plot;
+pub mod scenario;
 pub mod tire;
 pub mod tire_table;
+pub mod track;
 pub mod validity;
 pub mod vehicle;
