@@ -565,10 +565,13 @@ impl Track {
             w_left: Vec::new(),
             closed: self.closed,
         };
+        // Widths missing from a hand-built track read as the default.
+        let wr = |k: usize| self.w_right.get(k).copied().unwrap_or(DEFAULT_HALF_WIDTH_M);
+        let wl = |k: usize| self.w_left.get(k).copied().unwrap_or(DEFAULT_HALF_WIDTH_M);
         for i in 0..n {
             out.points.push(self.points[i]);
-            out.w_right.push(self.w_right[i]);
-            out.w_left.push(self.w_left[i]);
+            out.w_right.push(wr(i));
+            out.w_left.push(wl(i));
             if i + 1 == n && !self.closed {
                 break;
             }
@@ -579,10 +582,8 @@ impl Track {
                 let t = k as f64 / parts as f64;
                 out.points
                     .push([a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]);
-                out.w_right
-                    .push(self.w_right[i] + t * (self.w_right[j] - self.w_right[i]));
-                out.w_left
-                    .push(self.w_left[i] + t * (self.w_left[j] - self.w_left[i]));
+                out.w_right.push(wr(i) + t * (wr(j) - wr(i)));
+                out.w_left.push(wl(i) + t * (wl(j) - wl(i)));
             }
         }
         out
