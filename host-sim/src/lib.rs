@@ -12,11 +12,17 @@
 //! | [`track`] | track files (racetrack-database CSV), projection, curvature |
 //! | [`obstacle_file`] | obstacle files (`id,x_m,y_m`), polygon distances, footprints |
 //! | [`scenario`] | the built-in `paper` scenario and `--track`/`--obstacles` resolution |
+//! | [`closed_loop`] | the deterministic timeline: plant against the two tasks, budgets |
+//! | [`run`] | the `run` command: log, summary, figures |
+//! | [`figures`] | the closed-loop figures (the paper's Figures 5–8, task costs) |
 //! | [`plot`] | plotting helpers (embedded font) |
 
+pub mod closed_loop;
+pub mod figures;
 pub mod obstacle_file;
 pub mod plant;
 pub mod plot;
+pub mod run;
 pub mod scenario;
 pub mod tire;
 pub mod tire_table;

@@ -20,6 +20,9 @@ enum Command {
     /// The paper's Figure 3: steering of the 9-DoF plant vs the kinematic bicycle on
     /// circles, up to the speed where the car cannot hold them.
     Validity(host_sim::validity::ValidityArgs),
+    /// A closed-loop drive: the 9-DoF plant against the firmware's two tasks on a
+    /// deterministic timeline; writes log.csv, summary.json and the figures.
+    Run(host_sim::run::RunArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -27,5 +30,6 @@ fn main() -> anyhow::Result<()> {
     match &cli.command {
         Command::Tire(args) => host_sim::tire_table::run(args),
         Command::Validity(args) => host_sim::validity::run(args),
+        Command::Run(args) => host_sim::run::run(args),
     }
 }
