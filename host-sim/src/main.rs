@@ -22,10 +22,21 @@ enum Command {
     Validity(host_sim::validity::ValidityArgs),
 }
 
-fn main() -> anyhow::Result<()> {
-    let cli = Cli::parse();
+fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
         Command::Tire(args) => host_sim::tire_table::run(args),
         Command::Validity(args) => host_sim::validity::run(args),
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    match run(&cli) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            // The whole chain of causes on one line, without a backtrace.
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
     }
 }
