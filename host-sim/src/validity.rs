@@ -455,7 +455,7 @@ pub fn write_plot(path: &Path, sweeps: &[RadiusSweep], mu: f64) -> Result<(), pl
     let mut chart = ChartBuilder::on(&root)
         .caption(
             format!(
-                "Steering on circles: 9-DoF plant (delta_a) vs kinematic (delta_th), mu = {mu}"
+                "Steering on circles: 9-DoF plant delta_a (dots) vs kinematic delta_th (thin lines), mu = {mu}"
             ),
             (plot::FONT, 22),
         )
