@@ -25,11 +25,22 @@ enum Command {
     Run(host_sim::run::RunArgs),
 }
 
-fn main() -> anyhow::Result<()> {
-    let cli = Cli::parse();
+fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
         Command::Tire(args) => host_sim::tire_table::run(args),
         Command::Validity(args) => host_sim::validity::run(args),
         Command::Run(args) => host_sim::run::run(args),
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    match run(&cli) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            // The whole chain of causes on one line, without a backtrace.
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
     }
 }

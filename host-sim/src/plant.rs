@@ -21,6 +21,14 @@
 //!   equation of Section IV, `θ` and `φ` terms included as written. The right-hand
 //!   wheels carry the mirror image of the tyre (MF-Tyre's `TYRESIDE = RIGHT`), so the
 //!   car is left-right symmetric and runs straight with the wheels straight.
+//! * Wheel torques are applied as given (the paper's `T_ωi`): a negative torque is a
+//!   braking torque while the wheel rolls forward, but it is not a friction brake, so
+//!   a wheel held by a negative torque after the car stops spins backwards. The
+//!   caller (the low-level controller) releases the brakes at standstill.
+//! * As written in the paper, the rotation to the vehicle frame adds `F_z·sin θ·cos φ`
+//!   to `F_y` and `−F_z·sin φ` to `F_x` without the matching components of gravity
+//!   (which the paper's equations omit): in a steady turn the body roll adds about
+//!   `g·sin θ` of lateral acceleration toward the inside of the turn.
 //!
 //! # Slip near standstill
 //!

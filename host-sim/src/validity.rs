@@ -413,8 +413,18 @@ pub fn summary_line(s: &RadiusSweep, mu: f64) -> String {
 
 /// Writes `validity.csv` (columns `radius_m,speed_mps,ay_mps2,delta_a_rad,delta_th_rad`).
 pub fn write_csv(path: &Path, sweeps: &[RadiusSweep]) -> anyhow::Result<()> {
-    let mut w = csv::Writer::from_path(path)
+    let mut w = csv::WriterBuilder::new()
+        .has_headers(false)
+        .from_path(path)
         .with_context(|| format!("cannot create {}", path.display()))?;
+    w.write_record([
+        "radius_m",
+        "speed_mps",
+        "ay_mps2",
+        "delta_a_rad",
+        "delta_th_rad",
+    ])
+    .with_context(|| format!("cannot write {}", path.display()))?;
     for p in sweeps.iter().flat_map(|s| s.points.iter()) {
         w.serialize(p)
             .with_context(|| format!("cannot write {}", path.display()))?;
@@ -445,7 +455,7 @@ pub fn write_plot(path: &Path, sweeps: &[RadiusSweep], mu: f64) -> Result<(), pl
     let mut chart = ChartBuilder::on(&root)
         .caption(
             format!(
-                "Steering on circles: 9-DoF plant (delta_a) vs kinematic (delta_th), mu = {mu}"
+                "Steering on circles: 9-DoF plant delta_a (dots) vs kinematic delta_th (thin lines), mu = {mu}"
             ),
             (plot::FONT, 22),
         )

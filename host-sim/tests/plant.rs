@@ -218,3 +218,51 @@ fn bad_inputs_are_errors_not_panics() {
     }
     let _ = RR;
 }
+
+#[test]
+fn a_hard_launch_from_rest_and_a_hard_stop_stay_finite_and_sensible() {
+    let p = VehicleParams::default();
+    for dt in [1e-3, 5e-3] {
+        let mut plant = Plant::with_step(p, State::at_rest(), dt).unwrap();
+        let launch = Inputs {
+            torque_nm: [800.0, 800.0, 0.0, 0.0],
+            delta_rad: 0.0,
+        };
+        run(&mut plant, &launch, 3.0);
+        let s = *plant.state();
+        assert!(s.vx_mps > 10.0 && s.vx_mps < 20.0, "dt={dt}: {s:?}");
+        let o = plant.outputs();
+        assert!(o.kappa[FL] > 0.0 && o.kappa[FL] < 0.2, "{:?}", o.kappa);
+        let stop = Inputs {
+            torque_nm: [-700.0, -700.0, -300.0, -300.0],
+            delta_rad: 0.0,
+        };
+        let mut t = 0.0;
+        while plant.state().vx_mps > 0.05 && t < 10.0 {
+            plant.step(&stop, 1.0).unwrap();
+            let o = plant.outputs();
+            // Braking slip: -1 is a locked wheel.
+            assert!(
+                t < 0.2 || o.kappa.iter().all(|k| *k < 0.0 && *k >= -1.0 - 1e-9),
+                "dt={dt} t={t} v={} {:?}",
+                plant.state().vx_mps,
+                o.kappa
+            );
+            // Never beyond what the tyres can give (peak mu about 1.2 plus pitch).
+            assert!(o.ax_mps2 > -1.4 * G, "{}", o.ax_mps2);
+            t += dt;
+        }
+        assert!(t < 10.0, "dt={dt}: did not stop");
+        // A torque far beyond the tyres' grip: stays finite (the wheel, driven by a
+        // constant negative torque, ends up spinning backwards).
+        let mut plant = Plant::with_step(p, State::at_speed(20.0, &p), dt).unwrap();
+        let lock = Inputs {
+            torque_nm: [-3000.0; 4],
+            delta_rad: 0.0,
+        };
+        run(&mut plant, &lock, 2.0);
+        let o = plant.outputs();
+        assert!(o.kappa.iter().chain(o.fxp_n.iter()).all(|v| v.is_finite()));
+        assert!(o.ax_mps2 > -1.4 * G);
+    }
+}
