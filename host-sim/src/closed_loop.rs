@@ -310,16 +310,13 @@ pub fn mpc_settings<T: Real>(v: &VehicleParams) -> MpcSettings<T> {
         l_f_m: T::from_f64(v.lf_m),
         l_r_m: T::from_f64(v.lr_m),
     };
-    let mut s =
-        MpcSettings::paper(geometry, T::from_f64(v.max_steer_rad), T::from_f64(vehicle_width_m(v)));
+    let mut s = MpcSettings::paper(
+        geometry,
+        T::from_f64(v.max_steer_rad),
+        T::from_f64(vehicle_width_m(v)),
+    );
     // Front-wheel drive: the front axle's share of the static load.
     s.driven_load_share = T::from_f64(v.lr_m / (v.lf_m + v.lr_m));
-    if let Ok(x) = std::env::var("DBG_VH_AY") {
-        s.velocity.ay_fraction = T::from_f64(x.parse().unwrap_or(0.5));
-    }
-    if let Ok(x) = std::env::var("DBG_QY") {
-        s.weights.q_y = T::from_f64(x.parse().unwrap_or(5.0));
-    }
     s
 }
 
@@ -356,10 +353,24 @@ pub fn low_level_config<T: Real>(v: &VehicleParams) -> LowLevelConfig<T> {
     c
 }
 
-fn obstacle_settings<T: Real>(v: &VehicleParams) -> ObstacleSettings<T> {
+/// The obstacle manager's settings for a vehicle, a planner friction `mu` and the
+/// planner's top speed `v_max_mps`: the parabolas' steepness is such that skirting
+/// one at `v_max_mps` takes a quarter of `μ·g` of lateral acceleration
+/// (`c = a_y/(2V²)`), half of the validity limit, leaving the rest for the road's
+/// own curvature.
+pub fn obstacle_settings<T: Real>(
+    v: &VehicleParams,
+    mu: f64,
+    v_max_mps: f64,
+) -> ObstacleSettings<T> {
+    let ay = 0.25 * mu * f64::from(firmware::G);
     ObstacleSettings {
         half_car_width_m: T::from_f64(0.5 * vehicle_width_m(v)),
         half_car_length_m: T::from_f64(0.5 * vehicle_length_m(v)),
+        steepness_1pm: ObstacleSettings::steepness_for(
+            T::from_f64(ay),
+            T::from_f64(v_max_mps.max(5.0)),
+        ),
         ..ObstacleSettings::default()
     }
 }
@@ -435,8 +446,7 @@ pub fn run<T: Real>(
 ) -> Result<RunResult> {
     let wall = Instant::now();
     let steps_per_control = (CONTROL_PERIOD_US as f64 * 1e-6 / opts.plant_dt_s).round() as u64;
-    if steps_per_control == 0
-        || ((steps_per_control as f64) * opts.plant_dt_s - 0.01).abs() > 1e-12
+    if steps_per_control == 0 || ((steps_per_control as f64) * opts.plant_dt_s - 0.01).abs() > 1e-12
     {
         return Err(anyhow!(
             "plant step {} s does not divide the 10 ms control period: use e.g. 0.001 or 0.0005",
@@ -454,7 +464,14 @@ pub fn run<T: Real>(
     let rows: Vec<[T; 4]> = track
         .rows()
         .iter()
-        .map(|r| [T::from_f64(r[0]), T::from_f64(r[1]), T::from_f64(r[2]), T::from_f64(r[3])])
+        .map(|r| {
+            [
+                T::from_f64(r[0]),
+                T::from_f64(r[1]),
+                T::from_f64(r[2]),
+                T::from_f64(r[3]),
+            ]
+        })
         .collect();
     planner
         .path
@@ -465,14 +482,30 @@ pub fn run<T: Real>(
         .iter()
         .enumerate()
         .map(|(k, o)| {
-            let v: Vec<[T; 2]> = o.vertices.iter().map(|p| [T::from_f64(p[0]), T::from_f64(p[1])]).collect();
+            let v: Vec<[T; 2]> = o
+                .vertices
+                .iter()
+                .map(|p| [T::from_f64(p[0]), T::from_f64(p[1])])
+                .collect();
             FwObstacle::from_vertices(k as u32, &v)
                 .map_err(|e| anyhow!("obstacle {:?}: {e:?}", o.id))
         })
         .collect::<Result<Vec<_>>>()?;
     planner
         .obstacles
-        .update(&obstacle_settings::<T>(vehicle), &planner.path, &fw_obstacles)
+        .update(
+            &obstacle_settings::<T>(
+                vehicle,
+                opts.mu_planner,
+                planner
+                    .settings
+                    .velocity
+                    .v_max_mps(T::from_f64(opts.mu_planner))
+                    .to_f64(),
+            ),
+            &planner.path,
+            &fw_obstacles,
+        )
         .map_err(|e| obstacle_error_message(e, &scenario.obstacles))?;
 
     let mut control = ControlTask::new(low_level_config::<T>(vehicle))
@@ -570,7 +603,8 @@ pub fn run<T: Real>(
                     let mut resp_s = cycles / opts.ecu_clock_hz;
                     for _ in 0..64 {
                         let preempting = (resp_s * 1e6 / CONTROL_PERIOD_US as f64).floor();
-                        let next = (cycles + preempting * opts.cost_model.control) / opts.ecu_clock_hz;
+                        let next =
+                            (cycles + preempting * opts.cost_model.control) / opts.ecu_clock_hz;
                         if (next - resp_s).abs() < 1e-12 {
                             break;
                         }
@@ -584,9 +618,11 @@ pub fn run<T: Real>(
                     match outcome {
                         Ok(r) => {
                             pending_publish_us = Some(finish_us);
-                            sum.plan_max_qp_iterations = sum.plan_max_qp_iterations.max(r.qp_iterations);
-                            sum.max_validity_slack_rad =
-                                sum.max_validity_slack_rad.max(r.max_validity_slack_rad.to_f64());
+                            sum.plan_max_qp_iterations =
+                                sum.plan_max_qp_iterations.max(r.qp_iterations);
+                            sum.max_validity_slack_rad = sum
+                                .max_validity_slack_rad
+                                .max(r.max_validity_slack_rad.to_f64());
                             last_status = "optimal";
                         }
                         Err(e) => {
@@ -687,7 +723,10 @@ pub fn run<T: Real>(
                 break;
             }
             if lat.abs() > max_half_width + 3.0 {
-                stop_reason = format!("left the road at t = {:.2} s ({lat:.2} m off the centre line)", t_us as f64 * 1e-6);
+                stop_reason = format!(
+                    "left the road at t = {:.2} s ({lat:.2} m off the centre line)",
+                    t_us as f64 * 1e-6
+                );
                 break;
             }
             if st.speed_mps() < 0.05 {
@@ -713,13 +752,21 @@ pub fn run<T: Real>(
     sum.stop_reason = stop_reason;
     sum.distance_m = progress_m;
     sum.duration_s = t_us as f64 * 1e-6;
-    sum.rms_lateral_error_m = if n_lat > 0 { (sum_sq_lat / n_lat as f64).sqrt() } else { 0.0 };
+    sum.rms_lateral_error_m = if n_lat > 0 {
+        (sum_sq_lat / n_lat as f64).sqrt()
+    } else {
+        0.0
+    };
     sum.control_safe_actuations = control.stats.safe_actuations as u64;
     host_us.sort_by(|a, b| a.total_cmp(b));
     sum.plan_host_us_p50 = host_us.get(host_us.len() / 2).copied().unwrap_or(0.0);
     sum.plan_host_us_max = host_us.last().copied().unwrap_or(0.0);
     let wall_s = wall.elapsed().as_secs_f64();
-    sum.sim_speed_x_realtime = if wall_s > 0.0 { sum.duration_s / wall_s } else { 0.0 };
+    sum.sim_speed_x_realtime = if wall_s > 0.0 {
+        sum.duration_s / wall_s
+    } else {
+        0.0
+    };
     res.summary = sum;
     Ok(res)
 }
@@ -731,7 +778,11 @@ fn trace_of<T: Real>(plan: &Plan<T>, publish_us: u64) -> Option<PlanTrace> {
     Some(PlanTrace {
         t_release_s: plan.stamp_us as f64 * 1e-6,
         t_publish_s: publish_us as f64 * 1e-6,
-        xy: plan.nodes.iter().map(|n| [n.x_m.to_f64(), n.y_m.to_f64()]).collect(),
+        xy: plan
+            .nodes
+            .iter()
+            .map(|n| [n.x_m.to_f64(), n.y_m.to_f64()])
+            .collect(),
     })
 }
 
@@ -741,8 +792,14 @@ fn obstacle_error_message<T: Real>(
 ) -> anyhow::Error {
     use firmware::obstacles::ObstacleError as E;
     match e {
-        E::RoadBlocked { obstacle, missing_m } => {
-            let id = obstacles.get(obstacle).map(|o| o.id.as_str()).unwrap_or("?");
+        E::RoadBlocked {
+            obstacle,
+            missing_m,
+        } => {
+            let id = obstacles
+                .get(obstacle)
+                .map(|o| o.id.as_str())
+                .unwrap_or("?");
             anyhow!(
                 "obstacle {id:?} blocks the road: the car needs {:.2} m more free width beside it on either side; move it, make it narrower, or widen the track there",
                 missing_m.to_f64()

@@ -24,7 +24,10 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
         &t,
         &[
             (&r.log.iter().map(|l| l.v_heur_mps).collect::<Vec<_>>(), RED),
-            (&r.log.iter().map(|l| l.v_ref_mps).collect::<Vec<_>>(), GREEN),
+            (
+                &r.log.iter().map(|l| l.v_ref_mps).collect::<Vec<_>>(),
+                GREEN,
+            ),
             (&r.log.iter().map(|l| l.v_mps).collect::<Vec<_>>(), BLUE),
         ],
     )?;
@@ -35,7 +38,10 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
         &t,
         &[
             (&r.log.iter().map(|l| l.delta_rad).collect::<Vec<_>>(), BLUE),
-            (&r.log.iter().map(|l| l.delta_cl_rad).collect::<Vec<_>>(), GREEN),
+            (
+                &r.log.iter().map(|l| l.delta_cl_rad).collect::<Vec<_>>(),
+                GREEN,
+            ),
         ],
     )?;
     time_series(
@@ -43,7 +49,10 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
         "Front-left wheel torque",
         "N·m",
         &t,
-        &[(&r.log.iter().map(|l| l.torque_fl_nm).collect::<Vec<_>>(), BLUE)],
+        &[(
+            &r.log.iter().map(|l| l.torque_fl_nm).collect::<Vec<_>>(),
+            BLUE,
+        )],
     )?;
     time_series(
         &dir.join("lateral.png"),
@@ -51,7 +60,10 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
         "m, -",
         &t,
         &[
-            (&r.log.iter().map(|l| l.lateral_error_m).collect::<Vec<_>>(), BLUE),
+            (
+                &r.log.iter().map(|l| l.lateral_error_m).collect::<Vec<_>>(),
+                BLUE,
+            ),
             (
                 &r.log
                     .iter()
@@ -78,7 +90,12 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
 
 fn bounds(points: impl Iterator<Item = [f64; 2]>) -> (f64, f64, f64, f64) {
     points.fold(
-        (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY),
+        (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ),
         |(x0, x1, y0, y1), p| (x0.min(p[0]), x1.max(p[0]), y0.min(p[1]), y1.max(p[1])),
     )
 }
@@ -88,8 +105,24 @@ fn trajectory(path: &Path, sc: &Scenario, r: &RunResult) -> Result<()> {
     let (mut left, mut right) = (Vec::new(), Vec::new());
     let n = tr.points.len();
     for i in 0..n {
-        let a = tr.points[if i == 0 { if tr.closed { n - 1 } else { 0 } } else { i - 1 }];
-        let b = tr.points[if i + 1 == n { if tr.closed { 0 } else { n - 1 } } else { i + 1 }];
+        let a = tr.points[if i == 0 {
+            if tr.closed {
+                n - 1
+            } else {
+                0
+            }
+        } else {
+            i - 1
+        }];
+        let b = tr.points[if i + 1 == n {
+            if tr.closed {
+                0
+            } else {
+                n - 1
+            }
+        } else {
+            i + 1
+        }];
         let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
         let l = dx.hypot(dy).max(1e-9);
         let (nx, ny) = (-dy / l, dx / l);
@@ -110,10 +143,7 @@ fn trajectory(path: &Path, sc: &Scenario, r: &RunResult) -> Result<()> {
     root.fill(&WHITE).map_err(|e| draw_error(path, e))?;
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            format!(
-                "{}: actual (blue), plans (green), obstacles (red)",
-                tr.name
-            ),
+            format!("{}: actual (blue), plans (green), obstacles (red)", tr.name),
             (FONT, 24),
         )
         .margin(15)
@@ -166,7 +196,13 @@ fn trajectory(path: &Path, sc: &Scenario, r: &RunResult) -> Result<()> {
     Ok(())
 }
 
-fn time_series(path: &Path, title: &str, unit: &str, t: &[f64], series: &[(&Vec<f64>, RGBColor)]) -> Result<()> {
+fn time_series(
+    path: &Path,
+    title: &str,
+    unit: &str,
+    t: &[f64],
+    series: &[(&Vec<f64>, RGBColor)],
+) -> Result<()> {
     let t1 = t.last().copied().unwrap_or(1.0).max(1e-3);
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for (s, _) in series {
@@ -243,7 +279,10 @@ fn histogram(path: &Path, title: &str, costs: &[f64], budget: f64) -> Result<()>
         }))
         .map_err(|e| draw_error(path, e))?;
     chart
-        .draw_series(LineSeries::new([(budget, 0.0), (budget, top)], RED.stroke_width(3)))
+        .draw_series(LineSeries::new(
+            [(budget, 0.0), (budget, top)],
+            RED.stroke_width(3),
+        ))
         .map_err(|e| draw_error(path, e))?;
     root.present().map_err(|e| draw_error(path, e))?;
     Ok(())

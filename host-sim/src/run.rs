@@ -121,10 +121,16 @@ pub fn run(args: &RunArgs) -> Result<()> {
         bail!("--laps must be at least 1");
     }
     if !(args.duration.is_finite() && args.duration > 0.0) {
-        bail!("--duration must be a positive number of seconds, got {}", args.duration);
+        bail!(
+            "--duration must be a positive number of seconds, got {}",
+            args.duration
+        );
     }
     if !(args.initial_speed.is_finite() && args.initial_speed >= 0.0 && args.initial_speed < 60.0) {
-        bail!("--initial-speed must be in [0, 60) m/s, got {}", args.initial_speed);
+        bail!(
+            "--initial-speed must be in [0, 60) m/s, got {}",
+            args.initial_speed
+        );
     }
     let vehicle = load_vehicle(args.vehicle.as_deref())?;
     let scenario = scenario::resolve(&args.track, &args.obstacles, !args.open)?;
@@ -164,8 +170,14 @@ pub fn run(args: &RunArgs) -> Result<()> {
 }
 
 /// Writes `log.csv`, `summary.json` and (optionally) the figures into `dir`.
-pub fn write_outputs(dir: &Path, scenario: &Scenario, result: &RunResult, plots: bool) -> Result<()> {
-    fs::create_dir_all(dir).with_context(|| format!("cannot create output directory {}", dir.display()))?;
+pub fn write_outputs(
+    dir: &Path,
+    scenario: &Scenario,
+    result: &RunResult,
+    plots: bool,
+) -> Result<()> {
+    fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create output directory {}", dir.display()))?;
     let log_path = dir.join("log.csv");
     let mut w = csv::Writer::from_path(&log_path)
         .with_context(|| format!("cannot write {}", log_path.display()))?;
@@ -174,8 +186,11 @@ pub fn write_outputs(dir: &Path, scenario: &Scenario, result: &RunResult, plots:
     }
     w.flush()?;
     let summary_path = dir.join("summary.json");
-    fs::write(&summary_path, serde_json::to_string_pretty(&result.summary)?)
-        .with_context(|| format!("cannot write {}", summary_path.display()))?;
+    fs::write(
+        &summary_path,
+        serde_json::to_string_pretty(&result.summary)?,
+    )
+    .with_context(|| format!("cannot write {}", summary_path.display()))?;
     if plots {
         figures::draw_all(dir, scenario, result)?;
     }
