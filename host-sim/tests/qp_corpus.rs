@@ -295,3 +295,27 @@ fn clarabel_on_the_standard_form_agrees_with_our_solution() {
         );
     }
 }
+
+#[test]
+fn an_f32_run_records_too() {
+    let c = record(
+        &builtin_track_rows(),
+        true,
+        &builtin_obstacles(),
+        DEFAULT_STEPS,
+        Precision::F32,
+    )
+    .unwrap();
+    let optimal = c.iter().filter(|e| e.status == "optimal").count();
+    let (wm, wx) = median_max(&c.iter().map(|e| e.iterations).collect::<Vec<_>>());
+    println!(
+        "f32 run: {} QPs, {optimal} optimal, iterations median {wm} max {wx}",
+        c.len()
+    );
+    assert!(c.iter().all(|e| e.precision == "f32"));
+    assert_eq!(c.len(), DEFAULT_STEPS + 2);
+    assert_eq!(optimal, c.len());
+    // f32 data are stored exactly: converting back gives the same f32 problem.
+    let p = c[5].native.to_problem::<f32>().unwrap();
+    assert_eq!(p.f[0] as f64, c[5].native.f[0]);
+}
