@@ -21,7 +21,7 @@
 //!
 //! The maths is generic over [`Real`] (`f32` on the ECU). Units are SI (m, s,
 //! rad, N, N·m, kg); vehicle frame x forward, y left; yaw counter-clockwise.
-#![cfg_attr(not(test), no_std)]
+#![cfg_attr(not(any(test, feature = "dbg")), no_std)]
 
 pub mod real;
 

@@ -23,8 +23,13 @@
 //! paper's controller. `T` is limited to
 //! `[−max_braking_torque_nm, max_traction_torque_nm]`, the speed PID's anti-windup
 //! acting on that total. Dispatch (front-wheel drive): `T > 0` goes half to each
-//! front wheel, the rear ones get 0; `T < 0` (braking) goes a quarter to each of the
-//! four wheels. The four torques always add up to `T`.
+//! front wheel, the rear ones get 0; `T < 0` (braking) goes to the four wheels, a
+//! share [`LowLevelConfig::brake_front_share`] to the front axle and the rest to the
+//! rear, split equally between left and right. The paper dispatches braking equally
+//! on the four wheels (share 0.5, [`LowLevelConfig::default`]); a real car's brake
+//! balance puts more on the front, which carries more load when braking, so that
+//! the rear wheels do not lock first and spin the car (the simulator sets the share
+//! from the vehicle's geometry). The four torques always add up to `T`.
 //!
 //! # Lateral
 //!
@@ -124,6 +129,9 @@ pub struct LowLevelConfig<T> {
     pub stop_decel_mps2: T,
     /// Total braking torque of [`safe_actuation`] (magnitude), N·m, ≥ 0.
     pub safe_brake_torque_nm: T,
+    /// Fraction of a braking torque applied to the front axle, in `[0, 1]` (0.5:
+    /// equal on the four wheels, as the paper).
+    pub brake_front_share: T,
     /// Below this speed the yaw loop is paused, m/s, ≥ 0.
     pub lateral_min_speed_mps: T,
     /// Nominal period of [`control`], s, > 0. Used as the PIDs' time step when the
@@ -173,6 +181,7 @@ impl<T: Real> Default for LowLevelConfig<T> {
             stop_decel_mps2: T::from_f64(3.0),
             // 3 m/s² on 1500 kg through 0.3 m.
             safe_brake_torque_nm: T::from_f64(1350.0),
+            brake_front_share: T::HALF,
             lateral_min_speed_mps: T::from_f64(0.5),
             period_s: T::from_f64(0.01),
         }
@@ -244,7 +253,9 @@ impl<T: Real> LowLevelConfig<T> {
         if !(pos(self.max_traction_torque_nm)
             && pos(self.max_braking_torque_nm)
             && self.safe_brake_torque_nm.is_finite()
-            && self.safe_brake_torque_nm >= T::ZERO)
+            && self.safe_brake_torque_nm >= T::ZERO
+            && self.brake_front_share >= T::ZERO
+            && self.brake_front_share <= T::ONE)
         {
             return Err(LowLevelConfigError::InvalidTorqueLimit);
         }
@@ -570,7 +581,9 @@ pub fn control<T: Real>(
         let h = torque * T::HALF;
         [h, h, T::ZERO, T::ZERO]
     } else {
-        [torque * T::lit(0.25); 4]
+        let front = torque * cfg.brake_front_share * T::HALF;
+        let rear = torque * (T::ONE - cfg.brake_front_share) * T::HALF;
+        [front, front, rear, rear]
     };
 
     // Lateral.

@@ -163,6 +163,16 @@ pub struct MpcSettings<T> {
     pub accel_max_mps2: T,
     /// Bound of the steering-rate input `|u2|`, rad/s (paper: 0.5).
     pub steer_rate_max_radps: T,
+    /// Fraction of the vehicle's weight on the driven wheels (0.6 for a front-wheel
+    /// drive car with 60 % of its weight on the front axle; 1 for four-wheel drive).
+    /// With [`MpcSettings::friction_usage`] it caps the planned acceleration at what
+    /// the tyres can transmit on the road of friction `μ` (not in the paper, whose
+    /// bounds `[−8, 6] m/s²` assume a dry road and enough grip).
+    pub driven_load_share: T,
+    /// Fraction of the friction `μ·g` the plan may use longitudinally: the
+    /// acceleration bounds are `max(accel_min, −f·μ·g)` and
+    /// `min(accel_max, f·μ·g·driven_load_share)`, with `f` this fraction.
+    pub friction_usage: T,
     /// Mechanical steering limit `|δ|`, rad.
     pub delta_mech_max_rad: T,
     /// Fraction of `μ·g` allowed as lateral acceleration (paper: 0.5).
@@ -192,6 +202,8 @@ impl<T: Real> MpcSettings<T> {
             accel_min_mps2: T::lit(-8.0),
             accel_max_mps2: T::lit(6.0),
             steer_rate_max_radps: T::lit(0.5),
+            driven_load_share: T::ONE,
+            friction_usage: T::lit(0.8),
             delta_mech_max_rad,
             ay_fraction: T::HALF,
             half_width_m: T::HALF * width_m,
@@ -231,6 +243,10 @@ impl<T: Real> MpcSettings<T> {
             && self.accel_min_mps2 < self.accel_max_mps2
             && self.steer_rate_max_radps.is_finite()
             && self.steer_rate_max_radps > T::ZERO
+            && self.driven_load_share > T::ZERO
+            && self.driven_load_share <= T::ONE
+            && self.friction_usage > T::ZERO
+            && self.friction_usage.is_finite()
             && self.delta_mech_max_rad.is_finite()
             && self.delta_mech_max_rad > T::ZERO
             && self.ay_fraction.is_finite()
@@ -520,11 +536,14 @@ impl<T: Real> Mpc<T> {
                 qp.h[i][j] = T::ZERO;
             }
         }
-        // Input bounds and input costs.
+        // Input bounds (the acceleration's capped by the road's friction) and costs.
+        let grip = st.friction_usage * mu * T::lit(crate::G);
+        let a_lo = st.accel_min_mps2.max(-grip).min(T::ZERO);
+        let a_hi = st.accel_max_mps2.min(grip * st.driven_load_share).max(T::ZERO);
         for k in 0..HORIZON {
             let (ia, ir) = (2 * k, 2 * k + 1);
-            qp.x_lo[ia] = st.accel_min_mps2;
-            qp.x_hi[ia] = st.accel_max_mps2;
+            qp.x_lo[ia] = a_lo;
+            qp.x_hi[ia] = a_hi;
             qp.x_lo[ir] = -st.steer_rate_max_radps;
             qp.x_hi[ir] = st.steer_rate_max_radps;
             qp.h[ia][ia] += two * w.q_accel;

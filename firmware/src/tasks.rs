@@ -61,6 +61,8 @@ pub struct PlanTask<T, const CAP: usize> {
     ready: bool,
     /// Counters.
     pub stats: PlanTaskStats,
+    /// Why the last activation published nothing (`None` after a success).
+    pub last_error: Option<MpcError>,
 }
 
 impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
@@ -80,12 +82,18 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
                 failures: 0,
                 non_finite_estimates: 0,
             },
+            last_error: None,
         }
     }
 
     /// The MPC workspace (its solver holds the last QP's solution and working set).
     pub fn mpc(&self) -> &Mpc<T> {
         &self.mpc
+    }
+
+    /// Forgets the MPC's previous solution: the next activation starts cold.
+    pub fn reset(&mut self) {
+        self.mpc.reset();
     }
 
     /// The plan computed by the last successful activation, not yet published.
@@ -123,6 +131,7 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             before,
             after,
         );
+        self.last_error = result.err();
         match result {
             Ok(_) => self.ready = true,
             Err(e) => {

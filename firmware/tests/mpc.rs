@@ -374,3 +374,29 @@ fn bad_inputs_are_refused_with_a_status() {
     m2.step(&s32, &p32, &[], &e32, 1.0, &mut b).unwrap();
     assert_eq!(a, b);
 }
+
+#[test]
+fn a_qp_that_hits_its_iteration_cap_gives_no_plan() {
+    let mut s = settings::<f64>();
+    s.qp_max_iter = 1;
+    let path = straight::<f64>(400.0);
+    let mut obs = ObstacleManager::new();
+    obs.update(
+        &ObstacleSettings::default(),
+        &path,
+        &[box_obstacle(30.0, 0.0, 2.0, 1.0)],
+    )
+    .unwrap();
+    let mut mpc = Box::new(Mpc::<f64>::new());
+    let mut plan = Plan::zeroed();
+    let before = plan;
+    let e = est(0.0, 0.0, 0.0, 15.0, 0.0, 0);
+    let err = mpc
+        .step(&s, &path, obs.parabolas(), &e, 1.0, &mut plan)
+        .unwrap_err();
+    assert_eq!(
+        err,
+        firmware::mpc::MpcError::Qp(firmware::qp::QpStatus::IterationLimit)
+    );
+    assert_eq!(plan, before, "the output plan is untouched");
+}

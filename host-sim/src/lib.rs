@@ -1,4 +1,33 @@
 //! Host simulator: the 9-DoF vehicle plant of the paper's Section IV, its tyres,
 //! tracks and scenarios, and the deterministic timeline that closes the loop on
 //! the `firmware` library.
+//!
+//! | module | concept |
+//! |---|---|
+//! | [`vehicle`] | vehicle parameters, TOML vehicle files and their validation |
+//! | [`tire`] | Pacejka 2002 Magic Formula, combined slip |
+//! | [`plant`] | the 9-DoF plant, RK4 at a fixed step |
+//! | [`validity`] | the paper's Figure 3: `δ_a` vs `δ_th` on circles (`validity` command) |
+//! | [`tire_table`] | tyre forces for a table of slips (`tire` command) |
+//! | [`track`] | track files (racetrack-database CSV), projection, curvature |
+//! | [`obstacle_file`] | obstacle files (`id,x_m,y_m`), polygon distances, footprints |
+//! | [`scenario`] | the built-in `paper` scenario and `--track`/`--obstacles` resolution |
+//! | [`closed_loop`] | the deterministic timeline: plant against the two tasks, budgets |
+//! | [`run`] | the `run` command: log, summary, figures |
+//! | [`figures`] | the closed-loop figures (the paper's Figures 5–8, task costs) |
+//! | [`plot`] | plotting helpers (embedded font) |
+//! | [`qp_corpus`] | the MPC's QPs as JSON, for solver benchmarks (`qp-corpus` command) |
+
+pub mod closed_loop;
+pub mod figures;
+pub mod obstacle_file;
+pub mod plant;
+pub mod plot;
 pub mod qp_corpus;
+pub mod run;
+pub mod scenario;
+pub mod tire;
+pub mod tire_table;
+pub mod track;
+pub mod validity;
+pub mod vehicle;

@@ -1,2 +1,49 @@
 //! `host-sim` command line.
-fn main() {}
+//!
+//! One subcommand per job, each implemented in its own library module: add a variant
+//! to [`Command`] and a line to `main` to add one.
+
+use clap::{Parser, Subcommand};
+
+/// Host simulator of the consistent MPC + PID vehicle controller.
+#[derive(Debug, Parser)]
+#[command(name = "host-sim", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Tyre forces (PAC2002 combined slip) for a CSV of slips: kappa,alpha_rad,fz_n,mu.
+    Tire(host_sim::tire_table::TireArgs),
+    /// The paper's Figure 3: steering of the 9-DoF plant vs the kinematic bicycle on
+    /// circles, up to the speed where the car cannot hold them.
+    Validity(host_sim::validity::ValidityArgs),
+    /// A closed-loop drive: the 9-DoF plant against the firmware's two tasks on a
+    /// deterministic timeline; writes log.csv, summary.json and the figures.
+    Run(host_sim::run::RunArgs),
+    /// Every QP the MPC solves over a kinematic closed loop, one JSON file each (for solver benchmarks).
+    QpCorpus(host_sim::qp_corpus::QpCorpusArgs),
+}
+
+fn run(cli: &Cli) -> anyhow::Result<()> {
+    match &cli.command {
+        Command::Tire(args) => host_sim::tire_table::run(args),
+        Command::Validity(args) => host_sim::validity::run(args),
+        Command::Run(args) => host_sim::run::run(args),
+        Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    match run(&cli) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            // The whole chain of causes on one line, without a backtrace.
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

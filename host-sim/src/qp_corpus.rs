@@ -58,7 +58,8 @@
 //!
 //! # Use
 //!
-//! `host-sim qp-corpus --out DIR [--steps N] [--precision f64|f32]` (see [`run`]); the
+//! `host-sim qp-corpus --out DIR [--steps N] [--precision f64|f32] [--track
+//! builtin|paper|FILE [--open]] [--obstacles builtin|none|paper|FILE]` (see [`run`]); the
 //! benchmark `cargo bench -p host-sim --bench qp_solvers` reads `QP_CORPUS=DIR` or
 //! records the built-in scenario itself.
 
@@ -867,19 +868,63 @@ pub struct QpCorpusArgs {
     /// Precision of the MPC run to record.
     #[arg(long, value_enum, default_value_t = Precision::F64)]
     pub precision: Precision,
+    /// Track: `builtin` (this module's 120 m × 70 m loop), `paper` or a CSV file
+    /// `# x_m,y_m,w_tr_right_m,w_tr_left_m`.
+    #[arg(long, default_value = "builtin")]
+    pub track: String,
+    /// The track file is an open path (default: closed loop).
+    #[arg(long)]
+    pub open: bool,
+    /// Obstacles: `builtin` (with `--track builtin`), `none`, `paper` (with `--track
+    /// paper`) or a CSV file `id,x_m,y_m`.
+    #[arg(long, default_value = "builtin")]
+    pub obstacles: String,
 }
 
-/// `host-sim qp-corpus`: records the built-in scenario and writes the corpus; prints a
-/// summary (QPs, statuses, iterations warm as recorded and cold).
+/// Track rows, closed flag and obstacle polygons (m) of `args`' scenario.
+type ScenarioData = (Vec<[f64; 4]>, bool, Vec<Vec<[f64; 2]>>);
+
+fn scenario_data(args: &QpCorpusArgs) -> Result<ScenarioData> {
+    let file_obstacles = |path: &str| -> Result<Vec<Vec<[f64; 2]>>> {
+        Ok(crate::obstacle_file::load_obstacles_path(path)?
+            .into_iter()
+            .map(|o| o.vertices)
+            .collect())
+    };
+    if args.track == "builtin" {
+        ensure!(
+            !args.open,
+            "the built-in track is a closed loop; --open only applies to track files"
+        );
+        let obstacles = match args.obstacles.as_str() {
+            "builtin" => builtin_obstacles(),
+            "none" => Vec::new(),
+            "paper" => bail!(
+                "the `paper` obstacles are placed on the `paper` track; with `--track builtin` use `--obstacles builtin`, `none` or an obstacle file"
+            ),
+            path => file_obstacles(path)?,
+        };
+        return Ok((builtin_track_rows(), true, obstacles));
+    }
+    ensure!(
+        args.obstacles != "builtin",
+        "`--obstacles builtin` goes with `--track builtin`; with `--track {}` use `none`, `paper` (paper track) or an obstacle file",
+        args.track
+    );
+    let sc = crate::scenario::resolve(&args.track, &args.obstacles, !args.open)?;
+    Ok((
+        sc.track.rows(),
+        sc.track.closed,
+        sc.obstacles.into_iter().map(|o| o.vertices).collect(),
+    ))
+}
+
+/// `host-sim qp-corpus`: records the scenario of `--track`/`--obstacles` and writes the
+/// corpus; prints a summary (QPs, statuses, iterations).
 pub fn run(args: &QpCorpusArgs) -> Result<()> {
     ensure!(args.steps > 0, "--steps must be at least 1");
-    let entries = record(
-        &builtin_track_rows(),
-        true,
-        &builtin_obstacles(),
-        args.steps,
-        args.precision,
-    )?;
+    let (rows, closed, obstacles) = scenario_data(args)?;
+    let entries = record(&rows, closed, &obstacles, args.steps, args.precision)?;
     write_corpus(&args.out, &entries)?;
     let optimal = entries.iter().filter(|e| e.status == "optimal").count();
     let warm: Vec<u32> = entries.iter().map(|e| e.iterations).collect();

@@ -1,0 +1,146 @@
+//! The two tasks together on a kinematic stand-in for the car: publication,
+//! faults (failed plans, non-finite measurements) and the controlled stop.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+use firmware::bicycle::BicycleGeometry;
+use firmware::low_level::{LowLevelConfig, Mode};
+use firmware::mpc::{MpcError, MpcSettings};
+use firmware::plan::Plan;
+use firmware::state_estimate::StateEstimate;
+use firmware::tasks::{ControlTask, PlanTask, CONTROL_PERIOD_US, PLAN_PERIOD_US};
+
+const CAP: usize = 512;
+
+struct Car {
+    xi: [f64; 6],
+    geometry: BicycleGeometry<f64>,
+}
+
+impl Car {
+    /// A crude longitudinal model (torque / (m·r)) on the kinematic bicycle.
+    fn step(&mut self, torque_total: f64, delta: f64, dt: f64) {
+        let a = torque_total / (1500.0 * 0.3);
+        let u = [a, (delta - self.xi[5]) / dt];
+        self.xi = self.geometry.discretize(&self.xi, &u, dt).x_next;
+        if self.xi[3] < 0.0 {
+            self.xi[3] = 0.0;
+        }
+    }
+    fn estimate(&self, t_us: u64) -> StateEstimate<f64> {
+        StateEstimate {
+            stamp_us: t_us,
+            x_m: self.xi[1],
+            y_m: self.xi[2],
+            psi_rad: self.xi[4],
+            vx_mps: self.xi[3],
+            vy_mps: 0.0,
+            yaw_rate_radps: 0.0,
+            delta_rad: self.xi[5],
+        }
+    }
+}
+
+fn setup() -> (Box<PlanTask<f64, CAP>>, ControlTask<f64>, Car) {
+    let geometry = BicycleGeometry {
+        l_f_m: 1.1,
+        l_r_m: 1.55,
+    };
+    let mut planner = Box::new(PlanTask::new(MpcSettings::paper(geometry, 0.6, 1.8), 1.0));
+    let rows: Vec<[f64; 4]> = (0..400)
+        .map(|i| [i as f64 * 2.0 - 20.0, 0.0, 4.0, 4.0])
+        .collect();
+    planner.path.load_track(&rows, false).unwrap();
+    let control = ControlTask::new(LowLevelConfig::default()).unwrap();
+    let car = Car {
+        xi: [0.0, 0.0, 0.0, 15.0, 0.0, 0.0],
+        geometry,
+    };
+    (planner, control, car)
+}
+
+/// Runs the loop for `seconds`; `fail_plans_from_s` makes every later plan fail
+/// (the planner is handed a non-finite friction); `nan_at_s` feeds one non-finite
+/// estimate.
+type Outcome = (
+    Box<PlanTask<f64, CAP>>,
+    ControlTask<f64>,
+    Car,
+    Vec<(f64, Mode, f64)>,
+);
+
+fn run(seconds: f64, fail_plans_from_s: Option<f64>, nan_at_s: Option<f64>) -> Outcome {
+    let (mut planner, mut control, mut car) = setup();
+    let mut shared = Plan::zeroed();
+    let mut trace = Vec::new();
+    let mut t_us = 0u64;
+    while (t_us as f64) * 1e-6 < seconds {
+        let t = t_us as f64 * 1e-6;
+        let mut est = car.estimate(t_us);
+        if nan_at_s.is_some_and(|s| (t - s).abs() < 5e-3) {
+            est.vx_mps = f64::NAN;
+        }
+        if t_us % PLAN_PERIOD_US == 0 {
+            if fail_plans_from_s.is_some_and(|s| t >= s) {
+                planner.mu = f64::NAN;
+            }
+            if planner.run(&est).is_ok() {
+                planner.publish(&mut shared);
+            }
+        }
+        let act = control.run(&est, &shared, t_us);
+        trace.push((t, act.mode, car.xi[3]));
+        for _ in 0..10 {
+            car.step(act.wheel_torque_nm.iter().sum(), act.delta_rad, 1e-3);
+        }
+        t_us += CONTROL_PERIOD_US;
+    }
+    (planner, control, car, trace)
+}
+
+#[test]
+fn plans_are_published_and_followed() {
+    let (planner, control, car, trace) = run(8.0, None, None);
+    assert_eq!(planner.stats.activations, 80);
+    assert_eq!(planner.stats.published, 80);
+    assert_eq!(planner.stats.failures, 0);
+    assert_eq!(control.stats.safe_actuations, 0);
+    assert!(trace.iter().skip(1).all(|(_, m, _)| *m == Mode::Following));
+    assert!(car.xi[2].abs() < 0.05, "lateral {}", car.xi[2]);
+    assert!(car.xi[3] > 20.0, "speeds up on the straight: {}", car.xi[3]);
+}
+
+#[test]
+fn failed_plans_are_not_published_and_the_car_stops_under_control() {
+    let (planner, control, car, trace) = run(20.0, Some(3.0), None);
+    assert_eq!(planner.stats.published, 30, "plans until t = 3 s only");
+    assert_eq!(planner.stats.failures, planner.stats.activations - 30);
+    assert_eq!(planner.last_error, Some(MpcError::InvalidFriction));
+    // The last good plan is followed to its end, then the controlled stop.
+    let first_stop = trace
+        .iter()
+        .find(|(_, m, _)| *m == Mode::Stopping)
+        .unwrap()
+        .0;
+    assert!(
+        first_stop > 3.0 && first_stop < 3.0 + 3.3,
+        "stop began at {first_stop}"
+    );
+    assert!(car.xi[3] < 0.1, "stopped: {}", car.xi[3]);
+    assert!(car.xi[2].abs() < 0.3, "on the road: {}", car.xi[2]);
+    assert_eq!(control.stats.safe_actuations, 0);
+}
+
+#[test]
+fn non_finite_measurements_are_refused_counted_and_kept_safe() {
+    let (planner, control, car, trace) = run(6.0, None, Some(4.0));
+    assert_eq!(control.stats.non_finite_estimates, 1);
+    assert_eq!(control.stats.safe_actuations, 1);
+    // The NaN came on a planning instant (4.0 s): that plan was refused too.
+    assert_eq!(planner.stats.non_finite_estimates, 1);
+    assert_eq!(planner.stats.published, planner.stats.activations - 1);
+    assert!(trace
+        .iter()
+        .any(|(t, m, _)| (*t - 4.0).abs() < 5e-3 && *m == Mode::Safe));
+    assert!(car.xi.iter().all(|v| v.is_finite()));
+    assert!(car.xi[2].abs() < 0.05);
+}

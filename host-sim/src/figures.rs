@@ -1,0 +1,289 @@
+//! Figures of a closed-loop run, like the paper's Figures 5–8, plus the cost of
+//! each task against its budget.
+
+use std::path::Path;
+
+use anyhow::Result;
+use plotters::prelude::*;
+
+use crate::closed_loop::{LogRow, RunResult};
+use crate::plot::{draw_error, register_font, FONT};
+use crate::scenario::Scenario;
+
+const W: u32 = 1400;
+
+/// Draws every figure of a run into `dir`.
+pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
+    register_font()?;
+    trajectory(&dir.join("trajectory.png"), scenario, r)?;
+    let t: Vec<f64> = r.log.iter().map(|l| l.t_s).collect();
+    time_series(
+        &dir.join("speed.png"),
+        "Speed: V_heur (red), V^r (green), V (blue)",
+        "m/s",
+        &t,
+        &[
+            (&r.log.iter().map(|l| l.v_heur_mps).collect::<Vec<_>>(), RED),
+            (
+                &r.log.iter().map(|l| l.v_ref_mps).collect::<Vec<_>>(),
+                GREEN,
+            ),
+            (&r.log.iter().map(|l| l.v_mps).collect::<Vec<_>>(), BLUE),
+        ],
+    )?;
+    time_series(
+        &dir.join("steering.png"),
+        "Steering: δ (blue), δ_cl (green)",
+        "rad",
+        &t,
+        &[
+            (&r.log.iter().map(|l| l.delta_rad).collect::<Vec<_>>(), BLUE),
+            (
+                &r.log.iter().map(|l| l.delta_cl_rad).collect::<Vec<_>>(),
+                GREEN,
+            ),
+        ],
+    )?;
+    time_series(
+        &dir.join("torque_fl.png"),
+        "Front-left wheel torque",
+        "N·m",
+        &t,
+        &[(
+            &r.log.iter().map(|l| l.torque_fl_nm).collect::<Vec<_>>(),
+            BLUE,
+        )],
+    )?;
+    time_series(
+        &dir.join("lateral.png"),
+        "Lateral error (blue) and a_y / (μ·g) (red)",
+        "m, -",
+        &t,
+        &[
+            (
+                &r.log.iter().map(|l| l.lateral_error_m).collect::<Vec<_>>(),
+                BLUE,
+            ),
+            (
+                &r.log
+                    .iter()
+                    .map(|l: &LogRow| l.ay_mps2 / (r.summary.mu * f64::from(firmware::G)))
+                    .collect::<Vec<_>>(),
+                RED,
+            ),
+        ],
+    )?;
+    histogram(
+        &dir.join("plan_cost.png"),
+        "plan task: estimated cost per activation vs budget (red)",
+        &r.plan_costs,
+        r.summary.plan_budget_cycles,
+    )?;
+    histogram(
+        &dir.join("control_cost.png"),
+        "control task: estimated cost per activation vs budget (red)",
+        &r.control_costs,
+        r.summary.control_budget_cycles,
+    )?;
+    Ok(())
+}
+
+fn bounds(points: impl Iterator<Item = [f64; 2]>) -> (f64, f64, f64, f64) {
+    points.fold(
+        (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ),
+        |(x0, x1, y0, y1), p| (x0.min(p[0]), x1.max(p[0]), y0.min(p[1]), y1.max(p[1])),
+    )
+}
+
+fn trajectory(path: &Path, sc: &Scenario, r: &RunResult) -> Result<()> {
+    let tr = &sc.track;
+    let (mut left, mut right) = (Vec::new(), Vec::new());
+    let n = tr.points.len();
+    for i in 0..n {
+        let a = tr.points[if i == 0 {
+            if tr.closed {
+                n - 1
+            } else {
+                0
+            }
+        } else {
+            i - 1
+        }];
+        let b = tr.points[if i + 1 == n {
+            if tr.closed {
+                0
+            } else {
+                n - 1
+            }
+        } else {
+            i + 1
+        }];
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let l = dx.hypot(dy).max(1e-9);
+        let (nx, ny) = (-dy / l, dx / l);
+        let p = tr.points[i];
+        left.push((p[0] + nx * tr.w_left[i], p[1] + ny * tr.w_left[i]));
+        right.push((p[0] - nx * tr.w_right[i], p[1] - ny * tr.w_right[i]));
+    }
+    let (x0, x1, y0, y1) = bounds(
+        left.iter()
+            .chain(right.iter())
+            .map(|p| [p.0, p.1])
+            .chain(r.log.iter().map(|l| [l.x_m, l.y_m])),
+    );
+    let span = (x1 - x0).max(y1 - y0).max(1.0);
+    let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    let h = 0.5 * span * 1.05;
+    let root = BitMapBackend::new(path, (W, W)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| draw_error(path, e))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!("{}: actual (blue), plans (green), obstacles (red)", tr.name),
+            (FONT, 24),
+        )
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(cx - h..cx + h, cy - h..cy + h)
+        .map_err(|e| draw_error(path, e))?;
+    chart
+        .configure_mesh()
+        .x_desc("X (m)")
+        .y_desc("Y (m)")
+        .label_style((FONT, 14))
+        .draw()
+        .map_err(|e| draw_error(path, e))?;
+    let grey = RGBColor(150, 150, 150);
+    for edge in [&left, &right] {
+        let mut pts = edge.clone();
+        if tr.closed {
+            if let Some(&f) = edge.first() {
+                pts.push(f);
+            }
+        }
+        chart
+            .draw_series(LineSeries::new(pts, grey.stroke_width(1)))
+            .map_err(|e| draw_error(path, e))?;
+    }
+    for o in &sc.obstacles {
+        let poly: Vec<(f64, f64)> = o.vertices.iter().map(|p| (p[0], p[1])).collect();
+        chart
+            .draw_series(std::iter::once(Polygon::new(poly, RED.filled())))
+            .map_err(|e| draw_error(path, e))?;
+    }
+    for p in &r.plans {
+        chart
+            .draw_series(LineSeries::new(
+                p.xy.iter().map(|q| (q[0], q[1])),
+                GREEN.mix(0.5).stroke_width(1),
+            ))
+            .map_err(|e| draw_error(path, e))?;
+    }
+    chart
+        .draw_series(
+            r.log
+                .iter()
+                .step_by(10)
+                .map(|l| Circle::new((l.x_m, l.y_m), 2, BLUE.filled())),
+        )
+        .map_err(|e| draw_error(path, e))?;
+    root.present().map_err(|e| draw_error(path, e))?;
+    Ok(())
+}
+
+fn time_series(
+    path: &Path,
+    title: &str,
+    unit: &str,
+    t: &[f64],
+    series: &[(&Vec<f64>, RGBColor)],
+) -> Result<()> {
+    let t1 = t.last().copied().unwrap_or(1.0).max(1e-3);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (s, _) in series {
+        for &v in s.iter() {
+            if v.is_finite() {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        lo = -1.0;
+        hi = 1.0;
+    }
+    let pad = 0.05 * (hi - lo).max(1e-6);
+    let root = BitMapBackend::new(path, (W, 450)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| draw_error(path, e))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, (FONT, 22))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t1, (lo - pad)..(hi + pad))
+        .map_err(|e| draw_error(path, e))?;
+    chart
+        .configure_mesh()
+        .x_desc("t (s)")
+        .y_desc(unit)
+        .label_style((FONT, 14))
+        .draw()
+        .map_err(|e| draw_error(path, e))?;
+    for (s, c) in series {
+        chart
+            .draw_series(LineSeries::new(
+                t.iter().copied().zip(s.iter().copied()),
+                c.stroke_width(2),
+            ))
+            .map_err(|e| draw_error(path, e))?;
+    }
+    root.present().map_err(|e| draw_error(path, e))?;
+    Ok(())
+}
+
+fn histogram(path: &Path, title: &str, costs: &[f64], budget: f64) -> Result<()> {
+    let max = costs.iter().copied().fold(0.0f64, f64::max).max(budget) * 1.05;
+    let bins = 60usize;
+    let width = (max / bins as f64).max(1.0);
+    let mut counts = vec![0u32; bins + 1];
+    for &c in costs {
+        let i = ((c / width) as usize).min(bins);
+        counts[i] += 1;
+    }
+    let top = counts.iter().copied().max().unwrap_or(1).max(1) as f64 * 1.1;
+    let root = BitMapBackend::new(path, (W, 450)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| draw_error(path, e))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, (FONT, 22))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..max, 0.0..top)
+        .map_err(|e| draw_error(path, e))?;
+    chart
+        .configure_mesh()
+        .x_desc("ECU cycles")
+        .y_desc("activations")
+        .label_style((FONT, 14))
+        .draw()
+        .map_err(|e| draw_error(path, e))?;
+    chart
+        .draw_series(counts.iter().enumerate().map(|(i, &c)| {
+            let x0 = i as f64 * width;
+            Rectangle::new([(x0, 0.0), (x0 + width, c as f64)], BLUE.filled())
+        }))
+        .map_err(|e| draw_error(path, e))?;
+    chart
+        .draw_series(LineSeries::new(
+            [(budget, 0.0), (budget, top)],
+            RED.stroke_width(3),
+        ))
+        .map_err(|e| draw_error(path, e))?;
+    root.present().map_err(|e| draw_error(path, e))?;
+    Ok(())
+}

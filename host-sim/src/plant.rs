@@ -1,0 +1,556 @@
+//! The 9-DoF vehicle plant of the paper's Section IV, integrated with a fixed-step
+//! RK4 (1 kHz by default).
+//!
+//! Degrees of freedom: the vehicle's `V_x`, `V_y`, yaw rate `ψ̇` (and `X`, `Y`, `ψ`),
+//! the carbody's roll `θ` and pitch `φ` with their rates, and the four wheel spins
+//! `ω_i` (`i` = fl, fr, rl, rr). Inputs: the four wheel torques and the front steering
+//! angle (both front wheels). Vehicle frame x forward, y left, z up; yaw, roll and
+//! pitch right-handed (yaw counter-clockwise, roll positive when the left side rises,
+//! pitch positive nose down).
+//!
+//! # Equations (the paper's, with these choices)
+//!
+//! * Normal loads `F_zi = F_z0,i − k_s·ζ_i − d_s·ζ̇_i` (clamped at 0: a wheel may lift)
+//!   with the suspension extension `ζ_i = ±l_w·sin θ ∓ x_i·sin φ`, `+l_w` on the left,
+//!   `x_i = l_f` front, `−l_r` rear. Braking pitches nose down and loads the front;
+//!   cornering to the left rolls the body right and loads the right wheels.
+//! * The pitch equation subtracts the moment of the static loads, which is zero
+//!   analytically, so that a car at rest is an exact equilibrium in floating point.
+//! * Aerodynamic drag `½·ρ·C_x·S·V_x·|V_x|` (the paper's `V_x²`, opposing reversing too).
+//! * Tyre forces from [`crate::tire`], rotated to the vehicle frame by the paper's last
+//!   equation of Section IV, `θ` and `φ` terms included as written. The right-hand
+//!   wheels carry the mirror image of the tyre (MF-Tyre's `TYRESIDE = RIGHT`), so the
+//!   car is left-right symmetric and runs straight with the wheels straight.
+//! * Wheel torques are applied as given (the paper's `T_ωi`): a negative torque is a
+//!   braking torque while the wheel rolls forward, but it is not a friction brake, so
+//!   a wheel held by a negative torque after the car stops spins backwards. The
+//!   caller (the low-level controller) releases the brakes at standstill.
+//! * As written in the paper, the rotation to the vehicle frame adds `F_z·sin θ·cos φ`
+//!   to `F_y` and `−F_z·sin φ` to `F_x` without the matching components of gravity
+//!   (which the paper's equations omit): in a steady turn the body roll adds about
+//!   `g·sin θ` of lateral acceleration toward the inside of the turn.
+//!
+//! # Slip near standstill
+//!
+//! `V_xp`, `V_yp` are the wheel-centre velocity components along and across the wheel
+//! heading. The slip ratio is the paper's, with its denominator floored:
+//!
+//! * traction (`r·ω ≥ V_xp`): `κ = (r·ω − V_xp) / max(r·|ω|, v_κ)`;
+//! * braking (`r·ω < V_xp`): `κ = (r·ω − V_xp) / max(|V_xp|, v_κ)`;
+//!
+//! and the slip angle is `α = −atan(V_yp / max(|V_xp|, v_α))`, which equals the
+//! paper's `δ − atan((V_y + l_f·ψ̇)/(V_x ∓ l_w·ψ̇))` (front) and
+//! `−atan((V_y − l_r·ψ̇)/(V_x ∓ l_w·ψ̇))` (rear) when moving forward above the floor.
+//!
+//! * `v_α = max(low_speed_mps, v_α,stab)`, where `v_α,stab` is the speed under which
+//!   the lateral and yaw modes (time constant ∝ V/C_α) would be too fast for the RK4
+//!   step.
+//! * `v_κ = max(low_speed_mps, dt·r_eff²·K_xκ(F_z)/(2·I_r))`, per wheel and at its
+//!   current load: under that speed the wheel-spin mode, whose rate is
+//!   `r_eff²·K_xκ/(I_r·V)`, would make RK4 unstable at the step `dt`. For the default
+//!   car at 1 kHz, `v_κ` is about 3.5 m/s at the static load: below it the slip ratio
+//!   becomes a slip *velocity* over a constant, i.e. a viscous tyre that brings the
+//!   wheel and the car to rest smoothly.
+//! * The Magic Formula's offsets (conicity, ply steer, rolling offsets) are multiplied
+//!   by `min(1, V_wheel/low_speed_mps)` (`V_wheel` the wheel-centre speed), like the
+//!   low-speed treatment of MF-Tyre: a car at rest with zero torque has exactly zero
+//!   tyre force and stays exactly at rest.
+//!
+//! Both floors are continuous in the state (a `max`), so the derivative stays
+//! continuous; no division by zero or NaN can occur for finite states.
+//!
+//! # Wheel torques: drive and friction brakes
+//!
+//! A positive wheel torque drives. A negative one is a brake torque of that
+//! magnitude: friction that opposes the wheel's rotation and cannot spin it
+//! backwards. It is applied as `T·clamp(ω/ω_lock, −1, 1)` with
+//! [`BRAKE_LOCK_RADPS`]: the full torque against the rotation above `ω_lock`, and a
+//! stiff viscous lock below, so a locked wheel stays (nearly) still instead of
+//! reversing, and the derivative stays continuous for RK4.
+
+use crate::tire;
+use crate::vehicle::{InvalidField, VehicleParams};
+
+/// Index of the front-left wheel in the per-wheel arrays.
+pub const FL: usize = 0;
+/// Index of the front-right wheel in the per-wheel arrays.
+pub const FR: usize = 1;
+/// Index of the rear-left wheel in the per-wheel arrays.
+pub const RL: usize = 2;
+/// Index of the rear-right wheel in the per-wheel arrays.
+pub const RR: usize = 3;
+
+/// Default integration step, s (1 kHz).
+pub const DEFAULT_DT_S: f64 = 1e-3;
+
+/// Wheel speed under which a brake torque fades linearly to zero (a locked wheel),
+/// rad/s. At 1 kHz RK4 stays stable for brake torques up to about
+/// `2.7·I_r·ω_lock/dt`, 6,000 N·m per wheel for the default car.
+pub const BRAKE_LOCK_RADPS: f64 = 2.0;
+
+/// Torque acting on a wheel spinning at `omega_radps` for the commanded torque
+/// `torque_nm` (N·m): drive torque as is, brake torque (negative) against the
+/// rotation, fading below [`BRAKE_LOCK_RADPS`].
+pub fn wheel_torque_nm(torque_nm: f64, omega_radps: f64) -> f64 {
+    if torque_nm >= 0.0 {
+        torque_nm
+    } else {
+        torque_nm * (omega_radps / BRAKE_LOCK_RADPS).clamp(-1.0, 1.0)
+    }
+}
+
+/// Number of scalar states.
+const N: usize = 14;
+
+/// State of the plant. Positions in the ground frame, velocities in the vehicle frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct State {
+    /// Ground-frame position `X` of the centre of gravity, m.
+    pub x_m: f64,
+    /// Ground-frame position `Y` of the centre of gravity, m.
+    pub y_m: f64,
+    /// Yaw angle `ψ`, rad (counter-clockwise from the ground X axis).
+    pub psi_rad: f64,
+    /// Longitudinal speed `V_x` of the centre of gravity, vehicle frame, m/s.
+    pub vx_mps: f64,
+    /// Lateral speed `V_y` of the centre of gravity, vehicle frame (left), m/s.
+    pub vy_mps: f64,
+    /// Yaw rate `ψ̇`, rad/s (counter-clockwise positive).
+    pub yaw_rate_radps: f64,
+    /// Roll angle `θ` of the carbody, rad (positive: left side up).
+    pub roll_rad: f64,
+    /// Roll rate `θ̇`, rad/s.
+    pub roll_rate_radps: f64,
+    /// Pitch angle `φ` of the carbody, rad (positive: nose down).
+    pub pitch_rad: f64,
+    /// Pitch rate `φ̇`, rad/s.
+    pub pitch_rate_radps: f64,
+    /// Wheel spin rates `ω_i` `[fl, fr, rl, rr]`, rad/s (positive rolling forward).
+    pub omega_radps: [f64; 4],
+}
+
+impl State {
+    /// At rest at the origin, heading along X.
+    pub fn at_rest() -> Self {
+        Self::default()
+    }
+
+    /// At the origin heading along X at speed `speed_mps` (m/s), straight, with the
+    /// wheels rolling freely (`ω = V/r_eff`).
+    pub fn at_speed(speed_mps: f64, params: &VehicleParams) -> Self {
+        let w = speed_mps / params.r_eff_m;
+        Self {
+            vx_mps: speed_mps,
+            omega_radps: [w; 4],
+            ..Self::default()
+        }
+    }
+
+    fn to_array(self) -> [f64; N] {
+        let w = self.omega_radps;
+        [
+            self.x_m,
+            self.y_m,
+            self.psi_rad,
+            self.vx_mps,
+            self.vy_mps,
+            self.yaw_rate_radps,
+            self.roll_rad,
+            self.roll_rate_radps,
+            self.pitch_rad,
+            self.pitch_rate_radps,
+            w[0],
+            w[1],
+            w[2],
+            w[3],
+        ]
+    }
+
+    fn from_array(a: &[f64; N]) -> Self {
+        Self {
+            x_m: a[0],
+            y_m: a[1],
+            psi_rad: a[2],
+            vx_mps: a[3],
+            vy_mps: a[4],
+            yaw_rate_radps: a[5],
+            roll_rad: a[6],
+            roll_rate_radps: a[7],
+            pitch_rad: a[8],
+            pitch_rate_radps: a[9],
+            omega_radps: [a[10], a[11], a[12], a[13]],
+        }
+    }
+
+    /// Speed of the centre of gravity over the ground, m/s.
+    pub fn speed_mps(&self) -> f64 {
+        self.vx_mps.hypot(self.vy_mps)
+    }
+}
+
+/// Inputs of the plant, held constant over a step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Inputs {
+    /// Torque commanded on each wheel `[fl, fr, rl, rr]`, N·m: positive drives forward,
+    /// negative is a brake torque of that magnitude, acting against the wheel's
+    /// rotation (it stops a wheel, it never spins it backwards; see the module doc).
+    pub torque_nm: [f64; 4],
+    /// Steering angle of both front wheels, rad (positive to the left). Clamped to
+    /// the vehicle's `max_steer_rad`.
+    pub delta_rad: f64,
+}
+
+/// Quantities of the plant at the current state (with the last inputs).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Outputs {
+    /// Simulated time, s.
+    pub time_s: f64,
+    /// Steering angle applied (after the mechanical limit), rad.
+    pub delta_rad: f64,
+    /// Normal loads `F_zi`, N.
+    pub fz_n: [f64; 4],
+    /// Slip ratios `τ_xi` (the paper's definition, floored), dimensionless.
+    pub kappa: [f64; 4],
+    /// Slip angles `α_i`, rad (positive when the wheel points left of its velocity).
+    pub alpha_rad: [f64; 4],
+    /// Longitudinal tyre forces in the tyre frame `F_xpi`, N.
+    pub fxp_n: [f64; 4],
+    /// Lateral tyre forces in the tyre frame `F_ypi`, N.
+    pub fyp_n: [f64; 4],
+    /// Longitudinal tyre forces in the vehicle frame `F_xi`, N.
+    pub fx_n: [f64; 4],
+    /// Lateral tyre forces in the vehicle frame `F_yi`, N.
+    pub fy_n: [f64; 4],
+    /// Aerodynamic drag force (positive opposes forward motion), N.
+    pub aero_drag_n: f64,
+    /// Longitudinal acceleration at the centre of gravity, `(ΣF_x − F_aero)/M_T`, m/s².
+    pub ax_mps2: f64,
+    /// Lateral acceleration at the centre of gravity, `V̇_y + ψ̇·V_x = ΣF_y/M_T`, m/s²
+    /// (positive to the left).
+    pub ay_mps2: f64,
+    /// Speed of the centre of gravity, m/s.
+    pub speed_mps: f64,
+    /// Vehicle side-slip angle at the centre of gravity `atan2(V_y, V_x)`, rad.
+    pub beta_rad: f64,
+}
+
+/// Why the plant refused to start or to step.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlantError {
+    /// The vehicle parameters are unusable.
+    #[error("invalid vehicle parameters: {0}")]
+    Vehicle(#[from] InvalidField),
+    /// The step is not a positive number of at most 10 ms.
+    #[error("integration step dt = {0} s: must be positive and at most 0.01 s")]
+    Step(f64),
+    /// A field of the initial state is not finite.
+    #[error("initial state field \"{0}\" is not a finite number")]
+    State(&'static str),
+    /// An input is not finite.
+    #[error("input {0} is not a finite number")]
+    Input(&'static str),
+    /// The road friction is not a finite number ≥ 0.
+    #[error("road friction mu = {0}: must be a finite number, zero or positive")]
+    Mu(f64),
+    /// The state stopped being finite.
+    #[error(
+        "the simulation diverged (non-finite state) at t = {0} s; use a smaller step or \
+         check the vehicle file"
+    )]
+    Diverged(f64),
+}
+
+/// Constants derived once from the parameters.
+#[derive(Clone, Copy, Debug)]
+struct Derived {
+    fz0: [f64; 4],
+    pitch_static_nm: f64,
+    x_w: [f64; 4],
+    y_w: [f64; 4],
+    alpha_floor_mps: f64,
+    kappa_floor_per_k: f64,
+    aero: f64,
+}
+
+/// The 9-DoF plant.
+#[derive(Clone, Debug)]
+pub struct Plant {
+    params: VehicleParams,
+    derived: Derived,
+    state: State,
+    dt_s: f64,
+    time_s: f64,
+    last_inputs: Inputs,
+    mu: f64,
+}
+
+impl Plant {
+    /// A plant stepping at [`DEFAULT_DT_S`] from `initial`.
+    pub fn new(params: VehicleParams, initial: State) -> Result<Self, PlantError> {
+        Self::with_step(params, initial, DEFAULT_DT_S)
+    }
+
+    /// A plant stepping at `dt_s` (s, at most 0.01) from `initial`.
+    pub fn with_step(params: VehicleParams, initial: State, dt_s: f64) -> Result<Self, PlantError> {
+        params.validate()?;
+        if !(dt_s > 0.0 && dt_s <= 0.01) {
+            return Err(PlantError::Step(dt_s));
+        }
+        check_state(&initial)?;
+        let p = &params;
+        let fz0 = p.static_loads_n();
+        let pitch_static_nm = p.lr_m * (fz0[RL] + fz0[RR]) - p.lf_m * (fz0[FL] + fz0[FR]);
+        let c_alpha = p.tyre.max_cornering_stiffness_n_per_rad();
+        let l2 = p.lf_m.max(p.lr_m).powi(2);
+        let alpha_stab = dt_s * c_alpha * (4.0 / p.mass_kg + 4.0 * l2 / p.iz_kg_m2) / 2.0;
+        let derived = Derived {
+            fz0,
+            pitch_static_nm,
+            x_w: [p.lf_m, p.lf_m, -p.lr_m, -p.lr_m],
+            y_w: [p.lw_m, -p.lw_m, p.lw_m, -p.lw_m],
+            alpha_floor_mps: p.low_speed_mps.max(alpha_stab),
+            kappa_floor_per_k: dt_s * p.r_eff_m * p.r_eff_m / (2.0 * p.wheel_inertia_kg_m2),
+            aero: 0.5 * p.rho_air_kg_per_m3 * p.cx * p.frontal_area_m2,
+        };
+        Ok(Self {
+            params,
+            derived,
+            state: initial,
+            dt_s,
+            time_s: 0.0,
+            last_inputs: Inputs::default(),
+            mu: 1.0,
+        })
+    }
+
+    /// Advances one step `dt` with `inputs` held constant on a road of friction `mu`.
+    /// On error the state is left as it was before the call.
+    pub fn step(&mut self, inputs: &Inputs, mu: f64) -> Result<(), PlantError> {
+        for (i, t) in inputs.torque_nm.iter().enumerate() {
+            if !t.is_finite() {
+                return Err(PlantError::Input(
+                    [
+                        "torque_nm[0] (fl)",
+                        "torque_nm[1] (fr)",
+                        "torque_nm[2] (rl)",
+                        "torque_nm[3] (rr)",
+                    ][i],
+                ));
+            }
+        }
+        if !inputs.delta_rad.is_finite() {
+            return Err(PlantError::Input("delta_rad"));
+        }
+        if !(mu >= 0.0 && mu.is_finite()) {
+            return Err(PlantError::Mu(mu));
+        }
+        let max = self.params.max_steer_rad;
+        let inp = Inputs {
+            torque_nm: inputs.torque_nm,
+            delta_rad: inputs.delta_rad.clamp(-max, max),
+        };
+        let h = self.dt_s;
+        let y0 = self.state.to_array();
+        let k1 = self.eval(&y0, &inp, mu).0;
+        let k2 = self.eval(&axpy(&y0, 0.5 * h, &k1), &inp, mu).0;
+        let k3 = self.eval(&axpy(&y0, 0.5 * h, &k2), &inp, mu).0;
+        let k4 = self.eval(&axpy(&y0, h, &k3), &inp, mu).0;
+        let mut y = y0;
+        for i in 0..N {
+            y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+        if y.iter().any(|v| !v.is_finite()) {
+            return Err(PlantError::Diverged(self.time_s + h));
+        }
+        self.state = State::from_array(&y);
+        self.time_s += h;
+        self.last_inputs = inp;
+        self.mu = mu;
+        Ok(())
+    }
+
+    /// The current state.
+    pub fn state(&self) -> &State {
+        &self.state
+    }
+
+    /// Replaces the state (e.g. to start a scenario), keeping the time.
+    pub fn set_state(&mut self, state: State) -> Result<(), PlantError> {
+        check_state(&state)?;
+        self.state = state;
+        Ok(())
+    }
+
+    /// The vehicle parameters.
+    pub fn params(&self) -> &VehicleParams {
+        &self.params
+    }
+
+    /// Integration step, s.
+    pub fn dt_s(&self) -> f64 {
+        self.dt_s
+    }
+
+    /// Simulated time since the start, s.
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Floor of the slip-angle denominator, m/s (see the module documentation).
+    pub fn alpha_floor_mps(&self) -> f64 {
+        self.derived.alpha_floor_mps
+    }
+
+    /// Floor of the slip-ratio denominator at a wheel load `fz_n` (N), m/s.
+    pub fn kappa_floor_mps(&self, fz_n: f64) -> f64 {
+        self.params.low_speed_mps.max(
+            self.derived.kappa_floor_per_k * self.params.tyre.longitudinal_slip_stiffness_n(fz_n),
+        )
+    }
+
+    /// Loads, slips, forces and accelerations at the current state with the inputs
+    /// and friction of the last step (zero torque, straight, `μ = 1` before any step).
+    pub fn outputs(&self) -> Outputs {
+        let y = self.state.to_array();
+        let mut o = self.eval(&y, &self.last_inputs, self.mu).1;
+        o.time_s = self.time_s;
+        o
+    }
+
+    /// State derivative and outputs at state `y`.
+    #[allow(clippy::needless_range_loop)] // four wheels, several arrays indexed alike
+    fn eval(&self, y: &[f64; N], inp: &Inputs, mu: f64) -> ([f64; N], Outputs) {
+        let p = &self.params;
+        let d = &self.derived;
+        let s = State::from_array(y);
+        let (st, ct) = s.roll_rad.sin_cos();
+        let (sp, cp) = s.pitch_rad.sin_cos();
+        let r = s.yaw_rate_radps;
+        let (sd, cd) = inp.delta_rad.sin_cos();
+        let mut o = Outputs {
+            delta_rad: inp.delta_rad,
+            ..Outputs::default()
+        };
+        let mut sum_fx = 0.0;
+        let mut sum_fy = 0.0;
+        let mut dw = [0.0; 4];
+        for i in 0..4 {
+            let side = if d.y_w[i] > 0.0 { 1.0 } else { -1.0 };
+            // Suspension extension and its rate.
+            let zeta = side * p.lw_m * st - d.x_w[i] * sp;
+            let zeta_dot =
+                side * p.lw_m * ct * s.roll_rate_radps - d.x_w[i] * cp * s.pitch_rate_radps;
+            let fz = (d.fz0[i] - p.ks_n_per_m * zeta - p.ds_n_s_per_m * zeta_dot).max(0.0);
+            // Wheel-centre velocity, vehicle frame then tyre frame.
+            let vxw = s.vx_mps - d.y_w[i] * r;
+            let vyw = s.vy_mps + d.x_w[i] * r;
+            let (sdi, cdi) = if i < 2 { (sd, cd) } else { (0.0, 1.0) };
+            let vxp = vxw * cdi + vyw * sdi;
+            let vyp = -vxw * sdi + vyw * cdi;
+            // Slip ratio (paper's definition, floored denominators).
+            let rw = p.r_eff_m * s.omega_radps[i];
+            let v_k = self.kappa_floor_mps(fz);
+            let kappa = if rw >= vxp {
+                (rw - vxp) / rw.abs().max(v_k)
+            } else {
+                (rw - vxp) / vxp.abs().max(v_k)
+            };
+            let alpha = -(vyp / vxp.abs().max(d.alpha_floor_mps)).atan();
+            let fade = (vxp.hypot(vyp) / p.low_speed_mps).min(1.0);
+            // Right-hand wheels carry the mirrored tyre.
+            let (fxp, fyp) = if side > 0.0 {
+                tire::forces_with_offset_scale(kappa, alpha, fz, mu, fade, &p.tyre)
+            } else {
+                let (fx, fy) = tire::forces_with_offset_scale(kappa, -alpha, fz, mu, fade, &p.tyre);
+                (fx, -fy)
+            };
+            // The paper's rotation to the vehicle frame.
+            let a = fxp * cdi - fyp * sdi;
+            let b = fyp * cdi + fxp * sdi;
+            let fx = a * cp - fz * sp;
+            let fy = a * st * sp + b * ct + fz * st * cp;
+            sum_fx += fx;
+            sum_fy += fy;
+            dw[i] = (wheel_torque_nm(inp.torque_nm[i], s.omega_radps[i]) - p.r_eff_m * fxp)
+                / p.wheel_inertia_kg_m2;
+            o.fz_n[i] = fz;
+            o.kappa[i] = kappa;
+            o.alpha_rad[i] = alpha;
+            o.fxp_n[i] = fxp;
+            o.fyp_n[i] = fyp;
+            o.fx_n[i] = fx;
+            o.fy_n[i] = fy;
+        }
+        let aero = d.aero * s.vx_mps * s.vx_mps.abs();
+        let m = p.mass_kg;
+        let (fx, fy, fz) = (&o.fx_n, &o.fy_n, &o.fz_n);
+        let dvx = r * s.vy_mps + (sum_fx - aero) / m;
+        let dvy = -r * s.vx_mps + sum_fy / m;
+        let dr = (p.lf_m * (fy[FL] + fy[FR]) - p.lr_m * (fy[RL] + fy[RR])
+            + p.lw_m * (fx[FR] + fx[RR] - fx[FL] - fx[RL]))
+            / p.iz_kg_m2;
+        let droll = (p.lw_m * (fz[FL] + fz[RL] - fz[FR] - fz[RR]) + p.h_m * sum_fy) / p.ix_kg_m2;
+        let dpitch = (p.lr_m * (fz[RL] + fz[RR])
+            - p.lf_m * (fz[FL] + fz[FR])
+            - d.pitch_static_nm
+            - p.h_m * sum_fx)
+            / p.iy_kg_m2;
+        let (spsi, cpsi) = s.psi_rad.sin_cos();
+        let dy = [
+            s.vx_mps * cpsi - s.vy_mps * spsi,
+            s.vx_mps * spsi + s.vy_mps * cpsi,
+            r,
+            dvx,
+            dvy,
+            dr,
+            s.roll_rate_radps,
+            droll,
+            s.pitch_rate_radps,
+            dpitch,
+            dw[0],
+            dw[1],
+            dw[2],
+            dw[3],
+        ];
+        o.aero_drag_n = aero;
+        o.ax_mps2 = (sum_fx - aero) / m;
+        o.ay_mps2 = sum_fy / m;
+        o.speed_mps = s.speed_mps();
+        o.beta_rad = s.vy_mps.atan2(s.vx_mps);
+        (dy, o)
+    }
+}
+
+/// `y + h·k`.
+fn axpy(y: &[f64; N], h: f64, k: &[f64; N]) -> [f64; N] {
+    let mut out = *y;
+    for i in 0..N {
+        out[i] += h * k[i];
+    }
+    out
+}
+
+fn check_state(s: &State) -> Result<(), PlantError> {
+    let named = [
+        ("x_m", s.x_m),
+        ("y_m", s.y_m),
+        ("psi_rad", s.psi_rad),
+        ("vx_mps", s.vx_mps),
+        ("vy_mps", s.vy_mps),
+        ("yaw_rate_radps", s.yaw_rate_radps),
+        ("roll_rad", s.roll_rad),
+        ("roll_rate_radps", s.roll_rate_radps),
+        ("pitch_rad", s.pitch_rad),
+        ("pitch_rate_radps", s.pitch_rate_radps),
+        ("omega_radps[0]", s.omega_radps[0]),
+        ("omega_radps[1]", s.omega_radps[1]),
+        ("omega_radps[2]", s.omega_radps[2]),
+        ("omega_radps[3]", s.omega_radps[3]),
+    ];
+    for (n, v) in named {
+        if !v.is_finite() {
+            return Err(PlantError::State(n));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,198 @@
+//! `host-sim run`: a closed-loop drive of a scenario, with its log, summary and figures.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::closed_loop::{self, RunResult, SimOptions};
+use crate::figures;
+use crate::scenario::{self, Scenario};
+use crate::vehicle::VehicleParams;
+
+/// Scalar the firmware computes in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Precision {
+    /// Single precision, as on the ECU.
+    F32,
+    /// Double precision (to measure what single precision costs).
+    F64,
+}
+
+/// Arguments of `host-sim run`.
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// Track: `paper` (built in) or a CSV file `# x_m,y_m,w_tr_right_m,w_tr_left_m`.
+    #[arg(long, default_value = "paper")]
+    pub track: String,
+    /// The track file is an open path (default: closed loop).
+    #[arg(long)]
+    pub open: bool,
+    /// Obstacles: `none`, `paper` (built in, on the paper track) or a CSV file `id,x_m,y_m`.
+    #[arg(long, default_value = "none")]
+    pub obstacles: String,
+    /// Vehicle TOML file (default: the built-in car, `host-sim/vehicles/default.toml`).
+    #[arg(long)]
+    pub vehicle: Option<PathBuf>,
+    /// Road friction coefficient μ, given to the plant and to the planner.
+    #[arg(long, default_value_t = 1.0)]
+    pub mu: f64,
+    /// Friction given to the planner if different from the road's (default: --mu).
+    #[arg(long)]
+    pub planner_mu: Option<f64>,
+    /// Laps to drive on a closed track.
+    #[arg(long, default_value_t = 1)]
+    pub laps: u32,
+    /// Simulated time limit, s.
+    #[arg(long, default_value_t = 600.0)]
+    pub duration: f64,
+    /// Initial speed, m/s (the paper: 15).
+    #[arg(long, default_value_t = 15.0)]
+    pub initial_speed: f64,
+    /// Precision of the firmware maths.
+    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    pub precision: Precision,
+    /// Skip the PNG figures.
+    #[arg(long)]
+    pub no_plots: bool,
+    /// Output directory (created).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Loads the vehicle file or the built-in vehicle.
+pub fn load_vehicle(path: Option<&Path>) -> Result<VehicleParams> {
+    match path {
+        None => Ok(VehicleParams::default()),
+        Some(p) => Ok(VehicleParams::from_toml_file(p)?),
+    }
+}
+
+/// Checks a friction coefficient given on the command line.
+pub fn check_mu(name: &str, mu: f64) -> Result<()> {
+    if !(mu.is_finite() && mu > 0.0 && mu <= 2.0) {
+        bail!("{name} must be a friction coefficient in (0, 2], got {mu}");
+    }
+    Ok(())
+}
+
+/// Runs one closed-loop scenario and returns its result (no files written).
+pub fn simulate(
+    scenario: &Scenario,
+    vehicle: &VehicleParams,
+    opts: &SimOptions,
+    precision: Precision,
+    show_progress: bool,
+) -> Result<RunResult> {
+    let bar = if show_progress {
+        let b = ProgressBar::new(opts.max_duration_s.ceil() as u64);
+        b.set_style(
+            ProgressStyle::with_template("{spinner} simulated {pos} s  {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        );
+        Some(b)
+    } else {
+        None
+    };
+    let progress = |t: f64, d: f64| {
+        if let Some(b) = &bar {
+            b.set_position(t as u64);
+            b.set_message(format!("{d:.0} m driven"));
+        }
+    };
+    let result = match precision {
+        Precision::F32 => closed_loop::run::<f32>(scenario, vehicle, opts, progress),
+        Precision::F64 => closed_loop::run::<f64>(scenario, vehicle, opts, progress),
+    };
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    result
+}
+
+/// `host-sim run`.
+pub fn run(args: &RunArgs) -> Result<()> {
+    check_mu("--mu", args.mu)?;
+    let planner_mu = args.planner_mu.unwrap_or(args.mu);
+    check_mu("--planner-mu", planner_mu)?;
+    if args.laps == 0 {
+        bail!("--laps must be at least 1");
+    }
+    if !(args.duration.is_finite() && args.duration > 0.0) {
+        bail!(
+            "--duration must be a positive number of seconds, got {}",
+            args.duration
+        );
+    }
+    if !(args.initial_speed.is_finite() && args.initial_speed >= 0.0 && args.initial_speed < 60.0) {
+        bail!(
+            "--initial-speed must be in [0, 60) m/s, got {}",
+            args.initial_speed
+        );
+    }
+    let vehicle = load_vehicle(args.vehicle.as_deref())?;
+    let scenario = scenario::resolve(&args.track, &args.obstacles, !args.open)?;
+    let opts = SimOptions {
+        mu_road: args.mu,
+        mu_planner: planner_mu,
+        laps: args.laps,
+        max_duration_s: args.duration,
+        initial_speed_mps: args.initial_speed,
+        ..SimOptions::default()
+    };
+    let result = simulate(&scenario, &vehicle, &opts, args.precision, true)?;
+    write_outputs(&args.out, &scenario, &result, !args.no_plots)?;
+    let s = &result.summary;
+    println!(
+        "{}: {} in {:.1} s over {:.0} m | lateral error max {:.3} m rms {:.3} m | |a_y| max {:.2} m/s² ({:.2}·μg) | collisions {} | plan failures {}/{} | deadline misses plan {} control {} | {:.0}× real time",
+        scenario.track.name,
+        if s.completed { "completed" } else { "NOT completed" },
+        s.lap_time_s.unwrap_or(s.duration_s),
+        s.distance_m,
+        s.max_abs_lateral_error_m,
+        s.rms_lateral_error_m,
+        s.max_abs_ay_mps2,
+        s.max_abs_ay_mps2 / (s.mu * f64::from(firmware::G)),
+        s.collisions,
+        s.plan_failures,
+        s.plan_activations,
+        s.plan_deadline_misses,
+        s.control_deadline_misses,
+        s.sim_speed_x_realtime,
+    );
+    if !s.completed {
+        println!("stopped: {}", s.stop_reason);
+    }
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+/// Writes `log.csv`, `summary.json` and (optionally) the figures into `dir`.
+pub fn write_outputs(
+    dir: &Path,
+    scenario: &Scenario,
+    result: &RunResult,
+    plots: bool,
+) -> Result<()> {
+    fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create output directory {}", dir.display()))?;
+    let log_path = dir.join("log.csv");
+    let mut w = csv::Writer::from_path(&log_path)
+        .with_context(|| format!("cannot write {}", log_path.display()))?;
+    for row in &result.log {
+        w.serialize(row)?;
+    }
+    w.flush()?;
+    let summary_path = dir.join("summary.json");
+    fs::write(
+        &summary_path,
+        serde_json::to_string_pretty(&result.summary)?,
+    )
+    .with_context(|| format!("cannot write {}", summary_path.display()))?;
+    if plots {
+        figures::draw_all(dir, scenario, result)?;
+    }
+    Ok(())
+}

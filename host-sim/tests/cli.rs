@@ -1,0 +1,109 @@
+//! The command line: `host-sim tire` round trip and error messages.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::process::Command;
+
+use host_sim::tire::{forces, TireParams};
+
+fn host_sim() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_host-sim"))
+}
+
+#[test]
+fn tire_round_trip_on_a_small_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.csv");
+    let out = dir.path().join("out.csv");
+    std::fs::write(
+        &input,
+        "kappa,alpha_rad,fz_n,mu\n0.0,0.0,4000,1\n0.1,0.0,4000,1\n0.0,0.05,3000,0.8\n-0.2,-0.1,5000,1\n",
+    )
+    .unwrap();
+    let st = host_sim()
+        .args(["tire", "--input"])
+        .arg(&input)
+        .arg("--out")
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let mut r = csv::Reader::from_path(&out).unwrap();
+    assert_eq!(
+        r.headers().unwrap(),
+        vec!["kappa", "alpha_rad", "fz_n", "mu", "fx_n", "fy_n"]
+    );
+    let rows: Vec<Vec<f64>> = r
+        .records()
+        .map(|rec| rec.unwrap().iter().map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 4);
+    let p = TireParams::default();
+    for row in &rows {
+        let (fx, fy) = forces(row[0], row[1], row[2], row[3], &p);
+        assert_eq!((row[4], row[5]), (fx, fy));
+    }
+    assert!(rows[1][4] > 3000.0);
+    assert!(rows[2][5] > 1000.0);
+    assert!(rows[3][4] < 0.0 && rows[3][5] < 0.0);
+}
+
+#[test]
+fn a_bad_row_is_reported_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.csv");
+    std::fs::write(
+        &input,
+        "kappa,alpha_rad,fz_n,mu\n0.1,0,4000,1\n0.1,zero,4000,1\n",
+    )
+    .unwrap();
+    let o = host_sim()
+        .args(["tire", "--input"])
+        .arg(&input)
+        .arg("--out")
+        .arg(dir.path().join("out.csv"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("line 3"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+
+    std::fs::write(&input, "kappa,alpha_rad,fz_n,mu\n0.1,0,-4000,1\n").unwrap();
+    let o = host_sim()
+        .args(["tire", "--input"])
+        .arg(&input)
+        .arg("--out")
+        .arg(dir.path().join("out.csv"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("line 2") && err.contains("fz_n"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_bad_vehicle_file_is_reported_with_its_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let car = dir.path().join("x.toml");
+    let template = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/vehicles/default.toml"
+    ))
+    .unwrap();
+    std::fs::write(&car, template.replace("mass_kg = 1500.0", "mass_kg = -3")).unwrap();
+    let o = host_sim()
+        .args(["validity", "--radii", "20", "--vehicle"])
+        .arg(&car)
+        .arg("--out")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("x.toml") && err.contains(r#"field "mass_kg": must be positive, got -3"#),
+        "{err}"
+    );
+}

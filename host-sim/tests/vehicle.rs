@@ -1,0 +1,87 @@
+//! Vehicle files: the shipped template, and errors that name the field.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use host_sim::vehicle::{VehicleError, VehicleParams};
+
+const TEMPLATE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/vehicles/default.toml");
+
+fn template() -> String {
+    std::fs::read_to_string(TEMPLATE).unwrap()
+}
+
+fn error_of(text: &str) -> String {
+    VehicleParams::from_toml_str(text).unwrap_err().to_string()
+}
+
+#[test]
+fn the_template_is_exactly_the_built_in_vehicle() {
+    let v = VehicleParams::from_toml_file(TEMPLATE).unwrap();
+    assert_eq!(v, VehicleParams::default());
+    VehicleParams::default().validate().unwrap();
+}
+
+#[test]
+fn a_missing_field_is_named() {
+    let text = template().replace("mass_kg = 1500.0", "");
+    let e = error_of(&text);
+    assert!(e.contains("missing field") && e.contains("mass_kg"), "{e}");
+    assert!(e.starts_with("vehicle file"), "{e}");
+}
+
+#[test]
+fn an_unknown_field_is_named() {
+    let text = template().replace("mass_kg = 1500.0", "mass_kg = 1500.0\nmass_lb = 3300.0");
+    let e = error_of(&text);
+    assert!(e.contains("unknown field") && e.contains("mass_lb"), "{e}");
+    let text = template().replace("pcx1 = 1.685", "pcx1 = 1.685\nqbz1 = 8.9");
+    let e = error_of(&text);
+    assert!(e.contains("unknown field") && e.contains("qbz1"), "{e}");
+}
+
+#[test]
+fn a_negative_mass_is_rejected_with_its_value() {
+    let text = template().replace("mass_kg = 1500.0", "mass_kg = -3.0");
+    let e = error_of(&text);
+    assert!(
+        e.contains(r#"field "mass_kg": must be positive, got -3"#),
+        "{e}"
+    );
+}
+
+#[test]
+fn non_finite_numbers_are_rejected() {
+    let e = error_of(&template().replace("iz_kg_m2 = 2500.0", "iz_kg_m2 = nan"));
+    assert!(e.contains(r#""iz_kg_m2""#) && e.contains("finite"), "{e}");
+    let e = error_of(&template().replace("pky1 = -14.95", "pky1 = inf"));
+    assert!(e.contains(r#""tyre.pky1""#) && e.contains("finite"), "{e}");
+    let e = error_of(&template().replace("lr_m = 1.55", "lr_m = 0.0"));
+    assert!(e.contains(r#""lr_m""#), "{e}");
+}
+
+#[test]
+fn a_tyre_with_the_wrong_sign_convention_is_explained() {
+    let e = error_of(&template().replace("pky1 = -14.95", "pky1 = 14.95"));
+    assert!(e.contains("tyre.pky1") && e.contains("ISO"), "{e}");
+}
+
+#[test]
+fn tyre_coefficients_default_to_zero_and_scales_to_one() {
+    let text = template();
+    let start = text.find("\n[tyre]").unwrap() + 1;
+    let minimal = format!(
+        "{}[tyre]\nfnomin = 4000.0\npcx1 = 1.6\npdx1 = 1.0\npkx1 = 20.0\npcy1 = 1.3\npdy1 = -1.0\npky1 = -15.0\npky2 = 2.0\n",
+        &text[..start]
+    );
+    let v = VehicleParams::from_toml_str(&minimal).unwrap();
+    assert_eq!(v.tyre.pex1, 0.0);
+    assert_eq!(v.tyre.rvy6, 0.0);
+    assert_eq!(v.tyre.lmux, 1.0);
+    assert_eq!(v.tyre.lvyka, 1.0);
+}
+
+#[test]
+fn an_unreadable_file_names_the_path() {
+    let e = VehicleParams::from_toml_file("/nonexistent/car.toml").unwrap_err();
+    assert!(matches!(e, VehicleError::Io { .. }));
+    assert!(e.to_string().contains("/nonexistent/car.toml"), "{e}");
+}
