@@ -40,8 +40,8 @@ use criterion::{Criterion, Throughput};
 use firmware::mpc::{MpcQp, MpcQpProblem};
 use firmware::Real;
 use host_sim::qp_corpus::{
-    builtin_obstacles, builtin_track_rows, native_problems, read_corpus, record, status_name,
-    CorpusEntry, Precision, StandardQp, DEFAULT_STEPS, N_DECISION,
+    builtin_obstacles, builtin_track_rows, median_max, native_problems, read_corpus, record,
+    status_name, CorpusEntry, Precision, StandardQp, DEFAULT_STEPS, N_DECISION,
 };
 
 /// OSQP's infinity.
@@ -69,6 +69,8 @@ struct Answer {
     z: Option<Vec<f64>>,
     ok: bool,
     time: Duration,
+    /// The solver's iterations (ours: working-set changes; OSQP: ADMM; Clarabel: IPM).
+    iters: u32,
 }
 
 // ---------- ours ----------
@@ -100,6 +102,7 @@ fn ours_sequence<T: Real>(
             z: None,
             ok: status_name(sol.status) == "optimal",
             time: best,
+            iters: sol.iterations,
         });
         solver = last;
     }
@@ -145,12 +148,12 @@ fn osqp_settings(warm: bool) -> osqp::Settings {
         .warm_start(warm)
 }
 
-/// Solves one QP; returns (z, y, ok).
+/// Solves one QP; returns (z, y, ok, iterations).
 fn osqp_solve(
     d: &OsqpData,
     settings: &osqp::Settings,
     start: Option<&(Vec<f64>, Vec<f64>)>,
-) -> (Vec<f64>, Vec<f64>, bool) {
+) -> (Vec<f64>, Vec<f64>, bool, u32) {
     let mut prob = osqp::Problem::new(&d.p, &d.q, &d.a, &d.l, &d.u, settings).expect("OSQP setup");
     if let Some((x, y)) = start {
         if x.len() == d.q.len() && y.len() == d.l.len() {
@@ -160,12 +163,13 @@ fn osqp_solve(
         }
     }
     let st = prob.solve();
+    let it = st.iter();
     match st {
-        osqp::Status::Solved(s) => (s.x().to_vec(), s.y().to_vec(), true),
+        osqp::Status::Solved(s) => (s.x().to_vec(), s.y().to_vec(), true, it),
         osqp::Status::SolvedInaccurate(s) | osqp::Status::MaxIterationsReached(s) => {
-            (s.x().to_vec(), s.y().to_vec(), false)
+            (s.x().to_vec(), s.y().to_vec(), false, it)
         }
-        _ => (vec![0.0; d.q.len()], vec![0.0; d.l.len()], false),
+        _ => (vec![0.0; d.q.len()], vec![0.0; d.l.len()], false, it),
     }
 }
 
@@ -183,12 +187,13 @@ fn osqp_sequence(data: &[OsqpData], warm: bool, reps: usize) -> Vec<Answer> {
             best = best.min(t0.elapsed());
             res = Some(r);
         }
-        let (z, y, ok) = res.expect("at least one repetition");
+        let (z, y, ok, iters) = res.expect("at least one repetition");
         out.push(Answer {
             x: z[..N_DECISION].to_vec(),
             z: Some(z.clone()),
             ok,
             time: best,
+            iters,
         });
         prev = Some((z, y));
     }
@@ -199,7 +204,7 @@ fn osqp_run(data: &[OsqpData], warm: bool) {
     let settings = osqp_settings(warm);
     let mut prev: Option<(Vec<f64>, Vec<f64>)> = None;
     for d in data {
-        let (z, y, _) = osqp_solve(d, &settings, if warm { prev.as_ref() } else { None });
+        let (z, y, _, _) = osqp_solve(d, &settings, if warm { prev.as_ref() } else { None });
         prev = Some((black_box(z), y));
     }
 }
@@ -284,13 +289,13 @@ fn clarabel_settings(tol: Option<f64>) -> clarabel::solver::DefaultSettings<f64>
 fn clarabel_solve(
     d: &ClarabelData,
     settings: clarabel::solver::DefaultSettings<f64>,
-) -> (Vec<f64>, bool) {
+) -> (Vec<f64>, bool, u32) {
     use clarabel::solver::{DefaultSolver, IPSolver, SolverStatus};
     let mut s =
         DefaultSolver::new(&d.p, &d.q, &d.a, &d.b, &d.cones, settings).expect("Clarabel setup");
     s.solve();
     let ok = matches!(s.solution.status, SolverStatus::Solved);
-    (s.solution.x.clone(), ok)
+    (s.solution.x.clone(), ok, s.solution.iterations)
 }
 
 fn clarabel_sequence(data: &[ClarabelData], tol: Option<f64>, reps: usize) -> Vec<Answer> {
@@ -306,12 +311,13 @@ fn clarabel_sequence(data: &[ClarabelData], tol: Option<f64>, reps: usize) -> Ve
                 best = best.min(t0.elapsed());
                 res = Some(r);
             }
-            let (z, ok) = res.expect("at least one repetition");
+            let (z, ok, iters) = res.expect("at least one repetition");
             Answer {
                 x: z[..N_DECISION].to_vec(),
                 z: Some(z),
                 ok,
                 time: best,
+                iters,
             }
         })
         .collect()
@@ -333,6 +339,8 @@ struct Row {
     p99_us: f64,
     mean_us: f64,
     failures: usize,
+    it_med: u32,
+    it_max: u32,
     dx_max: f64,
     dx_med: f64,
     gap_max: f64,
@@ -365,12 +373,15 @@ fn summarise(name: &'static str, answers: &[Answer], corpus: &[CorpusEntry]) -> 
         viol_max = viol_max.max(e.standard.max_violation(&z));
     }
     dxs.sort_by(|a, b| a.total_cmp(b));
+    let its: Vec<u32> = answers.iter().map(|a| a.iters).collect();
     Row {
         name,
         p50_us: percentile(&t, 0.5),
         p99_us: percentile(&t, 0.99),
         mean_us,
         failures: answers.iter().filter(|a| !a.ok).count(),
+        it_med: median_max(&its).0,
+        it_max: median_max(&its).1,
         dx_max: dxs.last().copied().unwrap_or(0.0),
         dx_med: percentile(&dxs, 0.5),
         gap_max,
@@ -433,12 +444,13 @@ fn timing_pass(
         ms.iter().max().unwrap_or(&0),
     );
     println!(
-        "{:<15} {:>9} {:>9} {:>9} {:>5} | {:>10} {:>10} {:>10} {:>10}",
+        "{:<15} {:>9} {:>9} {:>9} {:>5} {:>11} | {:>10} {:>10} {:>10} {:>10}",
         "solver",
         "p50 µs",
         "p99 µs",
         "mean µs",
         "fail",
+        "it med/max",
         "max|Δx|",
         "med|Δx|",
         "max obj gap",
@@ -446,19 +458,20 @@ fn timing_pass(
     );
     for r in &rows {
         println!(
-            "{:<15} {:>9.1} {:>9.1} {:>9.1} {:>5} | {:>10.2e} {:>10.2e} {:>10.2e} {:>10.2e}",
+            "{:<15} {:>9.1} {:>9.1} {:>9.1} {:>5} {:>11} | {:>10.2e} {:>10.2e} {:>10.2e} {:>10.2e}",
             r.name,
             r.p50_us,
             r.p99_us,
             r.mean_us,
             r.failures,
+            format!("{}/{}", r.it_med, r.it_max),
             r.dx_max,
             r.dx_med,
             r.gap_max,
             r.viol_max
         );
     }
-    println!("(|Δx|: inputs vs our f64 solution as recorded; obj gap relative, 1 + |obj| scale; viol in the standard form)");
+    println!("(fail: not 'solved'/'optimal' (OSQP: polish or accuracy failures count); it: ours working-set changes, OSQP ADMM iterations, Clarabel IPM iterations; |Δx|: inputs vs our f64 solution as recorded; obj gap relative, 1 + |obj| scale; viol in the standard form)");
     let find = |n: &str| rows.iter().find(|r| r.name == n).expect("row");
     for ours in ["ours-f64-warm", "ours-f32-warm", "ours-f64-cold"] {
         let o = find(ours);
