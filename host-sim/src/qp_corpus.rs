@@ -35,7 +35,7 @@
 //! | `f` | `n` |
 //! | `A` | `m×n`: first one row per bounded input (`e_jᵀ`, the variable bounds), then the general rows, then the slacks' `s ≥ 0` rows |
 //! | `lower`, `upper` | `m` each; `null` for −∞ / +∞ |
-//! | `x` | our solution `z` (inputs, then the slacks `s_i = |λ_i|/ρ_i`) |
+//! | `x` | our solution `z` (inputs, then the slacks `s_i = |λ_i|/ρ_i`); from an `f32` run, feasible to the f32 solver's tolerance (3.5e-4) only |
 //! | `status` | our solver's status: `"optimal"`, `"iteration_limit"`, `"infeasible"`, … |
 //! | `iterations` | our solver's iterations on this QP, warm-started as in the MPC |
 //! | `n_decision` | 32: the first 32 variables are the MPC inputs `[a_0, δ̇_0, a_1, …]` |
