@@ -16,12 +16,14 @@
 //! | [`run`] | the `run` command: log, summary, figures |
 //! | [`figures`] | the closed-loop figures (the paper's Figures 5–8, task costs) |
 //! | [`plot`] | plotting helpers (embedded font) |
+//! | [`qp_corpus`] | the MPC's QPs as JSON, for solver benchmarks (`qp-corpus` command) |
 
 pub mod closed_loop;
 pub mod figures;
 pub mod obstacle_file;
 pub mod plant;
 pub mod plot;
+pub mod qp_corpus;
 pub mod run;
 pub mod scenario;
 pub mod tire;

@@ -23,6 +23,8 @@ enum Command {
     /// A closed-loop drive: the 9-DoF plant against the firmware's two tasks on a
     /// deterministic timeline; writes log.csv, summary.json and the figures.
     Run(host_sim::run::RunArgs),
+    /// Every QP the MPC solves over a kinematic closed loop, one JSON file each (for solver benchmarks).
+    QpCorpus(host_sim::qp_corpus::QpCorpusArgs),
 }
 
 fn run(cli: &Cli) -> anyhow::Result<()> {
@@ -30,6 +32,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Tire(args) => host_sim::tire_table::run(args),
         Command::Validity(args) => host_sim::validity::run(args),
         Command::Run(args) => host_sim::run::run(args),
+        Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
     }
 }
 
