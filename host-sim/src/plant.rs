@@ -63,8 +63,8 @@
 //!
 //! A positive wheel torque drives. A negative one is a brake torque of that
 //! magnitude: friction that opposes the wheel's rotation and cannot spin it
-//! backwards. It is applied as `T·clamp(ω/ω_lock, −1, 1)` with
-//! [`BRAKE_LOCK_RADPS`]: the full torque against the rotation above `ω_lock`, and a
+//! backwards. It is applied as `T·clamp(ω/ω_lock, −1, 1)` with `ω_lock` from
+//! [`brake_lock_radps`]: the full torque against the rotation above `ω_lock`, and a
 //! stiff viscous lock below, so a locked wheel stays (nearly) still instead of
 //! reversing, and the derivative stays continuous for RK4.
 
@@ -83,19 +83,26 @@ pub const RR: usize = 3;
 /// Default integration step, s (1 kHz).
 pub const DEFAULT_DT_S: f64 = 1e-3;
 
-/// Wheel speed under which a brake torque fades linearly to zero (a locked wheel),
-/// rad/s. At 1 kHz RK4 stays stable for brake torques up to about
-/// `2.7·I_r·ω_lock/dt`, 6,000 N·m per wheel for the default car.
+/// Least wheel speed under which a brake torque fades linearly to zero (a locked
+/// wheel), rad/s; see [`brake_lock_radps`].
 pub const BRAKE_LOCK_RADPS: f64 = 2.0;
+
+/// Wheel speed under which the brake torque `torque_nm` (N·m) fades, rad/s: the
+/// larger of [`BRAKE_LOCK_RADPS`] and `|T|·dt/(1.5·I_r)`. The fade is a viscous
+/// lock of rate `|T|/(ω_lock·I_r)`; keeping that rate times the step `dt_s` under
+/// 1.5 keeps RK4 (stable to 2.78) well damped whatever the torque and the step.
+pub fn brake_lock_radps(torque_nm: f64, dt_s: f64, wheel_inertia_kg_m2: f64) -> f64 {
+    BRAKE_LOCK_RADPS.max(torque_nm.abs() * dt_s / (1.5 * wheel_inertia_kg_m2))
+}
 
 /// Torque acting on a wheel spinning at `omega_radps` for the commanded torque
 /// `torque_nm` (N·m): drive torque as is, brake torque (negative) against the
-/// rotation, fading below [`BRAKE_LOCK_RADPS`].
-pub fn wheel_torque_nm(torque_nm: f64, omega_radps: f64) -> f64 {
+/// rotation, fading linearly below `lock_radps`.
+pub fn wheel_torque_nm(torque_nm: f64, omega_radps: f64, lock_radps: f64) -> f64 {
     if torque_nm >= 0.0 {
         torque_nm
     } else {
-        torque_nm * (omega_radps / BRAKE_LOCK_RADPS).clamp(-1.0, 1.0)
+        torque_nm * (omega_radps / lock_radps).clamp(-1.0, 1.0)
     }
 }
 
@@ -471,7 +478,9 @@ impl Plant {
             let fy = a * st * sp + b * ct + fz * st * cp;
             sum_fx += fx;
             sum_fy += fy;
-            dw[i] = (wheel_torque_nm(inp.torque_nm[i], s.omega_radps[i]) - p.r_eff_m * fxp)
+            let lock = brake_lock_radps(inp.torque_nm[i], self.dt_s, p.wheel_inertia_kg_m2);
+            dw[i] = (wheel_torque_nm(inp.torque_nm[i], s.omega_radps[i], lock)
+                - p.r_eff_m * fxp)
                 / p.wheel_inertia_kg_m2;
             o.fz_n[i] = fz;
             o.kappa[i] = kappa;

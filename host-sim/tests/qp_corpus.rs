@@ -288,7 +288,9 @@ fn clarabel_on_the_standard_form_agrees_with_our_solution() {
             "QP {k} (m = {}): |z − z_clarabel|∞ = {dx:.2e}, objective {ours:.9} vs {obj:.9}",
             e.native.m
         );
-        assert!(dx < 1e-5, "QP {k}: |z − z_clarabel|∞ = {dx:e}");
+        // Relative to the solution's size: the inputs reach 8 m/s².
+        let scale = 1.0 + e.x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(dx < 1e-5 * scale, "QP {k}: |z − z_clarabel|∞ = {dx:e}");
         assert!(
             (ours - obj).abs() <= 1e-6 * (1.0 + obj.abs()),
             "QP {k}: {ours} vs {obj}"
