@@ -479,8 +479,7 @@ impl Plant {
             sum_fx += fx;
             sum_fy += fy;
             let lock = brake_lock_radps(inp.torque_nm[i], self.dt_s, p.wheel_inertia_kg_m2);
-            dw[i] = (wheel_torque_nm(inp.torque_nm[i], s.omega_radps[i], lock)
-                - p.r_eff_m * fxp)
+            dw[i] = (wheel_torque_nm(inp.torque_nm[i], s.omega_radps[i], lock) - p.r_eff_m * fxp)
                 / p.wheel_inertia_kg_m2;
             o.fz_n[i] = fz;
             o.kappa[i] = kappa;

@@ -269,6 +269,10 @@ fn a_hard_launch_from_rest_and_a_hard_stop_stay_finite_and_sensible() {
         assert!(o.ax_mps2 > -1.4 * G);
         run(&mut plant, &lock, 3.0);
         // Stopped, up to the creep the brakes' low-speed fade allows at this step.
-        assert!(plant.state().vx_mps.abs() < 0.5, "stopped: {:?}", plant.state());
+        assert!(
+            plant.state().vx_mps.abs() < 0.5,
+            "stopped: {:?}",
+            plant.state()
+        );
     }
 }

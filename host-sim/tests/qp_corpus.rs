@@ -288,9 +288,13 @@ fn clarabel_on_the_standard_form_agrees_with_our_solution() {
             "QP {k} (m = {}): |z − z_clarabel|∞ = {dx:.2e}, objective {ours:.9} vs {obj:.9}",
             e.native.m
         );
-        // Relative to the solution's size: the inputs reach 8 m/s².
-        let scale = 1.0 + e.x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        assert!(dx < 1e-5 * scale, "QP {k}: |z − z_clarabel|∞ = {dx:e}");
+        // Where the cost is flat the two may differ more, as long as ours is no
+        // worse than Clarabel's (its interior point stops short of the optimum).
+        let no_worse = ours <= obj + 1e-12 * obj.abs();
+        assert!(
+            dx < 1e-5 || (no_worse && dx < 1e-4),
+            "QP {k}: |z − z_clarabel|∞ = {dx:e}"
+        );
         assert!(
             (ours - obj).abs() <= 1e-6 * (1.0 + obj.abs()),
             "QP {k}: {ours} vs {obj}"
