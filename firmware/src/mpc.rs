@@ -227,6 +227,10 @@ impl<T: Real> MpcSettings<T> {
                 // lateral error; the margin keeps the curve speeds within 5 % of the
                 // paper's `sqrt(0.5·μ·g·R)`.
                 ay_fraction: T::lit(0.45),
+                // `V_heur` is evaluated at every node, so each node already looks
+                // ahead; 2 s of preview from there (instead of the whole horizon)
+                // lets the car reach `V_max` on the paper track's longest straight.
+                preview_time_s: T::lit(2.0),
                 ..VelocityPlannerSettings::default()
             },
             steering_reference: SteeringReference::PathCurvature,
@@ -325,6 +329,9 @@ pub struct MpcReport<T> {
     pub active_constraints: u32,
     /// Whether the solve started from the previous solution.
     pub warm: bool,
+    /// On a cold start, a refinement pass after the first failed and the previous
+    /// pass's solution was kept (the slack diagnostics below are then 0).
+    pub refinement_failed: bool,
     /// Largest validity slack `δ_tol` in the solution, rad (0: the limit holds).
     pub max_validity_slack_rad: T,
     /// Largest obstacle slack in the solution, m (0: all parabolas respected).
@@ -502,13 +509,23 @@ impl<T: Real> Mpc<T> {
             report.qp_refactorizations += sol.refactorizations;
             report.active_constraints = sol.working_set_len as u32;
             if status != QpStatus::Optimal {
-                return Err(MpcError::Qp(status));
+                if report.passes == 1 {
+                    return Err(MpcError::Qp(status));
+                }
+                // A cold start's refinement pass failed: the previous pass's optimum
+                // (of the QP linearised one pass earlier) stands. The solver's
+                // working set is that of the failed pass: start the next step afresh.
+                report.refinement_failed = true;
+                self.solver.clear_working_set();
+                break;
             }
             for k in 0..HORIZON {
                 self.u_bar[k] = [sol.x[2 * k], sol.x[2 * k + 1]];
             }
         }
-        self.slack_diagnostics(&mut report);
+        if !report.refinement_failed {
+            self.slack_diagnostics(&mut report);
+        }
 
         // 4. The plan: the nonlinear model under the optimal inputs.
         plan.stamp_us = est.stamp_us;

@@ -1,0 +1,177 @@
+//! Acceptance: closed-loop laps of the `paper` scenario (9-DoF plant, both tasks,
+//! f32 firmware as on the ECU), with and without obstacles, at μ = 1 and 0.5.
+//! Deterministic: each assertion is on a simulated, bit-reproducible run.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+use host_sim::closed_loop::{RunResult, SimOptions};
+use host_sim::run::{simulate, Precision};
+use host_sim::scenario::Scenario;
+use host_sim::vehicle::VehicleParams;
+
+const G: f64 = 9.81;
+
+fn lap(obstacles: bool, mu: f64) -> RunResult {
+    let scenario = Scenario::paper(obstacles);
+    let opts = SimOptions {
+        mu_road: mu,
+        mu_planner: mu,
+        max_duration_s: 200.0,
+        ..SimOptions::default()
+    };
+    simulate(
+        &scenario,
+        &VehicleParams::default(),
+        &opts,
+        Precision::F32,
+        false,
+    )
+    .unwrap()
+}
+
+/// What every lap must satisfy.
+fn common(r: &RunResult, mu: f64) {
+    let s = &r.summary;
+    println!("{}", serde_json::to_string_pretty(s).unwrap());
+    assert!(s.completed, "lap not completed: {}", s.stop_reason);
+    assert!(s.lap_time_s.is_some());
+    assert!(
+        s.max_abs_ay_mps2 <= 0.55 * mu * G,
+        "|a_y| reached {} m/s² > 0.55·μ·g",
+        s.max_abs_ay_mps2
+    );
+    assert_eq!(s.collisions, 0);
+    assert_eq!(s.plan_deadline_misses, 0);
+    assert_eq!(s.control_deadline_misses, 0);
+    assert_eq!(s.plan_failures, 0, "every plan optimal");
+    // The controller brakes gently until the first plan is published (it takes
+    // the cold start's response time, under 20 ms), never after.
+    assert!(
+        s.control_safe_actuations <= 2,
+        "{}",
+        s.control_safe_actuations
+    );
+    let first_following = r.log.iter().position(|l| l.control_mode == "following");
+    assert!(first_following.is_some_and(|i| i <= 2));
+    assert!(r.log.iter().skip(3).all(|l| l.control_mode != "safe"));
+    // Almost no slip (the paper's claim): slip angles of a few degrees.
+    assert!(
+        s.max_abs_slip_angle_rad < 0.1,
+        "slip angle {}",
+        s.max_abs_slip_angle_rad
+    );
+    // Consistency: the car is where the plan said, to a few decimetres.
+    assert!(
+        s.consistency_max_m < 0.5,
+        "consistency {}",
+        s.consistency_max_m
+    );
+}
+
+/// Speed in the 10 m hairpin (path abscissa 552.5–583.9 m), away from its ends.
+fn hairpin_speed(r: &RunResult) -> (f64, f64) {
+    let v: Vec<f64> = r
+        .log
+        .iter()
+        .filter(|l| l.progress_m > 558.0 && l.progress_m < 578.0)
+        .map(|l| l.v_mps)
+        .collect();
+    assert!(!v.is_empty());
+    (
+        v.iter().copied().fold(f64::INFINITY, f64::min),
+        v.iter().copied().fold(0.0, f64::max),
+    )
+}
+
+#[test]
+fn paper_track_without_obstacles_mu_1() {
+    let r = lap(false, 1.0);
+    common(&r, 1.0);
+    let s = &r.summary;
+    assert!(
+        s.max_abs_lateral_error_m <= 0.4,
+        "lateral error {}",
+        s.max_abs_lateral_error_m
+    );
+    // V_max = min(8, μg)·T_H = 25.6 m/s is (nearly) reached on the longest straight.
+    assert!(
+        s.max_speed_mps > 0.95 * 25.6,
+        "top speed {}",
+        s.max_speed_mps
+    );
+    let (lo, hi) = hairpin_speed(&r);
+    assert!(lo > 6.0 && hi < 7.5, "hairpin speed {lo}..{hi}");
+}
+
+#[test]
+fn paper_track_with_obstacles_mu_1() {
+    let r = lap(true, 1.0);
+    common(&r, 1.0);
+    let c = r.summary.min_obstacle_clearance_m.unwrap();
+    assert!(c > 0.2, "clearance {c}");
+}
+
+#[test]
+fn paper_track_without_obstacles_mu_half() {
+    let r = lap(false, 0.5);
+    common(&r, 0.5);
+    assert!(r.summary.max_abs_lateral_error_m <= 0.4);
+    // V_max = min(8, μg)·T_H = 15.7 m/s at μ = 0.5.
+    assert!(r.summary.max_speed_mps < 15.7 * 1.02);
+}
+
+#[test]
+fn paper_track_with_obstacles_mu_half() {
+    let r = lap(true, 0.5);
+    common(&r, 0.5);
+    assert!(r.summary.min_obstacle_clearance_m.unwrap() > 0.2);
+}
+
+#[test]
+fn two_runs_are_bit_identical() {
+    let scenario = Scenario::paper(true);
+    let opts = SimOptions {
+        max_duration_s: 8.0,
+        ..SimOptions::default()
+    };
+    let v = VehicleParams::default();
+    let a = simulate(&scenario, &v, &opts, Precision::F32, false).unwrap();
+    let b = simulate(&scenario, &v, &opts, Precision::F32, false).unwrap();
+    assert_eq!(a.log, b.log);
+    assert_eq!(a.plan_costs, b.plan_costs);
+}
+
+#[test]
+fn a_planner_told_the_wrong_friction_fails_safe_and_reports_it() {
+    // The planner believes μ = 1 on a μ = 0.5 road: its plans ask for more grip
+    // than there is. The run must stay finite and say how it ended, never panic,
+    // and the tyres slip more than when the planner knows the road.
+    let scenario = Scenario::paper(false);
+    let run = |mu_planner: f64| {
+        let opts = SimOptions {
+            mu_road: 0.5,
+            mu_planner,
+            max_duration_s: 30.0,
+            ..SimOptions::default()
+        };
+        simulate(
+            &scenario,
+            &VehicleParams::default(),
+            &opts,
+            Precision::F32,
+            false,
+        )
+        .unwrap()
+    };
+    let wrong = run(1.0);
+    let right = run(0.5);
+    assert!(wrong
+        .log
+        .iter()
+        .all(|l| l.x_m.is_finite() && l.y_m.is_finite()));
+    assert!(!wrong.summary.stop_reason.is_empty());
+    println!(
+        "slip angle: planner told μ = 1: {}, told μ = 0.5: {}",
+        wrong.summary.max_abs_slip_angle_rad, right.summary.max_abs_slip_angle_rad
+    );
+    assert!(wrong.summary.max_abs_slip_angle_rad > right.summary.max_abs_slip_angle_rad);
+}
