@@ -49,60 +49,56 @@ pub const HOST_PATH_CAP: usize = 4096;
 
 /// Deterministic cost model of the two tasks, in ECU cycles.
 ///
-/// `plan = base + pass·passes + iter·QP iterations + add·constraints added +
-/// remove·constraints removed + refactor·refactorisations + row·(rows × passes)`;
-/// `control` is a constant (it has no data-dependent loops).
+/// `plan = passes·(per_pass + per_row·rows) + per_iteration·QP iterations`;
+/// `control` is a constant (no data-dependent loops).
+///
+/// Calibrated on the `mpc_step` ECU binary under QEMU (`-icount shift=3`, one
+/// instruction per 8 ns of virtual time): a least-squares fit of its 150 steps
+/// (`.ci/ecu-check` prints them) gives 392,269 instructions per pass, 8,718 per
+/// row and pass, 14,341 per QP iteration, within 4.2 % of every step; the control
+/// task took at most 771 instructions. Instructions become cycles at 1.34 cycles
+/// per instruction (a 168 MHz Cortex-M4F with flash wait states), plus 5 % for the
+/// fit's largest error, so the estimate does not undercount.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct CostModel {
-    /// Fixed cost of a plan activation (projection, shift, plan output), cycles.
+    /// Fixed cost of a plan activation, cycles.
     pub plan_base: f64,
-    /// Per linearise–condense pass (16 RK4 steps with Jacobians, condensing, factorising `H`), cycles.
+    /// Per linearise–condense–factorise pass (16 RK4 steps with Jacobians, the
+    /// condensed Hessian, its Cholesky factor), cycles.
     pub plan_per_pass: f64,
-    /// Per QP iteration (multiplier solve, constraint scan), cycles.
-    pub plan_per_iteration: f64,
-    /// Per constraint added to the working set (row transform, factor update), cycles.
-    pub plan_per_added: f64,
-    /// Per constraint removed (factor downdate), cycles.
-    pub plan_per_removed: f64,
-    /// Per refactorisation from scratch, cycles.
-    pub plan_per_refactor: f64,
     /// Per general QP row and pass (forming it, transforming it by `R⁻¹`), cycles.
     pub plan_per_row: f64,
+    /// Per QP iteration (multiplier solve, factor update, constraint scan), cycles.
+    pub plan_per_iteration: f64,
     /// One control activation, cycles.
     pub control: f64,
 }
 
 impl Default for CostModel {
-    /// Coefficients fitted to instruction counts of the `mpc_step` ECU binary under
-    /// QEMU (`-icount shift=3`), at 1.34 cycles per instruction; see the README.
+    /// The QEMU calibration above.
     fn default() -> Self {
+        let cycles = 1.34 * 1.05;
         Self {
-            plan_base: 60_000.0,
-            plan_per_pass: 400_000.0,
-            plan_per_iteration: 6_000.0,
-            plan_per_added: 4_000.0,
-            plan_per_removed: 3_000.0,
-            plan_per_refactor: 60_000.0,
-            plan_per_row: 2_500.0,
-            control: 4_000.0,
+            plan_base: 0.0,
+            plan_per_pass: 392_269.0 * cycles,
+            plan_per_row: 8_718.0 * cycles,
+            plan_per_iteration: 14_341.0 * cycles,
+            control: 771.0 * cycles,
         }
     }
 }
 
 impl CostModel {
     /// Estimated cycles of one plan activation from its work counters (an activation
-    /// that fails early still costs the base).
+    /// that fails before any pass costs one pass).
     pub fn plan_cycles<T: Real>(&self, r: Option<&MpcReport<T>>) -> f64 {
         match r {
-            None => self.plan_base,
+            None => self.plan_base + self.plan_per_pass,
             Some(r) => {
+                let passes = r.passes as f64;
                 self.plan_base
-                    + self.plan_per_pass * r.passes as f64
+                    + passes * (self.plan_per_pass + self.plan_per_row * r.rows as f64)
                     + self.plan_per_iteration * r.qp_iterations as f64
-                    + self.plan_per_added * r.qp_added as f64
-                    + self.plan_per_removed * r.qp_removed as f64
-                    + self.plan_per_refactor * r.qp_refactorizations as f64
-                    + self.plan_per_row * (r.rows as f64) * r.passes as f64
             }
         }
     }
@@ -138,7 +134,7 @@ impl Default for SimOptions {
         Self {
             plant_dt_s: 1e-3,
             ecu_clock_hz: 168e6,
-            control_budget_cycles: 20_000.0,
+            control_budget_cycles: 5_000.0,
             plan_budget_cycles: 8.4e6,
             cost_model: CostModel::default(),
             mu_road: 1.0,

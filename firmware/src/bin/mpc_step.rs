@@ -1,8 +1,9 @@
 //! ECU measurement binary: runs MPC steps on the Cortex-M4F and prints what each
 //! costs, in instructions, under QEMU with `-icount shift=3` (see `.cargo/config.toml`).
 //!
-//! A stadium-shaped closed track (two 60 m straights, two 20 m-radius half circles)
-//! is built at start-up; a kinematic-bicycle stand-in for the car follows each plan
+//! A stadium-shaped closed track (two 60 m straights, two 20 m-radius half circles,
+//! 4 m half-widths) with a parked car on each straight is built at start-up; a
+//! kinematic-bicycle stand-in for the car follows each plan
 //! for 100 ms before the next step, so the steps are those of a real receding
 //! horizon: one cold start, then warm starts through straights and curves.
 //!
@@ -19,15 +20,18 @@ use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use firmware::bicycle::BicycleGeometry;
+use firmware::low_level::LowLevelConfig;
 use firmware::mpc::{Mpc, MpcSettings};
+use firmware::obstacles::{Obstacle, ObstacleManager, ObstacleSettings};
 use firmware::plan::Plan;
 use firmware::real::f32_math;
 use firmware::reference_path::ReferencePath;
 use firmware::state_estimate::StateEstimate;
+use firmware::tasks::ControlTask;
 use stm32f4 as _;
 
 const PATH_CAP: usize = 256;
-const STEPS: usize = 60;
+const STEPS: usize = 150;
 
 static mut MPC: Mpc<f32> = Mpc::new();
 static mut PATH: ReferencePath<f32, PATH_CAP> = ReferencePath::new();
@@ -103,6 +107,26 @@ fn main() -> ! {
         l_r_m: 1.6,
     };
     let settings = MpcSettings::paper(geometry, 0.6, 1.8);
+    // Two parked cars on the straights, one on each side.
+    let mut obstacles = ObstacleManager::new();
+    let boxes = [
+        [[28.0, -2.5], [32.5, -2.5], [32.5, -0.6], [28.0, -0.6]],
+        [[25.0, 40.6], [29.5, 40.6], [29.5, 42.5], [25.0, 42.5]],
+    ];
+    let mut list: heapless::Vec<Obstacle<f32>, 2> = heapless::Vec::new();
+    for (k, b) in boxes.iter().enumerate() {
+        if let Ok(o) = Obstacle::from_vertices(k as u32, b) {
+            let _ = list.push(o);
+        }
+    }
+    let obstacle_settings = ObstacleSettings {
+        steepness_1pm: ObstacleSettings::steepness_for(0.25 * 9.81, 25.6),
+        ..ObstacleSettings::default()
+    };
+    if obstacles.update(&obstacle_settings, path, &list).is_err() {
+        hprintln!("mpc_step: obstacles rejected");
+        exit(false);
+    }
     let mut est = StateEstimate {
         stamp_us: 0,
         x_m: 0.0,
@@ -115,13 +139,30 @@ fn main() -> ! {
     };
     let (mut max_warm, mut sum_warm, mut cold, mut failures) = (0u32, 0u64, 0u32, 0u32);
     let mut max_iter = 0u32;
+    let mut control_max = 0u32;
+    let mut control = match ControlTask::new(LowLevelConfig::default()) {
+        Ok(c) => c,
+        Err(_) => exit(false),
+    };
     for step in 0..STEPS {
         let t0 = SYST::get_current();
-        let result = mpc.step(&settings, path, &[], &est, 1.0, plan);
+        let result = mpc.step(&settings, path, obstacles.parabolas(), &est, 1.0, plan);
         let t1 = SYST::get_current();
         let ticks = ticks_between(t0, t1);
         match result {
             Ok(report) => {
+                // One line per step, for the cost model's calibration (README).
+                hprintln!(
+                    "step {} instructions={} passes={} iterations={} added={} removed={} refactorizations={} rows={}",
+                    step,
+                    ticks as u64 * 1_000_000_000 / 168_000_000 / 8,
+                    report.passes,
+                    report.qp_iterations,
+                    report.qp_added,
+                    report.qp_removed,
+                    report.qp_refactorizations,
+                    report.rows
+                );
                 max_iter = max_iter.max(report.qp_iterations);
                 if step == 0 {
                     cold = ticks;
@@ -132,7 +173,8 @@ fn main() -> ! {
             }
             Err(_) => failures += 1,
         }
-        // The car follows the plan for 100 ms (kinematic stand-in, 10 ms steps).
+        // The car (a kinematic stand-in) follows the plan's inputs for 100 ms; the
+        // control task runs every 10 ms on its state, for the control's cost.
         let mut xi = [
             0.0,
             est.x_m,
@@ -141,9 +183,23 @@ fn main() -> ! {
             est.psi_rad,
             est.delta_rad,
         ];
-        let u = plan.inputs[0];
-        for _ in 0..10 {
-            xi = geometry.discretize(&xi, &u, 0.01).x_next;
+        for k in 0..10u64 {
+            let now = est.stamp_us + k * 10_000;
+            let measured = StateEstimate {
+                stamp_us: now,
+                x_m: xi[1],
+                y_m: xi[2],
+                psi_rad: xi[4],
+                vx_mps: xi[3],
+                vy_mps: 0.0,
+                yaw_rate_radps: 0.0,
+                delta_rad: xi[5],
+            };
+            let c0 = SYST::get_current();
+            let _ = control.run(&measured, plan, now);
+            let c1 = SYST::get_current();
+            control_max = control_max.max(ticks_between(c0, c1));
+            xi = geometry.discretize(&xi, &plan.inputs[0], 0.01).x_next;
         }
         est = StateEstimate {
             stamp_us: est.stamp_us + 100_000,
@@ -173,6 +229,10 @@ fn main() -> ! {
     hprintln!(
         "mpc_step: mpc_workspace_bytes={}",
         core::mem::size_of::<Mpc<f32>>()
+    );
+    hprintln!(
+        "mpc_step: control_max_instructions={}",
+        to_instr(control_max as u64)
     );
     exit(failures == 0)
 }
