@@ -374,6 +374,9 @@ pub struct QpSolution<T, const N: usize, const M: usize> {
     pub removed: u32,
     /// `LDLᵀ` factorisations recomputed from scratch (warm-start build not counted).
     pub refactorizations: u32,
+    /// Pivots of `H`'s Cholesky factor floored at `√ε·H_jj` (0 normally; > 0 when
+    /// `H` was singular to working precision and a small proximal term was added).
+    pub floored_pivots: u32,
     /// Working-set size at exit.
     pub working_set_len: u16,
 }
@@ -391,6 +394,7 @@ impl<T: Real, const N: usize, const M: usize> QpSolution<T, N, M> {
             added: 0,
             removed: 0,
             refactorizations: 0,
+            floored_pivots: 0,
             working_set_len: 0,
         }
     }
@@ -560,7 +564,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 Some(st) => st,
                 None => {
                     scale(&mut self.problem, &mut self.work.col_scale);
-                    if !factor_h(&mut self.problem.h) {
+                    let floored = factor_h_counted(&mut self.problem.h);
+                    self.solution.floored_pivots = floored.unwrap_or(0);
+                    if floored.is_none() {
                         QpStatus::NotConvex
                     } else {
                         transform(&mut self.problem, &mut self.work.v);
@@ -700,7 +706,22 @@ fn validate<T: Real, const N: usize, const M: usize>(p: &QpProblem<T, N, M>) -> 
 /// Cholesky `H = RᵀR` in the upper triangle, then `R ← R⁻¹` in place, lower triangle
 /// zeroed. False if a pivot is not clearly positive.
 fn factor_h<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> bool {
+    factor_h_counted(h).is_some()
+}
+
+/// [`factor_h`], returning how many pivots were floored (see below), `None` when
+/// `H` is not positive definite.
+///
+/// A pivot that comes out below `√ε·H_jj` but above `−0.1·H_jj` is taken for
+/// rounding on a nearly singular (positive semidefinite in exact arithmetic)
+/// Hessian, as a condensed MPC Hessian in single precision can be (its eigenvalues
+/// span more than `1/ε_f32`): it is floored to `√ε·H_jj`, which factors `H + E`
+/// with a small diagonal `E` (a proximal term of relative size `√ε`, 3·10⁻⁴ in
+/// `f32`) in the direction that rounding left undetermined. A pivot below
+/// `−0.1·H_jj` is a Hessian that is not convex: `None`.
+fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
     let tiny = T::EPSILON * T::from_usize(N);
+    let mut floored = 0u32;
     for j in 0..N {
         // Column j of R: R[k][j] for k ≤ j, from H[k][j] (upper triangle).
         let mut d = h[j][j];
@@ -708,8 +729,16 @@ fn factor_h<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> bool {
         for k in 0..j {
             d -= h[k][j] * h[k][j];
         }
-        if !(d > tiny * scale) || !d.is_finite() {
-            return false;
+        if !d.is_finite() || !(scale > T::ZERO) {
+            return None;
+        }
+        if !(d > tiny * scale) {
+            let floor = T::EPSILON.sqrt() * scale;
+            if d < -T::lit(0.1) * scale {
+                return None;
+            }
+            d = floor;
+            floored += 1;
         }
         let rjj = d.sqrt();
         h[j][j] = rjj;
@@ -742,7 +771,7 @@ fn factor_h<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> bool {
             *v = T::ZERO;
         }
     }
-    true
+    Some(floored)
 }
 
 /// `a_i ← a_iᵀ R⁻¹` for the used rows, and `v = R⁻ᵀ f`.

@@ -257,10 +257,18 @@ fn not_convex() {
     *s.problem_mut() = p;
     assert_eq!(s.solve(), QpStatus::NotConvex);
     let mut p = problem_1d();
-    p.h[0][1] = 1.0; // [[1,1],[1,1]] block: singular
-    p.h[1][0] = 1.0;
+    p.h[0][1] = 2.0; // [[1,2],[2,1]] block: indefinite
+    p.h[1][0] = 2.0;
     *s.problem_mut() = p;
     assert_eq!(s.solve(), QpStatus::NotConvex);
+    // Singular but positive semidefinite ([[1,1],[1,1]]): solved with a floored
+    // pivot (a small proximal term), and said so.
+    let mut p = problem_1d();
+    p.h[0][1] = 1.0;
+    p.h[1][0] = 1.0;
+    *s.problem_mut() = p;
+    assert_eq!(s.solve(), QpStatus::Optimal);
+    assert_eq!(s.solution().floored_pivots, 1);
 }
 
 #[test]

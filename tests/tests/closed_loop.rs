@@ -43,16 +43,16 @@ fn common(r: &RunResult, mu: f64) {
     assert_eq!(s.plan_deadline_misses, 0);
     assert_eq!(s.control_deadline_misses, 0);
     assert_eq!(s.plan_failures, 0, "every plan optimal");
-    // The controller brakes gently until the first plan is published (it takes
-    // the cold start's response time, under 20 ms), never after.
-    assert!(
-        s.control_safe_actuations <= 2,
-        "{}",
-        s.control_safe_actuations
-    );
-    let first_following = r.log.iter().position(|l| l.control_mode == "following");
-    assert!(first_following.is_some_and(|i| i <= 2));
-    assert!(r.log.iter().skip(3).all(|l| l.control_mode != "safe"));
+    // The controller brakes gently until the first plan is published (the cold
+    // start's response time on the ECU, about 23 ms), never after.
+    let first_following = r
+        .log
+        .iter()
+        .position(|l| l.control_mode == "following")
+        .unwrap();
+    assert!(first_following <= 5, "first plan followed at row {first_following}");
+    assert_eq!(s.control_safe_actuations as usize, first_following);
+    assert!(r.log.iter().skip(first_following).all(|l| l.control_mode != "safe"));
     // Almost no slip (the paper's claim): slip angles of a few degrees.
     assert!(
         s.max_abs_slip_angle_rad < 0.1,
