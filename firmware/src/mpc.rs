@@ -50,7 +50,7 @@
 use crate::bicycle::{self, BicycleGeometry};
 use crate::obstacles::{Parabola, Side};
 use crate::plan::{Plan, HORIZON, PLAN_DT_S};
-use crate::qp::{ldl_len, QpProblem, QpSolution, QpSolver, QpStatus};
+use crate::qp::{add_square_root_row, ldl_len, QpProblem, QpSolution, QpSolver, QpStatus};
 use crate::reference_path::ReferencePath;
 use crate::state_estimate::StateEstimate;
 use crate::validity::{kinematic_steering_for_radius, ValidityLimit};
@@ -581,14 +581,17 @@ impl<T: Real> Mpc<T> {
             .accel_max_mps2
             .min(grip * st.driven_load_share)
             .max(T::ZERO);
+        // The Hessian is kept as its factor R (H = RᵀR), updated by a Givens row per
+        // squared cost term: in f32, H itself would span more than 1/ε.
+        qp.h_factor = true;
         for k in 0..HORIZON {
             let (ia, ir) = (2 * k, 2 * k + 1);
             qp.x_lo[ia] = a_lo;
             qp.x_hi[ia] = a_hi;
             qp.x_lo[ir] = -st.steer_rate_max_radps;
             qp.x_hi[ir] = st.steer_rate_max_radps;
-            qp.h[ia][ia] += two * w.q_accel;
-            qp.h[ir][ir] += two * w.q_delta_rate;
+            qp.h[ia][ia] = (two * w.q_accel).sqrt();
+            qp.h[ir][ir] = (two * w.q_delta_rate).sqrt();
         }
         v_heur[0] = velocity_planner::v_heur(&st.velocity, path, xi0[IS], v0, mu);
 
@@ -832,22 +835,19 @@ fn dot<T: Real>(row: &[T; NV], u: &[[T; NU]; HORIZON], ncols: usize) -> T {
     acc
 }
 
-/// Adds `½·w·(rowᵀu + d)²` to the QP cost (upper triangle of `H`): `H += w·row·rowᵀ`,
-/// `f += w·d·row`. (`w = 2q` for a cost `q(·)²`.)
+/// Adds `½·w·(rowᵀu + d)²` to the QP cost: `H += w·row·rowᵀ` through its factor
+/// (a Givens row `√w·row`), `f += w·d·row`. (`w = 2q` for a cost `q(·)²`.)
 fn add_cost<T: Real>(qp: &mut MpcQpProblem<T>, row: &[T; NV], ncols: usize, w: T, d: T) {
     if w == T::ZERO {
         return;
     }
+    let sw = w.sqrt();
+    let mut x = [T::ZERO; NV];
     for i in 0..ncols {
-        let wi = w * row[i];
-        if wi == T::ZERO {
-            continue;
-        }
-        qp.f[i] += wi * d;
-        for j in i..ncols {
-            qp.h[i][j] += wi * row[j];
-        }
+        qp.f[i] += w * row[i] * d;
+        x[i] = sw * row[i];
     }
+    add_square_root_row(&mut qp.h, &mut x, ncols);
 }
 
 fn push_row<T: Real>(qp: &mut MpcQpProblem<T>, row: &[T; NV], lo: T, hi: T, rho: T) -> bool {

@@ -274,6 +274,13 @@ pub struct QpProblem<T, const N: usize, const M: usize> {
     pub soft: [T; M],
     /// Number of rows in use, `m ≤ M`.
     pub m: usize,
+    /// When true, `h` holds not `H` but an upper-triangular factor `R` with
+    /// `H = RᵀR` (lower triangle ignored; the sign of a row is free). A caller that
+    /// builds its cost as a sum of squares (the MPC) can maintain `R` by Givens
+    /// rotations ([`add_square_root_row`]): `R`'s condition number is the square root
+    /// of `H`'s, which keeps single precision accurate where forming `H` and
+    /// factorising it would not.
+    pub h_factor: bool,
 }
 
 impl<T: Real, const N: usize, const M: usize> QpProblem<T, N, M> {
@@ -289,6 +296,7 @@ impl<T: Real, const N: usize, const M: usize> QpProblem<T, N, M> {
             x_hi: [T::ZERO; N],
             soft: [T::ZERO; M],
             m: 0,
+            h_factor: false,
         }
         .with_free_bounds()
     }
@@ -324,6 +332,7 @@ impl<T: Real, const N: usize, const M: usize> QpProblem<T, N, M> {
         self.x_hi.fill(T::INFINITY);
         self.soft.fill(T::ZERO);
         self.m = 0;
+        self.h_factor = false;
     }
 
     /// Appends a row `lo ≤ aᵀx ≤ hi` with soft weight `soft` (`0` = hard) at index `m`
@@ -564,7 +573,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 Some(st) => st,
                 None => {
                     scale(&mut self.problem, &mut self.work.col_scale);
-                    let floored = factor_h_counted(&mut self.problem.h);
+                    let floored = if self.problem.h_factor {
+                        invert_factor(&mut self.problem.h)
+                    } else {
+                        factor_h_counted(&mut self.problem.h)
+                    };
                     self.solution.floored_pivots = floored.unwrap_or(0);
                     if floored.is_none() {
                         QpStatus::NotConvex
@@ -635,7 +648,16 @@ fn is_nan<T: Real>(v: T) -> bool {
 /// `d_j = 1` where `H_jj` is not positive (the Cholesky then reports it).
 fn scale<T: Real, const N: usize, const M: usize>(p: &mut QpProblem<T, N, M>, cs: &mut [T; N]) {
     for j in 0..N {
-        let hjj = p.h[j][j];
+        // H_jj, from R's column j when `h` holds the factor.
+        let hjj = if p.h_factor {
+            let mut acc = T::ZERO;
+            for i in 0..=j {
+                acc += p.h[i][j] * p.h[i][j];
+            }
+            acc
+        } else {
+            p.h[j][j]
+        };
         cs[j] = if hjj > T::ZERO && hjj.is_finite() {
             T::ONE / hjj.sqrt()
         } else {
@@ -644,7 +666,12 @@ fn scale<T: Real, const N: usize, const M: usize>(p: &mut QpProblem<T, N, M>, cs
     }
     for i in 0..N {
         for j in i..N {
-            p.h[i][j] = p.h[i][j] * cs[i] * cs[j];
+            // DHD, or R D for a factor (then (RD)ᵀ(RD) = DHD).
+            p.h[i][j] = if p.h_factor {
+                p.h[i][j] * cs[j]
+            } else {
+                p.h[i][j] * cs[i] * cs[j]
+            };
         }
         p.f[i] *= cs[i];
         // Bounds on y = D⁻¹x (±∞ stay ±∞).
@@ -703,8 +730,67 @@ fn validate<T: Real, const N: usize, const M: usize>(p: &QpProblem<T, N, M>) -> 
     }
 }
 
+/// `h` holds an upper-triangular factor `R` (`H = RᵀR`): makes its diagonal
+/// positive (a row's sign is free), floors a pivot below `√ε·‖R_·j‖` as
+/// [`factor_h_counted`] does, and inverts it in place. `None` for a zero or
+/// non-finite column.
+fn invert_factor<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
+    let mut floored = 0u32;
+    for j in 0..N {
+        if h[j][j] < T::ZERO {
+            for v in h[j].iter_mut().skip(j) {
+                *v = -*v;
+            }
+        }
+        let mut col = T::ZERO;
+        for i in 0..=j {
+            col += h[i][j] * h[i][j];
+        }
+        let norm = col.sqrt();
+        if !(norm > T::ZERO) || !norm.is_finite() {
+            return None;
+        }
+        let floor = T::EPSILON.sqrt() * norm;
+        if !(h[j][j] > floor) {
+            h[j][j] = floor;
+            floored += 1;
+        }
+    }
+    invert_upper(h);
+    Some(floored)
+}
+
+/// Adds the square `(xᵀy)²` to the cost whose Hessian factor `R` (`H = RᵀR`, upper
+/// triangle of `r`) is kept: after the call `RᵀR` gains `x xᵀ`. Givens rotations,
+/// `O(n²)`, only over the first `ncols` entries of `x` (the rest must be zero);
+/// `x` is destroyed. Each rotation takes one `hypot`.
+pub fn add_square_root_row<T: Real, const N: usize>(
+    r: &mut [[T; N]; N],
+    x: &mut [T; N],
+    ncols: usize,
+) {
+    let n = ncols.min(N);
+    for k in 0..n {
+        let xk = x[k];
+        if xk == T::ZERO {
+            continue;
+        }
+        let rkk = r[k][k];
+        let rho = rkk.hypot(xk);
+        let (c, s) = (rkk / rho, xk / rho);
+        r[k][k] = rho;
+        for j in (k + 1)..n {
+            let (a, b) = (r[k][j], x[j]);
+            r[k][j] = c * a + s * b;
+            x[j] = c * b - s * a;
+        }
+        x[k] = T::ZERO;
+    }
+}
+
 /// Cholesky `H = RᵀR` in the upper triangle, then `R ← R⁻¹` in place, lower triangle
 /// zeroed. False if a pivot is not clearly positive.
+#[cfg(test)]
 fn factor_h<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> bool {
     factor_h_counted(h).is_some()
 }
@@ -750,7 +836,13 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
             h[j][i] = s / rjj;
         }
     }
-    // In-place inverse of the upper-triangular R, column by column.
+    invert_upper(h);
+    Some(floored)
+}
+
+/// In-place inverse of the upper-triangular `R` (positive diagonal), column by
+/// column; lower triangle zeroed.
+fn invert_upper<T: Real, const N: usize>(h: &mut [[T; N]; N]) {
     for j in 0..N {
         let inv = T::ONE / h[j][j];
         h[j][j] = inv;
@@ -771,7 +863,6 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
             *v = T::ZERO;
         }
     }
-    Some(floored)
 }
 
 /// `a_i ← a_iᵀ R⁻¹` for the used rows, and `v = R⁻ᵀ f`.

@@ -54,8 +54,8 @@ pub const HOST_PATH_CAP: usize = 4096;
 ///
 /// Calibrated on the `mpc_step` ECU binary under QEMU (`-icount shift=3`, one
 /// instruction per 8 ns of virtual time): a least-squares fit of its 150 steps
-/// (`.ci/ecu-check` prints them) gives 392,269 instructions per pass, 8,718 per
-/// row and pass, 14,341 per QP iteration, within 4.2 % of every step; the control
+/// (`.ci/ecu-check` prints them) gives 542,657 instructions per pass, 8,537 per
+/// row and pass, 13,416 per QP iteration, within 4.6 % of every step; the control
 /// task took at most 771 instructions. Instructions become cycles at 1.34 cycles
 /// per instruction (a 168 MHz Cortex-M4F with flash wait states), plus 5 % for the
 /// fit's largest error, so the estimate does not undercount.
@@ -80,9 +80,9 @@ impl Default for CostModel {
         let cycles = 1.34 * 1.05;
         Self {
             plan_base: 0.0,
-            plan_per_pass: 392_269.0 * cycles,
-            plan_per_row: 8_718.0 * cycles,
-            plan_per_iteration: 14_341.0 * cycles,
+            plan_per_pass: 542_657.0 * cycles,
+            plan_per_row: 8_537.0 * cycles,
+            plan_per_iteration: 13_416.0 * cycles,
             control: 771.0 * cycles,
         }
     }

@@ -122,9 +122,14 @@ pub struct NativeQp {
     pub n: usize,
     /// General rows in use.
     pub m: usize,
-    /// `H`, `n×n` row-major; only the upper triangle is meaningful.
+    /// `H`, `n×n` row-major; only the upper triangle is meaningful. When
+    /// [`NativeQp::h_factor`], the upper-triangular factor `R` of `H = RᵀR` instead
+    /// (what the MPC hands the solver; [`NativeQp::h_sym`] gives `H` either way).
     #[serde(rename = "H")]
     pub h: Vec<f64>,
+    /// `H` holds the factor `R` (`QpProblem::h_factor`).
+    #[serde(default, rename = "H_is_factor")]
+    pub h_factor: bool,
     /// Linear cost, `n`.
     pub f: Vec<f64>,
     /// Rows, `m×n` row-major.
@@ -235,6 +240,7 @@ impl NativeQp {
             n: NV,
             m,
             h: p.h.iter().flat_map(|r| conv(r)).collect(),
+            h_factor: p.h_factor,
             f: conv(&p.f),
             a: rows.iter().flat_map(|r| conv(r)).collect(),
             lo: conv_opt(p.lo.get(..m).unwrap_or(&[])),
@@ -278,6 +284,7 @@ impl NativeQp {
         self.check()?;
         let n = self.n;
         p.clear();
+        p.h_factor = self.h_factor;
         for (r, row) in p.h.iter_mut().enumerate() {
             for (c, v) in row.iter_mut().enumerate() {
                 *v = T::from_f64(self.h.get(r * n + c).copied().unwrap_or(0.0));
@@ -327,10 +334,20 @@ impl NativeQp {
             .collect()
     }
 
-    /// `H[r][c]` of the symmetric Hessian, read from the upper triangle.
+    /// `H[r][c]` of the symmetric Hessian, read from the upper triangle (or
+    /// `(RᵀR)[r][c]` from the factor).
     pub fn h_sym(&self, r: usize, c: usize) -> f64 {
         let (i, j) = if r <= c { (r, c) } else { (c, r) };
-        self.h.get(i * self.n + j).copied().unwrap_or(0.0)
+        if self.h_factor {
+            (0..=i)
+                .map(|k| {
+                    self.h.get(k * self.n + i).copied().unwrap_or(0.0)
+                        * self.h.get(k * self.n + j).copied().unwrap_or(0.0)
+                })
+                .sum()
+        } else {
+            self.h.get(i * self.n + j).copied().unwrap_or(0.0)
+        }
     }
 
     /// `a_iᵀ x` for row `i`.

@@ -50,9 +50,16 @@ fn common(r: &RunResult, mu: f64) {
         .iter()
         .position(|l| l.control_mode == "following")
         .unwrap();
-    assert!(first_following <= 5, "first plan followed at row {first_following}");
+    assert!(
+        first_following <= 5,
+        "first plan followed at row {first_following}"
+    );
     assert_eq!(s.control_safe_actuations as usize, first_following);
-    assert!(r.log.iter().skip(first_following).all(|l| l.control_mode != "safe"));
+    assert!(r
+        .log
+        .iter()
+        .skip(first_following)
+        .all(|l| l.control_mode != "safe"));
     // Almost no slip (the paper's claim): slip angles of a few degrees.
     assert!(
         s.max_abs_slip_angle_rad < 0.1,
