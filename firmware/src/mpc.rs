@@ -53,7 +53,9 @@ use crate::plan::{Plan, HORIZON, PLAN_DT_S};
 use crate::qp::{add_square_root_row, ldl_len, QpProblem, QpSolution, QpSolver, QpStatus};
 use crate::reference_path::ReferencePath;
 use crate::state_estimate::StateEstimate;
-use crate::validity::{kinematic_steering_for_radius, ValidityLimit};
+use crate::validity::{
+    kinematic_lateral_acceleration, kinematic_steering_for_radius, ValidityLimit,
+};
 use crate::velocity_planner::{self, VelocityPlannerSettings};
 use crate::Real;
 
@@ -178,9 +180,12 @@ pub struct MpcSettings<T> {
     /// the tyres can transmit on the road of friction `μ` (not in the paper, whose
     /// bounds `[−8, 6] m/s²` assume a dry road and enough grip).
     pub driven_load_share: T,
-    /// Fraction of the friction `μ·g` the plan may use longitudinally: the
-    /// acceleration bounds are `max(accel_min, −f·μ·g)` and
-    /// `min(accel_max, f·μ·g·driven_load_share)`, with `f` this fraction.
+    /// Fraction `f` of the friction `μ·g` the plan may use: the acceleration bounds
+    /// are `max(accel_min, −f·μ·g)` and `min(accel_max, f·μ·g·driven_load_share)`,
+    /// the upper one scaled by `√(1 − (a_y/(f·μ·g))²)` where the nominal trajectory
+    /// turns with lateral acceleration `a_y` (a friction ellipse on the plan's
+    /// traction; not in the paper, whose car accelerating out of a curve at
+    /// 0.5·μ·g lateral would spin its front tyres).
     pub friction_usage: T,
     /// Mechanical steering limit `|δ|`, rad.
     pub delta_mech_max_rad: T,
@@ -604,6 +609,16 @@ impl<T: Real> Mpc<T> {
         let mut row = [T::ZERO; NV];
         let mut next = [[T::ZERO; NV]; NX];
         for k in 0..HORIZON {
+            // Friction ellipse on the plan's traction: the upper acceleration bound
+            // of interval k shrinks with the lateral acceleration the nominal
+            // trajectory needs at its start, so that the plan does not ask the
+            // driven tyres for more than `friction_usage·μ·g` in all. Braking keeps
+            // its bound: slowing down is what restores the validity domain.
+            {
+                let ay = kinematic_lateral_acceleration(&st.geometry, xbar[IV], xbar[IDELTA]);
+                let r = (ay / grip).abs().min(T::ONE);
+                qp.x_hi[2 * k] = a_hi * (T::ONE - r * r).sqrt();
+            }
             let lin = bicycle::discretize(&st.geometry, &xbar, &u_bar[k], dt);
             // S_{k+1} = A S_k + B E_k (columns beyond 2k+1 stay zero).
             let used = 2 * k;

@@ -94,6 +94,12 @@ fn paper_track_without_obstacles_mu_1() {
     let r = lap(false, 1.0);
     common(&r, 1.0);
     let s = &r.summary;
+    // Almost no wheel slip either (the plan's friction ellipse, see MpcSettings).
+    assert!(
+        s.max_abs_slip_ratio < 0.1,
+        "slip ratio {}",
+        s.max_abs_slip_ratio
+    );
     assert!(
         s.max_abs_lateral_error_m <= 0.4,
         "lateral error {}",
