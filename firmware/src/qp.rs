@@ -442,8 +442,6 @@ struct Workspace<T, const N: usize, const M: usize, const W: usize, const WL: us
     updates: u32,
     /// Pivot of the last `append` relative to its diagonal entry.
     last_rel_pivot: T,
-    /// Column scaling `d_j = 1/√H_jj` of the current solve (`N`).
-    col_scale: [T; N],
 }
 
 /// The solver: settings, problem, workspace and solution in one value (for a
@@ -500,7 +498,6 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 bound_state: [None; N],
                 updates: 0,
                 last_rel_pivot: T::ZERO,
-                col_scale: [T::ONE; N],
             },
             solution: QpSolution::new(),
             consumed: false,
@@ -572,7 +569,6 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             match validate(&self.problem) {
                 Some(st) => st,
                 None => {
-                    scale(&mut self.problem, &mut self.work.col_scale);
                     let floored = if self.problem.h_factor {
                         invert_factor(&mut self.problem.h)
                     } else {
@@ -592,19 +588,6 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
         };
         self.solution.status = status;
-        if !matches!(
-            status,
-            QpStatus::Optimal
-                | QpStatus::IterationLimit
-                | QpStatus::Infeasible
-                | QpStatus::WorkingSetFull
-                | QpStatus::NumericalError
-        ) && self.consumed
-        {
-            // Restore the caller's bounds, costs and weights if they were scaled.
-            let mut dummy = QpSolution::new();
-            unscale(&mut self.problem, &mut dummy, &self.work.col_scale);
-        }
         match status {
             QpStatus::Optimal
             | QpStatus::IterationLimit
@@ -612,7 +595,6 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             | QpStatus::WorkingSetFull
             | QpStatus::NumericalError => {
                 self.work.output(&self.problem, &mut self.solution);
-                unscale(&mut self.problem, &mut self.solution, &self.work.col_scale);
             }
             _ => {
                 self.work.n = 0;
@@ -641,68 +623,6 @@ fn is_nan<T: Real>(v: T) -> bool {
 }
 
 /// Input checks; `None` if the problem is acceptable.
-/// Equilibrates the problem in place by columns: `d_j = 1/√H_jj`, so `DHD` has a
-/// unit diagonal, with `f ← Df`, rows `a_i ← a_i D` and bounds on `y = D⁻¹x`. The
-/// condensed MPC Hessian's diagonal spans six orders of magnitude; a unit diagonal
-/// keeps its single-precision Cholesky accurate. The dual problem is unchanged.
-/// `d_j = 1` where `H_jj` is not positive (the Cholesky then reports it).
-fn scale<T: Real, const N: usize, const M: usize>(p: &mut QpProblem<T, N, M>, cs: &mut [T; N]) {
-    for j in 0..N {
-        // H_jj, from R's column j when `h` holds the factor.
-        let hjj = if p.h_factor {
-            let mut acc = T::ZERO;
-            for i in 0..=j {
-                acc += p.h[i][j] * p.h[i][j];
-            }
-            acc
-        } else {
-            p.h[j][j]
-        };
-        cs[j] = if hjj > T::ZERO && hjj.is_finite() {
-            T::ONE / hjj.sqrt()
-        } else {
-            T::ONE
-        };
-    }
-    for i in 0..N {
-        for j in i..N {
-            // DHD, or R D for a factor (then (RD)ᵀ(RD) = DHD).
-            p.h[i][j] = if p.h_factor {
-                p.h[i][j] * cs[j]
-            } else {
-                p.h[i][j] * cs[i] * cs[j]
-            };
-        }
-        p.f[i] *= cs[i];
-        // Bounds on y = D⁻¹x (±∞ stay ±∞).
-        p.x_lo[i] /= cs[i];
-        p.x_hi[i] /= cs[i];
-    }
-    let m = p.m.min(M);
-    for row in p.a.iter_mut().take(m) {
-        for j in 0..N {
-            row[j] *= cs[j];
-        }
-    }
-}
-
-/// Undoes [`scale`] on the caller's data (`f` and the bounds; `H` and the rows are
-/// consumed anyway) and maps the solution back: `x = D y`, bound multipliers
-/// `μ_j = μ'_j / d_j` (row multipliers and the objective are invariant).
-fn unscale<T: Real, const N: usize, const M: usize>(
-    p: &mut QpProblem<T, N, M>,
-    sol: &mut QpSolution<T, N, M>,
-    cs: &[T; N],
-) {
-    for j in 0..N {
-        p.f[j] /= cs[j];
-        p.x_lo[j] *= cs[j];
-        p.x_hi[j] *= cs[j];
-        sol.x[j] *= cs[j];
-        sol.lambda_bounds[j] /= cs[j];
-    }
-}
-
 fn validate<T: Real, const N: usize, const M: usize>(p: &QpProblem<T, N, M>) -> Option<QpStatus> {
     if p.m > M {
         return Some(QpStatus::InvalidInput);

@@ -461,3 +461,19 @@ fn infeasible_over_fixed_seeds() {
     println!("3000 infeasible problems: {counts:?}");
     assert_eq!(counts.get("Infeasible"), Some(&3000), "{counts:?}");
 }
+
+/// A case the property test above once found (f64): a contradiction whose
+/// infeasibility certificate was lost to rounding gave `NumericalError`.
+#[test]
+fn infeasible_regression_seed_11089739763387800491() {
+    let mut rng = Rng::new(11089739763387800491);
+    let m = 10;
+    let mut p = random_problem::<N2, M2>(&mut rng, Mix { m, ..Mix::all(m) });
+    inject_contradiction(&mut p, &mut rng, 1);
+    let mut s = Box::new(Medium::new());
+    s.settings.warm_start = false;
+    *s.problem_mut() = p.clone();
+    let st = s.solve();
+    println!("status {st:?} iterations {}", s.solution().iterations);
+    assert!(st == QpStatus::Infeasible, "{st:?}");
+}
