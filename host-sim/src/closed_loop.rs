@@ -631,7 +631,8 @@ pub fn run<T: Real>(
 
             // Measurements of this instant.
             let (s, lat) = track.project([st.x_m, st.y_m], s_hint);
-            if let Some(h) = s_hint {
+            if s_hint.is_some() {
+                // Arc length driven since the last sample (across the lap line too).
                 let mut ds = s - s_prev;
                 if track.closed {
                     if ds > 0.5 * lap_length {
@@ -640,7 +641,6 @@ pub fn run<T: Real>(
                         ds += lap_length;
                     }
                 }
-                let _ = h;
                 progress_m += ds;
             }
             s_prev = s;
