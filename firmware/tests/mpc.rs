@@ -266,34 +266,61 @@ fn obstacle_across_the_centre_line_is_passed_on_the_roomier_side() {
 
 #[test]
 fn warm_start_takes_fewer_qp_iterations_than_cold_start() {
+    // A real MPC sequence: along a straight past two obstacles into a curve, each
+    // QP solved warm (from the previous working set, as the MPC does) and the very
+    // same QP solved again cold by a fresh solver.
     let s = settings::<f64>();
-    let path = circle::<f64>(25.0);
-    let obs = ObstacleManager::new();
-    let d0 = kinematic_steering_for_radius(&geometry::<f64>(), 25.0).unwrap();
-    let runs = drive(&s, &path, &obs, est(0.0, 0.0, 0.0, 11.0, d0, 0), 1.0, 40);
-    // Re-solve each QP of the sequence cold (fresh workspace, one pass from the
-    // same shifted nominal is not available cold, so compare like for like: a
-    // fresh MPC warm-started only by the linearisation vs the receding one).
-    let (mut warm, mut cold) = (0u32, 0u32);
-    for (k, (plan, rep)) in runs.iter().enumerate().skip(5) {
-        warm += rep.qp_iterations;
-        let mut fresh = Box::new(Mpc::<f64>::new());
-        let mut p = Plan::zeroed();
-        let n = plan.nodes[0];
-        let e = est(
-            n.x_m,
-            n.y_m,
-            n.psi_rad,
-            n.v_mps,
-            n.delta_rad,
-            (k as u64) * 100_000,
-        );
-        let mut one = s;
-        one.cold_start_iterations = 1;
-        let r = fresh.step(&one, &path, &[], &e, 1.0, &mut p).unwrap();
-        cold += r.qp_iterations;
+    let mut rows = Vec::new();
+    for i in 0..60 {
+        rows.push([i as f64 * 2.0, 0.0, 4.0, 4.0]);
     }
-    println!("warm {warm} cold {cold}");
+    for i in 1..=40 {
+        let a = -std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * i as f64 / 40.0;
+        rows.push([118.0 + 25.0 * a.cos(), 25.0 + 25.0 * a.sin(), 4.0, 4.0]);
+    }
+    let mut path = Box::new(ReferencePath::<f64, CAP>::new());
+    path.load_track(&rows, false).unwrap();
+    let mut obs = ObstacleManager::new();
+    let boxes = [
+        box_obstacle(40.0, -1.5, 2.0, 1.0),
+        box_obstacle(80.0, 1.5, 2.0, 1.0),
+    ];
+    obs.update(&ObstacleSettings::default(), &path, &boxes)
+        .unwrap();
+    let mut mpc = Box::new(Mpc::<f64>::new());
+    let mut e = est(0.0, 0.0, 0.0, 12.0, 0.0, 0);
+    let (mut warm, mut cold, mut steps) = (0u32, 0u32, 0u32);
+    for step in 0..60 {
+        let mut plan = Plan::zeroed();
+        let mut copy: Option<Box<firmware::mpc::MpcQpProblem<f64>>> = None;
+        let mut its = 0;
+        mpc.step_observed(
+            &s,
+            &path,
+            obs.parabolas(),
+            &e,
+            1.0,
+            &mut plan,
+            |q| copy = Some(Box::new(q.clone())),
+            |sol| its = sol.iterations,
+        )
+        .unwrap();
+        if step > 0 {
+            let mut fresh = Box::new(firmware::mpc::MpcQp::<f64>::new());
+            fresh.settings.warm_start = false;
+            *fresh.problem_mut() = *copy.unwrap();
+            assert_eq!(fresh.solve(), firmware::qp::QpStatus::Optimal);
+            warm += its;
+            cold += fresh.solution().iterations;
+            steps += 1;
+        }
+        let mut xi = [0.0, e.x_m, e.y_m, e.speed_mps(), e.psi_rad, e.delta_rad];
+        for _ in 0..10 {
+            xi = s.geometry.discretize(&xi, &plan.inputs[0], 0.01).x_next;
+        }
+        e = est(xi[1], xi[2], xi[4], xi[3], xi[5], e.stamp_us + 100_000);
+    }
+    println!("{steps} QPs: warm {warm} iterations, cold {cold}");
     assert!(warm < cold, "warm {warm} vs cold {cold}");
 }
 
