@@ -117,6 +117,20 @@ impl<T: Real> ObstacleSettings<T> {
         ay_mps2 / (T::TWO * v_mps * v_mps)
     }
 
+    /// Settings for a car `width_m` × `length_m` (m) planned up to `v_max_mps` (m/s)
+    /// on a road of friction `mu`: skirting a parabola at `v_max_mps` takes a
+    /// quarter of `μ·g` of lateral acceleration (half the validity limit, leaving
+    /// the rest for the road's own curvature). Other fields as [`Default`].
+    pub fn for_vehicle(width_m: T, length_m: T, mu: T, v_max_mps: T) -> Self {
+        let ay = T::lit(0.25) * mu * T::lit(crate::G);
+        Self {
+            steepness_1pm: Self::steepness_for(ay, v_max_mps.max(T::lit(5.0))),
+            half_car_width_m: T::HALF * width_m,
+            half_car_length_m: T::HALF * length_m,
+            ..Self::default()
+        }
+    }
+
     /// Lateral inflation `m_y` = half width + buffer, m.
     pub fn lateral_margin_m(&self) -> T {
         self.half_car_width_m + self.lateral_buffer_m

@@ -350,25 +350,18 @@ pub fn low_level_config<T: Real>(v: &VehicleParams) -> LowLevelConfig<T> {
 }
 
 /// The obstacle manager's settings for a vehicle, a planner friction `mu` and the
-/// planner's top speed `v_max_mps`: the parabolas' steepness is such that skirting
-/// one at `v_max_mps` takes a quarter of `μ·g` of lateral acceleration
-/// (`c = a_y/(2V²)`), half of the validity limit, leaving the rest for the road's
-/// own curvature.
+/// planner's top speed `v_max_mps` ([`ObstacleSettings::for_vehicle`]).
 pub fn obstacle_settings<T: Real>(
     v: &VehicleParams,
     mu: f64,
     v_max_mps: f64,
 ) -> ObstacleSettings<T> {
-    let ay = 0.25 * mu * f64::from(firmware::G);
-    ObstacleSettings {
-        half_car_width_m: T::from_f64(0.5 * vehicle_width_m(v)),
-        half_car_length_m: T::from_f64(0.5 * vehicle_length_m(v)),
-        steepness_1pm: ObstacleSettings::steepness_for(
-            T::from_f64(ay),
-            T::from_f64(v_max_mps.max(5.0)),
-        ),
-        ..ObstacleSettings::default()
-    }
+    ObstacleSettings::for_vehicle(
+        T::from_f64(vehicle_width_m(v)),
+        T::from_f64(vehicle_length_m(v)),
+        T::from_f64(mu),
+        T::from_f64(v_max_mps),
+    )
 }
 
 fn estimate<T: Real>(s: &State, delta_rad: f64, t_us: u64) -> StateEstimate<T> {

@@ -119,10 +119,8 @@ fn main() -> ! {
             let _ = list.push(o);
         }
     }
-    let obstacle_settings = ObstacleSettings {
-        steepness_1pm: ObstacleSettings::steepness_for(0.25 * 9.81, 25.6),
-        ..ObstacleSettings::default()
-    };
+    let obstacle_settings =
+        ObstacleSettings::for_vehicle(1.8, 4.45, 1.0, settings.velocity.v_max_mps(1.0));
     if obstacles.update(&obstacle_settings, path, &list).is_err() {
         hprintln!("mpc_step: obstacles rejected");
         exit(false);
