@@ -229,6 +229,10 @@ fn main() -> ! {
         core::mem::size_of::<Mpc<f32>>()
     );
     hprintln!(
+        "mpc_step: qp_solver_bytes={}",
+        core::mem::size_of::<firmware::mpc::MpcQp<f32>>()
+    );
+    hprintln!(
         "mpc_step: control_max_instructions={}",
         to_instr(control_max as u64)
     );
