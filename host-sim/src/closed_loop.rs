@@ -527,6 +527,7 @@ pub fn run<T: Real>(
     let mut s_hint: Option<f64> = None;
     let mut progress_m = 0.0f64;
     let mut s_prev = 0.0f64;
+    let projector = track.projector();
     let lap_length = track.length();
     let target_m = if track.closed {
         lap_length * opts.laps.max(1) as f64
@@ -623,7 +624,7 @@ pub fn run<T: Real>(
             }
 
             // Measurements of this instant.
-            let (s, lat) = track.project([st.x_m, st.y_m], s_hint);
+            let (s, lat) = projector.project([st.x_m, st.y_m], s_hint);
             if s_hint.is_some() {
                 // Arc length driven since the last sample (across the lap line too).
                 let mut ds = s - s_prev;

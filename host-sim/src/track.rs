@@ -640,15 +640,67 @@ impl Track {
     /// left it, and the whole track is searched instead. Without a hint the
     /// whole track is searched. O(n).
     pub fn project(&self, p: [f64; 2], hint_s: Option<f64>) -> (f64, f64) {
-        let cum = self.arc_lengths();
-        let total = self.length();
+        self.projector().project(p, hint_s)
+    }
+
+    /// A [`Projector`]: the track's segment lengths computed once, for projecting
+    /// many points (the simulator projects the car every 10 ms).
+    pub fn projector(&self) -> Projector<'_> {
         let nseg = self.segment_count();
+        let mut s0 = Vec::with_capacity(nseg);
+        let mut len = Vec::with_capacity(nseg);
+        let mut acc = 0.0;
+        for i in 0..nseg {
+            let (a, b) = self.segment(i);
+            let l = dist(a, b);
+            s0.push(acc);
+            len.push(l);
+            acc += l;
+        }
+        Projector {
+            track: self,
+            s0,
+            len,
+            total: acc,
+        }
+    }
+
+    /// Pose `[x (m), y (m), heading (rad)]` on the centre line at the first
+    /// point, heading towards the second.
+    pub fn start_pose(&self) -> [f64; 3] {
+        match (self.points.first(), self.points.get(1)) {
+            (Some(a), Some(b)) => [a[0], a[1], (b[1] - a[1]).atan2(b[0] - a[0])],
+            (Some(a), None) => [a[0], a[1], 0.0],
+            _ => [0.0, 0.0, 0.0],
+        }
+    }
+}
+
+/// Projection onto a [`Track`] with its segment lengths computed once
+/// ([`Track::projector`]); same results as [`Track::project`].
+#[derive(Debug, Clone)]
+pub struct Projector<'a> {
+    track: &'a Track,
+    /// Arc length at the start of each segment, m.
+    s0: Vec<f64>,
+    /// Length of each segment, m.
+    len: Vec<f64>,
+    /// Track length, m.
+    total: f64,
+}
+
+impl Projector<'_> {
+    /// As [`Track::project`]: `(s, lateral)`, m, of the point `p` (m), searched
+    /// near `hint_s` (m) when given.
+    pub fn project(&self, p: [f64; 2], hint_s: Option<f64>) -> (f64, f64) {
+        let track = self.track;
+        let total = self.total;
         if !(total > 0.0 && total.is_finite()) {
             return (0.0, 0.0);
         }
         let circ = |a: f64, b: f64| -> f64 {
             let d = (a - b).abs();
-            if self.closed && total > 0.0 {
+            if track.closed && total > 0.0 {
                 let d = d % total;
                 d.min(total - d)
             } else {
@@ -657,12 +709,11 @@ impl Track {
         };
         let search = |window: Option<f64>| -> Option<(f64, f64, f64)> {
             let mut best: Option<(f64, f64, f64)> = None; // (dist, s, lateral)
-            for (i, &s0) in cum.iter().enumerate().take(nseg) {
-                let (a, b) = self.segment(i);
-                let len = dist(a, b);
+            for (i, (&s0, &len)) in self.s0.iter().zip(&self.len).enumerate() {
+                let (a, b) = track.segment(i);
                 if let Some(h) = window {
                     // Distance in arc length from the hint to this segment.
-                    let gap = if self.closed {
+                    let gap = if track.closed {
                         let rel = (h - s0).rem_euclid(total);
                         if rel <= len {
                             0.0
@@ -686,39 +737,29 @@ impl Track {
                 }
                 let t = (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / l2).clamp(0.0, 1.0);
                 let q = [a[0] + t * dx, a[1] + t * dy];
-                let d = dist(p, q);
-                let cross = dx * (p[1] - a[1]) - dy * (p[0] - a[0]);
-                let lat = if cross >= 0.0 { d } else { -d };
-                let mut s = s0 + t * len;
-                if self.closed && total > 0.0 && s >= total {
-                    s -= total;
-                }
-                if best.is_none_or(|(bd, _, _)| d < bd) {
-                    best = Some((d, s, lat));
+                // Squared distance to compare; the root only for the result.
+                let d2 = (p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]);
+                if best.is_none_or(|(bd, _, _)| d2 < bd) {
+                    let cross = dx * (p[1] - a[1]) - dy * (p[0] - a[0]);
+                    let mut s = s0 + t * len;
+                    if track.closed && total > 0.0 && s >= total {
+                        s -= total;
+                    }
+                    best = Some((d2, s, if cross >= 0.0 { 1.0 } else { -1.0 }));
                 }
             }
-            best
+            best.map(|(d2, s, sign)| (d2, s, sign * d2.sqrt()))
         };
         let local = hint_s.filter(|h| h.is_finite()).and_then(|h| {
             search(Some(h)).filter(|&(_, s, _)| {
                 let at_edge = circ(s, h) >= PROJECTION_WINDOW_M - 1e-9;
-                let at_open_end = !self.closed && (s <= 0.0 || s >= total);
+                let at_open_end = !track.closed && (s <= 0.0 || s >= total);
                 !at_edge || at_open_end
             })
         });
         match local.or_else(|| search(None)) {
             Some((_, s, lat)) => (s, lat),
             None => (0.0, 0.0),
-        }
-    }
-
-    /// Pose `[x (m), y (m), heading (rad)]` on the centre line at the first
-    /// point, heading towards the second.
-    pub fn start_pose(&self) -> [f64; 3] {
-        match (self.points.first(), self.points.get(1)) {
-            (Some(a), Some(b)) => [a[0], a[1], (b[1] - a[1]).atan2(b[0] - a[0])],
-            (Some(a), None) => [a[0], a[1], 0.0],
-            _ => [0.0, 0.0, 0.0],
         }
     }
 }
