@@ -222,57 +222,19 @@ struct ClarabelData {
 fn clarabel_data(s: &StandardQp) -> ClarabelData {
     use clarabel::algebra::CscMatrix;
     use clarabel::solver::SupportedConeT;
-    let n = s.n;
-    let (mut pi, mut pj, mut pv) = (vec![], vec![], vec![]);
-    for r in 0..n {
-        for c in r..n {
-            let v = s.h[r * n + c];
-            if v != 0.0 {
-                pi.push(r);
-                pj.push(c);
-                pv.push(v);
-            }
-        }
-    }
-    let mut eq = vec![];
-    let mut ineq = vec![];
-    for i in 0..s.m {
-        match (s.lower[i], s.upper[i]) {
-            (Some(l), Some(u)) if l == u => eq.push((i, 1.0, u)),
-            (l, u) => {
-                if let Some(u) = u {
-                    ineq.push((i, 1.0, u));
-                }
-                if let Some(l) = l {
-                    ineq.push((i, -1.0, -l));
-                }
-            }
-        }
-    }
-    let (mut ai, mut aj, mut av, mut b) = (vec![], vec![], vec![], vec![]);
-    for (r, &(i, sign, bv)) in eq.iter().chain(ineq.iter()).enumerate() {
-        for c in 0..n {
-            let v = s.a[i * n + c];
-            if v != 0.0 {
-                ai.push(r);
-                aj.push(c);
-                av.push(sign * v);
-            }
-        }
-        b.push(bv);
-    }
+    let c = s.conic();
     let mut cones = vec![];
-    if !eq.is_empty() {
-        cones.push(SupportedConeT::ZeroConeT(eq.len()));
+    if c.n_eq > 0 {
+        cones.push(SupportedConeT::ZeroConeT(c.n_eq));
     }
-    if !ineq.is_empty() {
-        cones.push(SupportedConeT::NonnegativeConeT(ineq.len()));
+    if c.n_ineq > 0 {
+        cones.push(SupportedConeT::NonnegativeConeT(c.n_ineq));
     }
     ClarabelData {
-        p: CscMatrix::new_from_triplets(n, n, pi, pj, pv),
+        p: CscMatrix::new_from_triplets(c.n, c.n, c.p.0, c.p.1, c.p.2),
         q: s.f.clone(),
-        a: CscMatrix::new_from_triplets(b.len(), n, ai, aj, av),
-        b,
+        a: CscMatrix::new_from_triplets(c.b.len(), c.n, c.a.0, c.a.1, c.a.2),
+        b: c.b,
         cones,
     }
 }

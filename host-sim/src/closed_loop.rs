@@ -44,6 +44,25 @@ use crate::plant::{Inputs, Plant, State};
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleParams;
 
+/// Scalar the firmware computes in (the simulator can run it in either).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Precision {
+    /// Single precision (the ECU's).
+    F32,
+    /// Double precision.
+    F64,
+}
+
+impl Precision {
+    /// `"f32"` or `"f64"`, as written in the corpus.
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+}
+
 /// Point capacity of the reference path on the host (the ECU build picks its own).
 pub const HOST_PATH_CAP: usize = 4096;
 

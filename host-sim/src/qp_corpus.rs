@@ -95,24 +95,7 @@ const STEP_S: f64 = 0.1;
 /// Plant integration steps per planning period.
 const PLANT_SUBSTEPS: usize = 10;
 
-/// Floating-point type the MPC runs in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Precision {
-    /// Single precision (the ECU's).
-    F32,
-    /// Double precision.
-    F64,
-}
-
-impl Precision {
-    /// `"f32"` or `"f64"`, as written in the corpus.
-    pub fn name(self) -> &'static str {
-        match self {
-            Precision::F32 => "f32",
-            Precision::F64 => "f64",
-        }
-    }
-}
+pub use crate::closed_loop::Precision;
 
 /// The QP in our solver's own form (see the module doc): `min ½xᵀHx + fᵀx + Σ ½ρ_i s_i²`
 /// s.t. `x_lo ≤ x ≤ x_hi`, `lo_i (− s_i) ≤ a_iᵀx ≤ hi_i (+ s_i)`.
@@ -482,7 +465,77 @@ impl NativeQp {
     }
 }
 
+/// A [`StandardQp`] in the conic form of interior-point solvers such as Clarabel:
+/// `min ½zᵀPz + fᵀz` s.t. `A z + s = b`, `s` in `{0}^n_eq × ℝ₊^n_ineq`, as
+/// triplets (row, column, value) for a sparse matrix.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ConicQp {
+    /// Variables.
+    pub n: usize,
+    /// Upper triangle of `P = H`, triplets.
+    pub p: (Vec<usize>, Vec<usize>, Vec<f64>),
+    /// `A`, triplets: the equality rows first, then one row per finite side.
+    pub a: (Vec<usize>, Vec<usize>, Vec<f64>),
+    /// Right-hand side, one per row of `A`.
+    pub b: Vec<f64>,
+    /// Equality rows (the zero cone), first in `A`.
+    pub n_eq: usize,
+    /// Inequality rows (the non-negative cone), after them.
+    pub n_ineq: usize,
+}
+
 impl StandardQp {
+    /// The conic form: `lo = hi` rows become equalities, a finite upper side
+    /// `aᵀz ≤ hi` the row `aᵀz + s = hi`, a finite lower side `−aᵀz + s = −lo`.
+    pub fn conic(&self) -> ConicQp {
+        let n = self.n;
+        let mut c = ConicQp {
+            n,
+            ..ConicQp::default()
+        };
+        for r in 0..n {
+            for col in r..n {
+                let v = self.h.get(r * n + col).copied().unwrap_or(0.0);
+                if v != 0.0 {
+                    c.p.0.push(r);
+                    c.p.1.push(col);
+                    c.p.2.push(v);
+                }
+            }
+        }
+        let (mut eq, mut ineq) = (Vec::new(), Vec::new()); // (row, sign, b)
+        for i in 0..self.m {
+            match (
+                self.lower.get(i).copied().flatten(),
+                self.upper.get(i).copied().flatten(),
+            ) {
+                (Some(l), Some(u)) if l == u => eq.push((i, 1.0, u)),
+                (l, u) => {
+                    if let Some(u) = u {
+                        ineq.push((i, 1.0, u));
+                    }
+                    if let Some(l) = l {
+                        ineq.push((i, -1.0, -l));
+                    }
+                }
+            }
+        }
+        c.n_eq = eq.len();
+        c.n_ineq = ineq.len();
+        for (r, &(i, sign, bv)) in eq.iter().chain(ineq.iter()).enumerate() {
+            for col in 0..n {
+                let v = self.a.get(i * n + col).copied().unwrap_or(0.0);
+                if v != 0.0 {
+                    c.a.0.push(r);
+                    c.a.1.push(col);
+                    c.a.2.push(sign * v);
+                }
+            }
+            c.b.push(bv);
+        }
+        c
+    }
+
     /// `½zᵀHz + fᵀz`, cost units.
     pub fn objective(&self, z: &[f64]) -> f64 {
         let n = self.n.min(z.len());

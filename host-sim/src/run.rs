@@ -4,7 +4,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::closed_loop::{self, RunResult, SimOptions};
@@ -12,14 +12,7 @@ use crate::figures;
 use crate::scenario::{self, Scenario};
 use crate::vehicle::VehicleParams;
 
-/// Scalar the firmware computes in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum Precision {
-    /// Single precision, as on the ECU.
-    F32,
-    /// Double precision (to measure what single precision costs).
-    F64,
-}
+pub use crate::closed_loop::Precision;
 
 /// Arguments of `host-sim run`.
 #[derive(Debug, Clone, Args)]

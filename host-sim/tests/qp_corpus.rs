@@ -198,53 +198,16 @@ fn clarabel_solve(q: &StandardQp) -> (bool, Vec<f64>, f64) {
     use clarabel::solver::{
         DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
     };
-    let n = q.n;
-    let (mut pi, mut pj, mut pv) = (vec![], vec![], vec![]);
-    for r in 0..n {
-        for col in r..n {
-            let v = q.h[r * n + col];
-            if v != 0.0 {
-                pi.push(r);
-                pj.push(col);
-                pv.push(v);
-            }
-        }
-    }
-    let mut eq: Vec<(usize, f64, f64)> = vec![]; // (row, sign, b)
-    let mut ineq: Vec<(usize, f64, f64)> = vec![];
-    for i in 0..q.m {
-        match (q.lower[i], q.upper[i]) {
-            (Some(l), Some(u)) if l == u => eq.push((i, 1.0, u)),
-            (l, u) => {
-                if let Some(u) = u {
-                    ineq.push((i, 1.0, u));
-                }
-                if let Some(l) = l {
-                    ineq.push((i, -1.0, -l));
-                }
-            }
-        }
-    }
-    let (mut ai, mut aj, mut av, mut b) = (vec![], vec![], vec![], vec![]);
-    for (r, &(i, sign, bv)) in eq.iter().chain(ineq.iter()).enumerate() {
-        for col in 0..n {
-            let v = q.a[i * n + col];
-            if v != 0.0 {
-                ai.push(r);
-                aj.push(col);
-                av.push(sign * v);
-            }
-        }
-        b.push(bv);
-    }
-    let pm = CscMatrix::new_from_triplets(n, n, pi, pj, pv);
-    let am = CscMatrix::new_from_triplets(b.len(), n, ai, aj, av);
+    let c = q.conic();
+    let pm = CscMatrix::new_from_triplets(c.n, c.n, c.p.0, c.p.1, c.p.2);
+    let am = CscMatrix::new_from_triplets(c.b.len(), c.n, c.a.0, c.a.1, c.a.2);
+    let b = c.b;
     let mut cones = vec![];
-    if !eq.is_empty() {
-        cones.push(SupportedConeT::ZeroConeT(eq.len()));
+    if c.n_eq > 0 {
+        cones.push(SupportedConeT::ZeroConeT(c.n_eq));
     }
-    if !ineq.is_empty() {
-        cones.push(SupportedConeT::NonnegativeConeT(ineq.len()));
+    if c.n_ineq > 0 {
+        cones.push(SupportedConeT::NonnegativeConeT(c.n_ineq));
     }
     let settings = DefaultSettingsBuilder::default()
         .verbose(false)
