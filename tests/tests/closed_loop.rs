@@ -10,14 +10,16 @@ use host_sim::vehicle::VehicleParams;
 
 const G: f64 = 9.81;
 
-fn lap(obstacles: bool, mu: f64) -> RunResult {
-    let scenario = Scenario::paper(obstacles);
+/// The `paper` scenario on a road of friction `mu_road`, the planner told
+/// `mu_planner`, for at most `duration_s` simulated seconds.
+fn drive(obstacles: bool, mu_road: f64, mu_planner: f64, duration_s: f64) -> RunResult {
     let opts = SimOptions {
-        mu_road: mu,
-        mu_planner: mu,
-        max_duration_s: 200.0,
+        mu_road,
+        mu_planner,
+        max_duration_s: duration_s,
         ..SimOptions::default()
     };
+    let scenario = Scenario::paper(obstacles);
     simulate(
         &scenario,
         &VehicleParams::default(),
@@ -26,6 +28,10 @@ fn lap(obstacles: bool, mu: f64) -> RunResult {
         false,
     )
     .unwrap()
+}
+
+fn lap(obstacles: bool, mu: f64) -> RunResult {
+    drive(obstacles, mu, mu, 200.0)
 }
 
 /// What every lap must satisfy.
@@ -158,23 +164,7 @@ fn a_planner_told_the_wrong_friction_fails_safe_and_reports_it() {
     // The planner believes μ = 1 on a μ = 0.5 road: its plans ask for more grip
     // than there is. The run must stay finite and say how it ended, never panic,
     // and the tyres slip more than when the planner knows the road.
-    let scenario = Scenario::paper(false);
-    let run = |mu_planner: f64| {
-        let opts = SimOptions {
-            mu_road: 0.5,
-            mu_planner,
-            max_duration_s: 30.0,
-            ..SimOptions::default()
-        };
-        simulate(
-            &scenario,
-            &VehicleParams::default(),
-            &opts,
-            Precision::F32,
-            false,
-        )
-        .unwrap()
-    };
+    let run = |mu_planner: f64| drive(false, 0.5, mu_planner, 30.0);
     let wrong = run(1.0);
     let right = run(0.5);
     assert!(wrong
