@@ -18,6 +18,7 @@
 //! | [`low_level`] | low-level control: torque dispatch, `δ = δ_ol + δ_cl` |
 //! | [`plan`], [`state_estimate`] | the two resources the tasks share |
 //! | [`tasks`] | the 100 Hz `control` and 10 Hz `plan` tasks |
+//! | [`vehicle_config`] | the car's numbers the settings derive from |
 //!
 //! The maths is generic over [`Real`] (`f32` on the ECU). Units are SI (m, s,
 //! rad, N, N·m, kg); vehicle frame x forward, y left; yaw counter-clockwise.
@@ -36,6 +37,7 @@ pub mod reference_path;
 pub mod state_estimate;
 pub mod tasks;
 pub mod validity;
+pub mod vehicle_config;
 pub mod velocity_planner;
 
 pub use real::Real;

@@ -30,12 +30,13 @@
 use std::time::Instant;
 
 use anyhow::{anyhow, Context, Result};
-use firmware::low_level::{Actuation, LowLevelConfig, Mode};
-use firmware::mpc::{MpcReport, MpcSettings};
-use firmware::obstacles::{Obstacle as FwObstacle, ObstacleSettings};
+use firmware::low_level::{Actuation, Mode};
+use firmware::mpc::MpcReport;
+use firmware::obstacles::Obstacle as FwObstacle;
 use firmware::plan::{Plan, HORIZON};
 use firmware::state_estimate::StateEstimate;
 use firmware::tasks::{ControlTask, PlanTask, CONTROL_PERIOD_US, PLAN_PERIOD_US};
+use firmware::vehicle_config::VehicleConfig;
 use firmware::Real;
 use serde::Serialize;
 
@@ -319,20 +320,19 @@ pub struct RunResult {
     pub summary: Summary,
 }
 
-/// The firmware's settings derived from a vehicle file.
-pub fn mpc_settings<T: Real>(v: &VehicleParams) -> MpcSettings<T> {
-    let geometry = firmware::bicycle::BicycleGeometry {
+/// What the firmware is told about the car of a vehicle file (the same numbers
+/// the ECU receives in its configuration frame).
+pub fn vehicle_config<T: Real>(v: &VehicleParams) -> VehicleConfig<T> {
+    VehicleConfig {
         l_f_m: T::from_f64(v.lf_m),
         l_r_m: T::from_f64(v.lr_m),
-    };
-    let mut s = MpcSettings::paper(
-        geometry,
-        T::from_f64(v.max_steer_rad),
-        T::from_f64(vehicle_width_m(v)),
-    );
-    // Front-wheel drive: the front axle's share of the static load.
-    s.driven_load_share = T::from_f64(v.lr_m / (v.lf_m + v.lr_m));
-    s
+        cg_height_m: T::from_f64(v.h_m),
+        width_m: T::from_f64(vehicle_width_m(v)),
+        length_m: T::from_f64(vehicle_length_m(v)),
+        mass_kg: T::from_f64(v.mass_kg),
+        wheel_radius_m: T::from_f64(v.r_eff_m),
+        max_steer_rad: T::from_f64(v.max_steer_rad),
+    }
 }
 
 /// Body width used for clearances: track plus a tyre width, m.
@@ -348,39 +348,6 @@ pub fn vehicle_length_m(v: &VehicleParams) -> f64 {
 /// Distance from the centre of gravity to the body's front, m.
 fn front_overhang_from_cg_m(v: &VehicleParams) -> f64 {
     v.lf_m + 0.9
-}
-
-/// The low-level controller's configuration derived from a vehicle file.
-pub fn low_level_config<T: Real>(v: &VehicleParams) -> LowLevelConfig<T> {
-    let mut c = LowLevelConfig::<T>::default();
-    let g = f64::from(firmware::G);
-    c.mass_kg = T::from_f64(v.mass_kg);
-    c.wheel_radius_m = T::from_f64(v.r_eff_m);
-    // What the tyres can transmit at μ = 1, with a margin: the limits are the
-    // actuators', the friction limit is the plant's business.
-    c.max_traction_torque_nm = T::from_f64(v.mass_kg * 0.6 * g * v.r_eff_m * 1.2);
-    c.max_braking_torque_nm = T::from_f64(v.mass_kg * 1.0 * g * v.r_eff_m * 1.2);
-    c.safe_brake_torque_nm = T::from_f64(v.mass_kg * 3.0 * v.r_eff_m);
-    c.steer_limit_rad = T::from_f64(v.max_steer_rad);
-    // Brake balance: the front axle's share of the load when braking at 0.5 g.
-    let wheelbase = v.lf_m + v.lr_m;
-    c.brake_front_share = T::from_f64(((v.lr_m + 0.5 * v.h_m) / wheelbase).clamp(0.5, 0.9));
-    c
-}
-
-/// The obstacle manager's settings for a vehicle, a planner friction `mu` and the
-/// planner's top speed `v_max_mps` ([`ObstacleSettings::for_vehicle`]).
-pub fn obstacle_settings<T: Real>(
-    v: &VehicleParams,
-    mu: f64,
-    v_max_mps: f64,
-) -> ObstacleSettings<T> {
-    ObstacleSettings::for_vehicle(
-        T::from_f64(vehicle_width_m(v)),
-        T::from_f64(vehicle_length_m(v)),
-        T::from_f64(mu),
-        T::from_f64(v_max_mps),
-    )
 }
 
 fn estimate<T: Real>(s: &State, delta_rad: f64, t_us: u64) -> StateEstimate<T> {
@@ -465,10 +432,10 @@ pub fn run<T: Real>(
     let track = &scenario.track;
 
     // The planner: path, obstacles, MPC (boxed: the path is large on the host).
-    let mut planner: Box<PlanTask<T, HOST_PATH_CAP>> = Box::new(PlanTask::new(
-        mpc_settings::<T>(vehicle),
-        T::from_f64(opts.mu_planner),
-    ));
+    let car = vehicle_config::<T>(vehicle);
+    let mu_planner = T::from_f64(opts.mu_planner);
+    let mut planner: Box<PlanTask<T, HOST_PATH_CAP>> =
+        Box::new(PlanTask::new(car.mpc_settings(), mu_planner));
     let rows: Vec<[T; 4]> = track
         .rows()
         .iter()
@@ -502,21 +469,13 @@ pub fn run<T: Real>(
     planner
         .obstacles
         .update(
-            &obstacle_settings::<T>(
-                vehicle,
-                opts.mu_planner,
-                planner
-                    .settings
-                    .velocity
-                    .v_max_mps(T::from_f64(opts.mu_planner))
-                    .to_f64(),
-            ),
+            &car.obstacle_settings(mu_planner),
             &planner.path,
             &fw_obstacles,
         )
         .map_err(|e| obstacle_error_message(e, &scenario.obstacles))?;
 
-    let mut control = ControlTask::new(low_level_config::<T>(vehicle))
+    let mut control = ControlTask::new(car.low_level_config())
         .map_err(|e| anyhow!("low-level controller configuration: {e:?}"))?;
 
     // The plant, on the centre line at the start, heading along the track.

@@ -729,9 +729,9 @@ fn record_in<T: Real>(
     }
     // The simulator's settings for the built-in vehicle.
     let vehicle = VehicleParams::default();
-    let settings = closed_loop::mpc_settings::<T>(&vehicle);
-    let v_max = settings.velocity.v_max_mps(T::from_f64(MU)).to_f64();
-    let obstacle_settings = closed_loop::obstacle_settings::<T>(&vehicle, MU, v_max);
+    let car = closed_loop::vehicle_config::<T>(&vehicle);
+    let settings = car.mpc_settings();
+    let obstacle_settings = car.obstacle_settings(T::from_f64(MU));
     let mut manager = ObstacleManager::<T>::new();
     manager
         .update(&obstacle_settings, &*path, &obs_t)
