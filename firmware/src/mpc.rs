@@ -244,6 +244,49 @@ impl<T: Real> MpcSettings<T> {
         }
     }
 
+    /// All-zero settings that every step refuses ([`MpcError::InvalidSettings`]):
+    /// a `const` placeholder for a planner in a `static`, replaced once the car is
+    /// known (the ECU receives it in its configuration frame).
+    pub const fn unset() -> Self {
+        let z = T::ZERO;
+        Self {
+            weights: MpcWeights {
+                q_v: z,
+                q_delta: z,
+                q_delta_rate: z,
+                q_x: z,
+                q_y: z,
+                q_obs: z,
+                q_delta_tol: z,
+                q_road: z,
+                q_accel: z,
+            },
+            geometry: BicycleGeometry { l_f_m: z, l_r_m: z },
+            accel_min_mps2: z,
+            accel_max_mps2: z,
+            steer_rate_max_radps: z,
+            driven_load_share: z,
+            friction_usage: z,
+            delta_mech_max_rad: z,
+            ay_fraction: z,
+            half_width_m: z,
+            road_margin_m: z,
+            obstacle_offset_buffer_m: z,
+            velocity: VelocityPlannerSettings {
+                delta_v_mps: z,
+                preview_time_s: z,
+                preview_speed_floor_mps: z,
+                ay_fraction: z,
+                v_cap_mps: z,
+                brake_decel_mps2: z,
+                horizon_s: z,
+            },
+            steering_reference: SteeringReference::PathCurvature,
+            cold_start_iterations: 0,
+            qp_max_iter: 0,
+        }
+    }
+
     fn validate(&self) -> Result<(), MpcError> {
         let w = &self.weights;
         let finite_nonneg = |x: T| x.is_finite() && x >= T::ZERO;

@@ -299,13 +299,15 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         self.max_abs_curvature = T::ZERO;
     }
 
-    fn load_inner<F: Fn(usize) -> ([T; 2], [T; 2])>(
-        &mut self,
+    /// Checks `count` points given by `get` and returns how many the path keeps
+    /// (a closed loop's repeated closing point dropped).
+    fn validate<F: Fn(usize) -> ([T; 2], [T; 2])>(
+        &self,
         count: usize,
         has_widths: bool,
         get: F,
         closed: bool,
-    ) -> Result<(), PathError> {
+    ) -> Result<usize, PathError> {
         let h = T::lit(self.curvature_half_window_m);
         if !h.is_finite() || h <= T::ZERO {
             return Err(PathError::InvalidCurvatureWindow);
@@ -346,6 +348,17 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         if closed && same_point(get(n - 1).0, get(0).0) {
             return Err(PathError::RepeatedPoint { index: 0 });
         }
+        Ok(n)
+    }
+
+    fn load_inner<F: Fn(usize) -> ([T; 2], [T; 2])>(
+        &mut self,
+        count: usize,
+        has_widths: bool,
+        get: F,
+        closed: bool,
+    ) -> Result<(), PathError> {
+        let n = self.validate(count, has_widths, &get, closed)?;
         // Copy (n <= CAP).
         for (i, (xy, wd)) in self
             .xy
@@ -358,6 +371,56 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             *xy = p;
             *wd = if has_widths { w } else { [T::ZERO; 2] };
         }
+        self.compute(n, closed, has_widths);
+        Ok(())
+    }
+
+    /// Writes track row `i` (`[x_m, y_m, w_right_m, w_left_m]`) into the path's own
+    /// storage, for [`Self::load_staged`]: a path received piece by piece (the
+    /// ECU's frames) is loaded without a second copy of the track in RAM. Returns
+    /// false, writing nothing, when `i ≥ CAP`. Empties the path.
+    pub fn stage_row(&mut self, i: usize, row: [T; 4]) -> bool {
+        self.clear();
+        match (self.xy.get_mut(i), self.widths.get_mut(i)) {
+            (Some(xy), Some(w)) => {
+                *xy = [row[0], row[1]];
+                *w = [row[2], row[3]];
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Loads the `count` rows written by [`Self::stage_row`] as
+    /// [`Self::load_track`] would load them (same checks, same result bit for bit).
+    pub fn load_staged(&mut self, count: usize, closed: bool) -> Result<(), PathError> {
+        self.clear();
+        if count > CAP {
+            return Err(PathError::TooManyPoints {
+                count,
+                capacity: CAP,
+            });
+        }
+        let r = self
+            .validate(
+                count,
+                true,
+                |i| (self.xy[i.min(CAP - 1)], self.widths[i.min(CAP - 1)]),
+                closed,
+            )
+            .map(|n| {
+                self.compute(n, closed, true);
+            });
+        if r.is_err() {
+            self.clear();
+        }
+        r
+    }
+
+    /// Derives segments, arc length, headings and curvatures from the `n` points
+    /// in `xy` (already checked).
+    fn compute(&mut self, n: usize, closed: bool, has_widths: bool) {
+        let h = T::lit(self.curvature_half_window_m);
         self.n = n;
         self.closed = closed;
         self.has_widths = has_widths;
@@ -440,7 +503,6 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             kmax = kmax.max(k.abs());
         }
         self.max_abs_curvature = kmax;
-        Ok(())
     }
 
     /// Number of vertices loaded (0 when empty).

@@ -21,6 +21,7 @@
 pub mod closed_loop;
 pub mod figures;
 pub mod obstacle_file;
+pub mod pil;
 pub mod plant;
 pub mod plot;
 pub mod qp_corpus;

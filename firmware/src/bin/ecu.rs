@@ -1,21 +1,440 @@
-//! ECU application (RTIC v2, Cortex-M4F): binds the library's tasks to interrupts.
-//! Build: `cargo ecu` (see `.cargo/config.toml`).
+//! The ECU application (RTIC v2, Cortex-M4F): binds the library's two tasks to
+//! priorities and the monotonic timer, and talks to the simulator.
+//!
+//! | task | priority | released | does |
+//! |---|---|---|---|
+//! | `control` | 2 (high) | every 10 ms by the monotonic | reads the sensor frame, [`ControlTask::run`] on the shared plan, sends the actuator frame |
+//! | `plan` | 1 (low) | every 100 ms by the monotonic | [`PlanTask::run`] outside any lock, then [`PlanTask::publish`] (a buffer swap) inside a short lock on the shared plan |
+//!
+//! No maths here: the app calls the same library functions the simulator calls.
+//!
+//! **Deadline policy** (the same in the simulator, `host-sim/src/closed_loop.rs`):
+//! a plan that finishes after its 100 ms deadline is still published when it
+//! finishes (it is the newest plan, stamped at its release, and `control` follows
+//! it at the current time, i.e. shifted); until then `control` keeps following the
+//! previous plan shifted in time, then brings the car to a controlled stop when it
+//! runs out. Releases that fall while the plan task is still running are skipped,
+//! not queued, so the next activation plans from a fresh state.
+//!
+//! **Link.** In the processor-in-the-loop run (`host-sim pil`) the simulator
+//! starts QEMU in a folder holding two FIFOs, `ecu.down` (host → ECU) and
+//! `ecu.up` (ECU → host), which the ECU opens through semihosting. Semihosting
+//! calls are synchronous: QEMU's virtual clock (`-icount`) does not advance while
+//! the host answers, so the run is deterministic. On a vehicle these frames would
+//! come from the sensor fusion and go to the actuators over CAN; the frames
+//! ([`firmware::link`]) are the same.
+//!
+//! **Panic**: the handler commands zero torque with the steering held, sends it as
+//! an actuator frame and stops.
+//!
+//! Build: `cargo ecu`; run in the loop with the simulator: `host-sim pil`.
 #![no_std]
 #![no_main]
+// Semihosting calls, painting the stack and the panic handler's actuator frame.
+#![allow(unsafe_code)]
 
-use cortex_m_rt as _;
-use stm32f4 as _;
+use core::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
 
-#[cortex_m_rt::entry]
-fn main() -> ! {
+use cortex_m_semihosting::{debug, syscall};
+use defmt_semihosting as _;
+use firmware::link::{self, ActuationFrame, Down, FrameReader, Up, MAX_FRAME_BYTES};
+use firmware::low_level::Actuation;
+use firmware::telemetry;
+use firmware::tasks::{ControlTask, PlanTask};
+use rtic_monotonics::systick::prelude::*;
+
+/// Point capacity of the ECU's reference path (real circuits have up to ~1,400).
+pub const PATH_CAP: usize = 1536;
+/// Core clock, Hz (STM32F405 at 168 MHz; QEMU's SysTick counts at this rate of
+/// virtual time).
+pub const SYSCLK_HZ: u32 = 168_000_000;
+/// Monotonic tick rate, Hz (1 ms ticks).
+const MONO_HZ: u32 = 1_000;
+/// SysTick reload: core clock ticks per monotonic tick.
+const TICKS_PER_MONO: u32 = SYSCLK_HZ / MONO_HZ;
+
+systick_monotonic!(Mono, MONO_HZ);
+
+/// Host file descriptor of the up-link (0: not open), for the panic handler.
+static UP_FD: AtomicUsize = AtomicUsize::new(0);
+/// Last steering command, `f32` bits (the panic handler holds it).
+static LAST_DELTA_BITS: AtomicU32 = AtomicU32::new(0);
+/// Core clock ticks spent in `control` so far (the plan task subtracts them).
+static CONTROL_TICKS: AtomicU32 = AtomicU32::new(0);
+/// Core clock tick count at the start of the timeline (t = 0).
+static EPOCH_TICKS: AtomicU32 = AtomicU32::new(0);
+/// High bits of the epoch (the 64-bit tick count's upper half).
+static EPOCH_TICKS_HI: AtomicU32 = AtomicU32::new(0);
+
+/// Core clock ticks since the monotonic started (168 MHz; 64 bits never wrap).
+fn core_ticks() -> u64 {
+    loop {
+        let a = Mono::now().ticks();
+        let cvr = cortex_m::peripheral::SYST::get_current();
+        let b = Mono::now().ticks();
+        if a == b {
+            let within = (TICKS_PER_MONO - 1).saturating_sub(cvr);
+            return a as u64 * TICKS_PER_MONO as u64 + within as u64;
+        }
+    }
+}
+
+fn epoch_ticks() -> u64 {
+    ((EPOCH_TICKS_HI.load(Ordering::Relaxed) as u64) << 32)
+        | EPOCH_TICKS.load(Ordering::Relaxed) as u64
+}
+
+defmt::timestamp!("{=u64:us}", now_us());
+
+/// µs since the timeline's start.
+fn now_us() -> u64 {
+    core_ticks().saturating_sub(epoch_ticks()) * 1_000_000 / SYSCLK_HZ as u64
+}
+
+/// The two FIFOs to the simulator, through semihosting.
+pub struct Link {
+    down: usize,
+    up: usize,
+    reader: FrameReader<MAX_FRAME_BYTES>,
+    rx: [u8; 64],
+    rx_len: usize,
+    rx_pos: usize,
+    /// Frames refused (garbled, short, wrong version, unexpected).
+    pub rejected: u32,
+}
+
+fn sh_open(name: &[u8], mode: usize) -> Option<usize> {
+    // `name` ends with a NUL; the length excludes it.
+    let fd = unsafe { syscall!(OPEN, name.as_ptr(), mode, name.len() - 1) };
+    if fd as isize == -1 {
+        None
+    } else {
+        Some(fd)
+    }
+}
+
+fn sh_write(fd: usize, mut bytes: &[u8]) -> bool {
+    while !bytes.is_empty() {
+        let left = unsafe { syscall!(WRITE, fd, bytes.as_ptr(), bytes.len()) };
+        if left >= bytes.len() {
+            return false;
+        }
+        bytes = &bytes[bytes.len() - left..];
+    }
+    true
+}
+
+impl Link {
+    /// Opens `ecu.down` for reading and `ecu.up` for writing, in that order (the
+    /// simulator opens them in the same order).
+    pub fn open() -> Option<Self> {
+        const R_BINARY: usize = 1;
+        const W_TRUNC_BINARY: usize = 5;
+        let down = sh_open(b"ecu.down\0", R_BINARY)?;
+        let up = sh_open(b"ecu.up\0", W_TRUNC_BINARY)?;
+        UP_FD.store(up, Ordering::Relaxed);
+        Some(Self {
+            down,
+            up,
+            reader: FrameReader::new(),
+            rx: [0; 64],
+            rx_len: 0,
+            rx_pos: 0,
+            rejected: 0,
+        })
+    }
+
+    /// The next well-formed host frame (refused frames are counted and skipped);
+    /// `None` when the host closed the link.
+    pub fn receive(&mut self) -> Option<Down> {
+        loop {
+            if self.rx_pos == self.rx_len {
+                let n = self.rx.len();
+                let left = unsafe { syscall!(READ, self.down, self.rx.as_mut_ptr(), n) };
+                if left >= n {
+                    return None; // end of file: the host is gone
+                }
+                self.rx_len = n - left;
+                self.rx_pos = 0;
+            }
+            let byte = self.rx[self.rx_pos];
+            self.rx_pos += 1;
+            match self.reader.push(byte) {
+                None => {}
+                Some(Ok(frame)) => match link::decode::<Down>(frame) {
+                    Ok(msg) => return Some(msg),
+                    Err(_) => self.rejected = self.rejected.wrapping_add(1),
+                },
+                Some(Err(_)) => self.rejected = self.rejected.wrapping_add(1),
+            }
+        }
+    }
+
+    /// Sends one frame to the host.
+    pub fn send(&mut self, msg: &Up) -> bool {
+        let mut buf = [0u8; MAX_FRAME_BYTES];
+        match link::encode(msg, &mut buf) {
+            Ok(n) => sh_write(self.up, &buf[..n]),
+            Err(_) => false,
+        }
+    }
+}
+
+/// Ends the QEMU run.
+fn exit(ok: bool) -> ! {
+    debug::exit(if ok {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
     loop {
         cortex_m::asm::wfi();
     }
 }
 
+/// Stack painting: the untouched part of the stack keeps this word.
+const PAINT: u32 = 0xCCCC_CCCC;
+
+extern "C" {
+    static _stack_start: u32;
+    static _stack_end: u32;
+}
+
+/// Lowest address the stack may reach (with flip-link the stack sits below the
+/// statics, from the start of RAM; without it, above `.bss`).
+fn stack_bottom() -> usize {
+    let start = core::ptr::addr_of!(_stack_start) as usize;
+    let end = core::ptr::addr_of!(_stack_end) as usize;
+    if end < start {
+        end
+    } else {
+        0x2000_0000
+    }
+}
+
+/// Fills the unused stack below the current stack pointer (less a margin).
+fn paint_stack() {
+    let sp = cortex_m::register::msp::read() as usize;
+    let mut p = (stack_bottom() + 3) & !3;
+    while p + 64 < sp {
+        unsafe { core::ptr::write_volatile(p as *mut u32, PAINT) };
+        p += 4;
+    }
+}
+
+/// Bytes of stack ever used: from the top down to the lowest overwritten word.
+fn stack_high_water() -> (u32, u32) {
+    let top = core::ptr::addr_of!(_stack_start) as usize;
+    let bottom = (stack_bottom() + 3) & !3;
+    let mut p = bottom;
+    while p < top && unsafe { core::ptr::read_volatile(p as *const u32) } == PAINT {
+        p += 4;
+    }
+    ((top - p) as u32, (top - bottom) as u32)
+}
+
+fn actuation_frame(seq: u32, a: &Actuation<f32>, fault: u8, ticks: u32) -> ActuationFrame {
+    ActuationFrame {
+        seq,
+        torque_nm: a.wheel_torque_nm,
+        delta_rad: a.delta_rad,
+        delta_ol_rad: a.delta_ol_rad,
+        delta_cl_rad: a.delta_cl_rad,
+        v_ref_mps: a.v_ref_mps,
+        mode: telemetry::mode_code(a.mode),
+        fault,
+        control_ticks: ticks,
+        plan: None,
+    }
+}
+
+#[rtic::app(device = stm32f4::stm32f405, dispatchers = [USART1, USART2])]
+mod app {
+    use super::*;
+    use firmware::link::{DoneFrame, PlanEventFrame, ReadyFrame};
+    use firmware::mpc::MpcSettings;
+    use firmware::plan::Plan;
+    use firmware::setup::Setup;
+    use firmware::state_estimate::StateEstimate;
+
+    #[shared]
+    struct Shared {
+        /// The latest state estimate (written by `control`, read by `plan`).
+        estimate: StateEstimate<f32>,
+        /// The plan `control` follows (swapped in by `plan`).
+        plan: Plan<f32>,
+        /// The last plan activation's record, until `control` reports it.
+        plan_event: Option<PlanEventFrame>,
+    }
+
+    #[local]
+    struct Local {
+        control: ControlTask<f32>,
+        link: Link,
+        planner: &'static mut PlanTask<f32, PATH_CAP>,
+    }
+
+    #[init(local = [
+        planner_storage: PlanTask<f32, PATH_CAP> = PlanTask::new(MpcSettings::unset(), 0.0),
+    ])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        paint_stack();
+        Mono::start(cx.core.SYST, SYSCLK_HZ);
+        defmt::info!("ecu: waiting for the simulator on ecu.down / ecu.up");
+        let Some(mut link) = Link::open() else {
+            defmt::error!("ecu: no link: run it from `host-sim pil` (it creates ecu.down and ecu.up)");
+            exit(false)
+        };
+        let planner = cx.local.planner_storage;
+        let mut setup = Setup::new();
+        let control = loop {
+            match link.receive() {
+                Some(Down::Config(c)) => setup.config(&c, planner),
+                Some(Down::PathChunk(c)) => setup.path_chunk(&c, planner),
+                Some(Down::Obstacle(o)) => setup.obstacle(&o),
+                Some(Down::Start) => match setup.finish(planner) {
+                    Ok(control) => break control,
+                    Err(e) => {
+                        defmt::error!("ecu: set-up refused, code {}", e.code());
+                        link.send(&Up::Ready(ReadyFrame {
+                            status: e.code(),
+                            detail: e.detail(),
+                        }));
+                        exit(false)
+                    }
+                },
+                Some(_) => link.rejected = link.rejected.wrapping_add(1),
+                None => exit(false),
+            }
+        };
+        defmt::info!("ecu: set-up done, {} path points", planner.path.len());
+        link.send(&Up::Ready(ReadyFrame {
+            status: 0,
+            detail: 0,
+        }));
+        let epoch = core_ticks();
+        EPOCH_TICKS.store(epoch as u32, Ordering::Relaxed);
+        EPOCH_TICKS_HI.store((epoch >> 32) as u32, Ordering::Relaxed);
+        let _ = control::spawn();
+        let _ = plan::spawn();
+        (
+            Shared {
+                estimate: StateEstimate::zeroed(),
+                plan: Plan::zeroed(),
+                plan_event: None,
+            },
+            Local {
+                control,
+                link,
+                planner,
+            },
+        )
+    }
+
+    /// The 100 Hz control task: sensor frame in, [`ControlTask::run`], actuator
+    /// frame out. Deadline: its 10 ms period.
+    #[task(priority = 2, shared = [estimate, plan, plan_event], local = [control, link])]
+    async fn control(mut cx: control::Context) {
+        let mut release = Mono::now();
+        loop {
+            let t0 = core_ticks();
+            let msg = cx.local.link.receive();
+            let est = match msg {
+                Some(Down::Sensor(f)) => f,
+                Some(Down::Stop) | None => {
+                    let (used, size) = stack_high_water();
+                    defmt::info!("ecu: stop; stack high-water {} of {} bytes", used, size);
+                    let rejected = cx.local.link.rejected;
+                    cx.local.link.send(&Up::Done(DoneFrame {
+                        stack_high_water_bytes: used,
+                        stack_size_bytes: size,
+                        rejected_frames: rejected,
+                    }));
+                    exit(msg.is_some())
+                }
+                Some(_) => {
+                    cx.local.link.rejected = cx.local.link.rejected.wrapping_add(1);
+                    continue;
+                }
+            };
+            let e = est.estimate;
+            cx.shared.estimate.lock(|s| *s = e);
+            let control = &mut *cx.local.control;
+            let act = cx.shared.plan.lock(|plan| control.run(&e, plan, e.stamp_us));
+            let fault = telemetry::fault_code(control.last_fault);
+            LAST_DELTA_BITS.store(act.delta_rad.to_bits(), Ordering::Relaxed);
+            let ticks = core_ticks().saturating_sub(t0).min(u32::MAX as u64) as u32;
+            CONTROL_TICKS.fetch_add(ticks, Ordering::Relaxed);
+            let mut frame = actuation_frame(est.seq, &act, fault, ticks);
+            frame.plan = cx.shared.plan_event.lock(|p| p.take());
+            cx.local.link.send(&Up::Actuation(frame));
+            release += 10.millis();
+            Mono::delay_until(release).await;
+        }
+    }
+
+    /// The 10 Hz plan task: [`PlanTask::run`] on the estimate at its release, then
+    /// the plan published by a swap. Deadline: its 100 ms period (see the
+    /// deadline policy above).
+    #[task(priority = 1, shared = [estimate, plan, plan_event], local = [planner])]
+    async fn plan(mut cx: plan::Context) {
+        let start = Mono::now();
+        let mut activation: u32 = 0;
+        let mut k: u32 = 0; // release index: t = k · 100 ms
+        loop {
+            Mono::delay_until(start + (k * 100).millis()).await;
+            activation = activation.wrapping_add(1);
+            let release_us = k as u64 * 100_000;
+            let est = cx.shared.estimate.lock(|e| *e);
+            let t0 = core_ticks();
+            let c0 = CONTROL_TICKS.load(Ordering::Relaxed);
+            let planner = &mut *cx.local.planner;
+            let result = planner.run(&est);
+            let report = result.unwrap_or_default();
+            // The record's copy of the plan, taken before the swap, outside the lock.
+            let computed = planner.pending().copied();
+            let published = cx.shared.plan.lock(|p| planner.publish(p));
+            let c1 = CONTROL_TICKS.load(Ordering::Relaxed);
+            let own = core_ticks()
+                .saturating_sub(t0)
+                .saturating_sub(c1.wrapping_sub(c0) as u64);
+            let finish_us = now_us();
+            let event = telemetry::plan_event(
+                activation,
+                release_us,
+                finish_us,
+                own.min(u32::MAX as u64) as u32,
+                &result,
+                &report,
+                published,
+                computed.as_ref(),
+            );
+            cx.shared.plan_event.lock(|p| *p = Some(event));
+            // The next release: the next multiple of 100 ms not yet past (releases
+            // that fell while this one ran are skipped, not queued).
+            k += 1;
+            while (k as u64) * 100_000 < finish_us {
+                k += 1;
+            }
+        }
+    }
+}
+
 #[panic_handler]
 fn panic(_info: &core::panic::PanicInfo) -> ! {
-    loop {
-        cortex_m::asm::wfi();
+    // Safe actuators: zero torque on every wheel, the steering held where it was.
+    cortex_m::interrupt::disable();
+    let delta = f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed));
+    let fd = UP_FD.load(Ordering::Relaxed);
+    if fd != 0 {
+        let a = Actuation::safe(delta, 0.0);
+        let mut frame = actuation_frame(u32::MAX, &a, telemetry::FAULT_PANIC, 0);
+        frame.plan = None;
+        let mut buf = [0u8; MAX_FRAME_BYTES];
+        if let Ok(n) = link::encode(&Up::Actuation(frame), &mut buf) {
+            sh_write(fd, &buf[..n]);
+        }
     }
+    defmt::error!("ecu: panic: zero torque, steering held");
+    exit(false)
 }

@@ -1,0 +1,443 @@
+//! Processor in the loop: the firmware's ECU application runs in QEMU
+//! (`netduinoplus2`, an STM32F405 Cortex-M4F) and the simulator's plant closes the
+//! loop with it, one sensor frame and one actuator frame per 10 ms control period.
+//!
+//! # Time
+//!
+//! QEMU runs with `-icount shift=N,sleep=off`: its virtual clock advances `2^N` ns
+//! per executed instruction and jumps straight to the next timer when the CPU
+//! sleeps, so the firmware's timers (RTIC's monotonic on SysTick, 168 MHz of
+//! virtual time) are driven by what the firmware executes, not by the host. The
+//! link is semihosting on two FIFOs (`ecu.down`, `ecu.up`): a semihosting call is
+//! synchronous and takes no virtual time, so the host's own speed never shows in
+//! the ECU's timeline and the run is deterministic. A UART would deliver bytes at
+//! host-dependent virtual instants.
+//!
+//! The plant advances 10 ms between two sensor frames; the ECU's control task is
+//! released by its own timer every 10 ms of virtual time and its plan task every
+//! 100 ms; a plan takes effect when the ECU publishes it, so the firmware's real
+//! execution time is what delays its plans. With `N = 4` an instruction takes
+//! 16 ns of virtual time, i.e. 2.69 cycles at 168 MHz: above the cycles-per-
+//! instruction bound of the timing report, so the PIL timeline is no faster than
+//! the real ECU.
+//!
+//! # Frames
+//!
+//! See [`firmware::link`]: versioned, CRC-32, COBS-delimited postcard frames.
+//! Set-up: `Config`, `PathChunk`s, `Obstacle`s, `Start` → `Ready`; then `Sensor`
+//! → `Actuation` every period; `Stop` → `Done`. Garbled, short, wrong-version,
+//! stale or out-of-order frames are refused and counted on both sides.
+
+use std::fs::{self, File};
+use std::io::{BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::thread;
+use std::time::Duration;
+
+use anyhow::{anyhow, bail, Context, Result};
+use firmware::link::{
+    self, ConfigFrame, Down, DoneFrame, FrameReader, ObstacleFrame, PathChunkFrame,
+    PlanEventFrame, SensorFrame, Up, MAX_FRAME_BYTES, PATH_CHUNK_ROWS,
+};
+use firmware::low_level::{Actuation, Mode};
+use firmware::obstacles::MAX_VERTICES;
+use firmware::plan::{Plan, PlanNode, PLAN_DT_S};
+use firmware::setup::SetupError;
+use firmware::state_estimate::StateEstimate;
+use firmware::telemetry;
+
+use crate::closed_loop::{self, SimOptions};
+use crate::scenario::Scenario;
+use crate::vehicle::VehicleParams;
+
+/// ECU core clock, Hz: QEMU's SysTick counts at this rate of virtual time.
+pub const ECU_CLOCK_HZ: f64 = 168e6;
+
+/// How the ECU is run.
+#[derive(Clone, Debug)]
+pub struct PilOptions {
+    /// The ECU application (ELF for `thumbv7em-none-eabihf`).
+    pub elf: PathBuf,
+    /// QEMU executable.
+    pub qemu: PathBuf,
+    /// `-icount shift`: virtual ns per instruction = 2^shift.
+    pub icount_shift: u32,
+    /// Folder for the FIFOs, the ECU's defmt log and QEMU's messages.
+    pub work_dir: PathBuf,
+    /// Longest wall time to wait for one frame, s (a hung ECU is an error).
+    pub frame_timeout_s: f64,
+}
+
+impl PilOptions {
+    /// Virtual time per instruction, ns.
+    pub fn ns_per_instruction(&self) -> f64 {
+        f64::from(1u32 << self.icount_shift)
+    }
+
+    /// Instructions executed in `ticks` of the ECU's 168 MHz clock.
+    pub fn instructions(&self, ticks: u32) -> f64 {
+        f64::from(ticks) / ECU_CLOCK_HZ * 1e9 / self.ns_per_instruction()
+    }
+}
+
+/// Counters of the link, host side.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct LinkCounters {
+    /// Frames the host refused (garbled, short, wrong version, unexpected).
+    pub rejected: u64,
+    /// Actuation frames answering another sensor frame than the one sent.
+    pub stale: u64,
+}
+
+enum Incoming {
+    Frame(Up),
+    Bad(link::FrameError),
+    Closed,
+}
+
+/// The ECU application running in QEMU, in the loop.
+pub struct QemuEcu {
+    child: Child,
+    down: BufWriter<File>,
+    up: Receiver<Incoming>,
+    opts: PilOptions,
+    seq: u32,
+    /// Counters of the link, host side.
+    pub counters: LinkCounters,
+    /// The plan the ECU's control task follows (positions only), as reported.
+    pub active: Plan<f32>,
+}
+
+impl Drop for QemuEcu {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn mkfifo(path: &Path) -> Result<()> {
+    if path.exists() {
+        fs::remove_file(path).with_context(|| format!("removing the old {}", path.display()))?;
+    }
+    let status = Command::new("mkfifo")
+        .arg(path)
+        .status()
+        .context("running mkfifo (coreutils) to create the ECU link")?;
+    if !status.success() {
+        bail!("mkfifo {} failed", path.display());
+    }
+    Ok(())
+}
+
+/// Reads frames from the up-link FIFO on a thread of its own.
+fn spawn_reader(mut file: File) -> Receiver<Incoming> {
+    let (tx, rx) = mpsc::channel();
+    thread::spawn(move || {
+        let mut reader: FrameReader<MAX_FRAME_BYTES> = FrameReader::new();
+        let mut buf = [0u8; 4096];
+        loop {
+            let n = match file.read(&mut buf) {
+                Ok(0) | Err(_) => {
+                    let _ = tx.send(Incoming::Closed);
+                    return;
+                }
+                Ok(n) => n,
+            };
+            for &b in &buf[..n] {
+                let msg = match reader.push(b) {
+                    None => continue,
+                    Some(Ok(frame)) => match link::decode::<Up>(frame) {
+                        Ok(m) => Incoming::Frame(m),
+                        Err(e) => Incoming::Bad(e),
+                    },
+                    Some(Err(e)) => Incoming::Bad(e),
+                };
+                if tx.send(msg).is_err() {
+                    return;
+                }
+            }
+        }
+    });
+    rx
+}
+
+impl QemuEcu {
+    /// Starts QEMU on the ECU application and sends it the car, the track and the
+    /// obstacles of `scenario`; returns once the ECU has accepted them.
+    pub fn start(
+        scenario: &Scenario,
+        vehicle: &VehicleParams,
+        sim: &SimOptions,
+        opts: &PilOptions,
+    ) -> Result<Self> {
+        if !opts.elf.exists() {
+            bail!(
+                "the ECU application {} does not exist: build it with `cargo ecu`",
+                opts.elf.display()
+            );
+        }
+        fs::create_dir_all(&opts.work_dir)
+            .with_context(|| format!("cannot create {}", opts.work_dir.display()))?;
+        let dir = fs::canonicalize(&opts.work_dir)?;
+        let down_path = dir.join("ecu.down");
+        let up_path = dir.join("ecu.up");
+        mkfifo(&down_path)?;
+        mkfifo(&up_path)?;
+        let defmt_path = dir.join("ecu.defmt");
+        let qemu_log = File::create(dir.join("qemu.log"))?;
+        let child = Command::new(&opts.qemu)
+            .current_dir(&dir)
+            .args(["-cpu", "cortex-m4", "-machine", "netduinoplus2"])
+            .args(["-display", "none", "-serial", "null", "-monitor", "none"])
+            .arg("-chardev")
+            .arg(format!("file,id=semi,path={}", defmt_path.display()))
+            .args(["-semihosting-config", "enable=on,target=native,chardev=semi"])
+            .arg("-icount")
+            .arg(format!("shift={},sleep=off", opts.icount_shift))
+            .arg("-kernel")
+            .arg(fs::canonicalize(&opts.elf)?)
+            .stdin(Stdio::null())
+            .stdout(qemu_log.try_clone()?)
+            .stderr(qemu_log)
+            .spawn()
+            .with_context(|| {
+                format!(
+                    "cannot start {} (install it: apt-get install qemu-system-arm)",
+                    opts.qemu.display()
+                )
+            })?;
+        // Open both FIFOs in the ECU's order (down, then up), on a thread: an open
+        // blocks until QEMU opens the other end.
+        let (tx, rx) = mpsc::channel();
+        {
+            let (d, u) = (down_path.clone(), up_path.clone());
+            thread::spawn(move || {
+                let r = File::options()
+                    .write(true)
+                    .open(&d)
+                    .and_then(|down| File::open(&u).map(|up| (down, up)));
+                let _ = tx.send(r);
+            });
+        }
+        let mut ecu = None;
+        let mut child = child;
+        for _ in 0..(opts.frame_timeout_s * 20.0).ceil() as u64 {
+            match rx.recv_timeout(Duration::from_millis(50)) {
+                Ok(r) => {
+                    let (down, up) = r.context("opening the ECU link FIFOs")?;
+                    ecu = Some((down, up));
+                    break;
+                }
+                Err(RecvTimeoutError::Timeout) => {
+                    if let Some(status) = child.try_wait()? {
+                        let log = fs::read_to_string(dir.join("qemu.log")).unwrap_or_default();
+                        bail!("QEMU exited ({status}) before opening the link: {log}");
+                    }
+                }
+                Err(RecvTimeoutError::Disconnected) => bail!("the link opener stopped"),
+            }
+        }
+        let Some((down, up)) = ecu else {
+            let _ = child.kill();
+            bail!(
+                "the ECU did not open its link within {} s (is {} the ECU application?)",
+                opts.frame_timeout_s,
+                opts.elf.display()
+            );
+        };
+        let mut ecu = Self {
+            child,
+            down: BufWriter::new(down),
+            up: spawn_reader(up),
+            opts: opts.clone(),
+            seq: 0,
+            counters: LinkCounters::default(),
+            active: Plan::zeroed(),
+        };
+        ecu.set_up(scenario, vehicle, sim)?;
+        Ok(ecu)
+    }
+
+    fn send(&mut self, msg: &Down) -> Result<()> {
+        let mut buf = [0u8; MAX_FRAME_BYTES];
+        let n = link::encode(msg, &mut buf).map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
+        self.down
+            .write_all(&buf[..n])
+            .context("the ECU closed its link")?;
+        Ok(())
+    }
+
+    fn receive(&mut self) -> Result<Up> {
+        loop {
+            self.down.flush().context("the ECU closed its link")?;
+            match self
+                .up
+                .recv_timeout(Duration::from_secs_f64(self.opts.frame_timeout_s))
+            {
+                Ok(Incoming::Frame(m)) => return Ok(m),
+                Ok(Incoming::Bad(_)) => self.counters.rejected += 1,
+                Ok(Incoming::Closed) | Err(RecvTimeoutError::Disconnected) => {
+                    let defmt = self.opts.work_dir.join("ecu.defmt");
+                    bail!(
+                        "the ECU stopped (QEMU exited); its log: {} (decode with `defmt-print -e {}`), QEMU's: {}",
+                        defmt.display(),
+                        self.opts.elf.display(),
+                        self.opts.work_dir.join("qemu.log").display()
+                    )
+                }
+                Err(RecvTimeoutError::Timeout) => bail!(
+                    "no frame from the ECU within {} s of wall time: the firmware hangs",
+                    self.opts.frame_timeout_s
+                ),
+            }
+        }
+    }
+
+    fn set_up(&mut self, scenario: &Scenario, vehicle: &VehicleParams, sim: &SimOptions) -> Result<()> {
+        let rows = scenario.track.rows();
+        if rows.len() > u16::MAX as usize {
+            bail!("the track has {} rows: the link carries at most 65,535", rows.len());
+        }
+        if scenario.obstacles.len() > u8::MAX as usize {
+            bail!("{} obstacles: the link carries at most 255", scenario.obstacles.len());
+        }
+        self.send(&Down::Config(ConfigFrame {
+            vehicle: closed_loop::vehicle_config::<f32>(vehicle),
+            mu_planner: sim.mu_planner as f32,
+            closed: scenario.track.closed,
+            path_rows: rows.len() as u16,
+            obstacles: scenario.obstacles.len() as u8,
+        }))?;
+        for (c, chunk) in rows.chunks(PATH_CHUNK_ROWS).enumerate() {
+            let mut f = PathChunkFrame {
+                first: (c * PATH_CHUNK_ROWS) as u16,
+                count: chunk.len() as u8,
+                rows: [[0.0; 4]; PATH_CHUNK_ROWS],
+            };
+            for (dst, src) in f.rows.iter_mut().zip(chunk) {
+                *dst = src.map(|x| x as f32);
+            }
+            self.send(&Down::PathChunk(f))?;
+        }
+        let total = scenario.obstacles.len() as u8;
+        for (k, o) in scenario.obstacles.iter().enumerate() {
+            if o.vertices.len() > MAX_VERTICES {
+                bail!(
+                    "obstacle {:?} has {} vertices: the ECU takes at most {MAX_VERTICES}",
+                    o.id,
+                    o.vertices.len()
+                );
+            }
+            let mut f = ObstacleFrame {
+                index: k as u8,
+                total,
+                id: k as u32,
+                count: o.vertices.len() as u8,
+                vertices: [[0.0; 2]; MAX_VERTICES],
+            };
+            for (dst, src) in f.vertices.iter_mut().zip(&o.vertices) {
+                *dst = src.map(|x| x as f32);
+            }
+            self.send(&Down::Obstacle(f))?;
+        }
+        self.send(&Down::Start)?;
+        loop {
+            match self.receive()? {
+                Up::Ready(r) if r.status == 0 => return Ok(()),
+                Up::Ready(r) => bail!(
+                    "the ECU refused the set-up: {} (code {}, detail {})",
+                    SetupError::describe(r.status),
+                    r.status,
+                    r.detail
+                ),
+                _ => self.counters.rejected += 1,
+            }
+        }
+    }
+
+    /// One control period: sends the estimate at `t_us`, returns the ECU's answer.
+    pub fn exchange(&mut self, est: &StateEstimate<f32>) -> Result<link::ActuationFrame> {
+        self.seq = self.seq.wrapping_add(1);
+        self.send(&Down::Sensor(SensorFrame {
+            seq: self.seq,
+            estimate: *est,
+        }))?;
+        loop {
+            match self.receive()? {
+                Up::Actuation(a) if a.seq == self.seq => {
+                    if let Some(p) = &a.plan {
+                        if p.published {
+                            self.active = plan_of(p);
+                        }
+                    }
+                    return Ok(a);
+                }
+                Up::Actuation(a) if a.fault == telemetry::FAULT_PANIC => {
+                    bail!("the ECU panicked (it commanded zero torque, steering held at {:.3} rad)", a.delta_rad)
+                }
+                Up::Actuation(_) => self.counters.stale += 1,
+                _ => self.counters.rejected += 1,
+            }
+        }
+    }
+
+    /// Ends the run: the ECU reports its stack high-water mark and exits.
+    pub fn stop(mut self) -> Result<DoneFrame> {
+        self.send(&Down::Stop)?;
+        let done = loop {
+            match self.receive()? {
+                Up::Done(d) => break d,
+                _ => self.counters.rejected += 1,
+            }
+        };
+        for _ in 0..100 {
+            if self.child.try_wait()?.is_some() {
+                break;
+            }
+            thread::sleep(Duration::from_millis(20));
+        }
+        Ok(done)
+    }
+
+    /// The run's options.
+    pub fn options(&self) -> &PilOptions {
+        &self.opts
+    }
+}
+
+/// The plan of a plan event (positions only: what the consistency measure needs).
+pub fn plan_of(p: &PlanEventFrame) -> Plan<f32> {
+    let mut plan = Plan::zeroed();
+    plan.stamp_us = p.release_us;
+    plan.dt_s = PLAN_DT_S;
+    for (n, xy) in plan.nodes.iter_mut().zip(p.nodes_xy.iter()) {
+        *n = PlanNode {
+            x_m: xy[0],
+            y_m: xy[1],
+            ..PlanNode::default()
+        };
+    }
+    plan.v_heur_mps[0] = p.v_heur0_mps;
+    plan
+}
+
+/// The actuation of an actuator frame (the fields the simulator uses).
+pub fn actuation_of(a: &link::ActuationFrame) -> Actuation<f32> {
+    Actuation {
+        wheel_torque_nm: a.torque_nm,
+        delta_rad: a.delta_rad,
+        delta_ol_rad: a.delta_ol_rad,
+        delta_cl_rad: a.delta_cl_rad,
+        v_ref_mps: a.v_ref_mps,
+        v_mps: 0.0,
+        psi_ref_rad: 0.0,
+        yaw_error_rad: 0.0,
+        torque_total_nm: a.torque_nm.iter().sum(),
+        torque_ff_nm: 0.0,
+        plan_age_s: 0.0,
+        mode: telemetry::mode_from_code(a.mode).unwrap_or(Mode::Safe),
+        new_plan: false,
+    }
+}
