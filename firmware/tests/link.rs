@@ -301,7 +301,7 @@ fn largest_frames_fit_max_frame_bytes() {
         let p = postcard_bytes(msg).len();
         println!("Down::{name}: payload {p} bytes, frame {n} bytes");
         assert!(n <= frame_bytes_for_payload(p));
-        assert!(n <= MAX_DOWN_FRAME_BYTES && n <= MAX_FRAME_BYTES);
+        assert!(n <= MAX_DOWN_FRAME_BYTES);
         largest_down_payload = largest_down_payload.max(p);
     }
     for (msg, name) in ups.iter().zip(names_up) {
@@ -309,7 +309,7 @@ fn largest_frames_fit_max_frame_bytes() {
         let p = postcard_bytes(msg).len();
         println!("Up::{name}: payload {p} bytes, frame {n} bytes");
         assert!(n <= frame_bytes_for_payload(p));
-        assert!(n <= MAX_UP_FRAME_BYTES && n <= MAX_FRAME_BYTES);
+        assert!(n <= MAX_UP_FRAME_BYTES);
         largest_up_payload = largest_up_payload.max(p);
     }
     // The compile-time bounds are exact, not loose.
@@ -754,7 +754,7 @@ proptest! {
         let mut stats = LinkStats::new();
         for b in bytes {
             if let Some(frame) = reader.push(b) {
-                let r = frame.and_then(|f| decode::<Down>(f));
+                let r = frame.and_then(decode::<Down>);
                 stats.record(&r);
             }
         }
@@ -814,7 +814,7 @@ proptest! {
         let mut stream = Vec::new();
         let mut expected_frames = Vec::new();
         let mut expected_garbage = 0u32;
-        let mut garbage = |g: &[u8], stream: &mut Vec<u8>| {
+        let garbage = |g: &[u8], stream: &mut Vec<u8>| {
             stream.extend_from_slice(g);
             stream.push(0);
             g.split(|&b| b == 0).filter(|piece| !piece.is_empty()).count() as u32
