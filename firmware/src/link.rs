@@ -976,6 +976,11 @@ impl SequenceCheck {
     pub const fn last(&self) -> Option<u32> {
         self.last
     }
+
+    /// Forgets the last sequence number (a new run accepts any first number).
+    pub fn reset(&mut self) {
+        self.last = None;
+    }
 }
 
 /// Counts of a receiver's frames (all saturating).

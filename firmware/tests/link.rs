@@ -266,6 +266,21 @@ fn frame_layout_is_version_postcard_crc_cobs() {
 }
 
 #[test]
+fn variant_tags_are_as_documented() {
+    // Module docs: `Down` Config 0 … Stop 5, `Up` Ready 0, Actuation 1, Done 2.
+    let down_tags: Vec<u8> = all_down(1, 1.0)
+        .iter()
+        .map(|m| postcard_bytes(m)[0])
+        .collect();
+    assert_eq!(down_tags, [0, 1, 2, 3, 4, 5]);
+    let up_tags: Vec<u8> = all_up(1, 1.0)
+        .iter()
+        .map(|m| postcard_bytes(m)[0])
+        .collect();
+    assert_eq!(up_tags, [0, 1, 1, 2]);
+}
+
+#[test]
 fn cobs_long_runs_without_zero_round_trip() {
     // 16 rows of non-zero bytes: runs past 254 bytes force extra COBS blocks.
     let v = f32::from_bits(0x4141_4141);
@@ -456,6 +471,8 @@ fn sequence_check_refuses_stale_and_counts_gaps() {
     assert_eq!(stats.stale, 5);
     assert_eq!(stats.gaps, 2);
     assert_eq!(check.last(), Some(u32::MAX));
+    check.reset();
+    assert_eq!(check.accept(3), Ok(0));
 
     let mut stats = LinkStats::default();
     stats.record::<()>(&Ok(()));
