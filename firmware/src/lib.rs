@@ -19,6 +19,7 @@
 //! | [`plan`], [`state_estimate`] | the two resources the tasks share |
 //! | [`tasks`] | the 100 Hz `control` and 10 Hz `plan` tasks |
 //! | [`vehicle_config`] | the car's numbers the settings derive from |
+//! | [`link`] | frames between the ECU and the simulator (processor-in-the-loop) |
 //!
 //! The maths is generic over [`Real`] (`f32` on the ECU). Units are SI (m, s,
 //! rad, N, N·m, kg); vehicle frame x forward, y left; yaw counter-clockwise.
@@ -27,6 +28,7 @@
 pub mod real;
 
 pub mod bicycle;
+pub mod link;
 pub mod low_level;
 pub mod mpc;
 pub mod obstacles;

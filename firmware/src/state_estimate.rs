@@ -2,8 +2,9 @@
 
 use crate::Real;
 
-/// Vehicle state as measured/estimated at one instant (SI units).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// Vehicle state as measured/estimated at one instant (SI units). Serde derives carry
+/// it in the simulator's sensor frame ([`crate::link::SensorFrame`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StateEstimate<T> {
     /// Time of the measurement, µs since start.
     pub stamp_us: u64,
