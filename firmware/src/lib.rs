@@ -39,7 +39,6 @@ pub mod reference_path;
 pub mod setup;
 pub mod state_estimate;
 pub mod tasks;
-pub mod telemetry;
 pub mod validity;
 pub mod vehicle_config;
 pub mod velocity_planner;

@@ -73,7 +73,8 @@ use crc::{Crc, CRC_32_ISO_HDLC};
 use serde::{Deserialize, Serialize};
 
 use crate::low_level::{ControlFault, Mode};
-use crate::mpc::MpcError;
+use crate::mpc::{MpcError, MpcReport};
+use crate::plan::Plan;
 use crate::obstacles::MAX_VERTICES;
 use crate::qp::QpStatus;
 use crate::state_estimate::StateEstimate;
@@ -258,6 +259,51 @@ pub struct PlanEventFrame {
     pub v_heur0_mps: f32,
 }
 
+impl PlanEventFrame {
+    /// The record of one plan activation: when it ran (µs on the ECU's timeline),
+    /// its own execution in core clock `ticks` (preemption excluded), its outcome,
+    /// its work counters (`report`: those of the activation, failed ones included)
+    /// and the positions of the plan it computed (zero when none).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new<R>(
+        activation: u32,
+        release_us: u64,
+        finish_us: u64,
+        ticks: u32,
+        result: &Result<R, MpcError>,
+        report: &MpcReport<f32>,
+        published: bool,
+        plan: Option<&Plan<f32>>,
+    ) -> Self {
+        let sat16 = |x: u32| x.min(u16::MAX as u32) as u16;
+        let mut nodes_xy = [[0.0f32; 2]; PLAN_NODES];
+        let mut v_heur0_mps = 0.0;
+        if let Some(p) = plan {
+            for (xy, n) in nodes_xy.iter_mut().zip(p.nodes.iter()) {
+                *xy = [n.x_m, n.y_m];
+            }
+            v_heur0_mps = p.v_heur_mps[0];
+        }
+        Self {
+            activation,
+            release_us,
+            finish_us,
+            ticks,
+            status: mpc_status_code(result),
+            published,
+            passes: report.passes.min(u8::MAX as u32) as u8,
+            qp_iterations: sat16(report.qp_iterations),
+            qp_added: sat16(report.qp_added),
+            qp_removed: sat16(report.qp_removed),
+            qp_refactorizations: sat16(report.qp_refactorizations),
+            rows: sat16(report.rows),
+            active: sat16(report.active_constraints),
+            nodes_xy,
+            v_heur0_mps,
+        }
+    }
+}
+
 /// Answer to `Down::Stop`: the ECU's end-of-run report.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DoneFrame {
@@ -345,7 +391,7 @@ pub const fn frame_bytes_for_payload(payload: usize) -> usize {
 // Status codes
 // ---------------------------------------------------------------------------
 
-/// Why the ECU refused the set-up (the [`ReadyFrame::status`] codes, 1..=11).
+/// Why the ECU refused the set-up (the [`ReadyFrame::status`] codes, 1..=12).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SetupError {
     /// `Start`, a `PathChunk` or an `Obstacle` came before any `Config` (detail 0).
@@ -373,11 +419,14 @@ pub enum SetupError {
     /// An obstacle's polygon was refused (non-finite, too few vertices; detail: its
     /// index).
     InvalidObstacle,
+    /// An obstacle leaves the car no room to pass on either side (detail: its
+    /// index).
+    ObstacleBlocksRoad,
 }
 
 impl SetupError {
     /// Every variant, in code order (for tests and tables).
-    pub const ALL: [SetupError; 11] = [
+    pub const ALL: [SetupError; 12] = [
         SetupError::NoConfig,
         SetupError::InvalidConfig,
         SetupError::PathTooLong,
@@ -389,9 +438,10 @@ impl SetupError {
         SetupError::ObstacleOutOfRange,
         SetupError::MissingObstacle,
         SetupError::InvalidObstacle,
+        SetupError::ObstacleBlocksRoad,
     ];
 
-    /// The [`ReadyFrame::status`] code, 1..=11 (0 means accepted).
+    /// The [`ReadyFrame::status`] code, 1..=12 (0 means accepted).
     pub const fn code(self) -> u8 {
         match self {
             SetupError::NoConfig => 1,
@@ -405,6 +455,7 @@ impl SetupError {
             SetupError::ObstacleOutOfRange => 9,
             SetupError::MissingObstacle => 10,
             SetupError::InvalidObstacle => 11,
+            SetupError::ObstacleBlocksRoad => 12,
         }
     }
 
@@ -422,6 +473,7 @@ impl SetupError {
             9 => Some(SetupError::ObstacleOutOfRange),
             10 => Some(SetupError::MissingObstacle),
             11 => Some(SetupError::InvalidObstacle),
+            12 => Some(SetupError::ObstacleBlocksRoad),
             _ => None,
         }
     }
@@ -440,6 +492,7 @@ impl SetupError {
             SetupError::ObstacleOutOfRange => "ObstacleOutOfRange",
             SetupError::MissingObstacle => "MissingObstacle",
             SetupError::InvalidObstacle => "InvalidObstacle",
+            SetupError::ObstacleBlocksRoad => "ObstacleBlocksRoad",
         }
     }
 }
@@ -610,6 +663,9 @@ pub const fn mode_name(code: u8) -> &'static str {
         None => "Unknown",
     }
 }
+
+/// [`ActuationFrame::fault`] of the ECU's panic handler: zero torque, steering held.
+pub const FAULT_PANIC: u8 = 255;
 
 /// [`ActuationFrame::fault`] of a control result's fault: 0 none,
 /// `NonFiniteEstimate` 1, `NonFinitePlan` 2, `InvalidPlan` 3, `Numerical` 4.

@@ -44,9 +44,7 @@ use firmware::link::{
 use firmware::low_level::{Actuation, Mode};
 use firmware::obstacles::MAX_VERTICES;
 use firmware::plan::{Plan, PlanNode, PLAN_DT_S};
-use firmware::setup::SetupError;
 use firmware::state_estimate::StateEstimate;
-use firmware::telemetry;
 
 use crate::closed_loop::{self, SimOptions};
 use crate::scenario::Scenario;
@@ -347,10 +345,8 @@ impl QemuEcu {
             match self.receive()? {
                 Up::Ready(r) if r.status == 0 => return Ok(()),
                 Up::Ready(r) => bail!(
-                    "the ECU refused the set-up: {} (code {}, detail {})",
-                    SetupError::describe(r.status),
-                    r.status,
-                    r.detail
+                    "the ECU refused the set-up: {}",
+                    setup_refusal(r.status, r.detail)
                 ),
                 _ => self.counters.rejected += 1,
             }
@@ -374,7 +370,7 @@ impl QemuEcu {
                     }
                     return Ok(a);
                 }
-                Up::Actuation(a) if a.fault == telemetry::FAULT_PANIC => {
+                Up::Actuation(a) if a.fault == link::FAULT_PANIC => {
                     bail!("the ECU panicked (it commanded zero torque, steering held at {:.3} rad)", a.delta_rad)
                 }
                 Up::Actuation(_) => self.counters.stale += 1,
@@ -437,7 +433,40 @@ pub fn actuation_of(a: &link::ActuationFrame) -> Actuation<f32> {
         torque_total_nm: a.torque_nm.iter().sum(),
         torque_ff_nm: 0.0,
         plan_age_s: 0.0,
-        mode: telemetry::mode_from_code(a.mode).unwrap_or(Mode::Safe),
+        mode: link::mode_from_code(a.mode).unwrap_or(Mode::Safe),
         new_plan: false,
+    }
+}
+
+/// What a refused set-up means, and what to change.
+pub fn setup_refusal(status: u8, detail: u16) -> String {
+    use firmware::link::SetupError as E;
+    match E::from_code(status) {
+        Some(E::NoConfig) => "a frame came before the configuration (a simulator bug)".into(),
+        Some(E::InvalidConfig) => {
+            "the vehicle's numbers or the planner's friction are not finite and positive: check the vehicle file and --planner-mu".into()
+        }
+        Some(E::PathTooLong) => format!(
+            "the track has more rows than the ECU's path holds ({detail}): resample the track to fewer points"
+        ),
+        Some(E::PathChunkOutOfRange) | Some(E::ObstacleOutOfRange) => {
+            format!("a set-up frame arrived out of order (at {detail}): a simulator bug")
+        }
+        Some(E::MissingPathRow) => format!("track row {detail} never arrived"),
+        Some(E::InvalidPathRow) => format!(
+            "track row {detail} is not finite or has a negative width: fix the track file"
+        ),
+        Some(E::PathRejected) => {
+            "the reference path refused the track (fewer than 3 distinct points or repeated points): fix the track file".into()
+        }
+        Some(E::TooManyObstacles) => format!("more obstacles than the ECU holds ({detail})"),
+        Some(E::MissingObstacle) => format!("obstacle {detail} never arrived"),
+        Some(E::InvalidObstacle) => format!(
+            "obstacle {detail} was refused (no vertex, too many, or not finite): fix the obstacle file"
+        ),
+        Some(E::ObstacleBlocksRoad) => format!(
+            "obstacle {detail} leaves no room to pass on either side: move it, make it narrower, or widen the track there"
+        ),
+        None => format!("unknown status {status} (detail {detail}): is the ECU application of another version?"),
     }
 }

@@ -39,7 +39,6 @@ use cortex_m_semihosting::{debug, syscall};
 use defmt_semihosting as _;
 use firmware::link::{self, ActuationFrame, Down, FrameReader, Up, MAX_FRAME_BYTES};
 use firmware::low_level::Actuation;
-use firmware::telemetry;
 use firmware::tasks::{ControlTask, PlanTask};
 use rtic_monotonics::systick::prelude::*;
 
@@ -241,7 +240,7 @@ fn actuation_frame(seq: u32, a: &Actuation<f32>, fault: u8, ticks: u32) -> Actua
         delta_ol_rad: a.delta_ol_rad,
         delta_cl_rad: a.delta_cl_rad,
         v_ref_mps: a.v_ref_mps,
-        mode: telemetry::mode_code(a.mode),
+        mode: link::mode_code(a.mode),
         fault,
         control_ticks: ticks,
         plan: None,
@@ -294,11 +293,11 @@ mod app {
                 Some(Down::Obstacle(o)) => setup.obstacle(&o),
                 Some(Down::Start) => match setup.finish(planner) {
                     Ok(control) => break control,
-                    Err(e) => {
-                        defmt::error!("ecu: set-up refused, code {}", e.code());
+                    Err(f) => {
+                        defmt::error!("ecu: set-up refused: {} ({})", f.error.name(), f.detail);
                         link.send(&Up::Ready(ReadyFrame {
-                            status: e.code(),
-                            detail: e.detail(),
+                            status: f.error.code(),
+                            detail: f.detail,
                         }));
                         exit(false)
                     }
@@ -361,7 +360,7 @@ mod app {
             cx.shared.estimate.lock(|s| *s = e);
             let control = &mut *cx.local.control;
             let act = cx.shared.plan.lock(|plan| control.run(&e, plan, e.stamp_us));
-            let fault = telemetry::fault_code(control.last_fault);
+            let fault = link::fault_code(control.last_fault);
             LAST_DELTA_BITS.store(act.delta_rad.to_bits(), Ordering::Relaxed);
             let ticks = core_ticks().saturating_sub(t0).min(u32::MAX as u64) as u32;
             CONTROL_TICKS.fetch_add(ticks, Ordering::Relaxed);
@@ -399,7 +398,7 @@ mod app {
                 .saturating_sub(t0)
                 .saturating_sub(c1.wrapping_sub(c0) as u64);
             let finish_us = now_us();
-            let event = telemetry::plan_event(
+            let event = PlanEventFrame::new(
                 activation,
                 release_us,
                 finish_us,
@@ -428,7 +427,7 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
     let fd = UP_FD.load(Ordering::Relaxed);
     if fd != 0 {
         let a = Actuation::safe(delta, 0.0);
-        let mut frame = actuation_frame(u32::MAX, &a, telemetry::FAULT_PANIC, 0);
+        let mut frame = actuation_frame(u32::MAX, &a, link::FAULT_PANIC, 0);
         frame.plan = None;
         let mut buf = [0u8; MAX_FRAME_BYTES];
         if let Ok(n) = link::encode(&Up::Actuation(frame), &mut buf) {
