@@ -474,8 +474,11 @@ pub struct PathEntry {
 /// The worst-case depth from one root function.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct RootReport {
-    /// The root's demangled name.
+    /// The root as asked for (symbol or alias), or the matched name for a prefix.
     pub root: String,
+    /// Demangled name of the function it resolved to (interrupts bound to the
+    /// default handler resolve to its first symbol).
+    pub function: String,
     /// Worst-case stack depth from the root's entry, in bytes (its own frame
     /// included, no exception frame).
     pub depth_bytes: u32,
@@ -676,8 +679,15 @@ pub fn stack_bound(program: &Program, levels: &[PriorityLevel]) -> Result<StackR
                     });
                     at = depths.next[f];
                 }
+                let function = demangle(&program.functions[i].name);
+                let exact = program.names.get(root) == Some(&i) || function == *root;
                 roots.push(RootReport {
-                    root: demangle(&program.functions[i].name),
+                    root: if exact {
+                        root.clone()
+                    } else {
+                        function.clone()
+                    },
+                    function,
                     depth_bytes: depths.depth[i],
                     worst_path,
                 });
