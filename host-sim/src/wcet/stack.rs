@@ -378,16 +378,17 @@ fn analyse_body(name: &str, address: u32, body: &[Insn<'_>]) -> Function {
                     }
                 }
             }
-            _ if m.starts_with("str") && insn.operands.contains("[sp, #-") => {
-                if insn.operands.ends_with("]!") {
-                    let imm = insn
-                        .operands
-                        .split("[sp, #-")
-                        .nth(1)
-                        .and_then(|s| s.split(']').next())
-                        .and_then(parse_imm);
-                    decrement(imm);
-                }
+            _ if m.starts_with("str")
+                && insn.operands.contains("[sp, #-")
+                && insn.operands.ends_with("]!") =>
+            {
+                let imm = insn
+                    .operands
+                    .split("[sp, #-")
+                    .nth(1)
+                    .and_then(|s| s.split(']').next())
+                    .and_then(parse_imm);
+                decrement(imm);
             }
             _ => {}
         }
