@@ -17,6 +17,7 @@
 //! | [`figures`] | the closed-loop figures (the paper's Figures 5–8, task costs) |
 //! | [`plot`] | plotting helpers (embedded font) |
 //! | [`qp_corpus`] | the MPC's QPs as JSON, for solver benchmarks (`qp-corpus` command) |
+//! | [`wcet`] | worst-case stack bound and cycles-per-instruction bound of the ECU binary |
 
 pub mod closed_loop;
 pub mod figures;
@@ -32,3 +33,4 @@ pub mod tire_table;
 pub mod track;
 pub mod validity;
 pub mod vehicle;
+pub mod wcet;

@@ -1,0 +1,974 @@
+//! Static worst-case stack bound of a thumbv7em ELF.
+//!
+//! The binary is disassembled with `llvm-objdump -d` (rustup component
+//! `llvm-tools`). For every function the frame size is the sum of every
+//! stack-pointer decrement in its body (`push`, `stmdb sp!`, `vpush`,
+//! `str rX, [sp, #-N]!`, `sub sp, #N`, `sub sp, rX` after `movw`/`movt` into `rX`):
+//! the compiler emits one prologue, so this is its size, and any other decrement
+//! only makes the bound larger. Calls are `bl`/`blx <symbol>`; a branch to another
+//! function (`b.w <other>`) is a tail call and counted like a call (the caller's
+//! frame kept: sound, slightly pessimistic). The depth of a function is its frame
+//! plus the deepest callee, computed by an iterative depth-first search with
+//! memoisation; a cycle in the call graph is reported and makes the bound unsound.
+//!
+//! On a Cortex-M4F with the FPU in use every preemption level stacks an exception
+//! frame of [`EXCEPTION_FRAME_FPU_BYTES`] (lazy stacking reserves the FPU part) on
+//! top of its handler's depth, so the bound of an application whose thread mode
+//! runs `main` and whose interrupts run at `L` priority levels is
+//! `depth(main) + Σ_levels (max depth of the level's handlers + 104 B)`.
+
+use super::{demangle, WcetError};
+use serde::Serialize;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Exception frame without FPU context: r0–r3, r12, lr, pc, xPSR, in bytes.
+pub const EXCEPTION_FRAME_BASIC_BYTES: u32 = 32;
+/// Exception frame with FPU context (adds s0–s15, FPSCR and a reserved word), in
+/// bytes; lazy stacking reserves it whenever the FPU is enabled.
+pub const EXCEPTION_FRAME_FPU_BYTES: u32 = 104;
+
+/// The stack frame of a function as read from its instructions.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub enum Frame {
+    /// Every stack-pointer decrement was understood; their sum, in bytes.
+    Known(u32),
+    /// Some decrement could not be sized.
+    Unknown {
+        /// Sum of the decrements that were understood, in bytes (a lower bound).
+        known_bytes: u32,
+        /// The instruction that could not be sized, with its address.
+        reason: String,
+    },
+}
+
+impl Frame {
+    /// The frame size counted in the bound, in bytes (the understood part).
+    pub fn bytes(&self) -> u32 {
+        match self {
+            Frame::Known(b) => *b,
+            Frame::Unknown { known_bytes, .. } => *known_bytes,
+        }
+    }
+}
+
+/// A direct call or tail call found in a function.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Call {
+    /// Callee symbol as printed by the disassembler (mangled).
+    pub target: String,
+    /// Address of the call instruction.
+    pub address: u32,
+    /// `true` for a branch (`b`, `b.w`, `beq.w`) to another function.
+    pub tail: bool,
+}
+
+/// A function of the disassembly.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Function {
+    /// Symbol (mangled, as in the symbol table).
+    pub name: String,
+    /// Start address.
+    pub address: u32,
+    /// Stack frame.
+    pub frame: Frame,
+    /// Direct calls and tail calls.
+    pub calls: Vec<Call>,
+    /// Indirect calls and jumps (`blx rN`, `bx rN` other than `bx lr`, `mov pc, rN`,
+    /// `ldr pc, [..]` not popping from the stack): `address: instruction`.
+    pub indirect: Vec<String>,
+}
+
+/// The functions of a disassembled binary and the names they are known by.
+#[derive(Debug, Clone, Default)]
+pub struct Program {
+    /// The functions, in address order.
+    pub functions: Vec<Function>,
+    /// Every name (symbol, alias) to an index into `functions`.
+    names: HashMap<String, usize>,
+}
+
+impl Program {
+    /// Looks a function up by its exact (mangled) symbol or alias.
+    pub fn get(&self, symbol: &str) -> Option<&Function> {
+        self.names.get(symbol).and_then(|&i| self.functions.get(i))
+    }
+
+    /// Adds `alias` for the function starting at `address` (symbols sharing an
+    /// address, e.g. interrupt names bound to `DefaultHandler`, which
+    /// `llvm-objdump` prints once). Returns `false` if no function starts there.
+    pub fn add_alias(&mut self, alias: &str, address: u32) -> bool {
+        match self
+            .functions
+            .iter()
+            .position(|f| f.address == address & !1)
+        {
+            Some(i) => {
+                self.names.entry(alias.to_string()).or_insert(i);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Indices of the functions matching `root`: exact symbol, exact demangled name
+    /// (without hash), or else every function whose demangled name starts with it.
+    fn resolve(&self, root: &str) -> Vec<usize> {
+        if let Some(&i) = self.names.get(root) {
+            return vec![i];
+        }
+        let mut exact: Vec<usize> = Vec::new();
+        let mut prefix: Vec<usize> = Vec::new();
+        let mut names: Vec<(&String, &usize)> = self.names.iter().collect();
+        names.sort();
+        for (name, &i) in names {
+            let d = demangle(name);
+            if d == root && !exact.contains(&i) {
+                exact.push(i);
+            } else if d.starts_with(root) && !prefix.contains(&i) {
+                prefix.push(i);
+            }
+        }
+        if exact.is_empty() {
+            prefix
+        } else {
+            exact
+        }
+    }
+}
+
+/// Path of `llvm-objdump` in the active toolchain's `llvm-tools` component.
+pub fn llvm_objdump_path() -> Result<PathBuf, WcetError> {
+    llvm_tool_path("llvm-objdump")
+}
+
+/// Path of an LLVM tool (`llvm-objdump`, `llvm-nm`) of the `llvm-tools` component.
+pub fn llvm_tool_path(tool: &str) -> Result<PathBuf, WcetError> {
+    let run = |args: &[&str]| -> Result<String, WcetError> {
+        let out = Command::new("rustc")
+            .args(args)
+            .output()
+            .map_err(|e| WcetError::Tool {
+                tool: "rustc".into(),
+                message: e.to_string(),
+            })?;
+        Ok(String::from_utf8_lossy(&out.stdout).to_string())
+    };
+    let sysroot = run(&["--print", "sysroot"])?.trim().to_string();
+    let host = run(&["-vV"])?
+        .lines()
+        .find_map(|l| l.strip_prefix("host: "))
+        .map(str::to_string)
+        .ok_or_else(|| WcetError::Tool {
+            tool: "rustc -vV".into(),
+            message: "no `host:` line".into(),
+        })?;
+    let path = Path::new(&sysroot)
+        .join("lib/rustlib")
+        .join(host)
+        .join("bin")
+        .join(tool);
+    if path.is_file() {
+        Ok(path)
+    } else {
+        Err(WcetError::ObjdumpMissing { searched: path })
+    }
+}
+
+/// Disassembles `elf` with `llvm-objdump -d --no-show-raw-insn` (mangled names).
+pub fn disassemble(elf: &Path) -> Result<String, WcetError> {
+    let objdump = llvm_objdump_path()?;
+    let out = Command::new(&objdump)
+        .arg("-d")
+        .arg("--no-show-raw-insn")
+        .arg(elf)
+        .output()
+        .map_err(|e| WcetError::Tool {
+            tool: objdump.display().to_string(),
+            message: e.to_string(),
+        })?;
+    if !out.status.success() {
+        return Err(WcetError::Tool {
+            tool: objdump.display().to_string(),
+            message: String::from_utf8_lossy(&out.stderr).trim().to_string(),
+        });
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).to_string())
+}
+
+/// One instruction line of the disassembly.
+struct Insn<'a> {
+    address: u32,
+    mnemonic: &'a str,
+    /// Operands without the trailing `@ comment`.
+    operands: &'a str,
+}
+
+fn parse_header(line: &str) -> Option<(u32, &str)> {
+    let rest = line.strip_suffix(">:")?;
+    let (addr, name) = rest.split_once(" <")?;
+    Some((u32::from_str_radix(addr.trim(), 16).ok()?, name))
+}
+
+fn parse_insn(line: &str) -> Option<Insn<'_>> {
+    if !line.starts_with(' ') {
+        return None;
+    }
+    let mut fields = line.splitn(3, '\t');
+    let head = fields.next()?;
+    let (addr, _) = head.trim_start().split_once(':')?;
+    let address = u32::from_str_radix(addr, 16).ok()?;
+    let mnemonic = fields.next()?.trim();
+    let rest = fields.next().unwrap_or("");
+    let operands = rest.split('@').next().unwrap_or("").trim();
+    Some(Insn {
+        address,
+        mnemonic,
+        operands,
+    })
+}
+
+/// Parses `llvm-objdump -d` text into functions with frames, calls and indirect
+/// jumps. Symbols at one address printed once are known only by that name; add
+/// the others with [`Program::add_alias`].
+pub fn parse_objdump(text: &str) -> Program {
+    let mut program = Program::default();
+    // Headers seen since the last instruction: aliases of the next body.
+    let mut pending: Vec<(u32, String)> = Vec::new();
+    let mut body: Vec<Insn<'_>> = Vec::new();
+    let mut flush = |pending: &mut Vec<(u32, String)>, body: &mut Vec<Insn<'_>>| {
+        if let Some((address, name)) = pending.last().cloned() {
+            let index = program.functions.len();
+            program.functions.push(analyse_body(&name, address, body));
+            for (_, alias) in pending.iter() {
+                program.names.entry(alias.clone()).or_insert(index);
+            }
+        }
+        pending.clear();
+        body.clear();
+    };
+    for line in text.lines() {
+        if let Some((address, name)) = parse_header(line) {
+            if !body.is_empty() {
+                flush(&mut pending, &mut body);
+            }
+            pending.push((address, name.to_string()));
+        } else if let Some(insn) = parse_insn(line) {
+            if !pending.is_empty() {
+                body.push(insn);
+            }
+        }
+    }
+    flush(&mut pending, &mut body);
+    program
+}
+
+/// Number of registers in a list `{r4, r5, d8-d9}`, in bytes (4 per core or
+/// s-register, 8 per d-register); `None` if the list is not understood.
+fn register_list_bytes(operands: &str) -> Option<u32> {
+    let open = operands.find('{')?;
+    let close = operands.rfind('}')?;
+    let list = operands.get(open + 1..close)?;
+    let mut bytes = 0;
+    for item in list.split(',').map(str::trim) {
+        let (first, last) = item.split_once('-').unwrap_or((item, item));
+        let size = match first.chars().next()? {
+            'd' => 8,
+            _ => 4,
+        };
+        let number = |r: &str| -> Option<u32> {
+            match r {
+                "sp" => Some(13),
+                "lr" => Some(14),
+                "pc" => Some(15),
+                "ip" => Some(12),
+                "fp" => Some(11),
+                "sb" => Some(9),
+                "sl" => Some(10),
+                _ => r.get(1..)?.parse().ok(),
+            }
+        };
+        let count = number(last)?.checked_sub(number(first)?)? + 1;
+        bytes += size * count;
+    }
+    Some(bytes)
+}
+
+fn parse_imm(s: &str) -> Option<u32> {
+    let s = s.trim().trim_start_matches('#');
+    match s.strip_prefix("0x") {
+        Some(hex) => u32::from_str_radix(hex, 16).ok(),
+        None => s.parse().ok(),
+    }
+}
+
+/// The base mnemonic without width qualifier (`.w`, `.n`).
+fn base(mnemonic: &str) -> &str {
+    mnemonic.split('.').next().unwrap_or(mnemonic)
+}
+
+const CONDITIONS: [&str; 15] = [
+    "eq", "ne", "cs", "hs", "cc", "lo", "mi", "pl", "vs", "vc", "hi", "ls", "ge", "lt", "gt",
+];
+
+fn is_condition(s: &str) -> bool {
+    CONDITIONS.contains(&s) || s == "le" || s == "al"
+}
+
+/// `Some(true)` for a call (`bl`, `blx`), `Some(false)` for a jump (`b`, `b<cond>`,
+/// `bx`), `None` otherwise.
+fn branch(mnemonic: &str) -> Option<bool> {
+    let m = base(mnemonic);
+    match m {
+        "bl" | "blx" => Some(true),
+        "b" | "bx" => Some(false),
+        _ if m.len() == 3 && m.starts_with('b') && is_condition(&m[1..]) => Some(false),
+        _ => None,
+    }
+}
+
+/// The symbol in `<symbol>` or `<symbol+0x12>` and whether it had an offset.
+fn target_symbol(operands: &str) -> Option<(&str, bool)> {
+    let open = operands.find('<')?;
+    let close = operands.rfind('>')?;
+    let inner = operands.get(open + 1..close)?;
+    Some(match inner.rfind("+0x") {
+        Some(i) => (&inner[..i], true),
+        None => (inner, false),
+    })
+}
+
+fn analyse_body(name: &str, address: u32, body: &[Insn<'_>]) -> Function {
+    let mut known: u32 = 0;
+    let mut unknown: Option<String> = None;
+    let mut calls = Vec::new();
+    let mut indirect = Vec::new();
+    // Constants moved into registers (movw/movt/mov #imm), for `sub sp, rX`.
+    let mut regs: HashMap<&str, u32> = HashMap::new();
+    for insn in body {
+        let m = base(insn.mnemonic);
+        let ops: Vec<&str> = insn.operands.split(',').map(str::trim).collect();
+        let first = ops.first().copied().unwrap_or("");
+        let here = || format!("{:#x}: {} {}", insn.address, insn.mnemonic, insn.operands);
+        let mut decrement = |bytes: Option<u32>| match bytes {
+            Some(b) => known = known.saturating_add(b),
+            None => {
+                unknown.get_or_insert_with(here);
+            }
+        };
+        match m {
+            "push" | "vpush" => decrement(register_list_bytes(insn.operands)),
+            "stmdb" | "vstmdb" | "stmfd" if first == "sp!" => {
+                decrement(register_list_bytes(insn.operands))
+            }
+            "sub" | "subw" | "subs" if first == "sp" => {
+                // `sub sp, #N`, `sub sp, sp, #N`, `sub sp, sp, rX`, `sub sp, rX`;
+                // `sub sp, r7, #N` restores from the frame pointer.
+                let (src, amount) = match ops.as_slice() {
+                    [_, a] => ("sp", *a),
+                    [_, s, a] => (*s, *a),
+                    _ => ("?", ""),
+                };
+                if src == "sp" {
+                    if amount.starts_with('#') {
+                        decrement(parse_imm(amount));
+                    } else {
+                        decrement(regs.get(amount).copied());
+                    }
+                }
+            }
+            _ if m.starts_with("str")
+                && insn.operands.contains("[sp, #-")
+                && insn.operands.ends_with("]!") =>
+            {
+                let imm = insn
+                    .operands
+                    .split("[sp, #-")
+                    .nth(1)
+                    .and_then(|s| s.split(']').next())
+                    .and_then(parse_imm);
+                decrement(imm);
+            }
+            _ => {}
+        }
+        // Constant tracking.
+        match m {
+            "movw" | "mov" | "movs" if ops.get(1).is_some_and(|o| o.starts_with('#')) => {
+                match ops.get(1).and_then(|o| parse_imm(o)) {
+                    Some(v) => {
+                        regs.insert(first, v);
+                    }
+                    None => {
+                        regs.remove(first);
+                    }
+                }
+            }
+            "movt" => {
+                let high = ops.get(1).and_then(|o| parse_imm(o));
+                match (regs.get(first), high) {
+                    (Some(&low), Some(h)) => {
+                        regs.insert(first, (low & 0xffff) | (h << 16));
+                    }
+                    _ => {
+                        regs.remove(first);
+                    }
+                }
+            }
+            _ if !(m.starts_with("str")
+                || m.starts_with("cmp")
+                || m.starts_with("cmn")
+                || m.starts_with("tst")
+                || m.starts_with("teq")
+                || m.starts_with("push")
+                || m.starts_with("vpush")) =>
+            {
+                regs.remove(first);
+            }
+            _ => {}
+        }
+        // Calls and indirect jumps.
+        let register_operand = first.starts_with('r') || first == "ip" || first == "lr";
+        if let Some(is_call) = branch(insn.mnemonic) {
+            if let Some((target, _)) = target_symbol(insn.operands) {
+                if is_call || target != name {
+                    calls.push(Call {
+                        target: target.to_string(),
+                        address: insn.address,
+                        tail: !is_call,
+                    });
+                }
+            } else if register_operand && !(m == "bx" && first == "lr") {
+                indirect.push(here());
+            }
+        } else if (m == "mov" && first == "pc")
+            || (m.starts_with("ldr") && first == "pc" && !insn.operands.contains("[sp"))
+        {
+            indirect.push(here());
+        }
+    }
+    let frame = match unknown {
+        None => Frame::Known(known),
+        Some(reason) => Frame::Unknown {
+            known_bytes: known,
+            reason,
+        },
+    };
+    Function {
+        name: name.to_string(),
+        address,
+        frame,
+        calls,
+        indirect,
+    }
+}
+
+/// One function on a worst path.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct PathEntry {
+    /// Demangled name (without hash).
+    pub function: String,
+    /// Frame counted, in bytes.
+    pub frame_bytes: u32,
+}
+
+/// The worst-case depth from one root function.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct RootReport {
+    /// The root as asked for (symbol or alias), or the matched name for a prefix.
+    pub root: String,
+    /// Demangled name of the function it resolved to (interrupts bound to the
+    /// default handler resolve to its first symbol).
+    pub function: String,
+    /// Worst-case stack depth from the root's entry, in bytes (its own frame
+    /// included, no exception frame).
+    pub depth_bytes: u32,
+    /// The call path reaching that depth, root first.
+    pub worst_path: Vec<PathEntry>,
+}
+
+/// One priority level: thread mode or the handlers sharing an interrupt priority.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct LevelReport {
+    /// The level's name as given.
+    pub name: String,
+    /// Each root of the level.
+    pub roots: Vec<RootReport>,
+    /// Exception frame stacked on entry to this level, in bytes (0 in thread mode).
+    pub exception_frame_bytes: u32,
+    /// This level's share of the bound: deepest root plus exception frame, in bytes.
+    pub contribution_bytes: u32,
+}
+
+/// A function whose frame was not understood.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct UnknownFrame {
+    /// Demangled name.
+    pub function: String,
+    /// The instruction not understood, and the bytes counted anyway.
+    pub reason: String,
+}
+
+/// An indirect call or jump: its target, and so its stack use, is not in the bound.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct IndirectCall {
+    /// Demangled name of the function containing it.
+    pub function: String,
+    /// `address: instruction`.
+    pub instruction: String,
+}
+
+/// Worst-case stack bound of an application.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StackReport {
+    /// Thread mode first, then each preemption level in increasing priority.
+    pub levels: Vec<LevelReport>,
+    /// The bound: sum of the levels' contributions, in bytes.
+    pub total_bytes: u32,
+    /// `false` if anything reachable was not analysed: an unknown frame, an indirect
+    /// call, a call to a symbol not in the disassembly, or a cycle.
+    pub sound: bool,
+    /// Reachable functions whose frame was not understood.
+    pub unknown_frames: Vec<UnknownFrame>,
+    /// Reachable indirect calls and jumps.
+    pub indirect_calls: Vec<IndirectCall>,
+    /// Reachable calls to symbols that are not functions of the disassembly:
+    /// `caller -> callee`.
+    pub unresolved_calls: Vec<String>,
+    /// Call-graph cycles reachable from a root (demangled names, the first repeated
+    /// at the end): recursion, whose depth the bound does not include.
+    pub cycles: Vec<Vec<String>>,
+    /// What the analysis covers and misses.
+    pub method: String,
+}
+
+/// A priority level of the application and its root functions (symbols, demangled
+/// names or prefixes of demangled names).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PriorityLevel {
+    /// Name in the report, e.g. `thread`, `priority 1`.
+    pub name: String,
+    /// Root functions, e.g. `main`, `USART1`, `SysTick`.
+    pub roots: Vec<String>,
+}
+
+/// Depths of every function, computed once.
+struct Depths {
+    depth: Vec<u32>,
+    next: Vec<Option<usize>>,
+    cycles: Vec<Vec<usize>>,
+    unresolved: Vec<(usize, String)>,
+}
+
+/// Iterative depth-first search with memoisation over the whole call graph.
+fn compute_depths(program: &Program) -> Depths {
+    let n = program.functions.len();
+    let mut depth = vec![0u32; n];
+    let mut next: Vec<Option<usize>> = vec![None; n];
+    let mut state = vec![0u8; n]; // 0 unvisited, 1 on the stack, 2 done
+    let mut cycles = Vec::new();
+    let mut unresolved = Vec::new();
+    let edges: Vec<Vec<Option<usize>>> = program
+        .functions
+        .iter()
+        .map(|f| {
+            f.calls
+                .iter()
+                .map(|c| program.names.get(&c.target).copied())
+                .collect()
+        })
+        .collect();
+    for start in 0..n {
+        if state[start] != 0 {
+            continue;
+        }
+        let mut stack: Vec<(usize, usize)> = vec![(start, 0)];
+        state[start] = 1;
+        while let Some(&mut (node, ref mut edge)) = stack.last_mut() {
+            let callees = &edges[node];
+            if *edge < callees.len() {
+                let e = *edge;
+                *edge += 1;
+                match callees[e] {
+                    None => {
+                        unresolved.push((node, program.functions[node].calls[e].target.clone()))
+                    }
+                    Some(c) if state[c] == 0 => {
+                        state[c] = 1;
+                        stack.push((c, 0));
+                    }
+                    Some(c) if state[c] == 1 => {
+                        let from = stack.iter().position(|&(f, _)| f == c).unwrap_or(0);
+                        let mut cycle: Vec<usize> = stack[from..].iter().map(|&(f, _)| f).collect();
+                        cycle.push(c);
+                        cycles.push(cycle);
+                    }
+                    Some(_) => {}
+                }
+            } else {
+                let mut best: Option<(u32, usize)> = None;
+                for &c in callees.iter().flatten() {
+                    if state[c] == 2 && best.is_none_or(|(d, _)| depth[c] > d) {
+                        best = Some((depth[c], c));
+                    }
+                }
+                depth[node] = program.functions[node].frame.bytes() + best.map_or(0, |(d, _)| d);
+                next[node] = best.map(|(_, c)| c);
+                state[node] = 2;
+                stack.pop();
+            }
+        }
+    }
+    Depths {
+        depth,
+        next,
+        cycles,
+        unresolved,
+    }
+}
+
+/// Functions reachable from `roots` (roots included), iteratively.
+fn reachable(program: &Program, roots: &[usize]) -> Vec<bool> {
+    let mut seen = vec![false; program.functions.len()];
+    let mut todo: Vec<usize> = roots.to_vec();
+    while let Some(f) = todo.pop() {
+        if std::mem::replace(&mut seen[f], true) {
+            continue;
+        }
+        for c in &program.functions[f].calls {
+            if let Some(&i) = program.names.get(&c.target) {
+                if !seen[i] {
+                    todo.push(i);
+                }
+            }
+        }
+    }
+    seen
+}
+
+const METHOD: &str = "Static bound from the disassembly: each function's frame is the sum of its \
+stack-pointer decrements (push, vpush, stmdb sp!, str [sp, #-N]!, sub sp by an immediate or by a \
+movw/movt constant); the depth of a root is the deepest chain of direct calls (bl, blx <symbol>) \
+and tail calls (a branch to another function, its caller's frame kept); each preemption level \
+adds its deepest handler and a 104-byte FPU exception frame. Not covered: the targets of indirect \
+calls (function pointers, trait objects: listed), recursion (cycles: listed), frames the parser \
+did not understand (listed, their understood part counted), inline assembly that moves sp other \
+than by these instructions, and handlers not given as roots (e.g. HardFault).";
+
+/// Worst-case stack bound of `program` for `levels` (thread mode first, then each
+/// preemption level in increasing priority).
+pub fn stack_bound(program: &Program, levels: &[PriorityLevel]) -> Result<StackReport, WcetError> {
+    let depths = compute_depths(program);
+    let mut all_roots = Vec::new();
+    let mut level_reports = Vec::new();
+    for (k, level) in levels.iter().enumerate() {
+        let mut roots = Vec::new();
+        for root in &level.roots {
+            let found = program.resolve(root);
+            if found.is_empty() {
+                return Err(WcetError::UnknownRoot(root.clone()));
+            }
+            for i in found {
+                all_roots.push(i);
+                let mut worst_path = Vec::new();
+                let mut at = Some(i);
+                while let Some(f) = at {
+                    let func = &program.functions[f];
+                    worst_path.push(PathEntry {
+                        function: demangle(&func.name),
+                        frame_bytes: func.frame.bytes(),
+                    });
+                    at = depths.next[f];
+                }
+                let function = demangle(&program.functions[i].name);
+                let exact = program.names.get(root) == Some(&i) || function == *root;
+                roots.push(RootReport {
+                    root: if exact {
+                        root.clone()
+                    } else {
+                        function.clone()
+                    },
+                    function,
+                    depth_bytes: depths.depth[i],
+                    worst_path,
+                });
+            }
+        }
+        let exception_frame_bytes = if k == 0 { 0 } else { EXCEPTION_FRAME_FPU_BYTES };
+        let deepest = roots.iter().map(|r| r.depth_bytes).max().unwrap_or(0);
+        level_reports.push(LevelReport {
+            name: level.name.clone(),
+            roots,
+            exception_frame_bytes,
+            contribution_bytes: deepest + exception_frame_bytes,
+        });
+    }
+    let seen = reachable(program, &all_roots);
+    let mut unknown_frames = Vec::new();
+    let mut indirect_calls = Vec::new();
+    for (f, func) in program.functions.iter().enumerate() {
+        if !seen[f] {
+            continue;
+        }
+        if let Frame::Unknown {
+            known_bytes,
+            reason,
+        } = &func.frame
+        {
+            unknown_frames.push(UnknownFrame {
+                function: demangle(&func.name),
+                reason: format!("{reason} (counted {known_bytes} B)"),
+            });
+        }
+        for instruction in &func.indirect {
+            indirect_calls.push(IndirectCall {
+                function: demangle(&func.name),
+                instruction: instruction.clone(),
+            });
+        }
+    }
+    let unresolved_calls: Vec<String> = depths
+        .unresolved
+        .iter()
+        .filter(|(f, _)| seen[*f])
+        .map(|(f, callee)| format!("{} -> {}", demangle(&program.functions[*f].name), callee))
+        .collect();
+    let cycles: Vec<Vec<String>> = depths
+        .cycles
+        .iter()
+        .filter(|c| c.iter().any(|&f| seen[f]))
+        .map(|c| {
+            c.iter()
+                .map(|&f| demangle(&program.functions[f].name))
+                .collect()
+        })
+        .collect();
+    let total_bytes = level_reports.iter().map(|l| l.contribution_bytes).sum();
+    let sound = unknown_frames.is_empty()
+        && indirect_calls.is_empty()
+        && unresolved_calls.is_empty()
+        && cycles.is_empty();
+    Ok(StackReport {
+        levels: level_reports,
+        total_bytes,
+        sound,
+        unknown_frames,
+        indirect_calls,
+        unresolved_calls,
+        cycles,
+        method: METHOD.to_string(),
+    })
+}
+
+/// Disassembles `elf`, adds every function symbol of its symbol table as an alias
+/// (interrupt handlers bound to `DefaultHandler` share its address), and bounds the
+/// stack of `levels`.
+pub fn analyse_elf(elf: &Path, levels: &[PriorityLevel]) -> Result<StackReport, WcetError> {
+    let text = disassemble(elf)?;
+    let mut program = parse_objdump(&text);
+    for symbol in super::cpi::elf_functions(elf)? {
+        program.add_alias(&symbol.name, symbol.address);
+    }
+    stack_bound(&program, levels)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A hand-written disassembly: `main` calls `leaf` and `big` (large frame via
+    /// movw/movt), `big` tail-calls `leaf`; `handler` calls through a register.
+    const FIXTURE: &str = "
+firmware:\tfile format elf32-littlearm
+
+Disassembly of section .text:
+
+08000100 <main>:
+ 8000100:      \tpush\t{r4, r5, r6, r7, lr}
+ 8000102:      \tadd\tr7, sp, #0xc
+ 8000104:      \tvpush\t{d8, d9}
+ 8000108:      \tsub\tsp, #0x10
+ 800010a:      \tbl\t0x8000200 <leaf>          @ imm = #0xf4
+ 800010e:      \tbl\t0x8000300 <big>           @ imm = #0x1f0
+ 8000112:      \tbeq\t0x8000100 <main+0x0>     @ imm = #-0x16
+ 8000114:      \tadd\tsp, #0x10
+ 8000116:      \tvpop\t{d8, d9}
+ 800011a:      \tpop\t{r4, r5, r6, r7, pc}
+
+08000200 <leaf>:
+ 8000200:      \tpush.w\t{r4, r5, r6, r7, r8, r9, r10, r11, lr}
+ 8000204:      \tsub.w\tsp, sp, #0x400
+ 8000208:      \tadd.w\tsp, sp, #0x400
+ 800020c:      \tpop.w\t{r4, r5, r6, r7, r8, r9, r10, r11, pc}
+
+08000300 <big>:
+ 8000300:      \tpush\t{r7, lr}
+ 8000302:      \tmovw\tr12, #0x2345
+ 8000306:      \tmovt\tr12, #0x1
+ 800030a:      \tsub.w\tsp, sp, r12
+ 800030e:      \tsub.w\tsp, r7, #0x8
+ 8000312:      \tpop.w\t{r7, lr}
+ 8000316:      \tb.w\t0x8000200 <leaf>         @ imm = #-0x11a
+
+08000400 <handler>:
+ 8000400:      \tstr\tr11, [sp, #-4]!
+ 8000404:      \tldr\tr2, [r0]
+ 8000406:      \tblx\tr2
+ 8000408:      \tbx\tlr
+";
+
+    fn program() -> Program {
+        parse_objdump(FIXTURE)
+    }
+
+    #[test]
+    fn prologues_give_frame_sizes() {
+        let p = program();
+        // 5 core registers + 2 d-registers + 16 B.
+        assert_eq!(
+            p.get("main").map(|f| f.frame.clone()),
+            Some(Frame::Known(20 + 16 + 16))
+        );
+        assert_eq!(
+            p.get("leaf").map(|f| f.frame.clone()),
+            Some(Frame::Known(36 + 0x400))
+        );
+        // push {r7, lr} + 0x12345 through r12; `sub.w sp, r7, #8` is a restore.
+        assert_eq!(
+            p.get("big").map(|f| f.frame.clone()),
+            Some(Frame::Known(8 + 0x12345))
+        );
+        assert_eq!(
+            p.get("handler").map(|f| f.frame.clone()),
+            Some(Frame::Known(4))
+        );
+    }
+
+    #[test]
+    fn call_edges_and_tail_calls() {
+        let p = program();
+        let main = p.get("main").map(|f| f.calls.clone()).unwrap_or_default();
+        let targets: Vec<(&str, bool)> = main.iter().map(|c| (c.target.as_str(), c.tail)).collect();
+        // The branch back into main itself is not a call.
+        assert_eq!(targets, vec![("leaf", false), ("big", false)]);
+        let big = p.get("big").map(|f| f.calls.clone()).unwrap_or_default();
+        assert_eq!(big.len(), 1);
+        assert!(big.iter().all(|c| c.tail && c.target == "leaf"));
+    }
+
+    #[test]
+    fn worst_path_and_preemption_levels() -> Result<(), WcetError> {
+        let p = program();
+        let levels = [
+            PriorityLevel {
+                name: "thread".into(),
+                roots: vec!["main".into()],
+            },
+            PriorityLevel {
+                name: "priority 1".into(),
+                roots: vec!["leaf".into()],
+            },
+        ];
+        let report = stack_bound(&p, &levels)?;
+        let main = 52;
+        let leaf = 36 + 0x400;
+        let big = 8 + 0x12345;
+        let thread = &report.levels[0].roots[0];
+        assert_eq!(thread.depth_bytes, main + big + leaf);
+        let path: Vec<&str> = thread
+            .worst_path
+            .iter()
+            .map(|e| e.function.as_str())
+            .collect();
+        assert_eq!(path, vec!["main", "big", "leaf"]);
+        assert_eq!(report.levels[1].contribution_bytes, leaf + 104);
+        assert_eq!(report.total_bytes, main + big + leaf + leaf + 104);
+        assert!(report.sound, "{report:?}");
+        Ok(())
+    }
+
+    #[test]
+    fn indirect_call_makes_the_bound_unsound() -> Result<(), WcetError> {
+        let report = stack_bound(
+            &program(),
+            &[PriorityLevel {
+                name: "thread".into(),
+                roots: vec!["handler".into()],
+            }],
+        )?;
+        assert!(!report.sound);
+        assert_eq!(report.indirect_calls.len(), 1);
+        assert_eq!(report.indirect_calls[0].function, "handler");
+        assert!(report.indirect_calls[0].instruction.contains("blx r2"));
+        Ok(())
+    }
+
+    #[test]
+    fn cycles_are_found_and_reported() -> Result<(), WcetError> {
+        let text = "
+08000000 <a>:
+ 8000000:      \tpush\t{r7, lr}
+ 8000002:      \tbl\t0x8000010 <b>
+08000010 <b>:
+ 8000010:      \tpush\t{r4, lr}
+ 8000012:      \tbl\t0x8000000 <a>
+ 8000016:      \tbl\t0x8000020 <c>
+08000020 <c>:
+ 8000020:      \tbx\tlr
+";
+        let report = stack_bound(
+            &parse_objdump(text),
+            &[PriorityLevel {
+                name: "thread".into(),
+                roots: vec!["a".into()],
+            }],
+        )?;
+        assert!(!report.sound);
+        assert_eq!(
+            report.cycles,
+            vec![vec!["a".to_string(), "b".into(), "a".into()]]
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn unknown_frame_is_reported_not_zero() -> Result<(), WcetError> {
+        let text = "
+08000000 <f>:
+ 8000000:      \tpush\t{r7, lr}
+ 8000002:      \tsub.w\tsp, sp, r3
+ 8000006:      \tbx\tlr
+";
+        let p = parse_objdump(text);
+        assert!(matches!(
+            p.get("f").map(|f| f.frame.clone()),
+            Some(Frame::Unknown { known_bytes: 8, .. })
+        ));
+        let report = stack_bound(
+            &p,
+            &[PriorityLevel {
+                name: "thread".into(),
+                roots: vec!["f".into()],
+            }],
+        )?;
+        assert!(!report.sound);
+        assert_eq!(report.unknown_frames.len(), 1);
+        Ok(())
+    }
+
+    #[test]
+    fn aliases_and_unknown_roots() {
+        let mut p = program();
+        assert!(p.add_alias("USART1", 0x0800_0401));
+        assert_eq!(p.get("USART1").map(|f| f.name.as_str()), Some("handler"));
+        assert!(!p.add_alias("nowhere", 0x0900_0000));
+        let err = stack_bound(
+            &p,
+            &[PriorityLevel {
+                name: "thread".into(),
+                roots: vec!["missing".into()],
+            }],
+        );
+        assert!(matches!(err, Err(WcetError::UnknownRoot(_))));
+    }
+}

@@ -1,0 +1,111 @@
+//! Worst-case analyses on the real ECU binary `mpc_step` (built by `.ci/ecu-check`
+//! or `cargo build --release -p firmware --target thumbv7em-none-eabihf --features ecu
+//! --bin mpc_step`). Each test says why it skips when the binary, `llvm-objdump`
+//! (`rustup component add llvm-tools`) or the QEMU log is absent.
+#![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::path::PathBuf;
+
+use host_sim::wcet::cpi::{analyse_log, elf_functions, Region};
+use host_sim::wcet::stack::{analyse_elf, llvm_objdump_path, PriorityLevel};
+
+/// `WCET_ELF`, or `mpc_step` in the workspace's target directory.
+fn mpc_step() -> Option<PathBuf> {
+    let path = std::env::var_os("WCET_ELF")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            let target = std::env::var_os("CARGO_TARGET_DIR")
+                .map(PathBuf::from)
+                .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target"));
+            target.join("thumbv7em-none-eabihf/release/mpc_step")
+        });
+    if path.is_file() {
+        Some(path)
+    } else {
+        eprintln!(
+            "skipped: {} not built (cargo build --release -p firmware --target thumbv7em-none-eabihf --features ecu --bin mpc_step)",
+            path.display()
+        );
+        None
+    }
+}
+
+#[test]
+fn stack_bound_of_mpc_step_main() {
+    let Some(elf) = mpc_step() else { return };
+    if let Err(e) = llvm_objdump_path() {
+        eprintln!("skipped: {e}");
+        return;
+    }
+    let levels = [
+        PriorityLevel {
+            name: "thread".into(),
+            roots: vec!["main".into()],
+        },
+        PriorityLevel {
+            name: "SysTick".into(),
+            roots: vec!["SysTick".into()],
+        },
+    ];
+    let report = analyse_elf(&elf, &levels).expect("analysing mpc_step");
+    println!("{}", serde_json::to_string_pretty(&report).unwrap());
+    let main = &report.levels[0].roots[0];
+    // main → the entry function → the MPC step: the path goes through the planner.
+    assert!(main
+        .worst_path
+        .iter()
+        .any(|e| e.function.starts_with("firmware::")));
+    let path_sum: u32 = main.worst_path.iter().map(|e| e.frame_bytes).sum();
+    assert_eq!(path_sum, main.depth_bytes);
+    // The MPC's workspaces are statics: the stack stays well under the 128 KB of RAM,
+    // and the step's own frame (kilobytes of condensing temporaries) is counted.
+    assert!(
+        main.depth_bytes > 1024 && main.depth_bytes < 64 * 1024,
+        "{}",
+        main.depth_bytes
+    );
+    assert_eq!(
+        report.total_bytes,
+        main.depth_bytes + report.levels[1].contribution_bytes
+    );
+    // The formatting machinery calls through `dyn Write`: reported, bound unsound.
+    assert!(!report.indirect_calls.is_empty());
+    assert!(!report.sound);
+}
+
+/// Run by hand on a log written by
+/// `qemu-system-arm ... -d in_asm,exec,nochain -D LOG -kernel mpc_step`:
+/// `WCET_QEMU_LOG=LOG cargo test -p host-sim --test wcet_ecu -- --nocapture`.
+#[test]
+fn cpi_bound_of_a_qemu_log() {
+    let Some(log) = std::env::var_os("WCET_QEMU_LOG").map(PathBuf::from) else {
+        eprintln!("skipped: set WCET_QEMU_LOG to a qemu-system-arm -d in_asm,exec,nochain log");
+        return;
+    };
+    let limit = std::env::var("WCET_MAX_TBS")
+        .ok()
+        .and_then(|s| s.parse().ok());
+    let regions = match mpc_step() {
+        Some(elf) => {
+            let symbols = elf_functions(&elf).expect("reading the ELF symbols");
+            vec![
+                Region::from_prefix(&symbols, "firmware::"),
+                Region::from_prefix(&symbols, "firmware::mpc::"),
+                Region::from_prefix(&symbols, "firmware::qp::"),
+            ]
+        }
+        None => Vec::new(),
+    };
+    let file = std::fs::File::open(&log).expect("opening the log");
+    let started = std::time::Instant::now();
+    let report = analyse_log(
+        std::io::BufReader::with_capacity(1 << 20, file),
+        limit,
+        &regions,
+    )
+    .expect("parsing the log");
+    println!("{}", serde_json::to_string_pretty(&report).unwrap());
+    println!("parsed in {:.1} s", started.elapsed().as_secs_f64());
+    assert!(report.total.instructions > 0);
+    assert!(report.total.cpi_bound >= 1.0);
+}
