@@ -79,7 +79,7 @@ fn run(seconds: f64, fail_plans_from_s: Option<f64>, nan_at_s: Option<f64>) -> O
         if nan_at_s.is_some_and(|s| (t - s).abs() < 5e-3) {
             est.vx_mps = f64::NAN;
         }
-        if t_us % PLAN_PERIOD_US == 0 {
+        if t_us.is_multiple_of(PLAN_PERIOD_US) {
             if fail_plans_from_s.is_some_and(|s| t >= s) {
                 planner.mu = f64::NAN;
             }

@@ -47,6 +47,8 @@ use firmware::plan::{Plan, PlanNode, PLAN_DT_S};
 use firmware::state_estimate::StateEstimate;
 
 use crate::closed_loop::{self, SimOptions};
+use crate::ecu::{ControlOutput, Ecu, PlanActivation};
+use firmware::tasks::PLAN_PERIOD_US;
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleParams;
 
@@ -66,6 +68,12 @@ pub struct PilOptions {
     pub work_dir: PathBuf,
     /// Longest wall time to wait for one frame, s (a hung ECU is an error).
     pub frame_timeout_s: f64,
+    /// Cycles per instruction that turn measured instructions into cycles (the
+    /// timing report's bound).
+    pub cycles_per_instruction: f64,
+    /// Write QEMU's execution trace (`-d in_asm,exec,nochain`) to this file, for the
+    /// cycles-per-instruction analysis (large: about 14 bytes per instruction).
+    pub trace: Option<PathBuf>,
 }
 
 impl PilOptions {
@@ -194,6 +202,11 @@ impl QemuEcu {
             .args(["-semihosting-config", "enable=on,target=native,chardev=semi"])
             .arg("-icount")
             .arg(format!("shift={},sleep=off", opts.icount_shift))
+            .args(
+                opts.trace
+                    .iter()
+                    .flat_map(|t| ["-d".into(), "in_asm,exec,nochain".into(), "-D".into(), t.display().to_string()]),
+            )
             .arg("-kernel")
             .arg(fs::canonicalize(&opts.elf)?)
             .stdin(Stdio::null())
@@ -468,5 +481,69 @@ pub fn setup_refusal(status: u8, detail: u16) -> String {
             "obstacle {detail} leaves no room to pass on either side: move it, make it narrower, or widen the track there"
         ),
         None => format!("unknown status {status} (detail {detail}): is the ECU application of another version?"),
+    }
+}
+
+/// Name of an MPC status code, as the simulator's logs write it.
+fn status_name(code: u8) -> &'static str {
+    match link::mpc_error_from_code(code) {
+        None if code == link::MPC_OK => "optimal",
+        None => "unknown",
+        Some(e) => crate::ecu::mpc_error_name(&e),
+    }
+}
+
+impl QemuEcu {
+    /// The record of a plan event, instructions from the ECU's clock ticks.
+    pub fn activation_of(&self, p: &PlanEventFrame) -> PlanActivation {
+        let instructions = self.opts.instructions(p.ticks);
+        PlanActivation {
+            activation: p.activation,
+            release_us: p.release_us,
+            finish_us: p.finish_us,
+            instructions,
+            cycles: instructions * self.opts.cycles_per_instruction,
+            status: status_name(p.status),
+            published: p.published,
+            deadline_miss: p.finish_us > p.release_us + PLAN_PERIOD_US,
+            passes: u32::from(p.passes),
+            qp_iterations: u32::from(p.qp_iterations),
+            qp_added: u32::from(p.qp_added),
+            qp_removed: u32::from(p.qp_removed),
+            qp_refactorizations: u32::from(p.qp_refactorizations),
+            rows: u32::from(p.rows),
+            active_constraints: u32::from(p.active),
+            max_validity_slack_rad: 0.0,
+        }
+    }
+}
+
+impl Ecu<f32> for QemuEcu {
+    fn control(&mut self, t_us: u64, est: &StateEstimate<f32>) -> Result<ControlOutput<f32>> {
+        let mut e = *est;
+        e.stamp_us = t_us;
+        let frame = self.exchange(&e)?;
+        let instructions = self.opts.instructions(frame.control_ticks);
+        let mut plans = Vec::new();
+        let mut skipped_releases = 0;
+        if let Some(p) = &frame.plan {
+            // Releases that fell while this activation ran were skipped.
+            let next_release = p.release_us + PLAN_PERIOD_US;
+            if p.finish_us > next_release {
+                skipped_releases = ((p.finish_us - next_release) / PLAN_PERIOD_US + 1) as u32;
+            }
+            plans.push(self.activation_of(p));
+        }
+        Ok(ControlOutput {
+            actuation: actuation_of(&frame),
+            instructions,
+            cycles: instructions * self.opts.cycles_per_instruction,
+            plans,
+            skipped_releases,
+        })
+    }
+
+    fn active_plan(&self) -> &Plan<f32> {
+        &self.active
     }
 }
