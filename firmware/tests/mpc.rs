@@ -457,7 +457,8 @@ fn the_qp_iteration_cap_bounds_the_whole_activation() {
     let s = settings::<f64>();
     let mut per_pass = Vec::new();
     let mut plan = Plan::zeroed();
-    let free = Box::new(Mpc::<f64>::new())
+    let mut mpc = Box::new(Mpc::<f64>::new());
+    let free = mpc
         .step_observed(
             &s,
             &path,

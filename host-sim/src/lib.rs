@@ -12,13 +12,15 @@
 //! | [`track`] | track files (racetrack-database CSV), projection, curvature |
 //! | [`obstacle_file`] | obstacle files (`id,x_m,y_m`), polygon distances, footprints |
 //! | [`scenario`] | the built-in `paper` scenario and `--track`/`--obstacles` resolution |
-//! | [`closed_loop`] | the deterministic timeline: plant against the two tasks, budgets |
+//! | [`closed_loop`] | the deterministic timeline: the plant against an ECU, budgets, deadlines |
+//! | [`ecu`] | what runs the firmware: the `Ecu` trait, the modelled ECU on the host |
 //! | [`run`] | the `run` command: log, summary, figures |
 //! | [`figures`] | the closed-loop figures (the paper's Figures 5–8, task costs) |
 //! | [`plot`] | plotting helpers (embedded font) |
 //! | [`qp_corpus`] | the MPC's QPs as JSON, for solver benchmarks (`qp-corpus` command) |
 
 pub mod closed_loop;
+pub mod ecu;
 pub mod figures;
 pub mod obstacle_file;
 pub mod plant;
