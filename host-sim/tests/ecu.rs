@@ -185,3 +185,112 @@ fn a_clock_that_is_not_positive_is_refused() {
         assert!(e.contains("ECU clock"), "{e}");
     }
 }
+
+#[test]
+fn a_slow_ecu_misses_the_cold_start_deadline_and_still_drives_the_lap() {
+    // At 40 MHz the 3-pass cold start (about 4.5 M cycles) takes about 112 ms:
+    // a deadline miss (not a budget overrun), and the release at 100 ms is skipped;
+    // warm steps (at most about 2.3 M cycles, 58 ms) meet theirs.
+    let r = paper_at(40.0, 200.0);
+    let s = &r.summary;
+    println!(
+        "40 MHz: {} plan deadline misses, {} budget overruns, {} collisions, {}",
+        s.plan_deadline_misses, s.plan_budget_overruns, s.collisions, s.stop_reason
+    );
+    assert!(s.completed, "{}", s.stop_reason);
+    assert_eq!(s.collisions, 0);
+    assert!(s.plan_deadline_misses >= 1);
+    let cold = &r.plan_activations[0];
+    assert_eq!(cold.passes, 3);
+    assert!(cold.deadline_miss && cold.published, "{cold:?}");
+    assert!(cold.finish_us > 100_000);
+    assert!(
+        cold.cycles < s.plan_budget_cycles,
+        "a miss without an overrun"
+    );
+    assert_eq!(s.plan_budget_overruns, 0);
+    // The release at 100 ms fell while the cold start ran: skipped, so the next
+    // activation is the third release.
+    assert_eq!(r.plan_activations[1].activation, 3);
+    assert_eq!(s.plan_deadline_misses, 2);
+    assert!(r
+        .plan_activations
+        .iter()
+        .filter(|p| p.passes == 1)
+        .all(|p| !p.deadline_miss));
+    assert_eq!(s.control_deadline_misses, 0);
+}
+
+#[test]
+fn an_ecu_too_slow_for_every_plan_stops_the_car_under_control() {
+    // At 5 MHz every plan finishes late (warm steps take 250–460 ms): control
+    // follows late plans, then stops the car.
+    let r = paper_at(5.0, 60.0);
+    let s = &r.summary;
+    println!(
+        "5 MHz: {} of {} plan releases missed, {} failures, {} collisions, {:.0} m, {}",
+        s.plan_deadline_misses,
+        s.plan_activations,
+        s.plan_failures,
+        s.collisions,
+        s.distance_m,
+        s.stop_reason
+    );
+    assert!(r.plan_activations.iter().all(|p| p.deadline_miss));
+    // Every release misses: run late or skipped (the last may still be running).
+    assert!(s.plan_deadline_misses + 1 >= s.plan_activations);
+    assert_eq!(s.collisions, 0);
+    assert!(!s.completed);
+    assert!(
+        s.stop_reason.starts_with("stood still"),
+        "{}",
+        s.stop_reason
+    );
+    assert!(r.log.last().unwrap().v_mps < 0.05);
+    assert_eq!(s.control_deadline_misses, 0);
+}
+
+#[test]
+fn a_control_activation_slower_than_its_period_is_a_deadline_miss() {
+    // A control task of 100,000 instructions (134,000 cycles at 1.34) on a 10 MHz
+    // ECU takes 13.4 ms > 10 ms: every control activation misses, and each is over
+    // its 5,000-cycle budget too.
+    let opts = SimOptions {
+        ecu_clock_hz: 10e6,
+        max_duration_s: 0.5,
+        cost_model: CostModel {
+            control: 100_000.0 / 1.05,
+            ..CostModel::default()
+        },
+        ..SimOptions::default()
+    };
+    let r = simulate(
+        &Scenario::paper(false),
+        &VehicleParams::default(),
+        &opts,
+        Precision::F32,
+        false,
+    )
+    .unwrap();
+    let s = &r.summary;
+    assert_eq!(s.control_deadline_misses, s.control_activations);
+    assert_eq!(s.control_budget_overruns, s.control_activations);
+    // At 168 MHz the same task is over budget but in time.
+    let fast = SimOptions {
+        ecu_clock_hz: 168e6,
+        ..opts
+    };
+    let r = simulate(
+        &Scenario::paper(false),
+        &VehicleParams::default(),
+        &fast,
+        Precision::F32,
+        false,
+    )
+    .unwrap();
+    assert_eq!(r.summary.control_deadline_misses, 0);
+    assert_eq!(
+        r.summary.control_budget_overruns,
+        r.summary.control_activations
+    );
+}
