@@ -204,7 +204,9 @@ pub struct MpcSettings<T> {
     pub steering_reference: SteeringReference,
     /// Linearise–solve passes on a cold start (no previous solution), ≥ 1.
     pub cold_start_iterations: u8,
-    /// Iteration cap of the QP solver (bounds its worst-case time).
+    /// QP iterations allowed in one activation, summed over its passes, ≥ 1 (with
+    /// [`MpcSettings::cold_start_iterations`] it bounds the step's worst-case time:
+    /// see [`Mpc::step_observed`]).
     pub qp_max_iter: u32,
 }
 
@@ -377,8 +379,9 @@ pub struct MpcReport<T> {
     pub active_constraints: u32,
     /// Whether the solve started from the previous solution.
     pub warm: bool,
-    /// On a cold start, a refinement pass after the first failed and the previous
-    /// pass's solution was kept (the slack diagnostics below are then 0).
+    /// On a cold start, a refinement pass after the first failed (or the
+    /// activation's QP iteration cap left it no iteration) and the previous pass's
+    /// solution was kept (the slack diagnostics below are then 0).
     pub refinement_failed: bool,
     /// Largest validity slack `δ_tol` in the solution, rad (0: the limit holds).
     pub max_validity_slack_rad: T,
@@ -404,6 +407,8 @@ pub struct Mpc<T> {
     u_bar: [[T; NU]; HORIZON],
     /// Row kind of each QP row of the current pass (for slack diagnostics).
     row_kind: [RowKind; NC],
+    /// Counters of the last step, whatever its outcome.
+    last_report: MpcReport<T>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -430,6 +435,22 @@ impl<T: Real> Mpc<T> {
             have_prev: false,
             u_bar: [[T::ZERO; NU]; HORIZON],
             row_kind: [RowKind::Validity; NC],
+            last_report: MpcReport {
+                passes: 0,
+                qp_iterations: 0,
+                qp_added: 0,
+                qp_removed: 0,
+                qp_refactorizations: 0,
+                rows: 0,
+                obstacle_rows: 0,
+                obstacle_rows_dropped: 0,
+                active_constraints: 0,
+                warm: false,
+                refinement_failed: false,
+                max_validity_slack_rad: T::ZERO,
+                max_obstacle_slack_m: T::ZERO,
+                max_road_slack_m: T::ZERO,
+            },
         }
     }
 
@@ -459,8 +480,26 @@ impl<T: Real> Mpc<T> {
         self.step_observed(settings, path, obstacles, est, mu, plan, |_| {}, |_| {})
     }
 
+    /// The work counters and diagnostics of the last step, whatever its outcome
+    /// (reset at the start of every step): a failed step's counters say how much
+    /// work it did before it failed, which its cost on the ECU depends on.
+    pub fn last_report(&self) -> &MpcReport<T> {
+        &self.last_report
+    }
+
     /// [`Mpc::step`], calling `before(problem)` on each condensed QP before it is
     /// solved and `after(solution)` after (to record the QPs; no cost otherwise).
+    ///
+    /// # Work bound
+    ///
+    /// One step runs at most [`MpcSettings::cold_start_iterations`]
+    /// linearise–condense passes (1 when warm) and at most
+    /// [`MpcSettings::qp_max_iter`] QP iterations in total: the cap is the
+    /// activation's, each pass gets the iterations the previous passes left. A
+    /// first pass that reaches the cap fails the step
+    /// ([`QpStatus::IterationLimit`]); a refinement pass (the second or later of a
+    /// cold start) that reaches it, or that finds none left, ends the refinement and
+    /// the previous pass's optimum stands ([`MpcReport::refinement_failed`]).
     #[allow(clippy::too_many_arguments)]
     pub fn step_observed<const CAP: usize>(
         &mut self,
@@ -470,9 +509,39 @@ impl<T: Real> Mpc<T> {
         est: &StateEstimate<T>,
         mu: T,
         plan: &mut Plan<T>,
+        before: impl FnMut(&MpcQpProblem<T>),
+        after: impl FnMut(&MpcQpSolution<T>),
+    ) -> Result<MpcReport<T>, MpcError> {
+        let mut report = MpcReport::default();
+        let result = self.step_inner(
+            settings,
+            path,
+            obstacles,
+            est,
+            mu,
+            plan,
+            before,
+            after,
+            &mut report,
+        );
+        self.last_report = report;
+        result.map(|()| report)
+    }
+
+    /// The step itself; `report` accumulates its counters whatever the outcome.
+    #[allow(clippy::too_many_arguments)]
+    fn step_inner<const CAP: usize>(
+        &mut self,
+        settings: &MpcSettings<T>,
+        path: &ReferencePath<T, CAP>,
+        obstacles: &[Parabola<T>],
+        est: &StateEstimate<T>,
+        mu: T,
+        plan: &mut Plan<T>,
         mut before: impl FnMut(&MpcQpProblem<T>),
         mut after: impl FnMut(&MpcQpSolution<T>),
-    ) -> Result<MpcReport<T>, MpcError> {
+        report: &mut MpcReport<T>,
+    ) -> Result<(), MpcError> {
         settings.validate()?;
         if !est.is_finite() {
             return Err(MpcError::NonFiniteState);
@@ -489,7 +558,6 @@ impl<T: Real> Mpc<T> {
         };
 
         // 1. Shift the previous solution to the new release time.
-        let mut report = MpcReport::default();
         // Elapsed since the previous plan, s (integer µs first: no f64 on the ECU).
         let elapsed_s = if self.have_prev && est.stamp_us >= self.prev_stamp_us {
             let us = (est.stamp_us - self.prev_stamp_us).min(u32::MAX as u64) as u32;
@@ -533,6 +601,13 @@ impl<T: Real> Mpc<T> {
         };
         let mut v_heur = [T::ZERO; HORIZON + 1];
         for _ in 0..passes {
+            // The iteration cap is the activation's: this pass gets what is left.
+            let left = settings.qp_max_iter.saturating_sub(report.qp_iterations);
+            if left == 0 {
+                // Only after a pass (the cap is ≥ 1): its optimum stands.
+                report.refinement_failed = true;
+                break;
+            }
             self.condense(
                 settings,
                 &validity,
@@ -542,9 +617,9 @@ impl<T: Real> Mpc<T> {
                 v0,
                 mu,
                 &mut v_heur,
-                &mut report,
+                report,
             );
-            self.solver.settings.max_iter = settings.qp_max_iter;
+            self.solver.settings.max_iter = left;
             self.solver.settings.warm_start = true;
             before(self.solver.problem());
             let status = self.solver.solve();
@@ -572,7 +647,7 @@ impl<T: Real> Mpc<T> {
             }
         }
         if !report.refinement_failed {
-            self.slack_diagnostics(&mut report);
+            self.slack_diagnostics(report);
         }
 
         // 4. The plan: the nonlinear model under the optimal inputs.
@@ -593,7 +668,7 @@ impl<T: Real> Mpc<T> {
         self.u_prev = self.u_bar;
         self.prev_stamp_us = est.stamp_us;
         self.have_prev = true;
-        Ok(report)
+        Ok(())
     }
 
     /// Linearises around `ū` from `xi0` and writes the condensed QP into the solver.

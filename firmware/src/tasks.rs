@@ -17,6 +17,18 @@
 //! the low-level controller brings the car to a controlled stop). A non-finite
 //! state estimate is refused by both tasks and counted; `control` then applies the
 //! safe actuation (no traction, moderate braking, steering held).
+//!
+//! Late plans: an activation that finishes after its deadline (the next release)
+//! still publishes its plan when it finishes: it is the newest plan, a trajectory
+//! stamped at its release that `control` follows at the current time (shifted).
+//! Until then `control` keeps following the previous plan shifted in time (and
+//! stops the car when it runs out). A release that falls while `plan` is still
+//! running is skipped, not queued (RTIC cannot spawn a busy task), so the next
+//! activation plans from a fresh state; each skipped release is a deadline miss.
+//!
+//! Worst-case work of one `plan` activation: at most
+//! [`MpcSettings::cold_start_iterations`] linearise–condense passes and at most
+//! [`MpcSettings::qp_max_iter`] QP iterations (see [`Mpc::step_observed`]).
 
 use crate::low_level::{self, Actuation, ControlFault, LowLevelConfig, LowLevelState};
 use crate::mpc::{Mpc, MpcError, MpcReport, MpcSettings};
@@ -84,6 +96,12 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             },
             last_error: None,
         }
+    }
+
+    /// The work counters of the last activation, whatever its outcome (a failed
+    /// activation's counters say how much work it did; see [`Mpc::last_report`]).
+    pub fn last_report(&self) -> &MpcReport<T> {
+        self.mpc.last_report()
     }
 
     /// The MPC workspace (its solver holds the last QP's solution and working set).

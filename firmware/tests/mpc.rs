@@ -426,4 +426,79 @@ fn a_qp_that_hits_its_iteration_cap_gives_no_plan() {
         firmware::mpc::MpcError::Qp(firmware::qp::QpStatus::IterationLimit)
     );
     assert_eq!(plan, before, "the output plan is untouched");
+    // The failed step's work is still counted: one pass, its one iteration, its rows.
+    let r = mpc.last_report();
+    assert_eq!(r.passes, 1, "{r:?}");
+    assert_eq!(r.qp_iterations, 1, "{r:?}");
+    assert!(r.rows > 0, "{r:?}");
+}
+
+/// The cold start at 15 m/s towards an obstacle at 30 m on a straight.
+fn cold_start_towards_an_obstacle() -> (
+    Box<ReferencePath<f64, CAP>>,
+    ObstacleManager<f64>,
+    StateEstimate<f64>,
+) {
+    let path = straight::<f64>(400.0);
+    let mut obs = ObstacleManager::new();
+    obs.update(
+        &ObstacleSettings::default(),
+        &path,
+        &[box_obstacle(30.0, 0.0, 2.0, 1.0)],
+    )
+    .unwrap();
+    (path, obs, est(0.0, 0.0, 0.0, 15.0, 0.0, 0))
+}
+
+#[test]
+fn the_qp_iteration_cap_bounds_the_whole_activation() {
+    let (path, obs, e) = cold_start_towards_an_obstacle();
+    // Uncapped in practice: how many iterations each pass of the cold start takes.
+    let s = settings::<f64>();
+    let mut per_pass = Vec::new();
+    let mut plan = Plan::zeroed();
+    let mut mpc = Box::new(Mpc::<f64>::new());
+    let free = mpc
+        .step_observed(
+            &s,
+            &path,
+            obs.parabolas(),
+            &e,
+            1.0,
+            &mut plan,
+            |_| {},
+            |sol| per_pass.push(sol.iterations),
+        )
+        .unwrap();
+    let total: u32 = per_pass.iter().sum();
+    println!("cold start: {per_pass:?} iterations per pass, {total} in all");
+    assert_eq!(per_pass.len(), s.cold_start_iterations as usize);
+    assert!(!free.refinement_failed);
+
+    // A cap the first pass fits in but the activation does not: per pass it would
+    // allow every pass (the old behaviour, `total` iterations in all).
+    let cap = total - 1;
+    assert!(per_pass[0] < cap && per_pass.iter().all(|&i| i <= cap));
+    let mut capped = s;
+    capped.qp_max_iter = cap;
+    let mut mpc = Box::new(Mpc::<f64>::new());
+    let r = mpc
+        .step(&capped, &path, obs.parabolas(), &e, 1.0, &mut plan)
+        .unwrap();
+    println!("cap {cap}: {r:?}");
+    assert!(r.qp_iterations <= cap, "{} > cap {cap}", r.qp_iterations);
+    assert!(
+        r.refinement_failed,
+        "the last refinement ran out of iterations"
+    );
+    assert_eq!(mpc.last_report(), &r);
+
+    // A cap of exactly the first pass's iterations: no refinement pass can run.
+    capped.qp_max_iter = per_pass[0];
+    let mut mpc = Box::new(Mpc::<f64>::new());
+    let r = mpc
+        .step(&capped, &path, obs.parabolas(), &e, 1.0, &mut plan)
+        .unwrap();
+    assert_eq!((r.passes, r.qp_iterations), (1, per_pass[0]), "{r:?}");
+    assert!(r.refinement_failed);
 }

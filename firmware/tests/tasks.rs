@@ -144,3 +144,21 @@ fn non_finite_measurements_are_refused_counted_and_kept_safe() {
     assert!(car.xi.iter().all(|v| v.is_finite()));
     assert!(car.xi[2].abs() < 0.05);
 }
+
+#[test]
+fn a_failed_activation_keeps_its_work_counters() {
+    let (mut planner, _, car) = setup();
+    // One QP iteration cannot solve the cold start: the activation fails...
+    planner.settings.qp_max_iter = 1;
+    let err = planner.run(&car.estimate(0)).unwrap_err();
+    assert!(matches!(err, MpcError::Qp(_)), "{err:?}");
+    // ...but what it did is still counted (the ECU spent that time).
+    let r = *planner.last_report();
+    assert_eq!((r.passes, r.qp_iterations), (1, 1), "{r:?}");
+    assert!(r.rows > 0, "{r:?}");
+    // A successful activation's counters replace them.
+    planner.settings.qp_max_iter = 200;
+    let ok = planner.run(&car.estimate(0)).unwrap();
+    assert_eq!(planner.last_report(), &ok);
+    assert!(ok.qp_iterations > 1);
+}

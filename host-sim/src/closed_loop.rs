@@ -1,46 +1,63 @@
 //! The closed loop on a deterministic timeline: the 9-DoF plant against the
-//! firmware's two tasks, with every task activation checked against its budget.
+//! firmware, with every task activation checked against its budget and deadline.
+//!
+//! The driver ([`run_with`]) owns the plant, the measurements, the log, the
+//! summary and the stop conditions; what runs the firmware is an [`Ecu`]: the
+//! firmware's tasks in this process on a modelled timeline ([`SimulatedEcu`],
+//! what [`run`] uses), or the firmware on an emulated ECU. The driver assumes
+//! nothing of it beyond the trait.
 //!
 //! # Timeline
 //!
 //! Simulated time advances in plant steps (1 ms by default). Every 10 ms the
-//! `control` task (high priority) runs on the plant's state at that instant and its
-//! actuation is held until the next activation. Every 100 ms the `plan` task is
+//! driver calls [`Ecu::control`] on the plant's state at that instant and holds the
+//! actuation it returns until the next call. Every 100 ms the `plan` task is
 //! released on the state at its release (after `control`, which has the higher
-//! priority, ran at the same instant); the host computes the plan at once, but the
-//! plan is published only at the instant the task would have finished on the ECU:
+//! priority, ran at the same instant). How long it runs and when its plan is
+//! published is the ECU's to say ([`SimulatedEcu`]: see [`crate::ecu`]).
 //!
-//! ```text
-//! finish = release + (plan cycles + cycles of the control activations that preempt it) / f_ECU
-//! ```
+//! # Deadlines and budgets
 //!
-//! A plan whose MPC status is not optimal is never published. A plan activation
-//! whose response time exceeds its period (100 ms), or a control activation whose
-//! cost exceeds its budget, is a deadline miss: counted and reported. A plan still
-//! running at the next release makes that release skip (RTIC cannot spawn a busy
-//! task): counted as a deadline miss too.
+//! Budgets are in ECU cycles (control 5,000, plan 8.4 M); deadlines are times: a
+//! plan activation whose response time exceeds its 100 ms period, and a control
+//! activation whose cycles over the ECU clock exceed its 10 ms period, are deadline
+//! misses. An activation over its cycle budget is a budget overrun, counted apart
+//! (it may or may not miss its deadline, depending on the clock). All are counted
+//! and reported, never absorbed.
+//!
+//! # Late plans
+//!
+//! A plan activation that finishes after its deadline still publishes its plan when
+//! it finishes: it is the newest plan, a trajectory stamped at its release, which
+//! `control` follows at the current time (shifted). Until then `control` keeps
+//! following the previous plan shifted in time, and brings the car to a controlled
+//! stop when it runs out. A release that falls while the `plan` task is still
+//! running is skipped, not queued (RTIC cannot spawn a busy task), so the next
+//! activation plans from a fresh state; each skipped release is a deadline miss.
+//! A plan whose MPC status is not optimal is never published.
 //!
 //! # Costs
 //!
-//! The cost of an activation in ECU cycles is a deterministic estimate from the
-//! firmware's work counters through [`CostModel`] (calibrated against instruction
-//! counts under QEMU, see the README); the host's wall time is recorded beside it,
-//! for information only.
+//! The cost of an activation is a deterministic estimate in ECU instructions from
+//! the firmware's work counters through [`CostModel`] (failed activations from
+//! their own counters too); cycles are instructions ×
+//! [`SimOptions::cycles_per_instruction`]. The host's wall time is recorded
+//! beside it, for information only.
 
 use std::time::Instant;
 
 use anyhow::{anyhow, Context, Result};
 use firmware::low_level::{Actuation, Mode};
-use firmware::mpc::MpcReport;
-use firmware::obstacles::Obstacle as FwObstacle;
+use firmware::mpc::{MpcReport, MpcSettings, NC};
 use firmware::plan::{Plan, HORIZON};
 use firmware::state_estimate::StateEstimate;
-use firmware::tasks::{ControlTask, PlanTask, CONTROL_PERIOD_US, PLAN_PERIOD_US};
+use firmware::tasks::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
 use firmware::vehicle_config::VehicleConfig;
 use firmware::Real;
 use serde::Serialize;
 
-use crate::obstacle_file::{self, Obstacle};
+pub use crate::ecu::{ControlOutput, Ecu, PlanActivation, SimulatedEcu};
+use crate::obstacle_file;
 use crate::plant::{Inputs, Plant, State};
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleParams;
@@ -67,60 +84,107 @@ impl Precision {
 /// Point capacity of the reference path on the host (the ECU build picks its own).
 pub const HOST_PATH_CAP: usize = 4096;
 
-/// Deterministic cost model of the two tasks, in ECU cycles.
+/// Deterministic cost model of the two tasks, in ECU instructions.
 ///
-/// `plan = passes·(per_pass + per_row·rows) + per_iteration·QP iterations`;
-/// `control` is a constant (no data-dependent loops).
+/// ```text
+/// plan    = margin · (per_activation + passes·(per_pass + per_row_pass·rows)
+///                     + per_iteration·iterations + per_added·added
+///                     + per_removed·removed + per_refactorization·refactorisations)
+/// control = margin · control
+/// ```
 ///
-/// Calibrated on the `mpc_step` ECU binary under QEMU (`-icount shift=3`, one
-/// instruction per 8 ns of virtual time): a least-squares fit of its 150 steps
-/// (`.ci/ecu-check` prints them) gives 542,657 instructions per pass, 8,537 per
-/// row and pass, 13,416 per QP iteration, within 4.6 % of every step; the control
-/// task took at most 771 instructions. Instructions become cycles at 1.34 cycles
-/// per instruction (a 168 MHz Cortex-M4F with flash wait states), plus 5 % for the
-/// fit's largest error, so the estimate does not undercount.
+/// from the work counters of each activation ([`MpcReport`]); the control task is
+/// one constant (no data-dependent loops). Cycles are instructions ×
+/// [`SimOptions::cycles_per_instruction`], a separate setting.
+///
+/// The coefficients are the QEMU calibration of the `mpc_step` ECU binary: a
+/// least-squares fit of its 150 steps (`.ci/ecu-check` prints them) gives 542,657
+/// instructions per pass, 8,537 per row and pass, 13,416 per QP iteration, within
+/// 4.6 % of every step; the control task took at most 771 instructions. The
+/// working-set terms (`per_added`, `per_removed`, `per_refactorization`) and
+/// `per_activation` are 0 until refitted from measurements on the ECU; `margin`
+/// (1.05) covers the fit's largest error so the estimate does not undercount.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct CostModel {
-    /// Fixed cost of a plan activation, cycles.
-    pub plan_base: f64,
+    /// Fixed cost of a plan activation, instructions.
+    pub per_activation: f64,
     /// Per linearise–condense–factorise pass (16 RK4 steps with Jacobians, the
-    /// condensed Hessian, its Cholesky factor), cycles.
-    pub plan_per_pass: f64,
-    /// Per general QP row and pass (forming it, transforming it by `R⁻¹`), cycles.
-    pub plan_per_row: f64,
-    /// Per QP iteration (multiplier solve, factor update, constraint scan), cycles.
-    pub plan_per_iteration: f64,
-    /// One control activation, cycles.
+    /// condensed Hessian, its Cholesky factor), instructions.
+    pub per_pass: f64,
+    /// Per general QP row and pass (forming it, transforming it by `R⁻¹`),
+    /// instructions.
+    pub per_row_pass: f64,
+    /// Per QP iteration (multiplier solve, constraint scan), instructions.
+    pub per_iteration: f64,
+    /// Per constraint added to the working set (factor update), instructions.
+    pub per_added: f64,
+    /// Per constraint removed from the working set (factor downdate), instructions.
+    pub per_removed: f64,
+    /// Per factorisation of the working set from scratch, instructions.
+    pub per_refactorization: f64,
+    /// One control activation, instructions.
     pub control: f64,
+    /// Factor applied to every estimate (the fit's largest error), dimensionless.
+    pub margin: f64,
 }
 
 impl Default for CostModel {
     /// The QEMU calibration above.
     fn default() -> Self {
-        let cycles = 1.34 * 1.05;
         Self {
-            plan_base: 0.0,
-            plan_per_pass: 542_657.0 * cycles,
-            plan_per_row: 8_537.0 * cycles,
-            plan_per_iteration: 13_416.0 * cycles,
-            control: 771.0 * cycles,
+            per_activation: 0.0,
+            per_pass: 542_657.0,
+            per_row_pass: 8_537.0,
+            per_iteration: 13_416.0,
+            per_added: 0.0,
+            per_removed: 0.0,
+            per_refactorization: 0.0,
+            control: 771.0,
+            margin: 1.05,
         }
     }
 }
 
 impl CostModel {
-    /// Estimated cycles of one plan activation from its work counters (an activation
-    /// that fails before any pass costs one pass).
-    pub fn plan_cycles<T: Real>(&self, r: Option<&MpcReport<T>>) -> f64 {
-        match r {
-            None => self.plan_base + self.plan_per_pass,
-            Some(r) => {
-                let passes = r.passes as f64;
-                self.plan_base
-                    + passes * (self.plan_per_pass + self.plan_per_row * r.rows as f64)
-                    + self.plan_per_iteration * r.qp_iterations as f64
-            }
-        }
+    /// Estimated instructions of one plan activation from its work counters,
+    /// whatever its outcome (a failed activation's counters say what it did).
+    pub fn plan_instructions<T: Real>(&self, r: &MpcReport<T>) -> f64 {
+        let passes = f64::from(r.passes);
+        self.margin
+            * (self.per_activation
+                + passes * (self.per_pass + self.per_row_pass * f64::from(r.rows))
+                + self.per_iteration * f64::from(r.qp_iterations)
+                + self.per_added * f64::from(r.qp_added)
+                + self.per_removed * f64::from(r.qp_removed)
+                + self.per_refactorization * f64::from(r.qp_refactorizations))
+    }
+
+    /// Estimated instructions of one control activation.
+    pub fn control_instructions(&self) -> f64 {
+        self.margin * self.control
+    }
+
+    /// The model's worst case for one plan activation under `settings`,
+    /// instructions: the firmware runs at most `cold_start_iterations` passes and
+    /// at most `qp_max_iter` QP iterations per activation (each adding, removing or
+    /// refactorising at most once), on at most [`NC`] rows:
+    ///
+    /// ```text
+    /// margin · (cold_start_iterations·(per_pass + NC·per_row_pass)
+    ///           + qp_max_iter·(per_iteration + per_added + per_removed + per_refactorization)
+    ///           + per_activation)
+    /// ```
+    pub fn plan_bound_instructions<T: Real>(&self, settings: &MpcSettings<T>) -> f64 {
+        let passes = f64::from(settings.cold_start_iterations.max(1));
+        let iterations = f64::from(settings.qp_max_iter);
+        self.margin
+            * (passes * (self.per_pass + NC as f64 * self.per_row_pass)
+                + iterations
+                    * (self.per_iteration
+                        + self.per_added
+                        + self.per_removed
+                        + self.per_refactorization)
+                + self.per_activation)
     }
 }
 
@@ -131,11 +195,15 @@ pub struct SimOptions {
     pub plant_dt_s: f64,
     /// ECU clock, Hz (168 MHz).
     pub ecu_clock_hz: f64,
-    /// Budget of one control activation, cycles.
+    /// Cycles per instruction of the ECU, cycles (1.34 for now: QEMU's
+    /// `-icount shift=3` setting, not a measured property of the Cortex-M4F; the
+    /// timing report gives the bound to use once measured on the ECU).
+    pub cycles_per_instruction: f64,
+    /// Budget of one control activation, cycles (its deadline is its 10 ms period).
     pub control_budget_cycles: f64,
     /// Budget of one plan activation, cycles (its deadline is its 100 ms period).
     pub plan_budget_cycles: f64,
-    /// Cost model.
+    /// Cost model, instructions.
     pub cost_model: CostModel,
     /// Friction coefficient of the road (the plant), dimensionless.
     pub mu_road: f64,
@@ -154,6 +222,7 @@ impl Default for SimOptions {
         Self {
             plant_dt_s: 1e-3,
             ecu_clock_hz: 168e6,
+            cycles_per_instruction: 1.34,
             control_budget_cycles: 5_000.0,
             plan_budget_cycles: 8.4e6,
             cost_model: CostModel::default(),
@@ -221,7 +290,8 @@ pub struct LogRow {
     pub alpha_rr_rad: f64,
     /// Distance from the active plan's position at this instant, m.
     pub plan_deviation_m: f64,
-    /// Status of the last plan activation (`optimal`, or the failure).
+    /// Status of the last plan activation that finished (`optimal`, the failure, or
+    /// `none` before the first finishes).
     pub plan_status: &'static str,
     /// Low-level controller mode.
     pub control_mode: &'static str,
@@ -277,19 +347,35 @@ pub struct Summary {
     pub plan_failures: u64,
     /// Largest estimated cost of a plan activation, cycles.
     pub plan_max_cost_cycles: f64,
-    /// Plan activations whose response time exceeded the period or cost the budget.
+    /// Largest estimated cost of a plan activation, instructions.
+    pub plan_max_instructions: f64,
+    /// Median estimated cost of a plan activation, instructions.
+    pub plan_p50_instructions: f64,
+    /// The cost model's worst case for one plan activation, instructions.
+    pub plan_bound_instructions: f64,
+    /// The same in cycles (instructions × cycles per instruction).
+    pub plan_bound_cycles: f64,
+    /// Plan releases whose response time exceeded the 100 ms period, skipped
+    /// releases included.
     pub plan_deadline_misses: u64,
+    /// Plan activations over their cycle budget (deadline met or not).
+    pub plan_budget_overruns: u64,
     /// Largest estimated cost of a control activation, cycles.
     pub control_max_cost_cycles: f64,
-    /// Control activations over budget.
+    /// Largest estimated cost of a control activation, instructions.
+    pub control_max_instructions: f64,
+    /// Control activations whose cycles over the ECU clock exceeded the 10 ms period.
     pub control_deadline_misses: u64,
+    /// Control activations over their cycle budget (deadline met or not).
+    pub control_budget_overruns: u64,
     /// Control activations.
     pub control_activations: u64,
     /// Control activations that applied the safe actuation.
     pub control_safe_actuations: u64,
-    /// Median host wall time of a plan activation, µs (information only).
+    /// Median host wall time of the ECU's work at a plan release (the plan
+    /// activation and the control activation before it), µs (information only).
     pub plan_host_us_p50: f64,
-    /// Largest host wall time of a plan activation, µs (information only).
+    /// Largest host wall time of the same, µs (information only).
     pub plan_host_us_max: f64,
     /// Largest QP iterations in one plan activation.
     pub plan_max_qp_iterations: u32,
@@ -312,10 +398,14 @@ pub struct RunResult {
     pub log: Vec<LogRow>,
     /// Published plans.
     pub plans: Vec<PlanTrace>,
-    /// Estimated cost of each plan activation, cycles.
+    /// Every plan activation that finished, in order.
+    pub plan_activations: Vec<PlanActivation>,
+    /// Estimated cost of each finished plan activation, cycles.
     pub plan_costs: Vec<f64>,
     /// Estimated cost of each control activation, cycles.
     pub control_costs: Vec<f64>,
+    /// Estimated cost of each control activation, instructions.
+    pub control_instructions: Vec<f64>,
     /// Figures of merit.
     pub summary: Summary,
 }
@@ -390,33 +480,30 @@ fn mode_name(m: Mode) -> &'static str {
     }
 }
 
-fn mpc_error_name(e: &firmware::mpc::MpcError) -> &'static str {
-    use firmware::mpc::MpcError as E;
-    use firmware::qp::QpStatus as Q;
-    match e {
-        E::NonFiniteState => "non_finite_state",
-        E::InvalidFriction => "invalid_friction",
-        E::InvalidSettings => "invalid_settings",
-        E::NoPath => "no_path",
-        E::Qp(Q::IterationLimit) => "qp_iteration_limit",
-        E::Qp(Q::Infeasible) => "qp_infeasible",
-        E::Qp(Q::NumericalError) => "qp_numerical_error",
-        E::Qp(Q::NotConvex) => "qp_not_convex",
-        E::Qp(Q::NonFiniteInput) => "qp_non_finite_input",
-        E::Qp(Q::InvalidInput) => "qp_invalid_input",
-        E::Qp(Q::WorkingSetFull) => "qp_working_set_full",
-        E::Qp(Q::NotSolved) => "qp_not_solved",
-        E::Qp(Q::Optimal) => "optimal",
-    }
-}
-
-/// Runs the closed loop of `scenario` with the firmware in precision `T`.
+/// Runs the closed loop of `scenario` with the firmware in precision `T` on the
+/// modelled ECU ([`SimulatedEcu`]).
 ///
 /// `progress` is called every simulated second with `(t_s, distance_m)`.
 pub fn run<T: Real>(
     scenario: &Scenario,
     vehicle: &VehicleParams,
     opts: &SimOptions,
+    progress: impl FnMut(f64, f64),
+) -> Result<RunResult> {
+    let mut ecu = SimulatedEcu::<T>::new(scenario, vehicle, opts)?;
+    run_with(scenario, vehicle, opts, &mut ecu, progress)
+}
+
+/// Runs the closed loop of `scenario` against `ecu` (which runs the firmware in
+/// precision `T`): the plant, the measurements, the log, the summary and the stop
+/// conditions.
+///
+/// `progress` is called every simulated second with `(t_s, distance_m)`.
+pub fn run_with<T: Real, E: Ecu<T>>(
+    scenario: &Scenario,
+    vehicle: &VehicleParams,
+    opts: &SimOptions,
+    ecu: &mut E,
     mut progress: impl FnMut(f64, f64),
 ) -> Result<RunResult> {
     let wall = Instant::now();
@@ -429,54 +516,6 @@ pub fn run<T: Real>(
         ));
     }
     let step_us = CONTROL_PERIOD_US / steps_per_control;
-    let track = &scenario.track;
-
-    // The planner: path, obstacles, MPC (boxed: the path is large on the host).
-    let car = vehicle_config::<T>(vehicle);
-    let mu_planner = T::from_f64(opts.mu_planner);
-    let mut planner: Box<PlanTask<T, HOST_PATH_CAP>> =
-        Box::new(PlanTask::new(car.mpc_settings(), mu_planner));
-    let rows: Vec<[T; 4]> = track
-        .rows()
-        .iter()
-        .map(|r| {
-            [
-                T::from_f64(r[0]),
-                T::from_f64(r[1]),
-                T::from_f64(r[2]),
-                T::from_f64(r[3]),
-            ]
-        })
-        .collect();
-    planner
-        .path
-        .load_track(&rows, track.closed)
-        .map_err(|e| anyhow!("track {}: the planner refused it: {e:?}", track.name))?;
-    let fw_obstacles = scenario
-        .obstacles
-        .iter()
-        .enumerate()
-        .map(|(k, o)| {
-            let v: Vec<[T; 2]> = o
-                .vertices
-                .iter()
-                .map(|p| [T::from_f64(p[0]), T::from_f64(p[1])])
-                .collect();
-            FwObstacle::from_vertices(k as u32, &v)
-                .map_err(|e| anyhow!("obstacle {:?}: {e:?}", o.id))
-        })
-        .collect::<Result<Vec<_>>>()?;
-    planner
-        .obstacles
-        .update(
-            &car.obstacle_settings(mu_planner),
-            &planner.path,
-            &fw_obstacles,
-        )
-        .map_err(|e| obstacle_error_message(e, &scenario.obstacles))?;
-
-    let mut control = ControlTask::new(car.low_level_config())
-        .map_err(|e| anyhow!("low-level controller configuration: {e:?}"))?;
 
     // The plant, on the centre line at the start, heading along the track.
     let start = scenario.start_pose;
@@ -486,228 +525,54 @@ pub fn run<T: Real>(
     init.psi_rad = start[2];
     let mut plant = Plant::with_step(*vehicle, init, opts.plant_dt_s).context("plant")?;
 
-    let mut shared_plan: Plan<T> = Plan::zeroed();
-    let mut pending_publish_us: Option<u64> = None;
-    let mut plan_busy_until_us: u64 = 0;
     let mut inputs = Inputs::default();
-    let mut last_status: &'static str = "none";
-
     let mut res = RunResult::default();
-    let mut sum = Summary {
-        mu: opts.mu_road,
-        mu_planner: opts.mu_planner,
-        plan_budget_cycles: opts.plan_budget_cycles,
-        control_budget_cycles: opts.control_budget_cycles,
-        ..Summary::default()
-    };
+    let mut meter = Meter::new(scenario, vehicle, opts);
     let mut host_us: Vec<f64> = Vec::new();
-    let (mut sum_sq_lat, mut n_lat) = (0.0f64, 0u64);
-    let mut s_hint: Option<f64> = None;
-    let mut progress_m = 0.0f64;
-    let mut s_prev = 0.0f64;
-    let projector = track.projector();
-    let lap_length = track.length();
-    let target_m = if track.closed {
-        lap_length * opts.laps.max(1) as f64
-    } else {
-        lap_length
-    };
-    let half_len = 0.5 * vehicle_length_m(vehicle);
-    let cg_offset = front_overhang_from_cg_m(vehicle) - half_len;
-    let width = vehicle_width_m(vehicle);
-    let max_half_width = track
-        .w_left
-        .iter()
-        .chain(track.w_right.iter())
-        .fold(0.0f64, |a, &b| a.max(b));
-    let mut stopped_for_s = 0.0f64;
+    let mut last_status: &'static str = "none";
 
     let max_steps = (opts.max_duration_s / opts.plant_dt_s).ceil() as u64;
     let mut t_us: u64 = 0;
     let mut step: u64 = 0;
     let mut stop_reason = String::from("time limit reached");
     while step <= max_steps {
-        if t_us % CONTROL_PERIOD_US == 0 {
-            // A plan that has finished on the ECU by now is published first.
-            if let Some(ft) = pending_publish_us {
-                if ft <= t_us {
-                    planner.publish(&mut shared_plan);
-                    if let Some(tr) = trace_of(&shared_plan, ft) {
-                        res.plans.push(tr);
-                    }
-                    pending_publish_us = None;
-                }
-            }
+        if t_us.is_multiple_of(CONTROL_PERIOD_US) {
             let st = *plant.state();
             let out = plant.outputs();
             let est = estimate::<T>(&st, out.delta_rad, t_us);
-            let act = control.run(&est, &shared_plan, t_us);
-            let c_cost = opts.cost_model.control;
-            res.control_costs.push(c_cost);
-            sum.control_activations += 1;
-            if c_cost > opts.control_budget_cycles {
-                sum.control_deadline_misses += 1;
+            let h0 = Instant::now();
+            let c = ecu
+                .control(t_us, &est)
+                .with_context(|| format!("ECU at t = {:.3} s", t_us as f64 * 1e-6))?;
+            if t_us.is_multiple_of(PLAN_PERIOD_US) {
+                // A release (the ECU's contract): counted here, run or skipped.
+                meter.sum.plan_activations += 1;
+                if c.skipped_releases == 0 {
+                    host_us.push(h0.elapsed().as_secs_f64() * 1e6);
+                }
             }
-            sum.control_max_cost_cycles = sum.control_max_cost_cycles.max(c_cost);
+            meter.account(opts, &c, &mut res);
+            if let Some(p) = c.plans.last() {
+                last_status = p.status;
+            }
+            if let Some(p) = c.plans.iter().rev().find(|p| p.published) {
+                if let Some(tr) = trace_of(ecu.active_plan(), p.finish_us) {
+                    res.plans.push(tr);
+                }
+            }
+            let act = c.actuation;
             inputs = Inputs {
                 torque_nm: act.wheel_torque_nm.map(|x| x.to_f64()),
                 delta_rad: act.delta_rad.to_f64(),
             };
-
-            if t_us % PLAN_PERIOD_US == 0 {
-                sum.plan_activations += 1;
-                if plan_busy_until_us > t_us {
-                    // Still running: this release is lost.
-                    sum.plan_deadline_misses += 1;
-                } else {
-                    let h0 = Instant::now();
-                    let outcome = planner.run(&est);
-                    host_us.push(h0.elapsed().as_secs_f64() * 1e6);
-                    let cycles = opts.cost_model.plan_cycles(outcome.as_ref().ok());
-                    res.plan_costs.push(cycles);
-                    sum.plan_max_cost_cycles = sum.plan_max_cost_cycles.max(cycles);
-                    // Response time: the plan's cycles plus the control activations
-                    // that preempt it meanwhile.
-                    let mut resp_s = cycles / opts.ecu_clock_hz;
-                    for _ in 0..64 {
-                        let preempting = (resp_s * 1e6 / CONTROL_PERIOD_US as f64).floor();
-                        let next =
-                            (cycles + preempting * opts.cost_model.control) / opts.ecu_clock_hz;
-                        if (next - resp_s).abs() < 1e-12 {
-                            break;
-                        }
-                        resp_s = next;
-                    }
-                    let finish_us = t_us + (resp_s * 1e6).ceil() as u64;
-                    plan_busy_until_us = finish_us;
-                    if cycles > opts.plan_budget_cycles || finish_us > t_us + PLAN_PERIOD_US {
-                        sum.plan_deadline_misses += 1;
-                    }
-                    match outcome {
-                        Ok(r) => {
-                            pending_publish_us = Some(finish_us);
-                            sum.plan_max_qp_iterations =
-                                sum.plan_max_qp_iterations.max(r.qp_iterations);
-                            sum.max_validity_slack_rad = sum
-                                .max_validity_slack_rad
-                                .max(r.max_validity_slack_rad.to_f64());
-                            last_status = "optimal";
-                        }
-                        Err(e) => {
-                            sum.plan_failures += 1;
-                            last_status = mpc_error_name(&e);
-                        }
-                    }
-                }
-            }
-
-            // Measurements of this instant.
-            let (s, lat) = projector.project([st.x_m, st.y_m], s_hint);
-            if s_hint.is_some() {
-                // Arc length driven since the last sample (across the lap line too).
-                let mut ds = s - s_prev;
-                if track.closed {
-                    if ds > 0.5 * lap_length {
-                        ds -= lap_length;
-                    } else if ds < -0.5 * lap_length {
-                        ds += lap_length;
-                    }
-                }
-                progress_m += ds;
-            }
-            s_prev = s;
-            s_hint = Some(s);
-            sum_sq_lat += lat * lat;
-            n_lat += 1;
-            sum.max_abs_lateral_error_m = sum.max_abs_lateral_error_m.max(lat.abs());
-            sum.max_abs_ay_mps2 = sum.max_abs_ay_mps2.max(out.ay_mps2.abs());
-            sum.max_speed_mps = sum.max_speed_mps.max(st.speed_mps());
-            for i in 0..4 {
-                sum.max_abs_slip_angle_rad = sum.max_abs_slip_angle_rad.max(out.alpha_rad[i].abs());
-                sum.max_abs_slip_ratio = sum.max_abs_slip_ratio.max(out.kappa[i].abs());
-            }
-            let dev = plan_position_at(&shared_plan, t_us)
-                .map(|p| (p[0] - st.x_m).hypot(p[1] - st.y_m))
-                .unwrap_or(0.0);
-            if shared_plan.dt_s > T::ZERO {
-                sum.consistency_max_m = sum.consistency_max_m.max(dev);
-            }
-            if !scenario.obstacles.is_empty() {
-                let fp = obstacle_file::vehicle_footprint(
-                    st.x_m + cg_offset * st.psi_rad.cos(),
-                    st.y_m + cg_offset * st.psi_rad.sin(),
-                    st.psi_rad,
-                    vehicle_length_m(vehicle),
-                    width,
-                );
-                for o in &scenario.obstacles {
-                    let d = obstacle_file::distance(&fp, &o.vertices);
-                    if obstacle_file::intersects(&fp, &o.vertices) {
-                        sum.collisions += 1;
-                    }
-                    sum.min_obstacle_clearance_m =
-                        Some(sum.min_obstacle_clearance_m.map_or(d, |m: f64| m.min(d)));
-                }
-            }
-            let g = |f: fn(&Actuation<T>) -> T| f(&act).to_f64();
-            res.log.push(LogRow {
-                t_s: t_us as f64 * 1e-6,
-                x_m: st.x_m,
-                y_m: st.y_m,
-                psi_rad: st.psi_rad,
-                v_mps: st.speed_mps(),
-                v_ref_mps: g(|x| x.v_ref_mps),
-                v_heur_mps: shared_plan.v_heur_mps[0].to_f64(),
-                delta_rad: g(|x| x.delta_rad),
-                delta_ol_rad: g(|x| x.delta_ol_rad),
-                delta_cl_rad: g(|x| x.delta_cl_rad),
-                torque_fl_nm: inputs.torque_nm[0],
-                torque_fr_nm: inputs.torque_nm[1],
-                torque_rl_nm: inputs.torque_nm[2],
-                torque_rr_nm: inputs.torque_nm[3],
-                ay_mps2: out.ay_mps2,
-                lateral_error_m: lat,
-                progress_m,
-                kappa_fl: out.kappa[0],
-                kappa_fr: out.kappa[1],
-                kappa_rl: out.kappa[2],
-                kappa_rr: out.kappa[3],
-                alpha_fl_rad: out.alpha_rad[0],
-                alpha_fr_rad: out.alpha_rad[1],
-                alpha_rl_rad: out.alpha_rad[2],
-                alpha_rr_rad: out.alpha_rad[3],
-                plan_deviation_m: dev,
-                plan_status: last_status,
-                control_mode: mode_name(act.mode),
-            });
-
-            // Stop conditions.
-            if sum.lap_time_s.is_none() && progress_m >= lap_length {
-                sum.lap_time_s = Some(t_us as f64 * 1e-6);
-            }
-            if progress_m >= target_m {
-                sum.completed = true;
-                stop_reason = "completed".into();
+            let row = meter.measure(t_us, &st, &out, &act, ecu.active_plan(), last_status);
+            res.log.push(row);
+            if let Some(reason) = meter.stop_reason(t_us, &st, &row) {
+                stop_reason = reason;
                 break;
             }
-            if lat.abs() > max_half_width + 3.0 {
-                stop_reason = format!(
-                    "left the road at t = {:.2} s ({lat:.2} m off the centre line)",
-                    t_us as f64 * 1e-6
-                );
-                break;
-            }
-            if st.speed_mps() < 0.05 {
-                stopped_for_s += CONTROL_PERIOD_US as f64 * 1e-6;
-                if stopped_for_s > 5.0 {
-                    stop_reason = format!("stood still for 5 s at t = {:.2} s", t_us as f64 * 1e-6);
-                    break;
-                }
-            } else {
-                stopped_for_s = 0.0;
-            }
-            if t_us % 1_000_000 == 0 {
-                progress(t_us as f64 * 1e-6, progress_m);
+            if t_us.is_multiple_of(1_000_000) {
+                progress(t_us as f64 * 1e-6, meter.progress_m);
             }
         }
         plant
@@ -717,15 +582,10 @@ pub fn run<T: Real>(
         step += 1;
     }
 
-    sum.stop_reason = stop_reason;
-    sum.distance_m = progress_m;
-    sum.duration_s = t_us as f64 * 1e-6;
-    sum.rms_lateral_error_m = if n_lat > 0 {
-        (sum_sq_lat / n_lat as f64).sqrt()
-    } else {
-        0.0
-    };
-    sum.control_safe_actuations = control.stats.safe_actuations as u64;
+    let mut sum = meter.finish(t_us, stop_reason, &res);
+    let car = vehicle_config::<T>(vehicle);
+    sum.plan_bound_instructions = opts.cost_model.plan_bound_instructions(&car.mpc_settings());
+    sum.plan_bound_cycles = sum.plan_bound_instructions * opts.cycles_per_instruction;
     host_us.sort_by(|a, b| a.total_cmp(b));
     sum.plan_host_us_p50 = host_us.get(host_us.len() / 2).copied().unwrap_or(0.0);
     sum.plan_host_us_max = host_us.last().copied().unwrap_or(0.0);
@@ -737,6 +597,251 @@ pub fn run<T: Real>(
     };
     res.summary = sum;
     Ok(res)
+}
+
+/// The driver's measurements: the summary being accumulated and what it needs.
+struct Meter<'a> {
+    scenario: &'a Scenario,
+    vehicle: &'a VehicleParams,
+    sum: Summary,
+    sum_sq_lat: f64,
+    n_lat: u64,
+    s_hint: Option<f64>,
+    s_prev: f64,
+    progress_m: f64,
+    projector: crate::track::Projector<'a>,
+    lap_length: f64,
+    target_m: f64,
+    cg_offset: f64,
+    max_half_width: f64,
+    stopped_for_s: f64,
+}
+
+impl<'a> Meter<'a> {
+    fn new(scenario: &'a Scenario, vehicle: &'a VehicleParams, opts: &SimOptions) -> Self {
+        let track = &scenario.track;
+        let lap_length = track.length();
+        let half_len = 0.5 * vehicle_length_m(vehicle);
+        Self {
+            scenario,
+            vehicle,
+            sum: Summary {
+                mu: opts.mu_road,
+                mu_planner: opts.mu_planner,
+                plan_budget_cycles: opts.plan_budget_cycles,
+                control_budget_cycles: opts.control_budget_cycles,
+                ..Summary::default()
+            },
+            sum_sq_lat: 0.0,
+            n_lat: 0,
+            s_hint: None,
+            s_prev: 0.0,
+            progress_m: 0.0,
+            projector: track.projector(),
+            lap_length,
+            target_m: if track.closed {
+                lap_length * opts.laps.max(1) as f64
+            } else {
+                lap_length
+            },
+            cg_offset: front_overhang_from_cg_m(vehicle) - half_len,
+            max_half_width: track
+                .w_left
+                .iter()
+                .chain(track.w_right.iter())
+                .fold(0.0f64, |a, &b| a.max(b)),
+            stopped_for_s: 0.0,
+        }
+    }
+
+    /// Counts one control activation and the plan activations it reports against
+    /// their budgets and deadlines.
+    fn account<T: Real>(&mut self, opts: &SimOptions, c: &ControlOutput<T>, res: &mut RunResult) {
+        let sum = &mut self.sum;
+        sum.control_activations += 1;
+        if c.actuation.mode == Mode::Safe {
+            sum.control_safe_actuations += 1;
+        }
+        res.control_costs.push(c.cycles);
+        res.control_instructions.push(c.instructions);
+        if c.cycles / opts.ecu_clock_hz * 1e6 > CONTROL_PERIOD_US as f64 {
+            sum.control_deadline_misses += 1;
+        }
+        if c.cycles > opts.control_budget_cycles {
+            sum.control_budget_overruns += 1;
+        }
+        sum.control_max_cost_cycles = sum.control_max_cost_cycles.max(c.cycles);
+        sum.control_max_instructions = sum.control_max_instructions.max(c.instructions);
+        sum.plan_deadline_misses += u64::from(c.skipped_releases);
+        for p in &c.plans {
+            res.plan_costs.push(p.cycles);
+            sum.plan_max_cost_cycles = sum.plan_max_cost_cycles.max(p.cycles);
+            sum.plan_max_instructions = sum.plan_max_instructions.max(p.instructions);
+            if p.deadline_miss {
+                sum.plan_deadline_misses += 1;
+            }
+            if p.cycles > opts.plan_budget_cycles {
+                sum.plan_budget_overruns += 1;
+            }
+            if p.published {
+                sum.plan_max_qp_iterations = sum.plan_max_qp_iterations.max(p.qp_iterations);
+                sum.max_validity_slack_rad =
+                    sum.max_validity_slack_rad.max(p.max_validity_slack_rad);
+            } else {
+                sum.plan_failures += 1;
+            }
+            res.plan_activations.push(p.clone());
+        }
+    }
+
+    /// The measurements of the instant `t_us`, as a log row.
+    fn measure<T: Real>(
+        &mut self,
+        t_us: u64,
+        st: &State,
+        out: &crate::plant::Outputs,
+        act: &Actuation<T>,
+        plan: &Plan<T>,
+        plan_status: &'static str,
+    ) -> LogRow {
+        let track = &self.scenario.track;
+        let sum = &mut self.sum;
+        let (s, lat) = self.projector.project([st.x_m, st.y_m], self.s_hint);
+        if self.s_hint.is_some() {
+            // Arc length driven since the last sample (across the lap line too).
+            let mut ds = s - self.s_prev;
+            if track.closed {
+                if ds > 0.5 * self.lap_length {
+                    ds -= self.lap_length;
+                } else if ds < -0.5 * self.lap_length {
+                    ds += self.lap_length;
+                }
+            }
+            self.progress_m += ds;
+        }
+        self.s_prev = s;
+        self.s_hint = Some(s);
+        self.sum_sq_lat += lat * lat;
+        self.n_lat += 1;
+        sum.max_abs_lateral_error_m = sum.max_abs_lateral_error_m.max(lat.abs());
+        sum.max_abs_ay_mps2 = sum.max_abs_ay_mps2.max(out.ay_mps2.abs());
+        sum.max_speed_mps = sum.max_speed_mps.max(st.speed_mps());
+        for i in 0..4 {
+            sum.max_abs_slip_angle_rad = sum.max_abs_slip_angle_rad.max(out.alpha_rad[i].abs());
+            sum.max_abs_slip_ratio = sum.max_abs_slip_ratio.max(out.kappa[i].abs());
+        }
+        let dev = plan_position_at(plan, t_us)
+            .map(|p| (p[0] - st.x_m).hypot(p[1] - st.y_m))
+            .unwrap_or(0.0);
+        if plan.dt_s > T::ZERO {
+            sum.consistency_max_m = sum.consistency_max_m.max(dev);
+        }
+        self.check_obstacles(st);
+        let g = |f: fn(&Actuation<T>) -> T| f(act).to_f64();
+        LogRow {
+            t_s: t_us as f64 * 1e-6,
+            x_m: st.x_m,
+            y_m: st.y_m,
+            psi_rad: st.psi_rad,
+            v_mps: st.speed_mps(),
+            v_ref_mps: g(|x| x.v_ref_mps),
+            v_heur_mps: plan.v_heur_mps[0].to_f64(),
+            delta_rad: g(|x| x.delta_rad),
+            delta_ol_rad: g(|x| x.delta_ol_rad),
+            delta_cl_rad: g(|x| x.delta_cl_rad),
+            torque_fl_nm: act.wheel_torque_nm[0].to_f64(),
+            torque_fr_nm: act.wheel_torque_nm[1].to_f64(),
+            torque_rl_nm: act.wheel_torque_nm[2].to_f64(),
+            torque_rr_nm: act.wheel_torque_nm[3].to_f64(),
+            ay_mps2: out.ay_mps2,
+            lateral_error_m: lat,
+            progress_m: self.progress_m,
+            kappa_fl: out.kappa[0],
+            kappa_fr: out.kappa[1],
+            kappa_rl: out.kappa[2],
+            kappa_rr: out.kappa[3],
+            alpha_fl_rad: out.alpha_rad[0],
+            alpha_fr_rad: out.alpha_rad[1],
+            alpha_rl_rad: out.alpha_rad[2],
+            alpha_rr_rad: out.alpha_rad[3],
+            plan_deviation_m: dev,
+            plan_status,
+            control_mode: mode_name(act.mode),
+        }
+    }
+
+    /// Counts collisions and the smallest clearance to the obstacles.
+    fn check_obstacles(&mut self, st: &State) {
+        if self.scenario.obstacles.is_empty() {
+            return;
+        }
+        let fp = obstacle_file::vehicle_footprint(
+            st.x_m + self.cg_offset * st.psi_rad.cos(),
+            st.y_m + self.cg_offset * st.psi_rad.sin(),
+            st.psi_rad,
+            vehicle_length_m(self.vehicle),
+            vehicle_width_m(self.vehicle),
+        );
+        for o in &self.scenario.obstacles {
+            let d = obstacle_file::distance(&fp, &o.vertices);
+            if obstacle_file::intersects(&fp, &o.vertices) {
+                self.sum.collisions += 1;
+            }
+            self.sum.min_obstacle_clearance_m = Some(
+                self.sum
+                    .min_obstacle_clearance_m
+                    .map_or(d, |m: f64| m.min(d)),
+            );
+        }
+    }
+
+    /// Why the run stops at `t_us`, if it does.
+    fn stop_reason(&mut self, t_us: u64, st: &State, row: &LogRow) -> Option<String> {
+        let t_s = t_us as f64 * 1e-6;
+        let lat = row.lateral_error_m;
+        if self.sum.lap_time_s.is_none() && self.progress_m >= self.lap_length {
+            self.sum.lap_time_s = Some(t_s);
+        }
+        if self.progress_m >= self.target_m {
+            self.sum.completed = true;
+            return Some("completed".into());
+        }
+        if lat.abs() > self.max_half_width + 3.0 {
+            return Some(format!(
+                "left the road at t = {t_s:.2} s ({lat:.2} m off the centre line)"
+            ));
+        }
+        if st.speed_mps() < 0.05 {
+            self.stopped_for_s += CONTROL_PERIOD_US as f64 * 1e-6;
+            if self.stopped_for_s > 5.0 {
+                return Some(format!("stood still for 5 s at t = {t_s:.2} s"));
+            }
+        } else {
+            self.stopped_for_s = 0.0;
+        }
+        None
+    }
+
+    /// The summary at the end of the run at `t_us`.
+    fn finish(self, t_us: u64, stop_reason: String, res: &RunResult) -> Summary {
+        let mut sum = self.sum;
+        sum.stop_reason = stop_reason;
+        sum.distance_m = self.progress_m;
+        sum.duration_s = t_us as f64 * 1e-6;
+        sum.rms_lateral_error_m = if self.n_lat > 0 {
+            (self.sum_sq_lat / self.n_lat as f64).sqrt()
+        } else {
+            0.0
+        };
+        let mut plan_instr: Vec<f64> = res
+            .plan_activations
+            .iter()
+            .map(|p| p.instructions)
+            .collect();
+        plan_instr.sort_by(|a, b| a.total_cmp(b));
+        sum.plan_p50_instructions = plan_instr.get(plan_instr.len() / 2).copied().unwrap_or(0.0);
+        sum
+    }
 }
 
 fn trace_of<T: Real>(plan: &Plan<T>, publish_us: u64) -> Option<PlanTrace> {
@@ -752,27 +857,4 @@ fn trace_of<T: Real>(plan: &Plan<T>, publish_us: u64) -> Option<PlanTrace> {
             .map(|n| [n.x_m.to_f64(), n.y_m.to_f64()])
             .collect(),
     })
-}
-
-fn obstacle_error_message<T: Real>(
-    e: firmware::obstacles::ObstacleError<T>,
-    obstacles: &[Obstacle],
-) -> anyhow::Error {
-    use firmware::obstacles::ObstacleError as E;
-    match e {
-        E::RoadBlocked {
-            obstacle,
-            missing_m,
-        } => {
-            let id = obstacles
-                .get(obstacle)
-                .map(|o| o.id.as_str())
-                .unwrap_or("?");
-            anyhow!(
-                "obstacle {id:?} blocks the road: the car needs {:.2} m more free width beside it on either side; move it, make it narrower, or widen the track there",
-                missing_m.to_f64()
-            )
-        }
-        other => anyhow!("obstacles: {other:?}"),
-    }
 }

@@ -12,7 +12,8 @@
 //! | [`track`] | track files (racetrack-database CSV), projection, curvature |
 //! | [`obstacle_file`] | obstacle files (`id,x_m,y_m`), polygon distances, footprints |
 //! | [`scenario`] | the built-in `paper` scenario and `--track`/`--obstacles` resolution |
-//! | [`closed_loop`] | the deterministic timeline: plant against the two tasks, budgets |
+//! | [`closed_loop`] | the deterministic timeline: the plant against an ECU, budgets, deadlines |
+//! | [`ecu`] | what runs the firmware: the `Ecu` trait, the modelled ECU on the host |
 //! | [`run`] | the `run` command: log, summary, figures |
 //! | [`figures`] | the closed-loop figures (the paper's Figures 5–8, task costs) |
 //! | [`plot`] | plotting helpers (embedded font) |
@@ -20,6 +21,7 @@
 //! | [`wcet`] | worst-case stack bound and cycles-per-instruction bound of the ECU binary |
 
 pub mod closed_loop;
+pub mod ecu;
 pub mod figures;
 pub mod obstacle_file;
 pub mod pil;

@@ -44,6 +44,10 @@ pub struct RunArgs {
     /// Initial speed, m/s (the paper: 15).
     #[arg(long, default_value_t = 15.0)]
     pub initial_speed: f64,
+    /// ECU clock, MHz (the tasks' response times, so their deadlines, depend on it;
+    /// their cycle budgets do not).
+    #[arg(long, default_value_t = 168.0)]
+    pub ecu_mhz: f64,
     /// Precision of the firmware maths.
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
@@ -125,6 +129,12 @@ pub fn run(args: &RunArgs) -> Result<()> {
             args.initial_speed
         );
     }
+    if !(args.ecu_mhz.is_finite() && args.ecu_mhz > 0.0) {
+        bail!(
+            "--ecu-mhz must be a positive clock frequency in MHz (e.g. 168), got {}",
+            args.ecu_mhz
+        );
+    }
     let vehicle = load_vehicle(args.vehicle.as_deref())?;
     let scenario = scenario::resolve(&args.track, &args.obstacles, !args.open)?;
     let opts = SimOptions {
@@ -133,6 +143,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         laps: args.laps,
         max_duration_s: args.duration,
         initial_speed_mps: args.initial_speed,
+        ecu_clock_hz: args.ecu_mhz * 1e6,
         ..SimOptions::default()
     };
     let result = simulate(&scenario, &vehicle, &opts, args.precision, true)?;

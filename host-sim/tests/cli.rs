@@ -107,3 +107,18 @@ fn a_bad_vehicle_file_is_reported_with_its_field() {
         "{err}"
     );
 }
+
+#[test]
+fn an_ecu_clock_that_is_not_positive_is_refused_with_a_clear_message() {
+    let dir = tempfile::tempdir().unwrap();
+    for mhz in ["0", "-5", "nan", "inf"] {
+        let o = host_sim()
+            .args(["run", "--no-plots", &format!("--ecu-mhz={mhz}"), "--out"])
+            .arg(dir.path())
+            .output()
+            .unwrap();
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("--ecu-mhz must be a positive"), "{mhz}: {err}");
+    }
+}

@@ -1,0 +1,383 @@
+//! What runs the firmware in the closed loop: the [`Ecu`] trait, and
+//! [`SimulatedEcu`], the firmware's two tasks run in this process on a modelled
+//! timeline.
+//!
+//! The closed-loop driver ([`crate::closed_loop::run_with`]) owns the plant, the
+//! measurements and the log; it calls [`Ecu::control`] at every 10 ms control
+//! release with the plant's state of that instant and applies the actuation it
+//! returns. Everything else (when the `plan` task runs, how long it takes, when its
+//! plan is published) is the ECU's business: modelled here by [`SimulatedEcu`],
+//! measured on the firmware running under an emulator by another implementation.
+//!
+//! # The modelled timeline ([`SimulatedEcu`])
+//!
+//! At each call at `t` (a multiple of 10 ms): a plan activation that has finished
+//! by `t` publishes its plan (if optimal), then `control` runs on the estimate and
+//! the current plan; when `t` is a multiple of 100 ms the `plan` task is released
+//! after it (lower priority) on the same estimate. The host computes the plan at
+//! once, but the activation finishes, and publishes, at
+//!
+//! ```text
+//! finish = release + (plan cycles + cycles of the control activations that preempt it) / f_ECU
+//! ```
+//!
+//! with every activation's instructions from its own work counters through
+//! [`CostModel`], failed activations included, and cycles = instructions ×
+//! [`SimOptions::cycles_per_instruction`]. A release that falls while the `plan`
+//! task is still running is skipped (see the late-plan policy in
+//! [`crate::closed_loop`]).
+
+use std::time::Instant;
+
+use anyhow::{anyhow, Result};
+use firmware::low_level::Actuation;
+use firmware::mpc::MpcReport;
+use firmware::obstacles::Obstacle as FwObstacle;
+use firmware::plan::Plan;
+use firmware::state_estimate::StateEstimate;
+use firmware::tasks::{ControlTask, PlanTask, CONTROL_PERIOD_US, PLAN_PERIOD_US};
+use firmware::Real;
+use serde::Serialize;
+
+use crate::closed_loop::{vehicle_config, CostModel, SimOptions, HOST_PATH_CAP};
+use crate::obstacle_file::Obstacle;
+use crate::scenario::Scenario;
+use crate::vehicle::VehicleParams;
+
+/// One activation of the plan task, as the ECU (modelled or measured) ran it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PlanActivation {
+    /// 1-based count of the task's releases (skipped releases included).
+    pub activation: u32,
+    /// Release time, µs.
+    pub release_us: u64,
+    /// When it finished (response time = finish − release), µs.
+    pub finish_us: u64,
+    /// Instructions of the task's own execution (modelled: from the cost model;
+    /// processor in the loop: measured).
+    pub instructions: f64,
+    /// `instructions` × cycles per instruction (see [`CostModel`]), ECU cycles.
+    pub cycles: f64,
+    /// `"optimal"` or the failure's name.
+    pub status: &'static str,
+    /// The plan was published (at `finish_us`).
+    pub published: bool,
+    /// The response time exceeded the period (100 ms).
+    pub deadline_miss: bool,
+    /// Linearise–condense passes.
+    pub passes: u32,
+    /// QP iterations, all passes.
+    pub qp_iterations: u32,
+    /// Constraints added to the QP's working set, all passes.
+    pub qp_added: u32,
+    /// Constraints removed from the QP's working set, all passes.
+    pub qp_removed: u32,
+    /// Factorisations of the working set from scratch, all passes.
+    pub qp_refactorizations: u32,
+    /// General QP rows of the last pass.
+    pub rows: u32,
+    /// Working-set size at the end of the last pass.
+    pub active_constraints: u32,
+    /// Largest validity slack of the plan, rad (0 if none or not optimal).
+    pub max_validity_slack_rad: f64,
+}
+
+/// What one control activation produced.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ControlOutput<T> {
+    /// The actuation to hold until the next control activation.
+    pub actuation: Actuation<T>,
+    /// Instructions of this control activation.
+    pub instructions: f64,
+    /// Its cycles (instructions × cycles per instruction), ECU cycles.
+    pub cycles: f64,
+    /// Plan activations that finished since the previous control activation, in order.
+    pub plans: Vec<PlanActivation>,
+    /// Plan releases lost since the previous call because the plan task was still
+    /// running (each a deadline miss).
+    pub skipped_releases: u32,
+}
+
+/// The firmware side of the closed loop.
+pub trait Ecu<T: Real> {
+    /// The control activation released at `t_us` (µs) on `est` (the plant's state
+    /// at that instant); the ECU also runs everything due by `t_us` (plan releases
+    /// at multiples of 100 ms happen right after the control activation of the same
+    /// instant, as the priorities order them).
+    fn control(&mut self, t_us: u64, est: &StateEstimate<T>) -> Result<ControlOutput<T>>;
+
+    /// The plan the control task is following after the last call (for the
+    /// consistency figure and plan traces).
+    fn active_plan(&self) -> &Plan<T>;
+}
+
+/// A plan activation computed on the host, waiting for its modelled finish.
+#[derive(Clone, Debug)]
+struct InFlight {
+    record: PlanActivation,
+}
+
+/// The firmware's two tasks in this process, on the modelled timeline (see the
+/// module docs).
+#[derive(Debug)]
+pub struct SimulatedEcu<T: Real> {
+    planner: Box<PlanTask<T, HOST_PATH_CAP>>,
+    control: ControlTask<T>,
+    shared_plan: Plan<T>,
+    cost_model: CostModel,
+    cycles_per_instruction: f64,
+    ecu_clock_hz: f64,
+    in_flight: Option<InFlight>,
+    busy_until_us: u64,
+    releases: u32,
+    host_us: Vec<f64>,
+}
+
+impl<T: Real> SimulatedEcu<T> {
+    /// The tasks for `scenario`'s track and obstacles and `vehicle`'s car, timed
+    /// with `opts`' cost model and ECU clock. Fails, saying why, on a track or an
+    /// obstacle the planner refuses or a clock that is not a positive number.
+    pub fn new(scenario: &Scenario, vehicle: &VehicleParams, opts: &SimOptions) -> Result<Self> {
+        if !(opts.ecu_clock_hz.is_finite() && opts.ecu_clock_hz > 0.0) {
+            return Err(anyhow!(
+                "ECU clock must be a positive number of Hz, got {}",
+                opts.ecu_clock_hz
+            ));
+        }
+        if !(opts.cycles_per_instruction.is_finite() && opts.cycles_per_instruction > 0.0) {
+            return Err(anyhow!(
+                "cycles per instruction must be a positive number, got {}",
+                opts.cycles_per_instruction
+            ));
+        }
+        let track = &scenario.track;
+        // The planner: path, obstacles, MPC (boxed: the path is large on the host).
+        let car = vehicle_config::<T>(vehicle);
+        let mu_planner = T::from_f64(opts.mu_planner);
+        let mut planner: Box<PlanTask<T, HOST_PATH_CAP>> =
+            Box::new(PlanTask::new(car.mpc_settings(), mu_planner));
+        let rows: Vec<[T; 4]> = track.rows().iter().map(|r| r.map(T::from_f64)).collect();
+        planner
+            .path
+            .load_track(&rows, track.closed)
+            .map_err(|e| anyhow!("track {}: the planner refused it: {e:?}", track.name))?;
+        let fw_obstacles = scenario
+            .obstacles
+            .iter()
+            .enumerate()
+            .map(|(k, o)| {
+                let v: Vec<[T; 2]> = o.vertices.iter().map(|p| p.map(T::from_f64)).collect();
+                FwObstacle::from_vertices(k as u32, &v)
+                    .map_err(|e| anyhow!("obstacle {:?}: {e:?}", o.id))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        planner
+            .obstacles
+            .update(
+                &car.obstacle_settings(mu_planner),
+                &planner.path,
+                &fw_obstacles,
+            )
+            .map_err(|e| obstacle_error_message(e, &scenario.obstacles))?;
+        let control = ControlTask::new(car.low_level_config())
+            .map_err(|e| anyhow!("low-level controller configuration: {e:?}"))?;
+        Ok(Self {
+            planner,
+            control,
+            shared_plan: Plan::zeroed(),
+            cost_model: opts.cost_model,
+            cycles_per_instruction: opts.cycles_per_instruction,
+            ecu_clock_hz: opts.ecu_clock_hz,
+            in_flight: None,
+            busy_until_us: 0,
+            releases: 0,
+            host_us: Vec::new(),
+        })
+    }
+
+    /// The plan task (its settings can be changed before the first activation,
+    /// e.g. its iteration cap).
+    pub fn plan_task_mut(&mut self) -> &mut PlanTask<T, HOST_PATH_CAP> {
+        &mut self.planner
+    }
+
+    /// The control task (its counters: safe actuations, faults).
+    pub fn control_task(&self) -> &ControlTask<T> {
+        &self.control
+    }
+
+    /// Host wall time of each plan activation computed, µs (information only).
+    pub fn host_us(&self) -> &[f64] {
+        &self.host_us
+    }
+
+    /// Runs the plan task released at `t_us` on `est` on the host; its record waits
+    /// in flight until its modelled finish.
+    fn release_plan(&mut self, t_us: u64, est: &StateEstimate<T>) {
+        let h0 = Instant::now();
+        let outcome = self.planner.run(est);
+        self.host_us.push(h0.elapsed().as_secs_f64() * 1e6);
+        // Charged from the activation's own counters, a failed one's included.
+        let report = *self.planner.last_report();
+        let instructions = self.cost_model.plan_instructions(&report);
+        let cycles = instructions * self.cycles_per_instruction;
+        let control_cycles = self.cost_model.control_instructions() * self.cycles_per_instruction;
+        let finish_us = t_us + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
+        self.busy_until_us = finish_us;
+        let (status, published) = match &outcome {
+            Ok(_) => ("optimal", true),
+            Err(e) => (mpc_error_name(e), false),
+        };
+        self.in_flight = Some(InFlight {
+            record: activation_record(
+                self.releases,
+                t_us,
+                finish_us,
+                instructions,
+                cycles,
+                &report,
+            )
+            .with_outcome(status, published),
+        });
+    }
+}
+
+/// Response time of a plan activation of `cycles` preempted every 10 ms by a
+/// control activation of `control_cycles`, on a clock of `clock_hz`, µs.
+fn response_us(cycles: f64, control_cycles: f64, clock_hz: f64) -> f64 {
+    let mut resp_s = cycles / clock_hz;
+    for _ in 0..64 {
+        let preempting = (resp_s * 1e6 / CONTROL_PERIOD_US as f64).floor();
+        let next = (cycles + preempting * control_cycles) / clock_hz;
+        if (next - resp_s).abs() < 1e-12 {
+            break;
+        }
+        resp_s = next;
+    }
+    resp_s * 1e6
+}
+
+fn activation_record<T: Real>(
+    activation: u32,
+    release_us: u64,
+    finish_us: u64,
+    instructions: f64,
+    cycles: f64,
+    r: &MpcReport<T>,
+) -> PlanActivation {
+    PlanActivation {
+        activation,
+        release_us,
+        finish_us,
+        instructions,
+        cycles,
+        status: "optimal",
+        published: false,
+        deadline_miss: finish_us > release_us + PLAN_PERIOD_US,
+        passes: r.passes,
+        qp_iterations: r.qp_iterations,
+        qp_added: r.qp_added,
+        qp_removed: r.qp_removed,
+        qp_refactorizations: r.qp_refactorizations,
+        rows: r.rows,
+        active_constraints: r.active_constraints,
+        max_validity_slack_rad: r.max_validity_slack_rad.to_f64(),
+    }
+}
+
+impl PlanActivation {
+    fn with_outcome(mut self, status: &'static str, published: bool) -> Self {
+        self.status = status;
+        self.published = published;
+        if !published {
+            self.max_validity_slack_rad = 0.0;
+        }
+        self
+    }
+}
+
+impl<T: Real> Ecu<T> for SimulatedEcu<T> {
+    fn control(&mut self, t_us: u64, est: &StateEstimate<T>) -> Result<ControlOutput<T>> {
+        let mut plans = Vec::new();
+        // A plan activation that has finished by now publishes first.
+        if self
+            .in_flight
+            .as_ref()
+            .is_some_and(|f| f.record.finish_us <= t_us)
+        {
+            if let Some(f) = self.in_flight.take() {
+                if f.record.published {
+                    self.planner.publish(&mut self.shared_plan);
+                }
+                plans.push(f.record);
+            }
+        }
+        let actuation = self.control.run(est, &self.shared_plan, t_us);
+        let instructions = self.cost_model.control_instructions();
+        let mut skipped_releases = 0;
+        if t_us.is_multiple_of(PLAN_PERIOD_US) {
+            self.releases += 1;
+            if self.busy_until_us > t_us {
+                // Still running: this release is lost (RTIC cannot spawn a busy task).
+                skipped_releases = 1;
+            } else {
+                self.release_plan(t_us, est);
+            }
+        }
+        Ok(ControlOutput {
+            actuation,
+            instructions,
+            cycles: instructions * self.cycles_per_instruction,
+            plans,
+            skipped_releases,
+        })
+    }
+
+    fn active_plan(&self) -> &Plan<T> {
+        &self.shared_plan
+    }
+}
+
+/// The name of an MPC failure, as written in the log and the activations.
+pub fn mpc_error_name(e: &firmware::mpc::MpcError) -> &'static str {
+    use firmware::mpc::MpcError as E;
+    use firmware::qp::QpStatus as Q;
+    match e {
+        E::NonFiniteState => "non_finite_state",
+        E::InvalidFriction => "invalid_friction",
+        E::InvalidSettings => "invalid_settings",
+        E::NoPath => "no_path",
+        E::Qp(Q::IterationLimit) => "qp_iteration_limit",
+        E::Qp(Q::Infeasible) => "qp_infeasible",
+        E::Qp(Q::NumericalError) => "qp_numerical_error",
+        E::Qp(Q::NotConvex) => "qp_not_convex",
+        E::Qp(Q::NonFiniteInput) => "qp_non_finite_input",
+        E::Qp(Q::InvalidInput) => "qp_invalid_input",
+        E::Qp(Q::WorkingSetFull) => "qp_working_set_full",
+        E::Qp(Q::NotSolved) => "qp_not_solved",
+        E::Qp(Q::Optimal) => "optimal",
+    }
+}
+
+fn obstacle_error_message<T: Real>(
+    e: firmware::obstacles::ObstacleError<T>,
+    obstacles: &[Obstacle],
+) -> anyhow::Error {
+    use firmware::obstacles::ObstacleError as E;
+    match e {
+        E::RoadBlocked {
+            obstacle,
+            missing_m,
+        } => {
+            let id = obstacles
+                .get(obstacle)
+                .map(|o| o.id.as_str())
+                .unwrap_or("?");
+            anyhow!(
+                "obstacle {id:?} blocks the road: the car needs {:.2} m more free width beside it on either side; move it, make it narrower, or widen the track there",
+                missing_m.to_f64()
+            )
+        }
+        other => anyhow!("obstacles: {other:?}"),
+    }
+}
