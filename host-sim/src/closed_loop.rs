@@ -48,7 +48,6 @@ use std::time::Instant;
 
 use anyhow::{anyhow, Context, Result};
 use firmware::low_level::{Actuation, Mode};
-use firmware::mpc::{MpcReport, MpcSettings, NC};
 use firmware::plan::{Plan, HORIZON};
 use firmware::state_estimate::StateEstimate;
 use firmware::tasks::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
@@ -57,6 +56,7 @@ use firmware::Real;
 use serde::Serialize;
 
 pub use crate::ecu::{ControlOutput, Ecu, PlanActivation, SimulatedEcu};
+pub use crate::cost_model::CostModel;
 use crate::obstacle_file;
 use crate::plant::{Inputs, Plant, State};
 use crate::scenario::Scenario;
@@ -83,110 +83,6 @@ impl Precision {
 
 /// Point capacity of the reference path on the host (the ECU build picks its own).
 pub const HOST_PATH_CAP: usize = 4096;
-
-/// Deterministic cost model of the two tasks, in ECU instructions.
-///
-/// ```text
-/// plan    = margin · (per_activation + passes·(per_pass + per_row_pass·rows)
-///                     + per_iteration·iterations + per_added·added
-///                     + per_removed·removed + per_refactorization·refactorisations)
-/// control = margin · control
-/// ```
-///
-/// from the work counters of each activation ([`MpcReport`]); the control task is
-/// one constant (no data-dependent loops). Cycles are instructions ×
-/// [`SimOptions::cycles_per_instruction`], a separate setting.
-///
-/// The coefficients are the QEMU calibration of the `mpc_step` ECU binary: a
-/// least-squares fit of its 150 steps (`.ci/ecu-check` prints them) gives 542,657
-/// instructions per pass, 8,537 per row and pass, 13,416 per QP iteration, within
-/// 4.6 % of every step; the control task took at most 771 instructions. The
-/// working-set terms (`per_added`, `per_removed`, `per_refactorization`) and
-/// `per_activation` are 0 until refitted from measurements on the ECU; `margin`
-/// (1.05) covers the fit's largest error so the estimate does not undercount.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct CostModel {
-    /// Fixed cost of a plan activation, instructions.
-    pub per_activation: f64,
-    /// Per linearise–condense–factorise pass (16 RK4 steps with Jacobians, the
-    /// condensed Hessian, its Cholesky factor), instructions.
-    pub per_pass: f64,
-    /// Per general QP row and pass (forming it, transforming it by `R⁻¹`),
-    /// instructions.
-    pub per_row_pass: f64,
-    /// Per QP iteration (multiplier solve, constraint scan), instructions.
-    pub per_iteration: f64,
-    /// Per constraint added to the working set (factor update), instructions.
-    pub per_added: f64,
-    /// Per constraint removed from the working set (factor downdate), instructions.
-    pub per_removed: f64,
-    /// Per factorisation of the working set from scratch, instructions.
-    pub per_refactorization: f64,
-    /// One control activation, instructions.
-    pub control: f64,
-    /// Factor applied to every estimate (the fit's largest error), dimensionless.
-    pub margin: f64,
-}
-
-impl Default for CostModel {
-    /// The QEMU calibration above.
-    fn default() -> Self {
-        Self {
-            per_activation: 0.0,
-            per_pass: 542_657.0,
-            per_row_pass: 8_537.0,
-            per_iteration: 13_416.0,
-            per_added: 0.0,
-            per_removed: 0.0,
-            per_refactorization: 0.0,
-            control: 771.0,
-            margin: 1.05,
-        }
-    }
-}
-
-impl CostModel {
-    /// Estimated instructions of one plan activation from its work counters,
-    /// whatever its outcome (a failed activation's counters say what it did).
-    pub fn plan_instructions<T: Real>(&self, r: &MpcReport<T>) -> f64 {
-        let passes = f64::from(r.passes);
-        self.margin
-            * (self.per_activation
-                + passes * (self.per_pass + self.per_row_pass * f64::from(r.rows))
-                + self.per_iteration * f64::from(r.qp_iterations)
-                + self.per_added * f64::from(r.qp_added)
-                + self.per_removed * f64::from(r.qp_removed)
-                + self.per_refactorization * f64::from(r.qp_refactorizations))
-    }
-
-    /// Estimated instructions of one control activation.
-    pub fn control_instructions(&self) -> f64 {
-        self.margin * self.control
-    }
-
-    /// The model's worst case for one plan activation under `settings`,
-    /// instructions: the firmware runs at most `cold_start_iterations` passes and
-    /// at most `qp_max_iter` QP iterations per activation (each adding, removing or
-    /// refactorising at most once), on at most [`NC`] rows:
-    ///
-    /// ```text
-    /// margin · (cold_start_iterations·(per_pass + NC·per_row_pass)
-    ///           + qp_max_iter·(per_iteration + per_added + per_removed + per_refactorization)
-    ///           + per_activation)
-    /// ```
-    pub fn plan_bound_instructions<T: Real>(&self, settings: &MpcSettings<T>) -> f64 {
-        let passes = f64::from(settings.cold_start_iterations.max(1));
-        let iterations = f64::from(settings.qp_max_iter);
-        self.margin
-            * (passes * (self.per_pass + NC as f64 * self.per_row_pass)
-                + iterations
-                    * (self.per_iteration
-                        + self.per_added
-                        + self.per_removed
-                        + self.per_refactorization)
-                + self.per_activation)
-    }
-}
 
 /// Options of a closed-loop run.
 #[derive(Clone, Debug, PartialEq, Serialize)]

@@ -12,6 +12,8 @@
 //! | [`track`] | track files (racetrack-database CSV), projection, curvature |
 //! | [`obstacle_file`] | obstacle files (`id,x_m,y_m`), polygon distances, footprints |
 //! | [`scenario`] | the built-in `paper` scenario and `--track`/`--obstacles` resolution |
+//! | [`cost_model`] | the tasks' cost model on the ECU (instructions), fitted on PIL measurements |
+//! | [`pil`] | processor in the loop: the ECU application in QEMU against the plant |
 //! | [`closed_loop`] | the deterministic timeline: the plant against an ECU, budgets, deadlines |
 //! | [`ecu`] | what runs the firmware: the `Ecu` trait, the modelled ECU on the host |
 //! | [`run`] | the `run` command: log, summary, figures |
@@ -21,6 +23,7 @@
 //! | [`wcet`] | worst-case stack bound and cycles-per-instruction bound of the ECU binary |
 
 pub mod closed_loop;
+pub mod cost_model;
 pub mod ecu;
 pub mod figures;
 pub mod obstacle_file;

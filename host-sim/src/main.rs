@@ -23,6 +23,9 @@ enum Command {
     /// A closed-loop drive: the 9-DoF plant against the firmware's two tasks on a
     /// deterministic timeline; writes log.csv, summary.json and the figures.
     Run(host_sim::run::RunArgs),
+    /// Processor in the loop: the ECU application in QEMU against the plant; writes
+    /// what `run` writes plus plan_activations.csv and pil.json (measured ECU costs).
+    Pil(host_sim::pil::PilArgs),
     /// Every QP the MPC solves over a kinematic closed loop, one JSON file each (for solver benchmarks).
     QpCorpus(host_sim::qp_corpus::QpCorpusArgs),
 }
@@ -33,6 +36,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Validity(args) => host_sim::validity::run(args),
         Command::Run(args) => host_sim::run::run(args),
         Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
+        Command::Pil(args) => host_sim::pil::run(args),
     }
 }
 

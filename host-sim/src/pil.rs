@@ -99,7 +99,7 @@ pub struct LinkCounters {
 
 enum Incoming {
     Frame(Up),
-    Bad(link::FrameError),
+    Bad,
     Closed,
 }
 
@@ -156,9 +156,9 @@ fn spawn_reader(mut file: File) -> Receiver<Incoming> {
                     None => continue,
                     Some(Ok(frame)) => match link::decode::<Up>(frame) {
                         Ok(m) => Incoming::Frame(m),
-                        Err(e) => Incoming::Bad(e),
+                        Err(_) => Incoming::Bad,
                     },
-                    Some(Err(e)) => Incoming::Bad(e),
+                    Some(Err(_)) => Incoming::Bad,
                 };
                 if tx.send(msg).is_err() {
                     return;
@@ -288,7 +288,7 @@ impl QemuEcu {
                 .recv_timeout(Duration::from_secs_f64(self.opts.frame_timeout_s))
             {
                 Ok(Incoming::Frame(m)) => return Ok(m),
-                Ok(Incoming::Bad(_)) => self.counters.rejected += 1,
+                Ok(Incoming::Bad) => self.counters.rejected += 1,
                 Ok(Incoming::Closed) | Err(RecvTimeoutError::Disconnected) => {
                     let defmt = self.opts.work_dir.join("ecu.defmt");
                     bail!(
@@ -546,4 +546,296 @@ impl Ecu<f32> for QemuEcu {
     fn active_plan(&self) -> &Plan<f32> {
         &self.active
     }
+}
+
+/// Arguments of `host-sim pil`: those of `run`, and how to run the ECU.
+#[derive(Debug, Clone, clap::Args)]
+pub struct PilArgs {
+    /// The scenario and outputs, as for `run` (`--precision` must stay f32 and
+    /// `--ecu-mhz` 168: the ECU's own clock times the run).
+    #[command(flatten)]
+    pub run: crate::run::RunArgs,
+    /// The ECU application (build it with `cargo ecu`).
+    #[arg(long, default_value = "target/thumbv7em-none-eabihf/release/ecu")]
+    pub elf: PathBuf,
+    /// QEMU's `-icount shift`: an instruction takes 2^shift ns of the ECU's virtual
+    /// time (4: 16 ns, 2.69 cycles at 168 MHz, above the CPI bound).
+    #[arg(long, default_value_t = 4)]
+    pub icount_shift: u32,
+    /// QEMU executable.
+    #[arg(long, default_value = "qemu-system-arm")]
+    pub qemu: PathBuf,
+    /// Cycles per instruction that turn measured instructions into cycles.
+    #[arg(long, default_value_t = 2.5)]
+    pub cpi: f64,
+    /// Also write QEMU's execution trace here (for `host-sim wcet`; large).
+    #[arg(long)]
+    pub trace: Option<PathBuf>,
+    /// Skip the comparison with the in-process run.
+    #[arg(long)]
+    pub no_compare: bool,
+    /// Longest wall time to wait for one frame, s.
+    #[arg(long, default_value_t = 60.0)]
+    pub frame_timeout: f64,
+}
+
+/// The first difference between the PIL trajectory and the in-process one.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Comparison {
+    /// Log rows compared (10 ms each).
+    pub rows_compared: usize,
+    /// The two trajectories are equal bit for bit on every compared row.
+    pub identical: bool,
+    /// Time of the first differing row, s.
+    pub first_divergence_s: Option<f64>,
+    /// Why, as far as the activations tell.
+    pub cause: String,
+}
+
+/// What `host-sim pil` adds to `run`'s outputs (`pil.json`).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PilReport {
+    /// QEMU's `-icount shift`.
+    pub icount_shift: u32,
+    /// Virtual time per instruction, ns.
+    pub ns_per_instruction: f64,
+    /// The ECU application run.
+    pub elf: String,
+    /// Deepest stack use seen on the ECU (painted stack), bytes.
+    pub stack_high_water_bytes: u32,
+    /// The ECU's stack region, bytes.
+    pub stack_size_bytes: u32,
+    /// Frames the ECU refused.
+    pub ecu_rejected_frames: u32,
+    /// Frames the host refused.
+    pub host_rejected_frames: u64,
+    /// Actuation frames answering an older sensor frame.
+    pub stale_frames: u64,
+    /// Largest control activation, instructions.
+    pub control_max_instructions: f64,
+    /// Median control activation, instructions.
+    pub control_p50_instructions: f64,
+    /// Largest plan activation, instructions.
+    pub plan_max_instructions: f64,
+    /// Largest warm (one-pass) plan activation, instructions.
+    pub warm_max_instructions: f64,
+    /// Largest cold-start plan activation, instructions.
+    pub cold_max_instructions: f64,
+    /// The simulator's cost model against the measurements.
+    pub model_error: crate::cost_model::ModelError,
+    /// The cost model refitted on this run's activations.
+    pub refit: Option<crate::cost_model::CostModel>,
+    /// Against the in-process run (f32, same inputs).
+    pub comparison: Option<Comparison>,
+    /// Wall time of the PIL run, s.
+    pub wall_s: f64,
+}
+
+fn percentile(v: &[f64], q: f64) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s.get(((s.len() as f64 * q).ceil() as usize).saturating_sub(1))
+        .copied()
+        .unwrap_or(0.0)
+}
+
+/// Compares the PIL run with the in-process one, row by row.
+pub fn compare(pil: &RunResult, host: &RunResult) -> Comparison {
+    let n = pil.log.len().min(host.log.len());
+    let first = (0..n).find(|&i| {
+        let (a, b) = (&pil.log[i], &host.log[i]);
+        a.x_m.to_bits() != b.x_m.to_bits()
+            || a.y_m.to_bits() != b.y_m.to_bits()
+            || a.psi_rad.to_bits() != b.psi_rad.to_bits()
+            || a.v_mps.to_bits() != b.v_mps.to_bits()
+            || a.delta_rad.to_bits() != b.delta_rad.to_bits()
+    });
+    let Some(i) = first else {
+        return Comparison {
+            rows_compared: n,
+            identical: pil.log.len() == host.log.len(),
+            first_divergence_s: None,
+            cause: if pil.log.len() == host.log.len() {
+                "none: identical bit for bit".into()
+            } else {
+                format!("equal on the first {n} rows; the runs ended at different times")
+            },
+        };
+    };
+    let t_us = (pil.log[i].t_s * 1e6).round() as u64;
+    // Publication slot: the first control instant at or after the finish.
+    let slot = |a: &PlanActivation| a.finish_us.div_ceil(10_000) * 10_000;
+    let cause = pil
+        .plan_activations
+        .iter()
+        .zip(host.plan_activations.iter())
+        .find(|(p, h)| {
+            p.release_us != h.release_us
+                || p.status != h.status
+                || p.published != h.published
+                || slot(p) != slot(h)
+        })
+        .filter(|(p, _)| p.release_us <= t_us)
+        .map(|(p, h)| {
+            if p.status != h.status {
+                format!(
+                    "plan released at {:.1} s: the ECU's MPC returned {} and the host's {} (f32 arithmetic differs between the targets)",
+                    p.release_us as f64 * 1e-6, p.status, h.status
+                )
+            } else {
+                format!(
+                    "plan released at {:.1} s was published at {:.1} ms on the ECU (measured: {:.0} instructions) and at {:.1} ms by the cost model ({:.0} instructions): a different 10 ms control period",
+                    p.release_us as f64 * 1e-6,
+                    (slot(p) - p.release_us) as f64 * 1e-3,
+                    p.instructions,
+                    (slot(h) - h.release_us) as f64 * 1e-3,
+                    h.instructions
+                )
+            }
+        })
+        .unwrap_or_else(|| {
+            "the plans agree in status and publication period up to here: the ECU's f32 results differ from the host's (compiler or library differences)".into()
+        });
+    Comparison {
+        rows_compared: n,
+        identical: false,
+        first_divergence_s: Some(pil.log[i].t_s),
+        cause,
+    }
+}
+
+use crate::closed_loop::RunResult;
+
+/// `host-sim pil`.
+pub fn run(args: &PilArgs) -> Result<()> {
+    if args.run.precision != closed_loop::Precision::F32 {
+        bail!("--precision: the ECU computes in f32; PIL runs are f32 only");
+    }
+    if (args.run.ecu_mhz - 168.0).abs() > 1e-9 {
+        bail!("--ecu-mhz: in PIL the ECU's own (virtual) clock times the run; use --icount-shift to change the time per instruction");
+    }
+    if !(1..=10).contains(&args.icount_shift) {
+        bail!("--icount-shift must be in 1..=10 (2^shift ns per instruction), got {}", args.icount_shift);
+    }
+    if !(args.cpi.is_finite() && args.cpi > 0.0) {
+        bail!("--cpi must be a positive number of cycles per instruction, got {}", args.cpi);
+    }
+    let (vehicle, scenario, mut opts) = crate::run::prepare(&args.run)?;
+    opts.cycles_per_instruction = args.cpi;
+    let pil_opts = PilOptions {
+        elf: args.elf.clone(),
+        qemu: args.qemu.clone(),
+        icount_shift: args.icount_shift,
+        work_dir: args.run.out.join("ecu"),
+        frame_timeout_s: args.frame_timeout,
+        cycles_per_instruction: args.cpi,
+        trace: args.trace.clone(),
+    };
+    let wall = std::time::Instant::now();
+    let mut ecu = QemuEcu::start(&scenario, &vehicle, &opts, &pil_opts)?;
+    let bar = indicatif::ProgressBar::new(opts.max_duration_s.ceil() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} PIL: simulated {pos} s  {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+    );
+    let result = closed_loop::run_with(&scenario, &vehicle, &opts, &mut ecu, |t, d| {
+        bar.set_position(t as u64);
+        bar.set_message(format!("{d:.0} m driven"));
+    });
+    bar.finish_and_clear();
+    let counters = ecu.counters;
+    let done = match &result {
+        Ok(_) => Some(ecu.stop()?),
+        Err(_) => None,
+    };
+    let result = result?;
+    let done = done.unwrap_or(DoneFrame {
+        stack_high_water_bytes: 0,
+        stack_size_bytes: 0,
+        rejected_frames: 0,
+    });
+    let wall_s = wall.elapsed().as_secs_f64();
+    crate::run::write_outputs(&args.run.out, &scenario, &result, !args.run.no_plots)?;
+    let act_path = args.run.out.join("plan_activations.csv");
+    let mut w = csv::Writer::from_path(&act_path)
+        .with_context(|| format!("cannot write {}", act_path.display()))?;
+    for a in &result.plan_activations {
+        w.serialize(a)?;
+    }
+    w.flush()?;
+
+    let plans = &result.plan_activations;
+    let max_of = |f: &dyn Fn(&PlanActivation) -> bool| {
+        plans
+            .iter()
+            .filter(|a| f(a))
+            .map(|a| a.instructions)
+            .fold(0.0f64, f64::max)
+    };
+    let comparison = if args.no_compare {
+        None
+    } else {
+        let host = closed_loop::run::<f32>(&scenario, &vehicle, &opts, |_, _| {})?;
+        // The in-process run beside it, for a look at any divergence.
+        crate::run::write_outputs(&args.run.out.join("host"), &scenario, &host, false)?;
+        Some(compare(&result, &host))
+    };
+    let report = PilReport {
+        icount_shift: args.icount_shift,
+        ns_per_instruction: pil_opts.ns_per_instruction(),
+        elf: args.elf.display().to_string(),
+        stack_high_water_bytes: done.stack_high_water_bytes,
+        stack_size_bytes: done.stack_size_bytes,
+        ecu_rejected_frames: done.rejected_frames,
+        host_rejected_frames: counters.rejected,
+        stale_frames: counters.stale,
+        control_max_instructions: percentile(&result.control_instructions, 1.0),
+        control_p50_instructions: percentile(&result.control_instructions, 0.5),
+        plan_max_instructions: max_of(&|_| true),
+        warm_max_instructions: max_of(&|a| a.passes == 1),
+        cold_max_instructions: max_of(&|a| a.passes > 1),
+        model_error: opts.cost_model.error_on(plans),
+        refit: crate::cost_model::CostModel::fit(
+            plans,
+            percentile(&result.control_instructions, 1.0),
+        ),
+        comparison,
+        wall_s,
+    };
+    let pil_path = args.run.out.join("pil.json");
+    fs::write(&pil_path, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("cannot write {}", pil_path.display()))?;
+
+    let s = &result.summary;
+    println!("{}", crate::run::summary_line(&scenario, s));
+    if !s.completed {
+        println!("stopped: {}", s.stop_reason);
+    }
+    println!(
+        "ECU (QEMU, {} ns/instruction): plan max {:.0} instructions (warm {:.0}, cold {:.0}), p50 {:.0}; control max {:.0}; stack high-water {} of {} B; frames refused: ECU {}, host {}, stale {}",
+        report.ns_per_instruction,
+        report.plan_max_instructions,
+        report.warm_max_instructions,
+        report.cold_max_instructions,
+        s.plan_p50_instructions,
+        report.control_max_instructions,
+        report.stack_high_water_bytes,
+        report.stack_size_bytes,
+        report.ecu_rejected_frames,
+        report.host_rejected_frames,
+        report.stale_frames,
+    );
+    let e = &report.model_error;
+    println!(
+        "cost model vs ECU over {} plan activations: |error| max {:.1} %, p99 {:.1} %, largest underestimate {:.1} %",
+        e.activations, e.max_abs_pct, e.p99_abs_pct, e.max_under_pct
+    );
+    if let Some(c) = &report.comparison {
+        match c.first_divergence_s {
+            None => println!("against the in-process run: {}", c.cause),
+            Some(t) => println!("against the in-process run: first divergence at {t:.2} s: {}", c.cause),
+        }
+    }
+    println!("PIL wall time {:.1} s; wrote {}", wall_s, args.run.out.display());
+    Ok(())
 }

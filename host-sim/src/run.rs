@@ -109,8 +109,9 @@ pub fn simulate(
     result
 }
 
-/// `host-sim run`.
-pub fn run(args: &RunArgs) -> Result<()> {
+/// Checks `run`'s arguments and resolves the vehicle, the scenario and the options
+/// (shared by `run` and `pil`).
+pub fn prepare(args: &RunArgs) -> Result<(VehicleParams, Scenario, SimOptions)> {
     check_mu("--mu", args.mu)?;
     let planner_mu = args.planner_mu.unwrap_or(args.mu);
     check_mu("--planner-mu", planner_mu)?;
@@ -146,10 +147,12 @@ pub fn run(args: &RunArgs) -> Result<()> {
         ecu_clock_hz: args.ecu_mhz * 1e6,
         ..SimOptions::default()
     };
-    let result = simulate(&scenario, &vehicle, &opts, args.precision, true)?;
-    write_outputs(&args.out, &scenario, &result, !args.no_plots)?;
-    let s = &result.summary;
-    println!(
+    Ok((vehicle, scenario, opts))
+}
+
+/// The one-line summary `run` and `pil` print.
+pub fn summary_line(scenario: &Scenario, s: &crate::closed_loop::Summary) -> String {
+    format!(
         "{}: {} in {:.1} s over {:.0} m | lateral error max {:.3} m rms {:.3} m | |a_y| max {:.2} m/s² ({:.2}·μg) | collisions {} | plan failures {}/{} | deadline misses plan {} control {} | {:.0}× real time",
         scenario.track.name,
         if s.completed { "completed" } else { "NOT completed" },
@@ -165,7 +168,16 @@ pub fn run(args: &RunArgs) -> Result<()> {
         s.plan_deadline_misses,
         s.control_deadline_misses,
         s.sim_speed_x_realtime,
-    );
+    )
+}
+
+/// `host-sim run`.
+pub fn run(args: &RunArgs) -> Result<()> {
+    let (vehicle, scenario, opts) = prepare(args)?;
+    let result = simulate(&scenario, &vehicle, &opts, args.precision, true)?;
+    write_outputs(&args.out, &scenario, &result, !args.no_plots)?;
+    let s = &result.summary;
+    println!("{}", summary_line(&scenario, s));
     if !s.completed {
         println!("stopped: {}", s.stop_reason);
     }

@@ -389,7 +389,6 @@ mod app {
             let c0 = CONTROL_TICKS.load(Ordering::Relaxed);
             let planner = &mut *cx.local.planner;
             let result = planner.run(&est);
-            let report = result.unwrap_or_default();
             // The record's copy of the plan, taken before the swap, outside the lock.
             let computed = planner.pending().copied();
             let published = cx.shared.plan.lock(|p| planner.publish(p));
@@ -404,7 +403,7 @@ mod app {
                 finish_us,
                 own.min(u32::MAX as u64) as u32,
                 &result,
-                &report,
+                planner.last_report(),
                 published,
                 computed.as_ref(),
             );

@@ -1,0 +1,226 @@
+//! The deterministic cost model of the two tasks on the ECU, in instructions, and
+//! its fit on activations measured on the ECU (processor in the loop).
+
+use firmware::mpc::{MpcReport, MpcSettings, NC};
+use firmware::Real;
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+
+use crate::ecu::PlanActivation;
+
+/// Deterministic cost model of the two tasks, in ECU instructions.
+///
+/// ```text
+/// plan    = margin · (per_activation + passes·(per_pass + per_row_pass·rows)
+///                     + per_iteration·iterations + per_added·added
+///                     + per_removed·removed + per_refactorization·refactorisations)
+/// control = margin · control
+/// ```
+///
+/// from the work counters of each activation ([`MpcReport`]); the control task is
+/// one constant (no data-dependent loops). Cycles are instructions ×
+/// [`SimOptions::cycles_per_instruction`], a separate setting.
+///
+/// The coefficients are the QEMU calibration of the `mpc_step` ECU binary: a
+/// least-squares fit of its 150 steps (`.ci/ecu-check` prints them) gives 542,657
+/// instructions per pass, 8,537 per row and pass, 13,416 per QP iteration, within
+/// 4.6 % of every step; the control task took at most 771 instructions. The
+/// working-set terms (`per_added`, `per_removed`, `per_refactorization`) and
+/// `per_activation` are 0 until refitted from measurements on the ECU; `margin`
+/// (1.05) covers the fit's largest error so the estimate does not undercount.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct CostModel {
+    /// Fixed cost of a plan activation, instructions.
+    pub per_activation: f64,
+    /// Per linearise–condense–factorise pass (16 RK4 steps with Jacobians, the
+    /// condensed Hessian, its Cholesky factor), instructions.
+    pub per_pass: f64,
+    /// Per general QP row and pass (forming it, transforming it by `R⁻¹`),
+    /// instructions.
+    pub per_row_pass: f64,
+    /// Per QP iteration (multiplier solve, constraint scan), instructions.
+    pub per_iteration: f64,
+    /// Per constraint added to the working set (factor update), instructions.
+    pub per_added: f64,
+    /// Per constraint removed from the working set (factor downdate), instructions.
+    pub per_removed: f64,
+    /// Per factorisation of the working set from scratch, instructions.
+    pub per_refactorization: f64,
+    /// One control activation, instructions.
+    pub control: f64,
+    /// Factor applied to every estimate (the fit's largest error), dimensionless.
+    pub margin: f64,
+}
+
+impl Default for CostModel {
+    /// The QEMU calibration above.
+    fn default() -> Self {
+        Self {
+            per_activation: 0.0,
+            per_pass: 542_657.0,
+            per_row_pass: 8_537.0,
+            per_iteration: 13_416.0,
+            per_added: 0.0,
+            per_removed: 0.0,
+            per_refactorization: 0.0,
+            control: 771.0,
+            margin: 1.05,
+        }
+    }
+}
+
+impl CostModel {
+    /// Estimated instructions of one plan activation from its work counters,
+    /// whatever its outcome (a failed activation's counters say what it did).
+    pub fn plan_instructions<T: Real>(&self, r: &MpcReport<T>) -> f64 {
+        let passes = f64::from(r.passes);
+        self.margin
+            * (self.per_activation
+                + passes * (self.per_pass + self.per_row_pass * f64::from(r.rows))
+                + self.per_iteration * f64::from(r.qp_iterations)
+                + self.per_added * f64::from(r.qp_added)
+                + self.per_removed * f64::from(r.qp_removed)
+                + self.per_refactorization * f64::from(r.qp_refactorizations))
+    }
+
+    /// Estimated instructions of one control activation.
+    pub fn control_instructions(&self) -> f64 {
+        self.margin * self.control
+    }
+
+    /// The model's worst case for one plan activation under `settings`,
+    /// instructions: the firmware runs at most `cold_start_iterations` passes and
+    /// at most `qp_max_iter` QP iterations per activation (each adding, removing or
+    /// refactorising at most once), on at most [`NC`] rows:
+    ///
+    /// ```text
+    /// margin · (cold_start_iterations·(per_pass + NC·per_row_pass)
+    ///           + qp_max_iter·(per_iteration + per_added + per_removed + per_refactorization)
+    ///           + per_activation)
+    /// ```
+    pub fn plan_bound_instructions<T: Real>(&self, settings: &MpcSettings<T>) -> f64 {
+        let passes = f64::from(settings.cold_start_iterations.max(1));
+        let iterations = f64::from(settings.qp_max_iter);
+        self.margin
+            * (passes * (self.per_pass + NC as f64 * self.per_row_pass)
+                + iterations
+                    * (self.per_iteration
+                        + self.per_added
+                        + self.per_removed
+                        + self.per_refactorization)
+                + self.per_activation)
+    }
+}
+
+
+/// The work counters of a recorded activation, as the MPC reported them.
+pub fn report_of(a: &PlanActivation) -> MpcReport<f64> {
+    MpcReport {
+        passes: a.passes,
+        qp_iterations: a.qp_iterations,
+        qp_added: a.qp_added,
+        qp_removed: a.qp_removed,
+        qp_refactorizations: a.qp_refactorizations,
+        rows: a.rows,
+        ..MpcReport::default()
+    }
+}
+
+/// The model's terms of an activation, in the order of [`CostModel::fit`]'s
+/// coefficients.
+fn terms(a: &PlanActivation) -> [f64; 7] {
+    let passes = f64::from(a.passes);
+    [
+        1.0,
+        passes,
+        passes * f64::from(a.rows),
+        f64::from(a.qp_iterations),
+        f64::from(a.qp_added),
+        f64::from(a.qp_removed),
+        f64::from(a.qp_refactorizations),
+    ]
+}
+
+/// The model's error on measured activations.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ModelError {
+    /// Activations compared.
+    pub activations: usize,
+    /// Largest |model − measured| / measured, %.
+    pub max_abs_pct: f64,
+    /// 99th percentile of |model − measured| / measured, %.
+    pub p99_abs_pct: f64,
+    /// Largest underestimate (measured − model) / measured, % (0 when the model
+    /// never undercounts).
+    pub max_under_pct: f64,
+}
+
+impl CostModel {
+    /// Least-squares fit of the plan terms (non-negative: a term that would come
+    /// out negative is dropped and the rest refitted) on measured activations,
+    /// with the margin set so that the model undercounts none of them; `control`
+    /// is the largest measured control activation. `None` with fewer activations
+    /// than terms.
+    pub fn fit(plans: &[PlanActivation], control_max_instructions: f64) -> Option<Self> {
+        let rows: Vec<&PlanActivation> = plans.iter().filter(|a| a.instructions > 0.0).collect();
+        let mut active = [true; 7];
+        let mut coef = [0.0f64; 7];
+        for _ in 0..7 {
+            let cols: Vec<usize> = (0..7).filter(|&j| active[j]).collect();
+            if rows.len() < cols.len() || cols.is_empty() {
+                return None;
+            }
+            let a = DMatrix::from_fn(rows.len(), cols.len(), |i, j| terms(rows[i])[cols[j]]);
+            let b = DVector::from_iterator(rows.len(), rows.iter().map(|r| r.instructions));
+            let x = a.svd(true, true).solve(&b, 1e-9).ok()?;
+            coef = [0.0; 7];
+            for (k, &j) in cols.iter().enumerate() {
+                coef[j] = x[k];
+            }
+            match (0..7).filter(|&j| active[j] && coef[j] < 0.0).min_by(|&i, &j| coef[i].total_cmp(&coef[j])) {
+                Some(j) => active[j] = false,
+                None => break,
+            }
+        }
+        let coef = coef.map(|c| c.max(0.0));
+        let mut model = Self {
+            per_activation: coef[0],
+            per_pass: coef[1],
+            per_row_pass: coef[2],
+            per_iteration: coef[3],
+            per_added: coef[4],
+            per_removed: coef[5],
+            per_refactorization: coef[6],
+            control: control_max_instructions,
+            margin: 1.0,
+        };
+        let worst = rows
+            .iter()
+            .map(|a| a.instructions / model.plan_instructions(&report_of(a)))
+            .fold(1.0f64, f64::max);
+        model.margin = worst;
+        Some(model)
+    }
+
+    /// The model's error on measured activations.
+    pub fn error_on(&self, plans: &[PlanActivation]) -> ModelError {
+        let mut errs: Vec<f64> = Vec::new();
+        let mut under = 0.0f64;
+        for a in plans.iter().filter(|a| a.instructions > 0.0) {
+            let e = (self.plan_instructions(&report_of(a)) - a.instructions) / a.instructions;
+            under = under.max(-e);
+            errs.push(e.abs() * 100.0);
+        }
+        errs.sort_by(f64::total_cmp);
+        let p99 = errs
+            .get(((errs.len() as f64 * 0.99).ceil() as usize).saturating_sub(1))
+            .copied()
+            .unwrap_or(0.0);
+        ModelError {
+            activations: errs.len(),
+            max_abs_pct: errs.last().copied().unwrap_or(0.0),
+            p99_abs_pct: p99,
+            max_under_pct: under * 100.0,
+        }
+    }
+}
