@@ -1021,7 +1021,7 @@ fn render_stack(s: &mut String, r: &WcetReport) -> std::fmt::Result {
             let path: Vec<String> = root
                 .worst_path
                 .iter()
-                .map(|e| format!("{} ({} B)", e.function, e.frame_bytes))
+                .map(|e| format!("`{}` ({} B)", e.function, e.frame_bytes))
                 .collect();
             (root.root.clone(), root.depth_bytes, path.join(" → "))
         });
@@ -1035,7 +1035,7 @@ fn render_stack(s: &mut String, r: &WcetReport) -> std::fmt::Result {
     if !r.memory.stack_misses.is_empty() {
         writeln!(s, "Not in the bound ({}):\n", r.memory.stack_misses.len())?;
         for miss in &r.memory.stack_misses {
-            writeln!(s, "- {miss}")?;
+            writeln!(s, "- `{miss}`")?;
         }
         writeln!(s)?;
     }
@@ -1691,6 +1691,39 @@ active_constraints,max_validity_slack_rad";
             .levels
             .iter()
             .all(|l| l.roots.iter().all(|r| r.function != "DefaultHandler")));
+        Ok(())
+    }
+
+    #[test]
+    fn real_ecu_elf_full_report_through_build_report() -> Result<()> {
+        let Some(elf) = real_elf() else {
+            eprintln!("no ECU ELF built: skipped");
+            return Ok(());
+        };
+        let tmp = tempfile::tempdir()?;
+        let run = write_run(
+            tmp.path(),
+            "run",
+            &[(1.0e6, 1, false, "optimal"), (1.6e6, 2, false, "optimal")],
+            1500.0,
+            9000,
+        )?;
+        let mut inputs = inputs(vec![run]);
+        inputs.elf = elf.clone();
+        let r = build_report(&inputs)?;
+        assert_eq!(r.memory.text_bytes, elf_memory(&elf)?.text_bytes);
+        assert_eq!(r.stack.levels.len(), 4);
+        assert_eq!(r.memory.stack_bound_bytes, u64::from(r.stack.total_bytes));
+        assert!(r.memory.stack_method.contains("SysTick"));
+        write_report(tmp.path(), &r)?;
+        let md = std::fs::read_to_string(tmp.path().join("wcet.md"))?;
+        assert!(
+            md.contains("`firmware::mpc::Mpc<T>::step_observed` ("),
+            "{md}"
+        );
+        eprintln!("{md}");
+        // A report always passes against itself.
+        assert!(check_against_expected(&r, &serde_json::to_string(&r)?, 0.0).is_empty());
         Ok(())
     }
 }
