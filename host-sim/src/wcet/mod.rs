@@ -4,10 +4,12 @@
 //! |---|---|
 //! | [`stack`] | static stack bound: frame sizes from `llvm-objdump` prologues, call graph, preemption levels |
 //! | [`cpi`] | cycles-per-instruction bound from a QEMU execution trace and a Cortex-M4 timing table |
+//! | [`report`] | the timing and memory report (`wcet.json`, `wcet.md`) from PIL runs, the ELF and the two bounds; CI comparison |
 //!
-//! Both are library functions; the `host-sim wcet` command wires them together.
+//! All are library functions; the `host-sim wcet` command wires them together.
 
 pub mod cpi;
+pub mod report;
 pub mod stack;
 
 use std::path::PathBuf;

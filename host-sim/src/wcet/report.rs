@@ -1,0 +1,1729 @@
+//! The worst-case timing and memory report of the ECU binary (`wcet.json`, `wcet.md`).
+//!
+//! It puts together what the other analyses measured or bounded:
+//!
+//! * **timing**: per task, the instructions observed on the ECU in the
+//!   processor-in-the-loop runs (`host-sim pil --out DIR`), the caller's static bound
+//!   on instructions (iteration cap × worst iteration + fixed work), and that bound
+//!   in cycles, `bound_cycles = bound_instructions × CPI bound` (the CPI bound from
+//!   [`super::cpi`]); `margin = budget_cycles / bound_cycles`, above 1 when the
+//!   bound fits the budget;
+//! * **memory**: section sizes of the ECU ELF (flash and static RAM), the static
+//!   stack bound of [`super::stack`] over the RTIC application's priority levels, and
+//!   the painted-stack high-water mark the PIL runs measured;
+//! * **symbols**: whether a heap allocator or software double-precision routines
+//!   were linked in;
+//! * **goals**: each project goal with its value and whether it is met.
+//!
+//! [`check_against_expected`] compares a report with a committed one for CI, in the
+//! manner of rtic's `ci/expected/*.size`.
+
+use super::cpi::CpiReport;
+use super::stack::{PriorityLevel, StackReport};
+use anyhow::{bail, ensure, Context, Result};
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// The command that writes a processor-in-the-loop run folder.
+const PIL_COMMAND: &str = "host-sim pil --out DIR";
+
+/// Goal: plan task, warm-started activations, observed instructions at most this.
+pub const GOAL_PLAN_WARM_MAX_INSTRUCTIONS: f64 = 1.5e6;
+/// Goal: control task, observed instructions at most this.
+pub const GOAL_CONTROL_MAX_INSTRUCTIONS: f64 = 2000.0;
+/// Goal: static RAM (`.data` + `.bss` + `.uninit`) at most this, in bytes (48 KiB).
+pub const GOAL_STATIC_RAM_BYTES: f64 = 49_152.0;
+/// Goal: static stack bound at most this, in bytes (8 KiB).
+pub const GOAL_STACK_BOUND_BYTES: f64 = 8_192.0;
+/// Goal: flash image at most this, in bytes (256 KiB).
+pub const GOAL_FLASH_BYTES: f64 = 262_144.0;
+
+// ---------------------------------------------------------------------------
+// Processor-in-the-loop run folders
+// ---------------------------------------------------------------------------
+
+/// The keys of a PIL run's `summary.json` that the report uses.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+pub struct PilSummary {
+    /// Whether the run reached the end of its scenario.
+    pub completed: bool,
+    /// Plan activations in the run.
+    pub plan_activations: u64,
+    /// Plan activations that finished after their 100 ms deadline.
+    pub plan_deadline_misses: u64,
+    /// Control activations that finished after their deadline.
+    pub control_deadline_misses: u64,
+    /// Most instructions of one plan activation, in instructions.
+    pub plan_max_instructions: f64,
+    /// Median instructions of a plan activation, in instructions.
+    pub plan_p50_instructions: f64,
+    /// Most instructions of one control activation, in instructions.
+    pub control_max_instructions: f64,
+}
+
+/// The keys of a PIL run's `pil.json` that the report uses (others are ignored).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+pub struct PilInfo {
+    /// QEMU `-icount shift`: one instruction takes `2^shift` ns of virtual time.
+    pub icount_shift: u32,
+    /// Virtual nanoseconds per instruction, in ns.
+    pub ns_per_instruction: f64,
+    /// The ECU ELF that ran.
+    pub elf: String,
+    /// Deepest stack use seen by painting the stack region, in bytes.
+    pub stack_high_water_bytes: u64,
+    /// Size of the stack region, in bytes.
+    pub stack_size_bytes: u64,
+    /// Most instructions of one control activation, in instructions.
+    pub control_max_instructions: f64,
+    /// Median instructions of a control activation, in instructions.
+    pub control_p50_instructions: f64,
+}
+
+/// One row of `plan_activations.csv` (the columns the report uses).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+pub struct PlanActivation {
+    /// Activation number, from 0.
+    pub activation: u64,
+    /// Instructions the ECU executed for the activation, in instructions.
+    pub instructions: f64,
+    /// `optimal` or the name of the failure.
+    pub status: String,
+    /// Whether it finished after its deadline.
+    pub deadline_miss: bool,
+    /// QP passes: 1 for a warm start that sufficed, more when it was cold-started.
+    pub passes: u32,
+}
+
+/// A processor-in-the-loop run folder, read by [`load_pil_run`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PilRun {
+    /// The folder.
+    pub dir: PathBuf,
+    /// Its `summary.json`.
+    pub summary: PilSummary,
+    /// Its `pil.json`.
+    pub pil: PilInfo,
+    /// Its `plan_activations.csv`, one entry per activation.
+    pub plan: Vec<PlanActivation>,
+}
+
+/// Columns `plan_activations.csv` must have (the report reads these).
+const PLAN_COLUMNS: [&str; 5] = [
+    "activation",
+    "instructions",
+    "status",
+    "deadline_miss",
+    "passes",
+];
+
+fn read_json<T: for<'de> Deserialize<'de>>(dir: &Path, name: &str) -> Result<T> {
+    let path = dir.join(name);
+    let text = std::fs::read_to_string(&path).with_context(|| {
+        format!(
+            "cannot read {}: a PIL run folder holds {name}, written by `{PIL_COMMAND}`",
+            path.display()
+        )
+    })?;
+    serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{} is not the {name} of `{PIL_COMMAND}` (a key is missing or has the wrong type)",
+            path.display()
+        )
+    })
+}
+
+fn read_plan_csv(dir: &Path) -> Result<Vec<PlanActivation>> {
+    let path = dir.join("plan_activations.csv");
+    let mut reader = csv::Reader::from_path(&path).with_context(|| {
+        format!(
+            "cannot read {}: a PIL run folder holds plan_activations.csv, written by `{PIL_COMMAND}`",
+            path.display()
+        )
+    })?;
+    let headers = reader
+        .headers()
+        .with_context(|| format!("{}: cannot read the header line", path.display()))?
+        .clone();
+    for column in PLAN_COLUMNS {
+        ensure!(
+            headers.iter().any(|h| h == column),
+            "{}: no `{column}` column (the header must name at least {})",
+            path.display(),
+            PLAN_COLUMNS.join(", ")
+        );
+    }
+    let mut rows = Vec::new();
+    for (k, row) in reader.deserialize::<PlanActivation>().enumerate() {
+        // Line 1 is the header.
+        let row = row.with_context(|| {
+            format!(
+                "{} line {}: expected numbers in activation/instructions/passes and \
+                 true/false in deadline_miss",
+                path.display(),
+                k + 2
+            )
+        })?;
+        ensure!(
+            row.instructions.is_finite() && row.instructions >= 0.0,
+            "{} line {}: instructions must be a finite number ≥ 0, got {}",
+            path.display(),
+            k + 2,
+            row.instructions
+        );
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+/// Reads a processor-in-the-loop run folder: `summary.json`, `plan_activations.csv`
+/// and `pil.json`, as written by `host-sim pil --out DIR`.
+pub fn load_pil_run(dir: &Path) -> Result<PilRun> {
+    ensure!(
+        dir.is_dir(),
+        "{} is not a folder: give the folder written by `{PIL_COMMAND}`",
+        dir.display()
+    );
+    Ok(PilRun {
+        dir: dir.to_path_buf(),
+        summary: read_json(dir, "summary.json")?,
+        pil: read_json(dir, "pil.json")?,
+        plan: read_plan_csv(dir)?,
+    })
+}
+
+// ---------------------------------------------------------------------------
+// The ELF: sections and symbols
+// ---------------------------------------------------------------------------
+
+/// Section sizes of the ECU ELF, in bytes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ElfMemory {
+    /// `.vector_table`, in bytes (flash).
+    pub vector_table_bytes: u64,
+    /// `.text`, in bytes (flash).
+    pub text_bytes: u64,
+    /// `.rodata`, in bytes (flash).
+    pub rodata_bytes: u64,
+    /// `.data`, in bytes (RAM, and its initial values in flash).
+    pub data_bytes: u64,
+    /// `.bss` plus `.uninit` (both zero- or un-initialised RAM), in bytes.
+    pub bss_bytes: u64,
+    /// `.uninit` alone (already in `bss_bytes`), in bytes.
+    pub uninit_bytes: u64,
+}
+
+impl ElfMemory {
+    /// Static RAM: `.data` + `.bss` + `.uninit`, in bytes.
+    pub fn static_ram_bytes(&self) -> u64 {
+        self.data_bytes + self.bss_bytes
+    }
+
+    /// Flash image: `.vector_table` + `.text` + `.rodata` + `.data` (its load
+    /// image), in bytes.
+    pub fn flash_bytes(&self) -> u64 {
+        self.vector_table_bytes + self.text_bytes + self.rodata_bytes + self.data_bytes
+    }
+}
+
+/// What the symbol table says about the ECU ELF.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ElfSymbols {
+    /// A heap allocator is linked in (any of [`ALLOCATOR_SYMBOLS`] is defined).
+    pub allocator: bool,
+    /// Software double-precision routines are linked in (`__aeabi_d*`,
+    /// `__adddf3`, `__muldf3`, `__divdf3`).
+    pub soft_double: bool,
+    /// The symbols that set `allocator`.
+    pub allocator_symbols: Vec<String>,
+    /// The symbols that set `soft_double`.
+    pub soft_double_symbols: Vec<String>,
+}
+
+/// Symbols whose definition means a heap allocator is in the binary.
+pub const ALLOCATOR_SYMBOLS: [&str; 5] = [
+    "__rust_alloc",
+    "__rust_dealloc",
+    "__rdl_alloc",
+    "malloc",
+    "free",
+];
+
+fn is_soft_double(name: &str) -> bool {
+    name.starts_with("__aeabi_d") || ["__adddf3", "__muldf3", "__divdf3"].contains(&name)
+}
+
+fn parse_elf<'d>(elf: &Path, data: &'d [u8]) -> Result<object::File<'d>> {
+    object::File::parse(data).with_context(|| {
+        format!(
+            "{} is not a readable ELF file: build it with `cargo build --release -p firmware \
+             --target thumbv7em-none-eabihf --features ecu --bin ecu`",
+            elf.display()
+        )
+    })
+}
+
+fn read_elf_bytes(elf: &Path) -> Result<Vec<u8>> {
+    std::fs::read(elf).with_context(|| {
+        format!(
+            "cannot read the ECU ELF {}: build it with `cargo build --release -p firmware \
+             --target thumbv7em-none-eabihf --features ecu --bin ecu`",
+            elf.display()
+        )
+    })
+}
+
+/// Section sizes of an ELF (`.vector_table`, `.text`, `.rodata`, `.data`, `.bss`,
+/// `.uninit`; a missing section counts 0).
+pub fn elf_memory(elf: &Path) -> Result<ElfMemory> {
+    use object::{Object, ObjectSection};
+    let data = read_elf_bytes(elf)?;
+    let file = parse_elf(elf, &data)?;
+    let size = |name: &str| file.section_by_name(name).map_or(0, |s| s.size());
+    let uninit = size(".uninit");
+    let memory = ElfMemory {
+        vector_table_bytes: size(".vector_table"),
+        text_bytes: size(".text"),
+        rodata_bytes: size(".rodata"),
+        data_bytes: size(".data"),
+        bss_bytes: size(".bss") + uninit,
+        uninit_bytes: uninit,
+    };
+    ensure!(
+        memory.text_bytes > 0,
+        "{} has no .text section: is it the ECU binary (not a library or a stripped file)?",
+        elf.display()
+    );
+    Ok(memory)
+}
+
+/// Allocator and software-double symbols of an ELF.
+pub fn elf_symbols(elf: &Path) -> Result<ElfSymbols> {
+    use object::{Object, ObjectSymbol};
+    let data = read_elf_bytes(elf)?;
+    let file = parse_elf(elf, &data)?;
+    let mut out = ElfSymbols::default();
+    for symbol in file.symbols() {
+        let Ok(name) = symbol.name() else { continue };
+        if symbol.is_definition() && ALLOCATOR_SYMBOLS.contains(&name) {
+            out.allocator_symbols.push(name.to_string());
+        }
+        if is_soft_double(name) {
+            out.soft_double_symbols.push(name.to_string());
+        }
+    }
+    out.allocator_symbols.sort();
+    out.allocator_symbols.dedup();
+    out.soft_double_symbols.sort();
+    out.soft_double_symbols.dedup();
+    out.allocator = !out.allocator_symbols.is_empty();
+    out.soft_double = !out.soft_double_symbols.is_empty();
+    Ok(out)
+}
+
+/// The priority levels of the RTIC application `firmware/src/bin/ecu.rs`, for
+/// [`super::stack::analyse_elf`]: thread mode runs `main` (init and idle); the
+/// priority-1 (`plan`) and priority-2 (`control`) async tasks run in the
+/// dispatchers `USART1` and `USART2` (RTIC v2 gives the dispatchers listed in
+/// `dispatchers = [USART1, USART2]` to the priorities in increasing order: in the
+/// disassembly `USART1` calls `Mpc::step_observed`, `USART2` `Link::receive`);
+/// `SysTick`, the monotonic's interrupt, is the highest.
+pub fn ecu_priority_levels() -> Vec<PriorityLevel> {
+    let level = |name: &str, roots: &[&str]| PriorityLevel {
+        name: name.to_string(),
+        roots: roots.iter().map(|r| r.to_string()).collect(),
+    };
+    vec![
+        level("thread (main: init, idle)", &["main"]),
+        level("priority 1 (plan, dispatcher USART1)", &["USART1"]),
+        level("priority 2 (control, dispatcher USART2)", &["USART2"]),
+        level("SysTick (monotonic)", &["SysTick"]),
+    ]
+}
+
+// ---------------------------------------------------------------------------
+// The report
+// ---------------------------------------------------------------------------
+
+/// What [`build_report`] needs besides the files it reads.
+#[derive(Debug, Clone)]
+pub struct ReportInputs {
+    /// Processor-in-the-loop run folders (`host-sim pil --out DIR`), at least one.
+    pub run_dirs: Vec<PathBuf>,
+    /// The ECU ELF (`target/thumbv7em-none-eabihf/release/ecu`).
+    pub elf: PathBuf,
+    /// Priority levels for the stack bound, thread mode first; usually
+    /// [`ecu_priority_levels`].
+    pub stack_levels: Vec<PriorityLevel>,
+    /// The CPI bound of a traced ECU run ([`super::cpi::analyse_log`]).
+    pub cpi: CpiReport,
+    /// Static bound on one plan activation, in instructions.
+    pub plan_bound_instructions: f64,
+    /// Static bound on one control activation, in instructions.
+    pub control_bound_instructions: f64,
+    /// Plan task budget per activation, in cycles (8.4e6: 50 ms at 168 MHz).
+    pub plan_budget_cycles: f64,
+    /// Control task budget per activation, in cycles.
+    pub control_budget_cycles: f64,
+    /// Core clock, in Hz (168e6).
+    pub clock_hz: u64,
+}
+
+/// Observed and bounded timing of one task.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TaskTiming {
+    /// Most instructions of one activation over all PIL runs, in instructions.
+    pub observed_max_instructions: f64,
+    /// Median instructions of an activation, in instructions (plan: over all
+    /// activations of all runs; control: the largest of the runs' medians).
+    pub observed_p50_instructions: f64,
+    /// Plan only: most instructions of an activation whose warm start sufficed
+    /// (`passes == 1`), in instructions; `null` if there was none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub observed_warm_max_instructions: Option<f64>,
+    /// Plan only: most instructions of an activation that needed a cold start
+    /// (`passes > 1`), in instructions; `null` if there was none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub observed_cold_max_instructions: Option<f64>,
+    /// Static bound on one activation, in instructions (given by the caller).
+    pub bound_instructions: f64,
+    /// `bound_instructions × cycles_per_instruction_bound`, in cycles.
+    pub bound_cycles: f64,
+    /// Budget of one activation, in cycles.
+    pub budget_cycles: f64,
+    /// `budget_cycles / bound_cycles` (dimensionless; > 1: the bound fits).
+    pub margin: f64,
+    /// `bound_cycles` at the clock, in µs.
+    pub bound_us: f64,
+    /// `budget_cycles` at the clock, in µs.
+    pub budget_us: f64,
+}
+
+/// Both tasks.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Tasks {
+    /// The plan task (priority 1, every 100 ms).
+    pub plan: TaskTiming,
+    /// The control task (priority 2, every 10 ms).
+    pub control: TaskTiming,
+}
+
+/// Flash, RAM and stack of the ECU binary.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MemoryReport {
+    /// `.vector_table`, in bytes.
+    pub vector_table_bytes: u64,
+    /// `.text`, in bytes.
+    pub text_bytes: u64,
+    /// `.rodata`, in bytes.
+    pub rodata_bytes: u64,
+    /// `.data`, in bytes.
+    pub data_bytes: u64,
+    /// `.bss` + `.uninit`, in bytes.
+    pub bss_bytes: u64,
+    /// `.uninit`, in bytes (counted in `bss_bytes`).
+    pub uninit_bytes: u64,
+    /// `.data` + `.bss` + `.uninit`, in bytes.
+    pub static_ram_bytes: u64,
+    /// `.vector_table` + `.text` + `.rodata` + `.data`, in bytes.
+    pub flash_bytes: u64,
+    /// Static worst-case stack bound over the priority levels, in bytes.
+    pub stack_bound_bytes: u64,
+    /// How the stack bound was computed and what it does not cover.
+    pub stack_method: String,
+    /// `true` if nothing reachable escaped the stack analysis.
+    pub stack_sound: bool,
+    /// What the stack bound misses: indirect calls, unresolved calls, unknown
+    /// frames, recursion (one line each).
+    pub stack_misses: Vec<String>,
+    /// Deepest painted-stack use over the PIL runs, in bytes.
+    pub stack_high_water_bytes: u64,
+    /// Size of the stack region (RAM below the statics, flip-link), in bytes.
+    pub stack_size_bytes: u64,
+}
+
+/// One PIL run as the report names it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunEntry {
+    /// The run folder.
+    pub dir: String,
+    /// Whether the run reached the end of its scenario.
+    pub completed: bool,
+    /// Plan activations.
+    pub plan_activations: u64,
+    /// Plan deadline misses (the larger of `summary.json` and the CSV's count).
+    pub plan_deadline_misses: u64,
+    /// Control deadline misses.
+    pub control_deadline_misses: u64,
+    /// Plan activations whose status was not `optimal`.
+    pub plan_failures: u64,
+    /// Painted-stack high-water mark of the run, in bytes.
+    pub stack_high_water_bytes: u64,
+    /// The ELF the run used (from `pil.json`).
+    pub elf: String,
+}
+
+/// One project goal: met when `value ≤ goal`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Goal {
+    /// What is measured.
+    pub name: String,
+    /// Its value (unit in `unit`); `null` when there was nothing to measure.
+    pub value: Option<f64>,
+    /// The most it may be (same unit).
+    pub goal: f64,
+    /// Unit of `value` and `goal`.
+    pub unit: String,
+    /// `value ≤ goal`.
+    pub met: bool,
+}
+
+/// The worst-case timing and memory report (`wcet.json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WcetReport {
+    /// Core clock, in Hz.
+    pub clock_hz: u64,
+    /// Worst-case cycles per instruction of the traced ECU code (dimensionless).
+    pub cycles_per_instruction_bound: f64,
+    /// The assumptions behind that bound.
+    pub cpi_justification: String,
+    /// Timing of both tasks.
+    pub tasks: Tasks,
+    /// Flash, RAM, stack.
+    pub memory: MemoryReport,
+    /// Allocator and software-double symbols.
+    pub symbols: ElfSymbols,
+    /// The PIL runs the observations come from.
+    pub runs: Vec<RunEntry>,
+    /// Deepest painted-stack use over the runs, in bytes.
+    pub stack_high_water_bytes: u64,
+    /// The project goals.
+    pub goals: Vec<Goal>,
+    /// The ECU ELF analysed.
+    pub elf: String,
+    /// The full static stack analysis (levels, worst paths, what it misses).
+    pub stack: StackReport,
+}
+
+/// Reads the run folders and the ELF, bounds the stack with `llvm-objdump`, and
+/// assembles the report.
+pub fn build_report(inputs: &ReportInputs) -> Result<WcetReport> {
+    let runs = inputs
+        .run_dirs
+        .iter()
+        .map(|d| load_pil_run(d))
+        .collect::<Result<Vec<_>>>()?;
+    let memory = elf_memory(&inputs.elf)?;
+    let symbols = elf_symbols(&inputs.elf)?;
+    let stack = super::stack::analyse_elf(&inputs.elf, &inputs.stack_levels)
+        .with_context(|| format!("stack bound of {}", inputs.elf.display()))?;
+    assemble_report(inputs, &runs, memory, symbols, stack)
+}
+
+fn check_inputs(inputs: &ReportInputs, cpi: f64) -> Result<()> {
+    let positive = [
+        ("plan_bound_instructions", inputs.plan_bound_instructions),
+        (
+            "control_bound_instructions",
+            inputs.control_bound_instructions,
+        ),
+        ("plan_budget_cycles", inputs.plan_budget_cycles),
+        ("control_budget_cycles", inputs.control_budget_cycles),
+        ("the CPI report's total.cpi_bound", cpi),
+    ];
+    for (name, value) in positive {
+        ensure!(
+            value.is_finite() && value > 0.0,
+            "{name} must be a finite number > 0, got {value}"
+        );
+    }
+    ensure!(
+        inputs.clock_hz > 0,
+        "clock_hz must be > 0 (168e6 for the ECU)"
+    );
+    Ok(())
+}
+
+/// Assembles the report from what [`build_report`] read (exposed so that the
+/// report can be built from fixtures).
+pub fn assemble_report(
+    inputs: &ReportInputs,
+    runs: &[PilRun],
+    memory: ElfMemory,
+    symbols: ElfSymbols,
+    stack: StackReport,
+) -> Result<WcetReport> {
+    let cpi = inputs.cpi.total.cpi_bound;
+    check_inputs(inputs, cpi)?;
+    if runs.is_empty() {
+        bail!("no PIL run given: make one with `{PIL_COMMAND}` and pass its folder");
+    }
+    let clock = inputs.clock_hz as f64;
+    let timing = |bound_instructions: f64, budget_cycles: f64| {
+        let bound_cycles = bound_instructions * cpi;
+        (
+            bound_cycles,
+            budget_cycles / bound_cycles,
+            bound_cycles / clock * 1e6,
+            budget_cycles / clock * 1e6,
+        )
+    };
+    let (plan_obs, control_obs) = (plan_observed(runs)?, control_observed(runs));
+    let (bc, margin, bound_us, budget_us) =
+        timing(inputs.plan_bound_instructions, inputs.plan_budget_cycles);
+    let plan = TaskTiming {
+        observed_max_instructions: plan_obs.max,
+        observed_p50_instructions: plan_obs.p50,
+        observed_warm_max_instructions: plan_obs.warm_max,
+        observed_cold_max_instructions: plan_obs.cold_max,
+        bound_instructions: inputs.plan_bound_instructions,
+        bound_cycles: bc,
+        budget_cycles: inputs.plan_budget_cycles,
+        margin,
+        bound_us,
+        budget_us,
+    };
+    let (bc, margin, bound_us, budget_us) = timing(
+        inputs.control_bound_instructions,
+        inputs.control_budget_cycles,
+    );
+    let control = TaskTiming {
+        observed_max_instructions: control_obs.max,
+        observed_p50_instructions: control_obs.p50,
+        observed_warm_max_instructions: None,
+        observed_cold_max_instructions: None,
+        bound_instructions: inputs.control_bound_instructions,
+        bound_cycles: bc,
+        budget_cycles: inputs.control_budget_cycles,
+        margin,
+        bound_us,
+        budget_us,
+    };
+    let run_entries: Vec<RunEntry> = runs.iter().map(run_entry).collect();
+    let high_water = runs
+        .iter()
+        .map(|r| r.pil.stack_high_water_bytes)
+        .max()
+        .unwrap_or(0);
+    let stack_size = runs
+        .iter()
+        .map(|r| r.pil.stack_size_bytes)
+        .max()
+        .unwrap_or(0);
+    let memory = memory_report(&memory, &stack, high_water, stack_size);
+    let tasks = Tasks { plan, control };
+    let goals = goals(&tasks, &memory, &run_entries);
+    Ok(WcetReport {
+        clock_hz: inputs.clock_hz,
+        cycles_per_instruction_bound: cpi,
+        cpi_justification: inputs.cpi.justification.clone(),
+        tasks,
+        memory,
+        symbols,
+        runs: run_entries,
+        stack_high_water_bytes: high_water,
+        goals,
+        elf: inputs.elf.display().to_string(),
+        stack,
+    })
+}
+
+/// Observed instructions of a task over the runs.
+struct Observed {
+    max: f64,
+    p50: f64,
+    warm_max: Option<f64>,
+    cold_max: Option<f64>,
+}
+
+fn max_of(values: impl Iterator<Item = f64>) -> Option<f64> {
+    values.fold(None, |m, v| Some(m.map_or(v, |m: f64| m.max(v))))
+}
+
+/// Median (mean of the two middle values for an even count); `None` if empty.
+fn median(mut values: Vec<f64>) -> Option<f64> {
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    match n {
+        0 => None,
+        _ if n % 2 == 1 => values.get(n / 2).copied(),
+        _ => Some((values.get(n / 2 - 1)? + values.get(n / 2)?) / 2.0),
+    }
+}
+
+/// Plan: the CSV rows of every run, and each summary's maximum (the larger wins).
+fn plan_observed(runs: &[PilRun]) -> Result<Observed> {
+    let rows = || runs.iter().flat_map(|r| r.plan.iter());
+    let summary_max = max_of(runs.iter().map(|r| r.summary.plan_max_instructions));
+    let csv_max = max_of(rows().map(|a| a.instructions));
+    let Some(max) = max_of(summary_max.into_iter().chain(csv_max)) else {
+        bail!("no PIL run given: make one with `{PIL_COMMAND}` and pass its folder");
+    };
+    let p50 = match median(rows().map(|a| a.instructions).collect()) {
+        Some(p) => p,
+        None => max_of(runs.iter().map(|r| r.summary.plan_p50_instructions)).unwrap_or(0.0),
+    };
+    Ok(Observed {
+        max,
+        p50,
+        warm_max: max_of(rows().filter(|a| a.passes == 1).map(|a| a.instructions)),
+        cold_max: max_of(rows().filter(|a| a.passes > 1).map(|a| a.instructions)),
+    })
+}
+
+/// Control: the larger of `summary.json` and `pil.json` of every run.
+fn control_observed(runs: &[PilRun]) -> Observed {
+    let max = max_of(runs.iter().flat_map(|r| {
+        [
+            r.summary.control_max_instructions,
+            r.pil.control_max_instructions,
+        ]
+    }));
+    Observed {
+        max: max.unwrap_or(0.0),
+        p50: max_of(runs.iter().map(|r| r.pil.control_p50_instructions)).unwrap_or(0.0),
+        warm_max: None,
+        cold_max: None,
+    }
+}
+
+fn run_entry(run: &PilRun) -> RunEntry {
+    let csv_misses = run.plan.iter().filter(|a| a.deadline_miss).count() as u64;
+    RunEntry {
+        dir: run.dir.display().to_string(),
+        completed: run.summary.completed,
+        plan_activations: run.summary.plan_activations.max(run.plan.len() as u64),
+        plan_deadline_misses: run.summary.plan_deadline_misses.max(csv_misses),
+        control_deadline_misses: run.summary.control_deadline_misses,
+        plan_failures: run.plan.iter().filter(|a| a.status != "optimal").count() as u64,
+        stack_high_water_bytes: run.pil.stack_high_water_bytes,
+        elf: run.pil.elf.clone(),
+    }
+}
+
+/// One line per thing the stack analysis could not follow.
+fn stack_misses(stack: &StackReport) -> Vec<String> {
+    let mut misses = Vec::new();
+    for call in &stack.indirect_calls {
+        misses.push(format!(
+            "indirect call in {}: {}",
+            call.function, call.instruction
+        ));
+    }
+    for call in &stack.unresolved_calls {
+        misses.push(format!("call to a symbol not disassembled: {call}"));
+    }
+    for frame in &stack.unknown_frames {
+        misses.push(format!(
+            "frame not understood in {}: {}",
+            frame.function, frame.reason
+        ));
+    }
+    for cycle in &stack.cycles {
+        misses.push(format!("recursion: {}", cycle.join(" -> ")));
+    }
+    misses
+}
+
+fn memory_report(
+    memory: &ElfMemory,
+    stack: &StackReport,
+    high_water: u64,
+    stack_size: u64,
+) -> MemoryReport {
+    let levels: Vec<String> = stack
+        .levels
+        .iter()
+        .map(|l| format!("{} {} B", l.name, l.contribution_bytes))
+        .collect();
+    MemoryReport {
+        vector_table_bytes: memory.vector_table_bytes,
+        text_bytes: memory.text_bytes,
+        rodata_bytes: memory.rodata_bytes,
+        data_bytes: memory.data_bytes,
+        bss_bytes: memory.bss_bytes,
+        uninit_bytes: memory.uninit_bytes,
+        static_ram_bytes: memory.static_ram_bytes(),
+        flash_bytes: memory.flash_bytes(),
+        stack_bound_bytes: u64::from(stack.total_bytes),
+        stack_method: format!(
+            "{} Levels (bound = their sum): {}.",
+            stack.method,
+            levels.join(" + ")
+        ),
+        stack_sound: stack.sound,
+        stack_misses: stack_misses(stack),
+        stack_high_water_bytes: high_water,
+        stack_size_bytes: stack_size,
+    }
+}
+
+fn goal(name: &str, value: Option<f64>, goal: f64, unit: &str) -> Goal {
+    Goal {
+        name: name.to_string(),
+        value,
+        goal,
+        unit: unit.to_string(),
+        met: value.is_some_and(|v| v <= goal),
+    }
+}
+
+fn goals(tasks: &Tasks, memory: &MemoryReport, runs: &[RunEntry]) -> Vec<Goal> {
+    let misses: u64 = runs
+        .iter()
+        .map(|r| r.plan_deadline_misses + r.control_deadline_misses)
+        .sum();
+    let not_completed = runs.iter().filter(|r| !r.completed).count();
+    vec![
+        goal(
+            "plan warm-start observed max",
+            tasks.plan.observed_warm_max_instructions,
+            GOAL_PLAN_WARM_MAX_INSTRUCTIONS,
+            "instructions",
+        ),
+        goal(
+            "plan bound within budget",
+            Some(tasks.plan.bound_cycles),
+            tasks.plan.budget_cycles,
+            "cycles",
+        ),
+        goal(
+            "control observed max",
+            Some(tasks.control.observed_max_instructions),
+            GOAL_CONTROL_MAX_INSTRUCTIONS,
+            "instructions",
+        ),
+        goal(
+            "static RAM",
+            Some(memory.static_ram_bytes as f64),
+            GOAL_STATIC_RAM_BYTES,
+            "bytes",
+        ),
+        goal(
+            "stack bound",
+            Some(memory.stack_bound_bytes as f64),
+            GOAL_STACK_BOUND_BYTES,
+            "bytes",
+        ),
+        goal(
+            "flash",
+            Some(memory.flash_bytes as f64),
+            GOAL_FLASH_BYTES,
+            "bytes",
+        ),
+        goal(
+            "deadline misses over the runs",
+            Some(misses as f64),
+            0.0,
+            "misses",
+        ),
+        goal(
+            "PIL runs not completed",
+            Some(not_completed as f64),
+            0.0,
+            "runs",
+        ),
+    ]
+}
+
+// ---------------------------------------------------------------------------
+// Writing: wcet.json and wcet.md
+// ---------------------------------------------------------------------------
+
+/// Writes `wcet.json` and `wcet.md` into `dir` (created if missing).
+pub fn write_report(dir: &Path, r: &WcetReport) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create the report folder {}", dir.display()))?;
+    let json = serde_json::to_string_pretty(r).context("cannot serialise the report")?;
+    let path = dir.join("wcet.json");
+    std::fs::write(&path, json + "\n")
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    let markdown = render_markdown(r).context("cannot format wcet.md")?;
+    let path = dir.join("wcet.md");
+    std::fs::write(&path, markdown).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
+}
+
+/// `met (12.5 % below)` or `MISSED by 3 bytes (+0.4 %)`.
+fn goal_verdict(g: &Goal) -> String {
+    let Some(value) = g.value else {
+        return "MISSED: nothing measured".to_string();
+    };
+    let relative = |d: f64| {
+        if g.goal > 0.0 {
+            format!(" ({:+.1} %)", d / g.goal * 100.0)
+        } else {
+            String::new()
+        }
+    };
+    if g.met {
+        format!(
+            "met, {} {} to spare{}",
+            num(g.goal - value),
+            g.unit,
+            relative(value - g.goal)
+        )
+    } else {
+        format!(
+            "**MISSED** by {} {}{}",
+            num(value - g.goal),
+            g.unit,
+            relative(value - g.goal)
+        )
+    }
+}
+
+/// A number without a fractional part if it has none, else with 2 decimals.
+fn num(v: f64) -> String {
+    if v.fract() == 0.0 && v.abs() < 1e15 {
+        format!("{v:.0}")
+    } else {
+        format!("{v:.2}")
+    }
+}
+
+fn opt_num(v: Option<f64>) -> String {
+    v.map_or_else(|| "—".to_string(), num)
+}
+
+fn render_markdown(r: &WcetReport) -> Result<String, std::fmt::Error> {
+    let mut s = String::new();
+    writeln!(s, "# Worst-case timing and memory of the ECU\n")?;
+    writeln!(
+        s,
+        "ELF `{}`, clock {} MHz, CPI bound {:.3} cycles/instruction.\n",
+        r.elf,
+        num(r.clock_hz as f64 / 1e6),
+        r.cycles_per_instruction_bound
+    )?;
+    render_goals(&mut s, r)?;
+    render_tasks(&mut s, r)?;
+    render_memory(&mut s, r)?;
+    render_stack(&mut s, r)?;
+    render_runs(&mut s, r)?;
+    writeln!(s, "## CPI bound\n\n{}", r.cpi_justification)?;
+    Ok(s)
+}
+
+fn render_goals(s: &mut String, r: &WcetReport) -> std::fmt::Result {
+    writeln!(
+        s,
+        "## Goals\n\n| goal | value | at most | verdict |\n|---|---:|---:|---|"
+    )?;
+    for g in &r.goals {
+        writeln!(
+            s,
+            "| {} | {} | {} {} | {} |",
+            g.name,
+            opt_num(g.value),
+            num(g.goal),
+            g.unit,
+            goal_verdict(g)
+        )?;
+    }
+    writeln!(s)
+}
+
+fn render_tasks(s: &mut String, r: &WcetReport) -> std::fmt::Result {
+    writeln!(
+        s,
+        "## Tasks\n\nInstructions observed on the ECU in the PIL runs; bound = static \
+         instruction bound × CPI bound; margin = budget / bound (> 1: fits).\n"
+    )?;
+    writeln!(
+        s,
+        "| task | observed p50 | observed max | warm max | cold max | bound (instr.) | \
+         bound (cycles) | budget (cycles) | bound (µs) | budget (µs) | margin |"
+    )?;
+    writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+    for (name, t) in [("plan", &r.tasks.plan), ("control", &r.tasks.control)] {
+        writeln!(
+            s,
+            "| {name} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {:.2} |",
+            num(t.observed_p50_instructions.round()),
+            num(t.observed_max_instructions.round()),
+            opt_num(t.observed_warm_max_instructions.map(f64::round)),
+            opt_num(t.observed_cold_max_instructions.map(f64::round)),
+            num(t.bound_instructions.round()),
+            num(t.bound_cycles.round()),
+            num(t.budget_cycles.round()),
+            t.bound_us,
+            t.budget_us,
+            t.margin
+        )?;
+    }
+    writeln!(s)
+}
+
+fn render_memory(s: &mut String, r: &WcetReport) -> std::fmt::Result {
+    let m = &r.memory;
+    writeln!(s, "## Memory\n\n| quantity | bytes |\n|---|---:|")?;
+    let rows = [
+        (".vector_table", m.vector_table_bytes),
+        (".text", m.text_bytes),
+        (".rodata", m.rodata_bytes),
+        (".data", m.data_bytes),
+        (".bss (incl. .uninit)", m.bss_bytes),
+        ("  of which .uninit", m.uninit_bytes),
+        (
+            "**flash** (vector table + text + rodata + data)",
+            m.flash_bytes,
+        ),
+        ("**static RAM** (data + bss + uninit)", m.static_ram_bytes),
+        ("**stack bound** (static)", m.stack_bound_bytes),
+        (
+            "stack high-water mark (painted, PIL runs)",
+            m.stack_high_water_bytes,
+        ),
+        ("stack region", m.stack_size_bytes),
+    ];
+    for (name, bytes) in rows {
+        writeln!(s, "| {name} | {bytes} |")?;
+    }
+    writeln!(
+        s,
+        "\nSymbols: allocator {} {:?}; software double precision {} {:?}.\n",
+        if r.symbols.allocator {
+            "**linked**"
+        } else {
+            "absent"
+        },
+        r.symbols.allocator_symbols,
+        if r.symbols.soft_double {
+            "**linked**"
+        } else {
+            "absent"
+        },
+        r.symbols.soft_double_symbols
+    )
+}
+
+fn render_stack(s: &mut String, r: &WcetReport) -> std::fmt::Result {
+    writeln!(
+        s,
+        "## Stack bound: {} B ({})\n",
+        r.memory.stack_bound_bytes,
+        if r.memory.stack_sound {
+            "sound"
+        } else {
+            "not sound: see what it misses"
+        }
+    )?;
+    writeln!(
+        s,
+        "| level | deepest root | depth (B) | exception frame (B) | worst path |"
+    )?;
+    writeln!(s, "|---|---|---:|---:|---|")?;
+    for level in &r.stack.levels {
+        let deepest = level.roots.iter().max_by_key(|root| root.depth_bytes);
+        let (root, depth, path) = deepest.map_or((String::new(), 0, String::new()), |root| {
+            let path: Vec<String> = root
+                .worst_path
+                .iter()
+                .map(|e| format!("`{}` ({} B)", e.function, e.frame_bytes))
+                .collect();
+            (root.root.clone(), root.depth_bytes, path.join(" → "))
+        });
+        writeln!(
+            s,
+            "| {} | {root} | {depth} | {} | {path} |",
+            level.name, level.exception_frame_bytes
+        )?;
+    }
+    writeln!(s, "\n{}\n", r.memory.stack_method)?;
+    if !r.memory.stack_misses.is_empty() {
+        writeln!(s, "Not in the bound ({}):\n", r.memory.stack_misses.len())?;
+        for miss in &r.memory.stack_misses {
+            writeln!(s, "- `{miss}`")?;
+        }
+        writeln!(s)?;
+    }
+    Ok(())
+}
+
+fn render_runs(s: &mut String, r: &WcetReport) -> std::fmt::Result {
+    writeln!(
+        s,
+        "## PIL runs\n\n| folder | completed | plan activations | plan failures | \
+         plan misses | control misses | stack high water (B) |\n|---|---|---:|---:|---:|---:|---:|"
+    )?;
+    for run in &r.runs {
+        writeln!(
+            s,
+            "| `{}` | {} | {} | {} | {} | {} | {} |",
+            run.dir,
+            if run.completed { "yes" } else { "**no**" },
+            run.plan_activations,
+            run.plan_failures,
+            run.plan_deadline_misses,
+            run.control_deadline_misses,
+            run.stack_high_water_bytes
+        )?;
+    }
+    writeln!(s)
+}
+
+// ---------------------------------------------------------------------------
+// CI: comparison with committed expectations
+// ---------------------------------------------------------------------------
+
+/// The quantities [`check_against_expected`] compares: name, JSON pointer into
+/// `wcet.json`, unit.
+const CHECKED: [(&str, &str, &str); 10] = [
+    (".text", "/memory/text_bytes", "bytes"),
+    (".rodata", "/memory/rodata_bytes", "bytes"),
+    (".data", "/memory/data_bytes", "bytes"),
+    (".bss", "/memory/bss_bytes", "bytes"),
+    ("static RAM", "/memory/static_ram_bytes", "bytes"),
+    ("flash", "/memory/flash_bytes", "bytes"),
+    ("stack bound", "/memory/stack_bound_bytes", "bytes"),
+    (
+        "plan observed max",
+        "/tasks/plan/observed_max_instructions",
+        "instructions",
+    ),
+    (
+        "plan warm observed max",
+        "/tasks/plan/observed_warm_max_instructions",
+        "instructions",
+    ),
+    (
+        "control observed max",
+        "/tasks/control/observed_max_instructions",
+        "instructions",
+    ),
+];
+
+/// Compares `report` with a committed `wcet.json` (`expected_json`): one
+/// human-readable failure per quantity that grew past `expected × (1 + margin)`
+/// (section sizes, static RAM, flash, stack bound; plan, warm plan and control
+/// observed maxima) and per symbol flag (`allocator`, `soft_double`) that became
+/// true. Empty when all is well. `margin` is a fraction (0.05 = 5 %).
+pub fn check_against_expected(
+    report: &WcetReport,
+    expected_json: &str,
+    margin: f64,
+) -> Vec<String> {
+    if !(margin.is_finite() && margin >= 0.0) {
+        return vec![format!(
+            "the allowed growth margin must be a finite fraction ≥ 0 (e.g. 0.05), got {margin}"
+        )];
+    }
+    let expected: serde_json::Value = match serde_json::from_str(expected_json) {
+        Ok(v) => v,
+        Err(e) => {
+            return vec![format!(
+                "the expected wcet.json is not valid JSON ({e}): regenerate it from a report"
+            )]
+        }
+    };
+    let actual = match serde_json::to_value(report) {
+        Ok(v) => v,
+        Err(e) => return vec![format!("cannot serialise the report for comparison: {e}")],
+    };
+    let mut failures = Vec::new();
+    for (name, pointer, unit) in CHECKED {
+        if let Some(f) = compare_quantity(&actual, &expected, name, pointer, unit, margin) {
+            failures.push(f);
+        }
+    }
+    for flag in ["allocator", "soft_double"] {
+        let pointer = format!("/symbols/{flag}");
+        let now = actual.pointer(&pointer).and_then(|v| v.as_bool()) == Some(true);
+        let before = expected.pointer(&pointer).and_then(|v| v.as_bool()) == Some(true);
+        if now && !before {
+            failures.push(format!(
+                "symbols.{flag} became true: the ECU binary now links {}",
+                if flag == "allocator" {
+                    format!("a heap allocator ({:?})", report.symbols.allocator_symbols)
+                } else {
+                    format!(
+                        "software double-precision routines ({:?}): an f64 crept in",
+                        report.symbols.soft_double_symbols
+                    )
+                }
+            ));
+        }
+    }
+    failures
+}
+
+fn compare_quantity(
+    actual: &serde_json::Value,
+    expected: &serde_json::Value,
+    name: &str,
+    pointer: &str,
+    unit: &str,
+    margin: f64,
+) -> Option<String> {
+    let key = pointer.trim_start_matches('/').replace('/', ".");
+    let Some(limit) = expected.pointer(pointer).and_then(|v| v.as_f64()) else {
+        return Some(format!(
+            "{name}: the expected file has no number at {key}: regenerate it from a current report"
+        ));
+    };
+    let Some(value) = actual.pointer(pointer).and_then(|v| v.as_f64()) else {
+        return Some(format!(
+            "{name}: this report has no value at {key} (expected {}) — e.g. no warm-started \
+             plan activation in the PIL runs",
+            num(limit)
+        ));
+    };
+    let allowed = limit * (1.0 + margin);
+    (value > allowed).then(|| {
+        format!(
+            "{name} grew to {} {unit}, expected {} (+{:.1} % allowed, up to {}): {:+.1} % ({key})",
+            num(value.round()),
+            num(limit.round()),
+            margin * 100.0,
+            num(allowed.round()),
+            (value / limit - 1.0) * 100.0
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wcet::cpi::Figures;
+    use crate::wcet::stack::{parse_objdump, stack_bound};
+
+    const HEADER: &str = "activation,release_us,finish_us,instructions,cycles,status,published,\
+deadline_miss,passes,qp_iterations,qp_added,qp_removed,qp_refactorizations,rows,\
+active_constraints,max_validity_slack_rad";
+
+    /// One plan activation of a fixture: instructions, passes, deadline miss, status.
+    type Row = (f64, u32, bool, &'static str);
+
+    /// Writes a PIL run folder `name` under `root` with these plan activations and
+    /// control maximum; returns its path.
+    fn write_run(
+        root: &Path,
+        name: &str,
+        rows: &[Row],
+        control_max: f64,
+        high_water: u64,
+    ) -> Result<PathBuf> {
+        let dir = root.join(name);
+        let mut csv = format!("{HEADER}\n");
+        for (k, (instructions, passes, miss, status)) in rows.iter().enumerate() {
+            csv += &format!(
+                "{k},{},{},{instructions},{},{status},true,{miss},{passes},12,3,1,0,40,5,0.01\n",
+                k * 100_000,
+                k * 100_000 + 5_000,
+                instructions * 1.2
+            );
+        }
+        let misses = rows.iter().filter(|r| r.2).count();
+        let max = rows.iter().map(|r| r.0).fold(0.0, f64::max);
+        let summary = serde_json::json!({
+            "completed": true, "plan_activations": rows.len(),
+            "plan_deadline_misses": misses, "control_deadline_misses": 0,
+            "plan_max_instructions": max, "plan_p50_instructions": 1.0,
+            "control_max_instructions": control_max - 10.0, "other": "ignored"
+        });
+        let pil = serde_json::json!({
+            "icount_shift": 4, "ns_per_instruction": 16.0, "elf": "target/ecu",
+            "stack_high_water_bytes": high_water, "stack_size_bytes": 43512,
+            "control_max_instructions": control_max, "control_p50_instructions": control_max / 2.0,
+            "extra": [1, 2]
+        });
+        let write = |file: &str, text: String| std::fs::write(dir.join(file), text);
+        std::fs::create_dir_all(&dir)
+            .and_then(|()| write("plan_activations.csv", csv))
+            .and_then(|()| write("summary.json", summary.to_string()))
+            .and_then(|()| write("pil.json", pil.to_string()))
+            .with_context(|| format!("cannot write the fixture {}", dir.display()))?;
+        Ok(dir)
+    }
+
+    fn cpi(bound: f64) -> CpiReport {
+        CpiReport {
+            total: Figures {
+                instructions: 1000,
+                worst_case_cycles: (1000.0 * bound) as u64,
+                cpi_bound: bound,
+                classes: Vec::new(),
+            },
+            tb_executions: 10,
+            translations: 2,
+            untraced_executions: 0,
+            abandoned_executions: 0,
+            top_mnemonics: Vec::new(),
+            unknown_mnemonics: Vec::new(),
+            regions: Vec::new(),
+            justification: "fixture CPI".into(),
+        }
+    }
+
+    /// A stack report: `main` 16 B, handler 8 B + an indirect call.
+    fn stack() -> Result<StackReport> {
+        let text = "
+08000000 <main>:
+ 8000000:      \tpush\t{r4, r5, r6, lr}
+ 8000002:      \tbx\tlr
+08000010 <USART1>:
+ 8000010:      \tpush\t{r7, lr}
+ 8000012:      \tblx\tr2
+";
+        let levels = [
+            PriorityLevel {
+                name: "thread".into(),
+                roots: vec!["main".into()],
+            },
+            PriorityLevel {
+                name: "priority 1".into(),
+                roots: vec!["USART1".into()],
+            },
+        ];
+        Ok(stack_bound(&parse_objdump(text), &levels)?)
+    }
+
+    fn memory() -> ElfMemory {
+        ElfMemory {
+            vector_table_bytes: 424,
+            text_bytes: 100_000,
+            rodata_bytes: 2_000,
+            data_bytes: 40_000,
+            bss_bytes: 2_000,
+            uninit_bytes: 1_700,
+        }
+    }
+
+    fn inputs(run_dirs: Vec<PathBuf>) -> ReportInputs {
+        ReportInputs {
+            run_dirs,
+            elf: PathBuf::from("target/ecu"),
+            stack_levels: ecu_priority_levels(),
+            cpi: cpi(1.5),
+            plan_bound_instructions: 4.0e6,
+            control_bound_instructions: 3000.0,
+            plan_budget_cycles: 8.4e6,
+            control_budget_cycles: 5000.0,
+            clock_hz: 168_000_000,
+        }
+    }
+
+    /// Two runs: warm activations up to 1.2e6, a cold one of 2.0e6 with a deadline
+    /// miss; control maxima 1500 and 1800.
+    fn fixture_report(root: &Path) -> Result<WcetReport> {
+        let a = write_run(
+            root,
+            "run-a",
+            &[(1.0e6, 1, false, "optimal"), (1.2e6, 1, false, "optimal")],
+            1500.0,
+            9000,
+        )?;
+        let b = write_run(
+            root,
+            "run-b",
+            &[
+                (0.8e6, 1, false, "optimal"),
+                (2.0e6, 3, true, "max_iterations"),
+            ],
+            1800.0,
+            11620,
+        )?;
+        let inputs = inputs(vec![a.clone(), b.clone()]);
+        let runs = [load_pil_run(&a)?, load_pil_run(&b)?];
+        assemble_report(&inputs, &runs, memory(), ElfSymbols::default(), stack()?)
+    }
+
+    fn goal_of<'a>(r: &'a WcetReport, name: &str) -> Result<&'a Goal> {
+        r.goals
+            .iter()
+            .find(|g| g.name == name)
+            .with_context(|| format!("no goal `{name}` in {:?}", r.goals))
+    }
+
+    #[test]
+    fn load_pil_run_reads_the_three_files() -> Result<()> {
+        let tmp = tempfile::tempdir()?;
+        let dir = write_run(
+            tmp.path(),
+            "run",
+            &[(5.0, 1, false, "optimal"), (7.0, 2, true, "infeasible")],
+            99.0,
+            1234,
+        )?;
+        let run = load_pil_run(&dir)?;
+        assert_eq!(run.plan.len(), 2);
+        assert_eq!(run.plan[1].instructions, 7.0);
+        assert_eq!(run.plan[1].passes, 2);
+        assert!(run.plan[1].deadline_miss);
+        assert_eq!(run.plan[1].status, "infeasible");
+        assert_eq!(run.summary.plan_deadline_misses, 1);
+        assert_eq!(run.pil.stack_high_water_bytes, 1234);
+        assert_eq!(run.pil.control_max_instructions, 99.0);
+        Ok(())
+    }
+
+    #[test]
+    fn missing_file_names_it_and_the_command() -> Result<()> {
+        let tmp = tempfile::tempdir()?;
+        for file in ["summary.json", "pil.json", "plan_activations.csv"] {
+            let dir = write_run(tmp.path(), file, &[(5.0, 1, false, "optimal")], 9.0, 1)?;
+            std::fs::remove_file(dir.join(file))?;
+            let message = format!(
+                "{:#}",
+                load_pil_run(&dir)
+                    .err()
+                    .unwrap_or_else(|| anyhow::anyhow!(""))
+            );
+            assert!(message.contains(file), "{message}");
+            assert!(message.contains("host-sim pil --out DIR"), "{message}");
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn bad_csv_row_and_missing_key_are_located() -> Result<()> {
+        let tmp = tempfile::tempdir()?;
+        let dir = write_run(
+            tmp.path(),
+            "run",
+            &[(5.0, 1, false, "optimal"), (6.0, 1, false, "optimal")],
+            9.0,
+            1,
+        )?;
+        let path = dir.join("plan_activations.csv");
+        let text = std::fs::read_to_string(&path)?;
+        std::fs::write(&path, text.replace(",false,1,12,", ",maybe,1,12,"))?;
+        let message = format!(
+            "{:#}",
+            load_pil_run(&dir)
+                .err()
+                .unwrap_or_else(|| anyhow::anyhow!(""))
+        );
+        assert!(
+            message.contains("line 2") && message.contains("deadline_miss"),
+            "{message}"
+        );
+
+        std::fs::write(dir.join("summary.json"), r#"{"completed": true}"#)?;
+        let message = format!(
+            "{:#}",
+            load_pil_run(&dir)
+                .err()
+                .unwrap_or_else(|| anyhow::anyhow!(""))
+        );
+        assert!(
+            message.contains("summary.json") && message.contains("plan_activations"),
+            "{message}"
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn report_from_fixtures_pins_the_numbers() -> Result<()> {
+        let tmp = tempfile::tempdir()?;
+        let r = fixture_report(tmp.path())?;
+        let plan = &r.tasks.plan;
+        assert_eq!(plan.observed_max_instructions, 2.0e6);
+        assert_eq!(plan.observed_warm_max_instructions, Some(1.2e6));
+        assert_eq!(plan.observed_cold_max_instructions, Some(2.0e6));
+        // Median of 0.8, 1.0, 1.2, 2.0 (×1e6).
+        assert_eq!(plan.observed_p50_instructions, 1.1e6);
+        assert_eq!(plan.bound_cycles, 6.0e6);
+        assert!((plan.margin - 1.4).abs() < 1e-12);
+        assert!((plan.budget_us - 50_000.0).abs() < 1e-6);
+        let control = &r.tasks.control;
+        assert_eq!(control.observed_max_instructions, 1800.0);
+        assert_eq!(control.bound_cycles, 4500.0);
+        assert!(control.observed_warm_max_instructions.is_none());
+        assert_eq!(r.stack_high_water_bytes, 11620);
+        assert_eq!(r.memory.static_ram_bytes, 42_000);
+        assert_eq!(r.memory.flash_bytes, 142_424);
+        // main 16 B; USART1 8 B + 104 B exception frame; its blx is reported.
+        assert_eq!(r.memory.stack_bound_bytes, 16 + 8 + 104);
+        assert!(!r.memory.stack_sound);
+        assert!(
+            r.memory.stack_misses.iter().any(|m| m.contains("blx")),
+            "{:?}",
+            r.memory.stack_misses
+        );
+        assert_eq!(r.runs.len(), 2);
+        assert_eq!(
+            (r.runs[1].plan_deadline_misses, r.runs[1].plan_failures),
+            (1, 1)
+        );
+        assert!(goal_of(&r, "plan warm-start observed max")?.met);
+        assert!(goal_of(&r, "plan bound within budget")?.met);
+        assert!(goal_of(&r, "control observed max")?.met);
+        assert!(goal_of(&r, "static RAM")?.met);
+        assert!(goal_of(&r, "stack bound")?.met);
+        assert!(goal_of(&r, "flash")?.met);
+        let misses = goal_of(&r, "deadline misses over the runs")?;
+        assert_eq!((misses.value, misses.met), (Some(1.0), false));
+        Ok(())
+    }
+
+    #[test]
+    fn invalid_inputs_are_refused_with_the_field_name() -> Result<()> {
+        let tmp = tempfile::tempdir()?;
+        let dir = write_run(tmp.path(), "run", &[(5.0, 1, false, "optimal")], 9.0, 1)?;
+        let runs = [load_pil_run(&dir)?];
+        let mut bad = inputs(vec![dir]);
+        bad.cpi = cpi(0.0);
+        let err = assemble_report(&bad, &runs, memory(), ElfSymbols::default(), stack()?);
+        let message = format!("{:#}", err.err().unwrap_or_else(|| anyhow::anyhow!("")));
+        assert!(message.contains("cpi_bound"), "{message}");
+        let none = assemble_report(
+            &inputs(Vec::new()),
+            &[],
+            memory(),
+            ElfSymbols::default(),
+            stack()?,
+        );
+        assert!(none.is_err());
+        Ok(())
+    }
+
+    #[test]
+    fn written_json_has_the_agreed_shape_and_markdown_the_verdicts() -> Result<()> {
+        let tmp = tempfile::tempdir()?;
+        let r = fixture_report(tmp.path())?;
+        let out = tmp.path().join("out");
+        write_report(&out, &r)?;
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("wcet.json"))?)?;
+        assert_eq!(v["clock_hz"].as_u64(), Some(168_000_000));
+        assert_eq!(v["cycles_per_instruction_bound"].as_f64(), Some(1.5));
+        assert_eq!(v["cpi_justification"].as_str(), Some("fixture CPI"));
+        for task in ["plan", "control"] {
+            for key in [
+                "observed_max_instructions",
+                "bound_instructions",
+                "bound_cycles",
+                "budget_cycles",
+                "margin",
+            ] {
+                assert!(v["tasks"][task][key].is_f64(), "tasks.{task}.{key}");
+            }
+        }
+        for key in [
+            "text_bytes",
+            "rodata_bytes",
+            "data_bytes",
+            "bss_bytes",
+            "static_ram_bytes",
+            "stack_bound_bytes",
+            "flash_bytes",
+        ] {
+            assert!(v["memory"][key].is_u64(), "memory.{key}");
+        }
+        assert!(v["memory"]["stack_method"].is_string());
+        assert_eq!(v["symbols"]["allocator"].as_bool(), Some(false));
+        assert_eq!(v["symbols"]["soft_double"].as_bool(), Some(false));
+        assert_eq!(v["runs"].as_array().map(Vec::len), Some(2));
+        assert_eq!(v["goals"].as_array().map(Vec::len), Some(8));
+        assert!(v["goals"][0]["met"].is_boolean());
+        let md = std::fs::read_to_string(out.join("wcet.md"))?;
+        assert!(
+            md.contains(
+                "| deadline misses over the runs | 1 | 0 misses | **MISSED** by 1 misses |"
+            ),
+            "{md}"
+        );
+        assert!(
+            md.contains("| flash | 142424 | 262144 bytes | met, 119720 bytes to spare (-45.7 %) |"),
+            "{md}"
+        );
+        assert!(md.contains("run-b") && md.contains("fixture CPI") && md.contains("blx"));
+        Ok(())
+    }
+
+    /// `wcet.json` of the fixture report with one number at `pointer` replaced.
+    fn expected_with(r: &WcetReport, pointer: &str, value: serde_json::Value) -> Result<String> {
+        let mut v = serde_json::to_value(r)?;
+        if let Some(slot) = v.pointer_mut(pointer) {
+            *slot = value;
+        }
+        Ok(v.to_string())
+    }
+
+    #[test]
+    fn check_passes_on_itself_and_on_shrinkage() -> Result<()> {
+        let tmp = tempfile::tempdir()?;
+        let r = fixture_report(tmp.path())?;
+        assert_eq!(
+            check_against_expected(&r, &serde_json::to_string(&r)?, 0.0),
+            Vec::<String>::new()
+        );
+        // The committed expectation was larger: the binary shrank.
+        let bigger = expected_with(&r, "/memory/text_bytes", 200_000.into())?;
+        assert!(check_against_expected(&r, &bigger, 0.0).is_empty());
+        Ok(())
+    }
+
+    #[test]
+    fn check_fails_on_growth_past_the_margin() -> Result<()> {
+        let tmp = tempfile::tempdir()?;
+        let r = fixture_report(tmp.path())?;
+        // .text is 100 000 B; expected 95 000 B: +5.3 %.
+        let smaller = expected_with(&r, "/memory/text_bytes", 95_000.into())?;
+        let failures = check_against_expected(&r, &smaller, 0.05);
+        assert_eq!(failures.len(), 1, "{failures:?}");
+        assert!(
+            failures[0].starts_with(".text grew to 100000 bytes, expected 95000"),
+            "{failures:?}"
+        );
+        assert!(check_against_expected(&r, &smaller, 0.06).is_empty());
+        let control = expected_with(
+            &r,
+            "/tasks/control/observed_max_instructions",
+            1000.0.into(),
+        )?;
+        let failures = check_against_expected(&r, &control, 0.1);
+        assert!(
+            failures.len() == 1 && failures[0].starts_with("control observed max"),
+            "{failures:?}"
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn check_fails_on_new_symbols_and_missing_expectations() -> Result<()> {
+        let tmp = tempfile::tempdir()?;
+        let mut r = fixture_report(tmp.path())?;
+        let expected = serde_json::to_string(&r)?;
+        r.symbols.soft_double = true;
+        r.symbols.soft_double_symbols = vec!["__aeabi_dmul".into()];
+        let failures = check_against_expected(&r, &expected, 0.05);
+        assert!(
+            failures.len() == 1 && failures[0].contains("__aeabi_dmul"),
+            "{failures:?}"
+        );
+        let no_stack = expected_with(&r, "/memory/stack_bound_bytes", serde_json::Value::Null)?;
+        let failures = check_against_expected(&r, &no_stack, 0.05);
+        assert!(
+            failures
+                .iter()
+                .any(|f| f.contains("memory.stack_bound_bytes")),
+            "{failures:?}"
+        );
+        assert_eq!(check_against_expected(&r, "{not json", 0.05).len(), 1);
+        assert_eq!(check_against_expected(&r, &expected, -0.1).len(), 1);
+        Ok(())
+    }
+
+    #[test]
+    fn median_of_odd_even_and_empty() {
+        assert_eq!(median(vec![3.0, 1.0, 2.0]), Some(2.0));
+        assert_eq!(median(vec![4.0, 1.0, 3.0, 2.0]), Some(2.5));
+        assert_eq!(median(Vec::new()), None);
+    }
+
+    /// The real ECU ELF, if it was built (`cargo build --release -p firmware
+    /// --target thumbv7em-none-eabihf --features ecu --bin ecu`).
+    fn real_elf() -> Option<PathBuf> {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../target/thumbv7em-none-eabihf/release/ecu");
+        path.is_file().then_some(path)
+    }
+
+    #[test]
+    fn real_ecu_elf_memory_and_symbols() -> Result<()> {
+        let Some(elf) = real_elf() else {
+            eprintln!("no ECU ELF built: skipped");
+            return Ok(());
+        };
+        let m = elf_memory(&elf)?;
+        eprintln!(
+            "{m:?} static RAM {} flash {}",
+            m.static_ram_bytes(),
+            m.flash_bytes()
+        );
+        assert!(m.vector_table_bytes > 0 && m.text_bytes > 0 && m.rodata_bytes > 0);
+        assert!(m.data_bytes > 0 && m.bss_bytes > m.uninit_bytes);
+        assert_eq!(
+            m.flash_bytes(),
+            m.vector_table_bytes + m.text_bytes + m.rodata_bytes + m.data_bytes
+        );
+        let s = elf_symbols(&elf)?;
+        assert!(!s.allocator, "allocator linked: {:?}", s.allocator_symbols);
+        assert!(
+            !s.soft_double,
+            "soft double linked: {:?}",
+            s.soft_double_symbols
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn real_ecu_elf_stack_bound_resolves_every_level() -> Result<()> {
+        let Some(elf) = real_elf() else {
+            eprintln!("no ECU ELF built: skipped");
+            return Ok(());
+        };
+        let stack = crate::wcet::stack::analyse_elf(&elf, &ecu_priority_levels())?;
+        for level in &stack.levels {
+            let root = level.roots.first();
+            eprintln!(
+                "{}: {} B = {:?}",
+                level.name,
+                level.contribution_bytes,
+                root.map(|r| r
+                    .worst_path
+                    .iter()
+                    .map(|e| format!("{} {}", e.function, e.frame_bytes))
+                    .collect::<Vec<_>>())
+            );
+            assert_eq!(
+                level.roots.len(),
+                1,
+                "{} resolved to {:?}",
+                level.name,
+                level.roots
+            );
+            assert!(level.roots.iter().all(|r| r.depth_bytes > 0));
+        }
+        eprintln!(
+            "total {} B, sound {}, misses {:#?}",
+            stack.total_bytes,
+            stack.sound,
+            stack_misses(&stack)
+        );
+        assert!(stack.total_bytes > 0 && stack.total_bytes < 1 << 20);
+        // The dispatchers run different tasks: not the default handler.
+        assert!(stack
+            .levels
+            .iter()
+            .all(|l| l.roots.iter().all(|r| r.function != "DefaultHandler")));
+        Ok(())
+    }
+
+    #[test]
+    fn real_ecu_elf_full_report_through_build_report() -> Result<()> {
+        let Some(elf) = real_elf() else {
+            eprintln!("no ECU ELF built: skipped");
+            return Ok(());
+        };
+        let tmp = tempfile::tempdir()?;
+        let run = write_run(
+            tmp.path(),
+            "run",
+            &[(1.0e6, 1, false, "optimal"), (1.6e6, 2, false, "optimal")],
+            1500.0,
+            9000,
+        )?;
+        let mut inputs = inputs(vec![run]);
+        inputs.elf = elf.clone();
+        let r = build_report(&inputs)?;
+        assert_eq!(r.memory.text_bytes, elf_memory(&elf)?.text_bytes);
+        assert_eq!(r.stack.levels.len(), 4);
+        assert_eq!(r.memory.stack_bound_bytes, u64::from(r.stack.total_bytes));
+        assert!(r.memory.stack_method.contains("SysTick"));
+        write_report(tmp.path(), &r)?;
+        let md = std::fs::read_to_string(tmp.path().join("wcet.md"))?;
+        assert!(
+            md.contains("`firmware::mpc::Mpc<T>::step_observed` ("),
+            "{md}"
+        );
+        eprintln!("{md}");
+        // A report always passes against itself.
+        assert!(check_against_expected(&r, &serde_json::to_string(&r)?, 0.0).is_empty());
+        Ok(())
+    }
+}
