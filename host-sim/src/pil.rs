@@ -694,7 +694,27 @@ pub fn compare(pil: &RunResult, host: &RunResult) -> Comparison {
             }
         })
         .unwrap_or_else(|| {
-            "the plans agree in status and publication period up to here: the ECU's f32 results differ from the host's (compiler or library differences)".into()
+            // Same outcome and same publication period: compare the plans themselves.
+            let t_div = pil.log[i].t_s;
+            let diff = pil.plans.iter().filter(|p| p.t_publish_s <= t_div).find_map(|p| {
+                let h = host
+                    .plans
+                    .iter()
+                    .find(|h| (h.t_release_s - p.t_release_s).abs() < 1e-9)?;
+                let d = p
+                    .xy
+                    .iter()
+                    .zip(h.xy.iter())
+                    .map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1]))
+                    .fold(0.0f64, f64::max);
+                (d > 0.0).then_some((p.t_release_s, d))
+            });
+            match diff {
+                Some((t, d)) => format!(
+                    "the plan released at {t:.1} s has the same QP work counters and publication period on both, but its nodes differ by up to {d:.3} m: the same f32 code gives different results on the Cortex-M4F and on the host (rounding of a step both compute; not a timing difference)"
+                ),
+                None => "every plan published so far is the same on both (positions bit for bit), so the control task's f32 results differ between the Cortex-M4F and the host (rounding in a step both compute; not a timing difference)".into(),
+            }
         });
     Comparison {
         rows_compared: n,
@@ -756,13 +776,6 @@ pub fn run(args: &PilArgs) -> Result<()> {
     });
     let wall_s = wall.elapsed().as_secs_f64();
     crate::run::write_outputs(&args.run.out, &scenario, &result, !args.run.no_plots)?;
-    let act_path = args.run.out.join("plan_activations.csv");
-    let mut w = csv::Writer::from_path(&act_path)
-        .with_context(|| format!("cannot write {}", act_path.display()))?;
-    for a in &result.plan_activations {
-        w.serialize(a)?;
-    }
-    w.flush()?;
 
     let plans = &result.plan_activations;
     let max_of = |f: &dyn Fn(&PlanActivation) -> bool| {

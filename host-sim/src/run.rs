@@ -185,7 +185,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
     Ok(())
 }
 
-/// Writes `log.csv`, `summary.json` and (optionally) the figures into `dir`.
+/// Writes `log.csv`, `plan_activations.csv` (one row per plan activation: when it
+/// ran, its cost, its work counters), `summary.json` and (optionally) the figures
+/// into `dir`.
 pub fn write_outputs(
     dir: &Path,
     scenario: &Scenario,
@@ -199,6 +201,13 @@ pub fn write_outputs(
         .with_context(|| format!("cannot write {}", log_path.display()))?;
     for row in &result.log {
         w.serialize(row)?;
+    }
+    w.flush()?;
+    let act_path = dir.join("plan_activations.csv");
+    let mut w = csv::Writer::from_path(&act_path)
+        .with_context(|| format!("cannot write {}", act_path.display()))?;
+    for a in &result.plan_activations {
+        w.serialize(a)?;
     }
     w.flush()?;
     let summary_path = dir.join("summary.json");
