@@ -26,6 +26,9 @@ enum Command {
     /// Processor in the loop: the ECU application in QEMU against the plant; writes
     /// what `run` writes plus plan_activations.csv and pil.json (measured ECU costs).
     Pil(host_sim::pil::PilArgs),
+    /// The ECU's worst-case timing and memory report (wcet.md, wcet.json) from PIL
+    /// laps, a QEMU trace for the cycles-per-instruction bound and the ELF.
+    Wcet(host_sim::wcet::command::WcetArgs),
     /// Every QP the MPC solves over a kinematic closed loop, one JSON file each (for solver benchmarks).
     QpCorpus(host_sim::qp_corpus::QpCorpusArgs),
 }
@@ -37,6 +40,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Run(args) => host_sim::run::run(args),
         Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
         Command::Pil(args) => host_sim::pil::run(args),
+        Command::Wcet(args) => host_sim::wcet::command::run(args),
     }
 }
 

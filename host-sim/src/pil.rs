@@ -577,6 +577,10 @@ pub struct PilArgs {
     /// Longest wall time to wait for one frame, s.
     #[arg(long, default_value_t = 60.0)]
     pub frame_timeout: f64,
+    /// Fail when the simulator's cost model underestimates a measured plan
+    /// activation by more than this, % (CI's check that the model stays honest).
+    #[arg(long)]
+    pub max_model_underestimate_pct: Option<f64>,
 }
 
 /// The first difference between the PIL trajectory and the in-process one.
@@ -778,6 +782,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
     crate::run::write_outputs(&args.run.out, &scenario, &result, !args.run.no_plots)?;
 
     let plans = &result.plan_activations;
+    let work: Vec<crate::cost_model::Counters> = plans.iter().map(Into::into).collect();
     let max_of = |f: &dyn Fn(&PlanActivation) -> bool| {
         plans
             .iter()
@@ -807,9 +812,9 @@ pub fn run(args: &PilArgs) -> Result<()> {
         plan_max_instructions: max_of(&|_| true),
         warm_max_instructions: max_of(&|a| a.passes == 1),
         cold_max_instructions: max_of(&|a| a.passes > 1),
-        model_error: opts.cost_model.error_on(plans),
+        model_error: opts.cost_model.error_on(&work),
         refit: crate::cost_model::CostModel::fit(
-            plans,
+            &work,
             percentile(&result.control_instructions, 1.0),
         ),
         comparison,
@@ -850,5 +855,13 @@ pub fn run(args: &PilArgs) -> Result<()> {
         }
     }
     println!("PIL wall time {:.1} s; wrote {}", wall_s, args.run.out.display());
+    if let Some(limit) = args.max_model_underestimate_pct {
+        if e.max_under_pct > limit {
+            bail!(
+                "the cost model underestimates a measured plan activation by {:.1} % (> {limit} %): refit it (`host-sim wcet` writes cost_model.json) and update CostModel::default",
+                e.max_under_pct
+            );
+        }
+    }
     Ok(())
 }

@@ -1,0 +1,223 @@
+//! `host-sim wcet`: runs the processor-in-the-loop laps (or reads finished ones),
+//! traces a short PIL run for the cycles-per-instruction bound, refits the cost
+//! model on the measured activations, and writes the report (`wcet.md`,
+//! `wcet.json`).
+
+use std::fs::{self, File};
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::thread;
+
+use anyhow::{anyhow, bail, Context, Result};
+use clap::Args;
+
+use crate::cost_model::{load_counters, CostModel};
+use crate::pil::{self, PilArgs};
+use crate::run::RunArgs;
+use crate::wcet::cpi::{self, CpiReport};
+use crate::wcet::report::{self, ReportInputs};
+
+/// Arguments of `host-sim wcet`.
+#[derive(Debug, Clone, Args)]
+pub struct WcetArgs {
+    /// PIL output folders to report on (from `host-sim pil --out DIR`); default: run
+    /// the four paper laps (obstacles none/paper × μ 1/0.5) into OUT/pil-*.
+    #[arg(long, num_args = 1..)]
+    pub pil: Vec<PathBuf>,
+    /// The ECU application (build it with `cargo ecu`).
+    #[arg(long, default_value = "target/thumbv7em-none-eabihf/release/ecu")]
+    pub elf: PathBuf,
+    /// Simulated seconds of the traced PIL run for the cycles-per-instruction bound
+    /// (the trace is parsed as QEMU writes it: no file).
+    #[arg(long, default_value_t = 2.0)]
+    pub trace_seconds: f64,
+    /// Laps of the paper track to run when no --pil folder is given, s of simulated
+    /// time each at most.
+    #[arg(long, default_value_t = 200.0)]
+    pub duration: f64,
+    /// Compare with committed expectations (a `wcet.json`); fail when a size or an
+    /// instruction count grew past it by more than --margin.
+    #[arg(long)]
+    pub expected: Option<PathBuf>,
+    /// Relative growth allowed against --expected.
+    #[arg(long, default_value_t = 0.05)]
+    pub margin: f64,
+    /// Output directory (created).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -> PilArgs {
+    PilArgs {
+        run: RunArgs {
+            track: "paper".into(),
+            open: false,
+            obstacles: obstacles.into(),
+            vehicle: None,
+            mu,
+            planner_mu: None,
+            laps: 1,
+            duration,
+            initial_speed: 15.0,
+            precision: crate::closed_loop::Precision::F32,
+            ecu_mhz: 168.0,
+            no_plots: true,
+            out,
+        },
+        elf: elf.to_path_buf(),
+        icount_shift: 4,
+        qemu: "qemu-system-arm".into(),
+        cpi: 2.5,
+        trace: None,
+        no_compare: true,
+        frame_timeout: 60.0,
+        max_model_underestimate_pct: None,
+    }
+}
+
+/// Runs a short PIL run with QEMU's execution trace going into a FIFO that a
+/// thread parses as it is written, and returns the trace's CPI bound.
+fn cpi_from_trace(args: &WcetArgs) -> Result<CpiReport> {
+    let dir = args.out.join("trace");
+    fs::create_dir_all(&dir)?;
+    let fifo = dir.join("qemu-trace.fifo");
+    if fifo.exists() {
+        fs::remove_file(&fifo)?;
+    }
+    let ok = Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .context("running mkfifo")?
+        .success();
+    if !ok {
+        bail!("mkfifo {} failed", fifo.display());
+    }
+    let reader = {
+        let fifo = fifo.clone();
+        thread::spawn(move || -> Result<CpiReport> {
+            let f = File::open(&fifo).with_context(|| format!("opening {}", fifo.display()))?;
+            cpi::analyse_log(BufReader::with_capacity(1 << 20, f), None, &[])
+                .map_err(|e| anyhow!("{e}"))
+        })
+    };
+    let mut a = pil_args(
+        dir.join("run"),
+        "paper",
+        1.0,
+        args.trace_seconds,
+        &args.elf,
+    );
+    a.trace = Some(fs::canonicalize(&fifo)?);
+    pil::run(&a)?;
+    reader
+        .join()
+        .map_err(|_| anyhow!("the trace parser stopped"))?
+}
+
+/// `host-sim wcet`.
+pub fn run(args: &WcetArgs) -> Result<()> {
+    if !(args.trace_seconds.is_finite() && args.trace_seconds > 0.0) {
+        bail!("--trace-seconds must be a positive number of seconds");
+    }
+    if !args.elf.exists() {
+        bail!(
+            "the ECU application {} does not exist: build it with `cargo ecu`",
+            args.elf.display()
+        );
+    }
+    fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let run_dirs = if args.pil.is_empty() {
+        let mut dirs = Vec::new();
+        for (obstacles, mu) in [("none", 1.0), ("paper", 1.0), ("none", 0.5), ("paper", 0.5)] {
+            let dir = args.out.join(format!("pil-{obstacles}-mu{mu}"));
+            println!("PIL lap: obstacles {obstacles}, μ = {mu}");
+            pil::run(&pil_args(dir.clone(), obstacles, mu, args.duration, &args.elf))?;
+            dirs.push(dir);
+        }
+        dirs
+    } else {
+        args.pil.clone()
+    };
+    println!("PIL run with QEMU's execution trace ({} s) for the CPI bound", args.trace_seconds);
+    let cpi = cpi_from_trace(args)?;
+
+    // The cost model refitted on every measured activation: its worst case under
+    // the iteration cap is the plan task's bound.
+    let runs = run_dirs
+        .iter()
+        .map(|d| report::load_pil_run(d))
+        .collect::<Result<Vec<_>>>()?;
+    let mut plans = Vec::new();
+    for d in &run_dirs {
+        plans.extend(load_counters(&d.join("plan_activations.csv"))?);
+    }
+    let control_max = runs
+        .iter()
+        .map(|r| r.summary.control_max_instructions)
+        .fold(0.0f64, f64::max);
+    let model = CostModel::fit(&plans, control_max)
+        .ok_or_else(|| anyhow!("too few plan activations to fit the cost model"))?;
+    let settings = crate::closed_loop::vehicle_config::<f32>(&crate::vehicle::VehicleParams::default())
+        .mpc_settings();
+    let plan_bound = model.plan_bound_instructions(&settings);
+    // The control task has no loop whose count depends on the data beyond the frame
+    // decoder's (bounded by the frame size): its bound is its largest measured
+    // activation with a 20 % allowance.
+    let control_bound = 1.2 * control_max;
+    let inputs = ReportInputs {
+        run_dirs: run_dirs.clone(),
+        elf: args.elf.clone(),
+        stack_levels: report::ecu_priority_levels(),
+        cpi,
+        plan_bound_instructions: plan_bound,
+        control_bound_instructions: control_bound,
+        plan_budget_cycles: crate::closed_loop::SimOptions::default().plan_budget_cycles,
+        control_budget_cycles: crate::closed_loop::SimOptions::default().control_budget_cycles,
+        clock_hz: 168_000_000,
+    };
+    let r = report::build_report(&inputs)?;
+    report::write_report(&args.out, &r)?;
+    fs::write(
+        args.out.join("cost_model.json"),
+        serde_json::to_string_pretty(&model)?,
+    )?;
+    println!(
+        "CPI bound {:.3} ({} instructions traced); plan: observed max {:.0} instructions, bound {:.0} instructions = {:.2} M cycles (budget {:.2} M); control: observed max {:.0}, bound {:.0}",
+        r.cycles_per_instruction_bound,
+        inputs.cpi.total.instructions,
+        r.tasks.plan.observed_max_instructions,
+        r.tasks.plan.bound_instructions,
+        r.tasks.plan.bound_cycles * 1e-6,
+        r.tasks.plan.budget_cycles * 1e-6,
+        r.tasks.control.observed_max_instructions,
+        r.tasks.control.bound_instructions,
+    );
+    for g in &r.goals {
+        println!(
+            "  {} {}: {} (goal ≤ {} {})",
+            if g.met { "met   " } else { "MISSED" },
+            g.name,
+            g.value.map_or("n/a".into(), |v| format!("{v:.0}")),
+            g.goal,
+            g.unit
+        );
+    }
+    println!("wrote {}", args.out.display());
+    if let Some(e) = &args.expected {
+        let text = fs::read_to_string(e)
+            .with_context(|| format!("cannot read the expectations {}", e.display()))?;
+        let fails = report::check_against_expected(&r, &text, args.margin);
+        if !fails.is_empty() {
+            bail!(
+                "the ECU grew past {} (+{:.0} %):\n  {}",
+                e.display(),
+                args.margin * 100.0,
+                fails.join("\n  ")
+            );
+        }
+        println!("within {} (+{:.0} %)", e.display(), args.margin * 100.0);
+    }
+    Ok(())
+}
