@@ -74,8 +74,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::low_level::{ControlFault, Mode};
 use crate::mpc::{MpcError, MpcReport};
-use crate::plan::Plan;
 use crate::obstacles::MAX_VERTICES;
+use crate::plan::Plan;
 use crate::qp::QpStatus;
 use crate::state_estimate::StateEstimate;
 use crate::vehicle_config::VehicleConfig;
@@ -214,10 +214,10 @@ pub struct ActuationFrame {
     /// 0 none, else [`fault_code`] of the [`ControlFault`] that forced the safe
     /// actuation.
     pub fault: u8,
-    /// ECU clock ticks (168 MHz cycle counter) of a control activation. The frame
-    /// is sent from inside the activation, so an ECU that measures the whole
-    /// activation (send included) reports the *previous* activation's ticks here
-    /// (0 in the first frame); the ECU application documents its choice.
+    /// ECU clock ticks (168 MHz) of this control activation's own work: the
+    /// estimate stored and `ControlTask::run` under the plan's lock. The link's
+    /// frame decoding and encoding (a stand-in for the vehicle's bus drivers) are
+    /// not included.
     pub control_ticks: u32,
     /// The plan activation that finished since the last actuation frame, if any.
     pub plan: Option<PlanEventFrame>,

@@ -85,8 +85,7 @@ impl Setup {
         };
         let count = chunk.count as usize;
         let end = chunk.first as usize + count;
-        if chunk.first != self.next_row || count > chunk.rows.len() || end > c.path_rows as usize
-        {
+        if chunk.first != self.next_row || count > chunk.rows.len() || end > c.path_rows as usize {
             return self.fail(failure(
                 SetupError::PathChunkOutOfRange,
                 chunk.first as usize,
@@ -106,8 +105,7 @@ impl Setup {
             return self.fail(failure(SetupError::NoConfig, 0));
         };
         let n = o.count as usize;
-        if o.index as usize != self.obstacles.len() || o.total != c.obstacles || n > MAX_VERTICES
-        {
+        if o.index as usize != self.obstacles.len() || o.total != c.obstacles || n > MAX_VERTICES {
             return self.fail(failure(SetupError::ObstacleOutOfRange, o.index as usize));
         }
         match Obstacle::from_vertices(o.id, &o.vertices[..n]) {

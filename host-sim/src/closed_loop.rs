@@ -55,8 +55,8 @@ use firmware::vehicle_config::VehicleConfig;
 use firmware::Real;
 use serde::Serialize;
 
-pub use crate::ecu::{ControlOutput, Ecu, PlanActivation, SimulatedEcu};
 pub use crate::cost_model::CostModel;
+pub use crate::ecu::{ControlOutput, Ecu, PlanActivation, SimulatedEcu};
 use crate::obstacle_file;
 use crate::plant::{Inputs, Plant, State};
 use crate::scenario::Scenario;
@@ -81,6 +81,10 @@ impl Precision {
     }
 }
 
+/// Cycles-per-instruction bound of the ECU from the timing report (`host-sim
+/// wcet`): worst-case cycles of the traced instruction mix over its instructions.
+pub const DEFAULT_CPI_BOUND: f64 = 2.42;
+
 /// Point capacity of the reference path on the host (the ECU build picks its own).
 pub const HOST_PATH_CAP: usize = 4096;
 
@@ -91,13 +95,15 @@ pub struct SimOptions {
     pub plant_dt_s: f64,
     /// ECU clock, Hz (168 MHz).
     pub ecu_clock_hz: f64,
-    /// Cycles per instruction of the ECU, cycles (1.34 for now: QEMU's
-    /// `-icount shift=3` setting, not a measured property of the Cortex-M4F; the
-    /// timing report gives the bound to use once measured on the ECU).
+    /// Cycles per instruction of the ECU: [`DEFAULT_CPI_BOUND`], the timing
+    /// report's bound for a Cortex-M4F at 168 MHz running from flash behind the
+    /// ART accelerator (`host-sim wcet`, `wcet.json`'s
+    /// `cycles_per_instruction_bound`).
     pub cycles_per_instruction: f64,
     /// Budget of one control activation, cycles (its deadline is its 10 ms period).
     pub control_budget_cycles: f64,
-    /// Budget of one plan activation, cycles (its deadline is its 100 ms period).
+    /// Budget of one plan activation, cycles: 80 ms at 168 MHz (13.44 M), the
+    /// 100 ms deadline less 20 ms kept for the control task's preemptions and margin.
     pub plan_budget_cycles: f64,
     /// Cost model, instructions.
     pub cost_model: CostModel,
@@ -118,9 +124,9 @@ impl Default for SimOptions {
         Self {
             plant_dt_s: 1e-3,
             ecu_clock_hz: 168e6,
-            cycles_per_instruction: 1.34,
+            cycles_per_instruction: DEFAULT_CPI_BOUND,
             control_budget_cycles: 5_000.0,
-            plan_budget_cycles: 8.4e6,
+            plan_budget_cycles: 13.44e6,
             cost_model: CostModel::default(),
             mu_road: 1.0,
             mu_planner: 1.0,

@@ -38,8 +38,8 @@ use std::time::Duration;
 
 use anyhow::{anyhow, bail, Context, Result};
 use firmware::link::{
-    self, ConfigFrame, Down, DoneFrame, FrameReader, ObstacleFrame, PathChunkFrame,
-    PlanEventFrame, SensorFrame, Up, MAX_FRAME_BYTES, PATH_CHUNK_ROWS,
+    self, ConfigFrame, DoneFrame, Down, FrameReader, ObstacleFrame, PathChunkFrame, PlanEventFrame,
+    SensorFrame, Up, MAX_FRAME_BYTES, PATH_CHUNK_ROWS,
 };
 use firmware::low_level::{Actuation, Mode};
 use firmware::obstacles::MAX_VERTICES;
@@ -48,9 +48,9 @@ use firmware::state_estimate::StateEstimate;
 
 use crate::closed_loop::{self, SimOptions};
 use crate::ecu::{ControlOutput, Ecu, PlanActivation};
-use firmware::tasks::PLAN_PERIOD_US;
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleParams;
+use firmware::tasks::PLAN_PERIOD_US;
 
 /// ECU core clock, Hz: QEMU's SysTick counts at this rate of virtual time.
 pub const ECU_CLOCK_HZ: f64 = 168e6;
@@ -199,14 +199,20 @@ impl QemuEcu {
             .args(["-display", "none", "-serial", "null", "-monitor", "none"])
             .arg("-chardev")
             .arg(format!("file,id=semi,path={}", defmt_path.display()))
-            .args(["-semihosting-config", "enable=on,target=native,chardev=semi"])
+            .args([
+                "-semihosting-config",
+                "enable=on,target=native,chardev=semi",
+            ])
             .arg("-icount")
             .arg(format!("shift={},sleep=off", opts.icount_shift))
-            .args(
-                opts.trace
-                    .iter()
-                    .flat_map(|t| ["-d".into(), "in_asm,exec,nochain".into(), "-D".into(), t.display().to_string()]),
-            )
+            .args(opts.trace.iter().flat_map(|t| {
+                [
+                    "-d".into(),
+                    "in_asm,exec,nochain".into(),
+                    "-D".into(),
+                    t.display().to_string(),
+                ]
+            }))
             .arg("-kernel")
             .arg(fs::canonicalize(&opts.elf)?)
             .stdin(Stdio::null())
@@ -306,13 +312,24 @@ impl QemuEcu {
         }
     }
 
-    fn set_up(&mut self, scenario: &Scenario, vehicle: &VehicleParams, sim: &SimOptions) -> Result<()> {
+    fn set_up(
+        &mut self,
+        scenario: &Scenario,
+        vehicle: &VehicleParams,
+        sim: &SimOptions,
+    ) -> Result<()> {
         let rows = scenario.track.rows();
         if rows.len() > u16::MAX as usize {
-            bail!("the track has {} rows: the link carries at most 65,535", rows.len());
+            bail!(
+                "the track has {} rows: the link carries at most 65,535",
+                rows.len()
+            );
         }
         if scenario.obstacles.len() > u8::MAX as usize {
-            bail!("{} obstacles: the link carries at most 255", scenario.obstacles.len());
+            bail!(
+                "{} obstacles: the link carries at most 255",
+                scenario.obstacles.len()
+            );
         }
         self.send(&Down::Config(ConfigFrame {
             vehicle: closed_loop::vehicle_config::<f32>(vehicle),
@@ -384,7 +401,10 @@ impl QemuEcu {
                     return Ok(a);
                 }
                 Up::Actuation(a) if a.fault == link::FAULT_PANIC => {
-                    bail!("the ECU panicked (it commanded zero torque, steering held at {:.3} rad)", a.delta_rad)
+                    bail!(
+                        "the ECU panicked (it commanded zero torque, steering held at {:.3} rad)",
+                        a.delta_rad
+                    )
                 }
                 Up::Actuation(_) => self.counters.stale += 1,
                 _ => self.counters.rejected += 1,
@@ -565,8 +585,9 @@ pub struct PilArgs {
     /// QEMU executable.
     #[arg(long, default_value = "qemu-system-arm")]
     pub qemu: PathBuf,
-    /// Cycles per instruction that turn measured instructions into cycles.
-    #[arg(long, default_value_t = 2.5)]
+    /// Cycles per instruction that turn measured instructions into cycles (the
+    /// timing report's bound).
+    #[arg(long, default_value_t = closed_loop::DEFAULT_CPI_BOUND)]
     pub cpi: f64,
     /// Also write QEMU's execution trace here (for `host-sim wcet`; large).
     #[arg(long)]
@@ -739,10 +760,16 @@ pub fn run(args: &PilArgs) -> Result<()> {
         bail!("--ecu-mhz: in PIL the ECU's own (virtual) clock times the run; use --icount-shift to change the time per instruction");
     }
     if !(1..=10).contains(&args.icount_shift) {
-        bail!("--icount-shift must be in 1..=10 (2^shift ns per instruction), got {}", args.icount_shift);
+        bail!(
+            "--icount-shift must be in 1..=10 (2^shift ns per instruction), got {}",
+            args.icount_shift
+        );
     }
     if !(args.cpi.is_finite() && args.cpi > 0.0) {
-        bail!("--cpi must be a positive number of cycles per instruction, got {}", args.cpi);
+        bail!(
+            "--cpi must be a positive number of cycles per instruction, got {}",
+            args.cpi
+        );
     }
     let (vehicle, scenario, mut opts) = crate::run::prepare(&args.run)?;
     opts.cycles_per_instruction = args.cpi;
@@ -851,10 +878,17 @@ pub fn run(args: &PilArgs) -> Result<()> {
     if let Some(c) = &report.comparison {
         match c.first_divergence_s {
             None => println!("against the in-process run: {}", c.cause),
-            Some(t) => println!("against the in-process run: first divergence at {t:.2} s: {}", c.cause),
+            Some(t) => println!(
+                "against the in-process run: first divergence at {t:.2} s: {}",
+                c.cause
+            ),
         }
     }
-    println!("PIL wall time {:.1} s; wrote {}", wall_s, args.run.out.display());
+    println!(
+        "PIL wall time {:.1} s; wrote {}",
+        wall_s,
+        args.run.out.display()
+    );
     if let Some(limit) = args.max_model_underestimate_pct {
         if e.max_under_pct > limit {
             bail!(

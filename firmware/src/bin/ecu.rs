@@ -58,7 +58,8 @@ systick_monotonic!(Mono, MONO_HZ);
 static UP_FD: AtomicUsize = AtomicUsize::new(0);
 /// Last steering command, `f32` bits (the panic handler holds it).
 static LAST_DELTA_BITS: AtomicU32 = AtomicU32::new(0);
-/// Core clock ticks spent in `control` so far (the plan task subtracts them).
+/// Core clock ticks spent in `control` so far, link included (the plan task
+/// subtracts them from its elapsed time).
 static CONTROL_TICKS: AtomicU32 = AtomicU32::new(0);
 /// Core clock tick count at the start of the timeline (t = 0).
 static EPOCH_TICKS: AtomicU32 = AtomicU32::new(0);
@@ -281,7 +282,9 @@ mod app {
         Mono::start(cx.core.SYST, SYSCLK_HZ);
         defmt::info!("ecu: waiting for the simulator on ecu.down / ecu.up");
         let Some(mut link) = Link::open() else {
-            defmt::error!("ecu: no link: run it from `host-sim pil` (it creates ecu.down and ecu.up)");
+            defmt::error!(
+                "ecu: no link: run it from `host-sim pil` (it creates ecu.down and ecu.up)"
+            );
             exit(false)
         };
         let planner = cx.local.planner_storage;
@@ -356,17 +359,25 @@ mod app {
                     continue;
                 }
             };
+            // The task's own work: the PIL link's frame decoding and encoding stand
+            // in for the vehicle's bus drivers and are measured apart.
+            let t1 = core_ticks();
             let e = est.estimate;
             cx.shared.estimate.lock(|s| *s = e);
             let control = &mut *cx.local.control;
-            let act = cx.shared.plan.lock(|plan| control.run(&e, plan, e.stamp_us));
+            let act = cx
+                .shared
+                .plan
+                .lock(|plan| control.run(&e, plan, e.stamp_us));
             let fault = link::fault_code(control.last_fault);
             LAST_DELTA_BITS.store(act.delta_rad.to_bits(), Ordering::Relaxed);
-            let ticks = core_ticks().saturating_sub(t0).min(u32::MAX as u64) as u32;
-            CONTROL_TICKS.fetch_add(ticks, Ordering::Relaxed);
+            let ticks = core_ticks().saturating_sub(t1).min(u32::MAX as u64) as u32;
             let mut frame = actuation_frame(est.seq, &act, fault, ticks);
             frame.plan = cx.shared.plan_event.lock(|p| p.take());
             cx.local.link.send(&Up::Actuation(frame));
+            // Everything this activation took, for the plan task's own-time account.
+            let whole = core_ticks().saturating_sub(t0).min(u32::MAX as u64) as u32;
+            CONTROL_TICKS.fetch_add(whole, Ordering::Relaxed);
             release += 10.millis();
             Mono::delay_until(release).await;
         }

@@ -32,6 +32,10 @@ pub struct WcetArgs {
     /// (the trace is parsed as QEMU writes it: no file).
     #[arg(long, default_value_t = 2.0)]
     pub trace_seconds: f64,
+    /// Use this cycles-per-instruction bound instead of tracing a PIL run (a value
+    /// from an earlier report's `cycles_per_instruction_bound`).
+    #[arg(long)]
+    pub cpi_bound: Option<f64>,
     /// Laps of the paper track to run when no --pil folder is given, s of simulated
     /// time each at most.
     #[arg(long, default_value_t = 200.0)]
@@ -68,7 +72,7 @@ fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -
         elf: elf.to_path_buf(),
         icount_shift: 4,
         qemu: "qemu-system-arm".into(),
-        cpi: 2.5,
+        cpi: crate::closed_loop::DEFAULT_CPI_BOUND,
         trace: None,
         no_compare: true,
         frame_timeout: 60.0,
@@ -101,18 +105,34 @@ fn cpi_from_trace(args: &WcetArgs) -> Result<CpiReport> {
                 .map_err(|e| anyhow!("{e}"))
         })
     };
-    let mut a = pil_args(
-        dir.join("run"),
-        "paper",
-        1.0,
-        args.trace_seconds,
-        &args.elf,
-    );
+    let mut a = pil_args(dir.join("run"), "paper", 1.0, args.trace_seconds, &args.elf);
     a.trace = Some(fs::canonicalize(&fifo)?);
     pil::run(&a)?;
     reader
         .join()
         .map_err(|_| anyhow!("the trace parser stopped"))?
+}
+
+/// A CPI report standing for a bound given on the command line.
+fn given_cpi(c: f64) -> CpiReport {
+    CpiReport {
+        total: cpi::Figures {
+            instructions: 0,
+            worst_case_cycles: 0,
+            cpi_bound: c,
+            classes: Vec::new(),
+        },
+        tb_executions: 0,
+        translations: 0,
+        untraced_executions: 0,
+        abandoned_executions: 0,
+        top_mnemonics: Vec::new(),
+        unknown_mnemonics: Vec::new(),
+        regions: Vec::new(),
+        justification: format!(
+            "given on the command line (--cpi-bound {c}): the bound of an earlier traced run; see its report"
+        ),
+    }
 }
 
 /// `host-sim wcet`.
@@ -133,15 +153,30 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         for (obstacles, mu) in [("none", 1.0), ("paper", 1.0), ("none", 0.5), ("paper", 0.5)] {
             let dir = args.out.join(format!("pil-{obstacles}-mu{mu}"));
             println!("PIL lap: obstacles {obstacles}, μ = {mu}");
-            pil::run(&pil_args(dir.clone(), obstacles, mu, args.duration, &args.elf))?;
+            pil::run(&pil_args(
+                dir.clone(),
+                obstacles,
+                mu,
+                args.duration,
+                &args.elf,
+            ))?;
             dirs.push(dir);
         }
         dirs
     } else {
         args.pil.clone()
     };
-    println!("PIL run with QEMU's execution trace ({} s) for the CPI bound", args.trace_seconds);
-    let cpi = cpi_from_trace(args)?;
+    let cpi = match args.cpi_bound {
+        Some(c) if c.is_finite() && c >= 1.0 => given_cpi(c),
+        Some(c) => bail!("--cpi-bound must be at least 1 cycle per instruction, got {c}"),
+        None => {
+            println!(
+                "PIL run with QEMU's execution trace ({} s) for the CPI bound",
+                args.trace_seconds
+            );
+            cpi_from_trace(args)?
+        }
+    };
 
     // The cost model refitted on every measured activation: its worst case under
     // the iteration cap is the plan task's bound.
@@ -159,8 +194,9 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         .fold(0.0f64, f64::max);
     let model = CostModel::fit(&plans, control_max)
         .ok_or_else(|| anyhow!("too few plan activations to fit the cost model"))?;
-    let settings = crate::closed_loop::vehicle_config::<f32>(&crate::vehicle::VehicleParams::default())
-        .mpc_settings();
+    let settings =
+        crate::closed_loop::vehicle_config::<f32>(&crate::vehicle::VehicleParams::default())
+            .mpc_settings();
     let plan_bound = model.plan_bound_instructions(&settings);
     // The control task has no loop whose count depends on the data beyond the frame
     // decoder's (bounded by the frame size): its bound is its largest measured

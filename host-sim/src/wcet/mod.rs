@@ -8,8 +8,8 @@
 //!
 //! All are library functions; the `host-sim wcet` command wires them together.
 
-pub mod cpi;
 pub mod command;
+pub mod cpi;
 pub mod report;
 pub mod stack;
 

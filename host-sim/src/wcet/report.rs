@@ -362,7 +362,7 @@ pub struct ReportInputs {
     pub plan_bound_instructions: f64,
     /// Static bound on one control activation, in instructions.
     pub control_bound_instructions: f64,
-    /// Plan task budget per activation, in cycles (8.4e6: 50 ms at 168 MHz).
+    /// Plan task budget per activation, in cycles (13.44e6: 80 ms at 168 MHz).
     pub plan_budget_cycles: f64,
     /// Control task budget per activation, in cycles.
     pub control_budget_cycles: f64,
