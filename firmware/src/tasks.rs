@@ -18,13 +18,17 @@
 //! state estimate is refused by both tasks and counted; `control` then applies the
 //! safe actuation (no traction, moderate braking, steering held).
 //!
-//! Late plans: an activation that finishes after its deadline (the next release)
-//! still publishes its plan when it finishes: it is the newest plan, a trajectory
+//! Late plans ([`PlanTask::publish_at`]): an activation that finishes after its
+//! deadline (the next release) but within [`MAX_PLAN_AGE_US`] of its release still
+//! publishes its plan when it finishes: it is the newest plan, a trajectory
 //! stamped at its release that `control` follows at the current time (shifted).
-//! Until then `control` keeps following the previous plan shifted in time (and
-//! stops the car when it runs out). A release that falls while `plan` is still
-//! running is skipped, not queued (RTIC cannot spawn a busy task), so the next
-//! activation plans from a fresh state; each skipped release is a deadline miss.
+//! A plan older than that when it finishes is dropped (counted in
+//! [`PlanTaskStats::stale`]): planned from a state that old it could lead the car
+//! off the road. Until a plan is published `control` keeps following the previous
+//! one shifted in time, and brings the car to a controlled stop when it runs out.
+//! A release that falls while `plan` is still running is skipped, not queued
+//! (RTIC cannot spawn a busy task), so the next activation plans from a fresh
+//! state; each skipped release is a deadline miss.
 //!
 //! Worst-case work of one `plan` activation: at most
 //! [`MpcSettings::cold_start_iterations`] linearise–condense passes and at most
@@ -42,6 +46,9 @@ use crate::Real;
 pub const CONTROL_PERIOD_US: u64 = 10_000;
 /// Period of the `plan` task, µs.
 pub const PLAN_PERIOD_US: u64 = 100_000;
+/// Oldest a plan may be when it is published (time since its release), µs: two
+/// periods. An older plan is dropped ([`PlanTask::publish_at`]).
+pub const MAX_PLAN_AGE_US: u64 = 2 * PLAN_PERIOD_US;
 
 /// Counters of the `plan` task (deterministic).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -54,6 +61,9 @@ pub struct PlanTaskStats {
     pub failures: u32,
     /// Of those, refused non-finite state estimates.
     pub non_finite_estimates: u32,
+    /// Plans dropped because they finished more than [`MAX_PLAN_AGE_US`] after
+    /// their release.
+    pub stale: u32,
 }
 
 /// The `plan` task's local resources: the reference path, the obstacle parabolas,
@@ -93,6 +103,7 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
                 published: 0,
                 failures: 0,
                 non_finite_estimates: 0,
+                stale: 0,
             },
             last_error: None,
         }
@@ -174,6 +185,19 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         self.ready = false;
         self.stats.published = self.stats.published.wrapping_add(1);
         true
+    }
+
+    /// [`PlanTask::publish`] at `now_us` (µs, the clock of the plan's stamp) under
+    /// the late-plan policy (module docs): a plan more than [`MAX_PLAN_AGE_US`] old
+    /// is dropped instead (counted in [`PlanTaskStats::stale`]). Returns whether it
+    /// was published.
+    pub fn publish_at(&mut self, shared: &mut Plan<T>, now_us: u64) -> bool {
+        if self.ready && now_us.saturating_sub(self.working.stamp_us) > MAX_PLAN_AGE_US {
+            self.ready = false;
+            self.stats.stale = self.stats.stale.wrapping_add(1);
+            return false;
+        }
+        self.publish(shared)
     }
 }
 

@@ -35,7 +35,7 @@ use firmware::mpc::MpcReport;
 use firmware::obstacles::Obstacle as FwObstacle;
 use firmware::plan::Plan;
 use firmware::state_estimate::StateEstimate;
-use firmware::tasks::{ControlTask, PlanTask, CONTROL_PERIOD_US, PLAN_PERIOD_US};
+use firmware::tasks::{ControlTask, PlanTask, CONTROL_PERIOD_US, MAX_PLAN_AGE_US, PLAN_PERIOD_US};
 use firmware::Real;
 use serde::Serialize;
 
@@ -224,8 +224,11 @@ impl<T: Real> SimulatedEcu<T> {
         let control_cycles = self.cost_model.control_instructions() * self.cycles_per_instruction;
         let finish_us = t_us + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
         self.busy_until_us = finish_us;
+        // The late-plan policy: published at its finish unless older than
+        // MAX_PLAN_AGE_US by then (`PlanTask::publish_at`).
+        let fresh = finish_us - t_us <= MAX_PLAN_AGE_US;
         let (status, published) = match &outcome {
-            Ok(_) => ("optimal", true),
+            Ok(_) => ("optimal", fresh),
             Err(e) => (mpc_error_name(e), false),
         };
         self.in_flight = Some(InFlight {
@@ -306,9 +309,10 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
             .is_some_and(|f| f.record.finish_us <= t_us)
         {
             if let Some(f) = self.in_flight.take() {
-                if f.record.published {
-                    self.planner.publish(&mut self.shared_plan);
-                }
+                let published = self
+                    .planner
+                    .publish_at(&mut self.shared_plan, f.record.finish_us);
+                debug_assert_eq!(published, f.record.published);
                 plans.push(f.record);
             }
         }

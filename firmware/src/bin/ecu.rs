@@ -8,13 +8,14 @@
 //!
 //! No maths here: the app calls the same library functions the simulator calls.
 //!
-//! **Deadline policy** (the same in the simulator, `host-sim/src/closed_loop.rs`):
-//! a plan that finishes after its 100 ms deadline is still published when it
-//! finishes (it is the newest plan, stamped at its release, and `control` follows
-//! it at the current time, i.e. shifted); until then `control` keeps following the
-//! previous plan shifted in time, then brings the car to a controlled stop when it
-//! runs out. Releases that fall while the plan task is still running are skipped,
-//! not queued, so the next activation plans from a fresh state.
+//! **Deadline policy** (`firmware::tasks`, the same in the simulator): a plan that
+//! finishes after its 100 ms deadline but within 200 ms of its release is still
+//! published when it finishes (it is the newest plan, stamped at its release, and
+//! `control` follows it at the current time, i.e. shifted); an older one is
+//! dropped. Until a plan is published `control` keeps following the previous one
+//! shifted in time, then brings the car to a controlled stop when it runs out.
+//! Releases that fall while the plan task is still running are skipped, not
+//! queued, so the next activation plans from a fresh state.
 //!
 //! **Link.** In the processor-in-the-loop run (`host-sim pil`) the simulator
 //! starts QEMU in a folder holding two FIFOs, `ecu.down` (host → ECU) and
@@ -402,12 +403,12 @@ mod app {
             let result = planner.run(&est);
             // The record's copy of the plan, taken before the swap, outside the lock.
             let computed = planner.pending().copied();
-            let published = cx.shared.plan.lock(|p| planner.publish(p));
+            let finish_us = now_us();
+            let published = cx.shared.plan.lock(|p| planner.publish_at(p, finish_us));
             let c1 = CONTROL_TICKS.load(Ordering::Relaxed);
             let own = core_ticks()
                 .saturating_sub(t0)
                 .saturating_sub(c1.wrapping_sub(c0) as u64);
-            let finish_us = now_us();
             let event = PlanEventFrame::new(
                 activation,
                 release_us,

