@@ -76,8 +76,10 @@ fn the_ecu_in_the_loop_drives_round_the_obstacles_within_its_deadlines() {
     assert_eq!(s.plan_failures, 0);
     assert_eq!(s.plan_deadline_misses, 0);
     assert_eq!(s.control_deadline_misses, 0);
-    // Every release ran and was reported, with its instructions measured.
-    assert_eq!(r.plan_activations.len() as u64, s.plan_activations);
+    // Every release ran and was reported (the last one may still be running when
+    // the run ends), with its instructions measured.
+    let reported = r.plan_activations.len() as u64;
+    assert!(reported + 1 >= s.plan_activations && reported <= s.plan_activations);
     assert!(r.plan_activations.iter().all(|a| a.instructions > 1e5));
     let warm_max = r
         .plan_activations
