@@ -60,7 +60,7 @@ impl Setup {
 
     /// A `Config` frame: checked and kept; the planner's settings derive from it.
     pub fn config<const CAP: usize>(&mut self, c: &ConfigFrame, planner: &mut PlanTask<f32, CAP>) {
-        if !c.vehicle.is_valid() || !(c.mu_planner.is_finite() && c.mu_planner > 0.0) {
+        if !(c.vehicle.is_valid() && c.mu_planner.is_finite() && c.mu_planner > 0.0) {
             return self.fail(failure(SetupError::InvalidConfig, 0));
         }
         if c.path_rows as usize > CAP {

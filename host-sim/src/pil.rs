@@ -98,7 +98,7 @@ pub struct LinkCounters {
 }
 
 enum Incoming {
-    Frame(Up),
+    Frame(Box<Up>),
     Bad,
     Closed,
 }
@@ -155,7 +155,7 @@ fn spawn_reader(mut file: File) -> Receiver<Incoming> {
                 let msg = match reader.push(b) {
                     None => continue,
                     Some(Ok(frame)) => match link::decode::<Up>(frame) {
-                        Ok(m) => Incoming::Frame(m),
+                        Ok(m) => Incoming::Frame(Box::new(m)),
                         Err(_) => Incoming::Bad,
                     },
                     Some(Err(_)) => Incoming::Bad,
@@ -293,7 +293,7 @@ impl QemuEcu {
                 .up
                 .recv_timeout(Duration::from_secs_f64(self.opts.frame_timeout_s))
             {
-                Ok(Incoming::Frame(m)) => return Ok(m),
+                Ok(Incoming::Frame(m)) => return Ok(*m),
                 Ok(Incoming::Bad) => self.counters.rejected += 1,
                 Ok(Incoming::Closed) | Err(RecvTimeoutError::Disconnected) => {
                     let defmt = self.opts.work_dir.join("ecu.defmt");
