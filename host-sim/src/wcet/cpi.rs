@@ -12,10 +12,22 @@
 //! the jump that ends the block). The result is an upper bound on cycles per
 //! instruction for the code that ran, under the assumptions in [`JUSTIFICATION`].
 //!
+//! Executions are matched to translations by the TB's host code pointer and pc
+//! printed in the `Trace` line (a pc can have several translations: icount
+//! re-translates an I/O instruction as a 1-instruction TB).
+//!
 //! With `-icount`, QEMU sometimes starts a TB it does not run (`Stopped execution of TB
 //! chain before`) or rewinds one at an I/O access (`cpu_io_recompile: rewound
-//! execution of TB to`); the first execution is removed, the second counted up to the
-//! instruction where execution resumed, so instruction counts match QEMU's.
+//! execution of TB to PC`, PC being the I/O instruction, possibly in the middle of the
+//! TB); the first execution is removed, the second counted up to the I/O instruction
+//! (which then runs as its own TB), so instruction counts match QEMU's.
+//!
+//! **Idle.** A firmware with no idle task spins in `b .` between interrupts (RTIC's
+//! default idle), and QEMU executes and counts that loop. A translation made only of
+//! `nop`/`wfi`/`wfe` ending in a branch to its own start is an idle loop: its
+//! executions are reported apart ([`CpiReport::idle`]) and are not in
+//! [`CpiReport::total`], whose CPI bound is that of the code doing work (an idle
+//! loop's bound, 11 cycles per `b .`, says nothing about the tasks).
 
 use super::{demangle, WcetError};
 use serde::Serialize;
@@ -202,6 +214,23 @@ struct Insn {
     cycles: u32,
     class: Class,
     mnemonic: String,
+    /// Target of an unconditional `b #ADDR`.
+    target: Option<u32>,
+}
+
+/// Whether a translation is an idle loop: only `nop`, `wfi`, `wfe`, `yield`, then an
+/// unconditional branch to its own start.
+fn is_idle_loop(insns: &[Insn]) -> bool {
+    let (Some(first), Some((last, body))) = (insns.first(), insns.split_last()) else {
+        return false;
+    };
+    last.target == Some(first.address)
+        && body.iter().all(|i| {
+            matches!(
+                i.mnemonic.split('.').next(),
+                Some("nop" | "wfi" | "wfe" | "yield")
+            )
+        })
 }
 
 /// A function symbol of the ELF: name (mangled), start address, size in bytes.
@@ -304,9 +333,12 @@ pub struct RegionFigures {
 /// The CPI bound of a traced execution.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CpiReport {
-    /// Whole trace.
+    /// Whole trace except the idle loop.
     pub total: Figures,
-    /// Executions of translation blocks counted.
+    /// The idle loop (`b .` and the like, see the module documentation): not in
+    /// `total`.
+    pub idle: Figures,
+    /// Executions of translation blocks counted (idle loop included).
     pub tb_executions: u64,
     /// Distinct translations seen.
     pub translations: u64,
@@ -331,11 +363,12 @@ struct Trace {
     translations: Vec<Vec<Insn>>,
     /// Translation not yet executed, by start pc.
     pending: HashMap<u32, usize>,
-    /// `[cs_base/pc/flags/cflags]` to translation.
-    bound: HashMap<(u32, u32, u32, u32), usize>,
+    /// (TB host code pointer, pc) to translation.
+    bound: HashMap<(u64, u32), usize>,
     /// Executions per (translation, instructions executed).
     executions: HashMap<(usize, usize), u64>,
-    last: Option<(usize, u32)>,
+    /// The last execution: translation, host pointer, pc.
+    last: Option<(usize, u64, u32)>,
     rewound: Option<usize>,
     tb_executions: u64,
     untraced: u64,
@@ -366,12 +399,16 @@ fn parse_in_line(line: &str) -> Option<Insn> {
     }
     let operands = tokens.collect::<Vec<_>>().join(" ");
     let (class, cycles) = instruction_timing(mnemonic, &operands);
+    let target = matches!(mnemonic, "b" | "b.w" | "b.n")
+        .then(|| operands.strip_prefix('#').and_then(hex))
+        .flatten();
     Some(Insn {
         address,
         bytes,
         cycles,
         class,
         mnemonic: mnemonic.to_string(),
+        target,
     })
 }
 
@@ -381,20 +418,51 @@ impl Trace {
         *entry = entry.saturating_add_signed(times);
     }
 
-    fn undo_last(&mut self, pc: u32) -> Option<usize> {
-        match self.last.take() {
-            Some((tb, start)) if start == pc => {
-                let len = self.translations.get(tb).map_or(0, Vec::len);
-                self.record(tb, len, -1);
-                self.tb_executions = self.tb_executions.saturating_sub(1);
-                self.abandoned += 1;
+    /// Removes the last execution if it is of the TB at `host` (when given) starting
+    /// at `pc`; returns its translation.
+    fn undo_last(&mut self, host: Option<u64>, pc: u32) -> Option<usize> {
+        match self.last {
+            Some((tb, h, start)) if start == pc && host.is_none_or(|x| x == h) => {
+                self.last = None;
+                self.remove_execution(tb);
                 Some(tb)
             }
             _ => None,
         }
     }
 
-    fn trace(&mut self, key: (u32, u32, u32, u32)) {
+    fn remove_execution(&mut self, tb: usize) {
+        let len = self.translations.get(tb).map_or(0, Vec::len);
+        self.record(tb, len, -1);
+        self.tb_executions = self.tb_executions.saturating_sub(1);
+        self.abandoned += 1;
+    }
+
+    /// `cpu_io_recompile: rewound execution of TB to PC`: the last TB ran up to the
+    /// instruction at `pc` (excluded), which is re-executed as its own TB. QEMU prints
+    /// the I/O instruction's pc (or, in some versions, the TB's start: then the
+    /// executed prefix is known at the next `Trace` line).
+    fn rewind(&mut self, pc: u32) {
+        let Some((tb, _, _)) = self.last else {
+            return;
+        };
+        let Some(done) = self
+            .translations
+            .get(tb)
+            .and_then(|insns| insns.iter().position(|i| i.address == pc))
+        else {
+            return;
+        };
+        self.last = None;
+        self.remove_execution(tb);
+        if done > 0 {
+            self.record(tb, done, 1);
+        } else {
+            self.rewound = Some(tb);
+        }
+    }
+
+    fn trace(&mut self, host: u64, key: (u32, u32, u32, u32)) {
         let pc = key.1;
         if let Some(tb) = self.rewound.take() {
             // The rewound TB ran up to the instruction where execution resumes.
@@ -408,15 +476,16 @@ impl Trace {
                 }
             }
         }
+        // QEMU prints a translation just before its first execution.
         if let Some(tb) = self.pending.remove(&pc) {
-            self.bound.insert(key, tb);
+            self.bound.insert((host, pc), tb);
         }
-        match self.bound.get(&key).copied() {
+        match self.bound.get(&(host, pc)).copied() {
             Some(tb) => {
                 let len = self.translations.get(tb).map_or(0, Vec::len);
                 self.record(tb, len, 1);
                 self.tb_executions += 1;
-                self.last = Some((tb, pc));
+                self.last = Some((tb, host, pc));
             }
             None => {
                 self.untraced += 1;
@@ -424,6 +493,13 @@ impl Trace {
             }
         }
     }
+}
+
+/// The TB host code pointer, the first `0x…` word of a `Trace` or `Stopped` line.
+fn host_pointer(line: &str) -> Option<u64> {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix("0x"))
+        .and_then(|h| u64::from_str_radix(h, 16).ok())
 }
 
 /// Parses the bracketed `cs_base/pc/flags/cflags` of a `Trace` line.
@@ -478,7 +554,9 @@ pub fn analyse_log<R: BufRead>(
             let key = trace_key(text).ok_or_else(|| {
                 format_error(number, "no [cs_base/pc/flags/cflags] in a Trace line", text)
             })?;
-            t.trace(key);
+            let host = host_pointer(text)
+                .ok_or_else(|| format_error(number, "no TB host pointer in a Trace line", text))?;
+            t.trace(host, key);
         } else if text.starts_with("IN:") {
             block = Some(Vec::new());
         } else if let Some(rest) = text.strip_prefix("Stopped execution of TB chain before") {
@@ -488,12 +566,12 @@ pub fn analyse_log<R: BufRead>(
                 hex(rest.get(open + 1..close)?)
             });
             if let Some(pc) = pc {
-                t.undo_last(pc);
+                t.undo_last(host_pointer(rest), pc);
             }
         } else if let Some(rest) = text.strip_prefix("cpu_io_recompile: rewound execution of TB to")
         {
             if let Some(pc) = hex(rest) {
-                t.rewound = t.undo_last(pc);
+                t.rewind(pc);
             }
         }
     }
@@ -552,6 +630,7 @@ impl Accumulator {
 
 fn summarise(t: &Trace, regions: &[Region]) -> CpiReport {
     let mut total = Accumulator::default();
+    let mut idle = Accumulator::default();
     let mut per_region: Vec<Accumulator> = regions.iter().map(|_| Accumulator::default()).collect();
     let mut mnemonics: HashMap<&str, u64> = HashMap::new();
     let mut unknown: HashMap<&str, u64> = HashMap::new();
@@ -560,6 +639,10 @@ fn summarise(t: &Trace, regions: &[Region]) -> CpiReport {
             continue;
         };
         if times == 0 || insns.is_empty() {
+            continue;
+        }
+        if t.translations.get(tb).is_some_and(|all| is_idle_loop(all)) {
+            idle.add(insns, times);
             continue;
         }
         total.add(insns, times);
@@ -583,6 +666,7 @@ fn summarise(t: &Trace, regions: &[Region]) -> CpiReport {
     };
     CpiReport {
         total: total.figures(),
+        idle: idle.figures(),
         tb_executions: t.tb_executions,
         translations: t.translations.len() as u64,
         untraced_executions: t.untraced,
@@ -724,6 +808,133 @@ Trace 0: 0x7f0000000100 [00800408/08000100/00000110/ff020200] f
         assert_eq!(report.total.instructions, 6);
         assert_eq!(report.regions[0].figures.instructions, 2);
         assert_eq!(report.regions[0].figures.worst_case_cycles, 11);
+        Ok(())
+    }
+
+    /// As QEMU 7.2 with `-icount` writes it on the ECU: a TB (4 instructions) rewound
+    /// at its third instruction (an I/O store), which then runs as a 1-instruction TB
+    /// at the same pc as another translation, and the rest of the block as a third
+    /// translation; the interrupted TB's first two instructions ran once.
+    const REWIND_MID_TB: &str = "\
+----------------
+IN: main
+0x08000100:  2040       movs     r0, #0x40
+0x08000102:  2100       movs     r1, #0
+0x08000104:  6008       str      r0, [r1]
+0x08000106:  2200       movs     r2, #0
+
+Trace 0: 0x7f0000000100 [00800408/08000100/00000010/ff020200] main
+cpu_io_recompile: rewound execution of TB to 08000104
+----------------
+IN: main
+0x08000104:  6008       str      r0, [r1]
+
+Trace 0: 0x7f0000000200 [00800408/08000104/00000010/ff038201] main
+----------------
+IN: main
+0x08000106:  2200       movs     r2, #0
+
+Trace 0: 0x7f0000000300 [00800408/08000106/00000010/ff020200] main
+----------------
+IN: main
+0x08000104:  6008       str      r0, [r1]
+0x08000106:  2200       movs     r2, #0
+
+Trace 0: 0x7f0000000400 [00800408/08000104/00000010/ff020200] main
+Trace 0: 0x7f0000000200 [00800408/08000104/00000010/ff038201] main
+Trace 0: 0x7f0000000400 [00800408/08000104/00000010/ff020200] main
+";
+
+    #[test]
+    fn rewind_in_the_middle_of_a_tb_counts_each_instruction_once() -> Result<(), WcetError> {
+        let report = analyse_log(REWIND_MID_TB.as_bytes(), None, &[])?;
+        // 2 (prefix of the rewound TB) + 1 (I/O TB) + 1 (rest) + 2 + 1 + 2.
+        assert_eq!(report.total.instructions, 2 + 1 + 1 + 2 + 1 + 2);
+        assert_eq!(report.abandoned_executions, 1);
+        assert_eq!(report.tb_executions, 5);
+        // Prefix movs, movs: 2 < 6 → 11; I/O str 2 → 11; movs → 11; str, movs → 11.
+        assert_eq!(report.total.worst_case_cycles, 6 * 11);
+        Ok(())
+    }
+
+    /// Start-up (one TB), then the idle loop `b .` spinning between two interrupt
+    /// handler executions.
+    const IDLE: &str = "\
+----------------
+IN: main
+0x08000100:  2040       movs     r0, #0x40
+0x08000102:  b662       cpsie    i
+
+Trace 0: 0x7f0000000100 [00800408/08000100/00000010/ff020200] main
+----------------
+IN: main
+0x08000104:  e7fe       b        #0x8000104
+
+Trace 0: 0x7f0000000200 [00800400/08000104/00000010/ff020200] main
+Trace 0: 0x7f0000000200 [00800400/08000104/00000010/ff020200] main
+Trace 0: 0x7f0000000200 [00800400/08000104/00000010/ff020200] main
+----------------
+IN: SysTick
+0x08000200:  2000       movs     r0, #0
+0x08000202:  4770       bx       lr
+
+Trace 0: 0x7f0000000300 [00800408/08000200/00000010/ff020200] SysTick
+Trace 0: 0x7f0000000200 [00800400/08000104/00000010/ff020200] main
+Trace 0: 0x7f0000000200 [00800400/08000104/00000010/ff020200] main
+Trace 0: 0x7f0000000300 [00800408/08000200/00000010/ff020200] SysTick
+";
+
+    #[test]
+    fn the_idle_loop_is_reported_apart() -> Result<(), WcetError> {
+        let report = analyse_log(IDLE.as_bytes(), None, &[])?;
+        assert_eq!(report.idle.instructions, 5);
+        assert_eq!(report.idle.worst_case_cycles, 5 * 11);
+        // Start-up 2 instructions, the handler 2 × 2.
+        assert_eq!(report.total.instructions, 2 + 2 * 2);
+        assert_eq!(report.total.worst_case_cycles, 3 * 11);
+        assert_eq!(report.tb_executions, 8);
+        assert!(report.top_mnemonics.iter().all(|(m, _)| m != "b"));
+        Ok(())
+    }
+
+    #[test]
+    fn a_branch_elsewhere_is_not_idle() {
+        let insn = |address, mnemonic: &str, target| Insn {
+            address,
+            bytes: 2,
+            cycles: 1,
+            class: Class::Branch,
+            mnemonic: mnemonic.into(),
+            target,
+        };
+        assert!(is_idle_loop(&[insn(0x10, "b", Some(0x10))]));
+        assert!(is_idle_loop(&[
+            insn(0x10, "wfi", None),
+            insn(0x12, "b", Some(0x10))
+        ]));
+        assert!(!is_idle_loop(&[insn(0x10, "b", Some(0x20))]));
+        assert!(!is_idle_loop(&[
+            insn(0x10, "adds", None),
+            insn(0x12, "b", Some(0x10))
+        ]));
+        assert!(!is_idle_loop(&[]));
+        assert_eq!(
+            parse_in_line("0x08018e26:  e7fe       b        #0x8018e26").and_then(|i| i.target),
+            Some(0x0801_8e26)
+        );
+    }
+
+    /// Tool, not a check: `CPI_LOG=/path/to/qemu.log cargo test --release -p host-sim
+    /// --lib cpi::tests::analyse_the_log_in_cpi_log -- --ignored --nocapture` prints
+    /// the analysis of a saved `-d in_asm,exec,nochain` log (`/dev/stdin` works).
+    #[test]
+    #[ignore = "needs a QEMU log in CPI_LOG"]
+    fn analyse_the_log_in_cpi_log() -> Result<(), Box<dyn std::error::Error>> {
+        let path = std::env::var("CPI_LOG")?;
+        let file = std::fs::File::open(&path)?;
+        let mut report = analyse_log(std::io::BufReader::with_capacity(1 << 20, file), None, &[])?;
+        report.justification.clear();
+        eprintln!("{}", serde_json::to_string_pretty(&report)?);
         Ok(())
     }
 

@@ -1246,6 +1246,12 @@ active_constraints,max_validity_slack_rad";
                 cpi_bound: bound,
                 classes: Vec::new(),
             },
+            idle: Figures {
+                instructions: 0,
+                worst_case_cycles: 0,
+                cpi_bound: 0.0,
+                classes: Vec::new(),
+            },
             tb_executions: 10,
             translations: 2,
             untraced_executions: 0,
