@@ -334,6 +334,15 @@ mod app {
         )
     }
 
+    /// Between activations the core sleeps until the next interrupt (the
+    /// monotonic's tick or a task's release).
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+
     /// The 100 Hz control task: sensor frame in, [`ControlTask::run`], actuator
     /// frame out. Deadline: its 10 ms period.
     #[task(priority = 2, shared = [estimate, plan, plan_event], local = [control, link])]
