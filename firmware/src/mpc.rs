@@ -244,9 +244,9 @@ impl<T: Real> MpcSettings<T> {
             cold_start_iterations: 3,
             // The closed-loop laps need at most 22 per activation, the harshest
             // tests (obstacles across the road, cold starts) up to ~60 for the first
-            // pass; 100 keeps the plan task's worst case (`host-sim wcet`: 3 passes
-            // and 100 iterations at the largest working set) within its budget.
-            qp_max_iter: 100,
+            // pass; 90 keeps the plan task's worst case (`host-sim wcet`: 3 passes
+            // and 90 iterations at the largest working set) within its budget.
+            qp_max_iter: 90,
         }
     }
 

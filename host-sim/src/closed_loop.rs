@@ -83,7 +83,7 @@ impl Precision {
 
 /// Cycles-per-instruction bound of the ECU from the timing report (`host-sim
 /// wcet`): worst-case cycles of the traced instruction mix over its instructions.
-pub const DEFAULT_CPI_BOUND: f64 = 2.42;
+pub const DEFAULT_CPI_BOUND: f64 = 2.53;
 
 /// Point capacity of the reference path on the host (the ECU build picks its own).
 pub const HOST_PATH_CAP: usize = 4096;

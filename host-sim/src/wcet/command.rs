@@ -122,6 +122,12 @@ fn given_cpi(c: f64) -> CpiReport {
             cpi_bound: c,
             classes: Vec::new(),
         },
+        idle: cpi::Figures {
+            instructions: 0,
+            worst_case_cycles: 0,
+            cpi_bound: 0.0,
+            classes: Vec::new(),
+        },
         tb_executions: 0,
         translations: 0,
         untraced_executions: 0,
