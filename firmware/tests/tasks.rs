@@ -162,3 +162,26 @@ fn a_failed_activation_keeps_its_work_counters() {
     assert_eq!(planner.last_report(), &ok);
     assert!(ok.qp_iterations > 1);
 }
+
+#[test]
+fn a_late_plan_is_published_but_one_older_than_two_periods_is_dropped() {
+    use firmware::tasks::MAX_PLAN_AGE_US;
+    let (mut planner, _, car) = setup();
+    let mut shared = Plan::zeroed();
+    // Released at 1 s, finished 150 ms later: late, still published.
+    planner.run(&car.estimate(1_000_000)).unwrap();
+    assert!(planner.publish_at(&mut shared, 1_150_000));
+    assert_eq!(shared.stamp_us, 1_000_000);
+    assert_eq!(planner.stats.stale, 0);
+    // Released at 2 s, finished just past the age limit: dropped, the shared plan
+    // untouched, counted.
+    planner.run(&car.estimate(2_000_000)).unwrap();
+    assert!(!planner.publish_at(&mut shared, 2_000_000 + MAX_PLAN_AGE_US + 1));
+    assert_eq!(shared.stamp_us, 1_000_000);
+    assert_eq!(planner.stats.stale, 1);
+    assert!(planner.pending().is_none(), "a dropped plan is not kept");
+    // Exactly at the limit it is still published.
+    planner.run(&car.estimate(3_000_000)).unwrap();
+    assert!(planner.publish_at(&mut shared, 3_000_000 + MAX_PLAN_AGE_US));
+    assert_eq!(shared.stamp_us, 3_000_000);
+}
