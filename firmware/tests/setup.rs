@@ -102,7 +102,7 @@ fn every_wrong_set_up_is_refused_with_its_reason() {
         let mut p = planner();
         let mut s = Setup::new();
         f(&mut s, &mut p);
-        s.finish(&mut p).err().expect("refused")
+        s.finish(&mut p).expect_err("refused")
     };
     // No configuration.
     assert_eq!(refuse(&|_, _| {}).error, SetupError::NoConfig);

@@ -153,14 +153,14 @@ fn the_ecu_refuses_an_obstacle_that_blocks_the_road_and_says_so() {
         vertices,
     }];
     let opts = SimOptions::default();
-    let e = QemuEcu::start(
+    let Err(e) = QemuEcu::start(
         &scenario,
         &VehicleParams::default(),
         &opts,
         &pil_options("wall", 4),
-    )
-    .err()
-    .expect("the ECU must refuse the set-up");
+    ) else {
+        panic!("the ECU must refuse the set-up");
+    };
     let msg = format!("{e:#}");
     assert!(msg.contains("no room to pass"), "{msg}");
 }
