@@ -191,18 +191,14 @@ impl QemuEcu {
         let up_path = dir.join("ecu.up");
         mkfifo(&down_path)?;
         mkfifo(&up_path)?;
-        let defmt_path = dir.join("ecu.defmt");
+        // The ECU's defmt log goes to the semihosting console, QEMU's stdout.
+        let defmt_log = File::create(dir.join("ecu.defmt"))?;
         let qemu_log = File::create(dir.join("qemu.log"))?;
         let child = Command::new(&opts.qemu)
             .current_dir(&dir)
             .args(["-cpu", "cortex-m4", "-machine", "netduinoplus2"])
             .args(["-display", "none", "-serial", "null", "-monitor", "none"])
-            .arg("-chardev")
-            .arg(format!("file,id=semi,path={}", defmt_path.display()))
-            .args([
-                "-semihosting-config",
-                "enable=on,target=native,chardev=semi",
-            ])
+            .args(["-semihosting-config", "enable=on,target=native"])
             .arg("-icount")
             .arg(format!("shift={},sleep=off", opts.icount_shift))
             .args(opts.trace.iter().flat_map(|t| {
@@ -216,7 +212,7 @@ impl QemuEcu {
             .arg("-kernel")
             .arg(fs::canonicalize(&opts.elf)?)
             .stdin(Stdio::null())
-            .stdout(qemu_log.try_clone()?)
+            .stdout(defmt_log)
             .stderr(qemu_log)
             .spawn()
             .with_context(|| {
