@@ -652,14 +652,6 @@ pub struct PilReport {
     pub wall_s: f64,
 }
 
-fn percentile(v: &[f64], q: f64) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    s.get(((s.len() as f64 * q).ceil() as usize).saturating_sub(1))
-        .copied()
-        .unwrap_or(0.0)
-}
-
 /// Compares the PIL run with the in-process one, row by row.
 pub fn compare(pil: &RunResult, host: &RunResult) -> Comparison {
     let n = pil.log.len().min(host.log.len());
@@ -746,6 +738,7 @@ pub fn compare(pil: &RunResult, host: &RunResult) -> Comparison {
 }
 
 use crate::closed_loop::RunResult;
+use crate::cost_model::percentile;
 
 /// `host-sim pil`.
 pub fn run(args: &PilArgs) -> Result<()> {

@@ -412,18 +412,9 @@ pub struct Tasks {
 /// Flash, RAM and stack of the ECU binary.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MemoryReport {
-    /// `.vector_table`, in bytes.
-    pub vector_table_bytes: u64,
-    /// `.text`, in bytes.
-    pub text_bytes: u64,
-    /// `.rodata`, in bytes.
-    pub rodata_bytes: u64,
-    /// `.data`, in bytes.
-    pub data_bytes: u64,
-    /// `.bss` + `.uninit`, in bytes.
-    pub bss_bytes: u64,
-    /// `.uninit`, in bytes (counted in `bss_bytes`).
-    pub uninit_bytes: u64,
+    /// The ELF's section sizes (their keys written inline in `wcet.json`).
+    #[serde(flatten)]
+    pub sections: ElfMemory,
     /// `.data` + `.bss` + `.uninit`, in bytes.
     pub static_ram_bytes: u64,
     /// `.vector_table` + `.text` + `.rodata` + `.data`, in bytes.
@@ -738,12 +729,7 @@ fn memory_report(
         .map(|l| format!("{} {} B", l.name, l.contribution_bytes))
         .collect();
     MemoryReport {
-        vector_table_bytes: memory.vector_table_bytes,
-        text_bytes: memory.text_bytes,
-        rodata_bytes: memory.rodata_bytes,
-        data_bytes: memory.data_bytes,
-        bss_bytes: memory.bss_bytes,
-        uninit_bytes: memory.uninit_bytes,
+        sections: *memory,
         static_ram_bytes: memory.static_ram_bytes(),
         flash_bytes: memory.flash_bytes(),
         stack_bound_bytes: u64::from(stack.total_bytes),
@@ -959,13 +945,14 @@ fn render_tasks(s: &mut String, r: &WcetReport) -> std::fmt::Result {
 fn render_memory(s: &mut String, r: &WcetReport) -> std::fmt::Result {
     let m = &r.memory;
     writeln!(s, "## Memory\n\n| quantity | bytes |\n|---|---:|")?;
+    let e = &m.sections;
     let rows = [
-        (".vector_table", m.vector_table_bytes),
-        (".text", m.text_bytes),
-        (".rodata", m.rodata_bytes),
-        (".data", m.data_bytes),
-        (".bss (incl. .uninit)", m.bss_bytes),
-        ("  of which .uninit", m.uninit_bytes),
+        (".vector_table", e.vector_table_bytes),
+        (".text", e.text_bytes),
+        (".rodata", e.rodata_bytes),
+        (".data", e.data_bytes),
+        (".bss (incl. .uninit)", e.bss_bytes),
+        ("  of which .uninit", e.uninit_bytes),
         (
             "**flash** (vector table + text + rodata + data)",
             m.flash_bytes,
@@ -1717,7 +1704,7 @@ active_constraints,max_validity_slack_rad";
         let mut inputs = inputs(vec![run]);
         inputs.elf = elf.clone();
         let r = build_report(&inputs)?;
-        assert_eq!(r.memory.text_bytes, elf_memory(&elf)?.text_bytes);
+        assert_eq!(r.memory.sections.text_bytes, elf_memory(&elf)?.text_bytes);
         assert_eq!(r.stack.levels.len(), 4);
         assert_eq!(r.memory.stack_bound_bytes, u64::from(r.stack.total_bytes));
         assert!(r.memory.stack_method.contains("SysTick"));
