@@ -2,8 +2,11 @@
 //!
 //! The ECU (in QEMU) and the host simulator exchange, every 10 ms control period,
 //! one [`Down::Sensor`] frame and one [`Up::Actuation`] frame, after a set-up
-//! phase (`Config`, `PathChunk`s, `Obstacle`s, `Start` → `Ready`) and before a
-//! `Stop` → `Done`. Everything here works on fixed buffers: no heap, no `alloc`,
+//! phase (`Config`, the first window's `PathChunk`s, `Obstacle`s, `Start` →
+//! `Ready`) and before a `Stop` → `Done`. While driving, the next window of the
+//! road arrives as `PathChunk`s then a [`Down::Window`] (the ECU holds a window,
+//! not the whole circuit). Version 2 added `Window` and
+//! [`PlanEventFrame::window`]. Everything here works on fixed buffers: no heap, no `alloc`,
 //! no panic; every refused frame is a [`FrameError`] value the receiver counts.
 //!
 //! # Wire format
@@ -24,7 +27,8 @@
 //!
 //! * **Payload**: [postcard] v1 encoding of a [`Down`] or [`Up`]: the enum
 //!   variant as a varint (`Down`: `Config` 0, `PathChunk` 1, `Obstacle` 2,
-//!   `Start` 3, `Sensor` 4, `Stop` 5; `Up`: `Ready` 0, `Actuation` 1, `Done` 2),
+//!   `Start` 3, `Sensor` 4, `Stop` 5, `Window` 6; `Up`: `Ready` 0, `Actuation` 1,
+//!   `Done` 2),
 //!   then the fields in declaration order; `f32` as 4 bytes little-endian
 //!   (NaN bits are kept), `u8`/`bool` as one byte, `u16`/`u32`/`u64` as LEB128
 //!   varints (at most 3/5/10 bytes), `Option` as a 0/1 byte then the value,
@@ -37,7 +41,7 @@
 //!   delimiters in a row) are idle and ignored.
 //!
 //! The largest frames: [`MAX_DOWN_FRAME_BYTES`] (a `PathChunk`, 269 bytes) and
-//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 244 bytes), both
+//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 245 bytes), both
 //! including the delimiter and checked at compile time against
 //! [`MAX_FRAME_BYTES`].
 //!
@@ -81,7 +85,7 @@ use crate::state_estimate::StateEstimate;
 use crate::vehicle_config::VehicleConfig;
 
 /// Version of this wire format, the first byte of every raw frame.
-pub const LINK_VERSION: u8 = 1;
+pub const LINK_VERSION: u8 = 2;
 /// The largest encoded frame, bytes, including its 0x00 delimiter.
 pub const MAX_FRAME_BYTES: usize = 512;
 /// Track rows per [`PathChunkFrame`].
@@ -114,6 +118,23 @@ pub enum Down {
     Sensor(SensorFrame),
     /// End of the run: the ECU answers `Up::Done`.
     Stop,
+    /// While driving: the `PathChunk` rows sent since the last `Window` (first row
+    /// 0) are the next window of the road; the plan task adopts it at its next
+    /// release (version 2).
+    Window(WindowFrame),
+}
+
+/// The next window of the reference path: the ECU holds a window of the road, not
+/// the whole circuit, so its RAM does not grow with the track.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WindowFrame {
+    /// Rows of the window (sent in `PathChunk` frames before this one), rows.
+    pub rows: u16,
+    /// Distance along the road of the window's first row, m (differences between
+    /// windows are what matter: the MPC's warm start moves by them).
+    pub origin_m: f32,
+    /// The window is the whole of a closed circuit (its last row joins its first).
+    pub closed: bool,
 }
 
 /// Set-up: what the ECU needs before the track.
@@ -123,9 +144,10 @@ pub struct ConfigFrame {
     pub vehicle: VehicleConfig<f32>,
     /// Friction coefficient the planner assumes, dimensionless, > 0.
     pub mu_planner: f32,
-    /// True when the track is a closed loop (last row joins the first).
+    /// True when the first window is the whole of a closed circuit (its last row
+    /// joins its first).
     pub closed: bool,
-    /// Number of track rows that will follow in `PathChunk` frames, rows.
+    /// Rows of the first window of the road, that follow in `PathChunk` frames, rows.
     pub path_rows: u16,
     /// Number of obstacles that will follow in `Obstacle` frames, obstacles.
     pub obstacles: u8,
@@ -253,6 +275,8 @@ pub struct PlanEventFrame {
     pub rows: u16,
     /// Active constraints at the last QP's solution, constraints.
     pub active: u16,
+    /// The activation first adopted a new window of the road (its cost included).
+    pub window: bool,
     /// Planned positions `[x_m, y_m]` of the plan's nodes, global frame, m.
     pub nodes_xy: [[f32; 2]; PLAN_NODES],
     /// Heuristic speed `V_heur` at the first node, m/s.
@@ -273,6 +297,7 @@ impl PlanEventFrame {
         result: &Result<R, MpcError>,
         report: &MpcReport<f32>,
         published: bool,
+        window: bool,
         plan: Option<&Plan<f32>>,
     ) -> Self {
         let sat16 = |x: u32| x.min(u16::MAX as u32) as u16;
@@ -298,6 +323,7 @@ impl PlanEventFrame {
             qp_refactorizations: sat16(report.qp_refactorizations),
             rows: sat16(report.rows),
             active: sat16(report.active_constraints),
+            window,
             nodes_xy,
             v_heur0_mps,
         }
@@ -338,7 +364,7 @@ const ESTIMATE_MAX_BYTES: usize = U64_MAX_BYTES + 7 * F32_BYTES;
 const PLAN_EVENT_MAX_BYTES: usize = U32_MAX_BYTES
     + 2 * U64_MAX_BYTES
     + U32_MAX_BYTES
-    + 3
+    + 4
     + 6 * U16_MAX_BYTES
     + (PLAN_NODES * 2 + 1) * F32_BYTES;
 

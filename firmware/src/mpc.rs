@@ -458,6 +458,15 @@ impl<T: Real> Mpc<T> {
         }
     }
 
+    /// Moves the previous solution's path abscissae by `−delta_m`, m: the path was
+    /// replaced by a window of the same road whose origin lies `delta_m` further
+    /// along it (the warm start's projection hints stay on the same points).
+    pub fn shift_s(&mut self, delta_m: T) {
+        for s in self.s_prev.iter_mut() {
+            *s -= delta_m;
+        }
+    }
+
     /// Forgets the previous solution: the next step starts cold.
     pub fn reset(&mut self) {
         self.have_prev = false;

@@ -1,5 +1,6 @@
-//! The ECU's set-up: the car, the track and the obstacles, received piece by piece
-//! before the timeline starts, then loaded into the two tasks.
+//! The ECU's set-up: the car, the first window of the road and the obstacles,
+//! received piece by piece before the timeline starts, then loaded into the two
+//! tasks. Later windows arrive while driving (`Down::Window`).
 //!
 //! The simulator loads the same data into the same tasks with the same library
 //! calls (`ReferencePath::load_track`, `ObstacleManager::update`,
@@ -8,7 +9,7 @@
 //! `Ready` frame's status and detail), never a panic.
 
 use crate::link::{ConfigFrame, ObstacleFrame, PathChunkFrame, SetupError};
-use crate::obstacles::{Obstacle, ObstacleError, MAX_OBSTACLES, MAX_VERTICES};
+use crate::obstacles::{Obstacle, MAX_OBSTACLES, MAX_VERTICES};
 use crate::reference_path::PathError;
 use crate::tasks::{ControlTask, PlanTask};
 
@@ -134,34 +135,23 @@ impl Setup {
         if self.obstacles.len() != c.obstacles as usize {
             return Err(failure(SetupError::MissingObstacle, self.obstacles.len()));
         }
+        if !planner.set_obstacles(c.vehicle.obstacle_settings(c.mu_planner), &self.obstacles) {
+            return Err(failure(SetupError::TooManyObstacles, MAX_OBSTACLES));
+        }
+        planner.reset();
         planner
-            .path
-            .load_staged(c.path_rows as usize, c.closed)
+            .adopt_window(c.path_rows as usize, 0.0, c.closed)
             .map_err(|e| match e {
                 PathError::NonFinite { index } | PathError::NegativeWidth { index } => {
                     failure(SetupError::InvalidPathRow, index)
                 }
                 _ => failure(SetupError::PathRejected, 0),
             })?;
-        planner
-            .obstacles
-            .update(
-                &c.vehicle.obstacle_settings(c.mu_planner),
-                &planner.path,
-                &self.obstacles,
-            )
-            .map_err(|e| match e {
-                ObstacleError::RoadBlocked { obstacle, .. } => {
-                    failure(SetupError::ObstacleBlocksRoad, obstacle)
-                }
-                ObstacleError::NoVertices { obstacle }
-                | ObstacleError::TooManyVertices { obstacle, .. }
-                | ObstacleError::NonFiniteVertex { obstacle, .. } => {
-                    failure(SetupError::InvalidObstacle, obstacle)
-                }
-                _ => failure(SetupError::InvalidObstacle, 0),
-            })?;
-        planner.reset();
+        if planner.stats.obstacle_errors > 0 {
+            // An obstacle of the first window was refused (the simulator checks every
+            // obstacle on the whole track before it starts the ECU, with its reason).
+            return Err(failure(SetupError::ObstacleBlocksRoad, 0));
+        }
         ControlTask::new(c.vehicle.low_level_config())
             .map_err(|_| failure(SetupError::InvalidConfig, 0))
     }

@@ -36,9 +36,9 @@
 
 use crate::low_level::{self, Actuation, ControlFault, LowLevelConfig, LowLevelState};
 use crate::mpc::{Mpc, MpcError, MpcReport, MpcSettings};
-use crate::obstacles::ObstacleManager;
+use crate::obstacles::{Obstacle, ObstacleManager, ObstacleSettings, MAX_OBSTACLES};
 use crate::plan::Plan;
-use crate::reference_path::ReferencePath;
+use crate::reference_path::{PathError, ReferencePath};
 use crate::state_estimate::StateEstimate;
 use crate::Real;
 
@@ -64,6 +64,11 @@ pub struct PlanTaskStats {
     /// Plans dropped because they finished more than [`MAX_PLAN_AGE_US`] after
     /// their release.
     pub stale: u32,
+    /// Path windows adopted ([`PlanTask::adopt_window`]).
+    pub windows: u32,
+    /// Obstacles in an adopted window that the obstacle manager refused (their
+    /// parabola left out of that window's plans).
+    pub obstacle_errors: u32,
 }
 
 /// The `plan` task's local resources: the reference path, the obstacle parabolas,
@@ -78,6 +83,12 @@ pub struct PlanTask<T, const CAP: usize> {
     pub path: ReferencePath<T, CAP>,
     /// Parabolas of the static obstacles (update after loading the path).
     pub obstacles: ObstacleManager<T>,
+    /// Every static obstacle known, in the global frame; the parabolas of those in
+    /// the current window are rebuilt when a window is adopted.
+    obstacle_list: heapless::Vec<Obstacle<T>, MAX_OBSTACLES>,
+    obstacle_settings: Option<ObstacleSettings<T>>,
+    /// Distance along the road of the current window's first point, m.
+    window_origin_m: T,
     mpc: Mpc<T>,
     working: Plan<T>,
     ready: bool,
@@ -104,7 +115,12 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
                 failures: 0,
                 non_finite_estimates: 0,
                 stale: 0,
+                windows: 0,
+                obstacle_errors: 0,
             },
+            obstacle_list: heapless::Vec::new(),
+            obstacle_settings: None,
+            window_origin_m: T::ZERO,
             last_error: None,
         }
     }
@@ -172,6 +188,90 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             }
         }
         result
+    }
+
+    /// The obstacles (global frame) and the obstacle manager's settings used when a
+    /// window is adopted. At most [`MAX_OBSTACLES`]; returns false if there were more.
+    pub fn set_obstacles(&mut self, settings: ObstacleSettings<T>, list: &[Obstacle<T>]) -> bool {
+        self.obstacle_settings = Some(settings);
+        self.obstacle_list.clear();
+        list.iter()
+            .all(|o| self.obstacle_list.push(o.clone()).is_ok())
+    }
+
+    /// Adopts the window of the reference path whose `count` rows were written with
+    /// `path.stage_row` (the ECU receives a window of the road, not the whole
+    /// circuit, so its RAM does not grow with the track): loads it (`closed` only
+    /// when it is the whole of a closed circuit), moves the MPC's warm start to the
+    /// new origin (`origin_m`, the distance along the road of the window's first
+    /// row, m) and rebuilds the parabolas of the obstacles that lie inside it
+    /// (those more than 5 m from its ends and within 20 m of its centre line).
+    /// An obstacle the manager refuses is left out and counted; a path refused is an
+    /// error (the planner then has no path: its steps fail with `NoPath`).
+    pub fn adopt_window(
+        &mut self,
+        count: usize,
+        origin_m: T,
+        closed: bool,
+    ) -> Result<(), PathError> {
+        let r = self.path.load_staged(count, closed);
+        self.stats.windows = self.stats.windows.wrapping_add(1);
+        self.mpc.shift_s(origin_m - self.window_origin_m);
+        self.window_origin_m = origin_m;
+        self.obstacles.clear();
+        r?;
+        let Some(settings) = self.obstacle_settings else {
+            return Ok(());
+        };
+        // The obstacles inside the window are moved to the front of the list (in
+        // place: no copy on the stack), their projection kept as the hint.
+        let (margin, reach) = (T::lit(5.0), T::lit(20.0));
+        let length = self.path.length_m();
+        let mut inside = 0;
+        for i in 0..self.obstacle_list.len() {
+            let o = &self.obstacle_list[i];
+            let n = T::from_usize(o.vertices.len().max(1));
+            let c = o
+                .vertices
+                .iter()
+                .fold([T::ZERO; 2], |a, v| [a[0] + v[0], a[1] + v[1]]);
+            let Some(p) = self.path.project([c[0] / n, c[1] / n], None) else {
+                continue;
+            };
+            let within = closed || (p.s_m > margin && p.s_m < length - margin);
+            if within && p.lateral_m.abs() < reach {
+                self.obstacle_list[i].s_hint_m = Some(p.s_m);
+                self.obstacle_list.swap(inside, i);
+                inside += 1;
+            }
+        }
+        if self
+            .obstacles
+            .update(&settings, &self.path, &self.obstacle_list[..inside])
+            .is_err()
+        {
+            self.stats.obstacle_errors = self.stats.obstacle_errors.wrapping_add(1);
+        }
+        Ok(())
+    }
+
+    /// [`PlanTask::adopt_window`] from rows `[x_m, y_m, w_right_m, w_left_m]` (the
+    /// simulator's way: it holds the rows itself).
+    pub fn load_window(
+        &mut self,
+        rows: &[[T; 4]],
+        origin_m: T,
+        closed: bool,
+    ) -> Result<(), PathError> {
+        for (i, r) in rows.iter().enumerate() {
+            if !self.path.stage_row(i, *r) {
+                return Err(PathError::TooManyPoints {
+                    count: rows.len(),
+                    capacity: CAP,
+                });
+            }
+        }
+        self.adopt_window(rows.len(), origin_m, closed)
     }
 
     /// Publishes the pending plan into the shared one by swapping buffers (call

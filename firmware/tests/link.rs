@@ -113,6 +113,7 @@ fn plan_event(big: u64, v: f32) -> PlanEventFrame {
         qp_refactorizations: big as u16,
         rows: big as u16,
         active: big as u16,
+        window: big % 2 == 1,
         nodes_xy: [[v, -v]; PLAN_NODES],
         v_heur0_mps: v,
     }
@@ -161,6 +162,11 @@ fn all_down(big: u64, v: f32) -> Vec<Down> {
             estimate: estimate(big, v),
         }),
         Down::Stop,
+        Down::Window(WindowFrame {
+            rows: big as u16,
+            origin_m: v,
+            closed: big % 2 == 1,
+        }),
     ]
 }
 
@@ -214,7 +220,7 @@ fn every_message_round_trips_with_extreme_values() {
             }
         }
     }
-    assert_eq!(count, BIGS.len() * 10 * 10);
+    assert_eq!(count, BIGS.len() * 10 * 11);
 }
 
 #[test]
@@ -257,22 +263,22 @@ fn frame_layout_is_version_postcard_crc_cobs() {
     // The CRC is CRC-32/ISO-HDLC (check value of "123456789").
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
     assert_eq!(crc.checksum(b"123456789"), 0xCBF4_3926);
-    // Pinned bytes: `Down::Start` is version 1, tag 3, then its CRC (zlib.crc32(b"\x01\x03")
-    // = 0xC1CB7204), stuffed.
+    // Pinned bytes: `Down::Start` is version 2, tag 3, then its CRC (zlib.crc32(b"\x02\x03")
+    // = 0xEAE621C7), stuffed.
     assert_eq!(
         frame_of(&Down::Start),
-        [0x07, 0x01, 0x03, 0x04, 0x72, 0xCB, 0xC1, 0x00]
+        [0x07, 0x02, 0x03, 0xC7, 0x21, 0xE6, 0xEA, 0x00]
     );
 }
 
 #[test]
 fn variant_tags_are_as_documented() {
-    // Module docs: `Down` Config 0 … Stop 5, `Up` Ready 0, Actuation 1, Done 2.
+    // Module docs: `Down` Config 0 … Stop 5, Window 6, `Up` Ready 0, Actuation 1, Done 2.
     let down_tags: Vec<u8> = all_down(1, 1.0)
         .iter()
         .map(|m| postcard_bytes(m)[0])
         .collect();
-    assert_eq!(down_tags, [0, 1, 2, 3, 4, 5]);
+    assert_eq!(down_tags, [0, 1, 2, 3, 4, 5, 6]);
     let up_tags: Vec<u8> = all_up(1, 1.0)
         .iter()
         .map(|m| postcard_bytes(m)[0])
@@ -307,7 +313,15 @@ fn maximal_up() -> Vec<Up> {
 fn largest_frames_fit_max_frame_bytes() {
     let downs = maximal_down();
     let ups = maximal_up();
-    let names_down = ["Config", "PathChunk", "Obstacle", "Start", "Sensor", "Stop"];
+    let names_down = [
+        "Config",
+        "PathChunk",
+        "Obstacle",
+        "Start",
+        "Sensor",
+        "Stop",
+        "Window",
+    ];
     let names_up = ["Ready", "Actuation(None)", "Actuation(Some)", "Done"];
     let mut largest_down_payload = 0;
     let mut largest_up_payload = 0;
@@ -331,7 +345,7 @@ fn largest_frames_fit_max_frame_bytes() {
     assert_eq!(largest_down_payload, MAX_DOWN_PAYLOAD_BYTES);
     assert_eq!(largest_up_payload, MAX_UP_PAYLOAD_BYTES);
     assert_eq!(MAX_DOWN_FRAME_BYTES, 269);
-    assert_eq!(MAX_UP_FRAME_BYTES, 244);
+    assert_eq!(MAX_UP_FRAME_BYTES, 245);
     assert_eq!(frame_of(&downs[1]).len(), MAX_DOWN_FRAME_BYTES);
 }
 
@@ -372,8 +386,8 @@ fn each_refusal_has_its_error() {
         Err(FrameError::TooShort)
     );
     // Another version, with its own valid CRC.
-    let mut v2 = hand_frame(2, &postcard_bytes(&Down::Start));
-    assert_eq!(decode::<Down>(&mut v2), Err(FrameError::Version { got: 2 }));
+    let mut v1 = hand_frame(1, &postcard_bytes(&Down::Start));
+    assert_eq!(decode::<Down>(&mut v1), Err(FrameError::Version { got: 1 }));
     // A wrong CRC.
     let mut frame = frame_of(&Down::Stop);
     frame.pop();
@@ -631,27 +645,35 @@ fn any_down() -> impl Strategy<Value = Down> {
             })
         },
     );
+    let window = (any::<u16>(), any_f32(), any::<bool>()).prop_map(|(rows, origin_m, closed)| {
+        Down::Window(WindowFrame {
+            rows,
+            origin_m,
+            closed,
+        })
+    });
     prop_oneof![
         config,
         chunk,
         obstacle,
         Just(Down::Start),
         sensor,
-        Just(Down::Stop)
+        Just(Down::Stop),
+        window
     ]
 }
 
 fn any_plan_event() -> impl Strategy<Value = PlanEventFrame> {
     (
         any::<(u32, u64, u64, u32, u8, bool, u8)>(),
-        any::<(u16, u16, u16, u16, u16, u16)>(),
+        any::<(u16, u16, u16, u16, u16, u16, bool)>(),
         prop::array::uniform17(prop::array::uniform2(any_f32())),
         any_f32(),
     )
         .prop_map(
             |(
                 (activation, release_us, finish_us, ticks, status, published, passes),
-                (qp_iterations, qp_added, qp_removed, qp_refactorizations, rows, active),
+                (qp_iterations, qp_added, qp_removed, qp_refactorizations, rows, active, window),
                 nodes_xy,
                 v_heur0_mps,
             )| PlanEventFrame {
@@ -668,6 +690,7 @@ fn any_plan_event() -> impl Strategy<Value = PlanEventFrame> {
                 qp_refactorizations,
                 rows,
                 active,
+                window,
                 nodes_xy,
                 v_heur0_mps,
             },

@@ -434,6 +434,15 @@ pub fn run_with<T: Real, E: Ecu<T>>(
     let mut host_us: Vec<f64> = Vec::new();
     let mut last_status: &'static str = "none";
 
+    // The road the ECU holds: a window, the next one sent as the car moves on.
+    let mut feeder = crate::route::RouteFeeder::new(&scenario.track)?;
+    feeder.first();
+    let s_start = scenario
+        .track
+        .projector()
+        .project([scenario.start_pose[0], scenario.start_pose[1]], None)
+        .0;
+
     let max_steps = (opts.max_duration_s / opts.plant_dt_s).ceil() as u64;
     let mut t_us: u64 = 0;
     let mut step: u64 = 0;
@@ -443,6 +452,11 @@ pub fn run_with<T: Real, E: Ecu<T>>(
             let st = *plant.state();
             let out = plant.outputs();
             let est = estimate::<T>(&st, out.delta_rad, t_us);
+            if let Some(w) = feeder.update(s_start + meter.progress_m) {
+                ecu.set_window(&w).with_context(|| {
+                    format!("window of the road at t = {:.3} s", t_us as f64 * 1e-6)
+                })?;
+            }
             let h0 = Instant::now();
             let c = ecu
                 .control(t_us, &est)

@@ -41,6 +41,7 @@ use serde::Serialize;
 
 use crate::closed_loop::{vehicle_config, CostModel, SimOptions, HOST_PATH_CAP};
 use crate::obstacle_file::Obstacle;
+use crate::route::{RouteFeeder, Window};
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleParams;
 
@@ -78,6 +79,8 @@ pub struct PlanActivation {
     pub rows: u32,
     /// Working-set size at the end of the last pass.
     pub active_constraints: u32,
+    /// The activation first adopted a new window of the road.
+    pub window: bool,
     /// Largest validity slack of the plan, rad (0 if none or not optimal).
     pub max_validity_slack_rad: f64,
 }
@@ -109,6 +112,11 @@ pub trait Ecu<T: Real> {
     /// The plan the control task is following after the last call (for the
     /// consistency figure and plan traces).
     fn active_plan(&self) -> &Plan<T>;
+
+    /// The next window of the road ([`crate::route`]), given before the control
+    /// activation of the instant it is due; the plan task adopts it at its next
+    /// release.
+    fn set_window(&mut self, w: &Window) -> Result<()>;
 }
 
 /// A plan activation computed on the host, waiting for its modelled finish.
@@ -131,6 +139,8 @@ pub struct SimulatedEcu<T: Real> {
     busy_until_us: u64,
     releases: u32,
     host_us: Vec<f64>,
+    /// The next window of the road, adopted at the next plan release.
+    pending_window: Option<Window>,
 }
 
 impl<T: Real> SimulatedEcu<T> {
@@ -179,6 +189,12 @@ impl<T: Real> SimulatedEcu<T> {
                 &fw_obstacles,
             )
             .map_err(|e| obstacle_error_message(e, &scenario.obstacles))?;
+        // Checked on the whole track above; from here the planner holds a window
+        // of the road, as the ECU does.
+        planner.set_obstacles(car.obstacle_settings(mu_planner), &fw_obstacles);
+        let first = RouteFeeder::new(track)?.first();
+        load_window(&mut planner, &first)?;
+        planner.stats = Default::default();
         let control = ControlTask::new(car.low_level_config())
             .map_err(|e| anyhow!("low-level controller configuration: {e:?}"))?;
         Ok(Self {
@@ -192,6 +208,7 @@ impl<T: Real> SimulatedEcu<T> {
             busy_until_us: 0,
             releases: 0,
             host_us: Vec::new(),
+            pending_window: None,
         })
     }
 
@@ -214,12 +231,19 @@ impl<T: Real> SimulatedEcu<T> {
     /// Runs the plan task released at `t_us` on `est` on the host; its record waits
     /// in flight until its modelled finish.
     fn release_plan(&mut self, t_us: u64, est: &StateEstimate<T>) {
+        let window = self.pending_window.take();
+        if let Some(w) = &window {
+            // A path the planner refuses leaves it without one: its steps then
+            // fail with `NoPath` and are reported as such.
+            let _ = load_window(&mut self.planner, w);
+        }
         let h0 = Instant::now();
         let outcome = self.planner.run(est);
         self.host_us.push(h0.elapsed().as_secs_f64() * 1e6);
         // Charged from the activation's own counters, a failed one's included.
         let report = *self.planner.last_report();
-        let instructions = self.cost_model.plan_instructions(&report);
+        let instructions = self.cost_model.plan_instructions(&report)
+            + self.cost_model.window_instructions(window.is_some());
         let cycles = instructions * self.cycles_per_instruction;
         let control_cycles = self.cost_model.control_instructions() * self.cycles_per_instruction;
         let finish_us = t_us + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
@@ -239,10 +263,19 @@ impl<T: Real> SimulatedEcu<T> {
                 instructions,
                 cycles,
                 &report,
+                window.is_some(),
             )
             .with_outcome(status, published),
         });
     }
+}
+
+/// Loads a window of the road into the plan task.
+fn load_window<T: Real>(planner: &mut PlanTask<T, HOST_PATH_CAP>, w: &Window) -> Result<()> {
+    let rows: Vec<[T; 4]> = w.rows.iter().map(|r| r.map(T::from_f64)).collect();
+    planner
+        .load_window(&rows, T::from_f64(w.origin_m), w.closed)
+        .map_err(|e| anyhow!("a window of the road was refused: {e:?}"))
 }
 
 /// Response time of a plan activation of `cycles` preempted every 10 ms by a
@@ -267,6 +300,7 @@ fn activation_record<T: Real>(
     instructions: f64,
     cycles: f64,
     r: &MpcReport<T>,
+    window: bool,
 ) -> PlanActivation {
     PlanActivation {
         activation,
@@ -284,6 +318,7 @@ fn activation_record<T: Real>(
         qp_refactorizations: r.qp_refactorizations,
         rows: r.rows,
         active_constraints: r.active_constraints,
+        window,
         max_validity_slack_rad: r.max_validity_slack_rad.to_f64(),
     }
 }
@@ -339,6 +374,11 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
 
     fn active_plan(&self) -> &Plan<T> {
         &self.shared_plan
+    }
+
+    fn set_window(&mut self, w: &Window) -> Result<()> {
+        self.pending_window = Some(w.clone());
+        Ok(())
     }
 }
 

@@ -16,6 +16,7 @@
 //! | [`pil`] | processor in the loop: the ECU application in QEMU against the plant |
 //! | [`closed_loop`] | the deterministic timeline: the plant against an ECU, budgets, deadlines |
 //! | [`ecu`] | what runs the firmware: the `Ecu` trait, the modelled ECU on the host |
+//! | [`route`] | the windows of the road the ECU holds, sent as the car moves on |
 //! | [`run`] | the `run` command: log, summary, figures |
 //! | [`figures`] | the closed-loop figures (the paper's Figures 5–8, task costs) |
 //! | [`plot`] | plotting helpers (embedded font) |
@@ -31,6 +32,7 @@ pub mod pil;
 pub mod plant;
 pub mod plot;
 pub mod qp_corpus;
+pub mod route;
 pub mod run;
 pub mod scenario;
 pub mod tire;

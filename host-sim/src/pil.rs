@@ -48,6 +48,7 @@ use firmware::state_estimate::StateEstimate;
 
 use crate::closed_loop::{self, SimOptions};
 use crate::ecu::{ControlOutput, Ecu, PlanActivation};
+use crate::route::{RouteFeeder, Window};
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleParams;
 use firmware::tasks::PLAN_PERIOD_US;
@@ -314,37 +315,24 @@ impl QemuEcu {
         vehicle: &VehicleParams,
         sim: &SimOptions,
     ) -> Result<()> {
-        let rows = scenario.track.rows();
-        if rows.len() > u16::MAX as usize {
-            bail!(
-                "the track has {} rows: the link carries at most 65,535",
-                rows.len()
-            );
-        }
+        // The same checks as `run` on the whole track first (their messages say
+        // which obstacle blocks the road and by how much).
+        crate::ecu::SimulatedEcu::<f32>::new(scenario, vehicle, sim)?;
         if scenario.obstacles.len() > u8::MAX as usize {
             bail!(
                 "{} obstacles: the link carries at most 255",
                 scenario.obstacles.len()
             );
         }
+        let first = RouteFeeder::new(&scenario.track)?.first();
         self.send(&Down::Config(ConfigFrame {
             vehicle: closed_loop::vehicle_config::<f32>(vehicle),
             mu_planner: sim.mu_planner as f32,
-            closed: scenario.track.closed,
-            path_rows: rows.len() as u16,
+            closed: first.closed,
+            path_rows: first.rows.len() as u16,
             obstacles: scenario.obstacles.len() as u8,
         }))?;
-        for (c, chunk) in rows.chunks(PATH_CHUNK_ROWS).enumerate() {
-            let mut f = PathChunkFrame {
-                first: (c * PATH_CHUNK_ROWS) as u16,
-                count: chunk.len() as u8,
-                rows: [[0.0; 4]; PATH_CHUNK_ROWS],
-            };
-            for (dst, src) in f.rows.iter_mut().zip(chunk) {
-                *dst = src.map(|x| x as f32);
-            }
-            self.send(&Down::PathChunk(f))?;
-        }
+        self.send_rows(&first.rows)?;
         let total = scenario.obstacles.len() as u8;
         for (k, o) in scenario.obstacles.iter().enumerate() {
             if o.vertices.len() > MAX_VERTICES {
@@ -377,6 +365,22 @@ impl QemuEcu {
                 _ => self.counters.rejected += 1,
             }
         }
+    }
+
+    /// Sends rows of a window in `PathChunk` frames (the first starting at row 0).
+    fn send_rows(&mut self, rows: &[[f64; 4]]) -> Result<()> {
+        for (c, chunk) in rows.chunks(PATH_CHUNK_ROWS).enumerate() {
+            let mut f = PathChunkFrame {
+                first: (c * PATH_CHUNK_ROWS) as u16,
+                count: chunk.len() as u8,
+                rows: [[0.0; 4]; PATH_CHUNK_ROWS],
+            };
+            for (dst, src) in f.rows.iter_mut().zip(chunk) {
+                *dst = src.map(|x| x as f32);
+            }
+            self.send(&Down::PathChunk(f))?;
+        }
+        Ok(())
     }
 
     /// One control period: sends the estimate at `t_us`, returns the ECU's answer.
@@ -529,6 +533,7 @@ impl QemuEcu {
             qp_refactorizations: u32::from(p.qp_refactorizations),
             rows: u32::from(p.rows),
             active_constraints: u32::from(p.active),
+            window: p.window,
             max_validity_slack_rad: 0.0,
         }
     }
@@ -561,6 +566,15 @@ impl Ecu<f32> for QemuEcu {
 
     fn active_plan(&self) -> &Plan<f32> {
         &self.active
+    }
+
+    fn set_window(&mut self, w: &Window) -> Result<()> {
+        self.send_rows(&w.rows)?;
+        self.send(&Down::Window(link::WindowFrame {
+            rows: w.rows.len() as u16,
+            origin_m: w.origin_m as f32,
+            closed: w.closed,
+        }))
     }
 }
 

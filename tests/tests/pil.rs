@@ -139,7 +139,10 @@ fn an_ecu_too_slow_for_its_plans_counts_the_misses_and_keeps_the_car_safe() {
 
 #[test]
 #[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
-fn the_ecu_refuses_an_obstacle_that_blocks_the_road_and_says_so() {
+fn a_pil_set_up_with_an_obstacle_that_blocks_the_road_is_refused_with_what_to_change() {
+    // The simulator checks every obstacle against the whole track before it sends
+    // the ECU its first window (the ECU's own refusal, `SetupError::ObstacleBlocksRoad`,
+    // is tested in firmware/tests/setup.rs).
     let mut scenario = Scenario::paper(false);
     let p = paper_pose_at(60.0);
     let (c, s) = (p[2].cos(), p[2].sin());
@@ -159,8 +162,9 @@ fn the_ecu_refuses_an_obstacle_that_blocks_the_road_and_says_so() {
         &opts,
         &pil_options("wall", 4),
     ) else {
-        panic!("the ECU must refuse the set-up");
+        panic!("the set-up must be refused");
     };
     let msg = format!("{e:#}");
-    assert!(msg.contains("no room to pass"), "{msg}");
+    assert!(msg.contains(r#"obstacle "wall" blocks the road"#), "{msg}");
+    assert!(msg.contains("move it, make it narrower, or widen the track"), "{msg}");
 }

@@ -43,8 +43,10 @@ use firmware::low_level::Actuation;
 use firmware::tasks::{ControlTask, PlanTask};
 use rtic_monotonics::systick::prelude::*;
 
-/// Point capacity of the ECU's reference path (real circuits have up to ~1,400).
-pub const PATH_CAP: usize = 1536;
+/// Rows of the window of the road the ECU holds (not the whole circuit: its RAM
+/// does not grow with the track; the simulator sends the next window as the car
+/// moves on).
+pub const PATH_CAP: usize = 320;
 /// Core clock, Hz (STM32F405 at 168 MHz; QEMU's SysTick counts at this rate of
 /// virtual time).
 pub const SYSCLK_HZ: u32 = 168_000_000;
@@ -234,6 +236,70 @@ fn stack_high_water() -> (u32, u32) {
     ((top - p) as u32, (top - bottom) as u32)
 }
 
+/// The next window of the road, received by `control` row by row.
+pub struct Staging {
+    rows: [[f32; 4]; PATH_CAP],
+    received: usize,
+    ready: Option<link::WindowFrame>,
+}
+
+impl Default for Staging {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Staging {
+    /// Empty (`const`, for the app's shared resources).
+    pub const fn new() -> Self {
+        Self {
+            rows: [[0.0; 4]; PATH_CAP],
+            received: 0,
+            ready: None,
+        }
+    }
+
+    /// Rows of a chunk (the first chunk of a window starts at row 0); false when
+    /// out of order or past the capacity.
+    fn chunk(&mut self, c: &link::PathChunkFrame) -> bool {
+        if c.first == 0 {
+            self.received = 0;
+            self.ready = None;
+        }
+        let (first, n) = (c.first as usize, c.count as usize);
+        if first != self.received || first + n > PATH_CAP || n > c.rows.len() {
+            return false;
+        }
+        self.rows[first..first + n].copy_from_slice(&c.rows[..n]);
+        self.received = first + n;
+        true
+    }
+
+    /// The window is complete when all its rows arrived.
+    fn complete(&mut self, w: &link::WindowFrame) {
+        if w.rows as usize == self.received {
+            self.ready = Some(*w);
+        }
+    }
+
+    /// Copies a complete window into the planner's path storage.
+    fn take_into(&mut self, planner: &mut PlanTask<f32, PATH_CAP>) -> Option<link::WindowFrame> {
+        let w = self.ready.take()?;
+        for (i, r) in self.rows.iter().take(w.rows as usize).enumerate() {
+            planner.path.stage_row(i, *r);
+        }
+        self.received = 0;
+        Some(w)
+    }
+}
+
+/// Adds the control task's ticks since `t0` (everything it did, the link's frames
+/// included) to [`CONTROL_TICKS`], which the plan task subtracts from its own time.
+fn add_control_ticks(t0: u64) {
+    let whole = core_ticks().saturating_sub(t0).min(u32::MAX as u64) as u32;
+    CONTROL_TICKS.fetch_add(whole, Ordering::Relaxed);
+}
+
 fn actuation_frame(seq: u32, a: &Actuation<f32>, fault: u8, ticks: u32) -> ActuationFrame {
     ActuationFrame {
         seq,
@@ -266,6 +332,8 @@ mod app {
         plan: Plan<f32>,
         /// The last plan activation's record, until `control` reports it.
         plan_event: Option<PlanEventFrame>,
+        /// The next window of the road, as `control` receives it; `plan` adopts it.
+        staging: Staging,
     }
 
     #[local]
@@ -325,6 +393,7 @@ mod app {
                 estimate: StateEstimate::zeroed(),
                 plan: Plan::zeroed(),
                 plan_event: None,
+                staging: Staging::new(),
             },
             Local {
                 control,
@@ -345,7 +414,7 @@ mod app {
 
     /// The 100 Hz control task: sensor frame in, [`ControlTask::run`], actuator
     /// frame out. Deadline: its 10 ms period.
-    #[task(priority = 2, shared = [estimate, plan, plan_event], local = [control, link])]
+    #[task(priority = 2, shared = [estimate, plan, plan_event, staging], local = [control, link])]
     async fn control(mut cx: control::Context) {
         let mut release = Mono::now();
         loop {
@@ -363,6 +432,21 @@ mod app {
                         rejected_frames: rejected,
                     }));
                     exit(msg.is_some())
+                }
+                Some(Down::PathChunk(c)) => {
+                    // The next window's rows (a short copy under the staging lock).
+                    let ok = cx.shared.staging.lock(|st| st.chunk(&c));
+                    if !ok {
+                        cx.local.link.rejected = cx.local.link.rejected.wrapping_add(1);
+                    }
+                    // Receiving is this task's time, not the preempted plan's.
+                    add_control_ticks(t0);
+                    continue;
+                }
+                Some(Down::Window(w)) => {
+                    cx.shared.staging.lock(|st| st.complete(&w));
+                    add_control_ticks(t0);
+                    continue;
                 }
                 Some(_) => {
                     cx.local.link.rejected = cx.local.link.rejected.wrapping_add(1);
@@ -385,9 +469,7 @@ mod app {
             let mut frame = actuation_frame(est.seq, &act, fault, ticks);
             frame.plan = cx.shared.plan_event.lock(|p| p.take());
             cx.local.link.send(&Up::Actuation(frame));
-            // Everything this activation took, for the plan task's own-time account.
-            let whole = core_ticks().saturating_sub(t0).min(u32::MAX as u64) as u32;
-            CONTROL_TICKS.fetch_add(whole, Ordering::Relaxed);
+            add_control_ticks(t0);
             release += 10.millis();
             Mono::delay_until(release).await;
         }
@@ -396,7 +478,7 @@ mod app {
     /// The 10 Hz plan task: [`PlanTask::run`] on the estimate at its release, then
     /// the plan published by a swap. Deadline: its 100 ms period (see the
     /// deadline policy above).
-    #[task(priority = 1, shared = [estimate, plan, plan_event], local = [planner])]
+    #[task(priority = 1, shared = [estimate, plan, plan_event, staging], local = [planner])]
     async fn plan(mut cx: plan::Context) {
         let start = Mono::now();
         let mut activation: u32 = 0;
@@ -409,6 +491,17 @@ mod app {
             let t0 = core_ticks();
             let c0 = CONTROL_TICKS.load(Ordering::Relaxed);
             let planner = &mut *cx.local.planner;
+            // A complete new window of the road: its rows copied into the path's
+            // storage under the lock, the path computed outside it.
+            let window = cx.shared.staging.lock(|st| st.take_into(planner));
+            if let Some(w) = window {
+                if planner
+                    .adopt_window(w.rows as usize, w.origin_m, w.closed)
+                    .is_err()
+                {
+                    defmt::error!("ecu: window refused");
+                }
+            }
             let result = planner.run(&est);
             // The record's copy of the plan, taken before the swap, outside the lock.
             let computed = planner.pending().copied();
@@ -426,6 +519,7 @@ mod app {
                 &result,
                 planner.last_report(),
                 published,
+                window.is_some(),
                 computed.as_ref(),
             );
             cx.shared.plan_event.lock(|p| *p = Some(event));
