@@ -41,7 +41,7 @@
 //!   delimiters in a row) are idle and ignored.
 //!
 //! The largest frames: [`MAX_DOWN_FRAME_BYTES`] (a `PathChunk`, 269 bytes) and
-//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 245 bytes), both
+//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 249 bytes), both
 //! including the delimiter and checked at compile time against
 //! [`MAX_FRAME_BYTES`].
 //!
@@ -119,8 +119,8 @@ pub enum Down {
     /// End of the run: the ECU answers `Up::Done`.
     Stop,
     /// While driving: the `PathChunk` rows sent since the last `Window` (first row
-    /// 0) are the next window of the road; the plan task adopts it at its next
-    /// release (version 2).
+    /// 0) are the next window of the road; the plan task adopts it after it next
+    /// publishes (version 2).
     Window(WindowFrame),
 }
 
@@ -275,8 +275,9 @@ pub struct PlanEventFrame {
     pub rows: u16,
     /// Active constraints at the last QP's solution, constraints.
     pub active: u16,
-    /// The activation first adopted a new window of the road (its cost included).
-    pub window: bool,
+    /// Core clock ticks the activation spent adopting a new window of the road
+    /// after publishing its plan (not in `ticks`; 0: no window), ticks.
+    pub window_ticks: u32,
     /// Planned positions `[x_m, y_m]` of the plan's nodes, global frame, m.
     pub nodes_xy: [[f32; 2]; PLAN_NODES],
     /// Heuristic speed `V_heur` at the first node, m/s.
@@ -297,7 +298,7 @@ impl PlanEventFrame {
         result: &Result<R, MpcError>,
         report: &MpcReport<f32>,
         published: bool,
-        window: bool,
+        window_ticks: u32,
         plan: Option<&Plan<f32>>,
     ) -> Self {
         let sat16 = |x: u32| x.min(u16::MAX as u32) as u16;
@@ -323,7 +324,7 @@ impl PlanEventFrame {
             qp_refactorizations: sat16(report.qp_refactorizations),
             rows: sat16(report.rows),
             active: sat16(report.active_constraints),
-            window,
+            window_ticks,
             nodes_xy,
             v_heur0_mps,
         }
@@ -364,8 +365,9 @@ const ESTIMATE_MAX_BYTES: usize = U64_MAX_BYTES + 7 * F32_BYTES;
 const PLAN_EVENT_MAX_BYTES: usize = U32_MAX_BYTES
     + 2 * U64_MAX_BYTES
     + U32_MAX_BYTES
-    + 4
+    + 3
     + 6 * U16_MAX_BYTES
+    + U32_MAX_BYTES
     + (PLAN_NODES * 2 + 1) * F32_BYTES;
 
 /// Largest postcard encoding of a [`Down`], bytes (a `PathChunk`).

@@ -113,7 +113,7 @@ fn plan_event(big: u64, v: f32) -> PlanEventFrame {
         qp_refactorizations: big as u16,
         rows: big as u16,
         active: big as u16,
-        window: big % 2 == 1,
+        window_ticks: big as u32,
         nodes_xy: [[v, -v]; PLAN_NODES],
         v_heur0_mps: v,
     }
@@ -345,7 +345,7 @@ fn largest_frames_fit_max_frame_bytes() {
     assert_eq!(largest_down_payload, MAX_DOWN_PAYLOAD_BYTES);
     assert_eq!(largest_up_payload, MAX_UP_PAYLOAD_BYTES);
     assert_eq!(MAX_DOWN_FRAME_BYTES, 269);
-    assert_eq!(MAX_UP_FRAME_BYTES, 245);
+    assert_eq!(MAX_UP_FRAME_BYTES, 249);
     assert_eq!(frame_of(&downs[1]).len(), MAX_DOWN_FRAME_BYTES);
 }
 
@@ -666,14 +666,22 @@ fn any_down() -> impl Strategy<Value = Down> {
 fn any_plan_event() -> impl Strategy<Value = PlanEventFrame> {
     (
         any::<(u32, u64, u64, u32, u8, bool, u8)>(),
-        any::<(u16, u16, u16, u16, u16, u16, bool)>(),
+        any::<(u16, u16, u16, u16, u16, u16, u32)>(),
         prop::array::uniform17(prop::array::uniform2(any_f32())),
         any_f32(),
     )
         .prop_map(
             |(
                 (activation, release_us, finish_us, ticks, status, published, passes),
-                (qp_iterations, qp_added, qp_removed, qp_refactorizations, rows, active, window),
+                (
+                    qp_iterations,
+                    qp_added,
+                    qp_removed,
+                    qp_refactorizations,
+                    rows,
+                    active,
+                    window_ticks,
+                ),
                 nodes_xy,
                 v_heur0_mps,
             )| PlanEventFrame {
@@ -690,7 +698,7 @@ fn any_plan_event() -> impl Strategy<Value = PlanEventFrame> {
                 qp_refactorizations,
                 rows,
                 active,
-                window,
+                window_ticks,
                 nodes_xy,
                 v_heur0_mps,
             },

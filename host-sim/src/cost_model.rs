@@ -13,8 +13,8 @@ use crate::ecu::PlanActivation;
 /// ```text
 /// plan    = margin · (per_activation + passes·(per_pass + per_row_pass·rows)
 ///                     + per_iteration·iterations + per_added·added
-///                     + per_removed·removed + per_refactorization·refactorisations
-///                     + per_window·[a new window of the road was adopted])
+///                     + per_removed·removed + per_refactorization·refactorisations)
+/// window  = per_window   (adopting a new window of the road, after publishing)
 /// control = margin · control
 /// ```
 ///
@@ -50,7 +50,8 @@ pub struct CostModel {
     /// Per factorisation of the working set from scratch, instructions.
     pub per_refactorization: f64,
     /// Adopting a new window of the road (loading the path, rebuilding the
-    /// obstacles' parabolas), instructions.
+    /// obstacles' parabolas), after the plan is published: the largest measured,
+    /// instructions.
     pub per_window: f64,
     /// One control activation, instructions.
     pub control: f64,
@@ -94,7 +95,7 @@ impl CostModel {
     /// is false).
     pub fn window_instructions(&self, adopted: bool) -> f64 {
         if adopted {
-            self.margin * self.per_window
+            self.per_window
         } else {
             0.0
         }
@@ -105,8 +106,9 @@ impl CostModel {
         self.margin * self.control
     }
 
-    /// The model's worst case for one plan activation under `settings`,
-    /// instructions: the firmware runs at most `cold_start_iterations` passes and
+    /// The model's worst case for one plan activation under `settings`, up to its
+    /// publication, instructions (a window adopted after it adds
+    /// [`CostModel::per_window`] to the task's busy time): the firmware runs at most `cold_start_iterations` passes and
     /// at most `qp_max_iter` QP iterations per activation (each adding, removing or
     /// refactorising at most once), on at most [`NC`] rows:
     ///
@@ -120,7 +122,6 @@ impl CostModel {
         let iterations = f64::from(settings.qp_max_iter);
         self.margin
             * (passes * (self.per_pass + NC as f64 * self.per_row_pass)
-                + self.per_window
                 + iterations
                     * (self.per_iteration
                         + self.per_added
@@ -148,8 +149,9 @@ pub struct Counters {
     pub qp_refactorizations: u32,
     /// General QP rows of the last pass.
     pub rows: u32,
-    /// The activation adopted a new window of the road.
-    pub window: bool,
+    /// Instructions of adopting a window of the road after publishing (0: none).
+    #[serde(default)]
+    pub window_instructions: f64,
 }
 
 impl From<&PlanActivation> for Counters {
@@ -162,7 +164,7 @@ impl From<&PlanActivation> for Counters {
             qp_removed: a.qp_removed,
             qp_refactorizations: a.qp_refactorizations,
             rows: a.rows,
-            window: a.window,
+            window_instructions: a.window_instructions,
         }
     }
 }
@@ -207,10 +209,9 @@ pub fn report_of(a: &Counters) -> MpcReport<f64> {
 
 /// The model's terms of an activation, in the order of [`CostModel::fit`]'s
 /// coefficients.
-fn terms(a: &Counters) -> [f64; 8] {
+fn terms(a: &Counters) -> [f64; 7] {
     let passes = f64::from(a.passes);
     [
-        f64::from(u8::from(a.window)),
         1.0,
         passes,
         passes * f64::from(a.rows),
@@ -243,17 +244,17 @@ impl CostModel {
     /// than terms.
     pub fn fit(plans: &[Counters], control_max_instructions: f64) -> Option<Self> {
         let rows: Vec<&Counters> = plans.iter().filter(|a| a.instructions > 0.0).collect();
-        let mut active = [true; 8];
-        let mut coef = [0.0f64; 8];
-        for _ in 0..8 {
-            let cols: Vec<usize> = (0..8).filter(|&j| active[j]).collect();
+        let mut active = [true; 7];
+        let mut coef = [0.0f64; 7];
+        for _ in 0..7 {
+            let cols: Vec<usize> = (0..7).filter(|&j| active[j]).collect();
             if rows.len() < cols.len() || cols.is_empty() {
                 return None;
             }
             let a = DMatrix::from_fn(rows.len(), cols.len(), |i, j| terms(rows[i])[cols[j]]);
             let b = DVector::from_iterator(rows.len(), rows.iter().map(|r| r.instructions));
             let x = a.svd(true, true).solve(&b, 1e-9).ok()?;
-            coef = [0.0; 8];
+            coef = [0.0; 7];
             for (k, &j) in cols.iter().enumerate() {
                 coef[j] = x[k];
             }
@@ -267,23 +268,23 @@ impl CostModel {
         }
         let coef = coef.map(|c| c.max(0.0));
         let mut model = Self {
-            per_window: coef[0],
-            per_activation: coef[1],
-            per_pass: coef[2],
-            per_row_pass: coef[3],
-            per_iteration: coef[4],
-            per_added: coef[5],
-            per_removed: coef[6],
-            per_refactorization: coef[7],
+            per_activation: coef[0],
+            per_pass: coef[1],
+            per_row_pass: coef[2],
+            per_iteration: coef[3],
+            per_added: coef[4],
+            per_removed: coef[5],
+            per_refactorization: coef[6],
+            per_window: plans
+                .iter()
+                .map(|a| a.window_instructions)
+                .fold(0.0, f64::max),
             control: control_max_instructions,
             margin: 1.0,
         };
         let worst = rows
             .iter()
-            .map(|a| {
-                a.instructions
-                    / (model.plan_instructions(&report_of(a)) + model.window_instructions(a.window))
-            })
+            .map(|a| a.instructions / model.plan_instructions(&report_of(a)))
             .fold(1.0f64, f64::max);
         model.margin = worst;
         Some(model)
@@ -294,8 +295,7 @@ impl CostModel {
         let mut errs: Vec<f64> = Vec::new();
         let mut under = 0.0f64;
         for a in plans.iter().filter(|a| a.instructions > 0.0) {
-            let modelled =
-                self.plan_instructions(&report_of(a)) + self.window_instructions(a.window);
+            let modelled = self.plan_instructions(&report_of(a));
             let e = (modelled - a.instructions) / a.instructions;
             under = under.max(-e);
             errs.push(e.abs() * 100.0);

@@ -79,8 +79,11 @@ pub struct PlanActivation {
     pub rows: u32,
     /// Working-set size at the end of the last pass.
     pub active_constraints: u32,
-    /// The activation first adopted a new window of the road.
+    /// After publishing, the activation adopted a new window of the road.
     pub window: bool,
+    /// Instructions of that adoption (not in `instructions`: it follows the
+    /// publication), 0 without a window.
+    pub window_instructions: f64,
     /// Largest validity slack of the plan, rad (0 if none or not optimal).
     pub max_validity_slack_rad: f64,
 }
@@ -114,9 +117,9 @@ pub trait Ecu<T: Real> {
     fn active_plan(&self) -> &Plan<T>;
 
     /// The next window of the road ([`crate::route`]), given before the control
-    /// activation of the instant it is due; the plan task adopts it at its next
-    /// release.
-    fn set_window(&mut self, w: &Window) -> Result<()>;
+    /// activation of the instant `t_us` (µs) it is due; the plan task adopts it after its next
+    /// publication (at the end of the activation running then, or of the next).
+    fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()>;
 }
 
 /// A plan activation computed on the host, waiting for its modelled finish.
@@ -139,8 +142,9 @@ pub struct SimulatedEcu<T: Real> {
     busy_until_us: u64,
     releases: u32,
     host_us: Vec<f64>,
-    /// The next window of the road, adopted at the next plan release.
-    pending_window: Option<Window>,
+    /// The next window of the road and when it arrived, µs; adopted at the end of
+    /// the first plan activation that finishes after that.
+    pending_window: Option<(Window, u64)>,
 }
 
 impl<T: Real> SimulatedEcu<T> {
@@ -231,19 +235,12 @@ impl<T: Real> SimulatedEcu<T> {
     /// Runs the plan task released at `t_us` on `est` on the host; its record waits
     /// in flight until its modelled finish.
     fn release_plan(&mut self, t_us: u64, est: &StateEstimate<T>) {
-        let window = self.pending_window.take();
-        if let Some(w) = &window {
-            // A path the planner refuses leaves it without one: its steps then
-            // fail with `NoPath` and are reported as such.
-            let _ = load_window(&mut self.planner, w);
-        }
         let h0 = Instant::now();
         let outcome = self.planner.run(est);
         self.host_us.push(h0.elapsed().as_secs_f64() * 1e6);
         // Charged from the activation's own counters, a failed one's included.
         let report = *self.planner.last_report();
-        let instructions = self.cost_model.plan_instructions(&report)
-            + self.cost_model.window_instructions(window.is_some());
+        let instructions = self.cost_model.plan_instructions(&report);
         let cycles = instructions * self.cycles_per_instruction;
         let control_cycles = self.cost_model.control_instructions() * self.cycles_per_instruction;
         let finish_us = t_us + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
@@ -263,10 +260,37 @@ impl<T: Real> SimulatedEcu<T> {
                 instructions,
                 cycles,
                 &report,
-                window.is_some(),
             )
             .with_outcome(status, published),
         });
+    }
+}
+
+impl<T: Real> SimulatedEcu<T> {
+    /// At the end of the activation `record` (after its publication), as the ECU
+    /// does: adopts the pending window of the road if it arrived before then; the
+    /// task stays busy for the adoption's modelled time.
+    fn adopt_window_after(&mut self, record: &mut PlanActivation) {
+        let due = self
+            .pending_window
+            .as_ref()
+            .is_some_and(|(_, arrived_us)| *arrived_us < record.finish_us);
+        if !due {
+            return;
+        }
+        if let Some((w, _)) = self.pending_window.take() {
+            // A path the planner refuses leaves it without one: its steps then fail
+            // with `NoPath` and are reported as such.
+            let _ = load_window(&mut self.planner, &w);
+            let instructions = self.cost_model.window_instructions(true);
+            let cycles = instructions * self.cycles_per_instruction;
+            let control_cycles =
+                self.cost_model.control_instructions() * self.cycles_per_instruction;
+            self.busy_until_us = record.finish_us
+                + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
+            record.window = true;
+            record.window_instructions = instructions;
+        }
     }
 }
 
@@ -300,7 +324,6 @@ fn activation_record<T: Real>(
     instructions: f64,
     cycles: f64,
     r: &MpcReport<T>,
-    window: bool,
 ) -> PlanActivation {
     PlanActivation {
         activation,
@@ -318,7 +341,8 @@ fn activation_record<T: Real>(
         qp_refactorizations: r.qp_refactorizations,
         rows: r.rows,
         active_constraints: r.active_constraints,
-        window,
+        window: false,
+        window_instructions: 0.0,
         max_validity_slack_rad: r.max_validity_slack_rad.to_f64(),
     }
 }
@@ -343,11 +367,12 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
             .as_ref()
             .is_some_and(|f| f.record.finish_us <= t_us)
         {
-            if let Some(f) = self.in_flight.take() {
+            if let Some(mut f) = self.in_flight.take() {
                 let published = self
                     .planner
                     .publish_at(&mut self.shared_plan, f.record.finish_us);
                 debug_assert_eq!(published, f.record.published);
+                self.adopt_window_after(&mut f.record);
                 plans.push(f.record);
             }
         }
@@ -376,8 +401,8 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
         &self.shared_plan
     }
 
-    fn set_window(&mut self, w: &Window) -> Result<()> {
-        self.pending_window = Some(w.clone());
+    fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()> {
+        self.pending_window = Some((w.clone(), t_us));
         Ok(())
     }
 }

@@ -533,7 +533,12 @@ impl QemuEcu {
             qp_refactorizations: u32::from(p.qp_refactorizations),
             rows: u32::from(p.rows),
             active_constraints: u32::from(p.active),
-            window: p.window,
+            window: p.window_ticks > 0,
+            window_instructions: if p.window_ticks > 0 {
+                self.opts.instructions(p.window_ticks)
+            } else {
+                0.0
+            },
             max_validity_slack_rad: 0.0,
         }
     }
@@ -568,7 +573,7 @@ impl Ecu<f32> for QemuEcu {
         &self.active
     }
 
-    fn set_window(&mut self, w: &Window) -> Result<()> {
+    fn set_window(&mut self, _t_us: u64, w: &Window) -> Result<()> {
         self.send_rows(&w.rows)?;
         self.send(&Down::Window(link::WindowFrame {
             rows: w.rows.len() as u16,

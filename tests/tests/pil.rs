@@ -166,5 +166,8 @@ fn a_pil_set_up_with_an_obstacle_that_blocks_the_road_is_refused_with_what_to_ch
     };
     let msg = format!("{e:#}");
     assert!(msg.contains(r#"obstacle "wall" blocks the road"#), "{msg}");
-    assert!(msg.contains("move it, make it narrower, or widen the track"), "{msg}");
+    assert!(
+        msg.contains("move it, make it narrower, or widen the track"),
+        "{msg}"
+    );
 }

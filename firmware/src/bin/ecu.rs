@@ -491,8 +491,19 @@ mod app {
             let t0 = core_ticks();
             let c0 = CONTROL_TICKS.load(Ordering::Relaxed);
             let planner = &mut *cx.local.planner;
-            // A complete new window of the road: its rows copied into the path's
-            // storage under the lock, the path computed outside it.
+            let result = planner.run(&est);
+            // The record's copy of the plan, taken before the swap, outside the lock.
+            let computed = planner.pending().copied();
+            let finish_us = now_us();
+            let published = cx.shared.plan.lock(|p| planner.publish_at(p, finish_us));
+            let c1 = CONTROL_TICKS.load(Ordering::Relaxed);
+            let t1 = core_ticks();
+            let own = t1
+                .saturating_sub(t0)
+                .saturating_sub(c1.wrapping_sub(c0) as u64);
+            // After publishing, in the slack before the next release: a complete new
+            // window of the road, its rows copied into the path's storage under the
+            // lock, the path computed outside it (the next activation plans on it).
             let window = cx.shared.staging.lock(|st| st.take_into(planner));
             if let Some(w) = window {
                 if planner
@@ -502,15 +513,14 @@ mod app {
                     defmt::error!("ecu: window refused");
                 }
             }
-            let result = planner.run(&est);
-            // The record's copy of the plan, taken before the swap, outside the lock.
-            let computed = planner.pending().copied();
-            let finish_us = now_us();
-            let published = cx.shared.plan.lock(|p| planner.publish_at(p, finish_us));
-            let c1 = CONTROL_TICKS.load(Ordering::Relaxed);
-            let own = core_ticks()
-                .saturating_sub(t0)
-                .saturating_sub(c1.wrapping_sub(c0) as u64);
+            let c2 = CONTROL_TICKS.load(Ordering::Relaxed);
+            let window_ticks = match window {
+                Some(_) => core_ticks()
+                    .saturating_sub(t1)
+                    .saturating_sub(c2.wrapping_sub(c1) as u64)
+                    .clamp(1, u32::MAX as u64) as u32,
+                None => 0,
+            };
             let event = PlanEventFrame::new(
                 activation,
                 release_us,
@@ -519,14 +529,15 @@ mod app {
                 &result,
                 planner.last_report(),
                 published,
-                window.is_some(),
+                window_ticks,
                 computed.as_ref(),
             );
             cx.shared.plan_event.lock(|p| *p = Some(event));
             // The next release: the next multiple of 100 ms not yet past (releases
             // that fell while this one ran are skipped, not queued).
+            let end_us = now_us();
             k += 1;
-            while (k as u64) * 100_000 < finish_us {
+            while (k as u64) * 100_000 < end_us {
                 k += 1;
             }
         }

@@ -208,6 +208,11 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     // decoder's (bounded by the frame size): its bound is its largest measured
     // activation with a 20 % allowance.
     let control_bound = 1.2 * control_max;
+    // Adopting a window: at most 320 rows (the ECU's capacity, every window of a
+    // long track is full) and the obstacles inside it; its bound is the largest
+    // measured adoption with the same 20 % allowance (more obstacles in a window
+    // than in the runs cost more: see the README).
+    let window_bound = 1.2 * model.per_window;
     let inputs = ReportInputs {
         run_dirs: run_dirs.clone(),
         elf: args.elf.clone(),
@@ -215,6 +220,8 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         cpi,
         plan_bound_instructions: plan_bound,
         control_bound_instructions: control_bound,
+        window_bound_instructions: window_bound,
+        plan_period_cycles: firmware::tasks::PLAN_PERIOD_US as f64 * 168.0,
         plan_budget_cycles: crate::closed_loop::SimOptions::default().plan_budget_cycles,
         control_budget_cycles: crate::closed_loop::SimOptions::default().control_budget_cycles,
         clock_hz: 168_000_000,

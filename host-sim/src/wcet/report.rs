@@ -94,6 +94,9 @@ pub struct PlanActivation {
     pub deadline_miss: bool,
     /// QP passes: 1 for a warm start that sufficed, more when it was cold-started.
     pub passes: u32,
+    /// Instructions of the window of the road adopted after publishing (0: none).
+    #[serde(default)]
+    pub window_instructions: f64,
 }
 
 /// A processor-in-the-loop run folder, read by [`load_pil_run`].
@@ -362,6 +365,12 @@ pub struct ReportInputs {
     pub plan_bound_instructions: f64,
     /// Static bound on one control activation, in instructions.
     pub control_bound_instructions: f64,
+    /// Bound on adopting a window of the road (after a plan's publication, in
+    /// the same activation), in instructions.
+    pub window_bound_instructions: f64,
+    /// Plan task period, in cycles (16.8e6: 100 ms at 168 MHz): a plan activation
+    /// and the window it adopts must end within it, or the next release is lost.
+    pub plan_period_cycles: f64,
     /// Plan task budget per activation, in cycles (15.96e6: 95 ms at 168 MHz).
     pub plan_budget_cycles: f64,
     /// Control task budget per activation, in cycles.
@@ -403,10 +412,26 @@ pub struct TaskTiming {
 /// Both tasks.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Tasks {
-    /// The plan task (priority 1, every 100 ms).
+    /// The plan task (priority 1, every 100 ms), up to its publication.
     pub plan: TaskTiming,
     /// The control task (priority 2, every 10 ms).
     pub control: TaskTiming,
+    /// The plan task's adoption of a new window of the road, after it published.
+    pub plan_window: WindowTiming,
+}
+
+/// The plan task's work after its publication: adopting a new window of the road.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WindowTiming {
+    /// Most instructions of one adoption over all PIL runs, in instructions.
+    pub observed_max_instructions: f64,
+    /// Bound on one adoption, in instructions.
+    pub bound_instructions: f64,
+    /// `(plan bound + window bound) × CPI bound`, in cycles: the longest an
+    /// activation keeps the task busy.
+    pub activation_bound_cycles: f64,
+    /// The plan period, in cycles.
+    pub period_cycles: f64,
 }
 
 /// Flash, RAM and stack of the ECU binary.
@@ -603,7 +628,24 @@ pub fn assemble_report(
         .max()
         .unwrap_or(0);
     let memory = memory_report(&memory, &stack, high_water, stack_size);
-    let tasks = Tasks { plan, control };
+    let plan_window = WindowTiming {
+        observed_max_instructions: max_of(
+            runs.iter()
+                .flat_map(|r| r.plan.iter())
+                .map(|a| a.window_instructions),
+        )
+        .unwrap_or(0.0),
+        bound_instructions: inputs.window_bound_instructions,
+        activation_bound_cycles: (inputs.plan_bound_instructions
+            + inputs.window_bound_instructions)
+            * cpi,
+        period_cycles: inputs.plan_period_cycles,
+    };
+    let tasks = Tasks {
+        plan,
+        control,
+        plan_window,
+    };
     let goals = goals(&tasks, &memory, &run_entries);
     Ok(WcetReport {
         clock_hz: inputs.clock_hz,
@@ -775,6 +817,12 @@ fn goals(tasks: &Tasks, memory: &MemoryReport, runs: &[RunEntry]) -> Vec<Goal> {
             "cycles",
         ),
         goal(
+            "plan + window bound within the period",
+            Some(tasks.plan_window.activation_bound_cycles),
+            tasks.plan_window.period_cycles,
+            "cycles",
+        ),
+        goal(
             "control observed max",
             Some(tasks.control.observed_max_instructions),
             GOAL_CONTROL_MAX_INSTRUCTIONS,
@@ -939,7 +987,22 @@ fn render_tasks(s: &mut String, r: &WcetReport) -> std::fmt::Result {
             t.margin
         )?;
     }
-    writeln!(s)
+    let w = &r.tasks.plan_window;
+    writeln!(
+        s,
+        "\nAfter publishing, a plan activation may adopt a new window of the road: \
+         observed max {} instructions, bound {}; plan + window bound {} cycles within \
+         the {}-cycle period: {}.\n",
+        num(w.observed_max_instructions.round()),
+        num(w.bound_instructions.round()),
+        num(w.activation_bound_cycles.round()),
+        num(w.period_cycles.round()),
+        if w.activation_bound_cycles <= w.period_cycles {
+            "yes"
+        } else {
+            "NO"
+        }
+    )
 }
 
 fn render_memory(s: &mut String, r: &WcetReport) -> std::fmt::Result {
@@ -1292,6 +1355,8 @@ active_constraints,max_validity_slack_rad";
             cpi: cpi(1.5),
             plan_bound_instructions: 4.0e6,
             control_bound_instructions: 3000.0,
+            window_bound_instructions: 0.0,
+            plan_period_cycles: 16.8e6,
             plan_budget_cycles: 8.4e6,
             control_budget_cycles: 5000.0,
             clock_hz: 168_000_000,
@@ -1510,7 +1575,12 @@ active_constraints,max_validity_slack_rad";
         assert_eq!(v["symbols"]["allocator"].as_bool(), Some(false));
         assert_eq!(v["symbols"]["soft_double"].as_bool(), Some(false));
         assert_eq!(v["runs"].as_array().map(Vec::len), Some(2));
-        assert_eq!(v["goals"].as_array().map(Vec::len), Some(8));
+        assert_eq!(v["goals"].as_array().map(Vec::len), Some(9));
+        // The fixture adopts no window: plan + window bound = the plan's.
+        assert_eq!(
+            v["tasks"]["plan_window"]["activation_bound_cycles"].as_f64(),
+            v["tasks"]["plan"]["bound_cycles"].as_f64()
+        );
         assert!(v["goals"][0]["met"].is_boolean());
         let md = std::fs::read_to_string(out.join("wcet.md"))?;
         assert!(
