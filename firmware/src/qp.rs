@@ -64,7 +64,9 @@
 //! factorisation). When a small pivot may come from accumulated rounding, or a solve
 //! gives non-finite multipliers, the factor is recomputed from scratch (counted).
 //!
-//! **Cost.** Per solve: Cholesky and in-place inverse of `H` (`N³/3` multiply-adds),
+//! **Cost.** Per solve: Cholesky and in-place inverse of `H` (`N³/3` multiply-adds; the
+//! inverse and the row transformation as row `axpy`s, the dot products in four partial
+//! sums, so that the host pipelines and vectorises them),
 //! transformation of the rows (`m·N²/2`). Per iteration: `O(m·N)` for the constraint
 //! values, `O(|W|·N + |W|²)` for the multipliers and the factor update. The counters of
 //! [`QpSolution`] (iterations, additions, removals, refactorisations) are
@@ -760,27 +762,55 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
     Some(floored)
 }
 
-/// In-place inverse of the upper-triangular `R` (positive diagonal), column by
-/// column; lower triangle zeroed.
+/// In-place inverse of the upper-triangular `R` (positive diagonal), row by row from
+/// the bottom; lower triangle zeroed.
+///
+/// Row `i` of `X = R⁻¹` follows from row `i` of `R X = I`:
+/// `X_i = (e_i − Σ_{k>i} R_ik X_k) / R_ii`, a sum of rows of `X` already computed
+/// (contiguous `axpy`s, which pipeline and vectorise, instead of strided dot products).
 fn invert_upper<T: Real, const N: usize>(h: &mut [[T; N]; N]) {
-    for j in 0..N {
-        let inv = T::ONE / h[j][j];
-        h[j][j] = inv;
-        // Column j above the diagonal: x = Rinv[0..j][0..j] * R[0..j][j], scaled by −inv.
-        for i in 0..j {
-            let mut s = T::ZERO;
-            for k in i..j {
-                s += h[i][k] * h[k][j];
+    for i in (0..N).rev() {
+        let (top, below) = h.split_at_mut(i + 1);
+        let Some(xi) = top.last_mut() else {
+            continue;
+        };
+        let r_row = *xi;
+        let inv = T::ONE / r_row[i];
+        xi.fill(T::ZERO);
+        let tail = xi.get_mut(i + 1..).unwrap_or(&mut []);
+        let r_tail = r_row.get(i + 1..).unwrap_or(&[]);
+        for (xk, &c) in below.iter().zip(r_tail) {
+            if c == T::ZERO {
+                continue;
             }
-            h[i][j] = s;
+            // Row k of X is zero before column k > i: sum over all of `tail` anyway
+            // (contiguous and of fixed length, so it vectorises).
+            for (d, &v) in tail.iter_mut().zip(xk.get(i + 1..).unwrap_or(&[])) {
+                *d += c * v;
+            }
         }
-        for i in 0..j {
-            h[i][j] = -h[i][j] * inv;
+        for d in tail.iter_mut() {
+            *d = -*d * inv;
         }
+        xi[i] = inv;
     }
-    for (r, row) in h.iter_mut().enumerate() {
-        for v in row.iter_mut().take(r) {
-            *v = T::ZERO;
+}
+
+/// `out = xᵀ U` for an upper-triangular `U`: `out_j = Σ_{k≤j} x_k U_kj`, as a sum of
+/// the rows of `U` (contiguous `axpy`s; zero entries of `x` skipped).
+#[inline]
+fn row_times_upper<T: Real, const N: usize>(x: &[T; N], u: &[[T; N]; N], out: &mut [T; N]) {
+    out.fill(T::ZERO);
+    for (k, (&c, uk)) in x.iter().zip(u.iter()).enumerate() {
+        if c == T::ZERO {
+            continue;
+        }
+        let (d, v) = (
+            out.get_mut(k..).unwrap_or(&mut []),
+            uk.get(k..).unwrap_or(&[]),
+        );
+        for (d, &v) in d.iter_mut().zip(v) {
+            *d += c * v;
         }
     }
 }
@@ -788,22 +818,12 @@ fn invert_upper<T: Real, const N: usize>(h: &mut [[T; N]; N]) {
 /// `a_i ← a_iᵀ R⁻¹` for the used rows, and `v = R⁻ᵀ f`.
 fn transform<T: Real, const N: usize, const M: usize>(p: &mut QpProblem<T, N, M>, v: &mut [T; N]) {
     let rinv = &p.h;
+    let mut out = [T::ZERO; N];
     for row in p.a.iter_mut().take(p.m) {
-        for j in (0..N).rev() {
-            let mut s = T::ZERO;
-            for k in 0..=j {
-                s += row[k] * rinv[k][j];
-            }
-            row[j] = s;
-        }
+        row_times_upper(row, rinv, &mut out);
+        *row = out;
     }
-    for j in 0..N {
-        let mut s = T::ZERO;
-        for k in 0..=j {
-            s += p.f[k] * rinv[k][j];
-        }
-        v[j] = s;
-    }
+    row_times_upper(&p.f, rinv, v);
 }
 
 #[inline]
@@ -834,11 +854,23 @@ fn con_row<T: Real, const N: usize, const M: usize>(
     }
 }
 
+/// `Σ_{k ≥ start} a_k b_k`, in four interleaved partial sums (independent additions
+/// pipeline; one chain would wait on each addition's latency).
 #[inline]
 fn dot_from<T: Real, const N: usize>(a: &[T; N], b: &[T; N], start: usize) -> T {
-    let mut s = T::ZERO;
-    for (x, y) in a.iter().zip(b.iter()).skip(start) {
-        s += *x * *y;
+    let a = a.get(start..).unwrap_or(&[]);
+    let b = b.get(start..).unwrap_or(&[]);
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    let mut acc = [T::ZERO; 4];
+    for (x, y) in ca.zip(cb) {
+        for ((s, &p), &q) in acc.iter_mut().zip(x).zip(y) {
+            *s += p * q;
+        }
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (&p, &q) in ra.iter().zip(rb) {
+        s += p * q;
     }
     s
 }
@@ -1080,12 +1112,21 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         for r in 0..n {
             self.tmp[r] /= self.ldl[row_start(r) + r];
         }
-        for r in (0..n).rev() {
-            let mut acc = self.tmp[r];
-            for k in (r + 1)..n {
-                acc -= self.ldl[row_start(k) + r] * self.tmp[k];
+        // Lᵀ x = y by columns of Lᵀ (rows of the packed L, contiguous): once x_r is
+        // final, its share leaves the entries above it.
+        for r in (1..n).rev() {
+            let xr = self.tmp[r];
+            if xr == T::ZERO {
+                continue;
             }
-            self.tmp[r] = acc;
+            let s = row_start(r);
+            let (t, l) = (
+                self.tmp.get_mut(..r).unwrap_or(&mut []),
+                self.ldl.get(s..s + r).unwrap_or(&[]),
+            );
+            for (t, &l) in t.iter_mut().zip(l) {
+                *t -= l * xr;
+            }
         }
     }
 
@@ -1121,7 +1162,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 continue;
             }
             let (row, st) = con_row(p, self.ws[k].index);
-            for (u, r) in self.u.iter_mut().zip(row.iter()).skip(st) {
+            let (u, r) = (
+                self.u.get_mut(st..).unwrap_or(&mut []),
+                row.get(st..).unwrap_or(&[]),
+            );
+            for (u, r) in u.iter_mut().zip(r) {
                 *u -= l * *r;
             }
         }

@@ -11,7 +11,10 @@
     clippy::needless_range_loop
 )]
 
+mod qp_util;
+
 use firmware::qp::{ldl_len, QpProblem, QpSolver, QpStatus};
+use qp_util::to_f32_into;
 
 const K: usize = 16;
 const N: usize = 2 * K;
@@ -113,26 +116,6 @@ fn build(x0: State) -> QpProblem<f64, N, M> {
     p
 }
 
-fn to_f32(p: &QpProblem<f64, N, M>, q: &mut QpProblem<f32, N, M>) {
-    for r in 0..N {
-        for c in 0..N {
-            q.h[r][c] = p.h[r][c] as f32;
-        }
-        q.f[r] = p.f[r] as f32;
-        q.x_lo[r] = p.x_lo[r] as f32;
-        q.x_hi[r] = p.x_hi[r] as f32;
-    }
-    for i in 0..M {
-        for c in 0..N {
-            q.a[i][c] = p.a[i][c] as f32;
-        }
-        q.lo[i] = p.lo[i] as f32;
-        q.hi[i] = p.hi[i] as f32;
-        q.soft[i] = p.soft[i] as f32;
-    }
-    q.m = p.m;
-}
-
 #[test]
 fn condensed_mpc_receding_horizon() {
     type S64 = QpSolver<f64, N, M, W, { ldl_len(W) }>;
@@ -158,8 +141,8 @@ fn condensed_mpc_receding_horizon() {
         max_m = max_m.max(p.m);
         *cold64.problem_mut() = p.clone();
         *warm64.problem_mut() = p.clone();
-        to_f32(&p, cold32.problem_mut());
-        to_f32(&p, warm32.problem_mut());
+        to_f32_into(&p, cold32.problem_mut());
+        to_f32_into(&p, warm32.problem_mut());
         for (name, st) in [
             ("cold64", cold64.solve()),
             ("warm64", warm64.solve()),

@@ -10,8 +10,8 @@
 
 mod qp_util;
 
-use firmware::qp::{ldl_len, QpProblem, QpSolver, QpStatus};
-use qp_util::{random_problem, Mix, Rng};
+use firmware::qp::{ldl_len, QpSolver, QpStatus};
+use qp_util::{random_problem, to_f32, Mix, Rng};
 
 const N: usize = 10;
 const M: usize = 24;
@@ -21,28 +21,6 @@ const W: usize = 30;
 const TOL32: f64 = 1e-3;
 /// The same for degenerate problems (dependent rows made nearly dependent by rounding).
 const TOL32_DEGENERATE: f64 = 1e-2;
-
-fn to_f32(p: &QpProblem<f64, N, M>) -> QpProblem<f32, N, M> {
-    let mut q = QpProblem::<f32, N, M>::new();
-    for r in 0..N {
-        for c in 0..N {
-            q.h[r][c] = p.h[r][c] as f32;
-        }
-        q.f[r] = p.f[r] as f32;
-        q.x_lo[r] = p.x_lo[r] as f32;
-        q.x_hi[r] = p.x_hi[r] as f32;
-    }
-    for i in 0..M {
-        for c in 0..N {
-            q.a[i][c] = p.a[i][c] as f32;
-        }
-        q.lo[i] = p.lo[i] as f32;
-        q.hi[i] = p.hi[i] as f32;
-        q.soft[i] = p.soft[i] as f32;
-    }
-    q.m = p.m;
-    q
-}
 
 #[test]
 fn f32_agrees_with_f64() {
@@ -116,24 +94,7 @@ fn mpc_sized_problems_f32_vs_f64() {
         for j in 0..N {
             p.h[j][j] += 2.0;
         }
-        let mut q = QpProblem::<f32, N, M>::new();
-        for r in 0..N {
-            for c in 0..N {
-                q.h[r][c] = p.h[r][c] as f32;
-            }
-            q.f[r] = p.f[r] as f32;
-            q.x_lo[r] = p.x_lo[r] as f32;
-            q.x_hi[r] = p.x_hi[r] as f32;
-        }
-        for i in 0..M {
-            for c in 0..N {
-                q.a[i][c] = p.a[i][c] as f32;
-            }
-            q.lo[i] = p.lo[i] as f32;
-            q.hi[i] = p.hi[i] as f32;
-            q.soft[i] = p.soft[i] as f32;
-        }
-        q.m = p.m;
+        let q = to_f32(&p);
         *s64.problem_mut() = p;
         *s32.problem_mut() = q;
         assert_eq!(s64.solve(), QpStatus::Optimal, "seed {seed} f64");

@@ -41,6 +41,7 @@
 //! | `n_decision` | 32: the first 32 variables are the MPC inputs `[a_0, δ̇_0, a_1, …]` |
 //! | `native` | the problem in our solver's own form, see below |
 //! | `precision`, `step`, `pass`, `objective`, `added`, `removed`, `refactorizations` | run information: `"f64"`/`"f32"`, MPC step (0.1 s each), pass within the step, our objective (with slack penalties), our working-set counters |
+//! | `solve_us_cold`, `solve_us_warm` | only with `--time`: our f64 solver's time on this QP, µs, from an empty working set and warm-started as in the MPC ([`time_solves`] says what is timed) |
 //!
 //! A hard row `lo ≤ aᵀx ≤ hi` is written as it is. A soft row (weight `ρ > 0`, meaning
 //! `lo − s ≤ aᵀx ≤ hi + s` with cost `½ρs²`, `s ≥ 0`) gets a slack variable `s` with `ρ`
@@ -59,12 +60,15 @@
 //! # Use
 //!
 //! `host-sim qp-corpus --out DIR [--steps N] [--precision f64|f32] [--track
-//! builtin|paper|FILE [--open]] [--obstacles builtin|none|paper|FILE]` (see [`run`]); the
+//! builtin|paper|FILE [--open]] [--obstacles builtin|none|paper|FILE] [--time
+//! [--time-reps K]]` (see [`run`]; `--time` adds our solver's times, [`time_solves`]); the
 //! benchmark `cargo bench -p host-sim --bench qp_solvers` reads `QP_CORPUS=DIR` or
 //! records the built-in scenario itself.
 
 use std::cell::RefCell;
+use std::hint::black_box;
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use anyhow::{bail, ensure, Context, Result};
 use firmware::mpc::{Mpc, MpcQp, MpcQpProblem, MpcQpSolution, NC, NV};
@@ -183,6 +187,14 @@ pub struct CorpusEntry {
     pub removed: u32,
     /// Our from-scratch refactorisations.
     pub refactorizations: u32,
+    /// With `qp-corpus --time`: our f64 solver's time on this QP from an empty working
+    /// set, µs (median of the repetitions; see [`time_solves`] for what is timed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub solve_us_cold: Option<f64>,
+    /// With `qp-corpus --time`: the same, warm-started from the working set the
+    /// previous QP of the file order left (as in the MPC), µs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub solve_us_warm: Option<f64>,
 }
 
 /// The corpus name of a solver status (`"optimal"`, `"iteration_limit"`, …).
@@ -602,6 +614,8 @@ impl CorpusEntry {
             added: solution.added,
             removed: solution.removed,
             refactorizations: solution.refactorizations,
+            solve_us_cold: None,
+            solve_us_warm: None,
         }
     }
 }
@@ -865,6 +879,75 @@ pub fn replay<T: Real>(
         .collect()
 }
 
+/// Fewest repetitions [`time_solves`] accepts (the median of fewer is too noisy).
+pub const MIN_TIME_REPS: usize = 5;
+
+/// Our f64 solver's time on each QP of `entries`, `(cold, warm)` in µs, the median of
+/// `reps` (≥ [`MIN_TIME_REPS`]) repetitions each.
+///
+/// What is timed is [`MpcQp::solve`] alone, in this process, by [`Instant`]: the input
+/// checks, the inversion of the factor `R` the MPC hands in (or the Cholesky
+/// factorisation of `H`), the transformation of the rows (`A R⁻¹`, `R⁻ᵀ f`), the
+/// warm-start factor of the working set, the iterations and the output (`x`,
+/// multipliers, objective). Not timed: copying the problem into the solver (the MPC
+/// condenses in place) and the solver's state copy made before each repetition, so that
+/// every repetition starts from the same state.
+///
+/// *Cold*: an empty working set. *Warm*: the working set the previous QP (in file
+/// order) left, as in the MPC; the state carried on is that of the last repetition, so
+/// the sequence is the one [`replay`] gives. Each QP gets its `max_iter`.
+pub fn time_solves(entries: &[CorpusEntry], reps: usize) -> Result<Vec<(f64, f64)>> {
+    ensure!(
+        reps >= MIN_TIME_REPS,
+        "at least {MIN_TIME_REPS} repetitions per QP are needed for a median, got {reps}"
+    );
+    let problems = native_problems::<f64>(entries)?;
+    let mut warm = Box::new(MpcQp::<f64>::new());
+    warm.settings.warm_start = true;
+    let mut cold = Box::new(MpcQp::<f64>::new());
+    cold.settings.warm_start = false;
+    let mut run = Box::new(MpcQp::<f64>::new());
+    let mut samples = vec![0.0; reps];
+    let mut out = Vec::with_capacity(problems.len());
+    for (p, e) in problems.iter().zip(entries) {
+        let max_iter = if e.native.max_iter > 0 {
+            e.native.max_iter
+        } else {
+            warm.settings.max_iter
+        };
+        warm.settings.max_iter = max_iter;
+        cold.settings.max_iter = max_iter;
+        let mut time_from = |start: &MpcQp<f64>, run: &mut MpcQp<f64>| {
+            for t in samples.iter_mut() {
+                run.clone_from(start);
+                run.problem_mut().clone_from(p);
+                let t0 = Instant::now();
+                black_box(run.solve());
+                *t = t0.elapsed().as_secs_f64() * 1e6;
+            }
+            median(&samples)
+        };
+        let cold_us = time_from(&cold, &mut run);
+        let warm_us = time_from(&warm, &mut run);
+        // `run` holds the state after the last warm repetition: carry it on.
+        std::mem::swap(&mut warm, &mut run);
+        out.push((cold_us, warm_us));
+    }
+    Ok(out)
+}
+
+/// Median of a non-empty list (the mean of the middle two for an even length); 0 for
+/// an empty one.
+fn median(v: &[f64]) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    match (s.get((n.max(1) - 1) / 2), s.get(n / 2)) {
+        (Some(a), Some(b)) => 0.5 * (a + b),
+        _ => 0.0,
+    }
+}
+
 /// Writes the corpus as `dir/qp_0000.json`, … (creating `dir`).
 pub fn write_corpus(dir: &Path, entries: &[CorpusEntry]) -> Result<()> {
     std::fs::create_dir_all(dir)
@@ -945,6 +1028,13 @@ pub struct QpCorpusArgs {
     /// paper`) or a CSV file `id,x_m,y_m`.
     #[arg(long, default_value = "builtin")]
     pub obstacles: String,
+    /// Also time our f64 solver on every QP, cold and warm (keys `solve_us_cold`,
+    /// `solve_us_warm`, µs; see `time_solves`), and print the percentiles.
+    #[arg(long)]
+    pub time: bool,
+    /// Repetitions per QP and mode with `--time` (their median is kept; at least 5).
+    #[arg(long, default_value_t = 21)]
+    pub time_reps: usize,
 }
 
 /// Track rows, closed flag and obstacle polygons (m) of `args`' scenario.
@@ -990,7 +1080,24 @@ fn scenario_data(args: &QpCorpusArgs) -> Result<ScenarioData> {
 pub fn run(args: &QpCorpusArgs) -> Result<()> {
     ensure!(args.steps > 0, "--steps must be at least 1");
     let (rows, closed, obstacles) = scenario_data(args)?;
-    let entries = record(&rows, closed, &obstacles, args.steps, args.precision)?;
+    let mut entries = record(&rows, closed, &obstacles, args.steps, args.precision)?;
+    if args.time {
+        let times = time_solves(&entries, args.time_reps)?;
+        for (e, &(cold, warm)) in entries.iter_mut().zip(&times) {
+            e.solve_us_cold = Some(cold);
+            e.solve_us_warm = Some(warm);
+        }
+        let (cold, warm): (Vec<f64>, Vec<f64>) = times.into_iter().unzip();
+        let pct = crate::cost_model::percentile;
+        println!(
+            "our f64 solve() (median of {} repetitions per QP): cold p50 {:.1} µs, p99 {:.1} µs; warm p50 {:.1} µs, p99 {:.1} µs",
+            args.time_reps,
+            pct(&cold, 0.5),
+            pct(&cold, 0.99),
+            pct(&warm, 0.5),
+            pct(&warm, 0.99)
+        );
+    }
     write_corpus(&args.out, &entries)?;
     let optimal = entries.iter().filter(|e| e.status == "optimal").count();
     let warm: Vec<u32> = entries.iter().map(|e| e.iterations).collect();

@@ -12,7 +12,8 @@ use std::sync::OnceLock;
 
 use host_sim::qp_corpus::{
     builtin_obstacles, builtin_track_rows, median_max, native_problems, read_corpus, record,
-    replay, write_corpus, CorpusEntry, Precision, StandardQp, DEFAULT_STEPS, N_DECISION,
+    replay, time_solves, write_corpus, CorpusEntry, Precision, StandardQp, DEFAULT_STEPS,
+    N_DECISION,
 };
 
 /// The built-in scenario's corpus (f64), recorded once for all tests.
@@ -287,4 +288,29 @@ fn an_f32_run_records_too() {
     // f32 data are stored exactly: converting back gives the same f32 problem.
     let p = c[5].native.to_problem::<f32>().unwrap();
     assert_eq!(p.f[0] as f64, c[5].native.f[0]);
+}
+
+#[test]
+fn solve_times_are_medians_of_real_solves_and_survive_the_json() {
+    let c = corpus();
+    let some: Vec<CorpusEntry> = c.iter().take(12).cloned().collect();
+    assert!(
+        time_solves(&some, 4).is_err(),
+        "fewer than 5 repetitions refused"
+    );
+    let times = time_solves(&some, 5).unwrap();
+    assert_eq!(times.len(), some.len());
+    for (k, &(cold, warm)) in times.iter().enumerate() {
+        // A solve of 32 variables and 48+ rows takes more than 0.1 µs and less than 1 s.
+        assert!(cold > 0.1 && cold < 1e6, "QP {k}: cold {cold} µs");
+        assert!(warm > 0.1 && warm < 1e6, "QP {k}: warm {warm} µs");
+    }
+    let mut e = some[0].clone();
+    let text = serde_json::to_string(&e).unwrap();
+    assert!(!text.contains("solve_us"), "no times unless asked for");
+    e.solve_us_cold = Some(times[0].0);
+    e.solve_us_warm = Some(times[0].1);
+    let text = serde_json::to_string(&e).unwrap();
+    let back: CorpusEntry = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, e);
 }

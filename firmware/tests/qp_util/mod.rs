@@ -405,3 +405,37 @@ pub fn clarabel_solve<const N: usize, const M: usize>(
     let ok = matches!(solver.solution.status, SolverStatus::Solved);
     (ok, solver.solution.x[..N].to_vec(), solver.solution.obj_val)
 }
+
+/// `p` rounded to single precision, written into `q` in place (a boxed solver's problem
+/// need not pass through the stack).
+pub fn to_f32_into<const N: usize, const M: usize>(
+    p: &QpProblem<f64, N, M>,
+    q: &mut QpProblem<f32, N, M>,
+) {
+    let f = |v: &[f64], d: &mut [f32]| {
+        for (d, s) in d.iter_mut().zip(v) {
+            *d = *s as f32;
+        }
+    };
+    for (d, s) in q.h.iter_mut().zip(&p.h) {
+        f(s, d);
+    }
+    for (d, s) in q.a.iter_mut().zip(&p.a) {
+        f(s, d);
+    }
+    f(&p.f, &mut q.f);
+    f(&p.x_lo, &mut q.x_lo);
+    f(&p.x_hi, &mut q.x_hi);
+    f(&p.lo, &mut q.lo);
+    f(&p.hi, &mut q.hi);
+    f(&p.soft, &mut q.soft);
+    q.m = p.m;
+    q.h_factor = p.h_factor;
+}
+
+/// `p` rounded to single precision.
+pub fn to_f32<const N: usize, const M: usize>(p: &QpProblem<f64, N, M>) -> QpProblem<f32, N, M> {
+    let mut q = QpProblem::new();
+    to_f32_into(p, &mut q);
+    q
+}
