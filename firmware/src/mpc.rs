@@ -655,7 +655,7 @@ impl<T: Real> Mpc<T> {
         plan.nodes[0] = bicycle::node_from_state(&xi);
         for k in 0..HORIZON {
             let u = self.u_bar[k];
-            xi = settings.geometry.discretize(&xi, &u, dt).x_next;
+            xi = settings.geometry.step(&xi, &u, dt);
             plan.nodes[k + 1] = bicycle::node_from_state(&xi);
             plan.inputs[k] = u;
         }
