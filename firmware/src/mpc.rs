@@ -34,15 +34,25 @@
 //! 2. Linearise: simulate `ξ̄` from `ξ_0` under `ū`; the Jacobians of the discrete map
 //!    give the sensitivities `S_k = ∂ξ_k/∂u` (6 × 32) recursively,
 //!    `S_{k+1} = A_k S_k + B_k E_k`, so `ξ_k ≈ ξ̄_k + S_k (u − ū)`.
+//!    `ξ_k` depends only on the inputs before node `k`, so `S_k`'s columns from
+//!    `NU·k` on are zero: every product, cost row and constraint row of node `k`
+//!    runs over its first `NU·k` columns only.
 //! 3. Condense: every cost term and constraint is an affine function of `u` through a
-//!    row of `S_k`; costs add rank-one terms to `H`, constraints become rows of `A`.
-//!    The QP has the 32 inputs as variables and no state or slack variables: soft
-//!    constraints are handled inside the solver (a `1/ρ` on its dual diagonal).
+//!    row of `S_k`; constraints become rows of `A`; costs add rank-one terms to `H`,
+//!    which is kept as its factor `R` (`H = RᵀR`, single precision could not hold
+//!    `H` itself): each node's four cost rows join `R` as one block of Householder
+//!    reflections. The QP has the 32 inputs as variables and no state or slack
+//!    variables: soft constraints are handled inside the solver (a `1/ρ` on its
+//!    dual diagonal). In code, [`Mpc`]'s `condense` calls the steps by name:
+//!    input bounds and regularisation, friction ellipse, linearise, tracking
+//!    costs, road row, validity rows, obstacle rows.
 //! 4. Solve, warm-started from the previous working set, and re-simulate the
-//!    nonlinear model under the optimal inputs: that trajectory is the plan.
+//!    nonlinear model under the optimal inputs (no Jacobians needed there:
+//!    [`BicycleGeometry::step`]): that trajectory is the plan.
 //!
-//! All sizes are constants; the workspace [`Mpc`] is `const`-constructible for a
-//! `static` on the ECU.
+//! All sizes are constants; the workspace [`Mpc`] (solver, warm start and the
+//! pass's scratch: sensitivities, cost block, row) is `const`-constructible for a
+//! `static` on the ECU, which keeps the step's stack frames small.
 
 // Index loops mirror the maths of the condensing; all ranges are const-bounded.
 #![allow(clippy::needless_range_loop)]
@@ -395,7 +405,8 @@ pub struct MpcReport<T> {
     pub max_road_slack_m: T,
 }
 
-/// The MPC's workspace: the QP solver and the previous solution for the warm start.
+/// The MPC's workspace: the QP solver, the previous solution for the warm start,
+/// and the scratch of a linearise–condense pass (so that it is not on the stack).
 /// Build it with [`Mpc::new`] (`const`), keep it across steps.
 #[derive(Clone, Debug)]
 pub struct Mpc<T> {
