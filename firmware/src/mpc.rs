@@ -34,15 +34,25 @@
 //! 2. Linearise: simulate `ξ̄` from `ξ_0` under `ū`; the Jacobians of the discrete map
 //!    give the sensitivities `S_k = ∂ξ_k/∂u` (6 × 32) recursively,
 //!    `S_{k+1} = A_k S_k + B_k E_k`, so `ξ_k ≈ ξ̄_k + S_k (u − ū)`.
+//!    `ξ_k` depends only on the inputs before node `k`, so `S_k`'s columns from
+//!    `NU·k` on are zero: every product, cost row and constraint row of node `k`
+//!    runs over its first `NU·k` columns only.
 //! 3. Condense: every cost term and constraint is an affine function of `u` through a
-//!    row of `S_k`; costs add rank-one terms to `H`, constraints become rows of `A`.
-//!    The QP has the 32 inputs as variables and no state or slack variables: soft
-//!    constraints are handled inside the solver (a `1/ρ` on its dual diagonal).
+//!    row of `S_k`; constraints become rows of `A`; costs add rank-one terms to `H`,
+//!    which is kept as its factor `R` (`H = RᵀR`, single precision could not hold
+//!    `H` itself): each node's four cost rows join `R` as one block of Householder
+//!    reflections. The QP has the 32 inputs as variables and no state or slack
+//!    variables: soft constraints are handled inside the solver (a `1/ρ` on its
+//!    dual diagonal). In code, [`Mpc`]'s `condense` calls the steps by name:
+//!    input bounds and regularisation, friction ellipse, linearise, tracking
+//!    costs, road row, validity rows, obstacle rows.
 //! 4. Solve, warm-started from the previous working set, and re-simulate the
-//!    nonlinear model under the optimal inputs: that trajectory is the plan.
+//!    nonlinear model under the optimal inputs (no Jacobians needed there:
+//!    [`BicycleGeometry::step`]): that trajectory is the plan.
 //!
-//! All sizes are constants; the workspace [`Mpc`] is `const`-constructible for a
-//! `static` on the ECU.
+//! All sizes are constants; the workspace [`Mpc`] (solver, warm start and the
+//! pass's scratch: sensitivities, cost block, row) is `const`-constructible for a
+//! `static` on the ECU, which keeps the step's stack frames small.
 
 // Index loops mirror the maths of the condensing; all ranges are const-bounded.
 #![allow(clippy::needless_range_loop)]
@@ -50,7 +60,7 @@
 use crate::bicycle::{self, BicycleGeometry};
 use crate::obstacles::{Parabola, Side};
 use crate::plan::{Plan, HORIZON, PLAN_DT_S};
-use crate::qp::{add_square_root_row, ldl_len, QpProblem, QpSolution, QpSolver, QpStatus};
+use crate::qp::{ldl_len, QpProblem, QpSolution, QpSolver, QpStatus};
 use crate::reference_path::ReferencePath;
 use crate::state_estimate::StateEstimate;
 use crate::validity::{
@@ -395,7 +405,8 @@ pub struct MpcReport<T> {
     pub max_road_slack_m: T,
 }
 
-/// The MPC's workspace: the QP solver and the previous solution for the warm start.
+/// The MPC's workspace: the QP solver, the previous solution for the warm start,
+/// and the scratch of a linearise–condense pass (so that it is not on the stack).
 /// Build it with [`Mpc::new`] (`const`), keep it across steps.
 #[derive(Clone, Debug)]
 pub struct Mpc<T> {
@@ -409,17 +420,10 @@ pub struct Mpc<T> {
     have_prev: bool,
     /// Nominal inputs of the current pass.
     u_bar: [[T; NU]; HORIZON],
-    /// Row kind of each QP row of the current pass (for slack diagnostics).
-    row_kind: [RowKind; NC],
+    /// Scratch of the linearise–condense pass (sensitivities, cost block, rows).
+    condensing: Condensing<T>,
     /// Counters of the last step, whatever its outcome.
     last_report: MpcReport<T>,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum RowKind {
-    Validity,
-    Road,
-    Obstacle,
 }
 
 impl<T: Real> Default for Mpc<T> {
@@ -438,7 +442,7 @@ impl<T: Real> Mpc<T> {
             s_prev: [T::ZERO; HORIZON + 1],
             have_prev: false,
             u_bar: [[T::ZERO; NU]; HORIZON],
-            row_kind: [RowKind::Validity; NC],
+            condensing: Condensing::new(),
             last_report: MpcReport {
                 passes: 0,
                 qp_iterations: 0,
@@ -671,7 +675,7 @@ impl<T: Real> Mpc<T> {
         plan.nodes[0] = bicycle::node_from_state(&xi);
         for k in 0..HORIZON {
             let u = self.u_bar[k];
-            xi = settings.geometry.discretize(&xi, &u, dt).x_next;
+            xi = settings.geometry.step(&xi, &u, dt);
             plan.nodes[k + 1] = bicycle::node_from_state(&xi);
             plan.inputs[k] = u;
         }
@@ -684,7 +688,11 @@ impl<T: Real> Mpc<T> {
         Ok(())
     }
 
-    /// Linearises around `ū` from `xi0` and writes the condensed QP into the solver.
+    /// Linearises around `ū` from `xi0` and writes the condensed QP into the solver
+    /// (Method, steps 2 and 3): input bounds and regularisation, then node by node
+    /// the linearisation, the tracking costs, and the validity, road and obstacle
+    /// rows. Costs and rows of node `k + 1` depend only on the inputs before it, so
+    /// every loop runs over the first `NU·(k + 1)` columns only.
     #[allow(clippy::too_many_arguments)]
     fn condense<const CAP: usize>(
         &mut self,
@@ -699,194 +707,29 @@ impl<T: Real> Mpc<T> {
         report: &mut MpcReport<T>,
     ) {
         let dt = T::lit(PLAN_DT_S);
-        let w = st.weights;
-        let two = T::TWO;
         let u_bar = self.u_bar;
         let qp = self.solver.problem_mut();
-        qp.m = 0;
-        for i in 0..NV {
-            qp.f[i] = T::ZERO;
-            for j in 0..NV {
-                qp.h[i][j] = T::ZERO;
-            }
-        }
-        // Input bounds (the acceleration's capped by the road's friction) and costs.
-        let grip = st.friction_usage * mu * T::lit(crate::G);
-        let a_lo = st.accel_min_mps2.max(-grip).min(T::ZERO);
-        let a_hi = st
-            .accel_max_mps2
-            .min(grip * st.driven_load_share)
-            .max(T::ZERO);
-        // The Hessian is kept as its factor R (H = RᵀR), updated by a Givens row per
-        // squared cost term: in f32, H itself would span more than 1/ε.
-        qp.h_factor = true;
-        for k in 0..HORIZON {
-            let (ia, ir) = (2 * k, 2 * k + 1);
-            qp.x_lo[ia] = a_lo;
-            qp.x_hi[ia] = a_hi;
-            qp.x_lo[ir] = -st.steer_rate_max_radps;
-            qp.x_hi[ir] = st.steer_rate_max_radps;
-            qp.h[ia][ia] = (two * w.q_accel).sqrt();
-            qp.h[ir][ir] = (two * w.q_delta_rate).sqrt();
-        }
+        let c = &mut self.condensing;
+        let accel = input_bounds_and_regularisation(qp, st, mu);
         v_heur[0] = velocity_planner::v_heur(&st.velocity, path, xi0[IS], v0, mu);
-
-        // Forward pass: nominal trajectory and sensitivities, node by node.
-        let mut sens = [[T::ZERO; NV]; NX];
+        c.start();
         let mut xbar = *xi0;
-        let mut rows = 0usize;
-        let mut obstacle_rows = 0usize;
-        let mut dropped = 0u32;
-        let mut row = [T::ZERO; NV];
-        let mut next = [[T::ZERO; NV]; NX];
         for k in 0..HORIZON {
-            // Friction ellipse on the plan's traction: the upper acceleration bound
-            // of interval k shrinks with the lateral acceleration the nominal
-            // trajectory needs at its start, so that the plan does not ask the
-            // driven tyres for more than `friction_usage·μ·g` in all. Braking keeps
-            // its bound: slowing down is what restores the validity domain.
-            {
-                let ay = kinematic_lateral_acceleration(&st.geometry, xbar[IV], xbar[IDELTA]);
-                let r = (ay / grip).abs().min(T::ONE);
-                qp.x_hi[2 * k] = a_hi * (T::ONE - r * r).sqrt();
-            }
-            let lin = bicycle::discretize(&st.geometry, &xbar, &u_bar[k], dt);
-            // S_{k+1} = A S_k + B E_k (columns beyond 2k+1 stay zero).
-            let used = 2 * k;
-            for i in 0..NX {
-                for j in 0..used {
-                    let mut acc = T::ZERO;
-                    for l in 0..NX {
-                        acc += lin.a[i][l] * sens[l][j];
-                    }
-                    next[i][j] = acc;
-                }
-                next[i][used] = lin.b[i][0];
-                next[i][used + 1] = lin.b[i][1];
-            }
-            let ncols = used + 2;
-            for i in 0..NX {
-                sens[i][..ncols].copy_from_slice(&next[i][..ncols]);
-            }
-            xbar = lin.x_next;
+            accel.friction_ellipse(qp, st, &xbar, k);
+            xbar = c.linearise(&st.geometry, &xbar, &u_bar[k], k, dt);
             let node = k + 1;
-
-            // Path frame at the predicted abscissa.
-            let s = xbar[IS];
-            let p = path.position_at(s);
-            let (sin_h, cos_h) = path.heading_at(s).sin_cos();
-            let kappa = path.curvature_at(s);
-            let (tx, ty, nx, ny) = (cos_h, sin_h, -sin_h, cos_h);
-            let (dx, dy) = (xbar[IX] - p[0], xbar[IY] - p[1]);
-            let ex = tx * dx + ty * dy;
-            let ey = nx * dx + ny * dy;
-
-            // Lateral deviation: e_y ≈ ē_y + nᵀδP − κ ē_x δs, about the reference
-            // offset that clears the obstacles' parabolas (0 away from them).
-            lin_row(
-                &sens,
-                ncols,
-                &[(IX, nx), (IY, ny), (IS, -kappa * ex)],
-                &mut row,
-            );
-            let d = ey - dot(&row, &u_bar, ncols);
-            let ey_ref = obstacle_offset(path, obstacles, s, st.obstacle_offset_buffer_m);
-            add_cost(qp, &row, ncols, two * w.q_y, d - ey_ref);
-            // Road limits on the same row.
-            if let Some(wd) = path.widths_at(s) {
-                let keep = st.half_width_m + st.road_margin_m;
-                let hi = wd.left_m - keep;
-                let lo = -(wd.right_m - keep);
-                let (lo, hi) = if lo <= hi {
-                    (lo, hi)
-                } else {
-                    let mid = T::HALF * (lo + hi);
-                    (mid, mid)
-                };
-                if push_row(qp, &row, lo - d, hi - d, two * w.q_road) {
-                    self.row_kind[rows] = RowKind::Road;
-                    rows += 1;
-                }
-            }
-            // Longitudinal deviation: e_x ≈ ē_x + tᵀδP + (κ ē_y − 1) δs.
-            lin_row(
-                &sens,
-                ncols,
-                &[(IX, tx), (IY, ty), (IS, kappa * ey - T::ONE)],
-                &mut row,
-            );
-            let d = ex - dot(&row, &u_bar, ncols);
-            add_cost(qp, &row, ncols, two * w.q_x, d);
-
-            // Speed towards V_heur.
-            let vh = velocity_planner::v_heur(&st.velocity, path, s, v0, mu);
+            let ncols = NU * node;
+            let fr = NodeFrame::new(path, &xbar);
+            let vh = velocity_planner::v_heur(&st.velocity, path, fr.s, v0, mu);
             v_heur[node] = vh;
-            lin_row(&sens, ncols, &[(IV, T::ONE)], &mut row);
-            let d = xbar[IV] - dot(&row, &u_bar, ncols) - vh;
-            add_cost(qp, &row, ncols, two * w.q_v, d);
-
-            // Steering towards its reference.
-            let delta_ref = match st.steering_reference {
-                SteeringReference::Zero => T::ZERO,
-                SteeringReference::PathCurvature => path_steering(&st.geometry, kappa)
-                    .clamp(-st.delta_mech_max_rad, st.delta_mech_max_rad),
-            };
-            lin_row(&sens, ncols, &[(IDELTA, T::ONE)], &mut row);
-            let d = xbar[IDELTA] - dot(&row, &u_bar, ncols) - delta_ref;
-            add_cost(qp, &row, ncols, two * w.q_delta, d);
-
-            // Validity: ±δ ≤ δ_max(V̄) + δ_max'(V̄)(V − V̄) + δ_tol.
-            let (dmax, slope) = validity.delta_max_and_slope(xbar[IV]);
-            for sign in [T::ONE, -T::ONE] {
-                lin_row(&sens, ncols, &[(IDELTA, sign), (IV, -slope)], &mut row);
-                let nominal = sign * xbar[IDELTA] - slope * xbar[IV];
-                let d = nominal - dot(&row, &u_bar, ncols);
-                let hi = dmax - slope * xbar[IV] - d;
-                if push_row(qp, &row, -T::INFINITY, hi, two * w.q_delta_tol) {
-                    self.row_kind[rows] = RowKind::Validity;
-                    rows += 1;
-                }
-            }
-
-            // Obstacles, in the path frame: the parabola's directrix is parallel to
-            // the path, so with ξ ≈ s − s_o and η ≈ e_y near the obstacle,
-            // g = σ·(e_y − η_a) + c·(s − s_o − ξ0)² ≥ 0, linearised at the nominal
-            // (s̄, ē_y). Curvilinear coordinates keep it right on a curved road,
-            // where the obstacle's own Cartesian frame would not be.
-            for o in obstacles {
-                if !o.reaches_road || !o.is_relevant_at_s(path, s) {
-                    continue;
-                }
-                if obstacle_rows >= MAX_OBSTACLE_ROWS {
-                    dropped += 1;
-                    continue;
-                }
-                let sigma = o.sigma();
-                let dxi = path.unwrap_s(s, o.s_m) - o.s_m - o.xi0_m;
-                let g = sigma * (ey - o.eta_apex_m) + o.steepness_1pm * dxi * dxi;
-                let dg_ds = T::TWO * o.steepness_1pm * dxi;
-                // ∂g/∂(X, Y, s) through e_y's and s's rows.
-                lin_row(
-                    &sens,
-                    ncols,
-                    &[
-                        (IX, sigma * nx),
-                        (IY, sigma * ny),
-                        (IS, dg_ds - sigma * kappa * ex),
-                    ],
-                    &mut row,
-                );
-                let d = g - dot(&row, &u_bar, ncols);
-                if push_row(qp, &row, -d, T::INFINITY, two * w.q_obs) {
-                    self.row_kind[rows] = RowKind::Obstacle;
-                    rows += 1;
-                    obstacle_rows += 1;
-                }
-            }
+            c.tracking_costs(qp, st, path, obstacles, &xbar, &fr, vh, &u_bar, ncols);
+            c.road_row(qp, st, path, &fr, &u_bar, ncols);
+            c.validity_rows(qp, st, validity, &xbar, &u_bar, ncols);
+            c.obstacle_rows(qp, st, path, obstacles, &fr, &u_bar, ncols);
         }
-        report.rows = rows as u32;
-        report.obstacle_rows = obstacle_rows as u32;
-        report.obstacle_rows_dropped = dropped;
+        report.rows = qp.m as u32;
+        report.obstacle_rows = c.obstacle_rows as u32;
+        report.obstacle_rows_dropped = c.dropped;
     }
 
     fn slack_diagnostics(&self, report: &mut MpcReport<T>) {
@@ -894,7 +737,7 @@ impl<T: Real> Mpc<T> {
         let (mut v, mut o, mut r) = (T::ZERO, T::ZERO, T::ZERO);
         for i in 0..m {
             let s = self.solver.slack(i);
-            match self.row_kind[i] {
+            match self.condensing.row_kind[i] {
                 RowKind::Validity => v = v.max(s),
                 RowKind::Obstacle => o = o.max(s),
                 RowKind::Road => r = r.max(s),
@@ -956,18 +799,439 @@ fn path_steering<T: Real>(geometry: &BicycleGeometry<T>, kappa: T) -> T {
     }
 }
 
-/// `row = Σ coef · S[state]` over the first `ncols` columns (the rest zero).
-fn lin_row<T: Real>(sens: &[[T; NV]; NX], ncols: usize, terms: &[(usize, T)], row: &mut [T; NV]) {
-    for j in 0..NV {
-        row[j] = T::ZERO;
+/// Cost rows that one node adds to the Hessian (lateral, longitudinal, speed,
+/// steering), appended to its factor as one block.
+const COST_ROWS: usize = 4;
+
+/// Kind of a QP row (for the slack diagnostics).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum RowKind {
+    Validity,
+    Road,
+    Obstacle,
+}
+
+/// Scratch of one linearise–condense pass, kept in the workspace [`Mpc`] rather
+/// than on the stack. Only the first `NU·(k + 1)` columns of a node's rows are
+/// ever written or read (the inputs from node `k + 1` on do not reach it).
+#[derive(Clone, Debug)]
+struct Condensing<T> {
+    /// Sensitivities `S_k = ∂ξ_k/∂u` of the current node, alternating between the
+    /// two buffers (`2 × NX × NV`; unit of `ξ_i` per unit of `u_j`).
+    sens: [[[T; NV]; NX]; 2],
+    /// Which buffer of `sens` holds `S_k`.
+    cur: usize,
+    /// The current node's cost rows, each scaled by `√w`, column-major
+    /// (`NV × COST_ROWS`): the block appended to the Hessian factor.
+    cost: [[T; COST_ROWS]; NV],
+    /// The QP row being built (`NV`).
+    row: [T; NV],
+    /// Kind of each QP row pushed in this pass (`NC`).
+    row_kind: [RowKind; NC],
+    /// Obstacle rows pushed in this pass.
+    obstacle_rows: usize,
+    /// Obstacle rows that found no room.
+    dropped: u32,
+}
+
+/// The acceleration bounds of one pass, m/s² (`a_hi` before the friction ellipse),
+/// and the grip `friction_usage·μ·g`, m/s².
+struct AccelBounds<T> {
+    a_hi: T,
+    grip: T,
+}
+
+/// Input bounds (the acceleration's capped by the road's friction) and the input
+/// regularisation `q_a u1² + q_δ̇ u2²`, which starts the Hessian factor `R`
+/// (`H = RᵀR`) as a diagonal. Clears the QP.
+fn input_bounds_and_regularisation<T: Real>(
+    qp: &mut MpcQpProblem<T>,
+    st: &MpcSettings<T>,
+    mu: T,
+) -> AccelBounds<T> {
+    let w = &st.weights;
+    qp.m = 0;
+    qp.f = [T::ZERO; NV];
+    for r in qp.h.iter_mut() {
+        *r = [T::ZERO; NV];
     }
-    for &(state, coef) in terms {
-        if coef == T::ZERO {
+    let grip = st.friction_usage * mu * T::lit(crate::G);
+    let a_lo = st.accel_min_mps2.max(-grip).min(T::ZERO);
+    let a_hi = st
+        .accel_max_mps2
+        .min(grip * st.driven_load_share)
+        .max(T::ZERO);
+    // The Hessian is kept as its factor R (H = RᵀR), updated by Householder
+    // reflections per block of squared cost terms: in f32, H itself would span
+    // more than 1/ε.
+    qp.h_factor = true;
+    for k in 0..HORIZON {
+        let (ia, ir) = (NU * k, NU * k + 1);
+        qp.x_lo[ia] = a_lo;
+        qp.x_hi[ia] = a_hi;
+        qp.x_lo[ir] = -st.steer_rate_max_radps;
+        qp.x_hi[ir] = st.steer_rate_max_radps;
+        qp.h[ia][ia] = (T::TWO * w.q_accel).sqrt();
+        qp.h[ir][ir] = (T::TWO * w.q_delta_rate).sqrt();
+    }
+    AccelBounds { a_hi, grip }
+}
+
+impl<T: Real> AccelBounds<T> {
+    /// Friction ellipse on the plan's traction: the upper acceleration bound of
+    /// interval `k` shrinks with the lateral acceleration the nominal trajectory
+    /// needs at its start (`xbar`), so that the plan does not ask the driven tyres
+    /// for more than `friction_usage·μ·g` in all. Braking keeps its bound: slowing
+    /// down is what restores the validity domain.
+    fn friction_ellipse(
+        &self,
+        qp: &mut MpcQpProblem<T>,
+        st: &MpcSettings<T>,
+        xbar: &[T; NX],
+        k: usize,
+    ) {
+        let ay = kinematic_lateral_acceleration(&st.geometry, xbar[IV], xbar[IDELTA]);
+        let r = (ay / self.grip).abs().min(T::ONE);
+        qp.x_hi[NU * k] = self.a_hi * (T::ONE - r * r).sqrt();
+    }
+}
+
+/// The nominal state at a node seen from the path point at its abscissa.
+struct NodeFrame<T> {
+    /// Predicted abscissa `s̄`, m.
+    s: T,
+    /// Path tangent `t` (unit, `[x, y]`).
+    t: [T; 2],
+    /// Path normal `n` (unit, to the left, `[x, y]`).
+    n: [T; 2],
+    /// Path curvature `κ`, 1/m.
+    kappa: T,
+    /// Longitudinal deviation `ē_x = tᵀ(P̄ − p(s̄))`, m.
+    ex: T,
+    /// Lateral deviation `ē_y = nᵀ(P̄ − p(s̄))`, m.
+    ey: T,
+}
+
+impl<T: Real> NodeFrame<T> {
+    fn new<const CAP: usize>(path: &ReferencePath<T, CAP>, xbar: &[T; NX]) -> Self {
+        let s = xbar[IS];
+        let p = path.position_at(s);
+        let (sin_h, cos_h) = path.heading_at(s).sin_cos();
+        let kappa = path.curvature_at(s);
+        let (t, n) = ([cos_h, sin_h], [-sin_h, cos_h]);
+        let (dx, dy) = (xbar[IX] - p[0], xbar[IY] - p[1]);
+        Self {
+            s,
+            t,
+            n,
+            kappa,
+            ex: t[0] * dx + t[1] * dy,
+            ey: n[0] * dx + n[1] * dy,
+        }
+    }
+}
+
+impl<T: Real> Condensing<T> {
+    const fn new() -> Self {
+        Self {
+            sens: [[[T::ZERO; NV]; NX]; 2],
+            cur: 0,
+            cost: [[T::ZERO; COST_ROWS]; NV],
+            row: [T::ZERO; NV],
+            row_kind: [RowKind::Validity; NC],
+            obstacle_rows: 0,
+            dropped: 0,
+        }
+    }
+
+    /// Starts a pass: `S_0 = 0` (`ξ_0` is given), no rows.
+    fn start(&mut self) {
+        self.cur = 0;
+        self.obstacle_rows = 0;
+        self.dropped = 0;
+    }
+
+    /// Linearise (Method, step 2): `ξ̄_{k+1} = F(ξ̄_k, ū_k)` (returned) and
+    /// `S_{k+1} = A_k S_k + B_k E_k`, where `S_k`'s columns from `NU·k` on are
+    /// zero and `A_k`'s structural zeros are skipped.
+    fn linearise(
+        &mut self,
+        geometry: &BicycleGeometry<T>,
+        xbar: &[T; NX],
+        u: &[T; NU],
+        k: usize,
+        dt: T,
+    ) -> [T; NX] {
+        let lin = bicycle::discretize(geometry, xbar, u, dt);
+        let used = NU * k;
+        let (a, b) = self.sens.split_at_mut(1);
+        let (old, new) = if self.cur == 0 {
+            (&a[0], &mut b[0])
+        } else {
+            (&b[0], &mut a[0])
+        };
+        for i in 0..NX {
+            let out = &mut new[i];
+            out[..used].fill(T::ZERO);
+            for l in 0..NX {
+                let ail = lin.a[i][l];
+                if ail == T::ZERO {
+                    continue;
+                }
+                for (o, s) in out[..used].iter_mut().zip(old[l][..used].iter()) {
+                    *o += ail * *s;
+                }
+            }
+            out[used] = lin.b[i][0];
+            out[used + 1] = lin.b[i][1];
+        }
+        self.cur ^= 1;
+        lin.x_next
+    }
+
+    /// `row = Σ coef · S_k[state]` over the first `ncols` columns (the rest zero);
+    /// returns the row's constant `nominal − row·ū`.
+    fn lin_row(
+        &mut self,
+        terms: &[(usize, T)],
+        nominal: T,
+        u_bar: &[[T; NU]; HORIZON],
+        ncols: usize,
+    ) -> T {
+        let sens = &self.sens[self.cur];
+        let row = &mut self.row;
+        row.fill(T::ZERO);
+        for &(state, coef) in terms {
+            if coef == T::ZERO {
+                continue;
+            }
+            if let Some(srow) = sens.get(state) {
+                for j in 0..ncols {
+                    row[j] += coef * srow[j];
+                }
+            }
+        }
+        nominal - dot(row, u_bar, ncols)
+    }
+
+    /// Puts `½·w·(rowᵀu + d)²` into block column `r`: `f += w·d·row` now, the
+    /// Hessian term `w·row·rowᵀ` when the block is appended ([`add_square_root_rows`]).
+    fn cost_row(&mut self, qp: &mut MpcQpProblem<T>, r: usize, ncols: usize, w: T, d: T) {
+        let sw = if w > T::ZERO { w.sqrt() } else { T::ZERO };
+        for j in 0..ncols {
+            qp.f[j] += w * self.row[j] * d;
+            self.cost[j][r] = sw * self.row[j];
+        }
+    }
+
+    /// Cost terms (Method, step 3) of the node: lateral deviation about the
+    /// obstacle-clearing offset, longitudinal deviation, speed towards `V_heur`
+    /// (`vh`, m/s), steering towards its reference; their squares join the
+    /// Hessian factor as one block.
+    #[allow(clippy::too_many_arguments)]
+    fn tracking_costs<const CAP: usize>(
+        &mut self,
+        qp: &mut MpcQpProblem<T>,
+        st: &MpcSettings<T>,
+        path: &ReferencePath<T, CAP>,
+        obstacles: &[Parabola<T>],
+        xbar: &[T; NX],
+        fr: &NodeFrame<T>,
+        vh: T,
+        u_bar: &[[T; NU]; HORIZON],
+        ncols: usize,
+    ) {
+        let w = &st.weights;
+        let two = T::TWO;
+        // Lateral deviation: e_y ≈ ē_y + nᵀδP − κ ē_x δs, about the reference
+        // offset that clears the obstacles' parabolas (0 away from them).
+        let d = self.lateral_row(fr, u_bar, ncols);
+        let ey_ref = obstacle_offset(path, obstacles, fr.s, st.obstacle_offset_buffer_m);
+        self.cost_row(qp, 0, ncols, two * w.q_y, d - ey_ref);
+        // Longitudinal deviation: e_x ≈ ē_x + tᵀδP + (κ ē_y − 1) δs.
+        let terms = [
+            (IX, fr.t[0]),
+            (IY, fr.t[1]),
+            (IS, fr.kappa * fr.ey - T::ONE),
+        ];
+        let d = self.lin_row(&terms, fr.ex, u_bar, ncols);
+        self.cost_row(qp, 1, ncols, two * w.q_x, d);
+        // Speed towards V_heur.
+        let d = self.lin_row(&[(IV, T::ONE)], xbar[IV], u_bar, ncols) - vh;
+        self.cost_row(qp, 2, ncols, two * w.q_v, d);
+        // Steering towards its reference.
+        let delta_ref = match st.steering_reference {
+            SteeringReference::Zero => T::ZERO,
+            SteeringReference::PathCurvature => path_steering(&st.geometry, fr.kappa)
+                .clamp(-st.delta_mech_max_rad, st.delta_mech_max_rad),
+        };
+        let d = self.lin_row(&[(IDELTA, T::ONE)], xbar[IDELTA], u_bar, ncols) - delta_ref;
+        self.cost_row(qp, 3, ncols, two * w.q_delta, d);
+        add_square_root_rows(&mut qp.h, &mut self.cost, ncols);
+    }
+
+    /// The lateral deviation's row `nᵀS_X,Y − κ ē_x S_s` into `row`; returns its
+    /// constant.
+    fn lateral_row(&mut self, fr: &NodeFrame<T>, u_bar: &[[T; NU]; HORIZON], ncols: usize) -> T {
+        let terms = [(IX, fr.n[0]), (IY, fr.n[1]), (IS, -fr.kappa * fr.ex)];
+        self.lin_row(&terms, fr.ey, u_bar, ncols)
+    }
+
+    /// Appends `row` with bounds `lo ≤ rowᵀu ≤ hi` and soft weight `rho`.
+    fn push(&mut self, qp: &mut MpcQpProblem<T>, kind: RowKind, lo: T, hi: T, rho: T) -> bool {
+        match qp.push_row(&self.row, lo, hi, rho) {
+            Some(i) => {
+                if let Some(k) = self.row_kind.get_mut(i) {
+                    *k = kind;
+                }
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Road limits (soft): `−(w_right − b) ≤ e_y ≤ w_left − b`, `b` the half-width
+    /// plus the margin, on the lateral deviation's row.
+    fn road_row<const CAP: usize>(
+        &mut self,
+        qp: &mut MpcQpProblem<T>,
+        st: &MpcSettings<T>,
+        path: &ReferencePath<T, CAP>,
+        fr: &NodeFrame<T>,
+        u_bar: &[[T; NU]; HORIZON],
+        ncols: usize,
+    ) {
+        let Some(wd) = path.widths_at(fr.s) else {
+            return;
+        };
+        let keep = st.half_width_m + st.road_margin_m;
+        let hi = wd.left_m - keep;
+        let lo = -(wd.right_m - keep);
+        let (lo, hi) = if lo <= hi {
+            (lo, hi)
+        } else {
+            let mid = T::HALF * (lo + hi);
+            (mid, mid)
+        };
+        let d = self.lateral_row(fr, u_bar, ncols);
+        self.push(
+            qp,
+            RowKind::Road,
+            lo - d,
+            hi - d,
+            T::TWO * st.weights.q_road,
+        );
+    }
+
+    /// Validity (soft): `±δ ≤ δ_max(V̄) + δ_max'(V̄)(V − V̄) + δ_tol`.
+    fn validity_rows(
+        &mut self,
+        qp: &mut MpcQpProblem<T>,
+        st: &MpcSettings<T>,
+        validity: &ValidityLimit<T>,
+        xbar: &[T; NX],
+        u_bar: &[[T; NU]; HORIZON],
+        ncols: usize,
+    ) {
+        let (dmax, slope) = validity.delta_max_and_slope(xbar[IV]);
+        for sign in [T::ONE, -T::ONE] {
+            let nominal = sign * xbar[IDELTA] - slope * xbar[IV];
+            let d = self.lin_row(&[(IDELTA, sign), (IV, -slope)], nominal, u_bar, ncols);
+            let hi = dmax - slope * xbar[IV] - d;
+            let rho = T::TWO * st.weights.q_delta_tol;
+            self.push(qp, RowKind::Validity, -T::INFINITY, hi, rho);
+        }
+    }
+
+    /// Obstacles (soft), in the path frame: the parabola's directrix is parallel
+    /// to the path, so with ξ ≈ s − s_o and η ≈ e_y near the obstacle,
+    /// g = σ·(e_y − η_a) + c·(s − s_o − ξ0)² ≥ 0, linearised at the nominal
+    /// (s̄, ē_y). Curvilinear coordinates keep it right on a curved road, where the
+    /// obstacle's own Cartesian frame would not be.
+    #[allow(clippy::too_many_arguments)]
+    fn obstacle_rows<const CAP: usize>(
+        &mut self,
+        qp: &mut MpcQpProblem<T>,
+        st: &MpcSettings<T>,
+        path: &ReferencePath<T, CAP>,
+        obstacles: &[Parabola<T>],
+        fr: &NodeFrame<T>,
+        u_bar: &[[T; NU]; HORIZON],
+        ncols: usize,
+    ) {
+        for o in obstacles {
+            if !o.reaches_road || !o.is_relevant_at_s(path, fr.s) {
+                continue;
+            }
+            if self.obstacle_rows >= MAX_OBSTACLE_ROWS {
+                self.dropped += 1;
+                continue;
+            }
+            let sigma = o.sigma();
+            let dxi = path.unwrap_s(fr.s, o.s_m) - o.s_m - o.xi0_m;
+            let g = sigma * (fr.ey - o.eta_apex_m) + o.steepness_1pm * dxi * dxi;
+            let dg_ds = T::TWO * o.steepness_1pm * dxi;
+            // ∂g/∂(X, Y, s) through e_y's and s's rows.
+            let terms = [
+                (IX, sigma * fr.n[0]),
+                (IY, sigma * fr.n[1]),
+                (IS, dg_ds - sigma * fr.kappa * fr.ex),
+            ];
+            let d = self.lin_row(&terms, g, u_bar, ncols);
+            if self.push(
+                qp,
+                RowKind::Obstacle,
+                -d,
+                T::INFINITY,
+                T::TWO * st.weights.q_obs,
+            ) {
+                self.obstacle_rows += 1;
+            }
+        }
+    }
+}
+
+/// Appends the rows of `x` (`NV × COST_ROWS`, column-major, entries from column
+/// `ncols` on zero) to the upper-triangular factor `r` (`H = RᵀR`): after the call
+/// `RᵀR` gains `Σ_rows x xᵀ`. One Householder reflection per column over the
+/// `COST_ROWS + 1` entries `[R_jj; x_·j]` (positive diagonal kept), `O(ncols²)`;
+/// `x` is zeroed.
+fn add_square_root_rows<T: Real>(
+    r: &mut [[T; NV]; NV],
+    x: &mut [[T; COST_ROWS]; NV],
+    ncols: usize,
+) {
+    let n = ncols.min(NV);
+    for k in 0..n {
+        let v = x[k];
+        x[k] = [T::ZERO; COST_ROWS];
+        let mut sigma = T::ZERO;
+        for vi in v {
+            sigma += vi * vi;
+        }
+        if sigma == T::ZERO {
             continue;
         }
-        if let Some(srow) = sens.get(state) {
-            for j in 0..ncols {
-                row[j] += coef * srow[j];
+        let rkk = r[k][k];
+        let mu = (rkk * rkk + sigma).sqrt();
+        // w = [R_kk − μ; v], computed without cancellation when R_kk ≥ 0.
+        let w0 = if rkk > T::ZERO {
+            -sigma / (rkk + mu)
+        } else {
+            rkk - mu
+        };
+        let beta = T::TWO / (w0 * w0 + sigma);
+        r[k][k] = mu;
+        let (rk, xs) = (&mut r[k], &mut x[k + 1..n]);
+        for (rkj, xj) in rk[k + 1..n].iter_mut().zip(xs.iter_mut()) {
+            let mut d = w0 * *rkj;
+            for (vi, xji) in v.iter().zip(xj.iter()) {
+                d += *vi * *xji;
+            }
+            let t = beta * d;
+            *rkj -= t * w0;
+            for (vi, xji) in v.iter().zip(xj.iter_mut()) {
+                *xji -= t * *vi;
             }
         }
     }
@@ -979,25 +1243,6 @@ fn dot<T: Real>(row: &[T; NV], u: &[[T; NU]; HORIZON], ncols: usize) -> T {
         acc += row[j] * u[j / 2][j % 2];
     }
     acc
-}
-
-/// Adds `½·w·(rowᵀu + d)²` to the QP cost: `H += w·row·rowᵀ` through its factor
-/// (a Givens row `√w·row`), `f += w·d·row`. (`w = 2q` for a cost `q(·)²`.)
-fn add_cost<T: Real>(qp: &mut MpcQpProblem<T>, row: &[T; NV], ncols: usize, w: T, d: T) {
-    if w == T::ZERO {
-        return;
-    }
-    let sw = w.sqrt();
-    let mut x = [T::ZERO; NV];
-    for i in 0..ncols {
-        qp.f[i] += w * row[i] * d;
-        x[i] = sw * row[i];
-    }
-    add_square_root_row(&mut qp.h, &mut x, ncols);
-}
-
-fn push_row<T: Real>(qp: &mut MpcQpProblem<T>, row: &[T; NV], lo: T, hi: T, rho: T) -> bool {
-    qp.push_row(row, lo, hi, rho).is_some()
 }
 
 /// Linear interpolation of node values at a fractional node index `t` (clamped).

@@ -236,3 +236,35 @@ fn addition_formulas_match_plain_rk4_including_fallbacks() {
         assert_jacobians_match(x, u, 0.2, 1);
     }
 }
+
+#[test]
+fn step_is_discretize_without_jacobians_bit_for_bit() {
+    let g32 = BicycleGeometry {
+        l_f_m: 1.2f32,
+        l_r_m: 1.6,
+    };
+    let g64 = BicycleGeometry {
+        l_f_m: 1.2f64,
+        l_r_m: 1.6,
+    };
+    for i in 0..200 {
+        let t = i as f64;
+        let x = [
+            t,
+            3.0 * (0.3 * t).sin(),
+            -2.0 + 0.1 * t,
+            0.5 + 0.15 * t,
+            (0.7 * t).sin() * 4.0,
+            0.5 * (1.3 * t).cos(),
+        ];
+        // Includes increments beyond the series' range (|u2|·dt > 0.5 rad).
+        let u = [6.0 * (0.9 * t).cos(), 4.0 * (0.4 * t).sin()];
+        let dt = if i % 3 == 0 { 0.2 } else { 0.05 };
+        let s64 = g64.step(&x, &u, dt);
+        assert_eq!(s64, g64.discretize(&x, &u, dt).x_next);
+        let x32 = x.map(|v| v as f32);
+        let u32_ = u.map(|v| v as f32);
+        let s32 = g32.step(&x32, &u32_, dt as f32);
+        assert_eq!(s32, g32.discretize(&x32, &u32_, dt as f32).x_next);
+    }
+}
