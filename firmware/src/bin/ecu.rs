@@ -328,35 +328,75 @@ mod app {
     struct Shared {
         /// The latest state estimate (written by `control`, read by `plan`).
         estimate: StateEstimate<f32>,
-        /// The plan `control` follows (swapped in by `plan`).
-        plan: Plan<f32>,
+        /// The plan `control` follows (swapped in by `plan`); in a static, so init
+        /// does not build it on its stack.
+        plan: &'static mut Plan<f32>,
         /// The last plan activation's record, until `control` reports it.
         plan_event: Option<PlanEventFrame>,
-        /// The next window of the road, as `control` receives it; `plan` adopts it.
-        staging: Staging,
+        /// The next window of the road, as `control` receives it; `plan` adopts it
+        /// (in a static, as `plan`).
+        staging: &'static mut Staging,
     }
 
     #[local]
     struct Local {
         control: ControlTask<f32>,
-        link: Link,
+        link: &'static mut Link,
         planner: &'static mut PlanTask<f32, PATH_CAP>,
     }
 
     #[init(local = [
         planner_storage: PlanTask<f32, PATH_CAP> = PlanTask::new(MpcSettings::unset(), 0.0),
+        plan_storage: Plan<f32> = Plan::zeroed(),
+        staging_storage: Staging = Staging::new(),
+        link_storage: Option<Link> = None,
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         paint_stack();
         Mono::start(cx.core.SYST, SYSCLK_HZ);
+        // The set-up's work runs in functions of their own, so their frames are gone
+        // when `init` returns and the tasks it spawned run on this stack (RTIC
+        // enables interrupts before `init`'s caller returns).
+        let link = cx.local.link_storage.insert(open_link());
+        let planner = cx.local.planner_storage;
+        let control = set_up(link, planner);
+        let epoch = core_ticks();
+        EPOCH_TICKS.store(epoch as u32, Ordering::Relaxed);
+        EPOCH_TICKS_HI.store((epoch >> 32) as u32, Ordering::Relaxed);
+        let _ = control::spawn();
+        let _ = plan::spawn();
+        (
+            Shared {
+                estimate: StateEstimate::zeroed(),
+                plan: cx.local.plan_storage,
+                plan_event: None,
+                staging: cx.local.staging_storage,
+            },
+            Local {
+                control,
+                link,
+                planner,
+            },
+        )
+    }
+
+    /// Opens the link to the simulator, or stops the ECU saying why.
+    #[inline(never)]
+    fn open_link() -> Link {
         defmt::info!("ecu: waiting for the simulator on ecu.down / ecu.up");
-        let Some(mut link) = Link::open() else {
+        let Some(link) = Link::open() else {
             defmt::error!(
                 "ecu: no link: run it from `host-sim pil` (it creates ecu.down and ecu.up)"
             );
             exit(false)
         };
-        let planner = cx.local.planner_storage;
+        link
+    }
+
+    /// The set-up from the simulator's frames (car, first window, obstacles), then
+    /// `Ready`; stops the ECU on a refused set-up.
+    #[inline(never)]
+    fn set_up(link: &mut Link, planner: &mut PlanTask<f32, PATH_CAP>) -> ControlTask<f32> {
         let mut setup = Setup::new();
         let control = loop {
             match link.receive() {
@@ -383,24 +423,7 @@ mod app {
             status: 0,
             detail: 0,
         }));
-        let epoch = core_ticks();
-        EPOCH_TICKS.store(epoch as u32, Ordering::Relaxed);
-        EPOCH_TICKS_HI.store((epoch >> 32) as u32, Ordering::Relaxed);
-        let _ = control::spawn();
-        let _ = plan::spawn();
-        (
-            Shared {
-                estimate: StateEstimate::zeroed(),
-                plan: Plan::zeroed(),
-                plan_event: None,
-                staging: Staging::new(),
-            },
-            Local {
-                control,
-                link,
-                planner,
-            },
-        )
+        control
     }
 
     /// Between activations the core sleeps until the next interrupt (the
@@ -546,8 +569,17 @@ mod app {
 
 #[panic_handler]
 fn panic(_info: &core::panic::PanicInfo) -> ! {
-    // Safe actuators: zero torque on every wheel, the steering held where it was.
+    // Interrupts off first, in a frame of a few bytes: nothing preempts the
+    // handler's work below (the stack bound counts `safe_stop`'s chain once, not
+    // at every priority level).
     cortex_m::interrupt::disable();
+    safe_stop()
+}
+
+/// Safe actuators after a panic, interrupts disabled: zero torque on every wheel,
+/// the steering held where it was; then the ECU stops.
+#[inline(never)]
+fn safe_stop() -> ! {
     let delta = f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed));
     let fd = UP_FD.load(Ordering::Relaxed);
     if fd != 0 {

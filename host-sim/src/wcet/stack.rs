@@ -523,8 +523,14 @@ pub struct IndirectCall {
 pub struct StackReport {
     /// Thread mode first, then each preemption level in increasing priority.
     pub levels: Vec<LevelReport>,
-    /// The bound: sum of the levels' contributions, in bytes.
+    /// The bound, in bytes: the sum of the levels' contributions, or the thread's
+    /// depth while interrupts are still disabled (`init_bytes`) plus the once
+    /// level, whichever is larger.
     pub total_bytes: u32,
+    /// The thread roots' depth including the functions that run only with
+    /// interrupts disabled (the set-up in `init`), in bytes; the thread level's
+    /// contribution leaves those out (nothing can preempt them).
+    pub init_bytes: u32,
     /// `false` if anything reachable was not analysed: an unknown frame, an indirect
     /// call, a call to a symbol not in the disassembly, or a cycle.
     pub sound: bool,
@@ -560,8 +566,10 @@ struct Depths {
     unresolved: Vec<(usize, String)>,
 }
 
-/// Iterative depth-first search with memoisation over the whole call graph.
-fn compute_depths(program: &Program) -> Depths {
+/// Iterative depth-first search with memoisation over the whole call graph; a
+/// call into a function marked in `cut` adds nothing to its caller's depth (that
+/// function is counted once, on its own).
+fn compute_depths(program: &Program, cut: &[bool]) -> Depths {
     let n = program.functions.len();
     let mut depth = vec![0u32; n];
     let mut next: Vec<Option<usize>> = vec![None; n];
@@ -608,6 +616,9 @@ fn compute_depths(program: &Program) -> Depths {
             } else {
                 let mut best: Option<(u32, usize)> = None;
                 for &c in callees.iter().flatten() {
+                    if cut[c] {
+                        continue;
+                    }
                     if state[c] == 2 && best.is_none_or(|(d, _)| depth[c] > d) {
                         best = Some((depth[c], c));
                     }
@@ -650,7 +661,10 @@ const METHOD: &str = "Static bound from the disassembly: each function's frame i
 stack-pointer decrements (push, vpush, stmdb sp!, str [sp, #-N]!, sub sp by an immediate or by a \
 movw/movt constant); the depth of a root is the deepest chain of direct calls (bl, blx <symbol>) \
 and tail calls (a branch to another function, its caller's frame kept); each preemption level \
-adds its deepest handler and a 104-byte FPU exception frame. Not covered: the targets of indirect \
+adds its deepest handler and a 104-byte FPU exception frame. The panic handler's work, entered \
+with interrupts disabled and never returning, is counted once as a level of its own; the set-up \
+functions init runs before enabling interrupts leave the thread level (the bound is at least their \
+depth plus that once level). Not covered: the targets of indirect \
 calls (function pointers, trait objects: listed), recursion (cycles: listed), frames the parser \
 did not understand (listed, their understood part counted), inline assembly that moves sp other \
 than by these instructions, and handlers not given as roots (e.g. HardFault).";
@@ -658,10 +672,58 @@ than by these instructions, and handlers not given as roots (e.g. HardFault).";
 /// Worst-case stack bound of `program` for `levels` (thread mode first, then each
 /// preemption level in increasing priority).
 pub fn stack_bound(program: &Program, levels: &[PriorityLevel]) -> Result<StackReport, WcetError> {
-    let depths = compute_depths(program);
+    stack_bound_once(program, levels, &[], &[])
+}
+
+/// [`stack_bound`] where the functions `once` (e.g. the panic handler's work) are
+/// entered with interrupts disabled and never return: nothing can preempt them
+/// and they run at most once, so their chain is one more level of the bound
+/// (without an exception frame) instead of being added under every level that
+/// can call them. The functions `masked` run only with interrupts disabled (RTIC's
+/// `init` calls them before it enables interrupts): the thread level's
+/// contribution leaves them out, and the bound is at least the thread's depth
+/// with them (`init_bytes`) plus the once level.
+pub fn stack_bound_once(
+    program: &Program,
+    levels: &[PriorityLevel],
+    once: &[String],
+    masked: &[String],
+) -> Result<StackReport, WcetError> {
+    let mark = |names: &[String], cut: &mut Vec<bool>| -> Result<(), WcetError> {
+        for root in names {
+            let found = program.resolve(root);
+            if found.is_empty() {
+                return Err(WcetError::UnknownRoot(root.clone()));
+            }
+            for i in found {
+                cut[i] = true;
+            }
+        }
+        Ok(())
+    };
+    let mut cut = vec![false; program.functions.len()];
+    mark(once, &mut cut)?;
+    let init_depths = compute_depths(program, &cut);
+    mark(masked, &mut cut)?;
+    let depths = compute_depths(program, &cut);
+    let init_bytes = levels
+        .first()
+        .map(|l| {
+            l.roots
+                .iter()
+                .flat_map(|r| program.resolve(r))
+                .map(|i| init_depths.depth[i])
+                .max()
+                .unwrap_or(0)
+        })
+        .unwrap_or(0);
     let mut all_roots = Vec::new();
     let mut level_reports = Vec::new();
-    for (k, level) in levels.iter().enumerate() {
+    let once_level = (!once.is_empty()).then(|| PriorityLevel {
+        name: "once (interrupts disabled, never returns)".into(),
+        roots: once.to_vec(),
+    });
+    for (k, level) in levels.iter().chain(once_level.iter()).enumerate() {
         let mut roots = Vec::new();
         for root in &level.roots {
             let found = program.resolve(root);
@@ -694,7 +756,11 @@ pub fn stack_bound(program: &Program, levels: &[PriorityLevel]) -> Result<StackR
                 });
             }
         }
-        let exception_frame_bytes = if k == 0 { 0 } else { EXCEPTION_FRAME_FPU_BYTES };
+        let exception_frame_bytes = if k == 0 || k >= levels.len() {
+            0
+        } else {
+            EXCEPTION_FRAME_FPU_BYTES
+        };
         let deepest = roots.iter().map(|r| r.depth_bytes).max().unwrap_or(0);
         level_reports.push(LevelReport {
             name: level.name.clone(),
@@ -743,7 +809,16 @@ pub fn stack_bound(program: &Program, levels: &[PriorityLevel]) -> Result<StackR
                 .collect()
         })
         .collect();
-    let total_bytes = level_reports.iter().map(|l| l.contribution_bytes).sum();
+    let once_bytes = if once.is_empty() {
+        0
+    } else {
+        level_reports.last().map_or(0, |l| l.contribution_bytes)
+    };
+    let total_bytes = level_reports
+        .iter()
+        .map(|l| l.contribution_bytes)
+        .sum::<u32>()
+        .max(init_bytes + once_bytes);
     let sound = unknown_frames.is_empty()
         && indirect_calls.is_empty()
         && unresolved_calls.is_empty()
@@ -751,6 +826,7 @@ pub fn stack_bound(program: &Program, levels: &[PriorityLevel]) -> Result<StackR
     Ok(StackReport {
         levels: level_reports,
         total_bytes,
+        init_bytes,
         sound,
         unknown_frames,
         indirect_calls,
@@ -764,12 +840,23 @@ pub fn stack_bound(program: &Program, levels: &[PriorityLevel]) -> Result<StackR
 /// (interrupt handlers bound to `DefaultHandler` share its address), and bounds the
 /// stack of `levels`.
 pub fn analyse_elf(elf: &Path, levels: &[PriorityLevel]) -> Result<StackReport, WcetError> {
+    analyse_elf_once(elf, levels, &[], &[])
+}
+
+/// [`analyse_elf`] with functions counted once and functions run only with
+/// interrupts disabled ([`stack_bound_once`]).
+pub fn analyse_elf_once(
+    elf: &Path,
+    levels: &[PriorityLevel],
+    once: &[String],
+    masked: &[String],
+) -> Result<StackReport, WcetError> {
     let text = disassemble(elf)?;
     let mut program = parse_objdump(&text);
     for symbol in super::cpi::elf_functions(elf)? {
         program.add_alias(&symbol.name, symbol.address);
     }
-    stack_bound(&program, levels)
+    stack_bound_once(&program, levels, once, masked)
 }
 
 #[cfg(test)]
@@ -900,6 +987,79 @@ Disassembly of section .text:
         assert_eq!(report.indirect_calls.len(), 1);
         assert_eq!(report.indirect_calls[0].function, "handler");
         assert!(report.indirect_calls[0].instruction.contains("blx r2"));
+        Ok(())
+    }
+
+    #[test]
+    fn a_function_counted_once_is_cut_from_every_level_and_added_once() -> Result<(), WcetError> {
+        // `t` and `h` both call `stop` (1 KiB frame), which runs with interrupts off.
+        let text = "
+08000000 <t>:
+ 8000000:      \tpush\t{r7, lr}
+ 8000002:      \tbl\t0x8000020 <stop>
+08000010 <h>:
+ 8000010:      \tpush\t{r4, r5, r7, lr}
+ 8000012:      \tbl\t0x8000020 <stop>
+08000020 <stop>:
+ 8000020:      \tsub.w\tsp, sp, #0x400
+ 8000024:      \tb\t0x8000020 <stop>
+";
+        let levels = [
+            PriorityLevel {
+                name: "thread".into(),
+                roots: vec!["t".into()],
+            },
+            PriorityLevel {
+                name: "priority 1".into(),
+                roots: vec!["h".into()],
+            },
+        ];
+        let p = parse_objdump(text);
+        let every = stack_bound(&p, &levels)?;
+        assert_eq!(every.total_bytes, (8 + 1024) + (16 + 1024 + 104));
+        let once = stack_bound_once(&p, &levels, &["stop".to_string()], &[])?;
+        assert_eq!(once.total_bytes, 8 + (16 + 104) + 1024);
+        assert_eq!(once.levels.len(), 3);
+        assert_eq!(once.levels[2].exception_frame_bytes, 0);
+        Ok(())
+    }
+
+    #[test]
+    fn functions_run_with_interrupts_disabled_leave_the_thread_level() -> Result<(), WcetError> {
+        // `main` calls `setup` (2 KiB, interrupts disabled) then `idle`; `h` preempts.
+        let text = "
+08000000 <main>:
+ 8000000:      \tpush\t{r7, lr}
+ 8000002:      \tbl\t0x8000020 <setup>
+ 8000006:      \tbl\t0x8000030 <idle>
+08000010 <h>:
+ 8000010:      \tpush\t{r4, r5, r7, lr}
+ 8000012:      \tsub\tsp, #0x100
+08000020 <setup>:
+ 8000020:      \tsub.w\tsp, sp, #0x800
+ 8000024:      \tbx\tlr
+08000030 <idle>:
+ 8000030:      \tpush\t{r7, lr}
+ 8000032:      \tb\t0x8000030 <idle>
+";
+        let levels = [
+            PriorityLevel {
+                name: "thread".into(),
+                roots: vec!["main".into()],
+            },
+            PriorityLevel {
+                name: "priority 1".into(),
+                roots: vec!["h".into()],
+            },
+        ];
+        let p = parse_objdump(text);
+        let h = 16 + 256 + 104;
+        assert_eq!(stack_bound(&p, &levels)?.total_bytes, 8 + 2048 + h);
+        let r = stack_bound_once(&p, &levels, &[], &["setup".to_string()])?;
+        assert_eq!(r.init_bytes, 8 + 2048);
+        assert_eq!(r.levels[0].contribution_bytes, 8 + 8);
+        // The set-up alone is deeper than idle under the handler.
+        assert_eq!(r.total_bytes, (8 + 2048).max(8 + 8 + h));
         Ok(())
     }
 
