@@ -130,8 +130,7 @@ pub struct Dropout {
 
 impl Dropout {
     fn covers(&self, t_us: u64) -> bool {
-        t_us >= self.start_us
-            && t_us < self.start_us + u64::from(self.periods) * CONTROL_PERIOD_US
+        t_us >= self.start_us && t_us < self.start_us + u64::from(self.periods) * CONTROL_PERIOD_US
     }
 }
 
@@ -164,7 +163,9 @@ pub struct Disturbances {
 impl Disturbances {
     /// The delay in whole control periods.
     pub fn delay_periods(&self) -> usize {
-        (self.delay_ms * 1e3 / CONTROL_PERIOD_US as f64).round().max(0.0) as usize
+        (self.delay_ms * 1e3 / CONTROL_PERIOD_US as f64)
+            .round()
+            .max(0.0) as usize
     }
 }
 
@@ -290,14 +291,14 @@ impl<T: Real> DisturbedEcu<T> {
                 DropoutKind::Nan => {
                     let nan = T::from_f64(f64::NAN);
                     StateEstimate {
-                    stamp_us: t_us,
-                    x_m: nan,
-                    y_m: nan,
-                    psi_rad: nan,
-                    vx_mps: nan,
-                    vy_mps: nan,
-                    yaw_rate_radps: nan,
-                    delta_rad: nan,
+                        stamp_us: t_us,
+                        x_m: nan,
+                        y_m: nan,
+                        psi_rad: nan,
+                        vx_mps: nan,
+                        vy_mps: nan,
+                        yaw_rate_radps: nan,
+                        delta_rad: nan,
                     }
                 }
                 DropoutKind::Hold => self.last_delivered.unwrap_or(delayed),
@@ -371,9 +372,7 @@ impl<T: Real> Ecu<T> for DisturbedEcu<T> {
 /// Mean of a polygon's vertices, m.
 pub fn centroid(v: &[[f64; 2]]) -> [f64; 2] {
     let n = v.len().max(1) as f64;
-    let (x, y) = v
-        .iter()
-        .fold((0.0, 0.0), |(x, y), p| (x + p[0], y + p[1]));
+    let (x, y) = v.iter().fold((0.0, 0.0), |(x, y), p| (x + p[0], y + p[1]));
     [x / n, y / n]
 }
 

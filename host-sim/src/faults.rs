@@ -109,7 +109,9 @@ impl FromStr for Fault {
         let periods = |default: f64| -> Result<u32, String> {
             let n = num(default)?;
             if n.fract() != 0.0 || n > 1e6 {
-                return Err(format!("fault {s:?}: give a whole number of control periods"));
+                return Err(format!(
+                    "fault {s:?}: give a whole number of control periods"
+                ));
             }
             Ok(n as u32)
         };

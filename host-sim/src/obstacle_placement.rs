@@ -43,7 +43,10 @@ fn locate(track: &Track, arcs: &[f64], s_m: f64) -> (usize, usize, f64) {
         s_m
     };
     let nseg = track.segment_count().max(1);
-    let i = arcs.partition_point(|&a| a <= q).saturating_sub(1).min(nseg - 1);
+    let i = arcs
+        .partition_point(|&a| a <= q)
+        .saturating_sub(1)
+        .min(nseg - 1);
     let j = (i + 1) % n.max(1);
     let (a, b) = (track.points[i], track.points[j]);
     let len = (b[0] - a[0]).hypot(b[1] - a[1]).max(1e-9);
@@ -67,7 +70,11 @@ pub fn pose_at(track: &Track, s_m: f64) -> ([f64; 2], f64, [f64; 2]) {
     let (i, j, f) = locate(track, &arcs, s_m);
     let (a, b) = (track.points[i], track.points[j]);
     let p = [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])];
-    (p, (b[1] - a[1]).atan2(b[0] - a[0]), widths_at(track, &arcs, s_m))
+    (
+        p,
+        (b[1] - a[1]).atan2(b[0] - a[0]),
+        widths_at(track, &arcs, s_m),
+    )
 }
 
 /// A `length × width` box (m) centred `lateral_m` left of the centre line at arc

@@ -31,6 +31,10 @@
 //! half-width on that side. `max_edge_excess_m` is how far the body's side went
 //! past the edge (negative: the margin left).
 //!
+//! With obstacles, each run's are written to `obstacles/<index>.csv`: `host-sim run
+//! --track T --obstacles obstacles/<index>.csv --mu ...` replays a run without its
+//! noise, delay or fault.
+//!
 //! `sweep.csv` holds every field of `summary.json` except the host's wall-time
 //! figures (`plan_host_us_p50`, `plan_host_us_max`, `sim_speed_x_realtime`), which
 //! differ from one run of the same command to the next.
@@ -193,7 +197,9 @@ impl FromStr for ObstacleSpec {
         if let Some(n) = s.strip_prefix("random:") {
             return match n.parse::<f64>() {
                 Ok(x) if x.is_finite() && x >= 0.0 => Ok(ObstacleSpec::Random(x)),
-                _ => Err(format!("--obstacles random:N wants N ≥ 0 per km, got {n:?}")),
+                _ => Err(format!(
+                    "--obstacles random:N wants N ≥ 0 per km, got {n:?}"
+                )),
             };
         }
         Ok(ObstacleSpec::File(s.to_string()))
@@ -284,10 +290,11 @@ pub const FACTOR_COLUMNS: [&str; 10] = [
 ];
 
 /// Columns after the factors: the outcome and what the sweep measures itself.
-pub const RESULT_COLUMNS: [&str; 9] = [
+pub const RESULT_COLUMNS: [&str; 10] = [
     "outcome",
     "fault_check",
     "error",
+    "plan_failure_kinds",
     "obstacle_count",
     "fault_event_s",
     "off_road_samples",
@@ -394,7 +401,9 @@ fn check_args(args: &SweepArgs) -> Result<ObstacleSpec> {
     if !(args.duration.is_finite() && args.duration > 0.0) {
         bail!("--duration must be a positive number of seconds");
     }
-    args.obstacles.parse::<ObstacleSpec>().map_err(|e| anyhow!(e))
+    args.obstacles
+        .parse::<ObstacleSpec>()
+        .map_err(|e| anyhow!(e))
 }
 
 /// What one run produced: its factors and its `sweep.csv` cells after them.
@@ -415,6 +424,9 @@ pub struct Common {
     pub laps: u32,
     /// Simulated time limit, s.
     pub duration_s: f64,
+    /// Where to write each run's obstacles as `<index>.csv` (random ones included,
+    /// so `host-sim run --obstacles` can replay a run); `None`: not written.
+    pub obstacle_dir: Option<PathBuf>,
 }
 
 /// Runs one run and returns its row (an error is a row too).
@@ -506,6 +518,14 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
         ObstacleSpec::Random(n) => random_obstacles(&scn.track, *n, spec.rng_seed(), &check),
         ObstacleSpec::File(f) => crate::obstacle_file::load_obstacles_path(f)?,
     };
+    if let (Some(dir), false) = (&common.obstacle_dir, scn.obstacles.is_empty()) {
+        let p = dir.join(format!("{}.csv", spec.index));
+        fs::create_dir_all(dir)
+            .and_then(|_| {
+                fs::write(&p, crate::obstacle_file::obstacles_to_csv_string(&scn.obstacles))
+            })
+            .with_context(|| format!("cannot write {}", p.display()))?;
+    }
     if let Fault::LateObstacle(dist) = spec.fault {
         scn.obstacles.push(late_obstacle_box(&scn, &check)?);
         d.late_obstacle = Some(LateObstacle {
@@ -538,6 +558,7 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
         } else {
             String::new()
         },
+        failure_kinds(&res.plan_activations),
         scn.obstacles.len().to_string(),
         fault_event_s.map(|t| format!("{t:.2}")).unwrap_or_default(),
         edge.off_road_samples.to_string(),
@@ -547,6 +568,28 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
     ];
     cells.extend(summary_values(s)?);
     Ok(cells)
+}
+
+/// The statuses of the plan activations that published nothing, with their
+/// counts (`qp_iteration_limit:3;stale:1`), in order of first appearance.
+fn failure_kinds(acts: &[crate::ecu::PlanActivation]) -> String {
+    let mut kinds: Vec<(String, usize)> = Vec::new();
+    for a in acts.iter().filter(|a| !a.published) {
+        let name = if a.status == "optimal" {
+            "stale".to_string()
+        } else {
+            a.status.to_string()
+        };
+        match kinds.iter_mut().find(|(k, _)| *k == name) {
+            Some((_, n)) => *n += 1,
+            None => kinds.push((name, 1)),
+        }
+    }
+    kinds
+        .iter()
+        .map(|(k, n)| format!("{k}:{n}"))
+        .collect::<Vec<_>>()
+        .join(";")
 }
 
 /// Off-road samples and the largest excess of the body's side past the road edge.
@@ -621,8 +664,8 @@ pub fn header() -> Vec<String> {
 
 /// Writes `sweep.csv` (rows sorted by index).
 pub fn write_csv(path: &Path, rows: &[Vec<String>]) -> Result<()> {
-    let mut w = csv::Writer::from_path(path)
-        .with_context(|| format!("cannot write {}", path.display()))?;
+    let mut w =
+        csv::Writer::from_path(path).with_context(|| format!("cannot write {}", path.display()))?;
     w.write_record(header())?;
     for r in rows {
         w.write_record(r)?;
@@ -656,6 +699,7 @@ pub fn run(args: &SweepArgs) -> Result<()> {
             .collect(),
     };
     let common = Common {
+        obstacle_dir: (obstacles != ObstacleSpec::None).then(|| out.join("obstacles")),
         obstacles,
         laps: args.laps,
         duration_s: args.duration,
@@ -666,7 +710,13 @@ pub fn run(args: &SweepArgs) -> Result<()> {
     let wall_s = wall.elapsed().as_secs_f64();
     let records: Vec<Vec<String>> = rows
         .iter()
-        .map(|r| r.spec.columns().into_iter().chain(r.cells.clone()).collect())
+        .map(|r| {
+            r.spec
+                .columns()
+                .into_iter()
+                .chain(r.cells.clone())
+                .collect()
+        })
         .collect();
     write_csv(&out.join("sweep.csv"), &records)?;
     let text = finish(out, &records, Some(wall_s), !args.no_plots)?;
@@ -793,10 +843,7 @@ pub fn parse_rows(records: &[Vec<String>]) -> Vec<Row> {
     records
         .iter()
         .map(|r| Row {
-            factors: FACTOR_COLUMNS
-                .iter()
-                .map(|&c| (c, get(r, c)))
-                .collect(),
+            factors: FACTOR_COLUMNS.iter().map(|&c| (c, get(r, c))).collect(),
             outcome: Outcome::from_name(&get(r, "outcome")).unwrap_or(Outcome::Failed),
             fault: get(r, "fault"),
             fault_pass: get(r, "fault_check") == "pass",
@@ -806,8 +853,8 @@ pub fn parse_rows(records: &[Vec<String>]) -> Vec<Row> {
             ay_over_mu_g: num(r, "ay_over_mu_g"),
             plan_ay_over_mu_g: num(r, "plan_ay_over_mu_g"),
             consistency_m: num(r, "consistency_max_m"),
-            misses: (num(r, "plan_deadline_misses") + num(r, "control_deadline_misses"))
-                .max(0.0) as u64,
+            misses: (num(r, "plan_deadline_misses") + num(r, "control_deadline_misses")).max(0.0)
+                as u64,
         })
         .collect()
 }
@@ -909,10 +956,7 @@ pub fn aggregate(rows: &[Row], wall_s: Option<f64>) -> Aggregate {
     for f in FACTOR_COLUMNS.iter().skip(1) {
         let mut levels: BTreeMap<String, Vec<&Row>> = BTreeMap::new();
         for r in rows {
-            levels
-                .entry(r.factors[f].clone())
-                .or_default()
-                .push(r);
+            levels.entry(r.factors[f].clone()).or_default().push(r);
         }
         by_factor.insert(
             *f,
@@ -1033,7 +1077,11 @@ pub fn text_summary(a: &Aggregate) -> String {
             );
         }
     } else {
-        let bad = a.per_track_mu.iter().filter(|r| !r.missed.is_empty()).count();
+        let bad = a
+            .per_track_mu
+            .iter()
+            .filter(|r| !r.missed.is_empty())
+            .count();
         let _ = writeln!(
             t,
             "{} track×μ groups, {} miss a bound (see sweep.json)",

@@ -38,7 +38,7 @@ pub fn draw_all(dir: &Path, rows: &[Row], agg: &Aggregate) -> Result<()> {
     }
     per_track(
         &dir.join("lateral_error.png"),
-        "largest |lateral error| per track (● μ=1st, ▲ others), bound dashed",
+        "largest |lateral error| from the centre line per track and μ, bound dashed",
         "m",
         agg,
         |t| t.lat_max_m,
@@ -48,7 +48,7 @@ pub fn draw_all(dir: &Path, rows: &[Row], agg: &Aggregate) -> Result<()> {
     per_track(
         &dir.join("ay_over_mu_g.png"),
         "largest |a_y|/μg per track: car (filled), plan's kinematic a_y (hollow), bound dashed",
-        "-",
+        "|a_y| / μg",
         agg,
         |t| t.ay_over_mu_g,
         Some(|t: &crate::sweep::TrackMu| t.plan_ay_over_mu_g),
@@ -70,7 +70,7 @@ fn outcome_rates(
     let mut chart = ChartBuilder::on(&root)
         .caption(format!("outcome rates by {factor}"), (FONT, 22))
         .margin(15)
-        .x_label_area_size(if n > 6 { 110 } else { 40 })
+        .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(0.0..n as f64, 0.0..1.0)
         .map_err(|e| draw_error(path, e))?;
@@ -86,11 +86,7 @@ fn outcome_rates(
                 String::new()
             }
         })
-        .x_label_style((FONT, 14).into_font().transform(if n > 6 {
-            FontTransform::Rotate90
-        } else {
-            FontTransform::None
-        }))
+        .x_label_style((FONT, if n > 10 { 11 } else { 14 }))
         .y_desc("fraction of runs")
         .draw()
         .map_err(|e| draw_error(path, e))?;
@@ -175,7 +171,7 @@ fn per_track(
     let mut chart = ChartBuilder::on(&root)
         .caption(title, (FONT, 20))
         .margin(15)
-        .x_label_area_size(120)
+        .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(0.0..n as f64, 0.0..ymax)
         .map_err(|e| draw_error(path, e))?;
@@ -191,7 +187,7 @@ fn per_track(
                 String::new()
             }
         })
-        .x_label_style((FONT, 14).into_font().transform(FontTransform::Rotate90))
+        .x_label_style((FONT, if n > 10 { 11 } else { 14 }))
         .y_desc(unit)
         .draw()
         .map_err(|e| draw_error(path, e))?;

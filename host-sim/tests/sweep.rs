@@ -50,11 +50,23 @@ fn a_sweep_is_deterministic_across_threads_and_shards_and_an_error_is_a_row() {
     let dir = tempfile::tempdir().unwrap();
     let oval = write_oval(dir.path());
     let bad = dir.path().join("broken.csv");
-    std::fs::write(&bad, "# x_m,y_m,w_tr_right_m,w_tr_left_m\n0,0,4,4\n1,zero,4,4\n").unwrap();
+    std::fs::write(
+        &bad,
+        "# x_m,y_m,w_tr_right_m,w_tr_left_m\n0,0,4,4\n1,zero,4,4\n",
+    )
+    .unwrap();
     let bad = bad.display().to_string();
     let d = |s: &str| dir.path().join(s).display().to_string();
     let common = [
-        "--tracks", &oval, "paper", &bad, "--mu", "1", "--noise", "low", "--no-plots",
+        "--tracks",
+        &oval,
+        "paper",
+        &bad,
+        "--mu",
+        "1",
+        "--noise",
+        "low",
+        "--no-plots",
     ];
     let (full, s0, s1, merged) = (d("full"), d("s0"), d("s1"), d("merged"));
     sweep(&[&common[..], &["--jobs", "2", "--out", &full]].concat());
@@ -67,7 +79,10 @@ fn a_sweep_is_deterministic_across_threads_and_shards_and_an_error_is_a_row() {
     assert!(st.success());
     let a = std::fs::read_to_string(Path::new(&full).join("sweep.csv")).unwrap();
     let b = std::fs::read_to_string(Path::new(&merged).join("sweep.csv")).unwrap();
-    assert_eq!(a, b, "sharded and merged sweep.csv differs from the full one");
+    assert_eq!(
+        a, b,
+        "sharded and merged sweep.csv differs from the full one"
+    );
 
     let mut r = csv::Reader::from_path(Path::new(&full).join("sweep.csv")).unwrap();
     let h: Vec<String> = r.headers().unwrap().iter().map(String::from).collect();
@@ -85,9 +100,10 @@ fn a_sweep_is_deterministic_across_threads_and_shards_and_an_error_is_a_row() {
         "the error names the file: {}",
         &rows[2][col("error")]
     );
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(Path::new(&full).join("sweep.json")).unwrap())
-            .unwrap();
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(Path::new(&full).join("sweep.json")).unwrap(),
+    )
+    .unwrap();
     assert_eq!(json["runs"], 3);
     assert_eq!(json["outcomes"]["failed"], 1);
 }
@@ -109,6 +125,7 @@ fn run_fault(track: &str, fault: Fault) -> Vec<(String, String)> {
         obstacles: ObstacleSpec::None,
         laps: 1,
         duration_s: 300.0,
+        obstacle_dir: None,
     };
     let row = execute(&spec, &common);
     header().into_iter().skip(10).zip(row.cells).collect()
