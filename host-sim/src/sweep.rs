@@ -522,7 +522,10 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
         let p = dir.join(format!("{}.csv", spec.index));
         fs::create_dir_all(dir)
             .and_then(|_| {
-                fs::write(&p, crate::obstacle_file::obstacles_to_csv_string(&scn.obstacles))
+                fs::write(
+                    &p,
+                    crate::obstacle_file::obstacles_to_csv_string(&scn.obstacles),
+                )
             })
             .with_context(|| format!("cannot write {}", p.display()))?;
     }
