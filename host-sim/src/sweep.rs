@@ -949,6 +949,11 @@ fn count_outcomes<'a>(rows: impl Iterator<Item = &'a Row>) -> BTreeMap<&'static 
     m
 }
 
+/// `x` is within `bound` (false for NaN: an unmeasured figure misses its bound).
+fn meets(x: f64, bound: f64) -> bool {
+    x <= bound
+}
+
 fn fmax(it: impl Iterator<Item = f64>) -> f64 {
     it.filter(|x| x.is_finite()).fold(f64::NAN, f64::max)
 }
@@ -996,13 +1001,13 @@ pub fn aggregate(rows: &[Row], wall_s: Option<f64>) -> Aggregate {
             if t.completed < t.runs {
                 missed.push("completed");
             }
-            if !(t.lat_max_m <= BOUNDS.lateral_error_m) {
+            if !meets(t.lat_max_m, BOUNDS.lateral_error_m) {
                 missed.push("lateral_error");
             }
-            if !(t.ay_over_mu_g <= BOUNDS.ay_over_mu_g) {
+            if !meets(t.ay_over_mu_g, BOUNDS.ay_over_mu_g) {
                 missed.push("ay");
             }
-            if !(t.consistency_m <= BOUNDS.consistency_m) {
+            if !meets(t.consistency_m, BOUNDS.consistency_m) {
                 missed.push("consistency");
             }
             if t.misses > 0 {
