@@ -68,6 +68,12 @@ use crate::Real;
 
 /// Default half-window `h` of the curvature estimate, m.
 pub const DEFAULT_CURVATURE_HALF_WINDOW_M: f32 = 3.0;
+
+/// Largest |coordinate| and half-width a path accepts, m (10,000 km: any map frame).
+/// Larger finite values (up to `f32::MAX`) made the segment lengths and the arc
+/// length overflow to infinity, and every query after them garbage (found by
+/// `firmware/tests/fuzz.rs`).
+pub const MAX_COORDINATE_M: f32 = 1.0e7;
 /// Default length of path searched behind the hint by [`ReferencePath::project`], m.
 pub const DEFAULT_SEARCH_BEHIND_M: f32 = 20.0;
 /// Default length of path searched ahead of the hint by [`ReferencePath::project`], m.
@@ -90,7 +96,8 @@ pub enum PathError {
         /// Capacity of the path.
         capacity: usize,
     },
-    /// A coordinate or width of point `index` is NaN or infinite.
+    /// A coordinate or width of point `index` is NaN, infinite, or farther than
+    /// [`MAX_COORDINATE_M`] from the origin (its arc length would overflow).
     NonFinite {
         /// Index of the bad point.
         index: usize,
@@ -315,11 +322,12 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         // Validate every point and width.
         for i in 0..count {
             let (p, w) = get(i);
-            if !p[0].is_finite() || !p[1].is_finite() {
+            let far = T::lit(MAX_COORDINATE_M);
+            if !(p[0].abs() <= far && p[1].abs() <= far) {
                 return Err(PathError::NonFinite { index: i });
             }
             if has_widths {
-                if !w[0].is_finite() || !w[1].is_finite() {
+                if !(w[0].abs() <= far && w[1].abs() <= far) {
                     return Err(PathError::NonFinite { index: i });
                 }
                 if w[0] < T::ZERO || w[1] < T::ZERO {

@@ -228,8 +228,14 @@ pub struct Summary {
     pub max_abs_lateral_error_m: f64,
     /// RMS lateral offset, m.
     pub rms_lateral_error_m: f64,
-    /// Largest |a_y|, m/s².
+    /// Largest |a_y| of the car, m/s²: the plant's body lateral acceleration at the
+    /// centre of gravity, `ΣF_y/M_T` in the vehicle frame (tyre forces, so it
+    /// includes the body's side-slip dynamics), sampled every 10 ms.
     pub max_abs_ay_mps2: f64,
+    /// Largest |a_y| the published plans asked for, m/s²: the kinematic bicycle's
+    /// `V²·sin β(δ)/l_r` at every node of every published plan (the quantity the
+    /// validity limit keeps under `0.5·μ_planner·g`, slack aside).
+    pub max_abs_plan_ay_mps2: f64,
     /// Road friction of the plant.
     pub mu: f64,
     /// Friction given to the planner.
@@ -476,6 +482,8 @@ pub fn run_with<T: Real, E: Ecu<T>>(
                 if let Some(tr) = trace_of(ecu.active_plan(), p.finish_us) {
                     res.plans.push(tr);
                 }
+                let ay = plan_max_kinematic_ay(ecu.active_plan(), vehicle);
+                meter.sum.max_abs_plan_ay_mps2 = meter.sum.max_abs_plan_ay_mps2.max(ay);
             }
             let act = c.actuation;
             inputs = Inputs {
@@ -759,6 +767,29 @@ impl<'a> Meter<'a> {
         sum.plan_p50_instructions = plan_instr.get(plan_instr.len() / 2).copied().unwrap_or(0.0);
         sum
     }
+}
+
+/// Largest |a_y| of the kinematic bicycle over a plan's nodes, m/s² (0 for an
+/// empty plan).
+fn plan_max_kinematic_ay<T: Real>(plan: &Plan<T>, vehicle: &VehicleParams) -> f64 {
+    if plan.dt_s <= T::ZERO {
+        return 0.0;
+    }
+    let geometry = firmware::bicycle::BicycleGeometry {
+        l_f_m: vehicle.lf_m,
+        l_r_m: vehicle.lr_m,
+    };
+    plan.nodes
+        .iter()
+        .map(|n| {
+            firmware::validity::kinematic_lateral_acceleration(
+                &geometry,
+                n.v_mps.to_f64(),
+                n.delta_rad.to_f64(),
+            )
+            .abs()
+        })
+        .fold(0.0, f64::max)
 }
 
 fn trace_of<T: Real>(plan: &Plan<T>, publish_us: u64) -> Option<PlanTrace> {

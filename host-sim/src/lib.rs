@@ -18,6 +18,11 @@
 //! | [`ecu`] | what runs the firmware: the `Ecu` trait, the modelled ECU on the host |
 //! | [`route`] | the windows of the road the ECU holds, sent as the car moves on |
 //! | [`run`] | the `run` command: log, summary, figures |
+//! | [`disturbance`] | noise, delay, dropout, steering rate limit, late obstacle at the ECU's boundary |
+//! | [`faults`] | named fault scenarios with their expected behaviour; run outcomes |
+//! | [`obstacle_placement`] | boxes on any track; random obstacles from a seed |
+//! | [`sweep`] | the `sweep` and `sweep-merge` commands: cross products of runs, in parallel |
+//! | [`sweep_figures`] | the sweep's figures |
 //! | [`figures`] | the closed-loop figures (the paper's Figures 5–8, task costs) |
 //! | [`plot`] | plotting helpers (embedded font) |
 //! | [`qp_corpus`] | the MPC's QPs as JSON, for solver benchmarks (`qp-corpus` command) |
@@ -25,9 +30,12 @@
 
 pub mod closed_loop;
 pub mod cost_model;
+pub mod disturbance;
 pub mod ecu;
+pub mod faults;
 pub mod figures;
 pub mod obstacle_file;
+pub mod obstacle_placement;
 pub mod pil;
 pub mod plant;
 pub mod plot;
@@ -35,6 +43,8 @@ pub mod qp_corpus;
 pub mod route;
 pub mod run;
 pub mod scenario;
+pub mod sweep;
+pub mod sweep_figures;
 pub mod tire;
 pub mod tire_table;
 pub mod track;

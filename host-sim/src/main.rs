@@ -31,6 +31,12 @@ enum Command {
     Wcet(host_sim::wcet::command::WcetArgs),
     /// Every QP the MPC solves over a kinematic closed loop, one JSON file each (for solver benchmarks).
     QpCorpus(host_sim::qp_corpus::QpCorpusArgs),
+    /// Many closed-loop runs: the cross product of tracks, frictions, vehicles, loads,
+    /// noise, delays, faults and seeds, in parallel; writes sweep.csv (one row per run),
+    /// sweep.json (the aggregate), figures and summary.txt.
+    Sweep(host_sim::sweep::SweepArgs),
+    /// Joins the sweep.csv of shards (`sweep --only I/N`) into one sweep's outputs.
+    SweepMerge(host_sim::sweep::MergeArgs),
 }
 
 fn run(cli: &Cli) -> anyhow::Result<()> {
@@ -41,6 +47,8 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
         Command::Pil(args) => host_sim::pil::run(args),
         Command::Wcet(args) => host_sim::wcet::command::run(args),
+        Command::Sweep(args) => host_sim::sweep::run(args),
+        Command::SweepMerge(args) => host_sim::sweep::merge(args),
     }
 }
 

@@ -1,0 +1,162 @@
+//! `host-sim sweep`: determinism (the same command, sharded or not, on any number of
+//! threads, writes the same `sweep.csv`), an erroring run as a row, and fault
+//! scenarios showing their stated behaviour.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::f64::consts::PI;
+use std::path::Path;
+use std::process::Command;
+
+use host_sim::faults::Fault;
+use host_sim::sweep::{execute, header, Common, ObstacleSpec, RunSpec};
+use host_sim::track::{Track, TrackPiece};
+
+fn host_sim() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_host-sim"))
+}
+
+/// A small oval (two 80 m straights, two R 35 m half circles, 5 m half-widths):
+/// a cheap lap of about 380 m.
+fn write_oval(dir: &Path) -> String {
+    let pieces = [
+        TrackPiece::Straight { length_m: 80.0 },
+        TrackPiece::Arc {
+            radius_m: 35.0,
+            angle_rad: PI,
+        },
+        TrackPiece::Straight { length_m: 80.0 },
+        TrackPiece::Arc {
+            radius_m: 35.0,
+            angle_rad: PI,
+        },
+    ];
+    let t = Track::from_pieces("oval", [0.0, 0.0, 0.0], &pieces, 2.0, 5.0, true);
+    let p = dir.join("oval.csv");
+    std::fs::write(&p, t.to_csv_string()).unwrap();
+    p.display().to_string()
+}
+
+fn sweep(args: &[&str]) {
+    let out = host_sim().arg("sweep").args(args).output().unwrap();
+    assert!(
+        out.status.success(),
+        "sweep {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn a_sweep_is_deterministic_across_threads_and_shards_and_an_error_is_a_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let oval = write_oval(dir.path());
+    let bad = dir.path().join("broken.csv");
+    std::fs::write(
+        &bad,
+        "# x_m,y_m,w_tr_right_m,w_tr_left_m\n0,0,4,4\n1,zero,4,4\n",
+    )
+    .unwrap();
+    let bad = bad.display().to_string();
+    let d = |s: &str| dir.path().join(s).display().to_string();
+    let common = [
+        "--tracks",
+        &oval,
+        "paper",
+        &bad,
+        "--mu",
+        "1",
+        "--noise",
+        "low",
+        "--no-plots",
+    ];
+    let (full, s0, s1, merged) = (d("full"), d("s0"), d("s1"), d("merged"));
+    sweep(&[&common[..], &["--jobs", "2", "--out", &full]].concat());
+    sweep(&[&common[..], &["--jobs", "1", "--only", "0/2", "--out", &s0]].concat());
+    sweep(&[&common[..], &["--jobs", "1", "--only", "1/2", "--out", &s1]].concat());
+    let st = host_sim()
+        .args(["sweep-merge", &s0, &s1, "--no-plots", "--out", &merged])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let a = std::fs::read_to_string(Path::new(&full).join("sweep.csv")).unwrap();
+    let b = std::fs::read_to_string(Path::new(&merged).join("sweep.csv")).unwrap();
+    assert_eq!(
+        a, b,
+        "sharded and merged sweep.csv differs from the full one"
+    );
+
+    let mut r = csv::Reader::from_path(Path::new(&full).join("sweep.csv")).unwrap();
+    let h: Vec<String> = r.headers().unwrap().iter().map(String::from).collect();
+    assert_eq!(h, header());
+    let col = |name: &str| h.iter().position(|c| c == name).unwrap();
+    let rows: Vec<csv::StringRecord> = r.records().map(|x| x.unwrap()).collect();
+    assert_eq!(rows.len(), 3);
+    assert_eq!(&rows[0][col("track")], "oval");
+    assert_eq!(&rows[0][col("outcome")], "ok");
+    assert_eq!(&rows[1][col("track")], "paper");
+    assert_eq!(&rows[2][col("track")], "broken");
+    assert_eq!(&rows[2][col("outcome")], "failed");
+    assert!(
+        rows[2][col("error")].contains("broken.csv"),
+        "the error names the file: {}",
+        &rows[2][col("error")]
+    );
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(Path::new(&full).join("sweep.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(json["runs"], 3);
+    assert_eq!(json["outcomes"]["failed"], 1);
+}
+
+fn run_fault(track: &str, fault: Fault) -> Vec<(String, String)> {
+    let spec = RunSpec {
+        index: 0,
+        track: track.into(),
+        mu: 1.0,
+        mu_planner: 1.0,
+        vehicle: None,
+        mass_scale: 1.0,
+        noise: 0.0,
+        delay_ms: 0.0,
+        fault,
+        seed: 0,
+    };
+    let common = Common {
+        obstacles: ObstacleSpec::None,
+        laps: 1,
+        duration_s: 300.0,
+        obstacle_dir: None,
+    };
+    let row = execute(&spec, &common);
+    header().into_iter().skip(10).zip(row.cells).collect()
+}
+
+fn cell<'a>(row: &'a [(String, String)], name: &str) -> &'a str {
+    &row.iter().find(|(h, _)| h == name).unwrap().1
+}
+
+#[test]
+fn a_nan_dropout_brakes_safely_for_its_periods_then_the_car_follows_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let oval = write_oval(dir.path());
+    let row = run_fault(&oval, Fault::DropoutNan(20));
+    assert_eq!(cell(&row, "error"), "");
+    assert_eq!(cell(&row, "outcome"), "ok");
+    assert_eq!(cell(&row, "fault_check"), "pass");
+    let safe: u64 = cell(&row, "control_safe_actuations").parse().unwrap();
+    assert!(safe >= 20, "{safe} safe actuations for 20 NaN periods");
+    let failures: u64 = cell(&row, "plan_failures").parse().unwrap();
+    assert!(failures >= 2, "the plan task refused the NaN estimates");
+}
+
+#[test]
+fn a_late_obstacle_is_revealed_and_avoided() {
+    let dir = tempfile::tempdir().unwrap();
+    let oval = write_oval(dir.path());
+    let row = run_fault(&oval, Fault::LateObstacle(60.0));
+    assert_eq!(cell(&row, "error"), "");
+    assert_ne!(cell(&row, "fault_event_s"), "", "the obstacle was revealed");
+    assert_eq!(cell(&row, "collisions"), "0");
+    assert_eq!(cell(&row, "obstacle_count"), "1");
+    assert_eq!(cell(&row, "fault_check"), "pass");
+}
