@@ -220,13 +220,28 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         self.window_origin_m = origin_m;
         self.obstacles.clear();
         r?;
+        self.rebuild_obstacles();
+        Ok(())
+    }
+
+    /// Rebuilds the parabolas of the known obstacles ([`PlanTask::set_obstacles`])
+    /// that lie inside the current window of the road: more than 5 m from its ends
+    /// (anywhere on a closed path) and within 20 m of its centre line. Returns false,
+    /// counting it in `stats.obstacle_errors` and leaving no parabola, when the
+    /// obstacle manager refuses them (e.g. one blocks the road); true otherwise.
+    pub fn rebuild_obstacles(&mut self) -> bool {
+        self.obstacles.clear();
         let Some(settings) = self.obstacle_settings else {
-            return Ok(());
+            return true;
         };
+        if self.path.is_empty() {
+            return true;
+        }
         // The obstacles inside the window are moved to the front of the list (in
         // place: no copy on the stack), their projection kept as the hint.
         let (margin, reach) = (T::lit(5.0), T::lit(20.0));
         let length = self.path.length_m();
+        let closed = self.path.is_closed();
         let mut inside = 0;
         for i in 0..self.obstacle_list.len() {
             let o = &self.obstacle_list[i];
@@ -250,9 +265,11 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             .update(&settings, &self.path, &self.obstacle_list[..inside])
             .is_err()
         {
+            self.obstacles.clear();
             self.stats.obstacle_errors = self.stats.obstacle_errors.wrapping_add(1);
+            return false;
         }
-        Ok(())
+        true
     }
 
     /// [`PlanTask::adopt_window`] from rows `[x_m, y_m, w_right_m, w_left_m]` (the

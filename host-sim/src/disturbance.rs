@@ -37,7 +37,7 @@
 
 use std::collections::VecDeque;
 
-use anyhow::{anyhow, Result};
+use anyhow::{anyhow, bail, Result};
 use firmware::obstacles::Obstacle as FwObstacle;
 use firmware::plan::Plan;
 use firmware::state_estimate::StateEstimate;
@@ -46,6 +46,7 @@ use firmware::Real;
 
 use crate::closed_loop::{vehicle_config, SimOptions};
 use crate::ecu::{ControlOutput, Ecu, SimulatedEcu};
+use crate::route::Window;
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleParams;
 
@@ -174,11 +175,13 @@ impl Disturbances {
 struct PendingObstacle<T> {
     /// Every obstacle the planner has once it appears (the late one included).
     all: Vec<FwObstacle<T>>,
-    /// Arc length of the late obstacle's centre on the path, m.
+    /// Arc length of the late obstacle's centre on the whole track, m.
     s_m: f64,
     appear_m: f64,
-    /// Last projection of the car, m (a hint for the next).
-    s_hint: Option<T>,
+    /// Last projection of the car on the whole track, m (a hint for the next).
+    s_hint: Option<f64>,
+    /// The whole track (the planner holds only a window of it).
+    track: crate::track::Track,
 }
 
 /// [`SimulatedEcu`] behind the [`Disturbances`] (see the module docs).
@@ -215,7 +218,7 @@ impl<T: Real> DisturbedEcu<T> {
                     .ok_or_else(|| anyhow!("late obstacle {} does not exist", late.index))?;
                 let mut early = scenario.clone();
                 early.obstacles.remove(late.index);
-                let mut inner = SimulatedEcu::new(&early, vehicle, opts)?;
+                let inner = SimulatedEcu::new(&early, vehicle, opts)?;
                 let all = scenario
                     .obstacles
                     .iter()
@@ -228,16 +231,16 @@ impl<T: Real> DisturbedEcu<T> {
                     })
                     .collect::<Result<Vec<_>>>()?;
                 let c = centroid(&o.vertices);
-                let path = &inner.plan_task_mut().path;
-                let s_m = path
-                    .project([T::from_f64(c[0]), T::from_f64(c[1])], None)
-                    .map(|p| p.s_m.to_f64())
-                    .ok_or_else(|| anyhow!("the late obstacle is not near the path"))?;
+                let (s_m, _) = scenario.track.project(c, None);
+                if !s_m.is_finite() {
+                    bail!("the late obstacle is not near the track");
+                }
                 let pending = PendingObstacle {
                     all,
                     s_m,
                     appear_m: late.appear_m,
                     s_hint: None,
+                    track: scenario.track.clone(),
                 };
                 (inner, Some(pending))
             }
@@ -316,21 +319,24 @@ impl<T: Real> DisturbedEcu<T> {
         let Some(p) = self.pending.as_mut() else {
             return Ok(());
         };
-        let task = self.inner.plan_task_mut();
-        let Some(proj) = task.path.project([truth.x_m, truth.y_m], p.s_hint) else {
+        let (s_car, _) = p
+            .track
+            .project([truth.x_m.to_f64(), truth.y_m.to_f64()], p.s_hint);
+        if !s_car.is_finite() {
             return Ok(());
-        };
-        p.s_hint = Some(proj.s_m);
-        let s_car = task.path.wrap_s(proj.s_m).to_f64();
+        }
+        p.s_hint = Some(s_car);
         let mut ahead = p.s_m - s_car;
-        let length = task.path.length_m().to_f64();
-        if task.path.is_closed() && ahead < 0.0 {
-            ahead += length;
+        if p.track.closed && ahead < 0.0 {
+            ahead += p.track.length();
         }
         if ahead <= p.appear_m {
-            task.obstacles
-                .update(&self.obstacle_settings, &task.path, &p.all)
-                .map_err(|e| anyhow!("the late obstacle: {e:?}"))?;
+            // Known from now on (every later window of the road rebuilds it too).
+            let task = self.inner.plan_task_mut();
+            task.set_obstacles(self.obstacle_settings, &p.all);
+            if !task.rebuild_obstacles() {
+                bail!("the late obstacle: the obstacle manager refused the obstacles");
+            }
             self.pending = None;
             self.appeared_at_us = Some(t_us);
         }
@@ -366,6 +372,10 @@ impl<T: Real> Ecu<T> for DisturbedEcu<T> {
 
     fn active_plan(&self) -> &Plan<T> {
         self.inner.active_plan()
+    }
+
+    fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()> {
+        self.inner.set_window(t_us, w)
     }
 }
 
