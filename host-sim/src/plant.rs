@@ -676,22 +676,29 @@ impl Plant {
         let d = &self.derived;
         let lifted = fz_spring <= 0.0;
         let fz = fz_spring.max(0.0);
+        let at = tire::AtLoad::new(fz, si.mu, &p.tyre);
         // Slip ratio (paper's definition, floored denominators).
         let rw = p.r_eff_m * omega;
-        let v_k = self.kappa_floor_mps(fz);
+        let k = match at {
+            Some(a) => a.slip_stiffness_n(),
+            None => p.tyre.longitudinal_slip_stiffness_n(fz),
+        };
+        let v_k = self.kappa_floor_for_stiffness(k);
         let kappa = if rw >= vxp {
             (rw - vxp) / rw.abs().max(v_k)
         } else {
             (rw - vxp) / vxp.abs().max(v_k)
         };
         let alpha = -(vyp / vxp.abs().max(d.alpha_floor_mps)).atan();
-        let fade = (vxp.hypot(vyp) / p.low_speed_mps).min(1.0);
+        let fade = offset_fade(vxp, vyp, p.low_speed_mps);
         // Right-hand wheels carry the mirrored tyre.
-        let (fxp, fyp) = if side > 0.0 {
-            tire::forces_with_offset_scale(kappa, alpha, fz, si.mu, fade, &p.tyre)
-        } else {
-            let (fx, fy) = tire::forces_with_offset_scale(kappa, -alpha, fz, si.mu, fade, &p.tyre);
-            (fx, -fy)
+        let (fxp, fyp) = match at {
+            None => (0.0, 0.0),
+            Some(at) if side > 0.0 => at.forces(kappa, alpha, fade),
+            Some(at) => {
+                let (fx, fy) = at.forces(kappa, -alpha, fade);
+                (fx, -fy)
+            }
         };
         // To the horizontal vehicle frame (see the derivation in the module doc).
         let (sdi, cdi) = si.sin_cos_delta[i];
@@ -710,6 +717,17 @@ impl Plant {
             fy,
             domega,
         }
+    }
+}
+
+/// The tyre offsets' fade `min(1, V_wheel/low_speed)` for the wheel-centre velocity
+/// `(vxp, vyp)` (m/s). When `max(|vxp|, |vyp|)` reaches the threshold it is 1 without
+/// the `hypot` (the same value: `hypot(x, y) ≥ max(|x|, |y|)`).
+fn offset_fade(vxp: f64, vyp: f64, low_speed_mps: f64) -> f64 {
+    if vxp.abs().max(vyp.abs()) >= low_speed_mps {
+        1.0
+    } else {
+        (vxp.hypot(vyp) / low_speed_mps).min(1.0)
     }
 }
 
