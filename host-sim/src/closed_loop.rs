@@ -236,6 +236,10 @@ pub struct Summary {
     /// `V²·sin β(δ)/l_r` at every node of every published plan (the quantity the
     /// validity limit keeps under `0.5·μ_planner·g`, slack aside).
     pub max_abs_plan_ay_mps2: f64,
+    /// Simulated time with at least one wheel lifted off the road (load zero), s.
+    pub wheel_lift_s: f64,
+    /// Time at which a wheel first lifted off the road, s (null if none did).
+    pub first_wheel_lift_s: Option<f64>,
     /// Road friction of the plant.
     pub mu: f64,
     /// Friction given to the planner.
@@ -508,6 +512,9 @@ pub fn run_with<T: Real, E: Ecu<T>>(
     }
 
     let mut sum = meter.finish(t_us, stop_reason, &res);
+    let lift = plant.wheel_lift();
+    sum.wheel_lift_s = lift.lifted_s;
+    sum.first_wheel_lift_s = lift.first_lift_s;
     let car = vehicle_config::<T>(vehicle);
     sum.plan_bound_instructions = opts.cost_model.plan_bound_instructions(&car.mpc_settings());
     sum.plan_bound_cycles = sum.plan_bound_instructions * opts.cycles_per_instruction;

@@ -13,22 +13,75 @@
 //! * Normal loads `F_zi = F_z0,i − k_s·ζ_i − d_s·ζ̇_i` (clamped at 0: a wheel may lift)
 //!   with the suspension extension `ζ_i = ±l_w·sin θ ∓ x_i·sin φ`, `+l_w` on the left,
 //!   `x_i = l_f` front, `−l_r` rear. Braking pitches nose down and loads the front;
-//!   cornering to the left rolls the body right and loads the right wheels.
+//!   cornering to the left rolls the body toward the outside (left side up, `θ > 0`)
+//!   and loads the right wheels.
+//! * The loads' moments in the roll and pitch equations have the arms `l_w·cos θ` and
+//!   `x_i·cos φ` (the paper's `l_w`, `l_f`, `l_r` at small angles): a load `F_zi` does
+//!   the work `F_zi·dζ_i` when the body turns, and `∂ζ_i/∂θ = ±l_w·cos θ`,
+//!   `∂ζ_i/∂φ = −x_i·cos φ`. With these arms the suspension is exactly a potential
+//!   (its springs) plus a dissipation (its dampers, and the clamp at zero load), so a
+//!   free roll or pitch oscillation loses energy and never gains it.
 //! * The pitch equation subtracts the moment of the static loads, which is zero
 //!   analytically, so that a car at rest is an exact equilibrium in floating point.
 //! * Aerodynamic drag `½·ρ·C_x·S·V_x·|V_x|` (the paper's `V_x²`, opposing reversing too).
-//! * Tyre forces from [`crate::tire`], rotated to the vehicle frame by the paper's last
-//!   equation of Section IV, `θ` and `φ` terms included as written. The right-hand
-//!   wheels carry the mirror image of the tyre (MF-Tyre's `TYRESIDE = RIGHT`), so the
-//!   car is left-right symmetric and runs straight with the wheels straight.
-//! * Wheel torques are applied as given (the paper's `T_ωi`): a negative torque is a
-//!   braking torque while the wheel rolls forward, but it is not a friction brake, so
-//!   a wheel held by a negative torque after the car stops spins backwards. The
-//!   caller (the low-level controller) releases the brakes at standstill.
-//! * As written in the paper, the rotation to the vehicle frame adds `F_z·sin θ·cos φ`
-//!   to `F_y` and `−F_z·sin φ` to `F_x` without the matching components of gravity
-//!   (which the paper's equations omit): in a steady turn the body roll adds about
-//!   `g·sin θ` of lateral acceleration toward the inside of the turn.
+//! * Tyre forces from [`crate::tire`], turned from the tyre frame to the vehicle frame
+//!   by the steering angle only (derived below; the paper's last equation of Section
+//!   IV is not used as printed). The right-hand wheels carry the mirror image of the
+//!   tyre (MF-Tyre's `TYRESIDE = RIGHT`), so the car is left-right symmetric and runs
+//!   straight with the wheels straight.
+//! * A wheel's load never goes below zero: when `F_z0,i − k_s·ζ_i − d_s·ζ̇_i` would,
+//!   the wheel is lifted, its load is 0 and it makes no tyre force. The plant reports
+//!   it ([`Outputs::wheel_lifted`], [`Plant::wheel_lift`]).
+//!
+//! # Forces on the body: a derivation
+//!
+//! Three frames, all right-handed with `z` up: the ground frame (inertial); the
+//! vehicle frame, the ground frame turned by the yaw `ψ` about `z` (horizontal); the
+//! carbody frame, the vehicle frame turned by the pitch `φ` about `y` (positive: nose
+//! down) and then by the roll `θ` about the new `x` (positive: left side up),
+//! `R = R_y(φ)·R_x(θ)`. A vector `(a, b, c)` of the vehicle frame has the body
+//! components
+//!
+//! ```text
+//! Rᵀ·(a, b, c) = ( a·cos φ                         − c·sin φ,
+//!                  a·sin θ·sin φ + b·cos θ          + c·sin θ·cos φ,
+//!                  a·cos θ·sin φ − b·sin θ          + c·cos θ·cos φ ).
+//! ```
+//!
+//! The road is flat and level (the paper's assumption), so each tyre's contact force
+//! is `(a_i, b_i, F_zi)` in the vehicle frame, its in-plane part turned by the wheel's
+//! steering angle `δ_i` (`δ` front, 0 rear): `a_i = F_xpi·cos δ_i − F_ypi·sin δ_i`,
+//! `b_i = F_xpi·sin δ_i + F_ypi·cos δ_i`. The paper's rotation equation is
+//! `Rᵀ·(a_i, b_i, F_zi)`: the tyre forces in the body frame. The weight `(0, 0, −M_T·g)`
+//! has the body components `M_T·g·(sin φ, −sin θ·cos φ, −cos θ·cos φ)`, which the paper
+//! leaves out. The total external force in the body frame is therefore (drag aside)
+//!
+//! ```text
+//! F_x,body = cos φ·Σa_i                      − sin φ·(ΣF_zi − M_T·g)
+//! F_y,body = sin θ·sin φ·Σa_i + cos θ·Σb_i    + sin θ·cos φ·(ΣF_zi − M_T·g)
+//! ```
+//!
+//! The paper's `F_z·sin` terms are cancelled by the weight as long as the loads carry
+//! the weight; what is left, `ΣF_zi − M_T·g = −k_s·Σζ_i − d_s·Σζ̇_i`, is a vertical
+//! (heave) force of the suspension for which the model has no degree of freedom.
+//! Roll and pitch turn about the centre of gravity (the paper's assumption), so the
+//! centre of gravity moves in the horizontal plane and `V_x`, `V_y` are its velocity
+//! in the horizontal vehicle frame. Newton's law for it takes the horizontal
+//! components of the total force, the first two components of `R·F_body`, which are
+//! `(Σa_i − F_aero, Σb_i)` exactly: the body's attitude drops out. Hence, in the
+//! paper's equations of motion,
+//!
+//! ```text
+//! F_xi = F_xpi·cos δ_i − F_ypi·sin δ_i,        F_yi = F_xpi·sin δ_i + F_ypi·cos δ_i,
+//! ```
+//!
+//! and the roll and pitch equations are the paper's, with the load arms above (their
+//! moments are about the centre of gravity, where the weight has none). As printed, the paper's rotation
+//! adds `≈ ΣF_z·sin θ` to `ΣF_y` and `−ΣF_z·sin φ` to `ΣF_x` with no physical source:
+//! about `g·sin θ` toward the inside of a turn (0.5 m/s² at 5 m/s² of lateral
+//! acceleration), which let a steady circle hold more lateral acceleration than the
+//! tyres' friction allows, and a pitched car coasting on the level speed up or slow
+//! down by `g·sin φ`.
 //!
 //! # Slip near standstill
 //!
@@ -214,8 +267,10 @@ pub struct Outputs {
     pub time_s: f64,
     /// Steering angle applied (after the mechanical limit), rad.
     pub delta_rad: f64,
-    /// Normal loads `F_zi`, N.
+    /// Normal loads `F_zi`, N (never negative).
     pub fz_n: [f64; 4],
+    /// Wheels whose load would be negative or zero (lifted off the road).
+    pub wheel_lifted: [bool; 4],
     /// Slip ratios `τ_xi` (the paper's definition, floored), dimensionless.
     pub kappa: [f64; 4],
     /// Slip angles `α_i`, rad (positive when the wheel points left of its velocity).
@@ -224,9 +279,9 @@ pub struct Outputs {
     pub fxp_n: [f64; 4],
     /// Lateral tyre forces in the tyre frame `F_ypi`, N.
     pub fyp_n: [f64; 4],
-    /// Longitudinal tyre forces in the vehicle frame `F_xi`, N.
+    /// Longitudinal tyre forces in the (horizontal) vehicle frame `F_xi`, N.
     pub fx_n: [f64; 4],
-    /// Lateral tyre forces in the vehicle frame `F_yi`, N.
+    /// Lateral tyre forces in the (horizontal) vehicle frame `F_yi`, N.
     pub fy_n: [f64; 4],
     /// Aerodynamic drag force (positive opposes forward motion), N.
     pub aero_drag_n: f64,
@@ -279,6 +334,37 @@ struct Derived {
     aero: f64,
 }
 
+/// What the derivative needs from the inputs, computed once per step (the inputs
+/// are held over the step).
+#[derive(Clone, Copy, Debug)]
+struct StepInputs {
+    /// Steering angle (clamped), rad.
+    delta_rad: f64,
+    /// `sin δ_i`, `cos δ_i` of each wheel (`δ` front, 0 rear).
+    sin_cos_delta: [(f64, f64); 4],
+    /// Commanded wheel torques, N·m.
+    torque_nm: [f64; 4],
+    /// Brake-lock speed of each wheel's torque, rad/s.
+    lock_radps: [f64; 4],
+    /// Road friction.
+    mu: f64,
+}
+
+/// Wheel lift seen by the plant since it started.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WheelLift {
+    /// Simulated time during which at least one wheel was lifted, s (whole steps: a
+    /// step counts when any of its RK4 stages saw a lifted wheel).
+    pub lifted_s: f64,
+    /// Earliest time at which a wheel was lifted, s (the time of the RK4 stage that
+    /// first saw it); `None` if no wheel ever lifted.
+    pub first_lift_s: Option<f64>,
+    /// Number of lifts: steps with a lifted wheel after a step with none.
+    pub count: u64,
+    /// The wheels lifted in the last step (any stage), `[fl, fr, rl, rr]`.
+    pub last_step: [bool; 4],
+}
+
 /// The 9-DoF plant.
 #[derive(Clone, Debug)]
 pub struct Plant {
@@ -289,6 +375,7 @@ pub struct Plant {
     time_s: f64,
     last_inputs: Inputs,
     mu: f64,
+    lift: WheelLift,
 }
 
 impl Plant {
@@ -327,6 +414,7 @@ impl Plant {
             time_s: 0.0,
             last_inputs: Inputs::default(),
             mu: 1.0,
+            lift: WheelLift::default(),
         })
     }
 
@@ -356,12 +444,13 @@ impl Plant {
             torque_nm: inputs.torque_nm,
             delta_rad: inputs.delta_rad.clamp(-max, max),
         };
+        let si = self.step_inputs(&inp, mu);
         let h = self.dt_s;
         let y0 = self.state.to_array();
-        let k1 = self.eval(&y0, &inp, mu).0;
-        let k2 = self.eval(&axpy(&y0, 0.5 * h, &k1), &inp, mu).0;
-        let k3 = self.eval(&axpy(&y0, 0.5 * h, &k2), &inp, mu).0;
-        let k4 = self.eval(&axpy(&y0, h, &k3), &inp, mu).0;
+        let (k1, l1) = self.derivative(&y0, &si);
+        let (k2, l2) = self.derivative(&axpy(&y0, 0.5 * h, &k1), &si);
+        let (k3, l3) = self.derivative(&axpy(&y0, 0.5 * h, &k2), &si);
+        let (k4, l4) = self.derivative(&axpy(&y0, h, &k3), &si);
         let mut y = y0;
         for i in 0..N {
             y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
@@ -369,11 +458,41 @@ impl Plant {
         if y.iter().any(|v| !v.is_finite()) {
             return Err(PlantError::Diverged(self.time_s + h));
         }
+        self.record_lift([(l1, 0.0), (l2, 0.5 * h), (l3, 0.5 * h), (l4, h)]);
         self.state = State::from_array(&y);
         self.time_s += h;
         self.last_inputs = inp;
         self.mu = mu;
         Ok(())
+    }
+
+    /// Updates the wheel-lift record with the lifted wheels seen at each RK4 stage
+    /// (with the stage's time offset in the step, s).
+    fn record_lift(&mut self, stages: [([bool; 4], f64); 4]) {
+        let mut any = [false; 4];
+        let mut first: Option<f64> = None;
+        for (lifted, dt) in stages {
+            for (a, l) in any.iter_mut().zip(lifted) {
+                *a |= l;
+            }
+            if first.is_none() && lifted.iter().any(|&l| l) {
+                first = Some(self.time_s + dt);
+            }
+        }
+        let lift = &mut self.lift;
+        if let Some(t) = first {
+            if !lift.last_step.iter().any(|&l| l) {
+                lift.count += 1;
+            }
+            lift.lifted_s += self.dt_s;
+            lift.first_lift_s.get_or_insert(t);
+        }
+        lift.last_step = any;
+    }
+
+    /// The wheel lift seen since the plant started.
+    pub fn wheel_lift(&self) -> &WheelLift {
+        &self.lift
     }
 
     /// The current state.
@@ -410,97 +529,93 @@ impl Plant {
 
     /// Floor of the slip-ratio denominator at a wheel load `fz_n` (N), m/s.
     pub fn kappa_floor_mps(&self, fz_n: f64) -> f64 {
-        self.params.low_speed_mps.max(
-            self.derived.kappa_floor_per_k * self.params.tyre.longitudinal_slip_stiffness_n(fz_n),
-        )
+        self.kappa_floor_for_stiffness(self.params.tyre.longitudinal_slip_stiffness_n(fz_n))
+    }
+
+    /// Floor of the slip-ratio denominator for a slip stiffness `k_n` (N), m/s.
+    fn kappa_floor_for_stiffness(&self, k_n: f64) -> f64 {
+        self.params
+            .low_speed_mps
+            .max(self.derived.kappa_floor_per_k * k_n)
     }
 
     /// Loads, slips, forces and accelerations at the current state with the inputs
     /// and friction of the last step (zero torque, straight, `μ = 1` before any step).
     pub fn outputs(&self) -> Outputs {
         let y = self.state.to_array();
-        let mut o = self.eval(&y, &self.last_inputs, self.mu).1;
+        let si = self.step_inputs(&self.last_inputs, self.mu);
+        let mut o = Outputs::default();
+        self.eval(&y, &si, Some(&mut o));
         o.time_s = self.time_s;
         o
     }
 
-    /// State derivative and outputs at state `y`.
+    /// The per-step part of the derivative for the (clamped) inputs `inp`.
+    fn step_inputs(&self, inp: &Inputs, mu: f64) -> StepInputs {
+        let front = inp.delta_rad.sin_cos();
+        let rear = (0.0, 1.0);
+        let (dt, ir) = (self.dt_s, self.params.wheel_inertia_kg_m2);
+        StepInputs {
+            delta_rad: inp.delta_rad,
+            sin_cos_delta: [front, front, rear, rear],
+            torque_nm: inp.torque_nm,
+            lock_radps: inp.torque_nm.map(|t| brake_lock_radps(t, dt, ir)),
+            mu,
+        }
+    }
+
+    /// State derivative at `y` and the wheels lifted there.
+    fn derivative(&self, y: &[f64; N], si: &StepInputs) -> ([f64; N], [bool; 4]) {
+        self.eval(y, si, None)
+    }
+
+    /// State derivative at `y` and the wheels lifted there; fills `out` if given.
     #[allow(clippy::needless_range_loop)] // four wheels, several arrays indexed alike
-    fn eval(&self, y: &[f64; N], inp: &Inputs, mu: f64) -> ([f64; N], Outputs) {
+    fn eval(
+        &self,
+        y: &[f64; N],
+        si: &StepInputs,
+        out: Option<&mut Outputs>,
+    ) -> ([f64; N], [bool; 4]) {
         let p = &self.params;
         let d = &self.derived;
         let s = State::from_array(y);
         let (st, ct) = s.roll_rad.sin_cos();
         let (sp, cp) = s.pitch_rad.sin_cos();
         let r = s.yaw_rate_radps;
-        let (sd, cd) = inp.delta_rad.sin_cos();
-        let mut o = Outputs {
-            delta_rad: inp.delta_rad,
-            ..Outputs::default()
-        };
-        let mut sum_fx = 0.0;
-        let mut sum_fy = 0.0;
-        let mut dw = [0.0; 4];
+        let mut w = [Wheel::default(); 4];
         for i in 0..4 {
             let side = if d.y_w[i] > 0.0 { 1.0 } else { -1.0 };
             // Suspension extension and its rate.
             let zeta = side * p.lw_m * st - d.x_w[i] * sp;
             let zeta_dot =
                 side * p.lw_m * ct * s.roll_rate_radps - d.x_w[i] * cp * s.pitch_rate_radps;
-            let fz = (d.fz0[i] - p.ks_n_per_m * zeta - p.ds_n_s_per_m * zeta_dot).max(0.0);
+            let fz_spring = d.fz0[i] - p.ks_n_per_m * zeta - p.ds_n_s_per_m * zeta_dot;
             // Wheel-centre velocity, vehicle frame then tyre frame.
             let vxw = s.vx_mps - d.y_w[i] * r;
             let vyw = s.vy_mps + d.x_w[i] * r;
-            let (sdi, cdi) = if i < 2 { (sd, cd) } else { (0.0, 1.0) };
+            let (sdi, cdi) = si.sin_cos_delta[i];
             let vxp = vxw * cdi + vyw * sdi;
             let vyp = -vxw * sdi + vyw * cdi;
-            // Slip ratio (paper's definition, floored denominators).
-            let rw = p.r_eff_m * s.omega_radps[i];
-            let v_k = self.kappa_floor_mps(fz);
-            let kappa = if rw >= vxp {
-                (rw - vxp) / rw.abs().max(v_k)
-            } else {
-                (rw - vxp) / vxp.abs().max(v_k)
-            };
-            let alpha = -(vyp / vxp.abs().max(d.alpha_floor_mps)).atan();
-            let fade = (vxp.hypot(vyp) / p.low_speed_mps).min(1.0);
-            // Right-hand wheels carry the mirrored tyre.
-            let (fxp, fyp) = if side > 0.0 {
-                tire::forces_with_offset_scale(kappa, alpha, fz, mu, fade, &p.tyre)
-            } else {
-                let (fx, fy) = tire::forces_with_offset_scale(kappa, -alpha, fz, mu, fade, &p.tyre);
-                (fx, -fy)
-            };
-            // The paper's rotation to the vehicle frame.
-            let a = fxp * cdi - fyp * sdi;
-            let b = fyp * cdi + fxp * sdi;
-            let fx = a * cp - fz * sp;
-            let fy = a * st * sp + b * ct + fz * st * cp;
-            sum_fx += fx;
-            sum_fy += fy;
-            let lock = brake_lock_radps(inp.torque_nm[i], self.dt_s, p.wheel_inertia_kg_m2);
-            dw[i] = (wheel_torque_nm(inp.torque_nm[i], s.omega_radps[i], lock) - p.r_eff_m * fxp)
-                / p.wheel_inertia_kg_m2;
-            o.fz_n[i] = fz;
-            o.kappa[i] = kappa;
-            o.alpha_rad[i] = alpha;
-            o.fxp_n[i] = fxp;
-            o.fyp_n[i] = fyp;
-            o.fx_n[i] = fx;
-            o.fy_n[i] = fy;
+            w[i] = self.wheel(i, side, fz_spring, vxp, vyp, s.omega_radps[i], si);
         }
         let aero = d.aero * s.vx_mps * s.vx_mps.abs();
         let m = p.mass_kg;
-        let (fx, fy, fz) = (&o.fx_n, &o.fy_n, &o.fz_n);
+        let sum_fx = w[0].fx + w[1].fx + w[2].fx + w[3].fx;
+        let sum_fy = w[0].fy + w[1].fy + w[2].fy + w[3].fy;
         let dvx = r * s.vy_mps + (sum_fx - aero) / m;
         let dvy = -r * s.vx_mps + sum_fy / m;
-        let dr = (p.lf_m * (fy[FL] + fy[FR]) - p.lr_m * (fy[RL] + fy[RR])
-            + p.lw_m * (fx[FR] + fx[RR] - fx[FL] - fx[RL]))
+        let dr = (p.lf_m * (w[FL].fy + w[FR].fy) - p.lr_m * (w[RL].fy + w[RR].fy)
+            + p.lw_m * ((w[FR].fx - w[FL].fx) + (w[RR].fx - w[RL].fx)))
             / p.iz_kg_m2;
-        let droll = (p.lw_m * (fz[FL] + fz[RL] - fz[FR] - fz[RR]) + p.h_m * sum_fy) / p.ix_kg_m2;
-        let dpitch = (p.lr_m * (fz[RL] + fz[RR])
-            - p.lf_m * (fz[FL] + fz[FR])
-            - d.pitch_static_nm
+        // The loads' moments with the arms `l_w·cos θ`, `x_i·cos φ` (see the module doc).
+        let droll = (p.lw_m * ct * ((w[FL].fz - w[FR].fz) + (w[RL].fz - w[RR].fz))
+            + p.h_m * sum_fy)
+            / p.ix_kg_m2;
+        let dpitch = (cp
+            * (p.lr_m * (w[RL].fz + w[RR].fz)
+                - p.lf_m * (w[FL].fz + w[FR].fz)
+                - d.pitch_static_nm)
             - p.h_m * sum_fx)
             / p.iy_kg_m2;
         let (spsi, cpsi) = s.psi_rad.sin_cos();
@@ -515,18 +630,126 @@ impl Plant {
             droll,
             s.pitch_rate_radps,
             dpitch,
-            dw[0],
-            dw[1],
-            dw[2],
-            dw[3],
+            w[0].domega,
+            w[1].domega,
+            w[2].domega,
+            w[3].domega,
         ];
-        o.aero_drag_n = aero;
-        o.ax_mps2 = (sum_fx - aero) / m;
-        o.ay_mps2 = sum_fy / m;
-        o.speed_mps = s.speed_mps();
-        o.beta_rad = s.vy_mps.atan2(s.vx_mps);
-        (dy, o)
+        let lifted = w.map(|x| x.lifted);
+        if let Some(o) = out {
+            *o = Outputs {
+                time_s: o.time_s,
+                delta_rad: si.delta_rad,
+                fz_n: w.map(|x| x.fz),
+                wheel_lifted: lifted,
+                kappa: w.map(|x| x.kappa),
+                alpha_rad: w.map(|x| x.alpha),
+                fxp_n: w.map(|x| x.fxp),
+                fyp_n: w.map(|x| x.fyp),
+                fx_n: w.map(|x| x.fx),
+                fy_n: w.map(|x| x.fy),
+                aero_drag_n: aero,
+                ax_mps2: (sum_fx - aero) / m,
+                ay_mps2: sum_fy / m,
+                speed_mps: s.speed_mps(),
+                beta_rad: s.vy_mps.atan2(s.vx_mps),
+            };
+        }
+        (dy, lifted)
     }
+
+    /// One wheel: its load from the suspension force `fz_spring` (N), its slips from
+    /// the wheel-centre velocity `(vxp, vyp)` in the tyre frame (m/s) and its spin
+    /// `omega` (rad/s), its tyre forces and its spin acceleration.
+    #[allow(clippy::too_many_arguments)]
+    fn wheel(
+        &self,
+        i: usize,
+        side: f64,
+        fz_spring: f64,
+        vxp: f64,
+        vyp: f64,
+        omega: f64,
+        si: &StepInputs,
+    ) -> Wheel {
+        let p = &self.params;
+        let d = &self.derived;
+        let lifted = fz_spring <= 0.0;
+        let fz = fz_spring.max(0.0);
+        let at = tire::AtLoad::new(fz, si.mu, &p.tyre);
+        // Slip ratio (paper's definition, floored denominators).
+        let rw = p.r_eff_m * omega;
+        let k = match at {
+            Some(a) => a.slip_stiffness_n(),
+            None => p.tyre.longitudinal_slip_stiffness_n(fz),
+        };
+        let v_k = self.kappa_floor_for_stiffness(k);
+        let kappa = if rw >= vxp {
+            (rw - vxp) / rw.abs().max(v_k)
+        } else {
+            (rw - vxp) / vxp.abs().max(v_k)
+        };
+        let alpha = -(vyp / vxp.abs().max(d.alpha_floor_mps)).atan();
+        let fade = offset_fade(vxp, vyp, p.low_speed_mps);
+        // Right-hand wheels carry the mirrored tyre.
+        let (fxp, fyp) = match at {
+            None => (0.0, 0.0),
+            Some(at) if side > 0.0 => at.forces(kappa, alpha, fade),
+            Some(at) => {
+                let (fx, fy) = at.forces(kappa, -alpha, fade);
+                (fx, -fy)
+            }
+        };
+        // To the horizontal vehicle frame (see the derivation in the module doc).
+        let (sdi, cdi) = si.sin_cos_delta[i];
+        let fx = fxp * cdi - fyp * sdi;
+        let fy = fyp * cdi + fxp * sdi;
+        let domega = (wheel_torque_nm(si.torque_nm[i], omega, si.lock_radps[i]) - p.r_eff_m * fxp)
+            / p.wheel_inertia_kg_m2;
+        Wheel {
+            fz,
+            lifted,
+            kappa,
+            alpha,
+            fxp,
+            fyp,
+            fx,
+            fy,
+            domega,
+        }
+    }
+}
+
+/// The tyre offsets' fade `min(1, V_wheel/low_speed)` for the wheel-centre velocity
+/// `(vxp, vyp)` (m/s). When `max(|vxp|, |vyp|)` reaches the threshold it is 1 without
+/// the `hypot` (the same value: `hypot(x, y) ≥ max(|x|, |y|)`).
+fn offset_fade(vxp: f64, vyp: f64, low_speed_mps: f64) -> f64 {
+    if vxp.abs().max(vyp.abs()) >= low_speed_mps {
+        1.0
+    } else {
+        (vxp.hypot(vyp) / low_speed_mps).min(1.0)
+    }
+}
+
+/// One wheel's quantities in an evaluation of the derivative.
+#[derive(Clone, Copy, Debug, Default)]
+struct Wheel {
+    /// Normal load, N.
+    fz: f64,
+    /// The load would be negative or zero.
+    lifted: bool,
+    /// Slip ratio.
+    kappa: f64,
+    /// Slip angle, rad.
+    alpha: f64,
+    /// Tyre-frame forces, N.
+    fxp: f64,
+    fyp: f64,
+    /// Vehicle-frame forces, N.
+    fx: f64,
+    fy: f64,
+    /// Spin acceleration, rad/s².
+    domega: f64,
 }
 
 /// `y + h·k`.

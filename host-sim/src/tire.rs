@@ -479,14 +479,23 @@ fn safe_div(b: f64, d: f64) -> f64 {
 
 /// The Magic Formula `D·sin(C·atan(B·x − E·(B·x − atan(B·x))))`.
 fn magic(b: f64, c: f64, d: f64, e: f64, x: f64) -> f64 {
-    let bx = b * x;
-    d * (c * (bx - e * (bx - bx.atan())).atan()).sin()
+    d * (c * curved(b * x, e).atan()).sin()
 }
 
 /// Combined-slip weighting `cos(C·atan(B·x − E·(B·x − atan(B·x))))`.
 fn weight(b: f64, c: f64, e: f64, x: f64) -> f64 {
     let bx = b * x;
-    (c * (bx - e * (bx - bx.atan())).atan()).cos()
+    (c * curved(bx, e).atan()).cos()
+}
+
+/// `B·x − E·(B·x − atan(B·x))`; with `E = 0` that is `B·x` exactly (for a finite
+/// `B·x`, `0·(B·x − atan(B·x))` is a zero), so the inner `atan` is skipped.
+fn curved(bx: f64, e: f64) -> f64 {
+    if e == 0.0 && bx.is_finite() {
+        bx
+    } else {
+        bx - e * (bx - bx.atan())
+    }
 }
 
 /// Combined-slip tyre forces `(F_x, F_y)` in the tyre frame, N.
@@ -538,101 +547,201 @@ fn evaluate(
     p: &TireParams,
     combined: bool,
 ) -> (f64, f64) {
-    let usable = fz_n > 0.0
-        && mu > 0.0
-        && kappa.is_finite()
-        && alpha_rad.is_finite()
-        && fz_n.is_finite()
-        && mu.is_finite()
-        && offset_scale.is_finite();
-    if !usable {
-        return (0.0, 0.0);
+    match AtLoad::new(fz_n, mu, p) {
+        Some(at) if combined => at.forces(kappa, alpha_rad, offset_scale),
+        Some(at) => at.pure_slip_forces(kappa, alpha_rad, offset_scale),
+        None => (0.0, 0.0),
     }
-    let s = offset_scale.clamp(0.0, 1.0);
-    let kappa = kappa.clamp(-100.0, 100.0);
-    // ISO slip angle (see the module documentation).
-    let a = -alpha_rad.clamp(-core::f64::consts::FRAC_PI_2, core::f64::consts::FRAC_PI_2);
-    let fz0 = p.nominal_load_n();
-    let dfz = p.dfz(fz_n);
-    let fz_coef = fz_n.min(10.0 * fz0);
-    let lmux = mu * p.lmux;
-    let lmuy = mu * p.lmuy;
+}
 
-    // Longitudinal force, pure slip (4.E9-4.E18).
-    let shx = (p.phx1 + p.phx2 * dfz) * p.lhx * s;
-    let kx = kappa + shx;
-    let cx = p.pcx1 * p.lcx;
-    let mux = (p.pdx1 + p.pdx2 * dfz) * lmux;
-    let dx = mux * fz_n;
-    let ex =
-        ((p.pex1 + p.pex2 * dfz + p.pex3 * dfz * dfz) * (1.0 - p.pex4 * sgn(kx)) * p.lex).min(1.0);
-    let kxk = fz_coef * (p.pkx1 + p.pkx2 * dfz) * (p.pkx3 * dfz).exp() * p.lkx;
-    let bx = safe_div(kxk, cx * dx) * fz_n / fz_coef;
-    let svx = fz_n * (p.pvx1 + p.pvx2 * dfz) * p.lvx * lmux * s;
-    let fx0 = magic(bx, cx, dx, ex, kx) + svx;
+/// The Magic Formula's coefficients at one normal load and road friction: the part
+/// of [`forces`] that does not depend on the slips, computed once and shared by the
+/// slip-ratio floor ([`AtLoad::slip_stiffness_n`]) and the forces of one evaluation.
+/// Splitting it off changes no operation: the forces are bit for bit those of
+/// [`forces_with_offset_scale`].
+#[derive(Clone, Copy, Debug)]
+pub struct AtLoad<'a> {
+    p: &'a TireParams,
+    /// Normal load `F_z`, N.
+    fz: f64,
+    /// Normalised load change `df_z`.
+    dfz: f64,
+    /// `λ_μx = μ·lmux`.
+    lmux: f64,
+    /// `λ_μy = μ·lmuy`.
+    lmuy: f64,
+    /// Shape factor `C_x`.
+    cx: f64,
+    /// Peak `D_x`, N.
+    dx: f64,
+    /// Slip stiffness `K_xκ`, N.
+    kxk: f64,
+    /// Stiffness factor `B_x`.
+    bx: f64,
+    /// Shape factor `C_y`.
+    cy: f64,
+    /// Friction `μ_y`.
+    muy: f64,
+    /// Peak `D_y`, N.
+    dy: f64,
+    /// Stiffness factor `B_y`.
+    by: f64,
+}
 
-    // Lateral force, pure slip (4.E19-4.E30), camber 0.
-    let shy = (p.phy1 + p.phy2 * dfz) * p.lhy * s;
-    let ay = a + shy;
-    let cy = p.pcy1 * p.lcy;
-    let muy = (p.pdy1 + p.pdy2 * dfz) * lmuy;
-    let dy = muy * fz_n;
-    let ey = ((p.pey1 + p.pey2 * dfz) * (1.0 - p.pey3 * sgn(ay)) * p.ley).min(1.0);
-    // sin(2·atan(u)) = 2u/(1+u²).
-    let u = safe_div(fz_coef, p.pky2 * fz0);
-    let kya = p.pky1 * fz0 * (2.0 * u / (1.0 + u * u)) * p.lky;
-    let by = safe_div(kya, cy * dy);
-    let svy = fz_n * (p.pvy1 + p.pvy2 * dfz) * p.lvy * lmuy * s;
-    let fy0 = magic(by, cy, dy, ey, ay) + svy;
+impl<'a> AtLoad<'a> {
+    /// The coefficients at load `fz_n` (N) and friction `mu`; `None` when the tyre
+    /// makes no force (no load, no friction, or a non-finite input).
+    pub fn new(fz_n: f64, mu: f64, p: &'a TireParams) -> Option<Self> {
+        let usable = fz_n > 0.0 && mu > 0.0 && fz_n.is_finite() && mu.is_finite();
+        if !usable {
+            return None;
+        }
+        let fz0 = p.nominal_load_n();
+        let dfz = p.dfz(fz_n);
+        let fz_coef = fz_n.min(10.0 * fz0);
+        let lmux = mu * p.lmux;
+        let lmuy = mu * p.lmuy;
+        let cx = p.pcx1 * p.lcx;
+        let mux = (p.pdx1 + p.pdx2 * dfz) * lmux;
+        let dx = mux * fz_n;
+        let kxk = fz_coef * (p.pkx1 + p.pkx2 * dfz) * (p.pkx3 * dfz).exp() * p.lkx;
+        let bx = safe_div(kxk, cx * dx) * fz_n / fz_coef;
+        let cy = p.pcy1 * p.lcy;
+        let muy = (p.pdy1 + p.pdy2 * dfz) * lmuy;
+        let dy = muy * fz_n;
+        // sin(2·atan(u)) = 2u/(1+u²).
+        let u = safe_div(fz_coef, p.pky2 * fz0);
+        let kya = p.pky1 * fz0 * (2.0 * u / (1.0 + u * u)) * p.lky;
+        let by = safe_div(kya, cy * dy);
+        Some(Self {
+            p,
+            fz: fz_n,
+            dfz,
+            lmux,
+            lmuy,
+            cx,
+            dx,
+            kxk,
+            bx,
+            cy,
+            muy,
+            dy,
+            by,
+        })
+    }
 
-    if !combined {
-        return if fx0.is_finite() && fy0.is_finite() {
+    /// Longitudinal slip stiffness `|K_xκ|` at this load, N per unit slip: the value
+    /// of [`TireParams::longitudinal_slip_stiffness_n`], without a second `exp`.
+    pub fn slip_stiffness_n(&self) -> f64 {
+        if self.kxk.is_finite() {
+            self.kxk.abs()
+        } else {
+            0.0
+        }
+    }
+
+    /// Pure-slip forces `(F_x0, F_y0)` with their peaks `(|D_x| + |S_Vx|, |D_y| + |S_Vy|)`.
+    fn pure(&self, kappa: f64, a: f64, s: f64) -> [f64; 4] {
+        let (p, fz_n, dfz) = (self.p, self.fz, self.dfz);
+        // Longitudinal force, pure slip (4.E9-4.E18).
+        let shx = (p.phx1 + p.phx2 * dfz) * p.lhx * s;
+        let kx = kappa + shx;
+        let ex = ((p.pex1 + p.pex2 * dfz + p.pex3 * dfz * dfz) * (1.0 - p.pex4 * sgn(kx)) * p.lex)
+            .min(1.0);
+        let svx = fz_n * (p.pvx1 + p.pvx2 * dfz) * p.lvx * self.lmux * s;
+        let fx0 = magic(self.bx, self.cx, self.dx, ex, kx) + svx;
+
+        // Lateral force, pure slip (4.E19-4.E30), camber 0.
+        let shy = (p.phy1 + p.phy2 * dfz) * p.lhy * s;
+        let ay = a + shy;
+        let ey = ((p.pey1 + p.pey2 * dfz) * (1.0 - p.pey3 * sgn(ay)) * p.ley).min(1.0);
+        let svy = fz_n * (p.pvy1 + p.pvy2 * dfz) * p.lvy * self.lmuy * s;
+        let fy0 = magic(self.by, self.cy, self.dy, ey, ay) + svy;
+        [
+            fx0,
+            fy0,
+            self.dx.abs() + svx.abs(),
+            self.dy.abs() + svy.abs(),
+        ]
+    }
+
+    /// Clamped slips and offset scale, or `None` for a non-finite input.
+    fn inputs(kappa: f64, alpha_rad: f64, offset_scale: f64) -> Option<(f64, f64, f64)> {
+        if !(kappa.is_finite() && alpha_rad.is_finite() && offset_scale.is_finite()) {
+            return None;
+        }
+        let s = offset_scale.clamp(0.0, 1.0);
+        let kappa = kappa.clamp(-100.0, 100.0);
+        // ISO slip angle (see the module documentation).
+        let a = -alpha_rad.clamp(-core::f64::consts::FRAC_PI_2, core::f64::consts::FRAC_PI_2);
+        Some((kappa, a, s))
+    }
+
+    /// Pure-slip forces (see [`pure_slip_forces`]), N.
+    pub fn pure_slip_forces(&self, kappa: f64, alpha_rad: f64, offset_scale: f64) -> (f64, f64) {
+        let Some((kappa, a, s)) = Self::inputs(kappa, alpha_rad, offset_scale) else {
+            return (0.0, 0.0);
+        };
+        let [fx0, fy0, _, _] = self.pure(kappa, a, s);
+        if fx0.is_finite() && fy0.is_finite() {
             (fx0, fy0)
         } else {
             (0.0, 0.0)
-        };
+        }
     }
 
-    // Longitudinal force, combined slip (4.E51-4.E57).
-    let shxa = p.rhx1;
-    let exa = (p.rex1 + p.rex2 * dfz).min(1.0);
-    let bxa = p.rbx1 * cos_atan(p.rbx2 * kappa) * p.lxal;
-    let gxa0 = weight(bxa, p.rcx1, exa, shxa);
-    let gxa = safe_div(weight(bxa, p.rcx1, exa, a + shxa), gxa0).max(0.0);
-    let fx = gxa * fx0;
+    /// Combined-slip forces (see [`forces_with_offset_scale`]), N.
+    pub fn forces(&self, kappa: f64, alpha_rad: f64, offset_scale: f64) -> (f64, f64) {
+        let Some((kappa, a, s)) = Self::inputs(kappa, alpha_rad, offset_scale) else {
+            return (0.0, 0.0);
+        };
+        let (p, fz_n, dfz) = (self.p, self.fz, self.dfz);
+        let [fx0, fy0, peak_x, peak_y] = self.pure(kappa, a, s);
 
-    // Lateral force, combined slip (4.E58-4.E67).
-    let dvyk = muy * fz_n * (p.rvy1 + p.rvy2 * dfz) * cos_atan(p.rvy4 * a);
-    let svyk = dvyk * (p.rvy5 * (p.rvy6 * kappa).atan()).sin() * p.lvyka * s;
-    let shyk = p.rhy1 + p.rhy2 * dfz;
-    let eyk = (p.rey1 + p.rey2 * dfz).min(1.0);
-    let byk = p.rby1 * cos_atan(p.rby2 * (a - p.rby3)) * p.lyka;
-    let gyk0 = weight(byk, p.rcy1, eyk, shyk);
-    let gyk = safe_div(weight(byk, p.rcy1, eyk, kappa + shyk), gyk0).max(0.0);
-    let fy = gyk * fy0 + svyk;
+        // Longitudinal force, combined slip (4.E51-4.E57).
+        let shxa = p.rhx1;
+        let exa = (p.rex1 + p.rex2 * dfz).min(1.0);
+        let bxa = p.rbx1 * cos_atan(p.rbx2 * kappa) * p.lxal;
+        let gxa0 = weight(bxa, p.rcx1, exa, shxa);
+        let gxa = safe_div(weight(bxa, p.rcx1, exa, a + shxa), gxa0).max(0.0);
+        let fx = gxa * fx0;
 
-    // Friction ellipse (the paper's Equation 5): the weights G are fitted at μ = 1
-    // and do not depend on μ, so on a slippery road the combined force could exceed
-    // the pure-slip peaks (by up to 25 % at μ = 0.3 with the book's tyre). Project
-    // such a force back onto the ellipse whose half-axes are the pure-slip peaks.
-    let peak_x = dx.abs() + svx.abs();
-    let peak_y = dy.abs() + svy.abs();
-    let (fx, fy) = if peak_x > 0.0 && peak_y > 0.0 {
-        let e = (fx / peak_x).powi(2) + (fy / peak_y).powi(2);
-        if e > 1.0 {
-            let k = 1.0 / e.sqrt();
-            (fx * k, fy * k)
+        // Lateral force, combined slip (4.E58-4.E67).
+        let dvyk = self.muy * fz_n * (p.rvy1 + p.rvy2 * dfz) * cos_atan(p.rvy4 * a);
+        let svyk = if dvyk == 0.0 {
+            // 0·sin(·)·λ·s: the same zero without the atan and the sine.
+            0.0
+        } else {
+            dvyk * (p.rvy5 * (p.rvy6 * kappa).atan()).sin() * p.lvyka * s
+        };
+        let shyk = p.rhy1 + p.rhy2 * dfz;
+        let eyk = (p.rey1 + p.rey2 * dfz).min(1.0);
+        let byk = p.rby1 * cos_atan(p.rby2 * (a - p.rby3)) * p.lyka;
+        let gyk0 = weight(byk, p.rcy1, eyk, shyk);
+        let gyk = safe_div(weight(byk, p.rcy1, eyk, kappa + shyk), gyk0).max(0.0);
+        let fy = gyk * fy0 + svyk;
+
+        // Friction ellipse (the paper's Equation 5): the weights G are fitted at μ = 1
+        // and do not depend on μ, so on a slippery road the combined force could exceed
+        // the pure-slip peaks (by up to 25 % at μ = 0.3 with the book's tyre). Project
+        // such a force back onto the ellipse whose half-axes are the pure-slip peaks.
+        let (fx, fy) = if peak_x > 0.0 && peak_y > 0.0 {
+            let e = (fx / peak_x).powi(2) + (fy / peak_y).powi(2);
+            if e > 1.0 {
+                let k = 1.0 / e.sqrt();
+                (fx * k, fy * k)
+            } else {
+                (fx, fy)
+            }
         } else {
             (fx, fy)
-        }
-    } else {
-        (fx, fy)
-    };
+        };
 
-    if fx.is_finite() && fy.is_finite() {
-        (fx, fy)
-    } else {
-        (0.0, 0.0)
+        if fx.is_finite() && fy.is_finite() {
+            (fx, fy)
+        } else {
+            (0.0, 0.0)
+        }
     }
 }
 

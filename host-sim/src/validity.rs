@@ -24,10 +24,14 @@
 //!   1 % (+0.02 m/s) of the target, distance to the circle under `0.02 + 0.002·R` m,
 //!   and the mean steering of the last second within `1e-4 + 1e-3·|δ|` rad of the
 //!   second before. `δ_a`, `a_y` and the speed are the means over that last second.
-//! * The car can no longer hold the circle when it leaves it (more than
-//!   `max(1.5 m, 0.1·R)` outside), slides (side-slip over 0.35 rad), needs the
-//!   steering's mechanical limit, cannot hold the speed, needs more than 5× `δ_th`,
-//!   or does not settle within 30 s; the sweep for that radius stops there.
+//! * The car can no longer hold the circle when it slides out of it (more than
+//!   `max(1.5 m, 0.1·R)` outside: [`StopCause::Sliding`]), spins (side-slip over
+//!   0.35 rad: [`StopCause::Spin`]), lifts a wheel off the road
+//!   ([`StopCause::WheelLift`]), needs the steering's mechanical limit
+//!   ([`StopCause::SteeringLimit`]), cannot hold the speed ([`StopCause::Speed`]),
+//!   needs more than 5× `δ_th` or does not settle within 30 s
+//!   ([`StopCause::NotSteady`]); the sweep for that radius stops there, and reports
+//!   its highest steady lateral acceleration and why the next speed failed.
 //!
 //! Radii are run in parallel (rayon); each is independent and deterministic, so the
 //! results do not depend on the number of threads.
@@ -115,6 +119,43 @@ impl ValidityPoint {
     }
 }
 
+/// Why a sweep stopped: how the car failed to hold the next speed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum StopCause {
+    /// The tyres saturated and the car slid out of the circle (understeer).
+    Sliding,
+    /// The car spun: side-slip over 0.35 rad (oversteer).
+    Spin,
+    /// A wheel's load reached zero: it lifted off the road.
+    WheelLift,
+    /// The steering needed its mechanical limit.
+    SteeringLimit,
+    /// The speed could not be held (the driven wheels spin, or too little grip).
+    Speed,
+    /// The steering diverged (over 5× `δ_th`) or did not settle within 30 s.
+    NotSteady,
+    /// The sweep went far above `sqrt(μ·g·R)` without failing.
+    AboveLimit,
+    /// The plant stopped (a non-finite state).
+    Plant,
+}
+
+impl StopCause {
+    /// A short name for the summary line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Sliding => "sliding",
+            Self::Spin => "spin",
+            Self::WheelLift => "wheel lift",
+            Self::SteeringLimit => "steering limit",
+            Self::Speed => "speed not held",
+            Self::NotSteady => "not steady",
+            Self::AboveLimit => "above the friction limit",
+            Self::Plant => "plant error",
+        }
+    }
+}
+
 /// The sweep over speeds for one radius.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RadiusSweep {
@@ -126,6 +167,10 @@ pub struct RadiusSweep {
     pub points: Vec<ValidityPoint>,
     /// Why the sweep stopped (the first speed the car could not hold, and how).
     pub stop_reason: String,
+    /// The kind of failure that stopped the sweep.
+    pub stop_cause: StopCause,
+    /// Wheel lifts the plant saw over the sweep (see [`crate::plant::WheelLift`]).
+    pub wheel_lifts: u64,
 }
 
 impl RadiusSweep {
@@ -222,14 +267,22 @@ pub fn sweep_radius(
     };
     let mut points = Vec::new();
     let mut k = 0usize;
-    let stop_reason = loop {
+    let (stop_cause, stop_reason) = loop {
         let target = v0 + k as f64 * dv;
         if target > 1.5 * v_limit + 2.0 {
-            break format!("stopped at {target:.2} m/s, far above sqrt(mu*g*R)");
+            break (
+                StopCause::AboveLimit,
+                format!("stopped at {target:.2} m/s, far above sqrt(mu*g*R)"),
+            );
         }
         match run.settle_at(target) {
             Ok(p) => points.push(p),
-            Err(why) => break format!("could not hold the circle at {target:.2} m/s: {why}"),
+            Err((cause, why)) => {
+                break (
+                    cause,
+                    format!("could not hold the circle at {target:.2} m/s: {why}"),
+                )
+            }
         }
         progress.inc(1);
         k += 1;
@@ -239,6 +292,8 @@ pub fn sweep_radius(
         delta_th_rad: delta_th,
         points,
         stop_reason,
+        stop_cause,
+        wheel_lifts: run.plant.wheel_lift().count,
     })
 }
 
@@ -306,7 +361,7 @@ impl CircleRun {
     }
 
     /// Drives to a steady state at `target` (m/s); the point, or why not.
-    fn settle_at(&mut self, target: f64) -> Result<ValidityPoint, String> {
+    fn settle_at(&mut self, target: f64) -> Result<ValidityPoint, (StopCause, String)> {
         let n_win = (1.0 / self.plant.dt_s()).round().max(1.0) as usize;
         let ramp_s = ((target - self.v_ref).abs() / 1.0).ceil() as usize;
         let lost = 1.5_f64.max(0.1 * self.radius_m);
@@ -317,12 +372,31 @@ impl CircleRun {
             let mut max_ey = 0.0_f64;
             let mut saturated = 0usize;
             for k in 0..n_win {
-                let info = self.step(target).map_err(|e| e.to_string())?;
+                let info = self
+                    .step(target)
+                    .map_err(|e| (StopCause::Plant, e.to_string()))?;
+                let lifted = self.plant.wheel_lift().last_step;
+                if let Some(w) = lifted.iter().position(|&l| l) {
+                    let name = ["front-left", "front-right", "rear-left", "rear-right"][w];
+                    return Err((
+                        StopCause::WheelLift,
+                        format!(
+                            "wheel lift (the {name} wheel's load reached zero at t = {:.3} s)",
+                            self.plant.time_s()
+                        ),
+                    ));
+                }
                 if info.e_y.abs() > lost {
-                    return Err(format!("left the circle ({:.2} m outside)", info.e_y));
+                    return Err((
+                        StopCause::Sliding,
+                        format!("sliding: left the circle ({:.2} m outside)", info.e_y),
+                    ));
                 }
                 if info.beta.abs() > 0.35 {
-                    return Err(format!("sliding (side-slip {:.2} rad)", info.beta));
+                    return Err((
+                        StopCause::Spin,
+                        format!("spin (side-slip {:.2} rad)", info.beta),
+                    ));
                 }
                 if info.saturated {
                     saturated += 1;
@@ -337,19 +411,23 @@ impl CircleRun {
                 }
             }
             if saturated * 2 > n_win {
-                return Err("the steering is at its mechanical limit".to_string());
+                return Err((
+                    StopCause::SteeringLimit,
+                    "the steering is at its mechanical limit".to_string(),
+                ));
             }
             let delta = sum_delta / n_win as f64;
             let ay = sum_ay / n_ay.max(1) as f64;
             let v = sum_v / n_ay.max(1) as f64;
             if delta.abs() > 5.0 * self.delta_th {
-                return Err(format!(
-                    "delta_a diverging ({delta:.3} rad, over 5x delta_th)"
+                return Err((
+                    StopCause::NotSteady,
+                    format!("delta_a diverging ({delta:.3} rad, over 5x delta_th)"),
                 ));
             }
             let after_ramp = second >= ramp_s + 3;
             if after_ramp && (v - target).abs() > 0.5_f64.max(0.1 * target) {
-                return Err(format!("speed not held ({v:.2} m/s)"));
+                return Err((StopCause::Speed, format!("speed not held ({v:.2} m/s)")));
             }
             let steady = after_ramp
                 && (v - target).abs() < 0.01 * target + 0.02
@@ -366,7 +444,10 @@ impl CircleRun {
             }
             prev_delta = Some(delta);
         }
-        Err("did not settle within 30 s".to_string())
+        Err((
+            StopCause::NotSteady,
+            "did not settle within 30 s".to_string(),
+        ))
     }
 }
 
@@ -402,12 +483,14 @@ pub fn summary_line(s: &RadiusSweep, mu: f64) -> String {
         .map(|p| format!("{:.2} m/s, a_y = {:.2} m/s2", p.speed_mps, p.ay_mps2))
         .unwrap_or_else(|| "none".to_string());
     format!(
-        "R = {:>5.1} m  delta_th = {:.4} rad  {}  (highest steady: {}; {})",
+        "R = {:>5.1} m  delta_th = {:.4} rad  {}  (highest steady: {}; next speed failed: {}: {}; wheel lifts {})",
         s.radius_m,
         s.delta_th_rad,
         parts.join(", "),
         top,
-        s.stop_reason
+        s.stop_cause.name(),
+        s.stop_reason,
+        s.wheel_lifts
     )
 }
 

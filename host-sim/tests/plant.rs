@@ -251,7 +251,7 @@ fn a_hard_launch_from_rest_and_a_hard_stop_stay_finite_and_sensible() {
                 plant.state().vx_mps,
                 o.kappa
             );
-            // Never beyond what the tyres can give (peak mu about 1.2 plus pitch).
+            // Never beyond what the tyres can give (longitudinal peak mu about 1.2).
             assert!(o.ax_mps2 > -1.4 * G, "{}", o.ax_mps2);
             t += dt;
         }

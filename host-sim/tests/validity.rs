@@ -47,7 +47,7 @@ fn the_experiment_is_deterministic_and_stops_when_the_circle_is_lost() {
         s.stop_reason
     );
     let last = s.points.last().unwrap();
-    // It cannot exceed the friction limit of the tyres (peak mu about 1.2).
+    // It cannot exceed the friction limit of the tyres (lateral peak mu about 1.05).
     assert!(last.ay_mps2 < 1.25 * 9.81, "{}", last.ay_mps2);
     assert!(last.ay_mps2 > 0.5 * 9.81, "{}", last.ay_mps2);
 }
