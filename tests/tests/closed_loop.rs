@@ -100,9 +100,12 @@ fn paper_track_without_obstacles_mu_1() {
     let r = lap(false, 1.0);
     common(&r, 1.0);
     let s = &r.summary;
-    // Almost no wheel slip either (the plan's friction ellipse, see MpcSettings).
+    // No wheel locks or spins (the plan's friction ellipse, see MpcSettings): the
+    // largest slip is a lightly loaded rear wheel braking at ~0.7 g before the
+    // hairpin (0.102 since the plant's load transfer was corrected; a locked or
+    // spinning wheel would be near 1).
     assert!(
-        s.max_abs_slip_ratio < 0.1,
+        s.max_abs_slip_ratio < 0.12,
         "slip ratio {}",
         s.max_abs_slip_ratio
     );
