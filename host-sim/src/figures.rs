@@ -17,18 +17,35 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
     register_font()?;
     trajectory(&dir.join("trajectory.png"), scenario, r)?;
     let t: Vec<f64> = r.log.iter().map(|l| l.t_s).collect();
+    // The references exist from the first plan on (the actuators are safe before).
+    let planned = |v: f64, l: &crate::closed_loop::LogRow| {
+        if l.control_mode == "safe" && l.plan_status == "none" {
+            f64::NAN
+        } else {
+            v
+        }
+    };
     time_series(
         &dir.join("speed.png"),
-        "Speed: V_heur (red), V^r (green), V (blue)",
+        "Speed: V_heur (red) and V^r (green) from the first plan, V (blue)",
         "m/s",
         &t,
         &[
-            (&r.log.iter().map(|l| l.v_heur_mps).collect::<Vec<_>>(), RED),
             (
-                &r.log.iter().map(|l| l.v_ref_mps).collect::<Vec<_>>(),
-                GREEN,
+                &r.log
+                    .iter()
+                    .map(|l| planned(l.v_heur_mps, l))
+                    .collect::<Vec<_>>(),
+                RED,
             ),
             (&r.log.iter().map(|l| l.v_mps).collect::<Vec<_>>(), BLUE),
+            (
+                &r.log
+                    .iter()
+                    .map(|l| planned(l.v_ref_mps, l))
+                    .collect::<Vec<_>>(),
+                GREEN,
+            ),
         ],
     )?;
     time_series(
@@ -75,15 +92,19 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
     )?;
     histogram(
         &dir.join("plan_cost.png"),
-        "plan task: estimated cost per activation vs budget (red)",
+        "plan task: cost per activation vs budget (red)",
         &r.plan_costs,
         r.summary.plan_budget_cycles,
+        1e6,
+        "ECU M cycles (1 M = 5.95 ms at 168 MHz)",
     )?;
     histogram(
         &dir.join("control_cost.png"),
-        "control task: estimated cost per activation vs budget (red)",
+        "control task: cost per activation vs budget (red)",
         &r.control_costs,
         r.summary.control_budget_cycles,
+        1e3,
+        "ECU k cycles (1 k = 5.95 µs at 168 MHz)",
     )?;
     Ok(())
 }
@@ -235,23 +256,35 @@ fn time_series(
         .draw()
         .map_err(|e| draw_error(path, e))?;
     for (s, c) in series {
-        chart
-            .draw_series(LineSeries::new(
-                t.iter().copied().zip(s.iter().copied()),
-                c.stroke_width(2),
-            ))
-            .map_err(|e| draw_error(path, e))?;
+        // Non-finite samples break the line (nothing is drawn there).
+        let points: Vec<(f64, f64)> = t.iter().copied().zip(s.iter().copied()).collect();
+        for run in points.split(|p| !p.1.is_finite()) {
+            chart
+                .draw_series(LineSeries::new(run.iter().copied(), c.stroke_width(2)))
+                .map_err(|e| draw_error(path, e))?;
+        }
     }
     root.present().map_err(|e| draw_error(path, e))?;
     Ok(())
 }
 
-fn histogram(path: &Path, title: &str, costs: &[f64], budget: f64) -> Result<()> {
+/// Histogram of activation costs (cycles) against the budget, the axis in the
+/// readable unit `unit` (`scale` cycles each, e.g. 1e6 for M cycles).
+fn histogram(
+    path: &Path,
+    title: &str,
+    costs: &[f64],
+    budget: f64,
+    scale: f64,
+    unit: &str,
+) -> Result<()> {
+    let costs: Vec<f64> = costs.iter().map(|c| c / scale).collect();
+    let budget = budget / scale;
     let max = costs.iter().copied().fold(0.0f64, f64::max).max(budget) * 1.05;
     let bins = 60usize;
-    let width = (max / bins as f64).max(1.0);
+    let width = (max / bins as f64).max(f64::MIN_POSITIVE);
     let mut counts = vec![0u32; bins + 1];
-    for &c in costs {
+    for &c in &costs {
         let i = ((c / width) as usize).min(bins);
         counts[i] += 1;
     }
@@ -267,7 +300,7 @@ fn histogram(path: &Path, title: &str, costs: &[f64], budget: f64) -> Result<()>
         .map_err(|e| draw_error(path, e))?;
     chart
         .configure_mesh()
-        .x_desc("ECU cycles")
+        .x_desc(unit)
         .y_desc("activations")
         .label_style((FONT, 14))
         .draw()
