@@ -1223,16 +1223,18 @@ fn add_square_root_rows<T: Real>(
         let beta = T::TWO / (w0 * w0 + sigma);
         r[k][k] = mu;
         let (rk, xs) = (&mut r[k], &mut x[k + 1..n]);
+        // The four rows as scalars (registers), summed in the order of the rows.
+        let [v0, v1, v2, v3] = v;
         for (rkj, xj) in rk[k + 1..n].iter_mut().zip(xs.iter_mut()) {
+            let [x0, x1, x2, x3] = *xj;
             let mut d = w0 * *rkj;
-            for (vi, xji) in v.iter().zip(xj.iter()) {
-                d += *vi * *xji;
-            }
+            d += v0 * x0;
+            d += v1 * x1;
+            d += v2 * x2;
+            d += v3 * x3;
             let t = beta * d;
             *rkj -= t * w0;
-            for (vi, xji) in v.iter().zip(xj.iter_mut()) {
-                *xji -= t * *vi;
-            }
+            *xj = [x0 - t * v0, x1 - t * v1, x2 - t * v2, x3 - t * v3];
         }
     }
 }
