@@ -446,10 +446,19 @@ struct Workspace<T, const N: usize, const M: usize, const W: usize, const WL: us
     updates: u32,
     /// Pivot of the last `append` relative to its diagonal entry.
     last_rel_pivot: T,
-    /// Whether row `i` of the problem already holds `a_i R⁻¹` in this solve (`M`):
-    /// rows are transformed only when they enter the working set.
-    transformed: [bool; M],
+    /// Per row (`M`, one byte to keep the solver small): [`ROW_TRANSFORMED`] once
+    /// the row holds `a_i R⁻¹` in this solve (rows are transformed only when they
+    /// enter the working set); otherwise the length of its prefix that can be
+    /// nonzero, in groups of four entries (its last nonzero entry rounded up to the
+    /// four-sum groups of [`dot_from`], so that a dot product over the prefix gives
+    /// the same result as over all `N` entries), or [`ROW_FULL`].
+    row_code: [u8; M],
 }
+
+/// [`Workspace::row_code`] of a row that holds `a_i R⁻¹`.
+const ROW_TRANSFORMED: u8 = 0xFF;
+/// [`Workspace::row_code`] of an untransformed row used over all `N` entries.
+const ROW_FULL: u8 = 0xFE;
 
 /// The solver: settings, problem, workspace and solution in one value (for a
 /// `static` on the ECU).
@@ -505,7 +514,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 bound_state: [None; N],
                 updates: 0,
                 last_rel_pivot: T::ZERO,
-                transformed: [false; M],
+                row_code: [ROW_FULL; M],
             },
             solution: QpSolution::new(),
             consumed: false,
@@ -575,7 +584,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             QpStatus::InvalidInput
         } else {
             self.consumed = true;
-            match validate(&self.problem) {
+            match validate(&self.problem, &mut self.work.row_code) {
                 Some(st) => st,
                 None => {
                     let floored = if self.problem.h_factor {
@@ -589,7 +598,6 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                     } else {
                         let p = &mut self.problem;
                         row_times_upper(&p.f, &p.h, &mut self.work.v);
-                        self.work.transformed.fill(false);
                         let tols = self.settings.effective();
                         self.work.start(p, &self.settings, tols);
                         self.work
@@ -634,14 +642,28 @@ fn is_nan<T: Real>(v: T) -> bool {
 }
 
 /// Input checks; `None` if the problem is acceptable.
-fn validate<T: Real, const N: usize, const M: usize>(p: &QpProblem<T, N, M>) -> Option<QpStatus> {
+/// Also writes `row_code` (see [`Workspace::row_code`]) for the used rows.
+fn validate<T: Real, const N: usize, const M: usize>(
+    p: &QpProblem<T, N, M>,
+    row_code: &mut [u8; M],
+) -> Option<QpStatus> {
     if p.m > M {
         return Some(QpStatus::InvalidInput);
     }
     let rows = p.a.get(..p.m).unwrap_or(&[]);
-    let finite = p.h.iter().all(|r| r.iter().all(|v| v.is_finite()))
-        && p.f.iter().all(|v| v.is_finite())
-        && rows.iter().all(|r| r.iter().all(|v| v.is_finite()));
+    let mut finite =
+        p.h.iter().all(|r| r.iter().all(|v| v.is_finite())) && p.f.iter().all(|v| v.is_finite());
+    let full = N - N % 4;
+    for (r, code) in rows.iter().zip(row_code.iter_mut()) {
+        finite &= r.iter().all(|v| v.is_finite());
+        let last = r.iter().rposition(|&v| v != T::ZERO).map_or(0, |j| j + 1);
+        let groups = last.div_ceil(4);
+        *code = if 4 * groups > full || groups >= ROW_FULL as usize {
+            ROW_FULL
+        } else {
+            groups as u8
+        };
+    }
     let mut bad_bound = false;
     let mut nan = false;
     for (&l, &h) in p.x_lo.iter().zip(p.x_hi.iter()) {
@@ -886,6 +908,28 @@ fn dot_from<T: Real, const N: usize>(a: &[T; N], b: &[T; N], start: usize) -> T 
     s
 }
 
+/// [`dot_from`] from 0 over the first `len` entries only: the same result as over
+/// all `N` when the rest of `a` is zero and `len` is a multiple of 4 (or `N`), since
+/// the four partial sums then group the entries alike.
+#[inline]
+fn dot_prefix<T: Real, const N: usize>(a: &[T; N], b: &[T; N], len: usize) -> T {
+    let a = a.get(..len).unwrap_or(a);
+    let b = b.get(..len).unwrap_or(b);
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    let mut acc = [T::ZERO; 4];
+    for (x, y) in ca.zip(cb) {
+        for ((s, &p), &q) in acc.iter_mut().zip(x).zip(y) {
+            *s += p * q;
+        }
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (&p, &q) in ra.iter().zip(rb) {
+        s += p * q;
+    }
+    s
+}
+
 /// Entry of the working-set matrix `m̃_c1ᵀ m̃_c2`.
 #[inline]
 fn mdot<T: Real, const N: usize, const M: usize>(
@@ -984,14 +1028,14 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         if i >= p.m {
             return;
         }
-        let (Some(done), Some(row)) = (self.transformed.get_mut(i), p.a.get_mut(i)) else {
+        let (Some(code), Some(row)) = (self.row_code.get_mut(i), p.a.get_mut(i)) else {
             return;
         };
-        if !*done {
+        if *code != ROW_TRANSFORMED {
             let mut out = [T::ZERO; N];
             row_times_upper(row, &p.h, &mut out);
             *row = out;
-            *done = true;
+            *code = ROW_TRANSFORMED;
         }
     }
 
@@ -1246,10 +1290,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         for i in 0..p.m.min(M) {
             if self.row_state[i].is_none() {
                 // m̃_iᵀu once the row is transformed, else a_iᵀx (the same value).
-                let val = if self.transformed[i] {
-                    dot_from(&p.a[i], &self.u, 0)
-                } else {
-                    dot_from(&p.a[i], x, 0)
+                let val = match self.row_code[i] {
+                    ROW_TRANSFORMED => dot_from(&p.a[i], &self.u, 0),
+                    ROW_FULL => dot_from(&p.a[i], x, 0),
+                    groups => dot_prefix(&p.a[i], x, 4 * groups as usize),
                 };
                 consider(val, p.lo[i], p.hi[i], ConstraintIndex::Row(i as u16));
             }
