@@ -723,7 +723,7 @@ impl<T: Real> Mpc<T> {
             let vh = velocity_planner::v_heur(&st.velocity, path, fr.s, v0, mu);
             v_heur[node] = vh;
             c.tracking_costs(qp, st, path, obstacles, &xbar, &fr, vh, &u_bar, ncols);
-            c.road_row(qp, st, path, &fr, &u_bar, ncols);
+            c.road_row(qp, st, path, &fr);
             c.validity_rows(qp, st, validity, &xbar, &u_bar, ncols);
             c.obstacle_rows(qp, st, path, obstacles, &fr, &u_bar, ncols);
         }
@@ -826,6 +826,9 @@ struct Condensing<T> {
     cost: [[T; COST_ROWS]; NV],
     /// The QP row being built (`NV`).
     row: [T; NV],
+    /// The current node's lateral-deviation row (`NV`) and its constant (m), kept
+    /// from the tracking costs for the road row.
+    lateral: ([T; NV], T),
     /// Kind of each QP row pushed in this pass (`NC`).
     row_kind: [RowKind; NC],
     /// Obstacle rows pushed in this pass.
@@ -938,6 +941,7 @@ impl<T: Real> Condensing<T> {
             cur: 0,
             cost: [[T::ZERO; COST_ROWS]; NV],
             row: [T::ZERO; NV],
+            lateral: ([T::ZERO; NV], T::ZERO),
             row_kind: [RowKind::Validity; NC],
             obstacle_rows: 0,
             dropped: 0,
@@ -1046,6 +1050,7 @@ impl<T: Real> Condensing<T> {
         // Lateral deviation: e_y ≈ ē_y + nᵀδP − κ ē_x δs, about the reference
         // offset that clears the obstacles' parabolas (0 away from them).
         let d = self.lateral_row(fr, u_bar, ncols);
+        self.lateral = (self.row, d);
         let ey_ref = obstacle_offset(path, obstacles, fr.s, st.obstacle_offset_buffer_m);
         self.cost_row(qp, 0, ncols, two * w.q_y, d - ey_ref);
         // Longitudinal deviation: e_x ≈ ē_x + tᵀδP + (κ ē_y − 1) δs.
@@ -1091,15 +1096,14 @@ impl<T: Real> Condensing<T> {
     }
 
     /// Road limits (soft): `−(w_right − b) ≤ e_y ≤ w_left − b`, `b` the half-width
-    /// plus the margin, on the lateral deviation's row.
+    /// plus the margin, on the lateral deviation's row (kept by
+    /// [`Condensing::tracking_costs`] of the same node).
     fn road_row<const CAP: usize>(
         &mut self,
         qp: &mut MpcQpProblem<T>,
         st: &MpcSettings<T>,
         path: &ReferencePath<T, CAP>,
         fr: &NodeFrame<T>,
-        u_bar: &[[T; NU]; HORIZON],
-        ncols: usize,
     ) {
         let Some(wd) = path.widths_at(fr.s) else {
             return;
@@ -1113,7 +1117,8 @@ impl<T: Real> Condensing<T> {
             let mid = T::HALF * (lo + hi);
             (mid, mid)
         };
-        let d = self.lateral_row(fr, u_bar, ncols);
+        self.row = self.lateral.0;
+        let d = self.lateral.1;
         self.push(
             qp,
             RowKind::Road,
