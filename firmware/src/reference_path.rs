@@ -730,14 +730,20 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         if self.closed && b - a >= self.length {
             return self.max_abs_curvature;
         }
-        let mut k = self.curvature_at(a).abs().max(self.curvature_at(b).abs());
-        let (i0, ds0, _, _) = self.locate_any(a);
+        // κ(a) as curvature_at(a) computes it, from the one lookup of `a`.
+        let (i0, ds0, f0, _) = self.locate_any(a);
+        let ka = lerp(self.curvature[i0], self.curvature[self.next_vertex(i0)], f0);
+        let mut k = ka.abs().max(self.curvature_at(b).abs());
         // Unwrapped arc length of the start of segment i0.
         let base = if self.closed { a - ds0 } else { self.s[i0] };
         let mut pos = base;
-        for step in 0..self.n {
-            let seg = (i0 + step) % self.n;
-            if seg >= self.segment_count() {
+        let segments = self.segment_count();
+        let mut seg = i0;
+        for _ in 0..self.n {
+            if seg >= self.n {
+                seg = 0; // (i0 + step) mod n
+            }
+            if seg >= segments {
                 break;
             }
             pos += self.seg_len[seg];
@@ -749,6 +755,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 break;
             }
             k = k.max(self.curvature[v].abs());
+            seg += 1;
         }
         k
     }
