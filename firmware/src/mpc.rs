@@ -723,7 +723,7 @@ impl<T: Real> Mpc<T> {
             let vh = velocity_planner::v_heur(&st.velocity, path, fr.s, v0, mu);
             v_heur[node] = vh;
             c.tracking_costs(qp, st, path, obstacles, &xbar, &fr, vh, &u_bar, ncols);
-            c.road_row(qp, st, path, &fr);
+            c.road_row(qp, st, &fr);
             c.validity_rows(qp, st, validity, &xbar, &u_bar, ncols);
             c.obstacle_rows(qp, st, path, obstacles, &fr, &u_bar, ncols);
         }
@@ -913,14 +913,17 @@ struct NodeFrame<T> {
     ex: T,
     /// Lateral deviation `ē_y = nᵀ(P̄ − p(s̄))`, m.
     ey: T,
+    /// Track half-widths at `s̄`, m (`None` for a path without widths).
+    widths: Option<crate::reference_path::Widths<T>>,
 }
 
 impl<T: Real> NodeFrame<T> {
     fn new<const CAP: usize>(path: &ReferencePath<T, CAP>, xbar: &[T; NX]) -> Self {
         let s = xbar[IS];
-        let p = path.position_at(s);
-        let (sin_h, cos_h) = path.heading_at(s).sin_cos();
-        let kappa = path.curvature_at(s);
+        let at = path.sample_at(s);
+        let p = at.position;
+        let (sin_h, cos_h) = at.heading_rad.sin_cos();
+        let kappa = at.curvature_1pm;
         let (t, n) = ([cos_h, sin_h], [-sin_h, cos_h]);
         let (dx, dy) = (xbar[IX] - p[0], xbar[IY] - p[1]);
         Self {
@@ -930,6 +933,7 @@ impl<T: Real> NodeFrame<T> {
             kappa,
             ex: t[0] * dx + t[1] * dy,
             ey: n[0] * dx + n[1] * dy,
+            widths: at.widths,
         }
     }
 }
@@ -1098,14 +1102,8 @@ impl<T: Real> Condensing<T> {
     /// Road limits (soft): `−(w_right − b) ≤ e_y ≤ w_left − b`, `b` the half-width
     /// plus the margin, on the lateral deviation's row (kept by
     /// [`Condensing::tracking_costs`] of the same node).
-    fn road_row<const CAP: usize>(
-        &mut self,
-        qp: &mut MpcQpProblem<T>,
-        st: &MpcSettings<T>,
-        path: &ReferencePath<T, CAP>,
-        fr: &NodeFrame<T>,
-    ) {
-        let Some(wd) = path.widths_at(fr.s) else {
+    fn road_row(&mut self, qp: &mut MpcQpProblem<T>, st: &MpcSettings<T>, fr: &NodeFrame<T>) {
+        let Some(wd) = fr.widths else {
             return;
         };
         let keep = st.half_width_m + st.road_margin_m;

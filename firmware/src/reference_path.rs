@@ -147,6 +147,20 @@ pub struct Widths<T> {
     pub left_m: T,
 }
 
+/// The path at one arc length, from one segment lookup (see
+/// [`ReferencePath::sample_at`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathSample<T> {
+    /// Position `[x, y]`, m (as [`ReferencePath::position_at`]).
+    pub position: [T; 2],
+    /// Heading, rad (as [`ReferencePath::heading_at`]).
+    pub heading_rad: T,
+    /// Curvature, 1/m (as [`ReferencePath::curvature_at`]).
+    pub curvature_1pm: T,
+    /// Track half-widths, m (as [`ReferencePath::widths_at`]).
+    pub widths: Option<Widths<T>>,
+}
+
 /// A reference path of at most `CAP` points; see the [module docs](self).
 #[derive(Clone, Debug)]
 pub struct ReferencePath<T, const CAP: usize> {
@@ -712,6 +726,48 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             right_m: lerp(self.widths[i][0], self.widths[j][0], f),
             left_m: lerp(self.widths[i][1], self.widths[j][1], f),
         })
+    }
+
+    /// Position, heading, curvature and widths at `s_m` (m), with the same values
+    /// as [`Self::position_at`], [`Self::heading_at`], [`Self::curvature_at`] and
+    /// [`Self::widths_at`], from one segment lookup instead of four.
+    pub fn sample_at(&self, s_m: T) -> PathSample<T> {
+        if self.n == 0 {
+            return PathSample {
+                position: [T::ZERO; 2],
+                heading_rad: T::ZERO,
+                curvature_1pm: T::ZERO,
+                widths: None,
+            };
+        }
+        let (i, ds, f, laps) = self.locate_any(s_m);
+        let j = self.next_vertex(i);
+        let position = if !self.closed && (s_m < T::ZERO || s_m > self.length) {
+            self.position_at(s_m)
+        } else {
+            let p = self.xy[i];
+            let d = self.dir[i];
+            [p[0] + d[0] * ds, p[1] + d[1] * ds]
+        };
+        let hj = if j == 0 {
+            self.heading[0] + self.total_turn
+        } else {
+            self.heading[j]
+        };
+        let widths = if self.has_widths {
+            Some(Widths {
+                right_m: lerp(self.widths[i][0], self.widths[j][0], f),
+                left_m: lerp(self.widths[i][1], self.widths[j][1], f),
+            })
+        } else {
+            None
+        };
+        PathSample {
+            position,
+            heading_rad: lerp(self.heading[i], hj, f) + laps * self.total_turn,
+            curvature_1pm: lerp(self.curvature[i], self.curvature[j], f),
+            widths,
+        }
     }
 
     /// Largest `|κ|` over the arc lengths `[s0_m, s1_m]` (either order), 1/m.
