@@ -723,7 +723,7 @@ impl<T: Real> Mpc<T> {
             let vh = velocity_planner::v_heur(&st.velocity, path, fr.s, v0, mu);
             v_heur[node] = vh;
             c.tracking_costs(qp, st, path, obstacles, &xbar, &fr, vh, &u_bar, ncols);
-            c.road_row(qp, st, path, &fr, &u_bar, ncols);
+            c.road_row(qp, st, &fr);
             c.validity_rows(qp, st, validity, &xbar, &u_bar, ncols);
             c.obstacle_rows(qp, st, path, obstacles, &fr, &u_bar, ncols);
         }
@@ -826,6 +826,9 @@ struct Condensing<T> {
     cost: [[T; COST_ROWS]; NV],
     /// The QP row being built (`NV`).
     row: [T; NV],
+    /// The current node's lateral-deviation row (`NV`) and its constant (m), kept
+    /// from the tracking costs for the road row.
+    lateral: ([T; NV], T),
     /// Kind of each QP row pushed in this pass (`NC`).
     row_kind: [RowKind; NC],
     /// Obstacle rows pushed in this pass.
@@ -910,14 +913,17 @@ struct NodeFrame<T> {
     ex: T,
     /// Lateral deviation `ē_y = nᵀ(P̄ − p(s̄))`, m.
     ey: T,
+    /// Track half-widths at `s̄`, m (`None` for a path without widths).
+    widths: Option<crate::reference_path::Widths<T>>,
 }
 
 impl<T: Real> NodeFrame<T> {
     fn new<const CAP: usize>(path: &ReferencePath<T, CAP>, xbar: &[T; NX]) -> Self {
         let s = xbar[IS];
-        let p = path.position_at(s);
-        let (sin_h, cos_h) = path.heading_at(s).sin_cos();
-        let kappa = path.curvature_at(s);
+        let at = path.sample_at(s);
+        let p = at.position;
+        let (sin_h, cos_h) = at.heading_rad.sin_cos();
+        let kappa = at.curvature_1pm;
         let (t, n) = ([cos_h, sin_h], [-sin_h, cos_h]);
         let (dx, dy) = (xbar[IX] - p[0], xbar[IY] - p[1]);
         Self {
@@ -927,6 +933,7 @@ impl<T: Real> NodeFrame<T> {
             kappa,
             ex: t[0] * dx + t[1] * dy,
             ey: n[0] * dx + n[1] * dy,
+            widths: at.widths,
         }
     }
 }
@@ -938,6 +945,7 @@ impl<T: Real> Condensing<T> {
             cur: 0,
             cost: [[T::ZERO; COST_ROWS]; NV],
             row: [T::ZERO; NV],
+            lateral: ([T::ZERO; NV], T::ZERO),
             row_kind: [RowKind::Validity; NC],
             obstacle_rows: 0,
             dropped: 0,
@@ -1046,6 +1054,7 @@ impl<T: Real> Condensing<T> {
         // Lateral deviation: e_y ≈ ē_y + nᵀδP − κ ē_x δs, about the reference
         // offset that clears the obstacles' parabolas (0 away from them).
         let d = self.lateral_row(fr, u_bar, ncols);
+        self.lateral = (self.row, d);
         let ey_ref = obstacle_offset(path, obstacles, fr.s, st.obstacle_offset_buffer_m);
         self.cost_row(qp, 0, ncols, two * w.q_y, d - ey_ref);
         // Longitudinal deviation: e_x ≈ ē_x + tᵀδP + (κ ē_y − 1) δs.
@@ -1091,17 +1100,10 @@ impl<T: Real> Condensing<T> {
     }
 
     /// Road limits (soft): `−(w_right − b) ≤ e_y ≤ w_left − b`, `b` the half-width
-    /// plus the margin, on the lateral deviation's row.
-    fn road_row<const CAP: usize>(
-        &mut self,
-        qp: &mut MpcQpProblem<T>,
-        st: &MpcSettings<T>,
-        path: &ReferencePath<T, CAP>,
-        fr: &NodeFrame<T>,
-        u_bar: &[[T; NU]; HORIZON],
-        ncols: usize,
-    ) {
-        let Some(wd) = path.widths_at(fr.s) else {
+    /// plus the margin, on the lateral deviation's row (kept by
+    /// [`Condensing::tracking_costs`] of the same node).
+    fn road_row(&mut self, qp: &mut MpcQpProblem<T>, st: &MpcSettings<T>, fr: &NodeFrame<T>) {
+        let Some(wd) = fr.widths else {
             return;
         };
         let keep = st.half_width_m + st.road_margin_m;
@@ -1113,7 +1115,8 @@ impl<T: Real> Condensing<T> {
             let mid = T::HALF * (lo + hi);
             (mid, mid)
         };
-        let d = self.lateral_row(fr, u_bar, ncols);
+        self.row = self.lateral.0;
+        let d = self.lateral.1;
         self.push(
             qp,
             RowKind::Road,
@@ -1223,16 +1226,18 @@ fn add_square_root_rows<T: Real>(
         let beta = T::TWO / (w0 * w0 + sigma);
         r[k][k] = mu;
         let (rk, xs) = (&mut r[k], &mut x[k + 1..n]);
+        // The four rows as scalars (registers), summed in the order of the rows.
+        let [v0, v1, v2, v3] = v;
         for (rkj, xj) in rk[k + 1..n].iter_mut().zip(xs.iter_mut()) {
+            let [x0, x1, x2, x3] = *xj;
             let mut d = w0 * *rkj;
-            for (vi, xji) in v.iter().zip(xj.iter()) {
-                d += *vi * *xji;
-            }
+            d += v0 * x0;
+            d += v1 * x1;
+            d += v2 * x2;
+            d += v3 * x3;
             let t = beta * d;
             *rkj -= t * w0;
-            for (vi, xji) in v.iter().zip(xj.iter_mut()) {
-                *xji -= t * *vi;
-            }
+            *xj = [x0 - t * v0, x1 - t * v1, x2 - t * v2, x3 - t * v3];
         }
     }
 }

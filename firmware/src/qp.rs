@@ -67,13 +67,15 @@
 //! **Cost.** Per solve: Cholesky and in-place inverse of `H` (`N³/3` multiply-adds; the
 //! inverse and the row transformation as row `axpy`s, the dot products in four partial
 //! sums, so that the host pipelines and vectorises them),
-//! transformation of the rows (`m·N²/2`). Per iteration: `O(m·N)` for the constraint
-//! values, `O(|W|·N + |W|²)` for the multipliers and the factor update. The counters of
+//! transformation of a row (`N²/2`) only when it first enters the working set in the
+//! solve (an inactive row's value is checked as `a_iᵀx`, `x = R⁻¹u`, which equals
+//! `m̃_iᵀu`). Per iteration: `O(m·N)` for the constraint values, `O(|W|·N + |W|²)` for the multipliers and the factor update. The counters of
 //! [`QpSolution`] (iterations, additions, removals, refactorisations) are
 //! deterministic, so a time budget can be derived from them.
 //!
 //! **Storage.** The solver owns the problem; [`QpSolver::solve`] overwrites `H` with
-//! `R⁻¹` (upper triangle, lower triangle zeroed) and the rows `a_i` with `a_i R⁻¹`, so
+//! `R⁻¹` (upper triangle, lower triangle zeroed) and the rows `a_i` that entered the
+//! working set with `a_i R⁻¹`, so
 //! the caller refills them before every solve (the MPC rebuilds them anyway). Nothing is
 //! allocated; there is no recursion; the sizes are const generics checked at compile
 //! time.
@@ -260,8 +262,8 @@ pub struct QpProblem<T, const N: usize, const M: usize> {
     pub h: [[T; N]; N],
     /// Linear cost `f` (`N`).
     pub f: [T; N],
-    /// General rows: `a[i]` is `a_iᵀ` (`M×N`, rows `0..m` used). Overwritten by
-    /// `a_iᵀ R⁻¹` during a solve.
+    /// General rows: `a[i]` is `a_iᵀ` (`M×N`, rows `0..m` used). A row that enters
+    /// the working set during a solve is overwritten by `a_iᵀ R⁻¹`.
     pub a: [[T; N]; M],
     /// Row lower bounds `lo_i` (`M`; `−∞` for none).
     pub lo: [T; M],
@@ -444,7 +446,19 @@ struct Workspace<T, const N: usize, const M: usize, const W: usize, const WL: us
     updates: u32,
     /// Pivot of the last `append` relative to its diagonal entry.
     last_rel_pivot: T,
+    /// Per row (`M`, one byte to keep the solver small): [`ROW_TRANSFORMED`] once
+    /// the row holds `a_i R⁻¹` in this solve (rows are transformed only when they
+    /// enter the working set); otherwise the length of its prefix that can be
+    /// nonzero, in groups of four entries (its last nonzero entry rounded up to the
+    /// four-sum groups of [`dot_from`], so that a dot product over the prefix gives
+    /// the same result as over all `N` entries), or [`ROW_FULL`].
+    row_code: [u8; M],
 }
+
+/// [`Workspace::row_code`] of a row that holds `a_i R⁻¹`.
+const ROW_TRANSFORMED: u8 = 0xFF;
+/// [`Workspace::row_code`] of an untransformed row used over all `N` entries.
+const ROW_FULL: u8 = 0xFE;
 
 /// The solver: settings, problem, workspace and solution in one value (for a
 /// `static` on the ECU).
@@ -500,6 +514,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 bound_state: [None; N],
                 updates: 0,
                 last_rel_pivot: T::ZERO,
+                row_code: [ROW_FULL; M],
             },
             solution: QpSolution::new(),
             consumed: false,
@@ -514,7 +529,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         &mut self.problem
     }
 
-    /// The problem (after a solve, `h` holds `R⁻¹` and `a` holds `A R⁻¹`).
+    /// The problem (after a solve, `h` holds `R⁻¹`, and each row that entered the
+    /// working set holds `a_iᵀ R⁻¹`, the others `a_iᵀ`).
     pub fn problem(&self) -> &QpProblem<T, N, M> {
         &self.problem
     }
@@ -568,7 +584,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             QpStatus::InvalidInput
         } else {
             self.consumed = true;
-            match validate(&self.problem) {
+            match validate(&self.problem, &mut self.work.row_code) {
                 Some(st) => st,
                 None => {
                     let floored = if self.problem.h_factor {
@@ -580,11 +596,12 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                     if floored.is_none() {
                         QpStatus::NotConvex
                     } else {
-                        transform(&mut self.problem, &mut self.work.v);
+                        let p = &mut self.problem;
+                        row_times_upper(&p.f, &p.h, &mut self.work.v);
                         let tols = self.settings.effective();
-                        self.work.start(&self.problem, &self.settings, tols);
+                        self.work.start(p, &self.settings, tols);
                         self.work
-                            .iterate(&self.problem, &self.settings, tols, &mut self.solution)
+                            .iterate(p, &self.settings, tols, &mut self.solution)
                     }
                 }
             }
@@ -625,14 +642,28 @@ fn is_nan<T: Real>(v: T) -> bool {
 }
 
 /// Input checks; `None` if the problem is acceptable.
-fn validate<T: Real, const N: usize, const M: usize>(p: &QpProblem<T, N, M>) -> Option<QpStatus> {
+/// Also writes `row_code` (see [`Workspace::row_code`]) for the used rows.
+fn validate<T: Real, const N: usize, const M: usize>(
+    p: &QpProblem<T, N, M>,
+    row_code: &mut [u8; M],
+) -> Option<QpStatus> {
     if p.m > M {
         return Some(QpStatus::InvalidInput);
     }
     let rows = p.a.get(..p.m).unwrap_or(&[]);
-    let finite = p.h.iter().all(|r| r.iter().all(|v| v.is_finite()))
-        && p.f.iter().all(|v| v.is_finite())
-        && rows.iter().all(|r| r.iter().all(|v| v.is_finite()));
+    let mut finite =
+        p.h.iter().all(|r| r.iter().all(|v| v.is_finite())) && p.f.iter().all(|v| v.is_finite());
+    let full = N - N % 4;
+    for (r, code) in rows.iter().zip(row_code.iter_mut()) {
+        finite &= r.iter().all(|v| v.is_finite());
+        let last = r.iter().rposition(|&v| v != T::ZERO).map_or(0, |j| j + 1);
+        let groups = last.div_ceil(4);
+        *code = if 4 * groups > full || groups >= ROW_FULL as usize {
+            ROW_FULL
+        } else {
+            groups as u8
+        };
+    }
     let mut bad_bound = false;
     let mut nan = false;
     for (&l, &h) in p.x_lo.iter().zip(p.x_hi.iter()) {
@@ -815,7 +846,9 @@ fn row_times_upper<T: Real, const N: usize>(x: &[T; N], u: &[[T; N]; N], out: &m
     }
 }
 
-/// `a_i ← a_iᵀ R⁻¹` for the used rows, and `v = R⁻ᵀ f`.
+/// `a_i ← a_iᵀ R⁻¹` for the used rows, and `v = R⁻ᵀ f` (the solver itself
+/// transforms a row only when it enters the working set).
+#[cfg(test)]
 fn transform<T: Real, const N: usize, const M: usize>(p: &mut QpProblem<T, N, M>, v: &mut [T; N]) {
     let rinv = &p.h;
     let mut out = [T::ZERO; N];
@@ -860,6 +893,28 @@ fn con_row<T: Real, const N: usize, const M: usize>(
 fn dot_from<T: Real, const N: usize>(a: &[T; N], b: &[T; N], start: usize) -> T {
     let a = a.get(start..).unwrap_or(&[]);
     let b = b.get(start..).unwrap_or(&[]);
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    let mut acc = [T::ZERO; 4];
+    for (x, y) in ca.zip(cb) {
+        for ((s, &p), &q) in acc.iter_mut().zip(x).zip(y) {
+            *s += p * q;
+        }
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (&p, &q) in ra.iter().zip(rb) {
+        s += p * q;
+    }
+    s
+}
+
+/// [`dot_from`] from 0 over the first `len` entries only: the same result as over
+/// all `N` when the rest of `a` is zero and `len` is a multiple of 4 (or `N`), since
+/// the four partial sums then group the entries alike.
+#[inline]
+fn dot_prefix<T: Real, const N: usize>(a: &[T; N], b: &[T; N], len: usize) -> T {
+    let a = a.get(..len).unwrap_or(a);
+    let b = b.get(..len).unwrap_or(b);
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
     let (ra, rb) = (ca.remainder(), cb.remainder());
     let mut acc = [T::ZERO; 4];
@@ -953,10 +1008,35 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
 
     /// Starts a solve: clears the flags and (warm start) re-activates the given
     /// working set with `λ = 0`, dropping inadmissible or dependent entries.
-    fn start(&mut self, p: &QpProblem<T, N, M>, settings: &QpSettings<T>, tols: Tols<T>) {
+    fn start(&mut self, p: &mut QpProblem<T, N, M>, settings: &QpSettings<T>, tols: Tols<T>) {
         let count = if settings.warm_start { self.n } else { 0 };
+        for r in 0..count.min(W) {
+            self.prepare(p, self.ws[r].index);
+        }
         self.rebuild(p, tols, count);
         self.lam.fill(T::ZERO);
+    }
+
+    /// Transforms row constraint `c` to `a_iᵀ R⁻¹` in place unless already done in
+    /// this solve (a bound's row of `R⁻¹` needs nothing). Only rows that enter the
+    /// working set are ever transformed: the others are checked as `a_iᵀ x`.
+    fn prepare(&mut self, p: &mut QpProblem<T, N, M>, c: ConstraintIndex) {
+        let ConstraintIndex::Row(i) = c else {
+            return;
+        };
+        let i = i as usize;
+        if i >= p.m {
+            return;
+        }
+        let (Some(code), Some(row)) = (self.row_code.get_mut(i), p.a.get_mut(i)) else {
+            return;
+        };
+        if *code != ROW_TRANSFORMED {
+            let mut out = [T::ZERO; N];
+            row_times_upper(row, &p.h, &mut out);
+            *row = out;
+            *code = ROW_TRANSFORMED;
+        }
     }
 
     /// Rebuilds the factor from entries `ws[0..count]` (and their `lam`), dropping
@@ -1209,7 +1289,12 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         for i in 0..p.m.min(M) {
             if self.row_state[i].is_none() {
-                let val = dot_from(&p.a[i], &self.u, 0);
+                // m̃_iᵀu once the row is transformed, else a_iᵀx (the same value).
+                let val = match self.row_code[i] {
+                    ROW_TRANSFORMED => dot_from(&p.a[i], &self.u, 0),
+                    ROW_FULL => dot_from(&p.a[i], x, 0),
+                    groups => dot_prefix(&p.a[i], x, 4 * groups as usize),
+                };
                 consider(val, p.lo[i], p.hi[i], ConstraintIndex::Row(i as u16));
             }
         }
@@ -1227,7 +1312,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// The main loop; returns the exit status (the solution is written by `output`).
     fn iterate(
         &mut self,
-        p: &QpProblem<T, N, M>,
+        p: &mut QpProblem<T, N, M>,
         settings: &QpSettings<T>,
         tols: Tols<T>,
         sol: &mut QpSolution<T, N, M>,
@@ -1315,11 +1400,13 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// again (at most `W` times); no multiplier reaching zero means infeasible.
     fn add(
         &mut self,
-        p: &QpProblem<T, N, M>,
+        p: &mut QpProblem<T, N, M>,
         e: ActiveConstraint,
         tols: Tols<T>,
         sol: &mut QpSolution<T, N, M>,
     ) -> Result<(), QpStatus> {
+        self.prepare(p, e.index);
+        let p = &*p;
         let sigma = sign::<T>(e.side);
         // Multiplier the new constraint has accumulated over null-space steps.
         let mut lam_e = T::ZERO;

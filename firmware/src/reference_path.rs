@@ -154,6 +154,20 @@ pub struct Widths<T> {
     pub left_m: T,
 }
 
+/// The path at one arc length, from one segment lookup (see
+/// [`ReferencePath::sample_at`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathSample<T> {
+    /// Position `[x, y]`, m (as [`ReferencePath::position_at`]).
+    pub position: [T; 2],
+    /// Heading, rad (as [`ReferencePath::heading_at`]).
+    pub heading_rad: T,
+    /// Curvature, 1/m (as [`ReferencePath::curvature_at`]).
+    pub curvature_1pm: T,
+    /// Track half-widths, m (as [`ReferencePath::widths_at`]).
+    pub widths: Option<Widths<T>>,
+}
+
 /// A reference path of at most `CAP` points; see the [module docs](self).
 #[derive(Clone, Debug)]
 pub struct ReferencePath<T, const CAP: usize> {
@@ -722,6 +736,48 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         })
     }
 
+    /// Position, heading, curvature and widths at `s_m` (m), with the same values
+    /// as [`Self::position_at`], [`Self::heading_at`], [`Self::curvature_at`] and
+    /// [`Self::widths_at`], from one segment lookup instead of four.
+    pub fn sample_at(&self, s_m: T) -> PathSample<T> {
+        if self.n == 0 {
+            return PathSample {
+                position: [T::ZERO; 2],
+                heading_rad: T::ZERO,
+                curvature_1pm: T::ZERO,
+                widths: None,
+            };
+        }
+        let (i, ds, f, laps) = self.locate_any(s_m);
+        let j = self.next_vertex(i);
+        let position = if !self.closed && (s_m < T::ZERO || s_m > self.length) {
+            self.position_at(s_m)
+        } else {
+            let p = self.xy[i];
+            let d = self.dir[i];
+            [p[0] + d[0] * ds, p[1] + d[1] * ds]
+        };
+        let hj = if j == 0 {
+            self.heading[0] + self.total_turn
+        } else {
+            self.heading[j]
+        };
+        let widths = if self.has_widths {
+            Some(Widths {
+                right_m: lerp(self.widths[i][0], self.widths[j][0], f),
+                left_m: lerp(self.widths[i][1], self.widths[j][1], f),
+            })
+        } else {
+            None
+        };
+        PathSample {
+            position,
+            heading_rad: lerp(self.heading[i], hj, f) + laps * self.total_turn,
+            curvature_1pm: lerp(self.curvature[i], self.curvature[j], f),
+            widths,
+        }
+    }
+
     /// Largest `|κ|` over the arc lengths `[s0_m, s1_m]` (either order), 1/m.
     /// Exact for the piecewise-linear curvature: the end values and the vertices
     /// in between. On a closed path a range of a lap or more gives the global
@@ -738,14 +794,20 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         if self.closed && b - a >= self.length {
             return self.max_abs_curvature;
         }
-        let mut k = self.curvature_at(a).abs().max(self.curvature_at(b).abs());
-        let (i0, ds0, _, _) = self.locate_any(a);
+        // κ(a) as curvature_at(a) computes it, from the one lookup of `a`.
+        let (i0, ds0, f0, _) = self.locate_any(a);
+        let ka = lerp(self.curvature[i0], self.curvature[self.next_vertex(i0)], f0);
+        let mut k = ka.abs().max(self.curvature_at(b).abs());
         // Unwrapped arc length of the start of segment i0.
         let base = if self.closed { a - ds0 } else { self.s[i0] };
         let mut pos = base;
-        for step in 0..self.n {
-            let seg = (i0 + step) % self.n;
-            if seg >= self.segment_count() {
+        let segments = self.segment_count();
+        let mut seg = i0;
+        for _ in 0..self.n {
+            if seg >= self.n {
+                seg = 0; // (i0 + step) mod n
+            }
+            if seg >= segments {
                 break;
             }
             pos += self.seg_len[seg];
@@ -757,6 +819,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 break;
             }
             k = k.max(self.curvature[v].abs());
+            seg += 1;
         }
         k
     }

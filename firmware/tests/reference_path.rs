@@ -312,3 +312,27 @@ proptest! {
         prop_assert!(pr.lateral_m * lat >= -1e-9);
     }
 }
+
+/// `sample_at` gives exactly what the four single lookups give, on open and closed
+/// paths, with and without widths, inside and outside `[0, L]`.
+#[test]
+fn sample_at_matches_the_single_lookups() {
+    let pts = circle(30.0, 40, true);
+    let half: Vec<[f64; 2]> = pts[..20].to_vec();
+    let widths: Vec<[f64; 2]> = (0..20).map(|i| [2.0 + 0.1 * i as f64, 3.0]).collect();
+    let mut closed: ReferencePath<f64, 64> = ReferencePath::new();
+    closed.load(&pts, None, true).unwrap();
+    let mut open: ReferencePath<f64, 64> = ReferencePath::new();
+    open.load(&half, Some(&widths), false).unwrap();
+    let empty: ReferencePath<f64, 64> = ReferencePath::new();
+    for p in [&closed, &open, &empty] {
+        for k in -30..300 {
+            let s = k as f64 * 1.37;
+            let a = p.sample_at(s);
+            assert_eq!(a.position, p.position_at(s), "s={s}");
+            assert_eq!(a.heading_rad.to_bits(), p.heading_at(s).to_bits(), "s={s}");
+            assert_eq!(a.curvature_1pm.to_bits(), p.curvature_at(s).to_bits());
+            assert_eq!(a.widths, p.widths_at(s), "s={s}");
+        }
+    }
+}
