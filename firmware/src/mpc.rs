@@ -1137,13 +1137,35 @@ impl<T: Real> Condensing<T> {
         ncols: usize,
     ) {
         let (dmax, slope) = validity.delta_max_and_slope(xbar[IV]);
-        for sign in [T::ONE, -T::ONE] {
-            let nominal = sign * xbar[IDELTA] - slope * xbar[IV];
-            let d = self.lin_row(&[(IDELTA, sign), (IV, -slope)], nominal, u_bar, ncols);
-            let hi = dmax - slope * xbar[IV] - d;
-            let rho = T::TWO * st.weights.q_delta_tol;
-            self.push(qp, RowKind::Validity, -T::INFINITY, hi, rho);
+        // The rows `±S_δ − δ_max'·S_V` in one pass over the sensitivities, each
+        // entry accumulated as [`Condensing::lin_row`] does (same values).
+        let sens = &self.sens[self.cur];
+        let (sd, sv) = (&sens[IDELTA], &sens[IV]);
+        let mut minus = [T::ZERO; NV];
+        let plus = &mut self.row;
+        plus.fill(T::ZERO);
+        let neg_slope = -slope;
+        if neg_slope == T::ZERO {
+            for j in 0..ncols {
+                plus[j] += sd[j];
+                minus[j] += -sd[j];
+            }
+        } else {
+            for j in 0..ncols {
+                let t = neg_slope * sv[j];
+                plus[j] = (plus[j] + sd[j]) + t;
+                minus[j] = (minus[j] + -sd[j]) + t;
+            }
         }
+        let rho = T::TWO * st.weights.q_delta_tol;
+        let sv_bar = slope * xbar[IV];
+        let d = (xbar[IDELTA] - sv_bar) - dot(&self.row, u_bar, ncols);
+        let hi = dmax - sv_bar - d;
+        self.push(qp, RowKind::Validity, -T::INFINITY, hi, rho);
+        let d = (-xbar[IDELTA] - sv_bar) - dot(&minus, u_bar, ncols);
+        let hi = dmax - sv_bar - d;
+        self.row = minus;
+        self.push(qp, RowKind::Validity, -T::INFINITY, hi, rho);
     }
 
     /// Obstacles (soft), in the path frame: the parabola's directrix is parallel
