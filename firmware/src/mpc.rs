@@ -719,8 +719,8 @@ impl<T: Real> Mpc<T> {
             xbar = c.linearise(&st.geometry, &xbar, &u_bar[k], k, dt);
             let node = k + 1;
             let ncols = NU * node;
-            let fr = NodeFrame::new(path, &xbar);
-            let vh = velocity_planner::v_heur(&st.velocity, path, fr.s, v0, mu);
+            let (fr, at) = NodeFrame::new(path, &xbar);
+            let vh = velocity_planner::v_heur_at(&st.velocity, path, &at, fr.s, v0, mu);
             v_heur[node] = vh;
             c.tracking_costs(qp, st, path, obstacles, &xbar, &fr, vh, &u_bar, ncols);
             c.road_row(qp, st, &fr);
@@ -918,7 +918,11 @@ struct NodeFrame<T> {
 }
 
 impl<T: Real> NodeFrame<T> {
-    fn new<const CAP: usize>(path: &ReferencePath<T, CAP>, xbar: &[T; NX]) -> Self {
+    /// The frame and the path sample it was built from.
+    fn new<const CAP: usize>(
+        path: &ReferencePath<T, CAP>,
+        xbar: &[T; NX],
+    ) -> (Self, crate::reference_path::PathSample<T>) {
         let s = xbar[IS];
         let at = path.sample_at(s);
         let p = at.position;
@@ -926,7 +930,7 @@ impl<T: Real> NodeFrame<T> {
         let kappa = at.curvature_1pm;
         let (t, n) = ([cos_h, sin_h], [-sin_h, cos_h]);
         let (dx, dy) = (xbar[IX] - p[0], xbar[IY] - p[1]);
-        Self {
+        let fr = Self {
             s,
             t,
             n,
@@ -934,7 +938,8 @@ impl<T: Real> NodeFrame<T> {
             ex: t[0] * dx + t[1] * dy,
             ey: n[0] * dx + n[1] * dy,
             widths: at.widths,
-        }
+        };
+        (fr, at)
     }
 }
 
