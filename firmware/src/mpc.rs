@@ -766,10 +766,9 @@ pub fn obstacle_offset<T: Real, const CAP: usize>(
 ) -> T {
     let (mut left, mut right) = (T::ZERO, T::ZERO);
     for o in obstacles {
-        if !o.reaches_road || !o.is_relevant_at_s(path, s_m) {
+        let Some(s) = o.relevant_s_at(path, s_m) else {
             continue;
-        }
-        let s = path.unwrap_s(s_m, o.s_m);
+        };
         let dxi = s - o.s_m - o.xi0_m;
         let bend = o.steepness_1pm * dxi * dxi;
         match o.side {
@@ -1190,15 +1189,15 @@ impl<T: Real> Condensing<T> {
         ncols: usize,
     ) {
         for o in obstacles {
-            if !o.reaches_road || !o.is_relevant_at_s(path, fr.s) {
+            let Some(s) = o.relevant_s_at(path, fr.s) else {
                 continue;
-            }
+            };
             if self.obstacle_rows >= MAX_OBSTACLE_ROWS {
                 self.dropped += 1;
                 continue;
             }
             let sigma = o.sigma();
-            let dxi = path.unwrap_s(fr.s, o.s_m) - o.s_m - o.xi0_m;
+            let dxi = s - o.s_m - o.xi0_m;
             let g = sigma * (fr.ey - o.eta_apex_m) + o.steepness_1pm * dxi * dxi;
             let dg_ds = T::TWO * o.steepness_1pm * dxi;
             // ∂g/∂(X, Y, s) through e_y's and s's rows.
