@@ -712,7 +712,7 @@ impl<T: Real> Mpc<T> {
         let c = &mut self.condensing;
         let accel = input_bounds_and_regularisation(qp, st, mu);
         v_heur[0] = velocity_planner::v_heur(&st.velocity, path, xi0[IS], v0, mu);
-        c.start();
+        c.start(st);
         let mut xbar = *xi0;
         for k in 0..HORIZON {
             accel.friction_ellipse(qp, st, &xbar, k);
@@ -823,6 +823,9 @@ struct Condensing<T> {
     /// The current node's cost rows, each scaled by `√w`, column-major
     /// (`NV × COST_ROWS`): the block appended to the Hessian factor.
     cost: [[T; COST_ROWS]; NV],
+    /// Weight `w` and `√w` of each cost row (lateral, longitudinal, speed,
+    /// steering), set by [`Condensing::start`].
+    cost_weights: [(T, T); COST_ROWS],
     /// The QP row being built (`NV`).
     row: [T; NV],
     /// The current node's lateral-deviation row (`NV`) and its constant (m), kept
@@ -948,6 +951,7 @@ impl<T: Real> Condensing<T> {
             sens: [[[T::ZERO; NV]; NX]; 2],
             cur: 0,
             cost: [[T::ZERO; COST_ROWS]; NV],
+            cost_weights: [(T::ZERO, T::ZERO); COST_ROWS],
             row: [T::ZERO; NV],
             lateral: ([T::ZERO; NV], T::ZERO),
             row_kind: [RowKind::Validity; NC],
@@ -957,7 +961,13 @@ impl<T: Real> Condensing<T> {
     }
 
     /// Starts a pass: `S_0 = 0` (`ξ_0` is given), no rows.
-    fn start(&mut self) {
+    fn start(&mut self, st: &MpcSettings<T>) {
+        let w = &st.weights;
+        for (r, q) in [w.q_y, w.q_x, w.q_v, w.q_delta].into_iter().enumerate() {
+            let wr = T::TWO * q;
+            let sw = if wr > T::ZERO { wr.sqrt() } else { T::ZERO };
+            self.cost_weights[r] = (wr, sw);
+        }
         self.cur = 0;
         self.obstacle_rows = 0;
         self.dropped = 0;
@@ -1028,8 +1038,10 @@ impl<T: Real> Condensing<T> {
 
     /// Puts `½·w·(rowᵀu + d)²` into block column `r`: `f += w·d·row` now, the
     /// Hessian term `w·row·rowᵀ` when the block is appended ([`add_square_root_rows`]).
-    fn cost_row(&mut self, qp: &mut MpcQpProblem<T>, r: usize, ncols: usize, w: T, d: T) {
-        let sw = if w > T::ZERO { w.sqrt() } else { T::ZERO };
+    /// The weight is `w` of row `r` and its root `√w` (0 unless `w > 0`), both
+    /// from [`Condensing::start`].
+    fn cost_row(&mut self, qp: &mut MpcQpProblem<T>, r: usize, ncols: usize, d: T) {
+        let (w, sw) = self.cost_weights[r];
         for j in 0..ncols {
             qp.f[j] += w * self.row[j] * d;
             self.cost[j][r] = sw * self.row[j];
@@ -1053,14 +1065,12 @@ impl<T: Real> Condensing<T> {
         u_bar: &[[T; NU]; HORIZON],
         ncols: usize,
     ) {
-        let w = &st.weights;
-        let two = T::TWO;
         // Lateral deviation: e_y ≈ ē_y + nᵀδP − κ ē_x δs, about the reference
         // offset that clears the obstacles' parabolas (0 away from them).
         let d = self.lateral_row(fr, u_bar, ncols);
         self.lateral = (self.row, d);
         let ey_ref = obstacle_offset(path, obstacles, fr.s, st.obstacle_offset_buffer_m);
-        self.cost_row(qp, 0, ncols, two * w.q_y, d - ey_ref);
+        self.cost_row(qp, 0, ncols, d - ey_ref);
         // Longitudinal deviation: e_x ≈ ē_x + tᵀδP + (κ ē_y − 1) δs.
         let terms = [
             (IX, fr.t[0]),
@@ -1068,10 +1078,10 @@ impl<T: Real> Condensing<T> {
             (IS, fr.kappa * fr.ey - T::ONE),
         ];
         let d = self.lin_row(&terms, fr.ex, u_bar, ncols);
-        self.cost_row(qp, 1, ncols, two * w.q_x, d);
+        self.cost_row(qp, 1, ncols, d);
         // Speed towards V_heur.
         let d = self.lin_row(&[(IV, T::ONE)], xbar[IV], u_bar, ncols) - vh;
-        self.cost_row(qp, 2, ncols, two * w.q_v, d);
+        self.cost_row(qp, 2, ncols, d);
         // Steering towards its reference.
         let delta_ref = match st.steering_reference {
             SteeringReference::Zero => T::ZERO,
@@ -1079,7 +1089,7 @@ impl<T: Real> Condensing<T> {
                 .clamp(-st.delta_mech_max_rad, st.delta_mech_max_rad),
         };
         let d = self.lin_row(&[(IDELTA, T::ONE)], xbar[IDELTA], u_bar, ncols) - delta_ref;
-        self.cost_row(qp, 3, ncols, two * w.q_delta, d);
+        self.cost_row(qp, 3, ncols, d);
         add_square_root_rows(&mut qp.h, &mut self.cost, ncols);
     }
 
