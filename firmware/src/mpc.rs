@@ -63,9 +63,7 @@ use crate::plan::{Plan, HORIZON, PLAN_DT_S};
 use crate::qp::{ldl_len, QpProblem, QpSolution, QpSolver, QpStatus};
 use crate::reference_path::ReferencePath;
 use crate::state_estimate::StateEstimate;
-use crate::validity::{
-    kinematic_lateral_acceleration, kinematic_steering_for_radius, ValidityLimit,
-};
+use crate::validity::{kinematic_steering_for_radius, ValidityLimit};
 use crate::velocity_planner::{self, VelocityPlannerSettings};
 use crate::Real;
 
@@ -715,8 +713,10 @@ impl<T: Real> Mpc<T> {
         c.start(st);
         let mut xbar = *xi0;
         for k in 0..HORIZON {
-            accel.friction_ellipse(qp, st, &xbar, k);
-            xbar = c.linearise(&st.geometry, &xbar, &u_bar[k], k, dt);
+            // tan δ̄ once, for the friction ellipse and the linearisation.
+            let tan_delta = xbar[IDELTA].tan();
+            accel.friction_ellipse(qp, st, &xbar, tan_delta, k);
+            xbar = c.linearise(&st.geometry, &xbar, tan_delta, &u_bar[k], k, dt);
             let node = k + 1;
             let ncols = NU * node;
             let (fr, at) = NodeFrame::new(path, &xbar);
@@ -893,9 +893,13 @@ impl<T: Real> AccelBounds<T> {
         qp: &mut MpcQpProblem<T>,
         st: &MpcSettings<T>,
         xbar: &[T; NX],
+        tan_delta: T,
         k: usize,
     ) {
-        let ay = kinematic_lateral_acceleration(&st.geometry, xbar[IV], xbar[IDELTA]);
+        // kinematic_lateral_acceleration(geometry, V̄, δ̄) from tan δ̄ (same value).
+        let g = &st.geometry;
+        let v = xbar[IV];
+        let ay = v * v * g.beta_from_tan_rad(tan_delta).sin() / g.l_r_m;
         let r = (ay / self.grip).abs().min(T::ONE);
         qp.x_hi[NU * k] = self.a_hi * (T::ONE - r * r).sqrt();
     }
@@ -980,11 +984,12 @@ impl<T: Real> Condensing<T> {
         &mut self,
         geometry: &BicycleGeometry<T>,
         xbar: &[T; NX],
+        tan_delta: T,
         u: &[T; NU],
         k: usize,
         dt: T,
     ) -> [T; NX] {
-        let lin = bicycle::discretize(geometry, xbar, u, dt);
+        let lin = geometry.discretize_with_tan(xbar, u, dt, tan_delta);
         let used = NU * k;
         let (a, b) = self.sens.split_at_mut(1);
         let (old, new) = if self.cur == 0 {
