@@ -1107,15 +1107,7 @@ impl<T: Real> Condensing<T> {
 
     /// Appends `row` with bounds `lo ≤ rowᵀu ≤ hi` and soft weight `rho`.
     fn push(&mut self, qp: &mut MpcQpProblem<T>, kind: RowKind, lo: T, hi: T, rho: T) -> bool {
-        match qp.push_row(&self.row, lo, hi, rho) {
-            Some(i) => {
-                if let Some(k) = self.row_kind.get_mut(i) {
-                    *k = kind;
-                }
-                true
-            }
-            None => false,
-        }
+        push_row_of(qp, &mut self.row_kind, &self.row, kind, lo, hi, rho)
     }
 
     /// Road limits (soft): `−(w_right − b) ≤ e_y ≤ w_left − b`, `b` the half-width
@@ -1183,8 +1175,8 @@ impl<T: Real> Condensing<T> {
         self.push(qp, RowKind::Validity, -T::INFINITY, hi, rho);
         let d = (-xbar[IDELTA] - sv_bar) - dot(&minus, u_bar, ncols);
         let hi = dmax - sv_bar - d;
-        self.row = minus;
-        self.push(qp, RowKind::Validity, -T::INFINITY, hi, rho);
+        let kinds = &mut self.row_kind;
+        push_row_of(qp, kinds, &minus, RowKind::Validity, -T::INFINITY, hi, rho);
     }
 
     /// Obstacles (soft), in the path frame: the parabola's directrix is parallel
@@ -1280,6 +1272,27 @@ fn add_square_root_rows<T: Real>(
             *rkj -= t * w0;
             *xj = [x0 - t * v0, x1 - t * v1, x2 - t * v2, x3 - t * v3];
         }
+    }
+}
+
+/// [`Condensing::push`] of `row`.
+fn push_row_of<T: Real>(
+    qp: &mut MpcQpProblem<T>,
+    row_kind: &mut [RowKind; NC],
+    row: &[T; NV],
+    kind: RowKind,
+    lo: T,
+    hi: T,
+    rho: T,
+) -> bool {
+    match qp.push_row(row, lo, hi, rho) {
+        Some(i) => {
+            if let Some(k) = row_kind.get_mut(i) {
+                *k = kind;
+            }
+            true
+        }
+        None => false,
     }
 }
 
