@@ -1126,14 +1126,16 @@ impl<T: Real> Condensing<T> {
             let mid = T::HALF * (lo + hi);
             (mid, mid)
         };
-        self.row = self.lateral.0;
-        let d = self.lateral.1;
-        self.push(
+        let (row, d) = (&self.lateral.0, self.lateral.1);
+        let rho = T::TWO * st.weights.q_road;
+        push_row_of(
             qp,
+            &mut self.row_kind,
+            row,
             RowKind::Road,
             lo - d,
             hi - d,
-            T::TWO * st.weights.q_road,
+            rho,
         );
     }
 
