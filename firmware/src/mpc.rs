@@ -1025,20 +1025,14 @@ impl<T: Real> Condensing<T> {
         u_bar: &[[T; NU]; HORIZON],
         ncols: usize,
     ) -> T {
-        let sens = &self.sens[self.cur];
-        let row = &mut self.row;
-        row.fill(T::ZERO);
-        for &(state, coef) in terms {
-            if coef == T::ZERO {
-                continue;
-            }
-            if let Some(srow) = sens.get(state) {
-                for j in 0..ncols {
-                    row[j] += coef * srow[j];
-                }
-            }
-        }
-        nominal - dot(row, u_bar, ncols)
+        lin_row_into(
+            &self.sens[self.cur],
+            &mut self.row,
+            terms,
+            nominal,
+            u_bar,
+            ncols,
+        )
     }
 
     /// Puts `½·w·(rowᵀu + d)²` into block column `r`: `f += w·d·row` now, the
@@ -1046,11 +1040,8 @@ impl<T: Real> Condensing<T> {
     /// The weight is `w` of row `r` and its root `√w` (0 unless `w > 0`), both
     /// from [`Condensing::start`].
     fn cost_row(&mut self, qp: &mut MpcQpProblem<T>, r: usize, ncols: usize, d: T) {
-        let (w, sw) = self.cost_weights[r];
-        for j in 0..ncols {
-            qp.f[j] += w * self.row[j] * d;
-            self.cost[j][r] = sw * self.row[j];
-        }
+        let wr = self.cost_weights[r];
+        cost_row_of(qp, &mut self.cost, wr, &self.row, r, ncols, d);
     }
 
     /// Cost terms (Method, step 3) of the node: lateral deviation about the
@@ -1072,10 +1063,22 @@ impl<T: Real> Condensing<T> {
     ) {
         // Lateral deviation: e_y ≈ ē_y + nᵀδP − κ ē_x δs, about the reference
         // offset that clears the obstacles' parabolas (0 away from them).
-        let d = self.lateral_row(fr, u_bar, ncols);
-        self.lateral = (self.row, d);
+        // Built in the kept lateral row itself (no copy).
+        let terms = [(IX, fr.n[0]), (IY, fr.n[1]), (IS, -fr.kappa * fr.ex)];
+        let sens = &self.sens[self.cur];
+        let d = lin_row_into(sens, &mut self.lateral.0, &terms, fr.ey, u_bar, ncols);
+        self.lateral.1 = d;
         let ey_ref = obstacle_offset(path, obstacles, fr.s, st.obstacle_offset_buffer_m);
-        self.cost_row(qp, 0, ncols, d - ey_ref);
+        let wr = self.cost_weights[0];
+        cost_row_of(
+            qp,
+            &mut self.cost,
+            wr,
+            &self.lateral.0,
+            0,
+            ncols,
+            d - ey_ref,
+        );
         // Longitudinal deviation: e_x ≈ ē_x + tᵀδP + (κ ē_y − 1) δs.
         let terms = [
             (IX, fr.t[0]),
@@ -1096,13 +1099,6 @@ impl<T: Real> Condensing<T> {
         let d = self.lin_row(&[(IDELTA, T::ONE)], xbar[IDELTA], u_bar, ncols) - delta_ref;
         self.cost_row(qp, 3, ncols, d);
         add_square_root_rows(&mut qp.h, &mut self.cost, ncols);
-    }
-
-    /// The lateral deviation's row `nᵀS_X,Y − κ ē_x S_s` into `row`; returns its
-    /// constant.
-    fn lateral_row(&mut self, fr: &NodeFrame<T>, u_bar: &[[T; NU]; HORIZON], ncols: usize) -> T {
-        let terms = [(IX, fr.n[0]), (IY, fr.n[1]), (IS, -fr.kappa * fr.ex)];
-        self.lin_row(&terms, fr.ey, u_bar, ncols)
     }
 
     /// Appends `row` with bounds `lo ≤ rowᵀu ≤ hi` and soft weight `rho`.
@@ -1274,6 +1270,45 @@ fn add_square_root_rows<T: Real>(
             *rkj -= t * w0;
             *xj = [x0 - t * v0, x1 - t * v1, x2 - t * v2, x3 - t * v3];
         }
+    }
+}
+
+/// [`Condensing::lin_row`] into `row`, from the sensitivities `sens`.
+fn lin_row_into<T: Real>(
+    sens: &[[T; NV]; NX],
+    row: &mut [T; NV],
+    terms: &[(usize, T)],
+    nominal: T,
+    u_bar: &[[T; NU]; HORIZON],
+    ncols: usize,
+) -> T {
+    row.fill(T::ZERO);
+    for &(state, coef) in terms {
+        if coef == T::ZERO {
+            continue;
+        }
+        if let Some(srow) = sens.get(state) {
+            for j in 0..ncols {
+                row[j] += coef * srow[j];
+            }
+        }
+    }
+    nominal - dot(row, u_bar, ncols)
+}
+
+/// [`Condensing::cost_row`] of `row` with `(w, √w)`.
+fn cost_row_of<T: Real>(
+    qp: &mut MpcQpProblem<T>,
+    cost: &mut [[T; COST_ROWS]; NV],
+    (w, sw): (T, T),
+    row: &[T; NV],
+    r: usize,
+    ncols: usize,
+    d: T,
+) {
+    for j in 0..ncols {
+        qp.f[j] += w * row[j] * d;
+        cost[j][r] = sw * row[j];
     }
 }
 
