@@ -40,7 +40,12 @@ impl<T: Real> BicycleGeometry<T> {
 
     /// Slip angle at the centre of gravity `β(δ) = atan(tan δ · l_r/(l_f+l_r))`, rad.
     pub fn beta_rad(&self, delta_rad: T) -> T {
-        (delta_rad.tan() * self.l_r_m / self.wheelbase_m()).atan()
+        self.beta_from_tan_rad(delta_rad.tan())
+    }
+
+    /// [`Self::beta_rad`] given `tan δ` (same value), rad.
+    pub fn beta_from_tan_rad(&self, tan_delta: T) -> T {
+        (tan_delta * self.l_r_m / self.wheelbase_m()).atan()
     }
 }
 
@@ -285,12 +290,24 @@ impl<T: Real> BicycleGeometry<T> {
     ///   that stage fall back to a `tan` or `sin_cos` call: worst case 3 `tan` and
     ///   4 `sin_cos`.
     pub fn discretize(&self, x: &State<T>, u: &Input<T>, dt_s: T) -> Discretization<T> {
+        self.discretize_with_tan(x, u, dt_s, x[DELTA].tan())
+    }
+
+    /// [`Self::discretize`] given `tan_delta = x[DELTA].tan()` (same result; for a
+    /// caller that needs `tan δ` itself: no `tan` call here).
+    pub fn discretize_with_tan(
+        &self,
+        x: &State<T>,
+        u: &Input<T>,
+        dt_s: T,
+        tan_delta: T,
+    ) -> Discretization<T> {
         let k = self.l_r_m / self.wheelbase_m();
         let inv_lr = T::ONE / self.l_r_m;
         let h2 = dt_s * T::HALF;
         // δ at the stages: δ, δ + h/2·u2 (twice), δ + h·u2 (δ̇ = u2 is constant).
         // tan of the later ones by the addition formula from tan δ (one call).
-        let td1 = x[DELTA].tan();
+        let td1 = tan_delta;
         let td23 = tan_of_sum(td1, x[DELTA], h2 * u[U_STEER_RATE]);
         let td4 = tan_of_sum(td1, x[DELTA], dt_s * u[U_STEER_RATE]);
         let st1 = SteerTerms::from_tan(k, td1);

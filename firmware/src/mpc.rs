@@ -63,9 +63,7 @@ use crate::plan::{Plan, HORIZON, PLAN_DT_S};
 use crate::qp::{ldl_len, QpProblem, QpSolution, QpSolver, QpStatus};
 use crate::reference_path::ReferencePath;
 use crate::state_estimate::StateEstimate;
-use crate::validity::{
-    kinematic_lateral_acceleration, kinematic_steering_for_radius, ValidityLimit,
-};
+use crate::validity::{kinematic_steering_for_radius, ValidityLimit};
 use crate::velocity_planner::{self, VelocityPlannerSettings};
 use crate::Real;
 
@@ -712,15 +710,17 @@ impl<T: Real> Mpc<T> {
         let c = &mut self.condensing;
         let accel = input_bounds_and_regularisation(qp, st, mu);
         v_heur[0] = velocity_planner::v_heur(&st.velocity, path, xi0[IS], v0, mu);
-        c.start();
+        c.start(st);
         let mut xbar = *xi0;
         for k in 0..HORIZON {
-            accel.friction_ellipse(qp, st, &xbar, k);
-            xbar = c.linearise(&st.geometry, &xbar, &u_bar[k], k, dt);
+            // tan δ̄ once, for the friction ellipse and the linearisation.
+            let tan_delta = xbar[IDELTA].tan();
+            accel.friction_ellipse(qp, st, &xbar, tan_delta, k);
+            xbar = c.linearise(&st.geometry, &xbar, tan_delta, &u_bar[k], k, dt);
             let node = k + 1;
             let ncols = NU * node;
-            let fr = NodeFrame::new(path, &xbar);
-            let vh = velocity_planner::v_heur(&st.velocity, path, fr.s, v0, mu);
+            let (fr, at) = NodeFrame::new(path, &xbar);
+            let vh = velocity_planner::v_heur_at(&st.velocity, path, &at, fr.s, v0, mu);
             v_heur[node] = vh;
             c.tracking_costs(qp, st, path, obstacles, &xbar, &fr, vh, &u_bar, ncols);
             c.road_row(qp, st, &fr);
@@ -766,10 +766,9 @@ pub fn obstacle_offset<T: Real, const CAP: usize>(
 ) -> T {
     let (mut left, mut right) = (T::ZERO, T::ZERO);
     for o in obstacles {
-        if !o.reaches_road || !o.is_relevant_at_s(path, s_m) {
+        let Some(s) = o.relevant_s_at(path, s_m) else {
             continue;
-        }
-        let s = path.unwrap_s(s_m, o.s_m);
+        };
         let dxi = s - o.s_m - o.xi0_m;
         let bend = o.steepness_1pm * dxi * dxi;
         match o.side {
@@ -824,6 +823,9 @@ struct Condensing<T> {
     /// The current node's cost rows, each scaled by `√w`, column-major
     /// (`NV × COST_ROWS`): the block appended to the Hessian factor.
     cost: [[T; COST_ROWS]; NV],
+    /// Weight `w` and `√w` of each cost row (lateral, longitudinal, speed,
+    /// steering), set by [`Condensing::start`].
+    cost_weights: [(T, T); COST_ROWS],
     /// The QP row being built (`NV`).
     row: [T; NV],
     /// The current node's lateral-deviation row (`NV`) and its constant (m), kept
@@ -891,9 +893,13 @@ impl<T: Real> AccelBounds<T> {
         qp: &mut MpcQpProblem<T>,
         st: &MpcSettings<T>,
         xbar: &[T; NX],
+        tan_delta: T,
         k: usize,
     ) {
-        let ay = kinematic_lateral_acceleration(&st.geometry, xbar[IV], xbar[IDELTA]);
+        // kinematic_lateral_acceleration(geometry, V̄, δ̄) from tan δ̄ (same value).
+        let g = &st.geometry;
+        let v = xbar[IV];
+        let ay = v * v * g.beta_from_tan_rad(tan_delta).sin() / g.l_r_m;
         let r = (ay / self.grip).abs().min(T::ONE);
         qp.x_hi[NU * k] = self.a_hi * (T::ONE - r * r).sqrt();
     }
@@ -918,7 +924,11 @@ struct NodeFrame<T> {
 }
 
 impl<T: Real> NodeFrame<T> {
-    fn new<const CAP: usize>(path: &ReferencePath<T, CAP>, xbar: &[T; NX]) -> Self {
+    /// The frame and the path sample it was built from.
+    fn new<const CAP: usize>(
+        path: &ReferencePath<T, CAP>,
+        xbar: &[T; NX],
+    ) -> (Self, crate::reference_path::PathSample<T>) {
         let s = xbar[IS];
         let at = path.sample_at(s);
         let p = at.position;
@@ -926,7 +936,7 @@ impl<T: Real> NodeFrame<T> {
         let kappa = at.curvature_1pm;
         let (t, n) = ([cos_h, sin_h], [-sin_h, cos_h]);
         let (dx, dy) = (xbar[IX] - p[0], xbar[IY] - p[1]);
-        Self {
+        let fr = Self {
             s,
             t,
             n,
@@ -934,7 +944,8 @@ impl<T: Real> NodeFrame<T> {
             ex: t[0] * dx + t[1] * dy,
             ey: n[0] * dx + n[1] * dy,
             widths: at.widths,
-        }
+        };
+        (fr, at)
     }
 }
 
@@ -944,6 +955,7 @@ impl<T: Real> Condensing<T> {
             sens: [[[T::ZERO; NV]; NX]; 2],
             cur: 0,
             cost: [[T::ZERO; COST_ROWS]; NV],
+            cost_weights: [(T::ZERO, T::ZERO); COST_ROWS],
             row: [T::ZERO; NV],
             lateral: ([T::ZERO; NV], T::ZERO),
             row_kind: [RowKind::Validity; NC],
@@ -953,7 +965,13 @@ impl<T: Real> Condensing<T> {
     }
 
     /// Starts a pass: `S_0 = 0` (`ξ_0` is given), no rows.
-    fn start(&mut self) {
+    fn start(&mut self, st: &MpcSettings<T>) {
+        let w = &st.weights;
+        for (r, q) in [w.q_y, w.q_x, w.q_v, w.q_delta].into_iter().enumerate() {
+            let wr = T::TWO * q;
+            let sw = if wr > T::ZERO { wr.sqrt() } else { T::ZERO };
+            self.cost_weights[r] = (wr, sw);
+        }
         self.cur = 0;
         self.obstacle_rows = 0;
         self.dropped = 0;
@@ -966,11 +984,12 @@ impl<T: Real> Condensing<T> {
         &mut self,
         geometry: &BicycleGeometry<T>,
         xbar: &[T; NX],
+        tan_delta: T,
         u: &[T; NU],
         k: usize,
         dt: T,
     ) -> [T; NX] {
-        let lin = bicycle::discretize(geometry, xbar, u, dt);
+        let lin = geometry.discretize_with_tan(xbar, u, dt, tan_delta);
         let used = NU * k;
         let (a, b) = self.sens.split_at_mut(1);
         let (old, new) = if self.cur == 0 {
@@ -1006,30 +1025,23 @@ impl<T: Real> Condensing<T> {
         u_bar: &[[T; NU]; HORIZON],
         ncols: usize,
     ) -> T {
-        let sens = &self.sens[self.cur];
-        let row = &mut self.row;
-        row.fill(T::ZERO);
-        for &(state, coef) in terms {
-            if coef == T::ZERO {
-                continue;
-            }
-            if let Some(srow) = sens.get(state) {
-                for j in 0..ncols {
-                    row[j] += coef * srow[j];
-                }
-            }
-        }
-        nominal - dot(row, u_bar, ncols)
+        lin_row_into(
+            &self.sens[self.cur],
+            &mut self.row,
+            terms,
+            nominal,
+            u_bar,
+            ncols,
+        )
     }
 
     /// Puts `½·w·(rowᵀu + d)²` into block column `r`: `f += w·d·row` now, the
     /// Hessian term `w·row·rowᵀ` when the block is appended ([`add_square_root_rows`]).
-    fn cost_row(&mut self, qp: &mut MpcQpProblem<T>, r: usize, ncols: usize, w: T, d: T) {
-        let sw = if w > T::ZERO { w.sqrt() } else { T::ZERO };
-        for j in 0..ncols {
-            qp.f[j] += w * self.row[j] * d;
-            self.cost[j][r] = sw * self.row[j];
-        }
+    /// The weight is `w` of row `r` and its root `√w` (0 unless `w > 0`), both
+    /// from [`Condensing::start`].
+    fn cost_row(&mut self, qp: &mut MpcQpProblem<T>, r: usize, ncols: usize, d: T) {
+        let wr = self.cost_weights[r];
+        cost_row_of(qp, &mut self.cost, wr, &self.row, r, ncols, d);
     }
 
     /// Cost terms (Method, step 3) of the node: lateral deviation about the
@@ -1049,14 +1061,24 @@ impl<T: Real> Condensing<T> {
         u_bar: &[[T; NU]; HORIZON],
         ncols: usize,
     ) {
-        let w = &st.weights;
-        let two = T::TWO;
         // Lateral deviation: e_y ≈ ē_y + nᵀδP − κ ē_x δs, about the reference
         // offset that clears the obstacles' parabolas (0 away from them).
-        let d = self.lateral_row(fr, u_bar, ncols);
-        self.lateral = (self.row, d);
+        // Built in the kept lateral row itself (no copy).
+        let terms = [(IX, fr.n[0]), (IY, fr.n[1]), (IS, -fr.kappa * fr.ex)];
+        let sens = &self.sens[self.cur];
+        let d = lin_row_into(sens, &mut self.lateral.0, &terms, fr.ey, u_bar, ncols);
+        self.lateral.1 = d;
         let ey_ref = obstacle_offset(path, obstacles, fr.s, st.obstacle_offset_buffer_m);
-        self.cost_row(qp, 0, ncols, two * w.q_y, d - ey_ref);
+        let wr = self.cost_weights[0];
+        cost_row_of(
+            qp,
+            &mut self.cost,
+            wr,
+            &self.lateral.0,
+            0,
+            ncols,
+            d - ey_ref,
+        );
         // Longitudinal deviation: e_x ≈ ē_x + tᵀδP + (κ ē_y − 1) δs.
         let terms = [
             (IX, fr.t[0]),
@@ -1064,10 +1086,10 @@ impl<T: Real> Condensing<T> {
             (IS, fr.kappa * fr.ey - T::ONE),
         ];
         let d = self.lin_row(&terms, fr.ex, u_bar, ncols);
-        self.cost_row(qp, 1, ncols, two * w.q_x, d);
+        self.cost_row(qp, 1, ncols, d);
         // Speed towards V_heur.
         let d = self.lin_row(&[(IV, T::ONE)], xbar[IV], u_bar, ncols) - vh;
-        self.cost_row(qp, 2, ncols, two * w.q_v, d);
+        self.cost_row(qp, 2, ncols, d);
         // Steering towards its reference.
         let delta_ref = match st.steering_reference {
             SteeringReference::Zero => T::ZERO,
@@ -1075,28 +1097,13 @@ impl<T: Real> Condensing<T> {
                 .clamp(-st.delta_mech_max_rad, st.delta_mech_max_rad),
         };
         let d = self.lin_row(&[(IDELTA, T::ONE)], xbar[IDELTA], u_bar, ncols) - delta_ref;
-        self.cost_row(qp, 3, ncols, two * w.q_delta, d);
+        self.cost_row(qp, 3, ncols, d);
         add_square_root_rows(&mut qp.h, &mut self.cost, ncols);
-    }
-
-    /// The lateral deviation's row `nᵀS_X,Y − κ ē_x S_s` into `row`; returns its
-    /// constant.
-    fn lateral_row(&mut self, fr: &NodeFrame<T>, u_bar: &[[T; NU]; HORIZON], ncols: usize) -> T {
-        let terms = [(IX, fr.n[0]), (IY, fr.n[1]), (IS, -fr.kappa * fr.ex)];
-        self.lin_row(&terms, fr.ey, u_bar, ncols)
     }
 
     /// Appends `row` with bounds `lo ≤ rowᵀu ≤ hi` and soft weight `rho`.
     fn push(&mut self, qp: &mut MpcQpProblem<T>, kind: RowKind, lo: T, hi: T, rho: T) -> bool {
-        match qp.push_row(&self.row, lo, hi, rho) {
-            Some(i) => {
-                if let Some(k) = self.row_kind.get_mut(i) {
-                    *k = kind;
-                }
-                true
-            }
-            None => false,
-        }
+        push_row_of(qp, &mut self.row_kind, &self.row, kind, lo, hi, rho)
     }
 
     /// Road limits (soft): `−(w_right − b) ≤ e_y ≤ w_left − b`, `b` the half-width
@@ -1115,14 +1122,16 @@ impl<T: Real> Condensing<T> {
             let mid = T::HALF * (lo + hi);
             (mid, mid)
         };
-        self.row = self.lateral.0;
-        let d = self.lateral.1;
-        self.push(
+        let (row, d) = (&self.lateral.0, self.lateral.1);
+        let rho = T::TWO * st.weights.q_road;
+        push_row_of(
             qp,
+            &mut self.row_kind,
+            row,
             RowKind::Road,
             lo - d,
             hi - d,
-            T::TWO * st.weights.q_road,
+            rho,
         );
     }
 
@@ -1137,13 +1146,35 @@ impl<T: Real> Condensing<T> {
         ncols: usize,
     ) {
         let (dmax, slope) = validity.delta_max_and_slope(xbar[IV]);
-        for sign in [T::ONE, -T::ONE] {
-            let nominal = sign * xbar[IDELTA] - slope * xbar[IV];
-            let d = self.lin_row(&[(IDELTA, sign), (IV, -slope)], nominal, u_bar, ncols);
-            let hi = dmax - slope * xbar[IV] - d;
-            let rho = T::TWO * st.weights.q_delta_tol;
-            self.push(qp, RowKind::Validity, -T::INFINITY, hi, rho);
+        // The rows `±S_δ − δ_max'·S_V` in one pass over the sensitivities, each
+        // entry accumulated as [`Condensing::lin_row`] does (same values).
+        let sens = &self.sens[self.cur];
+        let (sd, sv) = (&sens[IDELTA], &sens[IV]);
+        let mut minus = [T::ZERO; NV];
+        let plus = &mut self.row;
+        plus.fill(T::ZERO);
+        let neg_slope = -slope;
+        if neg_slope == T::ZERO {
+            for j in 0..ncols {
+                plus[j] += sd[j];
+                minus[j] += -sd[j];
+            }
+        } else {
+            for j in 0..ncols {
+                let t = neg_slope * sv[j];
+                plus[j] = (plus[j] + sd[j]) + t;
+                minus[j] = (minus[j] + -sd[j]) + t;
+            }
         }
+        let rho = T::TWO * st.weights.q_delta_tol;
+        let sv_bar = slope * xbar[IV];
+        let d = (xbar[IDELTA] - sv_bar) - dot(&self.row, u_bar, ncols);
+        let hi = dmax - sv_bar - d;
+        self.push(qp, RowKind::Validity, -T::INFINITY, hi, rho);
+        let d = (-xbar[IDELTA] - sv_bar) - dot(&minus, u_bar, ncols);
+        let hi = dmax - sv_bar - d;
+        let kinds = &mut self.row_kind;
+        push_row_of(qp, kinds, &minus, RowKind::Validity, -T::INFINITY, hi, rho);
     }
 
     /// Obstacles (soft), in the path frame: the parabola's directrix is parallel
@@ -1163,15 +1194,15 @@ impl<T: Real> Condensing<T> {
         ncols: usize,
     ) {
         for o in obstacles {
-            if !o.reaches_road || !o.is_relevant_at_s(path, fr.s) {
+            let Some(s) = o.relevant_s_at(path, fr.s) else {
                 continue;
-            }
+            };
             if self.obstacle_rows >= MAX_OBSTACLE_ROWS {
                 self.dropped += 1;
                 continue;
             }
             let sigma = o.sigma();
-            let dxi = path.unwrap_s(fr.s, o.s_m) - o.s_m - o.xi0_m;
+            let dxi = s - o.s_m - o.xi0_m;
             let g = sigma * (fr.ey - o.eta_apex_m) + o.steepness_1pm * dxi * dxi;
             let dg_ds = T::TWO * o.steepness_1pm * dxi;
             // ∂g/∂(X, Y, s) through e_y's and s's rows.
@@ -1239,6 +1270,66 @@ fn add_square_root_rows<T: Real>(
             *rkj -= t * w0;
             *xj = [x0 - t * v0, x1 - t * v1, x2 - t * v2, x3 - t * v3];
         }
+    }
+}
+
+/// [`Condensing::lin_row`] into `row`, from the sensitivities `sens`.
+fn lin_row_into<T: Real>(
+    sens: &[[T; NV]; NX],
+    row: &mut [T; NV],
+    terms: &[(usize, T)],
+    nominal: T,
+    u_bar: &[[T; NU]; HORIZON],
+    ncols: usize,
+) -> T {
+    row.fill(T::ZERO);
+    for &(state, coef) in terms {
+        if coef == T::ZERO {
+            continue;
+        }
+        if let Some(srow) = sens.get(state) {
+            for j in 0..ncols {
+                row[j] += coef * srow[j];
+            }
+        }
+    }
+    nominal - dot(row, u_bar, ncols)
+}
+
+/// [`Condensing::cost_row`] of `row` with `(w, √w)`.
+fn cost_row_of<T: Real>(
+    qp: &mut MpcQpProblem<T>,
+    cost: &mut [[T; COST_ROWS]; NV],
+    (w, sw): (T, T),
+    row: &[T; NV],
+    r: usize,
+    ncols: usize,
+    d: T,
+) {
+    for j in 0..ncols {
+        qp.f[j] += w * row[j] * d;
+        cost[j][r] = sw * row[j];
+    }
+}
+
+/// [`Condensing::push`] of `row`.
+fn push_row_of<T: Real>(
+    qp: &mut MpcQpProblem<T>,
+    row_kind: &mut [RowKind; NC],
+    row: &[T; NV],
+    kind: RowKind,
+    lo: T,
+    hi: T,
+    rho: T,
+) -> bool {
+    match qp.push_row(row, lo, hi, rho) {
+        Some(i) => {
+            if let Some(k) = row_kind.get_mut(i) {
+                *k = kind;
+            }
+            true
+        }
+        None => false,
     }
 }
 

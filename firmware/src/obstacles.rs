@@ -342,6 +342,25 @@ impl<T: Real> Parabola<T> {
         s >= a && s <= b
     }
 
+    /// `Some(path.unwrap_s(s_node_m, self.s_m))` when [`Self::is_relevant_at_s`]
+    /// holds (the unwrapped node abscissa, m, from one `unwrap_s`), else `None`.
+    pub fn relevant_s_at<const CAP: usize>(
+        &self,
+        path: &ReferencePath<T, CAP>,
+        s_node_m: T,
+    ) -> Option<T> {
+        if !self.reaches_road {
+            return None;
+        }
+        let s = path.unwrap_s(s_node_m, self.s_m);
+        let (a, b) = self.s_range_m();
+        if s >= a && s <= b {
+            Some(s)
+        } else {
+            None
+        }
+    }
+
     /// True when the parabola matters anywhere in the horizon window
     /// `[s0_m, s1_m]` (m, any lap; `s0 ≤ s1`, shorter than a lap).
     pub fn overlaps_s_window<const CAP: usize>(

@@ -800,12 +800,14 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
 /// `X_i = (e_i − Σ_{k>i} R_ik X_k) / R_ii`, a sum of rows of `X` already computed
 /// (contiguous `axpy`s, which pipeline and vectorise, instead of strided dot products).
 fn invert_upper<T: Real, const N: usize>(h: &mut [[T; N]; N]) {
+    // Row i of R from column i on (the rest of the buffer is not read).
+    let mut r_row = [T::ZERO; N];
     for i in (0..N).rev() {
         let (top, below) = h.split_at_mut(i + 1);
         let Some(xi) = top.last_mut() else {
             continue;
         };
-        let r_row = *xi;
+        r_row[i..].copy_from_slice(&xi[i..]);
         let inv = T::ONE / r_row[i];
         xi.fill(T::ZERO);
         let tail = xi.get_mut(i + 1..).unwrap_or(&mut []);

@@ -166,6 +166,10 @@ pub struct PathSample<T> {
     pub curvature_1pm: T,
     /// Track half-widths, m (as [`ReferencePath::widths_at`]).
     pub widths: Option<Widths<T>>,
+    /// The lookup behind the sample: segment and distance along it (m), for
+    /// [`ReferencePath::max_abs_curvature_from`].
+    segment: usize,
+    segment_offset_m: T,
 }
 
 /// A reference path of at most `CAP` points; see the [module docs](self).
@@ -746,6 +750,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 heading_rad: T::ZERO,
                 curvature_1pm: T::ZERO,
                 widths: None,
+                segment: 0,
+                segment_offset_m: T::ZERO,
             };
         }
         let (i, ds, f, laps) = self.locate_any(s_m);
@@ -775,6 +781,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             heading_rad: lerp(self.heading[i], hj, f) + laps * self.total_turn,
             curvature_1pm: lerp(self.curvature[i], self.curvature[j], f),
             widths,
+            segment: i,
+            segment_offset_m: ds,
         }
     }
 
@@ -797,6 +805,30 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         // κ(a) as curvature_at(a) computes it, from the one lookup of `a`.
         let (i0, ds0, f0, _) = self.locate_any(a);
         let ka = lerp(self.curvature[i0], self.curvature[self.next_vertex(i0)], f0);
+        self.max_abs_curvature_scan(a, b, i0, ds0, ka)
+    }
+
+    /// [`Self::max_abs_curvature_between`]`(s0_m, s1_m)` (same value) for the
+    /// `s0_m` that `at` was sampled at ([`Self::sample_at`]), without looking `s0_m`
+    /// up again.
+    pub fn max_abs_curvature_from(&self, at: &PathSample<T>, s0_m: T, s1_m: T) -> T {
+        if self.n == 0 {
+            return T::ZERO;
+        }
+        let ordered = s0_m <= s1_m;
+        if !ordered {
+            return self.max_abs_curvature_between(s0_m, s1_m);
+        }
+        if self.closed && s1_m - s0_m >= self.length {
+            return self.max_abs_curvature;
+        }
+        let (i0, ds0) = (at.segment, at.segment_offset_m);
+        self.max_abs_curvature_scan(s0_m, s1_m, i0, ds0, at.curvature_1pm)
+    }
+
+    /// The scan of [`Self::max_abs_curvature_between`] over `[a, b]` (`a <= b`),
+    /// `a` in segment `i0` at `ds0` along it, `ka = κ(a)`.
+    fn max_abs_curvature_scan(&self, a: T, b: T, i0: usize, ds0: T, ka: T) -> T {
         let mut k = ka.abs().max(self.curvature_at(b).abs());
         // Unwrapped arc length of the start of segment i0.
         let base = if self.closed { a - ds0 } else { self.s[i0] };
