@@ -889,12 +889,11 @@ fn con_row<T: Real, const N: usize, const M: usize>(
     }
 }
 
-/// `Σ_{k ≥ start} a_k b_k`, in four interleaved partial sums (independent additions
-/// pipeline; one chain would wait on each addition's latency).
+/// `Σ a_k b_k` over two slices of equal length, in four interleaved partial sums
+/// (independent additions pipeline; one chain would wait on each addition's
+/// latency), then the remainder in order.
 #[inline]
-fn dot_from<T: Real, const N: usize>(a: &[T; N], b: &[T; N], start: usize) -> T {
-    let a = a.get(start..).unwrap_or(&[]);
-    let b = b.get(start..).unwrap_or(&[]);
+fn dot4<T: Real>(a: &[T], b: &[T]) -> T {
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
     let (ra, rb) = (ca.remainder(), cb.remainder());
     let mut acc = [T::ZERO; 4];
@@ -910,26 +909,18 @@ fn dot_from<T: Real, const N: usize>(a: &[T; N], b: &[T; N], start: usize) -> T 
     s
 }
 
-/// [`dot_from`] from 0 over the first `len` entries only: the same result as over
+/// `Σ_{k ≥ start} a_k b_k` ([`dot4`]).
+#[inline]
+fn dot_from<T: Real, const N: usize>(a: &[T; N], b: &[T; N], start: usize) -> T {
+    dot4(a.get(start..).unwrap_or(&[]), b.get(start..).unwrap_or(&[]))
+}
+
+/// [`dot4`] from 0 over the first `len` entries only: the same result as over
 /// all `N` when the rest of `a` is zero and `len` is a multiple of 4 (or `N`), since
 /// the four partial sums then group the entries alike.
 #[inline]
 fn dot_prefix<T: Real, const N: usize>(a: &[T; N], b: &[T; N], len: usize) -> T {
-    let a = a.get(..len).unwrap_or(a);
-    let b = b.get(..len).unwrap_or(b);
-    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    let mut acc = [T::ZERO; 4];
-    for (x, y) in ca.zip(cb) {
-        for ((s, &p), &q) in acc.iter_mut().zip(x).zip(y) {
-            *s += p * q;
-        }
-    }
-    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
-    for (&p, &q) in ra.iter().zip(rb) {
-        s += p * q;
-    }
-    s
+    dot4(a.get(..len).unwrap_or(a), b.get(..len).unwrap_or(b))
 }
 
 /// Entry of the working-set matrix `m̃_c1ᵀ m̃_c2`.

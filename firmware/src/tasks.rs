@@ -218,10 +218,9 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         self.stats.windows = self.stats.windows.wrapping_add(1);
         self.mpc.shift_s(origin_m - self.window_origin_m);
         self.window_origin_m = origin_m;
-        self.obstacles.clear();
-        r?;
+        // A refused path leaves the planner without one: no parabola either.
         self.rebuild_obstacles();
-        Ok(())
+        r
     }
 
     /// Rebuilds the parabolas of the known obstacles ([`PlanTask::set_obstacles`])

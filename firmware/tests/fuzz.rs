@@ -82,16 +82,24 @@ fn estimate() -> impl Strategy<Value = StateEstimate<f32>> {
         near(-2.0, 2.0),
         near(-0.7, 0.7),
     )
-        .prop_map(|(t, x, y, psi, vx, vy, r, d)| StateEstimate {
-            stamp_us: t,
-            x_m: x,
-            y_m: y,
-            psi_rad: psi,
-            vx_mps: vx,
-            vy_mps: vy,
-            yaw_rate_radps: r,
-            delta_rad: d,
-        })
+        .prop_map(estimate_of)
+}
+
+/// The estimate of `(stamp_us, x_m, y_m, psi_rad, vx_mps, vy_mps, yaw_rate_radps,
+/// delta_rad)`.
+fn estimate_of(
+    (t, x, y, psi, vx, vy, r, d): (u64, f32, f32, f32, f32, f32, f32, f32),
+) -> StateEstimate<f32> {
+    StateEstimate {
+        stamp_us: t,
+        x_m: x,
+        y_m: y,
+        psi_rad: psi,
+        vx_mps: vx,
+        vy_mps: vy,
+        yaw_rate_radps: r,
+        delta_rad: d,
+    }
 }
 
 /// A small deviation from a pose on the track (added by [`on_track`]): position
@@ -107,16 +115,7 @@ fn deviation() -> impl Strategy<Value = StateEstimate<f32>> {
         near(-0.5, 0.5),
         near(-0.3, 0.3),
     )
-        .prop_map(|(t, x, y, psi, vx, vy, r, d)| StateEstimate {
-            stamp_us: t,
-            x_m: x,
-            y_m: y,
-            psi_rad: psi,
-            vx_mps: vx,
-            vy_mps: vy,
-            yaw_rate_radps: r,
-            delta_rad: d,
-        })
+        .prop_map(estimate_of)
 }
 
 /// The estimate `d` relative to the track's point `k` (heading along the track).

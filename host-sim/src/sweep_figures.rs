@@ -15,6 +15,17 @@ use crate::sweep::{Aggregate, Row, BOUNDS, FACTOR_COLUMNS};
 const W: u32 = 1400;
 const H: u32 = 700;
 
+/// The label of a category axis at `x`: category `i` spans `[i, i + 1)` and is
+/// named at its middle only.
+fn category_label<S: ToString>(names: &[S], x: f64) -> String {
+    let i = x.floor() as usize;
+    if (x - x.floor() - 0.5).abs() < 1e-6 {
+        names.get(i).map(|s| s.to_string()).unwrap_or_default()
+    } else {
+        String::new()
+    }
+}
+
 fn outcome_color(o: Outcome) -> RGBColor {
     match o {
         Outcome::Ok => RGBColor(60, 160, 60),
@@ -78,14 +89,7 @@ fn outcome_rates(
         .configure_mesh()
         .disable_x_mesh()
         .x_labels(n.max(1) * 2 + 1)
-        .x_label_formatter(&|x| {
-            let i = x.floor() as usize;
-            if (x - x.floor() - 0.5).abs() < 1e-6 {
-                names.get(i).map(|s| s.to_string()).unwrap_or_default()
-            } else {
-                String::new()
-            }
-        })
+        .x_label_formatter(&|x| category_label(&names, *x))
         .x_label_style((FONT, if n > 10 { 11 } else { 14 }))
         .y_desc("fraction of runs")
         .draw()
@@ -179,14 +183,7 @@ fn per_track(
         .configure_mesh()
         .disable_x_mesh()
         .x_labels(n * 2 + 1)
-        .x_label_formatter(&|x| {
-            let i = x.floor() as usize;
-            if (x - x.floor() - 0.5).abs() < 1e-6 {
-                tracks.get(i).map(|s| s.to_string()).unwrap_or_default()
-            } else {
-                String::new()
-            }
-        })
+        .x_label_formatter(&|x| category_label(&tracks, *x))
         .x_label_style((FONT, if n > 10 { 11 } else { 14 }))
         .y_desc(unit)
         .draw()
