@@ -30,6 +30,7 @@
 
 pub mod closed_loop;
 pub mod cost_model;
+pub mod csv_value;
 pub mod disturbance;
 pub mod ecu;
 pub mod faults;

@@ -95,30 +95,9 @@ pub enum ObstacleError {
         /// 1-based line number.
         line: u64,
     },
-    /// A coordinate that is not a number.
-    #[error("{file}: line {line}: column `{column}` is `{value}`, which is not a number; write a decimal number in metres")]
-    NotANumber {
-        /// File name.
-        file: String,
-        /// 1-based line number.
-        line: u64,
-        /// Column name.
-        column: &'static str,
-        /// The text found.
-        value: String,
-    },
-    /// A NaN or infinite coordinate.
-    #[error("{file}: line {line}: column `{column}` is {value}; coordinates must be finite numbers of metres")]
-    NonFinite {
-        /// File name.
-        file: String,
-        /// 1-based line number.
-        line: u64,
-        /// Column name.
-        column: &'static str,
-        /// The value found.
-        value: f64,
-    },
+    /// A cell that is not a finite number.
+    #[error(transparent)]
+    Value(#[from] crate::csv_value::CsvValueError),
     /// The rows of one id are not contiguous.
     #[error("{file}: line {line}: obstacle `{id}` already ended at line {previous_line}, other obstacles came between; keep all rows of one obstacle together (or give this one another id)")]
     SplitId {
@@ -158,24 +137,6 @@ pub fn load_obstacles_path(path: impl AsRef<Path>) -> Result<Vec<Obstacle>, Obst
         source,
     })?;
     load_obstacles_reader(f, &file)
-}
-
-fn coord(file: &str, line: u64, column: &'static str, text: &str) -> Result<f64, ObstacleError> {
-    let v: f64 = text.trim().parse().map_err(|_| ObstacleError::NotANumber {
-        file: file.to_string(),
-        line,
-        column,
-        value: text.to_string(),
-    })?;
-    if !v.is_finite() {
-        return Err(ObstacleError::NonFinite {
-            file: file.to_string(),
-            line,
-            column,
-            value: v,
-        });
-    }
-    Ok(v)
 }
 
 /// Loads obstacles from any reader; `name` stands for the file in errors.
@@ -238,8 +199,8 @@ pub fn load_obstacles_reader(
                 line,
             });
         }
-        let x = coord(file, line, "x_m", rec.get(1).unwrap_or(""))?;
-        let y = coord(file, line, "y_m", rec.get(2).unwrap_or(""))?;
+        let x = crate::csv_value::finite_metres(file, line, "x_m", rec.get(1).unwrap_or(""))?;
+        let y = crate::csv_value::finite_metres(file, line, "y_m", rec.get(2).unwrap_or(""))?;
         match out.last_mut() {
             Some((o, _, last)) if o.id == head => {
                 o.vertices.push([x, y]);

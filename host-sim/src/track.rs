@@ -99,30 +99,9 @@ pub enum TrackError {
         /// Columns expected.
         expected: usize,
     },
-    /// A value that is not a number.
-    #[error("{file}: line {line}: column `{column}` is `{value}`, which is not a number; write a decimal number in metres")]
-    NotANumber {
-        /// File name.
-        file: String,
-        /// 1-based line number.
-        line: u64,
-        /// Column name.
-        column: &'static str,
-        /// The text found.
-        value: String,
-    },
-    /// A NaN or infinite value.
-    #[error("{file}: line {line}: column `{column}` is {value}; every value must be a finite number of metres")]
-    NonFinite {
-        /// File name.
-        file: String,
-        /// 1-based line number.
-        line: u64,
-        /// Column name.
-        column: &'static str,
-        /// The value found.
-        value: f64,
-    },
+    /// A cell that is not a finite number.
+    #[error(transparent)]
+    Value(#[from] crate::csv_value::CsvValueError),
     /// A negative half-width.
     #[error("{file}: line {line}: column `{column}` is {value} m; a half-width is a distance from the centre line and must be >= 0")]
     NegativeWidth {
@@ -267,24 +246,6 @@ pub fn pose_along(pieces: &[TrackPiece], start: [f64; 3], s: f64) -> [f64; 3] {
     pose
 }
 
-fn parse_value(file: &str, line: u64, column: &'static str, text: &str) -> Result<f64, TrackError> {
-    let v: f64 = text.trim().parse().map_err(|_| TrackError::NotANumber {
-        file: file.to_string(),
-        line,
-        column,
-        value: text.to_string(),
-    })?;
-    if !v.is_finite() {
-        return Err(TrackError::NonFinite {
-            file: file.to_string(),
-            line,
-            column,
-            value: v,
-        });
-    }
-    Ok(v)
-}
-
 fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }
@@ -383,7 +344,12 @@ impl Track {
             }
             let mut v = [0.0; 4];
             for (i, slot) in v.iter_mut().enumerate().take(expected) {
-                *slot = parse_value(file, line, COLUMN_NAMES[i], rec.get(i).unwrap_or(""))?;
+                *slot = crate::csv_value::finite_metres(
+                    file,
+                    line,
+                    COLUMN_NAMES[i],
+                    rec.get(i).unwrap_or(""),
+                )?;
             }
             if expected == 2 {
                 v[2] = DEFAULT_HALF_WIDTH_M;

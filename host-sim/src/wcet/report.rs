@@ -350,10 +350,7 @@ pub fn ecu_masked() -> Vec<String> {
 /// disassembly `USART1` calls `Mpc::step_observed`, `USART2` `Link::receive`);
 /// `SysTick`, the monotonic's interrupt, is the highest.
 pub fn ecu_priority_levels() -> Vec<PriorityLevel> {
-    let level = |name: &str, roots: &[&str]| PriorityLevel {
-        name: name.to_string(),
-        roots: roots.iter().map(|r| r.to_string()).collect(),
-    };
+    let level = PriorityLevel::new;
     vec![
         level("thread (main: init, idle)", &["main"]),
         level("priority 1 (plan, dispatcher USART1)", &["USART1"]),
@@ -1259,7 +1256,7 @@ fn compare_quantity(
 mod tests {
     use super::*;
     use crate::wcet::cpi::Figures;
-    use crate::wcet::stack::{parse_objdump, stack_bound};
+    use crate::wcet::stack::{parse_objdump, stack_bound, tests::levels};
 
     const HEADER: &str = "activation,release_us,finish_us,instructions,cycles,status,published,\
 deadline_miss,passes,qp_iterations,qp_added,qp_removed,qp_refactorizations,rows,\
@@ -1345,16 +1342,7 @@ active_constraints,max_validity_slack_rad";
  8000010:      \tpush\t{r7, lr}
  8000012:      \tblx\tr2
 ";
-        let levels = [
-            PriorityLevel {
-                name: "thread".into(),
-                roots: vec!["main".into()],
-            },
-            PriorityLevel {
-                name: "priority 1".into(),
-                roots: vec!["USART1".into()],
-            },
-        ];
+        let levels = levels(&["main", "USART1"]);
         Ok(stack_bound(&parse_objdump(text), &levels)?)
     }
 

@@ -558,6 +558,16 @@ pub struct PriorityLevel {
     pub roots: Vec<String>,
 }
 
+impl PriorityLevel {
+    /// A level named `name` whose tasks start at `roots`.
+    pub fn new(name: &str, roots: &[&str]) -> Self {
+        Self {
+            name: name.to_string(),
+            roots: roots.iter().map(|r| r.to_string()).collect(),
+        }
+    }
+}
+
 /// Depths of every function, computed once.
 struct Depths {
     depth: Vec<u32>,
@@ -860,8 +870,21 @@ pub fn analyse_elf_once(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// The thread level with root `roots[0]`, then `priority i` with root `roots[i]`.
+    pub(crate) fn levels(roots: &[&str]) -> Vec<PriorityLevel> {
+        let name = |i: usize| match i {
+            0 => "thread".to_string(),
+            _ => format!("priority {i}"),
+        };
+        roots
+            .iter()
+            .enumerate()
+            .map(|(i, r)| PriorityLevel::new(&name(i), &[r]))
+            .collect()
+    }
 
     /// A hand-written disassembly: `main` calls `leaf` and `big` (large frame via
     /// movw/movt), `big` tail-calls `leaf`; `handler` calls through a register.
@@ -946,16 +969,7 @@ Disassembly of section .text:
     #[test]
     fn worst_path_and_preemption_levels() -> Result<(), WcetError> {
         let p = program();
-        let levels = [
-            PriorityLevel {
-                name: "thread".into(),
-                roots: vec!["main".into()],
-            },
-            PriorityLevel {
-                name: "priority 1".into(),
-                roots: vec!["leaf".into()],
-            },
-        ];
+        let levels = levels(&["main", "leaf"]);
         let report = stack_bound(&p, &levels)?;
         let main = 52;
         let leaf = 36 + 0x400;
@@ -976,13 +990,7 @@ Disassembly of section .text:
 
     #[test]
     fn indirect_call_makes_the_bound_unsound() -> Result<(), WcetError> {
-        let report = stack_bound(
-            &program(),
-            &[PriorityLevel {
-                name: "thread".into(),
-                roots: vec!["handler".into()],
-            }],
-        )?;
+        let report = stack_bound(&program(), &levels(&["handler"]))?;
         assert!(!report.sound);
         assert_eq!(report.indirect_calls.len(), 1);
         assert_eq!(report.indirect_calls[0].function, "handler");
@@ -1004,16 +1012,7 @@ Disassembly of section .text:
  8000020:      \tsub.w\tsp, sp, #0x400
  8000024:      \tb\t0x8000020 <stop>
 ";
-        let levels = [
-            PriorityLevel {
-                name: "thread".into(),
-                roots: vec!["t".into()],
-            },
-            PriorityLevel {
-                name: "priority 1".into(),
-                roots: vec!["h".into()],
-            },
-        ];
+        let levels = levels(&["t", "h"]);
         let p = parse_objdump(text);
         let every = stack_bound(&p, &levels)?;
         assert_eq!(every.total_bytes, (8 + 1024) + (16 + 1024 + 104));
@@ -1042,16 +1041,7 @@ Disassembly of section .text:
  8000030:      \tpush\t{r7, lr}
  8000032:      \tb\t0x8000030 <idle>
 ";
-        let levels = [
-            PriorityLevel {
-                name: "thread".into(),
-                roots: vec!["main".into()],
-            },
-            PriorityLevel {
-                name: "priority 1".into(),
-                roots: vec!["h".into()],
-            },
-        ];
+        let levels = levels(&["main", "h"]);
         let p = parse_objdump(text);
         let h = 16 + 256 + 104;
         assert_eq!(stack_bound(&p, &levels)?.total_bytes, 8 + 2048 + h);
@@ -1076,13 +1066,7 @@ Disassembly of section .text:
 08000020 <c>:
  8000020:      \tbx\tlr
 ";
-        let report = stack_bound(
-            &parse_objdump(text),
-            &[PriorityLevel {
-                name: "thread".into(),
-                roots: vec!["a".into()],
-            }],
-        )?;
+        let report = stack_bound(&parse_objdump(text), &levels(&["a"]))?;
         assert!(!report.sound);
         assert_eq!(
             report.cycles,
@@ -1104,13 +1088,7 @@ Disassembly of section .text:
             p.get("f").map(|f| f.frame.clone()),
             Some(Frame::Unknown { known_bytes: 8, .. })
         ));
-        let report = stack_bound(
-            &p,
-            &[PriorityLevel {
-                name: "thread".into(),
-                roots: vec!["f".into()],
-            }],
-        )?;
+        let report = stack_bound(&p, &levels(&["f"]))?;
         assert!(!report.sound);
         assert_eq!(report.unknown_frames.len(), 1);
         Ok(())
@@ -1122,13 +1100,7 @@ Disassembly of section .text:
         assert!(p.add_alias("USART1", 0x0800_0401));
         assert_eq!(p.get("USART1").map(|f| f.name.as_str()), Some("handler"));
         assert!(!p.add_alias("nowhere", 0x0900_0000));
-        let err = stack_bound(
-            &p,
-            &[PriorityLevel {
-                name: "thread".into(),
-                roots: vec!["missing".into()],
-            }],
-        );
+        let err = stack_bound(&p, &levels(&["missing"]));
         assert!(matches!(err, Err(WcetError::UnknownRoot(_))));
     }
 }
