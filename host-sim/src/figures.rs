@@ -16,36 +16,28 @@ const W: u32 = 1400;
 pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
     register_font()?;
     trajectory(&dir.join("trajectory.png"), scenario, r)?;
-    let t: Vec<f64> = r.log.iter().map(|l| l.t_s).collect();
-    // The references exist from the first plan on (the actuators are safe before).
-    let planned = |v: f64, l: &crate::closed_loop::LogRow| {
-        if l.control_mode == "safe" && l.plan_status == "none" {
-            f64::NAN
-        } else {
-            v
-        }
+    // One column of the log.
+    let col = |f: &dyn Fn(&LogRow) -> f64| r.log.iter().map(f).collect::<Vec<f64>>();
+    // A reference column: it exists from the first plan on (the actuators are safe before).
+    let planned = |f: fn(&LogRow) -> f64| {
+        col(&|l: &LogRow| {
+            if l.control_mode == "safe" && l.plan_status == "none" {
+                f64::NAN
+            } else {
+                f(l)
+            }
+        })
     };
+    let t = col(&|l| l.t_s);
     time_series(
         &dir.join("speed.png"),
         "Speed: V_heur (red) and V^r (green) from the first plan, V (blue)",
         "m/s",
         &t,
         &[
-            (
-                &r.log
-                    .iter()
-                    .map(|l| planned(l.v_heur_mps, l))
-                    .collect::<Vec<_>>(),
-                RED,
-            ),
-            (&r.log.iter().map(|l| l.v_mps).collect::<Vec<_>>(), BLUE),
-            (
-                &r.log
-                    .iter()
-                    .map(|l| planned(l.v_ref_mps, l))
-                    .collect::<Vec<_>>(),
-                GREEN,
-            ),
+            (&planned(|l| l.v_heur_mps), RED),
+            (&col(&|l| l.v_mps), BLUE),
+            (&planned(|l| l.v_ref_mps), GREEN),
         ],
     )?;
     time_series(
@@ -54,11 +46,8 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
         "rad",
         &t,
         &[
-            (&r.log.iter().map(|l| l.delta_rad).collect::<Vec<_>>(), BLUE),
-            (
-                &r.log.iter().map(|l| l.delta_cl_rad).collect::<Vec<_>>(),
-                GREEN,
-            ),
+            (&col(&|l| l.delta_rad), BLUE),
+            (&col(&|l| l.delta_cl_rad), GREEN),
         ],
     )?;
     time_series(
@@ -66,10 +55,7 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
         "Front-left wheel torque",
         "N·m",
         &t,
-        &[(
-            &r.log.iter().map(|l| l.torque_fl_nm).collect::<Vec<_>>(),
-            BLUE,
-        )],
+        &[(&col(&|l| l.torque_fl_nm), BLUE)],
     )?;
     time_series(
         &dir.join("lateral.png"),
@@ -77,15 +63,9 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
         "m, -",
         &t,
         &[
+            (&col(&|l| l.lateral_error_m), BLUE),
             (
-                &r.log.iter().map(|l| l.lateral_error_m).collect::<Vec<_>>(),
-                BLUE,
-            ),
-            (
-                &r.log
-                    .iter()
-                    .map(|l: &LogRow| l.ay_mps2 / (r.summary.mu * f64::from(firmware::G)))
-                    .collect::<Vec<_>>(),
+                &col(&|l| l.ay_mps2 / (r.summary.mu * f64::from(firmware::G))),
                 RED,
             ),
         ],
