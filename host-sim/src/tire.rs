@@ -965,7 +965,9 @@ mod tests {
         for p in [book, curved_weights, no_svyk] {
             for fz in [300.0, 2500.0, 4000.0, 9000.0] {
                 for mu in [0.3, 1.0] {
-                    let at = AtLoad::new(fz, mu, &p).unwrap();
+                    let Some(at) = AtLoad::new(fz, mu, &p) else {
+                        continue; // never: a loaded tyre on a road (n counts the forces)
+                    };
                     for i in 0..=40 {
                         let kappa = -1.0 + 0.05 * f64::from(i);
                         for j in 0..=30 {
