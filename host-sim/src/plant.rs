@@ -120,6 +120,16 @@
 //! [`brake_lock_radps`]: the full torque against the rotation above `ω_lock`, and a
 //! stiff viscous lock below, so a locked wheel stays (nearly) still instead of
 //! reversing, and the derivative stays continuous for RK4.
+//!
+//! # Speed
+//!
+//! What does not change within a step is computed once per step (`sin δ`, `cos δ`,
+//! the brake-lock speeds); roll, pitch and yaw share one `sin_cos` each per
+//! evaluation. The rest of the time is the tyres' `atan`, `sin` and `cos` (the C
+//! library's, bit for bit reproducible on one machine; see the tyre module's *Speed
+//! and determinism*), which [`crate::tire::AtLoad::forces`] calls in rounds of
+//! independent calls. `PLANT_BENCH_STEPS=N cargo bench -p host-sim --bench plant`
+//! runs a fixed number of steps (for instruction counters).
 
 use crate::tire;
 use crate::vehicle::{InvalidField, VehicleParams};
