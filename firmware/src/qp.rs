@@ -621,7 +621,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             | QpStatus::Infeasible
             | QpStatus::WorkingSetFull
             | QpStatus::NumericalError => {
-                self.work.output(&self.problem, &mut self.solution);
+                // At `Optimal`, `u` and `x` are those of the final multipliers already.
+                let fresh = status == QpStatus::Optimal;
+                self.work.output(&self.problem, &mut self.solution, fresh);
             }
             _ => {
                 self.work.n = 0;
@@ -649,8 +651,8 @@ fn is_nan<T: Real>(v: T) -> bool {
     v.partial_cmp(&v).is_none()
 }
 
-/// 0 if every entry of `v` is finite, NaN otherwise: `x − x` is 0 for a finite `x`
-/// and NaN for ±∞ and NaN (one subtraction and one addition per entry, no branch).
+/// ±0 if every entry of `v` is finite, NaN otherwise: `x·0` is ±0 for a finite `x`
+/// and NaN for ±∞ and NaN (one multiplication and one addition per entry, no branch).
 #[inline]
 fn nonfinite_probe<T: Real>(v: &[T]) -> T {
     let mut acc = [T::ZERO; 4];
@@ -658,12 +660,12 @@ fn nonfinite_probe<T: Real>(v: &[T]) -> T {
     let rest = chunks.remainder();
     for c in chunks {
         for (a, &x) in acc.iter_mut().zip(c) {
-            *a += x - x;
+            *a += x * T::ZERO;
         }
     }
     let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
     for &x in rest {
-        s += x - x;
+        s += x * T::ZERO;
     }
     s
 }
@@ -1625,9 +1627,13 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         })
     }
 
-    /// Writes `x`, multipliers and cost for the current iterate.
-    fn output(&mut self, p: &QpProblem<T, N, M>, sol: &mut QpSolution<T, N, M>) {
-        self.primal(p, &mut sol.x);
+    /// Writes `x` (unless `fresh`), multipliers and cost for the current iterate.
+    /// `fresh`: `u` and `sol.x` already belong to the current multipliers (the
+    /// optimal exit), so the primal point is not recomputed.
+    fn output(&mut self, p: &QpProblem<T, N, M>, sol: &mut QpSolution<T, N, M>, fresh: bool) {
+        if !fresh {
+            self.primal(p, &mut sol.x);
+        }
         sol.lambda_rows.fill(T::ZERO);
         sol.lambda_bounds.fill(T::ZERO);
         let mut soft_cost = T::ZERO;
@@ -1735,6 +1741,58 @@ mod tests {
                 }
                 let want = if r == c { 1.0 } else { 0.0 };
                 assert!((v - want).abs() < 1e-10, "({r},{c}) = {v}");
+            }
+        }
+    }
+
+    /// Every bound's row of `R⁻¹`, stored in the lower triangle of `h` next to `R`,
+    /// reads back as `e_jᵀ R⁻¹` (checked against `R⁻¹ e_k` by back substitution),
+    /// and the rows' products are those of `R⁻¹`'s rows.
+    #[test]
+    fn bound_rows_in_the_lower_triangle_are_rows_of_the_inverse() {
+        let mut s = filled(5);
+        assert!(factor_h(&mut s.problem.h));
+        let r = s.problem.h;
+        // Columns of R⁻¹ from the upper triangle alone, before any row is stored.
+        let mut inv = [[0.0; 5]; 5];
+        for k in 0..5 {
+            let mut e = [0.0; 5];
+            e[k] = 1.0;
+            let mut col = [0.0; 5];
+            solve_upper(&r, &e, &mut col);
+            for j in 0..5 {
+                inv[j][k] = col[j];
+            }
+        }
+        transform(&mut s.problem, &mut s.work);
+        // R itself is untouched.
+        for j in 0..5 {
+            for k in j..5 {
+                assert_eq!(s.problem.h[j][k], r[j][k]);
+            }
+        }
+        for j in 0..5u16 {
+            let row = con_row(&s.problem, ConstraintIndex::Bound(j));
+            assert_eq!(row.start, j as usize);
+            let mut full = [0.0; 5];
+            full[row.start] = row.head;
+            full[row.start + 1..].copy_from_slice(row.tail);
+            for k in 0..5 {
+                assert!(
+                    (full[k] - inv[j as usize][k]).abs() < 1e-12,
+                    "R⁻¹[{j}][{k}]"
+                );
+            }
+            for i in 0..5u16 {
+                let want: f64 = (0..5)
+                    .map(|k| inv[i as usize][k] * inv[j as usize][k])
+                    .sum();
+                let got = mdot(
+                    &s.problem,
+                    ConstraintIndex::Bound(i),
+                    ConstraintIndex::Bound(j),
+                );
+                assert!((got - want).abs() < 1e-12, "({i}, {j})");
             }
         }
     }
