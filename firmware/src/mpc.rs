@@ -999,14 +999,59 @@ impl<T: Real> Condensing<T> {
         };
         for i in 0..NX {
             let out = &mut new[i];
-            out[..used].fill(T::ZERO);
-            for l in 0..NX {
-                let ail = lin.a[i][l];
+            // Row i of A has at most four nonzeros (the kinematic bicycle's
+            // structure); they are summed in column order in one pass per entry,
+            // the same sums as adding one column after the other to a zero row.
+            let mut terms: [(&[T; NV], T); 4] = [(&old[0], T::ZERO); 4];
+            let mut cnt = 0;
+            let mut extra = false;
+            for (l, &ail) in lin.a[i].iter().enumerate() {
                 if ail == T::ZERO {
                     continue;
                 }
-                for (o, s) in out[..used].iter_mut().zip(old[l][..used].iter()) {
-                    *o += ail * *s;
+                match terms.get_mut(cnt) {
+                    Some(t) => {
+                        *t = (&old[l], ail);
+                        cnt += 1;
+                    }
+                    None => extra = true,
+                }
+            }
+            let [(s0, a0), (s1, a1), (s2, a2), (s3, a3)] = terms;
+            let o = &mut out[..used];
+            match cnt {
+                0 => o.fill(T::ZERO),
+                1 => {
+                    for (j, d) in o.iter_mut().enumerate() {
+                        *d = a0 * s0[j];
+                    }
+                }
+                2 => {
+                    for (j, d) in o.iter_mut().enumerate() {
+                        *d = a0 * s0[j] + a1 * s1[j];
+                    }
+                }
+                3 => {
+                    for (j, d) in o.iter_mut().enumerate() {
+                        *d = (a0 * s0[j] + a1 * s1[j]) + a2 * s2[j];
+                    }
+                }
+                4 if !extra => {
+                    for (j, d) in o.iter_mut().enumerate() {
+                        *d = ((a0 * s0[j] + a1 * s1[j]) + a2 * s2[j]) + a3 * s3[j];
+                    }
+                }
+                _ => {
+                    o.fill(T::ZERO);
+                    for l in 0..NX {
+                        let ail = lin.a[i][l];
+                        if ail == T::ZERO {
+                            continue;
+                        }
+                        for (d, s) in o.iter_mut().zip(old[l][..used].iter()) {
+                            *d += ail * *s;
+                        }
+                    }
                 }
             }
             out[used] = lin.b[i][0];
@@ -1282,18 +1327,71 @@ fn lin_row_into<T: Real>(
     u_bar: &[[T; NU]; HORIZON],
     ncols: usize,
 ) -> T {
-    row.fill(T::ZERO);
+    let n = ncols.min(NV);
+    // The terms with a nonzero coefficient (at most three are used), summed in their
+    // order in one pass per entry, with the dot product `row·ū` in the same pass
+    // (the same sums as adding one term after the other to a zero row).
+    let mut used: [(&[T; NV], T); 3] = [(&sens[0], T::ZERO); 3];
+    let mut cnt = 0;
+    let mut extra = false;
     for &(state, coef) in terms {
         if coef == T::ZERO {
             continue;
         }
         if let Some(srow) = sens.get(state) {
-            for j in 0..ncols {
-                row[j] += coef * srow[j];
+            match used.get_mut(cnt) {
+                Some(t) => {
+                    *t = (srow, coef);
+                    cnt += 1;
+                }
+                None => extra = true,
             }
         }
     }
-    nominal - dot(row, u_bar, ncols)
+    if let Some(tail) = row.get_mut(n..) {
+        tail.fill(T::ZERO);
+    }
+    let u = u_bar.as_flattened();
+    let mut acc = T::ZERO;
+    let [(s0, c0), (s1, c1), (s2, c2)] = used;
+    match cnt {
+        1 if !extra => {
+            for j in 0..n {
+                let r = c0 * s0[j];
+                row[j] = r;
+                acc += r * u[j];
+            }
+        }
+        2 if !extra => {
+            for j in 0..n {
+                let r = c0 * s0[j] + c1 * s1[j];
+                row[j] = r;
+                acc += r * u[j];
+            }
+        }
+        3 if !extra => {
+            for j in 0..n {
+                let r = (c0 * s0[j] + c1 * s1[j]) + c2 * s2[j];
+                row[j] = r;
+                acc += r * u[j];
+            }
+        }
+        _ => {
+            row.fill(T::ZERO);
+            for &(state, coef) in terms {
+                if coef == T::ZERO {
+                    continue;
+                }
+                if let Some(srow) = sens.get(state) {
+                    for j in 0..n {
+                        row[j] += coef * srow[j];
+                    }
+                }
+            }
+            acc = dot(row, u_bar, n);
+        }
+    }
+    nominal - acc
 }
 
 /// [`Condensing::cost_row`] of `row` with `(w, √w)`.

@@ -64,18 +64,19 @@
 //! factorisation). When a small pivot may come from accumulated rounding, or a solve
 //! gives non-finite multipliers, the factor is recomputed from scratch (counted).
 //!
-//! **Cost.** Per solve: Cholesky and in-place inverse of `H` (`N³/3` multiply-adds; the
-//! inverse and the row transformation as row `axpy`s, the dot products in four partial
-//! sums, so that the host pipelines and vectorises them),
-//! transformation of a row (`N²/2`) only when it first enters the working set in the
-//! solve (an inactive row's value is checked as `a_iᵀx`, `x = R⁻¹u`, which equals
-//! `m̃_iᵀu`). Per iteration: `O(m·N)` for the constraint values, `O(|W|·N + |W|²)` for the multipliers and the factor update. The counters of
+//! **Cost.** Per solve: Cholesky of `H` (`N³/6` multiply-adds; none when the caller
+//! gives the factor `R`, see [`QpProblem::h_factor`]); `R` is never inverted: `v`,
+//! a row's transformation `a_iᵀR⁻¹` and a bound's row `e_jᵀR⁻¹` are triangular
+//! solves with `Rᵀ` (`N²/2`, row `axpy`s), the last two only when the constraint
+//! first enters the working set in the solve (an inactive row's value is checked as
+//! `a_iᵀx`, `x = R⁻¹u` by back substitution, which equals `m̃_iᵀu`); dot products
+//! in four partial sums, so that the host pipelines and vectorises them. Per iteration: `O(m·N)` for the constraint values, `O(|W|·N + |W|²)` for the multipliers and the factor update. The counters of
 //! [`QpSolution`] (iterations, additions, removals, refactorisations) are
 //! deterministic, so a time budget can be derived from them.
 //!
 //! **Storage.** The solver owns the problem; [`QpSolver::solve`] overwrites `H` with
-//! `R⁻¹` (upper triangle, lower triangle zeroed) and the rows `a_i` that entered the
-//! working set with `a_i R⁻¹`, so
+//! its factor `R` (upper triangle) and the rows `e_jᵀR⁻¹` of the bounds that entered
+//! the working set (lower triangle), and the rows `a_i` that entered with `a_i R⁻¹`, so
 //! the caller refills them before every solve (the MPC rebuilds them anyway). Nothing is
 //! allocated; there is no recursion; the sizes are const generics checked at compile
 //! time.
@@ -258,7 +259,8 @@ struct Tols<T> {
 #[derive(Clone, Debug)]
 pub struct QpProblem<T, const N: usize, const M: usize> {
     /// Hessian `H` (`N×N`, symmetric positive definite; only the upper triangle
-    /// `h[r][c]`, `c ≥ r`, is read). Overwritten by `R⁻¹` during a solve.
+    /// `h[r][c]`, `c ≥ r`, is read). Overwritten during a solve by its factor `R` (upper
+    /// triangle) and rows of `R⁻¹` (lower triangle).
     pub h: [[T; N]; N],
     /// Linear cost `f` (`N`).
     pub f: [T; N],
@@ -438,6 +440,10 @@ struct Workspace<T, const N: usize, const M: usize, const W: usize, const WL: us
     v: [T; N],
     /// `u = R x` (`N`).
     u: [T; N],
+    /// Whether bound `j`'s row `e_jᵀ R⁻¹` is stored in this solve (`N`): `R` itself
+    /// is kept, not inverted, and a bound's row is computed when it enters the working
+    /// set, into the lower triangle of `h` (see [`store_inverse_row`]).
+    bound_ready: [bool; N],
     /// Side at which each row is active (`M`).
     row_state: [Option<Side>; M],
     /// Side at which each bound is active (`N`).
@@ -510,6 +516,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 ldl: [T::ZERO; WL],
                 v: [T::ZERO; N],
                 u: [T::ZERO; N],
+                bound_ready: [false; N],
                 row_state: [None; M],
                 bound_state: [None; N],
                 updates: 0,
@@ -529,7 +536,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         &mut self.problem
     }
 
-    /// The problem (after a solve, `h` holds `R⁻¹`, and each row that entered the
+    /// The problem (after a solve, `h` holds `R` (`H = RᵀR`), and each row that entered the
     /// working set holds `a_iᵀ R⁻¹`, the others `a_iᵀ`).
     pub fn problem(&self) -> &QpProblem<T, N, M> {
         &self.problem
@@ -588,7 +595,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 Some(st) => st,
                 None => {
                     let floored = if self.problem.h_factor {
-                        invert_factor(&mut self.problem.h)
+                        prepare_factor(&mut self.problem.h)
                     } else {
                         factor_h_counted(&mut self.problem.h)
                     };
@@ -597,7 +604,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                         QpStatus::NotConvex
                     } else {
                         let p = &mut self.problem;
-                        row_times_upper(&p.f, &p.h, &mut self.work.v);
+                        self.work.v = p.f;
+                        solve_transposed(&p.h, &mut self.work.v, 0);
                         let tols = self.settings.effective();
                         self.work.start(p, &self.settings, tols);
                         self.work
@@ -613,7 +621,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             | QpStatus::Infeasible
             | QpStatus::WorkingSetFull
             | QpStatus::NumericalError => {
-                self.work.output(&self.problem, &mut self.solution);
+                // At `Optimal`, `u` and `x` are those of the final multipliers already.
+                let fresh = status == QpStatus::Optimal;
+                self.work.output(&self.problem, &mut self.solution, fresh);
             }
             _ => {
                 self.work.n = 0;
@@ -641,6 +651,25 @@ fn is_nan<T: Real>(v: T) -> bool {
     v.partial_cmp(&v).is_none()
 }
 
+/// ±0 if every entry of `v` is finite, NaN otherwise: `x·0` is ±0 for a finite `x`
+/// and NaN for ±∞ and NaN (one multiplication and one addition per entry, no branch).
+#[inline]
+fn nonfinite_probe<T: Real>(v: &[T]) -> T {
+    let mut acc = [T::ZERO; 4];
+    let chunks = v.chunks_exact(4);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for (a, &x) in acc.iter_mut().zip(c) {
+            *a += x * T::ZERO;
+        }
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for &x in rest {
+        s += x * T::ZERO;
+    }
+    s
+}
+
 /// Input checks; `None` if the problem is acceptable.
 /// Also writes `row_code` (see [`Workspace::row_code`]) for the used rows.
 fn validate<T: Real, const N: usize, const M: usize>(
@@ -651,12 +680,16 @@ fn validate<T: Real, const N: usize, const M: usize>(
         return Some(QpStatus::InvalidInput);
     }
     let rows = p.a.get(..p.m).unwrap_or(&[]);
-    let mut finite =
-        p.h.iter().all(|r| r.iter().all(|v| v.is_finite())) && p.f.iter().all(|v| v.is_finite());
+    let mut probe = nonfinite_probe(&p.f);
+    for r in p.h.iter() {
+        probe += nonfinite_probe(r);
+    }
     let full = N - N % 4;
     for (r, code) in rows.iter().zip(row_code.iter_mut()) {
-        finite &= r.iter().all(|v| v.is_finite());
+        // A NaN or ±∞ is nonzero: it lies in the prefix up to the last nonzero entry
+        // (the rest are zeros), so only the prefix needs the finiteness probe.
         let last = r.iter().rposition(|&v| v != T::ZERO).map_or(0, |j| j + 1);
+        probe += nonfinite_probe(r.get(..last).unwrap_or(r));
         let groups = last.div_ceil(4);
         *code = if 4 * groups > full || groups >= ROW_FULL as usize {
             ROW_FULL
@@ -674,7 +707,8 @@ fn validate<T: Real, const N: usize, const M: usize>(
         nan |= is_nan(l) || is_nan(h) || !s.is_finite();
         bad_bound |= l > h || l == T::INFINITY || h == -T::INFINITY || s < T::ZERO;
     }
-    if !finite || nan {
+    // NaN != 0: the probe is 0 exactly when every entry is finite.
+    if probe != T::ZERO || nan {
         Some(QpStatus::NonFiniteInput)
     } else if bad_bound {
         Some(QpStatus::InvalidInput)
@@ -684,10 +718,9 @@ fn validate<T: Real, const N: usize, const M: usize>(
 }
 
 /// `h` holds an upper-triangular factor `R` (`H = RᵀR`): makes its diagonal
-/// positive (a row's sign is free), floors a pivot below `√ε·‖R_·j‖` as
-/// [`factor_h_counted`] does, and inverts it in place. `None` for a zero or
-/// non-finite column.
-fn invert_factor<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
+/// positive (a row's sign is free) and floors a pivot below `√ε·‖R_·j‖` as
+/// [`factor_h_counted`] does. `None` for a zero or non-finite column.
+fn prepare_factor<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
     let mut floored = 0u32;
     for j in 0..N {
         if h[j][j] < T::ZERO {
@@ -709,7 +742,6 @@ fn invert_factor<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
             floored += 1;
         }
     }
-    invert_upper(h);
     Some(floored)
 }
 
@@ -741,8 +773,8 @@ pub fn add_square_root_row<T: Real, const N: usize>(
     }
 }
 
-/// Cholesky `H = RᵀR` in the upper triangle, then `R ← R⁻¹` in place, lower triangle
-/// zeroed. False if a pivot is not clearly positive.
+/// Cholesky `H = RᵀR` in the upper triangle (the lower triangle keeps `H`'s, never
+/// read). False if a pivot is not clearly positive.
 #[cfg(test)]
 fn factor_h<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> bool {
     factor_h_counted(h).is_some()
@@ -789,76 +821,126 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
             h[j][i] = s / rjj;
         }
     }
-    invert_upper(h);
     Some(floored)
 }
 
-/// In-place inverse of the upper-triangular `R` (positive diagonal), row by row from
-/// the bottom; lower triangle zeroed.
-///
-/// Row `i` of `X = R⁻¹` follows from row `i` of `R X = I`:
-/// `X_i = (e_i − Σ_{k>i} R_ik X_k) / R_ii`, a sum of rows of `X` already computed
-/// (contiguous `axpy`s, which pipeline and vectorise, instead of strided dot products).
-fn invert_upper<T: Real, const N: usize>(h: &mut [[T; N]; N]) {
-    // Row i of R from column i on (the rest of the buffer is not read).
-    let mut r_row = [T::ZERO; N];
-    for i in (0..N).rev() {
-        let (top, below) = h.split_at_mut(i + 1);
-        let Some(xi) = top.last_mut() else {
-            continue;
-        };
-        r_row[i..].copy_from_slice(&xi[i..]);
-        let inv = T::ONE / r_row[i];
-        xi.fill(T::ZERO);
-        let tail = xi.get_mut(i + 1..).unwrap_or(&mut []);
-        let r_tail = r_row.get(i + 1..).unwrap_or(&[]);
-        for (xk, &c) in below.iter().zip(r_tail) {
-            if c == T::ZERO {
-                continue;
+/// `x ← x R⁻¹` in place for the upper-triangular `R` (upper triangle of `r`, positive
+/// diagonal): solves `Rᵀ y = x` forwards, `y_j = (x_j − Σ_{k<j} y_k R_kj) / R_jj`.
+/// The entries of `x` before `start` must be zero (they stay zero). Row `axpy`s:
+/// once `y_j` is final, its share leaves the later entries (contiguous, like the
+/// rows of `R`); zero entries skipped.
+fn solve_transposed<T: Real, const N: usize>(r: &[[T; N]; N], x: &mut [T; N], start: usize) {
+    for j in start..N {
+        // Σ_{start≤k<j} y_k R_kj in four partial sums, as `dot4` groups them.
+        let mut acc = [T::ZERO; 4];
+        let mut k = start;
+        while k + 4 <= j {
+            for (q, a) in acc.iter_mut().enumerate() {
+                *a += x[k + q] * r[k + q][j];
             }
-            // Row k of X is zero before column k > i: sum over all of `tail` anyway
-            // (contiguous and of fixed length, so it vectorises).
-            for (d, &v) in tail.iter_mut().zip(xk.get(i + 1..).unwrap_or(&[])) {
-                *d += c * v;
-            }
+            k += 4;
         }
-        for d in tail.iter_mut() {
-            *d = -*d * inv;
+        let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+        while k < j {
+            s += x[k] * r[k][j];
+            k += 1;
         }
-        xi[i] = inv;
+        x[j] = (x[j] - s) / r[j][j];
     }
 }
 
-/// `out = xᵀ U` for an upper-triangular `U`: `out_j = Σ_{k≤j} x_k U_kj`, as a sum of
-/// the rows of `U` (contiguous `axpy`s; zero entries of `x` skipped).
-#[inline]
-fn row_times_upper<T: Real, const N: usize>(x: &[T; N], u: &[[T; N]; N], out: &mut [T; N]) {
+/// `x = R⁻¹ u` for the upper-triangular `R` (upper triangle of `r`, positive
+/// diagonal), by back substitution `x_j = (u_j − Σ_{k>j} R_jk x_k) / R_jj` (each sum
+/// a contiguous dot product over row `j` of `R`).
+fn solve_upper<T: Real, const N: usize>(r: &[[T; N]; N], u: &[T; N], x: &mut [T; N]) {
+    for j in (0..N).rev() {
+        let s = dot_from(&r[j], x, j + 1);
+        x[j] = (u[j] - s) / r[j][j];
+    }
+}
+
+/// Row `j` of `R⁻¹` (`e_jᵀ R⁻¹`, zero before column `j`) into `out`.
+fn inverse_row<T: Real, const N: usize>(r: &[[T; N]; N], j: usize, out: &mut [T; N]) {
     out.fill(T::ZERO);
-    for (k, (&c, uk)) in x.iter().zip(u.iter()).enumerate() {
-        if c == T::ZERO {
-            continue;
-        }
-        let (d, v) = (
-            out.get_mut(k..).unwrap_or(&mut []),
-            uk.get(k..).unwrap_or(&[]),
-        );
-        for (d, &v) in d.iter_mut().zip(v) {
-            *d += c * v;
-        }
+    if let Some(o) = out.get_mut(j) {
+        *o = T::ONE;
+        solve_transposed(r, out, j);
     }
 }
 
-/// `a_i ← a_iᵀ R⁻¹` for the used rows, and `v = R⁻ᵀ f` (the solver itself
-/// transforms a row only when it enters the working set).
+/// `a_i ← a_iᵀ R⁻¹` for the used rows, `v = R⁻ᵀ f`, and every bound's row of
+/// `R⁻¹` (the solver itself transforms a row or a bound only when it enters the
+/// working set).
 #[cfg(test)]
-fn transform<T: Real, const N: usize, const M: usize>(p: &mut QpProblem<T, N, M>, v: &mut [T; N]) {
-    let rinv = &p.h;
-    let mut out = [T::ZERO; N];
+fn transform<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>(
+    p: &mut QpProblem<T, N, M>,
+    w: &mut Workspace<T, N, M, W, WL>,
+) {
     for row in p.a.iter_mut().take(p.m) {
-        row_times_upper(row, rinv, &mut out);
-        *row = out;
+        solve_transposed(&p.h, row, 0);
     }
-    row_times_upper(&p.f, rinv, v);
+    w.v = p.f;
+    solve_transposed(&p.h, &mut w.v, 0);
+    for j in 0..N {
+        store_inverse_row(&mut p.h, j);
+        w.bound_ready[j] = true;
+    }
+}
+
+/// Stores row `j` of `R⁻¹` (`e_jᵀ R⁻¹`: zero before column `j`, `1/R_jj` at `j`)
+/// in the lower triangle of `h`, which holds `R` in its upper triangle: the `N−1−j`
+/// entries after the diagonal go to `h[N−1−j][0..N−1−j]`, the lower part of row
+/// `N−1−j`, exactly its length (so the rows of all `N` bounds fit at once). The
+/// solve reads the upper triangle only.
+fn store_inverse_row<T: Real, const N: usize>(h: &mut [[T; N]; N], j: usize) {
+    if j >= N {
+        return;
+    }
+    let mut row = [T::ZERO; N];
+    inverse_row(h, j, &mut row);
+    let dst = N - 1 - j;
+    if let (Some(d), Some(src)) = (
+        h.get_mut(dst).and_then(|r| r.get_mut(..dst)),
+        row.get(j + 1..),
+    ) {
+        d.copy_from_slice(src);
+    }
+}
+
+/// A transformed constraint row `m̃` from column `start` on (zero before): its entry
+/// at `start` and the entries after it.
+#[derive(Clone, Copy)]
+struct ConRow<'a, T> {
+    start: usize,
+    head: T,
+    tail: &'a [T],
+}
+
+impl<T: Real> ConRow<'_, T> {
+    /// `m̃ᵀx` (the tail in four partial sums).
+    #[inline]
+    fn dot<const N: usize>(&self, x: &[T; N]) -> T {
+        let xs = x.get(self.start + 1..).unwrap_or(&[]);
+        let x0 = x.get(self.start).copied().unwrap_or(T::ZERO);
+        self.head * x0 + dot4(self.tail, xs)
+    }
+
+    /// `m̃₁ᵀm̃₂`.
+    #[inline]
+    fn dot_row(&self, other: &Self) -> T {
+        let (lo, hi) = if self.start <= other.start {
+            (self, other)
+        } else {
+            (other, self)
+        };
+        if lo.start == hi.start {
+            return lo.head * hi.head + dot4(lo.tail, hi.tail);
+        }
+        // lo's entry at hi.start is its tail[off − 1].
+        let off = hi.start - lo.start;
+        let at = lo.tail.get(off - 1).copied().unwrap_or(T::ZERO);
+        at * hi.head + dot4(lo.tail.get(off..).unwrap_or(&[]), hi.tail)
+    }
 }
 
 #[inline]
@@ -874,18 +956,31 @@ fn row_start(r: usize) -> usize {
     r * (r + 1) / 2
 }
 
-/// The transformed row of a constraint and the index of its first possible nonzero.
+/// The transformed row of a constraint: a general row's `a_iᵀR⁻¹` in place of
+/// `a_i`, a bound's `e_jᵀR⁻¹` from the lower triangle of `h` ([`store_inverse_row`]).
 #[inline]
 fn con_row<T: Real, const N: usize, const M: usize>(
     p: &QpProblem<T, N, M>,
     c: ConstraintIndex,
-) -> (&[T; N], usize) {
+) -> ConRow<'_, T> {
     match c {
         ConstraintIndex::Bound(j) => {
-            let j = j as usize;
-            (&p.h[j], j)
+            let j = (j as usize).min(N - 1);
+            let dst = N - 1 - j;
+            ConRow {
+                start: j,
+                head: T::ONE / p.h[j][j],
+                tail: p.h[dst].get(..dst).unwrap_or(&[]),
+            }
         }
-        ConstraintIndex::Row(i) => (&p.a[i as usize], 0),
+        ConstraintIndex::Row(i) => {
+            let a = &p.a[i as usize];
+            ConRow {
+                start: 0,
+                head: a[0],
+                tail: a.get(1..).unwrap_or(&[]),
+            }
+        }
     }
 }
 
@@ -930,9 +1025,7 @@ fn mdot<T: Real, const N: usize, const M: usize>(
     c1: ConstraintIndex,
     c2: ConstraintIndex,
 ) -> T {
-    let (r1, s1) = con_row(p, c1);
-    let (r2, s2) = con_row(p, c2);
-    dot_from(r1, r2, s1.max(s2))
+    con_row(p, c1).dot_row(&con_row(p, c2))
 }
 
 /// `1/ρ` for a soft row, else 0.
@@ -1003,6 +1096,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// working set with `λ = 0`, dropping inadmissible or dependent entries.
     fn start(&mut self, p: &mut QpProblem<T, N, M>, settings: &QpSettings<T>, tols: Tols<T>) {
         let count = if settings.warm_start { self.n } else { 0 };
+        self.bound_ready.fill(false);
         for r in 0..count.min(W) {
             self.prepare(p, self.ws[r].index);
         }
@@ -1010,14 +1104,25 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         self.lam.fill(T::ZERO);
     }
 
-    /// Transforms row constraint `c` to `a_iᵀ R⁻¹` in place unless already done in
-    /// this solve (a bound's row of `R⁻¹` needs nothing). Only rows that enter the
-    /// working set are ever transformed: the others are checked as `a_iᵀ x`.
+    /// Transforms row constraint `c` to `a_iᵀ R⁻¹` in place, or computes bound `c`'s
+    /// row `e_jᵀ R⁻¹` into the lower triangle of `h` ([`store_inverse_row`]), unless
+    /// already done in this
+    /// solve. Only constraints that enter the working set are ever transformed: the
+    /// others are checked as `a_iᵀ x` or `x_j`.
     fn prepare(&mut self, p: &mut QpProblem<T, N, M>, c: ConstraintIndex) {
-        let ConstraintIndex::Row(i) = c else {
-            return;
+        let i = match c {
+            ConstraintIndex::Row(i) => i as usize,
+            ConstraintIndex::Bound(j) => {
+                let j = j as usize;
+                if let Some(ready) = self.bound_ready.get_mut(j) {
+                    if !*ready {
+                        store_inverse_row(&mut p.h, j);
+                        *ready = true;
+                    }
+                }
+                return;
+            }
         };
-        let i = i as usize;
         if i >= p.m {
             return;
         }
@@ -1025,9 +1130,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             return;
         };
         if *code != ROW_TRANSFORMED {
-            let mut out = [T::ZERO; N];
-            row_times_upper(row, &p.h, &mut out);
-            *row = out;
+            solve_transposed(&p.h, row, 0);
             *code = ROW_TRANSFORMED;
         }
     }
@@ -1212,8 +1315,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 Side::Lower => lo,
                 Side::Upper => hi,
             };
-            let (row, st) = con_row(p, e.index);
-            self.tmp[k] = -(b + dot_from(row, &self.v, st));
+            self.tmp[k] = -(b + con_row(p, e.index).dot(&self.v));
         }
         self.ldl_solve_tmp();
         self.tmp.iter().take(self.n).all(|v| v.is_finite())
@@ -1234,18 +1336,16 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             if l == T::ZERO {
                 continue;
             }
-            let (row, st) = con_row(p, self.ws[k].index);
-            let (u, r) = (
-                self.u.get_mut(st..).unwrap_or(&mut []),
-                row.get(st..).unwrap_or(&[]),
-            );
-            for (u, r) in u.iter_mut().zip(r) {
+            let row = con_row(p, self.ws[k].index);
+            if let Some(u0) = self.u.get_mut(row.start) {
+                *u0 -= l * row.head;
+            }
+            let u = self.u.get_mut(row.start + 1..).unwrap_or(&mut []);
+            for (u, r) in u.iter_mut().zip(row.tail) {
                 *u -= l * *r;
             }
         }
-        for (j, xj) in x.iter_mut().enumerate() {
-            *xj = dot_from(&p.h[j], &self.u, j);
-        }
+        solve_upper(&p.h, &self.u, x);
     }
 
     /// Most violated inactive constraint (beyond `tol`), given `u` and `x`. `skip` is
@@ -1371,6 +1471,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 // constraints in f32 the factor's own rounding reaches ~10⁻³
                 // relative, which is a converged optimum, not a wrong one.
                 if self.working_set_holds(p, tols.primal * T::lit(10.0)) {
+                    self.refine(p, &mut sol.x);
                     return QpStatus::Optimal;
                 }
                 if checked_refactor {
@@ -1479,6 +1580,35 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         Err(QpStatus::NumericalError)
     }
 
+    /// One step of iterative refinement of the multipliers at the optimum: the
+    /// residuals `r_k = m̃_kᵀu − b_k − λ_k/ρ_k` of the working-set equations give
+    /// `Δλ = (M̃_W M̃_Wᵀ + D_W)⁻¹ r` with the same factor; kept (and `u`, `x`
+    /// recomputed) only if every multiplier keeps its sign.
+    fn refine(&mut self, p: &QpProblem<T, N, M>, x: &mut [T; N]) {
+        for k in 0..self.n {
+            let e = self.ws[k];
+            let (lo, hi) = bounds_of(p, e.index);
+            let b = match e.side {
+                Side::Lower => lo,
+                Side::Upper => hi,
+            };
+            self.tmp[k] = con_row(p, e.index).dot(&self.u) - b - self.lam[k] * delta(p, e.index);
+        }
+        self.ldl_solve_tmp();
+        for k in 0..self.n {
+            let l = self.lam[k] + self.tmp[k];
+            let e = self.ws[k];
+            if !l.is_finite() || (!Self::is_equality(p, e.index) && sign::<T>(e.side) * l < T::ZERO)
+            {
+                return;
+            }
+        }
+        for k in 0..self.n {
+            self.lam[k] += self.tmp[k];
+        }
+        self.primal(p, x);
+    }
+
     /// Whether every working-set constraint holds at `u`: `m̃_kᵀu = b_k + λ_k/ρ_k`
     /// within `tol` relative to `1 + |b_k + λ_k/ρ_k|`.
     fn working_set_holds(&self, p: &QpProblem<T, N, M>, tol: T) -> bool {
@@ -1489,8 +1619,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 Side::Lower => lo,
                 Side::Upper => hi,
             };
-            let (row, st) = con_row(p, e.index);
-            let val = dot_from(row, &self.u, st);
+            let val = con_row(p, e.index).dot(&self.u);
             let target = b + self.lam[k] * delta(p, e.index);
             // Relative to the magnitudes involved: rows are formed in the working
             // precision, so their rounding scales with them.
@@ -1498,9 +1627,13 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         })
     }
 
-    /// Writes `x`, multipliers and cost for the current iterate.
-    fn output(&mut self, p: &QpProblem<T, N, M>, sol: &mut QpSolution<T, N, M>) {
-        self.primal(p, &mut sol.x);
+    /// Writes `x` (unless `fresh`), multipliers and cost for the current iterate.
+    /// `fresh`: `u` and `sol.x` already belong to the current multipliers (the
+    /// optimal exit), so the primal point is not recomputed.
+    fn output(&mut self, p: &QpProblem<T, N, M>, sol: &mut QpSolution<T, N, M>, fresh: bool) {
+        if !fresh {
+            self.primal(p, &mut sol.x);
+        }
         sol.lambda_rows.fill(T::ZERO);
         sol.lambda_bounds.fill(T::ZERO);
         let mut soft_cost = T::ZERO;
@@ -1575,12 +1708,26 @@ mod tests {
     }
 
     #[test]
-    fn cholesky_inverse_is_inverse() {
+    fn cholesky_and_triangular_solves_invert_h() {
         let mut s = filled(3);
         let h = s.problem.h;
         assert!(factor_h(&mut s.problem.h));
-        let ri = &s.problem.h;
-        // H · R⁻¹ R⁻ᵀ = I.
+        let r = &s.problem.h;
+        // The rows of R⁻¹ from the forward solve: H · R⁻¹ R⁻ᵀ = I.
+        let mut ri = [[0.0; 5]; 5];
+        for (j, row) in ri.iter_mut().enumerate() {
+            inverse_row(r, j, row);
+        }
+        // Back substitution: R⁻¹ e_j is column j of R⁻¹.
+        for j in 0..5 {
+            let mut e = [0.0; 5];
+            e[j] = 1.0;
+            let mut col = [0.0; 5];
+            solve_upper(r, &e, &mut col);
+            for k in 0..5 {
+                assert!((col[k] - ri[k][j]).abs() < 1e-12, "R⁻¹[{k}][{j}]");
+            }
+        }
         for r in 0..5 {
             for c in 0..5 {
                 let mut v = 0.0;
@@ -1598,6 +1745,58 @@ mod tests {
         }
     }
 
+    /// Every bound's row of `R⁻¹`, stored in the lower triangle of `h` next to `R`,
+    /// reads back as `e_jᵀ R⁻¹` (checked against `R⁻¹ e_k` by back substitution),
+    /// and the rows' products are those of `R⁻¹`'s rows.
+    #[test]
+    fn bound_rows_in_the_lower_triangle_are_rows_of_the_inverse() {
+        let mut s = filled(5);
+        assert!(factor_h(&mut s.problem.h));
+        let r = s.problem.h;
+        // Columns of R⁻¹ from the upper triangle alone, before any row is stored.
+        let mut inv = [[0.0; 5]; 5];
+        for k in 0..5 {
+            let mut e = [0.0; 5];
+            e[k] = 1.0;
+            let mut col = [0.0; 5];
+            solve_upper(&r, &e, &mut col);
+            for j in 0..5 {
+                inv[j][k] = col[j];
+            }
+        }
+        transform(&mut s.problem, &mut s.work);
+        // R itself is untouched.
+        for j in 0..5 {
+            for k in j..5 {
+                assert_eq!(s.problem.h[j][k], r[j][k]);
+            }
+        }
+        for j in 0..5u16 {
+            let row = con_row(&s.problem, ConstraintIndex::Bound(j));
+            assert_eq!(row.start, j as usize);
+            let mut full = [0.0; 5];
+            full[row.start] = row.head;
+            full[row.start + 1..].copy_from_slice(row.tail);
+            for k in 0..5 {
+                assert!(
+                    (full[k] - inv[j as usize][k]).abs() < 1e-12,
+                    "R⁻¹[{j}][{k}]"
+                );
+            }
+            for i in 0..5u16 {
+                let want: f64 = (0..5)
+                    .map(|k| inv[i as usize][k] * inv[j as usize][k])
+                    .sum();
+                let got = mdot(
+                    &s.problem,
+                    ConstraintIndex::Bound(i),
+                    ConstraintIndex::Bound(j),
+                );
+                assert!((got - want).abs() < 1e-12, "({i}, {j})");
+            }
+        }
+    }
+
     /// Removing an entry by downdate gives the same factor as factorising the
     /// remaining working set from scratch.
     #[test]
@@ -1605,7 +1804,7 @@ mod tests {
         for seed in 0..20u64 {
             let mut s = filled(seed);
             assert!(factor_h(&mut s.problem.h));
-            transform(&mut s.problem, &mut s.work.v);
+            transform(&mut s.problem, &mut s.work);
             let tols = QpSettings::<f64>::new(10).effective();
             let set = [
                 ConstraintIndex::Row(0),
@@ -1648,7 +1847,7 @@ mod tests {
         s.problem.soft[0] = 0.0;
         s.problem.soft[1] = 0.0;
         assert!(factor_h(&mut s.problem.h));
-        transform(&mut s.problem, &mut s.work.v);
+        transform(&mut s.problem, &mut s.work);
         let tols = QpSettings::<f64>::new(10).effective();
         let e = |i| ActiveConstraint {
             index: ConstraintIndex::Row(i),
