@@ -104,7 +104,10 @@ pub struct MpcWeights<T> {
     pub q_y: T,
     /// On the obstacle slack, per m² (paper: 100).
     pub q_obs: T,
-    /// On the validity slack `δ_tol`, per rad² (paper: 100).
+    /// On the validity slack `δ_tol`, per rad² where `δ_max(V)` is the mechanical
+    /// limit `δ_mech` (low speed), and `q_δtol·(δ_mech/δ_max(V))²` per rad² at speed
+    /// `V` (the ratio capped at 100): a given *fraction* of `δ_max` over the limit
+    /// costs the same at every speed (paper: 100 per rad², at every speed).
     pub q_delta_tol: T,
     /// On the road-limit slack, per m² (not in the paper: its road limits are the
     /// `y_tol` margins).
@@ -115,8 +118,9 @@ pub struct MpcWeights<T> {
 }
 
 impl<T: Real> Default for MpcWeights<T> {
-    /// The paper's weights except `q_y = 100` (paper: 5) and `q_δtol = q_obs = 10⁴`
-    /// (paper: 100 each).
+    /// The paper's weights except `q_y = 100` (paper: 5), `q_δtol = 10⁴` (paper:
+    /// 100; scaled by `(δ_mech/δ_max(V))²`), `q_obs = 10⁵` (paper: 100) and
+    /// `q_δ̇ = 10` (paper: 0.2).
     ///
     /// `q_y`: in closed loop on the 9-DoF plant the car understeers against the
     /// kinematic plan at the validity limit, and with `q_y = 5` the planner accepts
@@ -129,13 +133,31 @@ impl<T: Real> Default for MpcWeights<T> {
     /// and a slack of 0.05 rad (a lateral acceleration almost twice the limit) costs,
     /// at `q_δtol = 100`, as little as 0.1 m of lateral deviation at `q_y = 5`. At
     /// 10⁴ a 10 % excess costs as much as 0.25 m of deviation: the limit binds, as the
-    /// paper intends. The obstacle slack then gets the same weight, so that the
-    /// planner never buys validity with clearance.
+    /// paper intends. The obstacle slack gets more, `q_obs = 10⁵`, so that the
+    /// planner does not buy validity with clearance: with the validity weight
+    /// scaled up at speed (below), 10⁴ let a plan at 12 m/s cut 5 cm into an
+    /// obstacle's parabola (`firmware/tests/mpc.rs`, the obstacle across the centre
+    /// line).
+    ///
+    /// A weight per rad² alone did not keep fast plans valid: at 25 m/s `δ_max` is
+    /// about 0.02 rad, and a slack of 0.01 rad (50 % over the limit, a kinematic
+    /// `a_y` of 0.8·μg) cost only 1. On the 17 circuits of `host-sim sweep` at
+    /// `μ = 1` the plans' nodes reached 0.8·μg; with the weight scaled by
+    /// `(δ_mech/δ_max(V))²` (10⁴ per rad² at low speed, ~9·10⁶ at 25 m/s) they
+    /// stay within 0.51·μg.
+    ///
+    /// `q_δ̇ = 10`: with 0.2 the plan steers back and forth round the kinks of a
+    /// measured centre line (5 m between points in a 10 m hairpin); at low speed
+    /// the lateral acceleration then carries the term `V·β̇` of the steering rate,
+    /// which the kinematic `V²·sin β/l_r` does not: single 10 ms samples of the
+    /// plant's `|a_y|` at 0.56–0.60·μg at `μ = 0.5` on the 17 circuits, ≤ 0.54·μg
+    /// with 10.
     fn default() -> Self {
         Self {
+            q_delta_rate: T::lit(10.0),
             q_y: T::lit(100.0),
             q_delta_tol: T::lit(1.0e4),
-            q_obs: T::lit(1.0e4),
+            q_obs: T::lit(1.0e5),
             ..Self::paper()
         }
     }
@@ -237,11 +259,18 @@ impl<T: Real> MpcSettings<T> {
             road_margin_m: T::lit(0.2),
             obstacle_offset_buffer_m: T::lit(0.2),
             velocity: VelocityPlannerSettings {
-                // 90 % of the validity limit: at exactly `0.5·μ·g` the plan sits on
-                // `δ_max` through every curve and has no steering left to correct a
-                // lateral error; the margin keeps the curve speeds within 5 % of the
-                // paper's `sqrt(0.5·μ·g·R)`.
-                ay_fraction: T::lit(0.45),
+                // 80 % of the validity limit, with a curvature reserve: at exactly
+                // `0.5·μ·g` the plan sits on `δ_max` through every curve and has no
+                // steering left to correct a lateral error. At 21–25 m/s the car
+                // turns less than the kinematic model says for the same steering
+                // (the validity experiment: 10 % at 0.38·μg on an 80 m circle), so
+                // the reserve must be largest there: a fixed curvature reserve
+                // is a fixed steering reserve ([`VelocityPlannerSettings::curve_speed_mps`]).
+                // With 0.45 and no reserve the car ran up to 0.60 m off the line on
+                // the 17 circuits at μ = 1; with 0.4 and 0.002 1/m (0.3 m of error
+                // corrected over ~17 m) up to 0.41 m, laps ~4 % slower.
+                ay_fraction: T::lit(0.4),
+                curvature_reserve_1pm: T::lit(0.002),
                 // `V_heur` is evaluated at every node, so each node already looks
                 // ahead; 2 s of preview from there (instead of the whole horizon)
                 // lets the car reach `V_max` on the paper track's longest straight.
@@ -291,6 +320,7 @@ impl<T: Real> MpcSettings<T> {
                 preview_time_s: z,
                 preview_speed_floor_mps: z,
                 ay_fraction: z,
+                curvature_reserve_1pm: z,
                 v_cap_mps: z,
                 brake_decel_mps2: z,
                 horizon_s: z,
@@ -1211,7 +1241,11 @@ impl<T: Real> Condensing<T> {
                 minus[j] = (minus[j] + -sd[j]) + t;
             }
         }
-        let rho = T::TWO * st.weights.q_delta_tol;
+        // The slack's weight grows as `δ_max(V̄)` shrinks ([`MpcWeights::q_delta_tol`]):
+        // `q_δtol·(δ_mech/δ_max)²`, the ratio capped at 100 (`δ_max(V)` → 0 as V → ∞).
+        let mech = validity.delta_mech_max_rad;
+        let ratio = mech / dmax.max(mech * T::lit(0.01));
+        let rho = T::TWO * st.weights.q_delta_tol * ratio * ratio;
         let sv_bar = slope * xbar[IV];
         let d = (xbar[IDELTA] - sv_bar) - dot(&self.row, u_bar, ncols);
         let hi = dmax - sv_bar - d;

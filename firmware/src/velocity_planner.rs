@@ -2,13 +2,16 @@
 //! Section III-A (its Equation 3) that the MPC's speed cost tracks.
 //!
 //! ```text
-//! V_heur = min( sqrt(a_y,frac · μ · g · R_min),  V_max,  V + ΔV )
+//! V_heur = min( sqrt(a_y,frac · μ · g / (κ_max + κ_res)),  V_max,  V + ΔV )
 //! ```
 //!
-//! * `R_min = 1 / κ_max`, with `κ_max` the largest `|κ|` of the reference path
+//! (the paper's `sqrt(a_y,frac · μ · g · R_min)`, `R_min = 1/κ_max`, when the curvature reserve
+//! `κ_res` is 0, its default; [`VelocityPlannerSettings::curve_speed_mps`]).
+//!
+//! * `κ_max` is the largest `|κ|` of the reference path
 //!   over the preview distance `d = max(V, V_floor) · T_prev` ahead of the queried
 //!   abscissa ([`ReferencePath::max_abs_curvature_between`]); on a straight
-//!   (`κ_max = 0`) the first term is infinite. `a_y,frac = 0.5` (the paper) keeps
+//!   (`κ_max = κ_res = 0`) the first term is infinite. `a_y,frac = 0.5` (the paper) keeps
 //!   the lateral acceleration in the validity domain of the kinematic model, the
 //!   same bound as [`crate::validity`]. `V_floor` keeps a useful preview at low
 //!   speed (the car must see a hairpin before it starts).
@@ -53,6 +56,10 @@ pub struct VelocityPlannerSettings<T> {
     pub preview_speed_floor_mps: T,
     /// Fraction of `μ·g` allowed as lateral acceleration (the paper's 0.5).
     pub ay_fraction: T,
+    /// Curvature reserve `κ_res`, 1/m: the curve speed is taken at `|κ| + κ_res`,
+    /// so the plan keeps that much curvature (steering) below the validity limit
+    /// for bringing the car back to the line (see [`Self::curve_speed_mps`]).
+    pub curvature_reserve_1pm: T,
     /// User speed cap `V_cap` (legal limit, track limit), m/s.
     pub v_cap_mps: T,
     /// Deceleration used for "can stop within the horizon", `a_brake`, m/s² (positive).
@@ -71,6 +78,7 @@ impl<T: Real> Default for VelocityPlannerSettings<T> {
             preview_time_s: horizon_s,
             preview_speed_floor_mps: T::lit(5.0),
             ay_fraction: T::HALF,
+            curvature_reserve_1pm: T::ZERO,
             v_cap_mps: T::lit(30.0),
             brake_decel_mps2: T::lit(8.0),
             horizon_s,
@@ -90,11 +98,19 @@ impl<T: Real> VelocityPlannerSettings<T> {
         self.v_cap_mps.min(a_stop * self.horizon_s).max(T::ZERO)
     }
 
-    /// Speed at which a turn of curvature `kappa_1pm` (1/m, either sign) reaches
-    /// the lateral limit `ay_fraction·μ·g`: `sqrt(ay_fraction·μ·g/|κ|)`, m/s
-    /// (`+∞` on a straight).
+    /// Speed at which a turn of curvature `kappa_1pm` (1/m, either sign) plus the
+    /// reserve `κ_res` reaches the lateral limit `ay_fraction·μ·g`:
+    /// `sqrt(ay_fraction·μ·g/(|κ| + κ_res))`, m/s (`+∞` when `|κ| + κ_res` is 0).
+    ///
+    /// The reserve is what the plan keeps for corrections: bringing the car back
+    /// from a lateral error `e` over a distance `d` takes a curvature of about
+    /// `2·e/d²` on top of the path's. The kinematic steering is about `l·κ` and
+    /// `δ_max(V)` about `l·a_y,lim/V²`, so a fixed curvature reserve is a fixed
+    /// steering reserve, which is a larger share of `δ_max` the faster the car:
+    /// it slows fast curves (where the car, turning less than the kinematic model
+    /// says, needs that steering most) and leaves hairpins almost as they were.
     pub fn curve_speed_mps(&self, kappa_1pm: T, mu: T) -> T {
-        let k = kappa_1pm.abs();
+        let k = kappa_1pm.abs() + self.curvature_reserve_1pm.max(T::ZERO);
         let ay = self.ay_fraction * mu.max(T::ZERO) * T::lit(crate::G);
         if k <= T::ZERO {
             return T::INFINITY;
@@ -110,8 +126,8 @@ impl<T: Real> VelocityPlannerSettings<T> {
 
 /// `V_heur`, m/s, at the path abscissa `s_node_m` (m; any value, wrapped on a
 /// closed path) for the current speed `v_now_mps` (m/s; negative counts as 0)
-/// and friction `mu`: `min(sqrt(a_y,frac·μ·g·R_min), V_max, V + ΔV)` with
-/// `R_min` over `[s_node, s_node + preview distance]`. Never negative. An empty
+/// and friction `mu`: `min(sqrt(a_y,frac·μ·g/(κ_max + κ_res)), V_max, V + ΔV)` with
+/// `κ_max` over `[s_node, s_node + preview distance]`. Never negative. An empty
 /// path has no curvature: the result is then `min(V_max, V + ΔV)`.
 ///
 /// The MPC calls it once per prediction node (one curvature scan of the preview

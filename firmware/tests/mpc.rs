@@ -8,7 +8,7 @@ use firmware::obstacles::{Obstacle, ObstacleManager, ObstacleSettings};
 use firmware::plan::{Plan, HORIZON};
 use firmware::reference_path::ReferencePath;
 use firmware::state_estimate::StateEstimate;
-use firmware::validity::kinematic_steering_for_radius;
+use firmware::validity::{kinematic_lateral_acceleration, kinematic_steering_for_radius};
 use firmware::Real;
 
 const CAP: usize = 1024;
@@ -210,6 +210,51 @@ fn validity_limit_binds_at_high_speed_on_a_tight_curve_and_speed_drops() {
         excess(plan2)
     );
     assert!(excess(plan2) > excess(plan) + 0.02);
+}
+
+#[test]
+fn a_fast_plan_starting_wide_keeps_to_the_validity_limit() {
+    // 25 m/s, 0.6 m outside a 150 m circle (0.42 g kinematic on the line): at this
+    // speed δ_max is ~0.02 rad, and getting back also takes steering.
+    let s = settings::<f64>();
+    let r = 150.0;
+    let path = circle::<f64>(r);
+    let obs = ObstacleManager::new();
+    let d_th = kinematic_steering_for_radius(&geometry::<f64>(), r).unwrap();
+    let v0 = 25.0;
+    let start = est(0.0, -0.6, 0.0, v0, d_th, 0);
+    let limit = firmware::validity::ValidityLimit {
+        geometry: geometry::<f64>(),
+        mu: 1.0,
+        ay_fraction: 0.5,
+        delta_mech_max_rad: 0.6,
+    };
+    // Largest kinematic a_y over the plan's nodes after the start, in g.
+    let worst_ay_g = |p: &Plan<f64>| {
+        p.nodes[1..]
+            .iter()
+            .map(|n| kinematic_lateral_acceleration(&geometry::<f64>(), n.v_mps, n.delta_rad).abs())
+            .fold(0.0, f64::max)
+            / 9.81
+    };
+    let (plan, rep) = &drive(&s, &path, &obs, start, 1.0, 1)[0];
+    let ay = worst_ay_g(plan);
+    // The slack weight per rad² the validity rows had before it was scaled by
+    // (δ_mech/δ_max)², at this speed: 10⁴ per rad² whatever the speed.
+    let mut flat = s;
+    let ratio = limit.delta_max_rad(v0) / limit.delta_mech_max_rad;
+    flat.weights.q_delta_tol = s.weights.q_delta_tol * ratio * ratio;
+    let (plan_flat, _) = &drive(&flat, &path, &obs, start, 1.0, 1)[0];
+    let ay_flat = worst_ay_g(plan_flat);
+    println!("{rep:?}: worst plan a_y {ay} g, with a flat slack weight {ay_flat} g");
+    assert!(ay <= 0.5 * 1.03, "plan a_y {ay} g");
+    assert!(ay_flat > ay + 0.05, "flat weight {ay_flat} g vs {ay} g");
+    // It slows down instead (V_heur's curvature reserve asks for less than 22 m/s).
+    assert!(
+        plan.nodes[HORIZON].v_mps < 23.0,
+        "{}",
+        plan.nodes[HORIZON].v_mps
+    );
 }
 
 fn box_obstacle<T: Real>(cx: f64, cy: f64, half_l: f64, half_w: f64) -> Obstacle<T> {

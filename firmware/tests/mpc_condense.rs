@@ -205,12 +205,15 @@ fn reference(
         r.rows
             .push((row_y.clone(), lo - d_y, hi - d_y, 2.0 * w.q_road));
         let (dmax, slope) = validity.delta_max_and_slope(x[V]);
+        // The slack weight per rad² scales with (δ_mech/δ_max)², the ratio capped at 100.
+        let mech = validity.delta_mech_max_rad;
+        let ratio = (mech / dmax).min(100.0);
+        let rho_validity = 2.0 * w.q_delta_tol * ratio * ratio;
         for sign in [1.0, -1.0] {
             let row = combine(&sens, &[(DELTA, sign), (V, -slope)]);
             let d = sign * x[DELTA] - slope * x[V] - dot_u(&row, u);
             let hi = dmax - slope * x[V] - d;
-            r.rows
-                .push((row, f64::NEG_INFINITY, hi, 2.0 * w.q_delta_tol));
+            r.rows.push((row, f64::NEG_INFINITY, hi, rho_validity));
         }
         for o in obstacles {
             if !o.reaches_road || !o.is_relevant_at_s(path, s) {

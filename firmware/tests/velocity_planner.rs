@@ -86,3 +86,43 @@ fn empty_path_is_a_straight() {
     let s = VelocityPlannerSettings::default();
     assert!((v_heur(&s, &p, 0.0, 5.0, 1.0) - 8.0).abs() < 1e-12);
 }
+
+#[test]
+fn curvature_reserve_slows_fast_curves_most() {
+    let none: VelocityPlannerSettings<f64> = VelocityPlannerSettings::default();
+    assert_eq!(none.curvature_reserve_1pm, 0.0);
+    let res = VelocityPlannerSettings {
+        curvature_reserve_1pm: 0.002,
+        ..none
+    };
+    let ay = none.ay_fraction * 9.81;
+    for kappa in [0.1, 0.02, 0.005, -0.005] {
+        // Without a reserve: the paper's sqrt(a_y/|κ|); with it, sqrt(a_y/(|κ| + κ_res)).
+        let v0 = none.curve_speed_mps(kappa, 1.0);
+        assert!((v0 / (ay / f64::abs(kappa)).sqrt() - 1.0).abs() < 1e-6);
+        let v1 = res.curve_speed_mps(kappa, 1.0);
+        assert!((v1 / (ay / (f64::abs(kappa) + 0.002)).sqrt() - 1.0).abs() < 1e-6);
+        assert!(v1 < v0);
+    }
+    // A 10 m hairpin loses 1 %, a 200 m curve 15 %: the steering reserve is a
+    // larger share of δ_max(V) at speed.
+    let loss = |k: f64| 1.0 - res.curve_speed_mps(k, 1.0) / none.curve_speed_mps(k, 1.0);
+    assert!(
+        loss(0.1) < 0.011 && loss(0.005) > 0.15,
+        "{} {}",
+        loss(0.1),
+        loss(0.005)
+    );
+    // On a straight the reserve alone bounds the speed (far above V_max here).
+    assert!(res.curve_speed_mps(0.0, 1.0) > 40.0);
+    assert_eq!(none.curve_speed_mps(0.0, 1.0), f64::INFINITY);
+    // A negative reserve counts as none.
+    let neg = VelocityPlannerSettings {
+        curvature_reserve_1pm: -1.0,
+        ..none
+    };
+    assert_eq!(
+        neg.curve_speed_mps(0.01, 1.0),
+        none.curve_speed_mps(0.01, 1.0)
+    );
+}

@@ -233,8 +233,10 @@ pub struct Summary {
     /// includes the body's side-slip dynamics), sampled every 10 ms.
     pub max_abs_ay_mps2: f64,
     /// Largest |a_y| the published plans asked for, m/s²: the kinematic bicycle's
-    /// `V²·sin β(δ)/l_r` at every node of every published plan (the quantity the
-    /// validity limit keeps under `0.5·μ_planner·g`, slack aside).
+    /// `V²·sin β(δ)/l_r` at every node but the first of every published plan (the
+    /// quantity the validity limit keeps under `0.5·μ_planner·g`, slack aside; the
+    /// first node is the measured state, its steering the low-level controller's
+    /// `δ_ol + δ_cl`, which no plan chose).
     pub max_abs_plan_ay_mps2: f64,
     /// Simulated time with at least one wheel lifted off the road (load zero), s.
     pub wheel_lift_s: f64,
@@ -788,6 +790,7 @@ fn plan_max_kinematic_ay<T: Real>(plan: &Plan<T>, vehicle: &VehicleParams) -> f6
     };
     plan.nodes
         .iter()
+        .skip(1)
         .map(|n| {
             firmware::validity::kinematic_lateral_acceleration(
                 &geometry,
