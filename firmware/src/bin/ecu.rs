@@ -173,7 +173,9 @@ impl Link {
         }
     }
 
-    /// Sends one frame to the host.
+    /// Sends one frame to the host. Not inlined: its frame buffer then lives on the
+    /// stack only while a frame is sent, not for the whole of the caller's activation.
+    #[inline(never)]
     pub fn send(&mut self, msg: &Up) -> bool {
         let mut buf = [0u8; MAX_FRAME_BYTES];
         match link::encode(msg, &mut buf) {
