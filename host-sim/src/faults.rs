@@ -7,7 +7,7 @@
 //! | `none` | nothing | `ok` |
 //! | `dropout-nan:N` (N = 20) | every estimate field NaN for N control periods (10 ms) from t = [`FAULT_START_S`] | both tasks refuse the estimate; `control` applies the safe actuation (gentle braking, steering held) in each of the N periods, then follows again: outcome `ok` and at least N safe actuations |
 //! | `dropout-hold:N` (N = 20) | no estimate update for N control periods from t = [`FAULT_START_S`] (the last one again, stamp and all) | keep following on the held estimate: outcome `ok` |
-//! | `overrun:MHZ` (MHZ = 40) | the ECU clock at MHZ instead of 168 MHz: the plan activations that cost more than `0.1 s × MHZ` cycles overrun their 100 ms period | misses counted, late plans published or dropped by the late-plan policy, the car keeps following: outcome `deadline-miss` (the lap completes, no collision, no off-road) with at least one miss |
+//! | `overrun:MHZ` (MHZ = 20) | the ECU clock at MHZ instead of 168 MHz: the plan activations that cost more than `0.1 s × MHZ` cycles overrun their 100 ms period | misses counted, late plans published or dropped by the late-plan policy, the car keeps following: outcome `deadline-miss` (the lap completes, no collision, no off-road) with at least one miss |
 //! | `mu-high:F` (F = 1.5) | the planner assumes `F × μ` on a road of `μ` | the plan's `a_y ≤ 0.5·F·μ·g` is still within the tyres' `μ·g` for `F < 2`: keep following, outcome `ok` (lateral error and consistency degrade, reported) |
 //! | `late-obstacle:D` (D = 60 m) | a 2 m × 2 m box half across the centre line at half the lap, given to the planner only when the car is D m before it along the path | replan around it or stop before it: outcome `ok` or `stopped-safely`, and the obstacle was revealed |
 //! | `steer-rate:R` (R = 0.5 rad/s) | the steering actuator moves at most R rad/s (the firmware does not know) | keep following: outcome `ok` |
@@ -119,7 +119,7 @@ impl FromStr for Fault {
             "none" => Ok(Fault::None),
             "dropout-nan" => Ok(Fault::DropoutNan(periods(20.0)?)),
             "dropout-hold" => Ok(Fault::DropoutHold(periods(20.0)?)),
-            "overrun" => Ok(Fault::Overrun(num(40.0)?)),
+            "overrun" => Ok(Fault::Overrun(num(20.0)?)),
             "mu-high" => Ok(Fault::MuHigh(num(1.5)?)),
             "late-obstacle" => Ok(Fault::LateObstacle(num(60.0)?)),
             "steer-rate" => Ok(Fault::SteerRate(num(0.5)?)),
