@@ -1517,7 +1517,8 @@ active_constraints,max_validity_slack_rad";
             (r.runs[1].plan_deadline_misses, r.runs[1].plan_failures),
             (1, 1)
         );
-        assert!(goal_of(&r, "plan warm-start observed max")?.met);
+        // The fixture's warm maximum, 1.2 M instructions, is over the 0.5 M goal.
+        assert!(!goal_of(&r, "plan warm-start observed max")?.met);
         assert!(goal_of(&r, "plan bound within budget")?.met);
         assert!(goal_of(&r, "control observed max")?.met);
         assert!(goal_of(&r, "static RAM")?.met);
