@@ -185,3 +185,39 @@ fn a_late_plan_is_published_but_one_older_than_two_periods_is_dropped() {
     assert!(planner.publish_at(&mut shared, 3_000_000 + MAX_PLAN_AGE_US));
     assert_eq!(shared.stamp_us, 3_000_000);
 }
+
+#[test]
+fn the_mpc_starts_from_the_last_plans_open_loop_steering() {
+    let (mut planner, _, car) = setup();
+    let est = car.estimate(0);
+    // No plan yet: the measured steering.
+    assert_eq!(planner.initial_steering(&est), est.delta_rad);
+    planner.run(&est).unwrap();
+    let plan = *planner.pending().unwrap();
+    // 0.3 s later, with a measured steering the plan never had (the yaw loop's
+    // feedback): the plan's steering, interpolated between nodes 1 and 2.
+    let mut later = car.estimate(300_000);
+    later.delta_rad = 0.07;
+    let open_loop = 0.5 * (plan.nodes[1].delta_rad + plan.nodes[2].delta_rad);
+    let gain = f64::from(firmware::tasks::STEER_FEEDBACK_GAIN);
+    let want = open_loop + gain * (0.07 - open_loop);
+    let got = planner.initial_steering(&later);
+    assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+    assert_ne!(got, later.delta_rad);
+    // And the MPC's plan starts there.
+    planner.run(&later).unwrap();
+    assert!((planner.pending().unwrap().nodes[0].delta_rad - want).abs() < 1e-12);
+    // Beyond the last plan's horizon, before its stamp, a non-finite measurement,
+    // or after a reset: the measurement.
+    let mut stale = car.estimate(300_000 + 3_200_000);
+    stale.delta_rad = 0.07;
+    assert_eq!(planner.initial_steering(&stale), 0.07);
+    let mut early = car.estimate(0);
+    early.delta_rad = 0.05;
+    assert_eq!(planner.initial_steering(&early), 0.05);
+    let mut nan = car.estimate(400_000);
+    nan.delta_rad = f64::NAN;
+    assert!(planner.initial_steering(&nan).is_nan());
+    planner.reset();
+    assert_eq!(planner.initial_steering(&later), 0.07);
+}
