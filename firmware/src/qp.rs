@@ -1056,6 +1056,19 @@ fn bounds_of<T: Real, const N: usize, const M: usize>(
     }
 }
 
+/// The bound `b` at which working-set entry `e` is held: the lower or upper bound of
+/// its constraint, by its side.
+fn held_bound<T: Real, const N: usize, const M: usize>(
+    p: &QpProblem<T, N, M>,
+    e: ActiveConstraint,
+) -> T {
+    let (lo, hi) = bounds_of(p, e.index);
+    match e.side {
+        Side::Lower => lo,
+        Side::Upper => hi,
+    }
+}
+
 impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     Workspace<T, N, M, W, WL>
 {
@@ -1310,11 +1323,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     fn solve_lam_star(&mut self, p: &QpProblem<T, N, M>) -> bool {
         for k in 0..self.n {
             let e = self.ws[k];
-            let (lo, hi) = bounds_of(p, e.index);
-            let b = match e.side {
-                Side::Lower => lo,
-                Side::Upper => hi,
-            };
+            let b = held_bound(p, e);
             self.tmp[k] = -(b + con_row(p, e.index).dot(&self.v));
         }
         self.ldl_solve_tmp();
@@ -1587,11 +1596,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     fn refine(&mut self, p: &QpProblem<T, N, M>, x: &mut [T; N]) {
         for k in 0..self.n {
             let e = self.ws[k];
-            let (lo, hi) = bounds_of(p, e.index);
-            let b = match e.side {
-                Side::Lower => lo,
-                Side::Upper => hi,
-            };
+            let b = held_bound(p, e);
             self.tmp[k] = con_row(p, e.index).dot(&self.u) - b - self.lam[k] * delta(p, e.index);
         }
         self.ldl_solve_tmp();
@@ -1614,11 +1619,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     fn working_set_holds(&self, p: &QpProblem<T, N, M>, tol: T) -> bool {
         (0..self.n).all(|k| {
             let e = self.ws[k];
-            let (lo, hi) = bounds_of(p, e.index);
-            let b = match e.side {
-                Side::Lower => lo,
-                Side::Upper => hi,
-            };
+            let b = held_bound(p, e);
             let val = con_row(p, e.index).dot(&self.u);
             let target = b + self.lam[k] * delta(p, e.index);
             // Relative to the magnitudes involved: rows are formed in the working

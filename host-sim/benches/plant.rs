@@ -25,26 +25,6 @@ fn inputs(k: usize) -> Inputs {
     }
 }
 
-fn state_row(s: &State) -> [f64; 14] {
-    let w = s.omega_radps;
-    [
-        s.x_m,
-        s.y_m,
-        s.psi_rad,
-        s.vx_mps,
-        s.vy_mps,
-        s.yaw_rate_radps,
-        s.roll_rad,
-        s.roll_rate_radps,
-        s.pitch_rad,
-        s.pitch_rate_radps,
-        w[0],
-        w[1],
-        w[2],
-        w[3],
-    ]
-}
-
 /// `steps` steps of the manoeuvre; the end state printed, each state written to
 /// `trajectory` if given.
 fn fixed_steps(steps: usize, trajectory: Option<String>) {
@@ -54,7 +34,9 @@ fn fixed_steps(steps: usize, trajectory: Option<String>) {
     for k in 0..steps {
         plant.step(black_box(&inputs(k)), black_box(1.0)).unwrap();
         if let Some(w) = out.as_mut() {
-            let row: Vec<String> = state_row(plant.state())
+            let row: Vec<String> = plant
+                .state()
+                .to_array()
                 .iter()
                 .map(|v| format!("{v:?}"))
                 .collect();
@@ -63,7 +45,7 @@ fn fixed_steps(steps: usize, trajectory: Option<String>) {
     }
     println!(
         "end state after {steps} steps: {:?}",
-        state_row(plant.state())
+        plant.state().to_array()
     );
 }
 

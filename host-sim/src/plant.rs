@@ -170,7 +170,7 @@ pub fn wheel_torque_nm(torque_nm: f64, omega_radps: f64, lock_radps: f64) -> f64
 }
 
 /// Number of scalar states.
-const N: usize = 14;
+pub const N: usize = 14;
 
 /// State of the plant. Positions in the ground frame, velocities in the vehicle frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -216,7 +216,10 @@ impl State {
         }
     }
 
-    fn to_array(self) -> [f64; N] {
+    /// The state as one array, in the order of the fields: `X`, `Y` (m), `ψ` (rad),
+    /// `v_x`, `v_y` (m/s), yaw rate (rad/s), roll (rad), roll rate (rad/s), pitch
+    /// (rad), pitch rate (rad/s), the four wheel speeds (rad/s, FL, FR, RL, RR).
+    pub fn to_array(self) -> [f64; N] {
         let w = self.omega_radps;
         [
             self.x_m,

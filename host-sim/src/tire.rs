@@ -496,6 +496,28 @@ fn cos_atan(x: f64) -> f64 {
 }
 
 /// `b/d`, or 0 when `d` is too small to divide by.
+/// `(F_x, F_y)` projected back onto the friction ellipse whose half-axes are the
+/// pure-slip peaks `peak_x`, `peak_y` (N) when it lies outside it; `(0, 0)` if not
+/// finite.
+fn onto_friction_ellipse(fx: f64, fy: f64, peak_x: f64, peak_y: f64) -> (f64, f64) {
+    let (fx, fy) = if peak_x > 0.0 && peak_y > 0.0 {
+        let e = (fx / peak_x).powi(2) + (fy / peak_y).powi(2);
+        if e > 1.0 {
+            let k = 1.0 / e.sqrt();
+            (fx * k, fy * k)
+        } else {
+            (fx, fy)
+        }
+    } else {
+        (fx, fy)
+    };
+    if fx.is_finite() && fy.is_finite() {
+        (fx, fy)
+    } else {
+        (0.0, 0.0)
+    }
+}
+
 fn safe_div(b: f64, d: f64) -> f64 {
     if d.abs() > 1e-12 {
         b / d
@@ -826,23 +848,7 @@ impl<'a> AtLoad<'a> {
         // and do not depend on μ, so on a slippery road the combined force could exceed
         // the pure-slip peaks (by up to 25 % at μ = 0.3 with the book's tyre). Project
         // such a force back onto the ellipse whose half-axes are the pure-slip peaks.
-        let (fx, fy) = if peak_x > 0.0 && peak_y > 0.0 {
-            let e = (fx / peak_x).powi(2) + (fy / peak_y).powi(2);
-            if e > 1.0 {
-                let k = 1.0 / e.sqrt();
-                (fx * k, fy * k)
-            } else {
-                (fx, fy)
-            }
-        } else {
-            (fx, fy)
-        };
-
-        if fx.is_finite() && fy.is_finite() {
-            (fx, fy)
-        } else {
-            (0.0, 0.0)
-        }
+        onto_friction_ellipse(fx, fy, peak_x, peak_y)
     }
 }
 
@@ -925,22 +931,7 @@ mod tests {
         let byk = p.rby1 * cos_atan(p.rby2 * (a - p.rby3)) * p.lyka;
         let gyk0 = weight(byk, p.rcy1, eyk, shyk);
         let fy = safe_div(weight(byk, p.rcy1, eyk, kappa + shyk), gyk0).max(0.0) * fy0 + svyk;
-        let (fx, fy) = if peak_x > 0.0 && peak_y > 0.0 {
-            let e = (fx / peak_x).powi(2) + (fy / peak_y).powi(2);
-            if e > 1.0 {
-                let k = 1.0 / e.sqrt();
-                (fx * k, fy * k)
-            } else {
-                (fx, fy)
-            }
-        } else {
-            (fx, fy)
-        };
-        if fx.is_finite() && fy.is_finite() {
-            (fx, fy)
-        } else {
-            (0.0, 0.0)
-        }
+        onto_friction_ellipse(fx, fy, peak_x, peak_y)
     }
 
     /// Interleaving the transcendental calls changes no bit of the forces: the book's

@@ -330,22 +330,7 @@ fn reference_manoeuvre() -> State {
 #[test]
 fn the_reference_manoeuvre_ends_where_it_did_before_the_speed_ups() {
     let s = reference_manoeuvre();
-    let got = [
-        s.x_m,
-        s.y_m,
-        s.psi_rad,
-        s.vx_mps,
-        s.vy_mps,
-        s.yaw_rate_radps,
-        s.roll_rad,
-        s.roll_rate_radps,
-        s.pitch_rad,
-        s.pitch_rate_radps,
-        s.omega_radps[0],
-        s.omega_radps[1],
-        s.omega_radps[2],
-        s.omega_radps[3],
-    ];
+    let got = s.to_array();
     let want: [f64; 14] = REFERENCE;
     for (i, (g, w)) in got.iter().zip(want).enumerate() {
         assert!(
