@@ -184,12 +184,21 @@ fn stage<T: Real>(
     }
 }
 
+/// First column of `[ξ; u]` that a stage's state can depend on: the dynamics do
+/// not depend on `s`, `X`, `Y` (columns `0..FIRST_LIVE`), so every stage's
+/// derivative with respect to them is zero and `∂ξ_next/∂(s, X, Y)` is the
+/// identity. The Jacobian products run over the columns from here on only.
+const FIRST_LIVE: usize = V;
+const _: () = assert!(S < FIRST_LIVE && X < FIRST_LIVE && Y < FIRST_LIVE);
+const _: () = assert!(V >= FIRST_LIVE && PSI >= FIRST_LIVE && DELTA >= FIRST_LIVE);
+
 /// `dk = J·M + [0 | B_c]`: derivative of a stage's `k = f(ξ_stage, u)` with
-/// respect to `[ξ; u]` (6×8), given `M = ∂ξ_stage/∂[ξ; u]`.
+/// respect to `[ξ; u]` (6×8), given `M = ∂ξ_stage/∂[ξ; u]`. Columns before
+/// [`FIRST_LIVE`] are zero (and left so).
 #[inline]
 fn stage_derivative<T: Real>(g: &Stage<T>, m: &[[T; NX + NU]; NX]) -> [[T; NX + NU]; NX] {
     let mut dk = [[T::ZERO; NX + NU]; NX];
-    for j in 0..NX + NU {
+    for j in FIRST_LIVE..NX + NU {
         let mv = m[V][j];
         let mp = m[PSI][j];
         let md = m[DELTA][j];
@@ -330,7 +339,7 @@ impl<T: Real> BicycleGeometry<T> {
         let advance_m = |dk: &[[T; NX + NU]; NX], c: T| {
             let mut m = ident;
             for (mr, dr) in m.iter_mut().zip(dk.iter()) {
-                for (mv, dv) in mr.iter_mut().zip(dr.iter()) {
+                for (mv, dv) in mr[FIRST_LIVE..].iter_mut().zip(dr[FIRST_LIVE..].iter()) {
                     *mv += c * *dv;
                 }
             }
@@ -373,9 +382,13 @@ impl<T: Real> BicycleGeometry<T> {
             a: [[T::ZERO; NX]; NX],
             b: [[T::ZERO; NU]; NX],
         };
+        // ∂ξ_next/∂(s, X, Y) = I (see FIRST_LIVE).
+        for j in 0..FIRST_LIVE {
+            out.a[j][j] = T::ONE;
+        }
         for i in 0..NX {
             out.x_next[i] += w * (g1.f[i] + T::TWO * (g2.f[i] + g3.f[i]) + g4.f[i]);
-            for j in 0..NX + NU {
+            for j in FIRST_LIVE..NX + NU {
                 let d =
                     ident[i][j] + w * (dk1[i][j] + T::TWO * (dk2[i][j] + dk3[i][j]) + dk4[i][j]);
                 if j < NX {
