@@ -61,7 +61,7 @@ use crate::bicycle::{self, BicycleGeometry};
 use crate::obstacles::{Parabola, Side};
 use crate::plan::{Plan, HORIZON, PLAN_DT_S};
 use crate::qp::{ldl_len, QpProblem, QpSolution, QpSolver, QpStatus};
-use crate::reference_path::ReferencePath;
+use crate::reference_path::{CurvatureWindow, ReferencePath};
 use crate::state_estimate::StateEstimate;
 use crate::validity::{kinematic_steering_for_radius, ValidityLimit};
 use crate::velocity_planner::{self, VelocityPlannerSettings};
@@ -741,6 +741,7 @@ impl<T: Real> Mpc<T> {
         let accel = input_bounds_and_regularisation(qp, st, mu);
         v_heur[0] = velocity_planner::v_heur(&st.velocity, path, xi0[IS], v0, mu);
         c.start(st);
+        let mut window = CurvatureWindow::new();
         let mut xbar = *xi0;
         for k in 0..HORIZON {
             // tan δ̄ once, for the friction ellipse and the linearisation.
@@ -750,7 +751,8 @@ impl<T: Real> Mpc<T> {
             let node = k + 1;
             let ncols = NU * node;
             let (fr, at) = NodeFrame::new(path, &xbar);
-            let vh = velocity_planner::v_heur_at(&st.velocity, path, &at, fr.s, v0, mu);
+            let vh =
+                velocity_planner::v_heur_at(&st.velocity, path, &mut window, &at, fr.s, v0, mu);
             v_heur[node] = vh;
             c.tracking_costs(qp, st, path, obstacles, &xbar, &fr, vh, &u_bar, ncols);
             c.road_row(qp, st, &fr);

@@ -154,6 +154,53 @@ pub struct Widths<T> {
     pub left_m: T,
 }
 
+/// The state of a sliding scan for [`ReferencePath::max_abs_curvature_window`]:
+/// the largest vertex curvature found in the last window and where the scan
+/// stopped, so that the next window (whose ends did not move back) scans only the
+/// vertices that entered it. Start each sequence of windows with
+/// [`CurvatureWindow::new`]; one sequence per path (and per path change).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CurvatureWindow<T> {
+    /// The last window, unwrapped arc lengths, m (`valid` false: none).
+    a: T,
+    b: T,
+    /// Largest `|κ|` (1/m) of the vertices scanned inside the window, and the
+    /// unwrapped arc length (m) of the last vertex that attains it.
+    vmax: T,
+    vpos: T,
+    /// Segment the scan goes on with, and the unwrapped arc length of its start, m.
+    seg: usize,
+    pos: T,
+    /// Segments the scan went past (it stops after one lap), and whether it met the
+    /// end of an open path.
+    steps: usize,
+    ended: bool,
+    valid: bool,
+}
+
+impl<T: Real> CurvatureWindow<T> {
+    /// No window yet: the first query scans its whole window.
+    pub const fn new() -> Self {
+        Self {
+            a: T::ZERO,
+            b: T::ZERO,
+            vmax: T::ZERO,
+            vpos: T::ZERO,
+            seg: 0,
+            pos: T::ZERO,
+            steps: 0,
+            ended: false,
+            valid: false,
+        }
+    }
+}
+
+impl<T: Real> Default for CurvatureWindow<T> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 /// The path at one arc length, from one segment lookup (see
 /// [`ReferencePath::sample_at`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -824,6 +871,91 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         }
         let (i0, ds0) = (at.segment, at.segment_offset_m);
         self.max_abs_curvature_scan(s0_m, s1_m, i0, ds0, at.curvature_1pm)
+    }
+
+    /// [`Self::max_abs_curvature_from`]`(at, s0_m, s1_m)` for a sequence of
+    /// windows whose ends never move back (`s0_m`, `s1_m` not below the previous
+    /// query's; the MPC's nodes along the horizon), 1/m: while the previous
+    /// window's largest vertex is still inside, only the vertices that entered
+    /// the window are scanned (`O(vertices entered)` instead of `O(vertices in the
+    /// window)`); otherwise, and whenever the ends move back, the window is scanned
+    /// afresh. The same maximum as the full scan, up to the rounding of the
+    /// vertices' unwrapped arc lengths (summed from the first window's start).
+    pub fn max_abs_curvature_window(
+        &self,
+        win: &mut CurvatureWindow<T>,
+        at: &PathSample<T>,
+        s0_m: T,
+        s1_m: T,
+    ) -> T {
+        if self.n == 0 {
+            return T::ZERO;
+        }
+        if !(s0_m <= s1_m) || (self.closed && s1_m - s0_m >= self.length) {
+            win.valid = false;
+            return self.max_abs_curvature_from(at, s0_m, s1_m);
+        }
+        // The kept maximum stands for the vertices in `(s0_m, win.b)` if it is
+        // attained there (or is 0: all scanned vertices flat); the scan then goes on
+        // from `win.b`, which must not lie before the new start.
+        let keep = win.valid
+            && s0_m >= win.a
+            && s0_m < win.b
+            && s1_m >= win.b
+            && (win.vpos > s0_m || win.vmax == T::ZERO);
+        if !keep {
+            let (i0, ds0) = (at.segment, at.segment_offset_m);
+            *win = CurvatureWindow {
+                a: s0_m,
+                b: s0_m,
+                vmax: T::ZERO,
+                vpos: T::ZERO,
+                seg: i0,
+                pos: if self.closed { s0_m - ds0 } else { self.s[i0] },
+                steps: 0,
+                ended: false,
+                valid: true,
+            };
+        }
+        self.scan_vertices(win, s1_m);
+        win.a = s0_m;
+        win.b = s1_m;
+        at.curvature_1pm
+            .abs()
+            .max(self.curvature_at(s1_m).abs())
+            .max(win.vmax)
+    }
+
+    /// Takes the vertices before `b` (unwrapped, m) into the window's maximum, as
+    /// [`Self::max_abs_curvature_scan`] does from where the window's scan stopped.
+    fn scan_vertices(&self, win: &mut CurvatureWindow<T>, b: T) {
+        let segments = self.segment_count();
+        while win.steps < self.n && !win.ended {
+            if win.seg >= self.n {
+                win.seg = 0;
+            }
+            if win.seg >= segments {
+                win.ended = true;
+                break;
+            }
+            let next = win.pos + self.seg_len[win.seg];
+            if next >= b {
+                break;
+            }
+            win.pos = next;
+            let v = self.next_vertex(win.seg);
+            if !self.closed && v == 0 {
+                win.ended = true;
+                break;
+            }
+            let kv = self.curvature[v].abs();
+            if kv >= win.vmax {
+                win.vmax = kv;
+                win.vpos = next;
+            }
+            win.seg += 1;
+            win.steps += 1;
+        }
     }
 
     /// The scan of [`Self::max_abs_curvature_between`] over `[a, b]` (`a <= b`),

@@ -42,7 +42,7 @@
 //! ```
 
 use crate::plan::{HORIZON, PLAN_DT_S};
-use crate::reference_path::{PathSample, ReferencePath};
+use crate::reference_path::{CurvatureWindow, PathSample, ReferencePath};
 use crate::Real;
 
 /// Settings of the local velocity planner (units in each field).
@@ -148,11 +148,15 @@ pub fn v_heur<T: Real, const CAP: usize>(
     curve.min(v_max).min(v_inc).max(T::ZERO)
 }
 
-/// [`v_heur`] (same value) at the abscissa `s_node_m` that `at` was sampled at
-/// ([`ReferencePath::sample_at`]): the window's start is not looked up again.
+/// [`v_heur`] at the abscissa `s_node_m` that `at` was sampled at
+/// ([`ReferencePath::sample_at`]), for one of a sequence of nodes along the
+/// horizon: the preview window slides with `window`
+/// ([`ReferencePath::max_abs_curvature_window`]; the same value up to the
+/// rounding of vertex positions), and its start is not looked up again.
 pub fn v_heur_at<T: Real, const CAP: usize>(
     settings: &VelocityPlannerSettings<T>,
     path: &ReferencePath<T, CAP>,
+    window: &mut CurvatureWindow<T>,
     at: &PathSample<T>,
     s_node_m: T,
     v_now_mps: T,
@@ -160,7 +164,7 @@ pub fn v_heur_at<T: Real, const CAP: usize>(
 ) -> T {
     let v = v_now_mps.max(T::ZERO);
     let d = settings.preview_distance_m(v);
-    let kappa = path.max_abs_curvature_from(at, s_node_m, s_node_m + d);
+    let kappa = path.max_abs_curvature_window(window, at, s_node_m, s_node_m + d);
     let curve = settings.curve_speed_mps(kappa, mu);
     let v_max = settings.v_max_mps(mu);
     let v_inc = v + settings.delta_v_mps.max(T::ZERO);

@@ -2,7 +2,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use core::f64::consts::PI;
-use firmware::reference_path::{PathError, ReferencePath};
+use firmware::reference_path::{CurvatureWindow, PathError, ReferencePath};
 use proptest::prelude::*;
 
 fn circle(r: f64, n: usize, ccw: bool) -> Vec<[f64; 2]> {
@@ -333,6 +333,52 @@ fn sample_at_matches_the_single_lookups() {
             assert_eq!(a.heading_rad.to_bits(), p.heading_at(s).to_bits(), "s={s}");
             assert_eq!(a.curvature_1pm.to_bits(), p.curvature_at(s).to_bits());
             assert_eq!(a.widths, p.widths_at(s), "s={s}");
+        }
+    }
+}
+
+proptest! {
+    /// The sliding window's maximum equals the full scan's for every window of a
+    /// sequence whose ends never move back (the MPC's nodes), on random wiggly
+    /// closed and open paths, including windows that wrap past the start of a
+    /// closed path, run off the end of an open one, or span more than a lap; a
+    /// window whose ends move back starts afresh and still agrees.
+    #[test]
+    fn sliding_curvature_window_matches_the_full_scan(
+        seed in 0u64..1_000,
+        closed in any::<bool>(),
+        start in -50.0f64..400.0,
+        steps in proptest::collection::vec((0.0f64..6.0, 0.0f64..60.0), 1..20),
+    ) {
+        let mut state = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        let mut rnd = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        // A circle of radius 40 m with radial wiggles: curvature of both signs.
+        let n = 60;
+        let pts: Vec<[f64; 2]> = (0..n)
+            .map(|i| {
+                let a = 2.0 * PI * i as f64 / n as f64;
+                let r = 40.0 + 4.0 * (rnd() - 0.5);
+                [r * a.cos(), r * a.sin()]
+            })
+            .collect();
+        let mut p: ReferencePath<f64, 128> = ReferencePath::new();
+        p.load(&pts, None, closed).unwrap();
+        let mut win = CurvatureWindow::new();
+        let mut s0 = start;
+        for (i, &(ds, len)) in steps.iter().enumerate() {
+            // Every fifth window moves back: the window must start afresh.
+            s0 = if i % 5 == 4 { s0 - ds } else { s0 + ds };
+            let s1 = s0 + len;
+            let at = p.sample_at(s0);
+            let full = p.max_abs_curvature_from(&at, s0, s1);
+            let slid = p.max_abs_curvature_window(&mut win, &at, s0, s1);
+            prop_assert!(
+                (slid - full).abs() <= 1e-12 * (1.0 + full.abs()),
+                "window {i} [{s0}, {s1}]: sliding {slid} vs full {full}"
+            );
         }
     }
 }
