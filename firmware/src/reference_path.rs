@@ -891,7 +891,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         if self.n == 0 {
             return T::ZERO;
         }
-        if !(s0_m <= s1_m) || (self.closed && s1_m - s0_m >= self.length) {
+        let ordered = s0_m <= s1_m; // false for a NaN
+        if !ordered || (self.closed && s1_m - s0_m >= self.length) {
             win.valid = false;
             return self.max_abs_curvature_from(at, s0_m, s1_m);
         }
