@@ -681,16 +681,21 @@ fn validate<T: Real, const N: usize, const M: usize>(
     }
     let rows = p.a.get(..p.m).unwrap_or(&[]);
     let mut probe = nonfinite_probe(&p.f);
-    for r in p.h.iter() {
-        probe += nonfinite_probe(r);
+    // Only the upper triangle of `H` (or of its factor) is ever read.
+    for (j, r) in p.h.iter().enumerate() {
+        probe += nonfinite_probe(r.get(j..).unwrap_or(&[]));
     }
     let full = N - N % 4;
     for (r, code) in rows.iter().zip(row_code.iter_mut()) {
-        // A NaN or ±∞ is nonzero: it lies in the prefix up to the last nonzero entry
-        // (the rest are zeros), so only the prefix needs the finiteness probe.
-        let last = r.iter().rposition(|&v| v != T::ZERO).map_or(0, |j| j + 1);
-        probe += nonfinite_probe(r.get(..last).unwrap_or(r));
-        let groups = last.div_ceil(4);
+        // A NaN or ±∞ is nonzero: it lies in the prefix up to the last group of four
+        // with a nonzero entry (the rest are zeros), so only that prefix needs the
+        // finiteness probe. A group is zero when the sum of its magnitudes is (a NaN
+        // or ±∞ makes it nonzero).
+        let groups = r
+            .chunks(4)
+            .rposition(|c| c.iter().fold(T::ZERO, |acc, &v| acc + v.abs()) != T::ZERO)
+            .map_or(0, |g| g + 1);
+        probe += nonfinite_probe(r.get(..4 * groups).unwrap_or(r));
         *code = if 4 * groups > full || groups >= ROW_FULL as usize {
             ROW_FULL
         } else {
