@@ -60,7 +60,10 @@
 use crate::bicycle::{self, BicycleGeometry};
 use crate::obstacles::{Parabola, Side};
 use crate::plan::{Plan, HORIZON, PLAN_DT_S};
-use crate::qp::{ldl_len, QpProblem, QpSolution, QpSolver, QpStatus};
+use crate::qp::{
+    ldl_len, ActiveConstraint, ConstraintIndex, QpProblem, QpSolution, QpSolver, QpStatus,
+    Side as QpSide,
+};
 use crate::reference_path::{CurvatureWindow, ReferencePath};
 use crate::state_estimate::StateEstimate;
 use crate::validity::{kinematic_steering_for_radius, ValidityLimit};
@@ -450,6 +453,11 @@ pub struct Mpc<T> {
     u_bar: [[T; NU]; HORIZON],
     /// Scratch of the linearise–condense pass (sensitivities, cost block, rows).
     condensing: Condensing<T>,
+    /// The last solve's working set at its optimum, rows by [`RowId`], for the
+    /// next warm start (the next step's rows are numbered afresh).
+    warm_set: [WarmEntry; WS],
+    /// Entries of `warm_set` in use.
+    warm_len: usize,
     /// Counters of the last step, whatever its outcome.
     last_report: MpcReport<T>,
 }
@@ -471,6 +479,8 @@ impl<T: Real> Mpc<T> {
             have_prev: false,
             u_bar: [[T::ZERO; NU]; HORIZON],
             condensing: Condensing::new(),
+            warm_set: [WarmEntry::Bound(0, QpSide::Lower); WS],
+            warm_len: 0,
             last_report: MpcReport {
                 passes: 0,
                 qp_iterations: 0,
@@ -502,6 +512,7 @@ impl<T: Real> Mpc<T> {
     /// Forgets the previous solution: the next step starts cold.
     pub fn reset(&mut self) {
         self.have_prev = false;
+        self.warm_len = 0;
         self.solver.clear_working_set();
     }
 
@@ -620,6 +631,7 @@ impl<T: Real> Mpc<T> {
             shift_inputs(&self.u_prev, elapsed_s / dt, &mut self.u_bar);
         } else {
             self.u_bar = [[T::ZERO; NU]; HORIZON];
+            self.warm_len = 0;
             self.solver.clear_working_set();
         }
         report.warm = warm;
@@ -664,10 +676,12 @@ impl<T: Real> Mpc<T> {
                 &mut v_heur,
                 report,
             );
+            self.renumber_working_set();
             self.solver.settings.max_iter = left;
             self.solver.settings.warm_start = true;
             before(self.solver.problem());
             let status = self.solver.solve();
+            self.keep_working_set();
             let sol = self.solver.solution();
             after(sol);
             report.passes += 1;
@@ -684,6 +698,7 @@ impl<T: Real> Mpc<T> {
                 // (of the QP linearised one pass earlier) stands. The solver's
                 // working set is that of the failed pass: start the next step afresh.
                 report.refinement_failed = true;
+                self.warm_len = 0;
                 self.solver.clear_working_set();
                 break;
             }
@@ -755,13 +770,68 @@ impl<T: Real> Mpc<T> {
                 velocity_planner::v_heur_at(&st.velocity, path, &mut window, &at, fr.s, v0, mu);
             v_heur[node] = vh;
             c.tracking_costs(qp, st, path, obstacles, &xbar, &fr, vh, &u_bar, ncols);
+            c.node = node as u8;
+            c.node_first[node] = qp.m as u8;
             c.road_row(qp, st, &fr);
             c.validity_rows(qp, st, validity, &xbar, &u_bar, ncols);
             c.obstacle_rows(qp, st, path, obstacles, &fr, &u_bar, ncols);
         }
+        c.node_first[HORIZON + 1] = qp.m as u8;
         report.rows = qp.m as u32;
         report.obstacle_rows = c.obstacle_rows as u32;
         report.obstacle_rows_dropped = c.dropped;
+    }
+
+    /// Keeps the solver's working set after a solve, rows by [`RowId`], for the
+    /// next solve's warm start.
+    fn keep_working_set(&mut self) {
+        let mut n = 0;
+        for e in self.solver.working_set() {
+            let entry = match e.index {
+                ConstraintIndex::Bound(j) => WarmEntry::Bound(j, e.side),
+                ConstraintIndex::Row(i) => match self.condensing.row_id.get(i as usize) {
+                    Some(&id) => WarmEntry::Row(id, e.side),
+                    None => continue,
+                },
+            };
+            if let Some(d) = self.warm_set.get_mut(n) {
+                *d = entry;
+                n += 1;
+            }
+        }
+        self.warm_len = n;
+    }
+
+    /// Gives the solver the kept working set with each row's index in this pass's
+    /// QP (Method, step 4: the warm start): a row is found by its [`RowId`] among
+    /// its node's rows; one that does not exist in this pass (an obstacle no longer
+    /// relevant at that node) is dropped. The solver drops the entries that this
+    /// pass's bounds make inadmissible or that are dependent.
+    fn renumber_working_set(&mut self) {
+        let c = &self.condensing;
+        let kept = self.warm_set[..self.warm_len.min(WS)]
+            .iter()
+            .filter_map(|&e| match e {
+                WarmEntry::Bound(j, side) => Some(ActiveConstraint {
+                    index: ConstraintIndex::Bound(j),
+                    side,
+                }),
+                WarmEntry::Row(id, side) => {
+                    let node = id.node as usize;
+                    let (Some(&first), Some(&end)) =
+                        (c.node_first.get(node), c.node_first.get(node + 1))
+                    else {
+                        return None;
+                    };
+                    let i =
+                        (first as usize..end as usize).find(|&i| c.row_id.get(i) == Some(&id))?;
+                    Some(ActiveConstraint {
+                        index: ConstraintIndex::Row(i as u16),
+                        side,
+                    })
+                }
+            });
+        self.solver.set_working_set_from(kept);
     }
 
     fn slack_diagnostics(&self, report: &mut MpcReport<T>) {
@@ -769,7 +839,7 @@ impl<T: Real> Mpc<T> {
         let (mut v, mut o, mut r) = (T::ZERO, T::ZERO, T::ZERO);
         for i in 0..m {
             let s = self.solver.slack(i);
-            match self.condensing.row_kind[i] {
+            match self.condensing.row_id[i].kind {
                 RowKind::Validity => v = v.max(s),
                 RowKind::Obstacle => o = o.max(s),
                 RowKind::Road => r = r.max(s),
@@ -834,12 +904,42 @@ fn path_steering<T: Real>(geometry: &BicycleGeometry<T>, kappa: T) -> T {
 /// steering), appended to its factor as one block.
 const COST_ROWS: usize = 4;
 
-/// Kind of a QP row (for the slack diagnostics).
+/// Kind of a QP row (for the slack diagnostics and the warm start).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum RowKind {
     Validity,
     Road,
     Obstacle,
+}
+
+/// What a QP row constrains: its kind, its node (1..=HORIZON) and which of the
+/// node's rows of that kind it is (validity: 0 for `+δ`, 1 for `−δ`; road: 0;
+/// obstacle: the obstacle's id). Row indices move from one step to the next (an
+/// obstacle row that appears at an early node shifts every later row); a
+/// `RowId` names the same constraint in both.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct RowId {
+    kind: RowKind,
+    node: u8,
+    sub: u16,
+}
+
+impl RowId {
+    const NONE: Self = Self {
+        kind: RowKind::Validity,
+        node: 0,
+        sub: 0,
+    };
+}
+
+/// One entry of the working set kept for the next step's warm start: a variable
+/// bound, or a row by its [`RowId`]; and the side held.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum WarmEntry {
+    /// The bound on QP variable `j`.
+    Bound(u16, QpSide),
+    /// A general row.
+    Row(RowId, QpSide),
 }
 
 /// Scratch of one linearise–condense pass, kept in the workspace [`Mpc`] rather
@@ -863,8 +963,13 @@ struct Condensing<T> {
     /// The current node's lateral-deviation row (`NV`) and its constant (m), kept
     /// from the tracking costs for the road row.
     lateral: ([T; NV], T),
-    /// Kind of each QP row pushed in this pass (`NC`).
-    row_kind: [RowKind; NC],
+    /// What each QP row pushed in this pass constrains (`NC`).
+    row_id: [RowId; NC],
+    /// Node whose rows are being pushed (1..=HORIZON).
+    node: u8,
+    /// First QP row of each node `1..=HORIZON`; entry `HORIZON + 1` is the row count
+    /// (rows of node `n` are `node_first[n]..node_first[n + 1]`).
+    node_first: [u8; HORIZON + 2],
     /// Obstacle rows pushed in this pass.
     obstacle_rows: usize,
     /// Obstacle rows that found no room.
@@ -990,7 +1095,9 @@ impl<T: Real> Condensing<T> {
             cost_weights: [(T::ZERO, T::ZERO); COST_ROWS],
             row: [T::ZERO; NV],
             lateral: ([T::ZERO; NV], T::ZERO),
-            row_kind: [RowKind::Validity; NC],
+            row_id: [RowId::NONE; NC],
+            node: 0,
+            node_first: [0; HORIZON + 2],
             obstacle_rows: 0,
             dropped: 0,
         }
@@ -1178,9 +1285,23 @@ impl<T: Real> Condensing<T> {
         add_square_root_rows(&mut qp.h, &mut self.cost, ncols);
     }
 
-    /// Appends `row` with bounds `lo ≤ rowᵀu ≤ hi` and soft weight `rho`.
-    fn push(&mut self, qp: &mut MpcQpProblem<T>, kind: RowKind, lo: T, hi: T, rho: T) -> bool {
-        push_row_of(qp, &mut self.row_kind, &self.row, kind, lo, hi, rho)
+    /// Appends `row` with bounds `lo ≤ rowᵀu ≤ hi` and soft weight `rho`, as row
+    /// `sub` of its kind at the current node.
+    fn push(
+        &mut self,
+        qp: &mut MpcQpProblem<T>,
+        kind: RowKind,
+        sub: u16,
+        lo: T,
+        hi: T,
+        rho: T,
+    ) -> bool {
+        let id = RowId {
+            kind,
+            node: self.node,
+            sub,
+        };
+        push_row_of(qp, &mut self.row_id, &self.row, id, lo, hi, rho)
     }
 
     /// Road limits (soft): `−(w_right − b) ≤ e_y ≤ w_left − b`, `b` the half-width
@@ -1203,9 +1324,13 @@ impl<T: Real> Condensing<T> {
         let rho = T::TWO * st.weights.q_road;
         push_row_of(
             qp,
-            &mut self.row_kind,
+            &mut self.row_id,
             row,
-            RowKind::Road,
+            RowId {
+                kind: RowKind::Road,
+                node: self.node,
+                sub: 0,
+            },
             lo - d,
             hi - d,
             rho,
@@ -1251,11 +1376,15 @@ impl<T: Real> Condensing<T> {
         let sv_bar = slope * xbar[IV];
         let d = (xbar[IDELTA] - sv_bar) - dot(&self.row, u_bar, ncols);
         let hi = dmax - sv_bar - d;
-        self.push(qp, RowKind::Validity, -T::INFINITY, hi, rho);
+        self.push(qp, RowKind::Validity, 0, -T::INFINITY, hi, rho);
         let d = (-xbar[IDELTA] - sv_bar) - dot(&minus, u_bar, ncols);
         let hi = dmax - sv_bar - d;
-        let kinds = &mut self.row_kind;
-        push_row_of(qp, kinds, &minus, RowKind::Validity, -T::INFINITY, hi, rho);
+        let id = RowId {
+            kind: RowKind::Validity,
+            node: self.node,
+            sub: 1,
+        };
+        push_row_of(qp, &mut self.row_id, &minus, id, -T::INFINITY, hi, rho);
     }
 
     /// Obstacles (soft), in the path frame: the parabola's directrix is parallel
@@ -1296,6 +1425,7 @@ impl<T: Real> Condensing<T> {
             if self.push(
                 qp,
                 RowKind::Obstacle,
+                o.id as u16,
                 -d,
                 T::INFINITY,
                 T::TWO * st.weights.q_obs,
@@ -1449,17 +1579,17 @@ fn cost_row_of<T: Real>(
 /// [`Condensing::push`] of `row`.
 fn push_row_of<T: Real>(
     qp: &mut MpcQpProblem<T>,
-    row_kind: &mut [RowKind; NC],
+    row_id: &mut [RowId; NC],
     row: &[T; NV],
-    kind: RowKind,
+    id: RowId,
     lo: T,
     hi: T,
     rho: T,
 ) -> bool {
     match qp.push_row(row, lo, hi, rho) {
         Some(i) => {
-            if let Some(k) = row_kind.get_mut(i) {
-                *k = kind;
+            if let Some(k) = row_id.get_mut(i) {
+                *k = id;
             }
             true
         }

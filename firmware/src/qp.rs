@@ -564,6 +564,21 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         k
     }
 
+    /// [`QpSolver::set_working_set`] from an iterator (no buffer needed); keeps at
+    /// most `W` entries and returns how many were kept.
+    pub fn set_working_set_from(
+        &mut self,
+        set: impl IntoIterator<Item = ActiveConstraint>,
+    ) -> usize {
+        let mut k = 0;
+        for (d, s) in self.work.ws.iter_mut().zip(set) {
+            *d = s;
+            k += 1;
+        }
+        self.work.n = k;
+        k
+    }
+
     /// Empties the working set.
     pub fn clear_working_set(&mut self) {
         self.work.n = 0;
