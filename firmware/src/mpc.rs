@@ -46,7 +46,10 @@
 //!    dual diagonal). In code, [`Mpc`]'s `condense` calls the steps by name:
 //!    input bounds and regularisation, friction ellipse, linearise, tracking
 //!    costs, road row, validity rows, obstacle rows.
-//! 4. Solve, warm-started from the previous working set, and re-simulate the
+//! 4. Solve, warm-started from the previous working set (input bounds by
+//!    variable, rows by what they constrain: kind, node and obstacle, since an
+//!    obstacle row appearing at an early node renumbers the later rows), and
+//!    re-simulate the
 //!    nonlinear model under the optimal inputs (no Jacobians needed there:
 //!    [`BicycleGeometry::step`]): that trajectory is the plan.
 //!

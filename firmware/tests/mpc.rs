@@ -550,3 +550,66 @@ fn the_qp_iteration_cap_bounds_the_whole_activation() {
     assert_eq!((r.passes, r.qp_iterations), (1, per_pass[0]), "{r:?}");
     assert!(r.refinement_failed);
 }
+
+/// The warm start finds its constraints by what they are, not by their row
+/// index: an obstacle whose rows appear at the early nodes renumbers every later
+/// row, and the next solve still starts from the optimum's working set.
+#[test]
+fn warm_start_survives_rows_renumbered_by_a_new_obstacle() {
+    let s = settings::<f64>();
+    let path = straight::<f64>(400.0);
+    let os = ObstacleSettings::default();
+    // Obstacle A in the right lane 16 m ahead: its rows bind.
+    let a = box_obstacle(16.0, -2.2, 1.0, 1.0);
+    // Obstacle B at the left edge 6 m ahead: relevant (rows) at the early nodes,
+    // binding nowhere, and it does not move the lateral reference.
+    let mut b = box_obstacle(6.0, 3.7, 0.2, 0.2);
+    b.id = 1;
+    let e = est(0.0, 0.0, 0.0, 12.0, 0.0, 1_000_000);
+    let mut mpc = Box::new(Mpc::<f64>::new());
+    let mut plan = Plan::zeroed();
+    let mut obs = ObstacleManager::new();
+    obs.update(&os, &path, &[a.clone()]).unwrap();
+    let first = mpc
+        .step(&s, &path, obs.parabolas(), &e, 1.0, &mut plan)
+        .unwrap();
+    let y_first: Vec<f64> = plan.nodes.iter().map(|n| n.y_m).collect();
+    let rows_of = |m: &Mpc<f64>| -> Vec<u16> {
+        let mut v: Vec<u16> = m
+            .solver()
+            .working_set()
+            .iter()
+            .filter_map(|e| match e.index {
+                firmware::qp::ConstraintIndex::Row(i) => Some(i),
+                firmware::qp::ConstraintIndex::Bound(_) => None,
+            })
+            .collect();
+        v.sort();
+        v
+    };
+    let rows_first = rows_of(&mpc);
+    // The same estimate again (warm, no time elapsed) with B listed first.
+    obs.update(&os, &path, &[b, a]).unwrap();
+    let again = mpc
+        .step(&s, &path, obs.parabolas(), &e, 1.0, &mut plan)
+        .unwrap();
+    println!("first {first:?}\nagain {again:?}");
+    assert!(first.max_obstacle_slack_m >= 0.0 && first.active_constraints >= 2);
+    assert!(
+        again.warm && again.obstacle_rows > first.obstacle_rows,
+        "{again:?}"
+    );
+    // Same optimum (B binds nowhere; the step is linearised at the last pass's
+    // solution instead of the one before) ...
+    for (n, y) in plan.nodes.iter().zip(&y_first) {
+        assert!((n.y_m - y).abs() < 1e-3, "{} vs {y}", n.y_m);
+    }
+    // ... with the same active rows under new numbers ...
+    let rows_again = rows_of(&mpc);
+    println!("active rows {rows_first:?} -> {rows_again:?}");
+    assert!(!rows_first.is_empty());
+    assert_eq!(rows_again.len(), rows_first.len());
+    assert_ne!(rows_again, rows_first);
+    // ... found in one iteration: the working set was carried over row for row.
+    assert_eq!(again.qp_iterations, 1, "{again:?}");
+}
