@@ -49,8 +49,8 @@
 //! 4. Solve, warm-started from the previous working set (input bounds by
 //!    variable, rows by what they constrain: kind, node and obstacle, since an
 //!    obstacle row appearing at an early node renumbers the later rows), and
-//!    re-simulate the
-//!    nonlinear model under the optimal inputs (no Jacobians needed there:
+//!    re-simulate the nonlinear model under the optimal inputs (no Jacobians
+//!    needed there:
 //!    [`BicycleGeometry::step`]): that trajectory is the plan.
 //!
 //! All sizes are constants; the workspace [`Mpc`] (solver, warm start and the

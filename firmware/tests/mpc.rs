@@ -569,7 +569,7 @@ fn warm_start_survives_rows_renumbered_by_a_new_obstacle() {
     let mut mpc = Box::new(Mpc::<f64>::new());
     let mut plan = Plan::zeroed();
     let mut obs = ObstacleManager::new();
-    obs.update(&os, &path, &[a.clone()]).unwrap();
+    obs.update(&os, &path, std::slice::from_ref(&a)).unwrap();
     let first = mpc
         .step(&s, &path, obs.parabolas(), &e, 1.0, &mut plan)
         .unwrap();
