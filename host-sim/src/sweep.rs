@@ -112,9 +112,24 @@ pub struct SweepArgs {
     /// Skip the PNG figures.
     #[arg(long)]
     pub no_plots: bool,
+    /// Also write each run's `log.csv`, `plan_activations.csv` and
+    /// `summary.json` (what `host-sim run` writes, without figures) into
+    /// `OUT/runs/<index>/`: `failed` for the runs whose outcome is not `ok`,
+    /// `all` for every run.
+    #[arg(long, value_enum)]
+    pub logs: Option<LogRuns>,
     /// Output directory (created).
     #[arg(long, required_unless_present = "list")]
     pub out: Option<PathBuf>,
+}
+
+/// Which runs of a sweep keep their logs (`--logs`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum LogRuns {
+    /// The runs whose outcome is not `ok`.
+    Failed,
+    /// Every run.
+    All,
 }
 
 /// Arguments of `host-sim sweep-merge`.
@@ -427,6 +442,8 @@ pub struct Common {
     /// Where to write each run's obstacles as `<index>.csv` (random ones included,
     /// so `host-sim run --obstacles` can replay a run); `None`: not written.
     pub obstacle_dir: Option<PathBuf>,
+    /// Where and for which runs to write the run's outputs (`<dir>/<index>/`).
+    pub log_dir: Option<(PathBuf, LogRuns)>,
 }
 
 /// Runs one run and returns its row (an error is a row too).
@@ -541,6 +558,11 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
     let s = &res.summary;
     let edge = edge_excess(&scn, &plant_car, &res.log);
     let outcome = classify(s, edge.off_road_samples > 0);
+    if let Some((dir, which)) = &common.log_dir {
+        if *which == LogRuns::All || outcome != Outcome::Ok {
+            crate::run::write_outputs(&dir.join(spec.index.to_string()), &scn, &res, false)?;
+        }
+    }
     let fault_event_s = match spec.fault {
         Fault::LateObstacle(_) => ecu.obstacle_appeared_at_us().map(|t| t as f64 * 1e-6),
         Fault::DropoutNan(_) | Fault::DropoutHold(_) => Some(FAULT_START_S),
@@ -706,6 +728,7 @@ pub fn run(args: &SweepArgs) -> Result<()> {
         obstacles,
         laps: args.laps,
         duration_s: args.duration,
+        log_dir: args.logs.map(|w| (out.join("runs"), w)),
     };
     fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let wall = Instant::now();

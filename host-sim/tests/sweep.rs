@@ -126,6 +126,7 @@ fn run_fault(track: &str, fault: Fault) -> Vec<(String, String)> {
         laps: 1,
         duration_s: 300.0,
         obstacle_dir: None,
+        log_dir: None,
     };
     let row = execute(&spec, &common);
     header().into_iter().skip(10).zip(row.cells).collect()
