@@ -61,7 +61,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use crate::bicycle::{self, BicycleGeometry};
-use crate::obstacles::{Parabola, Side};
+use crate::obstacles::{obstacle_speed_cap, Parabola, Side};
 use crate::plan::{Plan, HORIZON, PLAN_DT_S};
 use crate::qp::{
     ldl_len, ActiveConstraint, ConstraintIndex, QpProblem, QpSolution, QpSolver, QpStatus,
@@ -757,7 +757,10 @@ impl<T: Real> Mpc<T> {
         let qp = self.solver.problem_mut();
         let c = &mut self.condensing;
         let accel = input_bounds_and_regularisation(qp, st, mu);
-        v_heur[0] = velocity_planner::v_heur(&st.velocity, path, xi0[IS], v0, mu);
+        let ay_limit = st.ay_fraction * mu * T::lit(crate::G);
+        let buffer = st.obstacle_offset_buffer_m;
+        let cap = |s: T| obstacle_speed_cap(&st.velocity, path, obstacles, s, v0, ay_limit, buffer);
+        v_heur[0] = velocity_planner::v_heur(&st.velocity, path, xi0[IS], v0, mu).min(cap(xi0[IS]));
         c.start(st);
         let mut window = CurvatureWindow::new();
         let mut xbar = *xi0;
@@ -770,7 +773,8 @@ impl<T: Real> Mpc<T> {
             let ncols = NU * node;
             let (fr, at) = NodeFrame::new(path, &xbar);
             let vh =
-                velocity_planner::v_heur_at(&st.velocity, path, &mut window, &at, fr.s, v0, mu);
+                velocity_planner::v_heur_at(&st.velocity, path, &mut window, &at, fr.s, v0, mu)
+                    .min(cap(fr.s));
             v_heur[node] = vh;
             c.tracking_costs(qp, st, path, obstacles, &xbar, &fr, vh, &u_bar, ncols);
             c.node = node as u8;

@@ -71,6 +71,7 @@
 //! abscissae).
 
 use crate::reference_path::ReferencePath;
+use crate::velocity_planner::VelocityPlannerSettings;
 use crate::Real;
 use heapless::Vec;
 
@@ -264,6 +265,14 @@ pub struct Parabola<T> {
     /// False when the forbidden region never reaches the road (the obstacle is off
     /// the road on its side): the MPC can ignore the parabola.
     pub reaches_road: bool,
+    /// Largest curvature of the path bending towards the side the car passes on
+    /// over the abscissae where the parabola matters ([`Parabola::s_range_m`]),
+    /// 1/m, ≥ 0: positive when the obstacle is on the outside of a bend there, where
+    /// a car at its lateral limit runs wide towards it (0 on a straight, on the
+    /// inside of a bend, or when the parabola does not reach the road). With the
+    /// parabola's own `2c` it bounds the curvature of the way round
+    /// ([`obstacle_speed_cap`]).
+    pub outside_kappa_1pm: T,
 }
 
 impl<T: Real> Parabola<T> {
@@ -384,6 +393,53 @@ impl<T: Real> Parabola<T> {
             .iter()
             .any(|shift| s0 <= b + *shift && s1 >= a + *shift)
     }
+}
+
+/// Speed cap near obstacles on the outside of a bend, m/s (`+∞` when none): the
+/// car at path abscissa `s_node_m` (m) and speed `v_now_mps` (m/s) previews the
+/// same distance as the velocity planner
+/// ([`VelocityPlannerSettings::preview_distance_m`]). A parabola in that window
+/// ([`Parabola::overlaps_s_window`]) that pushes the MPC's lateral reference off the
+/// centre line (its forbidden side reaches `η = 0` with the reference's buffer
+/// `offset_buffer_m`, m) makes the car swerve, towards the inside of the bend when
+/// the obstacle is on its outside; that way round bends up to `κ_out + 2c` (the
+/// road's sharpest bend towards the passing side, [`Parabola::outside_kappa_1pm`],
+/// plus the boundary's own curvature `2c`), and the cap is the speed at which that
+/// curvature takes `ay_limit_mps2` (m/s², the validity limit's `a_y,frac·μ·g`):
+/// `sqrt(a_y,lim/(κ_out + 2c))`.
+///
+/// Why: `V_heur` spends most of the lateral budget on the road's curvature and the
+/// parabolas' steepness takes another quarter of `μ·g` at `V_max`
+/// ([`ObstacleSettings::for_vehicle`]); in a fast bend the two together exceed the
+/// validity limit, the plan can swerve only as far as `δ_max(V)` allows, and the
+/// car at the edge of its tyres runs wide, into an obstacle on the outside. An
+/// obstacle on the inside of a bend is left on the side the car drifts away from;
+/// on a straight the cap is above `V_max`; an obstacle that needs no swerve caps
+/// nothing.
+pub fn obstacle_speed_cap<T: Real, const CAP: usize>(
+    velocity: &VelocityPlannerSettings<T>,
+    path: &ReferencePath<T, CAP>,
+    parabolas: &[Parabola<T>],
+    s_node_m: T,
+    v_now_mps: T,
+    ay_limit_mps2: T,
+    offset_buffer_m: T,
+) -> T {
+    let d = velocity.preview_distance_m(v_now_mps.max(T::ZERO));
+    let mut cap = T::INFINITY;
+    for o in parabolas {
+        let swerve = match o.side {
+            Side::Left => o.eta_apex_m + offset_buffer_m > T::ZERO,
+            Side::Right => o.eta_apex_m - offset_buffer_m < T::ZERO,
+        };
+        if swerve && o.overlaps_s_window(path, s_node_m, s_node_m + d) {
+            let kappa = o.outside_kappa_1pm + T::TWO * o.steepness_1pm;
+            if kappa > T::ZERO {
+                cap = cap.min((ay_limit_mps2.max(T::ZERO) / kappa).sqrt());
+            }
+        }
+    }
+    cap
 }
 
 /// Free-function form of [`Parabola::constraint_value_and_gradient`]: `g` (m,
@@ -530,6 +586,7 @@ fn build_inner<T: Real, const CAP: usize>(
         xi_min_m: T::ZERO,
         xi_max_m: T::ZERO,
         reaches_road: false,
+        outside_kappa_1pm: T::ZERO,
     };
     // Local coordinates of the vertices and the lateral extent.
     let mut local: Vec<(T, T), MAX_VERTICES> = Vec::new();
@@ -576,6 +633,11 @@ fn build_inner<T: Real, const CAP: usize>(
         frame.xi_min_m = xi0 - r;
         frame.xi_max_m = xi0 + r;
         frame.reaches_road = true;
+        // How sharply the road bends towards the side the car passes on (the
+        // obstacle on the outside of the bend) where the parabola matters.
+        frame.outside_kappa_1pm = path
+            .max_signed_curvature_between(s_o + frame.xi_min_m, s_o + frame.xi_max_m, sigma)
+            .max(T::ZERO);
     } else {
         frame.xi_min_m = xi0;
         frame.xi_max_m = xi0;

@@ -962,7 +962,31 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
     /// The scan of [`Self::max_abs_curvature_between`] over `[a, b]` (`a <= b`),
     /// `a` in segment `i0` at `ds0` along it, `ka = κ(a)`.
     fn max_abs_curvature_scan(&self, a: T, b: T, i0: usize, ds0: T, ka: T) -> T {
-        let mut k = ka.abs().max(self.curvature_at(b).abs());
+        self.max_curvature_scan(a, b, i0, ds0, ka, T::abs)
+    }
+
+    /// The largest `sign·κ` over `[s0_m, s1_m]` (either order), 1/m, as
+    /// [`Self::max_abs_curvature_between`] finds `|κ|` (end values and the vertices
+    /// in between): with `sign` `+1` the sharpest left bend (negative if the range
+    /// bends only right), with `−1` the sharpest right bend.
+    pub fn max_signed_curvature_between(&self, s0_m: T, s1_m: T, sign: T) -> T {
+        if self.n == 0 {
+            return T::ZERO;
+        }
+        let (a, b) = if s0_m <= s1_m {
+            (s0_m, s1_m)
+        } else {
+            (s1_m, s0_m)
+        };
+        let (i0, ds0, f0, _) = self.locate_any(a);
+        let ka = lerp(self.curvature[i0], self.curvature[self.next_vertex(i0)], f0);
+        // A range of a lap or more: every vertex (the scan stops after one lap).
+        self.max_curvature_scan(a, b, i0, ds0, ka, |k| sign * k)
+    }
+
+    /// The largest `g(κ)` over the end values and the vertices of `[a, b]`.
+    fn max_curvature_scan(&self, a: T, b: T, i0: usize, ds0: T, ka: T, g: impl Fn(T) -> T) -> T {
+        let mut k = g(ka).max(g(self.curvature_at(b)));
         // Unwrapped arc length of the start of segment i0.
         let base = if self.closed { a - ds0 } else { self.s[i0] };
         let mut pos = base;
@@ -983,7 +1007,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             if !self.closed && v == 0 {
                 break;
             }
-            k = k.max(self.curvature[v].abs());
+            k = k.max(g(self.curvature[v]));
             seg += 1;
         }
         k
@@ -1002,6 +1026,18 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
     ///
     /// `None` when the path is empty or `p` is not finite.
     pub fn project(&self, p: [T; 2], s_hint_m: Option<T>) -> Option<Projection<T>> {
+        self.project_impl(p, s_hint_m, true)
+    }
+
+    /// [`Self::project`] on the polyline itself: the end segments of an open path
+    /// are not extended, so a point is never matched to the straight line beyond
+    /// an end (which can pass near a far part of the road), and `s_m` stays in
+    /// `[0, L]`. For what lies beside the road (obstacles), not for the car.
+    pub fn project_on_polyline(&self, p: [T; 2], s_hint_m: Option<T>) -> Option<Projection<T>> {
+        self.project_impl(p, s_hint_m, false)
+    }
+
+    fn project_impl(&self, p: [T; 2], s_hint_m: Option<T>, extend: bool) -> Option<Projection<T>> {
         let m = self.segment_count();
         if m == 0 || !p[0].is_finite() || !p[1].is_finite() {
             return None;
@@ -1042,8 +1078,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             let rx = p[0] - a[0];
             let ry = p[1] - a[1];
             let mut t = rx * d[0] + ry * d[1];
-            let lo_open = !self.closed && i == 0;
-            let hi_open = !self.closed && i + 1 == m;
+            let lo_open = extend && !self.closed && i == 0;
+            let hi_open = extend && !self.closed && i + 1 == m;
             if !lo_open {
                 t = t.max(T::ZERO);
             }

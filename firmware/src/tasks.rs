@@ -325,7 +325,9 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
                 .vertices
                 .iter()
                 .fold([T::ZERO; 2], |a, v| [a[0] + v[0], a[1] + v[1]]);
-            let Some(p) = self.path.project([c[0] / n, c[1] / n], None) else {
+            // On the polyline: an open window's end segments, extended, can pass
+            // near a far part of the road and claim the obstacle for it.
+            let Some(p) = self.path.project_on_polyline([c[0] / n, c[1] / n], None) else {
                 continue;
             };
             let within = closed || (p.s_m > margin && p.s_m < length - margin);

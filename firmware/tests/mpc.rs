@@ -560,7 +560,7 @@ fn warm_start_survives_rows_renumbered_by_a_new_obstacle() {
     let path = straight::<f64>(400.0);
     let os = ObstacleSettings::default();
     // Obstacle A in the right lane 16 m ahead: its rows bind.
-    let a = box_obstacle(16.0, -2.2, 1.0, 1.0);
+    let a = box_obstacle(16.0, -1.8, 1.0, 1.0);
     // Obstacle B at the left edge 6 m ahead: relevant (rows) at the early nodes,
     // binding nowhere, and it does not move the lateral reference.
     let mut b = box_obstacle(6.0, 3.7, 0.2, 0.2);
