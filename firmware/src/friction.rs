@@ -220,6 +220,9 @@ pub struct FrictionEstimator<T> {
     mu: T,
     /// Slip events (wrapping).
     events: u32,
+    /// `1/(m·r_eff)` (1/(kg·m)), `1/τ_o` and `1/τ_f` (1/s), set by
+    /// [`FrictionEstimator::start`].
+    inverses: [T; 3],
 }
 
 impl<T: Real> Default for FrictionEstimator<T> {
@@ -245,13 +248,21 @@ impl<T: Real> FrictionEstimator<T> {
             since_slip_s: T::ZERO,
             mu: T::INFINITY,
             events: 0,
+            inverses: [T::ZERO; 3],
         }
     }
 
-    /// Forgets everything and starts at `μ̂ = cfg.mu_nominal`.
+    /// Forgets everything and starts at `μ̂ = cfg.mu_nominal` (`cfg` valid:
+    /// [`FrictionConfig::is_valid`]; [`FrictionEstimator::update`] must be given
+    /// the same settings).
     pub fn start(&mut self, cfg: &FrictionConfig<T>) {
         *self = Self::new();
         self.mu = cfg.mu_nominal;
+        self.inverses = [
+            T::ONE / (cfg.mass_kg * cfg.wheel_radius_m),
+            T::ONE / cfg.observer_time_s,
+            T::ONE / cfg.filter_time_s,
+        ];
     }
 
     /// The estimate `μ̂`, dimensionless: an upper bound on the road's friction
@@ -282,6 +293,7 @@ impl<T: Real> FrictionEstimator<T> {
     /// commanded now and applied until the next call. A stamp that does not advance
     /// (a held estimate) adds nothing; a gap over `max_gap_s` restarts the
     /// differentiation. Returns `μ̂`.
+    #[inline(never)]
     pub fn update(
         &mut self,
         cfg: &FrictionConfig<T>,
@@ -296,8 +308,9 @@ impl<T: Real> FrictionEstimator<T> {
         }
         match self.prev_stamp_us {
             Some(stamp) if stamp_us > stamp => {
-                let us = (stamp_us - stamp).min(1 << 24) as f32;
-                let dt = T::lit(us) * T::lit(1.0e-6);
+                // u32 → f32 is one instruction on the ECU (u64 → f32 a call).
+                let us = (stamp_us - stamp).min(u64::from(u32::MAX)) as u32;
+                let dt = T::lit(us as f32) * T::lit(1.0e-6);
                 if dt <= cfg.max_gap_s {
                     self.step(cfg, v_mps, yaw_rate_radps, dt);
                 } else {
@@ -333,16 +346,18 @@ impl<T: Real> FrictionEstimator<T> {
 
     /// The observer, the slip test and the estimate over one step of `dt` s.
     fn step(&mut self, cfg: &FrictionConfig<T>, v: T, yaw_rate: T, dt: T) {
-        let a_cmd = self.torque_nm / (cfg.mass_kg * cfg.wheel_radius_m);
+        let [inv_mr, inv_tau_o, inv_tau_f] = self.inverses;
+        let a_cmd = self.torque_nm * inv_mr;
         // V̂ integrates the commanded acceleration and is pulled to the measured
         // speed in `observer_time_s`: (V̂ − V)/τ_o is the shortfall low-passed at
-        // τ_o, from the speed itself, not its noisy derivative.
-        let k_o = dt / cfg.observer_time_s;
+        // τ_o, from the speed itself, not its noisy derivative. Forward Euler
+        // (gains at most 1).
         let e = self.v_hat_mps - v;
-        self.v_hat_mps += dt * a_cmd - k_o.min(T::ONE) * e;
-        let k = dt / (cfg.filter_time_s + dt);
+        let s_raw = e * inv_tau_o;
+        self.v_hat_mps += dt * a_cmd - (dt * inv_tau_o).min(T::ONE) * e;
+        let k = (dt * inv_tau_f).min(T::ONE);
         self.accel_cmd_mps2 += k * (a_cmd - self.accel_cmd_mps2);
-        self.shortfall_mps2 += k * (e / cfg.observer_time_s - self.shortfall_mps2);
+        self.shortfall_mps2 += k * (s_raw - self.shortfall_mps2);
         let cmd = self.accel_cmd_mps2;
         let demand = cmd.abs();
         let shortfall = self.shortfall_mps2 * cmd.signum0();
@@ -351,7 +366,7 @@ impl<T: Real> FrictionEstimator<T> {
         let a_tyre = if cmd > T::ZERO {
             // Driving: the driven axle alone, its load lowered by the transfer.
             let share = cfg.driven_load_share
-                - cfg.cg_height_over_wheelbase * a_meas.max(T::ZERO) / T::lit(crate::G);
+                - cfg.cg_height_over_wheelbase * a_meas.max(T::ZERO) * T::lit(1.0 / crate::G);
             a_meas / share.max(T::lit(0.1))
         } else {
             a_meas
@@ -375,11 +390,16 @@ impl<T: Real> FrictionEstimator<T> {
                 self.mu_before = self.mu;
                 self.events = self.events.wrapping_add(1);
             }
-            let obs = self.peak.0.sqrt() / T::lit(crate::G);
-            let floor = (self.mu_before * cfg.max_drop).max(cfg.mu_min);
-            let mu = self.mu_before.min(obs).max(floor);
-            // Within one event, the best the tyres gave counts.
-            self.mu = if new_event { mu } else { self.mu.max(mu) };
+            // Within one event, the best the tyres gave counts: the square root
+            // only when the peak is new to the event.
+            let g = T::lit(crate::G);
+            let mu_g = self.mu * g;
+            if new_event || self.peak.0 > mu_g * mu_g {
+                let obs = self.peak.0.sqrt() / g;
+                let floor = (self.mu_before * cfg.max_drop).max(cfg.mu_min);
+                let mu = self.mu_before.min(obs).max(floor);
+                self.mu = if new_event { mu } else { self.mu.max(mu) };
+            }
             self.since_slip_s = T::ZERO;
         } else {
             self.slipping = false;

@@ -434,7 +434,7 @@ pub struct ControlTask<T> {
     pub config: LowLevelConfig<T>,
     state: LowLevelState<T>,
     /// Settings of the friction check ([`crate::friction`]).
-    pub friction_config: FrictionConfig<T>,
+    friction_config: FrictionConfig<T>,
     friction: FrictionEstimator<T>,
     /// Counters.
     pub stats: ControlTaskStats,
@@ -487,6 +487,11 @@ impl<T: Real> ControlTask<T> {
     /// The friction check ([`crate::friction`]): its estimate and events.
     pub fn friction(&self) -> &FrictionEstimator<T> {
         &self.friction
+    }
+
+    /// The friction check's settings.
+    pub fn friction_config(&self) -> &FrictionConfig<T> {
+        &self.friction_config
     }
 
     /// The friction estimate `μ̂`, dimensionless (the configured `μ` until a slip
