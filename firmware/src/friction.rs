@@ -202,8 +202,9 @@ pub struct FrictionEstimator<T> {
     torque_nm: T,
     /// The observer's speed `V̂`, m/s.
     v_hat_mps: T,
-    /// Filtered `a_cmd`, m/s².
-    accel_cmd_mps2: T,
+    /// `a_cmd` low-passed at `τ_o` (as the observer low-passes the shortfall),
+    /// then at `τ_f`, m/s².
+    accel_cmd_mps2: [T; 2],
     /// Filtered shortfall `a_cmd − a_meas`, m/s².
     shortfall_mps2: T,
     /// Time the shortfall has been over its threshold, s.
@@ -239,7 +240,7 @@ impl<T: Real> FrictionEstimator<T> {
             prev_stamp_us: None,
             torque_nm: T::ZERO,
             v_hat_mps: T::ZERO,
-            accel_cmd_mps2: T::ZERO,
+            accel_cmd_mps2: [T::ZERO; 2],
             shortfall_mps2: T::ZERO,
             shortfall_s: T::ZERO,
             peak: (T::ZERO, T::ZERO),
@@ -338,7 +339,7 @@ impl<T: Real> FrictionEstimator<T> {
     /// The observer and the filters restart from the speed `v` (not the estimate).
     fn restart(&mut self, v: T) {
         self.v_hat_mps = v;
-        self.accel_cmd_mps2 = T::ZERO;
+        self.accel_cmd_mps2 = [T::ZERO; 2];
         self.shortfall_mps2 = T::ZERO;
         self.shortfall_s = T::ZERO;
         self.peak = (T::ZERO, T::ZERO);
@@ -352,13 +353,21 @@ impl<T: Real> FrictionEstimator<T> {
         // speed in `observer_time_s`: (V̂ − V)/τ_o is the shortfall low-passed at
         // τ_o, from the speed itself, not its noisy derivative. Forward Euler
         // (gains at most 1).
-        let e = self.v_hat_mps - v;
+        // Predicted to now with the torque applied since the last estimate, then
+        // corrected: e_j = (1 − k_o)·e_{j−1} + Δt·(a_cmd − a_meas) exactly, the
+        // recursion of the first filter on a_cmd below.
+        let k_o = (dt * inv_tau_o).min(T::ONE);
+        let e = self.v_hat_mps + dt * a_cmd - v;
+        self.v_hat_mps = v + (T::ONE - k_o) * e;
         let s_raw = e * inv_tau_o;
-        self.v_hat_mps += dt * a_cmd - (dt * inv_tau_o).min(T::ONE) * e;
+        // a_cmd through the same two filters as the shortfall, so that
+        // a_cmd − shortfall is the measured acceleration without a lag between them.
+        let [c1, c2] = self.accel_cmd_mps2;
+        let c1 = c1 + k_o * (a_cmd - c1);
         let k = (dt * inv_tau_f).min(T::ONE);
-        self.accel_cmd_mps2 += k * (a_cmd - self.accel_cmd_mps2);
+        let cmd = c2 + k * (c1 - c2);
+        self.accel_cmd_mps2 = [c1, cmd];
         self.shortfall_mps2 += k * (s_raw - self.shortfall_mps2);
-        let cmd = self.accel_cmd_mps2;
         let demand = cmd.abs();
         let shortfall = self.shortfall_mps2 * cmd.signum0();
         // What the tyres deliver, (μ_obs·g)², kept at its peak over the window.
@@ -408,5 +417,150 @@ impl<T: Real> FrictionEstimator<T> {
                 self.mu = (self.mu + cfg.recovery_per_s * dt).min(cfg.mu_nominal);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const M: f64 = 1500.0;
+    const R: f64 = 0.3;
+
+    fn cfg() -> FrictionConfig<f64> {
+        // The default car: 58.5 % of its weight on the driven front axle.
+        FrictionConfig::for_car(M, R, 0.585, 0.55 / 2.65, 0.75)
+    }
+
+    /// Drives the estimator for `secs` with the torque asking `a_cmd` (m/s²) while
+    /// the car achieves `a_meas` (m/s²) at lateral acceleration `ay` (m/s²); returns
+    /// the speed reached.
+    fn drive(
+        e: &mut FrictionEstimator<f64>,
+        c: &FrictionConfig<f64>,
+        t_us: &mut u64,
+        v: f64,
+        a_cmd: f64,
+        a_meas: f64,
+        ay: f64,
+        secs: f64,
+    ) -> f64 {
+        let mut v = v;
+        for _ in 0..(secs * 100.0).round() as u32 {
+            let yaw_rate = if v > 0.0 { ay / v } else { 0.0 };
+            e.update(c, *t_us, v, yaw_rate, a_cmd * M * R);
+            *t_us += 10_000;
+            v += a_meas * 0.01;
+        }
+        v
+    }
+
+    #[test]
+    fn tyres_that_deliver_what_is_asked_leave_the_estimate_alone() {
+        let c = cfg();
+        assert!(c.is_valid());
+        let mut e = FrictionEstimator::new();
+        e.start(&c);
+        let mut t = 0;
+        // Accelerating and braking hard, in a curve, less 0.4 m/s² of drag.
+        let v = drive(&mut e, &c, &mut t, 10.0, 4.0, 3.6, 3.0, 3.0);
+        drive(&mut e, &c, &mut t, v, -7.0, -7.4, 3.0, 2.0);
+        assert_eq!(e.mu(), 0.75);
+        assert_eq!(e.events(), 0);
+        assert!(!e.slipping());
+    }
+
+    #[test]
+    fn spinning_driven_wheels_lower_the_estimate_to_the_friction_they_gave() {
+        let c = cfg();
+        let mut e = FrictionEstimator::new();
+        e.start(&c);
+        let mut t = 0;
+        // The torque asks 3.5 m/s²; the road (μ = 0.5) gives 2.4 m/s² on the
+        // front axle, then 2.0 once the wheels spin far past their peak.
+        let v = drive(&mut e, &c, &mut t, 15.0, 3.5, 2.4, 0.0, 0.3);
+        drive(&mut e, &c, &mut t, v, 3.5, 2.0, 0.0, 1.0);
+        assert_eq!(e.events(), 1);
+        // 2.4 m/s² over the front axle's share less the transfer: μ ≈ 0.45.
+        let expected = 2.4 / (0.585 - 0.55 / 2.65 * 2.4 / 9.81) / 9.81;
+        assert!(
+            (e.mu() - expected).abs() < 0.03,
+            "μ̂ = {}, expected ≈ {expected}",
+            e.mu()
+        );
+        assert!(e.mu() >= 0.6 * 0.75);
+    }
+
+    #[test]
+    fn locked_wheels_lower_the_estimate_and_it_recovers_slowly_after_the_hold() {
+        let c = cfg();
+        let mut e = FrictionEstimator::new();
+        e.start(&c);
+        let mut t = 0;
+        // The brakes ask 5.9 m/s², the road gives 4.9 (μ = 0.5, all four wheels).
+        let v = drive(&mut e, &c, &mut t, 25.0, -5.9, -4.9, 0.0, 1.0);
+        assert_eq!(e.events(), 1);
+        // Cruising: no slip; held for 10 s, then +0.002 per second.
+        let v = drive(&mut e, &c, &mut t, v, 0.0, 0.0, 0.0, 0.5);
+        let low = e.mu();
+        assert!((low - 0.5).abs() < 0.03, "μ̂ = {low}");
+        let v = drive(&mut e, &c, &mut t, v, 0.0, 0.0, 0.0, 9.0);
+        assert_eq!(e.mu(), low);
+        let v = drive(&mut e, &c, &mut t, v, 0.0, 0.0, 0.0, 10.5);
+        assert!(
+            (e.mu() - (low + 0.002 * 10.0)).abs() < 0.002,
+            "μ̂ = {}",
+            e.mu()
+        );
+        // Never above the nominal friction.
+        drive(&mut e, &c, &mut t, v, 0.0, 0.0, 0.0, 200.0);
+        assert_eq!(e.mu(), 0.75);
+    }
+
+    #[test]
+    fn one_event_lowers_the_estimate_by_at_most_its_drop() {
+        let c = cfg();
+        let mut e = FrictionEstimator::new();
+        e.start(&c);
+        let mut t = 0;
+        // A spinning wheel braked back (almost no deceleration for the brake torque).
+        drive(&mut e, &c, &mut t, 20.0, -3.0, -0.1, 0.0, 0.5);
+        assert_eq!(e.events(), 1);
+        assert!((e.mu() - 0.6 * 0.75).abs() < 1e-6, "μ̂ = {}", e.mu());
+    }
+
+    #[test]
+    fn held_estimates_add_nothing_and_gaps_restart_the_observer() {
+        let c = cfg();
+        let mut e = FrictionEstimator::new();
+        e.start(&c);
+        // The same stamp again and again (a held estimate) with a torque the car
+        // does not follow: nothing is measured.
+        for _ in 0..100 {
+            e.update(&c, 1_000, 10.0, 0.0, 4.0 * M * R);
+        }
+        assert_eq!(e.events(), 0);
+        // Estimates 1 s apart: each gap restarts the observer.
+        for k in 0..50u64 {
+            e.update(&c, 2_000_000 + k * 1_000_000, 10.0, 0.0, 4.0 * M * R);
+        }
+        assert_eq!(e.events(), 0);
+        assert_eq!(e.shortfall_mps2(), 0.0);
+        // A non-finite speed is refused and forgotten.
+        e.update(&c, 60_000_000, f64::NAN, 0.0, 0.0);
+        assert_eq!(e.mu(), 0.75);
+    }
+
+    #[test]
+    fn invalid_settings_are_refused() {
+        let mut c = cfg();
+        c.driven_load_share = 1.5;
+        assert!(!c.is_valid());
+        let mut c = cfg();
+        c.mu_nominal = f64::NAN;
+        assert!(!c.is_valid());
+        let mut c = cfg();
+        c.max_drop = 0.0;
+        assert!(!c.is_valid());
     }
 }
