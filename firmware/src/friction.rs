@@ -83,7 +83,13 @@
 //! root only on a slip. Deterministic, no allocation, no branch on data but the
 //! slip test.
 
+use crate::tasks::CONTROL_PERIOD_US;
 use crate::Real;
+
+/// Control periods of commanded torque the friction check keeps (160 ms at
+/// 100 Hz): the oldest state estimate it can pair with the torque that moved the
+/// car.
+pub const TORQUE_HISTORY: usize = 16;
 
 /// Settings of the friction check (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -132,15 +138,18 @@ impl<T: Real> FrictionConfig<T> {
     /// gravity height over wheelbase `cg_height_over_wheelbase`, planned with the
     /// friction `mu_nominal`:
     ///
-    /// * observer 0.2 s, filters 0.1 s: the shortfall's noise is the speed's
-    ///   over 0.2 s, not its derivative's over 10 ms;
+    /// * observer 0.4 s, filters 0.2 s: the shortfall's noise is the speed's
+    ///   over 0.4 s, not its derivative's over 10 ms (at four times the level-1
+    ///   noise, σ = 0.2 m/s, about 0.06 m/s² against the 0.6 m/s² threshold);
     /// * slip looked for above 1 m/s² of demand, declared at a shortfall of
     ///   0.6 m/s² (1.4× the largest measured without slip: 0.42 m/s², the 17
     ///   circuits at μ = 1 and 0.5) held for 0.05 s;
     /// * the friction used kept over 1 s (the tyre's peak before it spun or locked);
     ///   one event lowers `μ̂` by at most 40 %;
     /// * recovery after 10 s without slip at 0.002 per s (0.1 of `μ` in 50 s),
-    ///   up to `mu_nominal`; `μ̂ ≥ 0.1`.
+    ///   up to `mu_nominal`; `μ̂ ≥ 0.4·mu_nominal` (the configured friction is
+    ///   trusted within a factor 2.5: a road with less grip than that is not one
+    ///   this car was set up for, and a planner that cannot brake is no safer).
     pub fn for_car(
         mass_kg: T,
         wheel_radius_m: T,
@@ -154,8 +163,8 @@ impl<T: Real> FrictionConfig<T> {
             driven_load_share,
             cg_height_over_wheelbase,
             mu_nominal,
-            observer_time_s: T::lit(0.2),
-            filter_time_s: T::lit(0.1),
+            observer_time_s: T::lit(0.4),
+            filter_time_s: T::lit(0.2),
             min_demand_mps2: T::ONE,
             shortfall_mps2_limit: T::lit(0.6),
             confirm_s: T::lit(0.05),
@@ -163,7 +172,7 @@ impl<T: Real> FrictionConfig<T> {
             max_drop: T::lit(0.6),
             hold_s: T::lit(10.0),
             recovery_per_s: T::lit(0.002),
-            mu_min: T::lit(0.1),
+            mu_min: T::lit(0.4) * mu_nominal,
             max_gap_s: T::lit(0.1),
         }
     }
@@ -198,8 +207,11 @@ impl<T: Real> FrictionConfig<T> {
 pub struct FrictionEstimator<T> {
     /// Stamp of the last estimate used, µs (`None`: differentiation restarts).
     prev_stamp_us: Option<u64>,
-    /// Total wheel torque applied since the last estimate, N·m.
-    torque_nm: T,
+    /// The total wheel torques commanded at the last [`TORQUE_HISTORY`] control
+    /// periods, N·m (a ring; `head` is the next to write).
+    torques: [T; TORQUE_HISTORY],
+    /// Next slot of `torques` to write.
+    head: usize,
     /// The observer's speed `V̂`, m/s.
     v_hat_mps: T,
     /// `a_cmd` low-passed at `τ_o` (as the observer low-passes the shortfall),
@@ -238,7 +250,8 @@ impl<T: Real> FrictionEstimator<T> {
     pub const fn new() -> Self {
         Self {
             prev_stamp_us: None,
-            torque_nm: T::ZERO,
+            torques: [T::ZERO; TORQUE_HISTORY],
+            head: 0,
             v_hat_mps: T::ZERO,
             accel_cmd_mps2: [T::ZERO; 2],
             shortfall_mps2: T::ZERO,
@@ -288,32 +301,40 @@ impl<T: Real> FrictionEstimator<T> {
         self.shortfall_mps2
     }
 
-    /// One period, after a successful low-level step: the estimate's stamp
-    /// `stamp_us` (µs), the measured speed `v_mps` (m/s) and yaw rate
-    /// `yaw_rate_radps` (rad/s), then `torque_nm` (N·m), the total wheel torque
-    /// commanded now and applied until the next call. A stamp that does not advance
-    /// (a held estimate) adds nothing; a gap over `max_gap_s` restarts the
-    /// differentiation. Returns `μ̂`.
-    #[inline(never)]
+    /// One period, after a successful low-level step at `now_us` (µs): the
+    /// estimate's stamp `stamp_us` (µs, at most `now_us`), the measured speed
+    /// `v_mps` (m/s) and yaw rate `yaw_rate_radps` (rad/s), then `torque_nm`
+    /// (N·m), the total wheel torque commanded now and applied for the next
+    /// period. The speed measured at the stamp is compared with the torque applied
+    /// over the period before the stamp (an estimate `d` old answers the torque
+    /// commanded `d` + one period ago: kept for [`TORQUE_HISTORY`] periods; an
+    /// older estimate is not used). A stamp that does not advance (a held estimate)
+    /// adds nothing; a gap over `max_gap_s` restarts the observer. Returns `μ̂`.
     pub fn update(
         &mut self,
         cfg: &FrictionConfig<T>,
+        now_us: u64,
         stamp_us: u64,
         v_mps: T,
         yaw_rate_radps: T,
         torque_nm: T,
     ) -> T {
-        if !(v_mps.is_finite() && yaw_rate_radps.is_finite() && torque_nm.is_finite()) {
-            self.forget();
+        if !(v_mps.is_finite() && yaw_rate_radps.is_finite()) {
+            self.forget(torque_nm);
             return self.mu;
         }
+        // Periods between the stamp and now (u32 division: one instruction).
+        let age = (now_us.saturating_sub(stamp_us)).min(u64::from(u32::MAX)) as u32;
+        let back = (age / CONTROL_PERIOD_US as u32) as usize + 1;
         match self.prev_stamp_us {
             Some(stamp) if stamp_us > stamp => {
                 // u32 → f32 is one instruction on the ECU (u64 → f32 a call).
                 let us = (stamp_us - stamp).min(u64::from(u32::MAX)) as u32;
                 let dt = T::lit(us as f32) * T::lit(1.0e-6);
-                if dt <= cfg.max_gap_s {
-                    self.step(cfg, v_mps, yaw_rate_radps, dt);
+                if dt <= cfg.max_gap_s && back <= TORQUE_HISTORY {
+                    let i = (self.head + TORQUE_HISTORY - back) % TORQUE_HISTORY;
+                    let applied = self.torques[i];
+                    self.step(cfg, v_mps, yaw_rate_radps, applied, dt);
                 } else {
                     self.restart(v_mps);
                 }
@@ -325,15 +346,27 @@ impl<T: Real> FrictionEstimator<T> {
                 self.prev_stamp_us = Some(stamp_us);
             }
         }
-        self.torque_nm = torque_nm;
+        self.record(torque_nm);
         self.mu
     }
 
-    /// A period without a valid estimate or command (the safe actuation): the next
+    /// A period without a valid estimate (the safe actuation, of total torque
+    /// `torque_nm`, N·m): the torque is recorded, and the next
     /// [`FrictionEstimator::update`] starts the observer afresh. The estimate is
     /// kept.
-    pub fn forget(&mut self) {
+    pub fn forget(&mut self, torque_nm: T) {
         self.prev_stamp_us = None;
+        self.record(torque_nm);
+    }
+
+    /// Records the torque commanded this period (non-finite: 0).
+    fn record(&mut self, torque_nm: T) {
+        self.torques[self.head] = if torque_nm.is_finite() {
+            torque_nm
+        } else {
+            T::ZERO
+        };
+        self.head = (self.head + 1) % TORQUE_HISTORY;
     }
 
     /// The observer and the filters restart from the speed `v` (not the estimate).
@@ -346,9 +379,9 @@ impl<T: Real> FrictionEstimator<T> {
     }
 
     /// The observer, the slip test and the estimate over one step of `dt` s.
-    fn step(&mut self, cfg: &FrictionConfig<T>, v: T, yaw_rate: T, dt: T) {
+    fn step(&mut self, cfg: &FrictionConfig<T>, v: T, yaw_rate: T, torque_nm: T, dt: T) {
         let [inv_mr, inv_tau_o, inv_tau_f] = self.inverses;
-        let a_cmd = self.torque_nm * inv_mr;
+        let a_cmd = torque_nm * inv_mr;
         // V̂ integrates the commanded acceleration and is pulled to the measured
         // speed in `observer_time_s`: (V̂ − V)/τ_o is the shortfall low-passed at
         // τ_o, from the speed itself, not its noisy derivative. Forward Euler
@@ -448,7 +481,7 @@ mod tests {
         let mut v = v;
         for _ in 0..(secs * 100.0).round() as u32 {
             let yaw_rate = if v > 0.0 { ay / v } else { 0.0 };
-            e.update(c, *t_us, v, yaw_rate, a_cmd * M * R);
+            e.update(c, *t_us, *t_us, v, yaw_rate, a_cmd * M * R);
             *t_us += 10_000;
             v += a_meas * 0.01;
         }
@@ -537,17 +570,18 @@ mod tests {
         // The same stamp again and again (a held estimate) with a torque the car
         // does not follow: nothing is measured.
         for _ in 0..100 {
-            e.update(&c, 1_000, 10.0, 0.0, 4.0 * M * R);
+            e.update(&c, 1_000, 1_000, 10.0, 0.0, 4.0 * M * R);
         }
         assert_eq!(e.events(), 0);
         // Estimates 1 s apart: each gap restarts the observer.
         for k in 0..50u64 {
-            e.update(&c, 2_000_000 + k * 1_000_000, 10.0, 0.0, 4.0 * M * R);
+            let t = 2_000_000 + k * 1_000_000;
+            e.update(&c, t, t, 10.0, 0.0, 4.0 * M * R);
         }
         assert_eq!(e.events(), 0);
         assert_eq!(e.shortfall_mps2(), 0.0);
         // A non-finite speed is refused and forgotten.
-        e.update(&c, 60_000_000, f64::NAN, 0.0, 0.0);
+        e.update(&c, 60_000_000, 60_000_000, f64::NAN, 0.0, 0.0);
         assert_eq!(e.mu(), 0.75);
     }
 

@@ -511,6 +511,7 @@ impl<T: Real> ControlTask<T> {
                 self.last_fault = None;
                 self.friction.update(
                     &self.friction_config,
+                    now_us,
                     est.stamp_us,
                     a.v_mps,
                     est.yaw_rate_radps,
@@ -519,7 +520,8 @@ impl<T: Real> ControlTask<T> {
                 a
             }
             Err(fault) => {
-                self.friction.forget();
+                let safe = low_level::safe_actuation(&self.config, &self.state);
+                self.friction.forget(safe.torque_total_nm);
                 self.stats.safe_actuations = self.stats.safe_actuations.wrapping_add(1);
                 match fault {
                     ControlFault::NonFiniteEstimate => {
@@ -532,7 +534,7 @@ impl<T: Real> ControlTask<T> {
                     ControlFault::Numerical => {}
                 }
                 self.last_fault = Some(fault);
-                low_level::safe_actuation(&self.config, &self.state)
+                safe
             }
         }
     }
