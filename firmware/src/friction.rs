@@ -530,8 +530,9 @@ mod tests {
         let mut e = FrictionEstimator::new();
         e.start(&c);
         let mut t = 0;
-        // The brakes ask 5.9 m/s², the road gives 4.9 (μ = 0.5, all four wheels).
-        let v = drive(&mut e, &c, &mut t, 25.0, -5.9, -4.9, 0.0, 1.0);
+        // The brakes ask 5.9 m/s², the road gives 4.9 (μ = 0.5, all four wheels):
+        // within the event the estimate follows the filtered deceleration up to it.
+        let v = drive(&mut e, &c, &mut t, 25.0, -5.9, -4.9, 0.0, 2.0);
         assert_eq!(e.events(), 1);
         // Cruising: no slip; held for 10 s, then +0.002 per second.
         let v = drive(&mut e, &c, &mut t, v, 0.0, 0.0, 0.0, 0.5);
