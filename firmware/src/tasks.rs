@@ -2,10 +2,12 @@
 //!
 //! | task | period | priority | deadline | does |
 //! |---|---|---|---|---|
-//! | [`ControlTask::run`] | 10 ms (100 Hz) | high | 10 ms, budget a few thousand cycles | follows the current plan: speed PID → wheel torques, `δ = δ_ol + δ_cl` |
-//! | [`PlanTask::run`] | 100 ms (10 Hz) | low | 100 ms | `V_heur` → obstacle parabolas → MPC, into its own buffer |
+//! | [`ControlTask::run`] | 10 ms (100 Hz) | high | 10 ms, budget a few thousand cycles | follows the current plan: speed PID → wheel torques, `δ = δ_ol + δ_cl`; the friction check ([`crate::friction`]) |
+//! | [`PlanTask::run`] | 100 ms (10 Hz) | low | 100 ms | `V_heur` → obstacle parabolas → MPC, into its own buffer, with `min(μ, μ̂)` |
 //!
-//! They share two resources: the latest [`StateEstimate`] and the current [`Plan`].
+//! They share two resources: the latest [`StateEstimate`] and the current [`Plan`]
+//! (and one word: the friction estimate `μ̂` that `control` updates and `plan`
+//! reads with the estimate at its release, [`PlanTask::set_friction_limit`]).
 //! `control` preempts `plan`. The planner computes into a buffer of its own,
 //! outside any lock, and publishes with [`PlanTask::publish`] — a swap of the two
 //! buffers, the only work done inside the critical section on the shared plan — so
