@@ -465,54 +465,57 @@ mod tests {
         FrictionConfig::for_car(M, R, 0.585, 0.55 / 2.65, 0.75)
     }
 
-    /// Drives the estimator for `secs` with the torque asking `a_cmd` (m/s²) while
-    /// the car achieves `a_meas` (m/s²) at lateral acceleration `ay` (m/s²); returns
-    /// the speed reached.
-    fn drive(
-        e: &mut FrictionEstimator<f64>,
-        c: &FrictionConfig<f64>,
-        t_us: &mut u64,
-        v: f64,
-        a_cmd: f64,
-        a_meas: f64,
-        ay: f64,
-        secs: f64,
-    ) -> f64 {
-        let mut v = v;
-        for _ in 0..(secs * 100.0).round() as u32 {
-            let yaw_rate = if v > 0.0 { ay / v } else { 0.0 };
-            e.update(c, *t_us, *t_us, v, yaw_rate, a_cmd * M * R);
-            *t_us += 10_000;
-            v += a_meas * 0.01;
+    /// An estimator started on [`cfg`] and its clock.
+    struct Rig {
+        e: FrictionEstimator<f64>,
+        c: FrictionConfig<f64>,
+        t_us: u64,
+    }
+
+    impl Rig {
+        fn new() -> Self {
+            let c = cfg();
+            let mut e = FrictionEstimator::new();
+            e.start(&c);
+            Self { e, c, t_us: 0 }
         }
-        v
+
+        /// Drives the estimator for `secs` from the speed `v` (m/s) with the torque
+        /// asking `a_cmd` (m/s²) while the car achieves `a_meas` (m/s²) at lateral
+        /// acceleration `ay` (m/s²); returns the speed reached.
+        fn drive(&mut self, v: f64, a_cmd: f64, a_meas: f64, ay: f64, secs: f64) -> f64 {
+            let mut v = v;
+            for _ in 0..(secs * 100.0).round() as u32 {
+                let yaw_rate = if v > 0.0 { ay / v } else { 0.0 };
+                let t = self.t_us;
+                self.e.update(&self.c, t, t, v, yaw_rate, a_cmd * M * R);
+                self.t_us += 10_000;
+                v += a_meas * 0.01;
+            }
+            v
+        }
     }
 
     #[test]
     fn tyres_that_deliver_what_is_asked_leave_the_estimate_alone() {
-        let c = cfg();
-        assert!(c.is_valid());
-        let mut e = FrictionEstimator::new();
-        e.start(&c);
-        let mut t = 0;
+        assert!(cfg().is_valid());
+        let mut r = Rig::new();
         // Accelerating and braking hard, in a curve, less 0.4 m/s² of drag.
-        let v = drive(&mut e, &c, &mut t, 10.0, 4.0, 3.6, 3.0, 3.0);
-        drive(&mut e, &c, &mut t, v, -7.0, -7.4, 3.0, 2.0);
-        assert_eq!(e.mu(), 0.75);
-        assert_eq!(e.events(), 0);
-        assert!(!e.slipping());
+        let v = r.drive(10.0, 4.0, 3.6, 3.0, 3.0);
+        r.drive(v, -7.0, -7.4, 3.0, 2.0);
+        assert_eq!(r.e.mu(), 0.75);
+        assert_eq!(r.e.events(), 0);
+        assert!(!r.e.slipping());
     }
 
     #[test]
     fn spinning_driven_wheels_lower_the_estimate_to_the_friction_they_gave() {
-        let c = cfg();
-        let mut e = FrictionEstimator::new();
-        e.start(&c);
-        let mut t = 0;
+        let mut r = Rig::new();
         // The torque asks 3.5 m/s²; the road (μ = 0.5) gives 2.4 m/s² on the
         // front axle, then 2.0 once the wheels spin far past their peak.
-        let v = drive(&mut e, &c, &mut t, 15.0, 3.5, 2.4, 0.0, 0.3);
-        drive(&mut e, &c, &mut t, v, 3.5, 2.0, 0.0, 1.0);
+        let v = r.drive(15.0, 3.5, 2.4, 0.0, 0.3);
+        r.drive(v, 3.5, 2.0, 0.0, 1.0);
+        let e = r.e;
         assert_eq!(e.events(), 1);
         // 2.4 m/s² over the front axle's share less the transfer: μ ≈ 0.45.
         let expected = 2.4 / (0.585 - 0.55 / 2.65 * 2.4 / 9.81) / 9.81;
@@ -526,41 +529,32 @@ mod tests {
 
     #[test]
     fn locked_wheels_lower_the_estimate_and_it_recovers_slowly_after_the_hold() {
-        let c = cfg();
-        let mut e = FrictionEstimator::new();
-        e.start(&c);
-        let mut t = 0;
+        let mut r = Rig::new();
         // The brakes ask 5.9 m/s², the road gives 4.9 (μ = 0.5, all four wheels):
         // within the event the estimate follows the filtered deceleration up to it.
-        let v = drive(&mut e, &c, &mut t, 25.0, -5.9, -4.9, 0.0, 2.0);
-        assert_eq!(e.events(), 1);
+        let v = r.drive(25.0, -5.9, -4.9, 0.0, 2.0);
+        assert_eq!(r.e.events(), 1);
         // Cruising: no slip; held for 10 s, then +0.002 per second.
-        let v = drive(&mut e, &c, &mut t, v, 0.0, 0.0, 0.0, 0.5);
-        let low = e.mu();
+        let v = r.drive(v, 0.0, 0.0, 0.0, 0.5);
+        let low = r.e.mu();
         assert!((low - 0.5).abs() < 0.03, "μ̂ = {low}");
-        let v = drive(&mut e, &c, &mut t, v, 0.0, 0.0, 0.0, 9.0);
-        assert_eq!(e.mu(), low);
-        let v = drive(&mut e, &c, &mut t, v, 0.0, 0.0, 0.0, 10.5);
-        assert!(
-            (e.mu() - (low + 0.002 * 10.0)).abs() < 0.002,
-            "μ̂ = {}",
-            e.mu()
-        );
+        let v = r.drive(v, 0.0, 0.0, 0.0, 9.0);
+        assert_eq!(r.e.mu(), low);
+        let v = r.drive(v, 0.0, 0.0, 0.0, 10.5);
+        let mu = r.e.mu();
+        assert!((mu - (low + 0.002 * 10.0)).abs() < 0.002, "μ̂ = {mu}");
         // Never above the nominal friction.
-        drive(&mut e, &c, &mut t, v, 0.0, 0.0, 0.0, 200.0);
-        assert_eq!(e.mu(), 0.75);
+        r.drive(v, 0.0, 0.0, 0.0, 200.0);
+        assert_eq!(r.e.mu(), 0.75);
     }
 
     #[test]
     fn one_event_lowers_the_estimate_by_at_most_its_drop() {
-        let c = cfg();
-        let mut e = FrictionEstimator::new();
-        e.start(&c);
-        let mut t = 0;
+        let mut r = Rig::new();
         // A spinning wheel braked back (almost no deceleration for the brake torque).
-        drive(&mut e, &c, &mut t, 20.0, -3.0, -0.1, 0.0, 0.5);
-        assert_eq!(e.events(), 1);
-        assert!((e.mu() - 0.6 * 0.75).abs() < 1e-6, "μ̂ = {}", e.mu());
+        r.drive(20.0, -3.0, -0.1, 0.0, 0.5);
+        assert_eq!(r.e.events(), 1);
+        assert!((r.e.mu() - 0.6 * 0.75).abs() < 1e-6, "μ̂ = {}", r.e.mu());
     }
 
     #[test]
