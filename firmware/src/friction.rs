@@ -310,6 +310,7 @@ impl<T: Real> FrictionEstimator<T> {
     /// commanded `d` + one period ago: kept for [`TORQUE_HISTORY`] periods; an
     /// older estimate is not used). A stamp that does not advance (a held estimate)
     /// adds nothing; a gap over `max_gap_s` restarts the observer. Returns `μ̂`.
+    #[inline(never)]
     pub fn update(
         &mut self,
         cfg: &FrictionConfig<T>,
