@@ -15,6 +15,7 @@
 //! | [`qp`] | our dense active-set QP solver |
 //! | [`mpc`] | the local MPC planner (linearise, condense, solve) |
 //! | [`pid`] | PID controller |
+//! | [`friction`] | online friction check: `μ̂` from what the tyres deliver |
 //! | [`low_level`] | low-level control: torque dispatch, `δ = δ_ol + δ_cl` |
 //! | [`plan`], [`state_estimate`] | the two resources the tasks share |
 //! | [`tasks`] | the 100 Hz `control` and 10 Hz `plan` tasks |
@@ -28,6 +29,7 @@
 pub mod real;
 
 pub mod bicycle;
+pub mod friction;
 pub mod link;
 pub mod low_level;
 pub mod mpc;

@@ -152,7 +152,8 @@ impl Setup {
             // obstacle on the whole track before it starts the ECU, with its reason).
             return Err(failure(SetupError::ObstacleBlocksRoad, 0));
         }
-        ControlTask::new(c.vehicle.low_level_config())
+        c.vehicle
+            .control_task(c.mu_planner)
             .map_err(|_| failure(SetupError::InvalidConfig, 0))
     }
 }

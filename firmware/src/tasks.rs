@@ -2,10 +2,12 @@
 //!
 //! | task | period | priority | deadline | does |
 //! |---|---|---|---|---|
-//! | [`ControlTask::run`] | 10 ms (100 Hz) | high | 10 ms, budget a few thousand cycles | follows the current plan: speed PID → wheel torques, `δ = δ_ol + δ_cl` |
-//! | [`PlanTask::run`] | 100 ms (10 Hz) | low | 100 ms | `V_heur` → obstacle parabolas → MPC, into its own buffer |
+//! | [`ControlTask::run`] | 10 ms (100 Hz) | high | 10 ms, budget a few thousand cycles | follows the current plan: speed PID → wheel torques, `δ = δ_ol + δ_cl`; the friction check ([`crate::friction`]) |
+//! | [`PlanTask::run`] | 100 ms (10 Hz) | low | 100 ms | `V_heur` → obstacle parabolas → MPC, into its own buffer, with `min(μ, μ̂)` |
 //!
-//! They share two resources: the latest [`StateEstimate`] and the current [`Plan`].
+//! They share two resources: the latest [`StateEstimate`] and the current [`Plan`]
+//! (and one word: the friction estimate `μ̂` that `control` updates and `plan`
+//! reads with the estimate at its release, [`PlanTask::set_friction_limit`]).
 //! `control` preempts `plan`. The planner computes into a buffer of its own,
 //! outside any lock, and publishes with [`PlanTask::publish`] — a swap of the two
 //! buffers, the only work done inside the critical section on the shared plan — so
@@ -34,6 +36,7 @@
 //! [`MpcSettings::cold_start_iterations`] linearise–condense passes and at most
 //! [`MpcSettings::qp_max_iter`] QP iterations (see [`Mpc::step_observed`]).
 
+use crate::friction::{FrictionConfig, FrictionEstimator};
 use crate::low_level::{self, Actuation, ControlFault, LowLevelConfig, LowLevelState};
 use crate::mpc::{Mpc, MpcError, MpcReport, MpcSettings};
 use crate::obstacles::{Obstacle, ObstacleManager, ObstacleSettings, MAX_OBSTACLES};
@@ -85,8 +88,12 @@ pub struct PlanTaskStats {
 pub struct PlanTask<T, const CAP: usize> {
     /// MPC settings.
     pub settings: MpcSettings<T>,
-    /// Road friction coefficient `μ` the planner assumes, dimensionless.
+    /// Road friction coefficient `μ` the planner is configured with, dimensionless
+    /// (it plans with `min(μ, friction limit)`: [`PlanTask::set_friction_limit`]).
     pub mu: T,
+    /// The `control` task's friction estimate `μ̂` ([`crate::friction`]),
+    /// dimensionless, `+∞` when there is none.
+    friction_limit: T,
     /// The reference path (load it once before the first activation).
     pub path: ReferencePath<T, CAP>,
     /// Parabolas of the static obstacles (update after loading the path).
@@ -118,6 +125,7 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         Self {
             settings,
             mu,
+            friction_limit: T::INFINITY,
             path: ReferencePath::new(),
             obstacles: ObstacleManager::new(),
             mpc: Mpc::new(),
@@ -139,6 +147,20 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             window_origin_m: T::ZERO,
             last_error: None,
         }
+    }
+
+    /// The friction estimate `μ̂` of the `control` task ([`ControlTask::friction_mu`],
+    /// dimensionless; `+∞`, NaN or a value not above 0: none), read with the state
+    /// estimate at the release: the activations plan with
+    /// [`PlanTask::planning_mu`], so a road found slipperier than configured
+    /// lowers the acceleration bounds, `V_heur` and `V_max`.
+    pub fn set_friction_limit(&mut self, mu: T) {
+        self.friction_limit = if mu > T::ZERO { mu } else { T::INFINITY };
+    }
+
+    /// The friction the activations plan with: `min(μ, μ̂)`, dimensionless.
+    pub fn planning_mu(&self) -> T {
+        self.mu.min(self.friction_limit)
     }
 
     /// The work counters of the last activation, whatever its outcome (a failed
@@ -235,12 +257,13 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             delta_rad: delta0,
             ..*est
         };
+        let mu = self.planning_mu();
         let result = self.mpc.step_observed(
             &self.settings,
             &self.path,
             self.obstacles.parabolas(),
             est,
-            self.mu,
+            mu,
             &mut self.working,
             before,
             after,
@@ -414,6 +437,9 @@ pub struct ControlTask<T> {
     /// Low-level controller configuration (validated by [`ControlTask::new`]).
     pub config: LowLevelConfig<T>,
     state: LowLevelState<T>,
+    /// Settings of the friction check ([`crate::friction`]).
+    friction_config: FrictionConfig<T>,
+    friction: FrictionEstimator<T>,
     /// Counters.
     pub stats: ControlTaskStats,
     /// The last fault, if the last activation applied the safe actuation.
@@ -421,12 +447,37 @@ pub struct ControlTask<T> {
 }
 
 impl<T: Real> ControlTask<T> {
-    /// A controller with a validated configuration.
+    /// A controller with a validated configuration; its friction check assumes
+    /// every wheel driven, no load transfer and a nominal `μ = 1`
+    /// ([`ControlTask::with_friction`] to say otherwise).
     pub fn new(config: LowLevelConfig<T>) -> Result<Self, low_level::LowLevelConfigError> {
+        let friction = FrictionConfig::for_car(
+            config.mass_kg,
+            config.wheel_radius_m,
+            T::ONE,
+            T::ZERO,
+            T::ONE,
+        );
+        Self::with_friction(config, friction)
+    }
+
+    /// A controller with a validated configuration and the friction check's
+    /// settings (refused as an invalid vehicle when they are out of range).
+    pub fn with_friction(
+        config: LowLevelConfig<T>,
+        friction_config: FrictionConfig<T>,
+    ) -> Result<Self, low_level::LowLevelConfigError> {
         config.validate()?;
+        if !friction_config.is_valid() {
+            return Err(low_level::LowLevelConfigError::InvalidVehicle);
+        }
+        let mut friction = FrictionEstimator::new();
+        friction.start(&friction_config);
         Ok(Self {
             config,
             state: LowLevelState::new(),
+            friction_config,
+            friction,
             stats: ControlTaskStats::default(),
             last_fault: None,
         })
@@ -437,6 +488,23 @@ impl<T: Real> ControlTask<T> {
         &self.state
     }
 
+    /// The friction check ([`crate::friction`]): its estimate and events.
+    pub fn friction(&self) -> &FrictionEstimator<T> {
+        &self.friction
+    }
+
+    /// The friction check's settings.
+    pub fn friction_config(&self) -> &FrictionConfig<T> {
+        &self.friction_config
+    }
+
+    /// The friction estimate `μ̂`, dimensionless (the configured `μ` until a slip
+    /// is seen): give it to
+    /// the `plan` task ([`PlanTask::set_friction_limit`]) with the state estimate.
+    pub fn friction_mu(&self) -> T {
+        self.friction.mu()
+    }
+
     /// One 10 ms activation at `now_us` on `est` following `plan` (both read under
     /// short locks by the caller). Never fails: on a fault (non-finite estimate,
     /// no valid plan) it returns the safe actuation and counts it.
@@ -445,9 +513,19 @@ impl<T: Real> ControlTask<T> {
         match low_level::control(&self.config, &mut self.state, plan, est, now_us) {
             Ok(a) => {
                 self.last_fault = None;
+                self.friction.update(
+                    &self.friction_config,
+                    now_us,
+                    est.stamp_us,
+                    a.v_mps,
+                    est.yaw_rate_radps,
+                    a.torque_total_nm,
+                );
                 a
             }
             Err(fault) => {
+                let safe = low_level::safe_actuation(&self.config, &self.state);
+                self.friction.forget(safe.torque_total_nm);
                 self.stats.safe_actuations = self.stats.safe_actuations.wrapping_add(1);
                 match fault {
                     ControlFault::NonFiniteEstimate => {
@@ -460,7 +538,7 @@ impl<T: Real> ControlTask<T> {
                     ControlFault::Numerical => {}
                 }
                 self.last_fault = Some(fault);
-                low_level::safe_actuation(&self.config, &self.state)
+                safe
             }
         }
     }

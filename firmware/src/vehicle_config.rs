@@ -7,9 +7,11 @@
 //! settings, bit for bit.
 
 use crate::bicycle::BicycleGeometry;
-use crate::low_level::LowLevelConfig;
+use crate::friction::FrictionConfig;
+use crate::low_level::{LowLevelConfig, LowLevelConfigError};
 use crate::mpc::MpcSettings;
 use crate::obstacles::ObstacleSettings;
+use crate::tasks::ControlTask;
 use crate::Real;
 
 /// The car, as the firmware needs it (SI units in each field).
@@ -85,6 +87,26 @@ impl<T: Real> VehicleConfig<T> {
         let share = (self.l_r_m + T::HALF * self.cg_height_m) / self.wheelbase_m();
         c.brake_front_share = share.clamp(T::HALF, T::lit(0.9));
         c
+    }
+
+    /// The friction check's settings ([`FrictionConfig::for_car`]) for this car
+    /// planned with the friction `mu_planner`: its mass, wheel radius, the front
+    /// axle's static share of the weight (front-wheel drive, as
+    /// [`VehicleConfig::mpc_settings`]) and `h/L`.
+    pub fn friction_config(&self, mu_planner: T) -> FrictionConfig<T> {
+        FrictionConfig::for_car(
+            self.mass_kg,
+            self.wheel_radius_m,
+            self.l_r_m / self.wheelbase_m(),
+            self.cg_height_m / self.wheelbase_m(),
+            mu_planner,
+        )
+    }
+
+    /// The `control` task for this car planned with the friction `mu_planner`:
+    /// [`VehicleConfig::low_level_config`] and [`VehicleConfig::friction_config`].
+    pub fn control_task(&self, mu_planner: T) -> Result<ControlTask<T>, LowLevelConfigError> {
+        ControlTask::with_friction(self.low_level_config(), self.friction_config(mu_planner))
     }
 
     /// The obstacle manager's settings for a planner friction `mu`

@@ -198,6 +198,9 @@ pub struct LogRow {
     pub plan_status: &'static str,
     /// Low-level controller mode.
     pub control_mode: &'static str,
+    /// The control task's friction estimate `μ̂` (`firmware::friction`): `inf`
+    /// before any slip, NaN when the ECU does not report it (processor in the loop).
+    pub friction_mu: f64,
 }
 
 /// A published plan's positions (for the trajectory figure).
@@ -287,6 +290,10 @@ pub struct Summary {
     pub control_activations: u64,
     /// Control activations that applied the safe actuation.
     pub control_safe_actuations: u64,
+    /// Lowest friction estimate `μ̂` of the control task's friction check
+    /// (`firmware::friction`: below the planner's `μ` when a slip showed the road
+    /// slipperier), null when the ECU does not report it (processor in the loop).
+    pub friction_mu_min: Option<f64>,
     /// Median host wall time of the ECU's work at a plan release (the plan
     /// activation and the control activation before it), µs (information only).
     pub plan_host_us_p50: f64,
@@ -496,7 +503,14 @@ pub fn run_with<T: Real, E: Ecu<T>>(
                 torque_nm: act.wheel_torque_nm.map(|x| x.to_f64()),
                 delta_rad: act.delta_rad.to_f64(),
             };
-            let row = meter.measure(t_us, &st, &out, &act, ecu.active_plan(), last_status);
+            let mut row = meter.measure(t_us, &st, &out, &act, ecu.active_plan(), last_status);
+            if let Some(mu) = c.friction_mu {
+                row.friction_mu = mu;
+                if mu.is_finite() {
+                    let low = meter.sum.friction_mu_min.map_or(mu, |m: f64| m.min(mu));
+                    meter.sum.friction_mu_min = Some(low);
+                }
+            }
             res.log.push(row);
             if let Some(reason) = meter.stop_reason(t_us, &st, &row) {
                 stop_reason = reason;
@@ -701,6 +715,7 @@ impl<'a> Meter<'a> {
             plan_deviation_m: dev,
             plan_status,
             control_mode: mode_name(act.mode),
+            friction_mu: f64::NAN,
         }
     }
 

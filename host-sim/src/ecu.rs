@@ -102,6 +102,10 @@ pub struct ControlOutput<T> {
     /// Plan releases lost since the previous call because the plan task was still
     /// running (each a deadline miss).
     pub skipped_releases: u32,
+    /// The control task's friction estimate `μ̂` after this activation
+    /// (`firmware::friction`; `+∞`: no slip seen), `None` when the ECU does not
+    /// report it (processor in the loop).
+    pub friction_mu: Option<f64>,
 }
 
 /// The firmware side of the closed loop.
@@ -199,7 +203,8 @@ impl<T: Real> SimulatedEcu<T> {
         let first = RouteFeeder::new(track)?.first();
         load_window(&mut planner, &first)?;
         planner.stats = Default::default();
-        let control = ControlTask::new(car.low_level_config())
+        let control = car
+            .control_task(mu_planner)
             .map_err(|e| anyhow!("low-level controller configuration: {e:?}"))?;
         Ok(Self {
             planner,
@@ -236,6 +241,7 @@ impl<T: Real> SimulatedEcu<T> {
     /// in flight until its modelled finish.
     fn release_plan(&mut self, t_us: u64, est: &StateEstimate<T>) {
         let h0 = Instant::now();
+        self.planner.set_friction_limit(self.control.friction_mu());
         let outcome = self.planner.run(est);
         self.host_us.push(h0.elapsed().as_secs_f64() * 1e6);
         // Charged from the activation's own counters, a failed one's included.
@@ -394,6 +400,7 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
             cycles: instructions * self.cycles_per_instruction,
             plans,
             skipped_releases,
+            friction_mu: Some(self.control.friction_mu().to_f64()),
         })
     }
 

@@ -566,6 +566,7 @@ impl Ecu<f32> for QemuEcu {
             cycles: instructions * self.opts.cycles_per_instruction,
             plans,
             skipped_releases,
+            friction_mu: None,
         })
     }
 

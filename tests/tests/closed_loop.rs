@@ -166,7 +166,8 @@ fn two_runs_are_bit_identical() {
 fn a_planner_told_the_wrong_friction_fails_safe_and_reports_it() {
     // The planner believes μ = 1 on a μ = 0.5 road: its plans ask for more grip
     // than there is. The run must stay finite and say how it ended, never panic,
-    // and the tyres slip more than when the planner knows the road.
+    // and the control task's friction check must see the slip and report a lower
+    // μ̂ (which it never does when the planner knows the road).
     let run = |mu_planner: f64| drive(false, 0.5, mu_planner, 30.0);
     let wrong = run(1.0);
     let right = run(0.5);
@@ -175,9 +176,39 @@ fn a_planner_told_the_wrong_friction_fails_safe_and_reports_it() {
         .iter()
         .all(|l| l.x_m.is_finite() && l.y_m.is_finite()));
     assert!(!wrong.summary.stop_reason.is_empty());
+    let (w, r) = (
+        wrong.summary.friction_mu_min.unwrap(),
+        right.summary.friction_mu_min.unwrap(),
+    );
     println!(
-        "slip angle: planner told μ = 1: {}, told μ = 0.5: {}",
+        "μ̂ min: planner told μ = 1: {w}, told μ = 0.5: {r}; slip angle {} / {}",
         wrong.summary.max_abs_slip_angle_rad, right.summary.max_abs_slip_angle_rad
     );
-    assert!(wrong.summary.max_abs_slip_angle_rad > right.summary.max_abs_slip_angle_rad);
+    assert!(w < 0.75, "the slip was not seen: μ̂ = {w}");
+    assert_eq!(r, 0.5);
+}
+
+#[test]
+fn a_planner_told_half_again_the_roads_friction_learns_the_road_and_keeps_to_it() {
+    // The `mu-high:1.5` fault: the planner believes μ = 0.75 on a μ = 0.5 road. Its
+    // lateral plan fits the tyres, its longitudinal one does not (the front wheels
+    // spin accelerating, lock braking): without the control task's friction check
+    // the car leaves the line by 4.2 m within the first minute. With it, the slip
+    // is seen, `μ̂` falls towards the road's, and the car keeps the paper's bound.
+    let r = drive(false, 0.5, 0.75, 60.0);
+    let s = &r.summary;
+    let mu_min = s.friction_mu_min.unwrap();
+    println!(
+        "μ̂ min {mu_min}, lateral error {} m, stop: {}",
+        s.max_abs_lateral_error_m, s.stop_reason
+    );
+    assert!(
+        mu_min < 0.65 && mu_min > 0.3,
+        "μ̂ should fall near the road's 0.5: {mu_min}"
+    );
+    assert!(s.max_abs_lateral_error_m < 0.4);
+    assert!(!s.stop_reason.starts_with("left the road"));
+    assert!(s.distance_m > 500.0, "kept driving: {} m", s.distance_m);
+    // The estimate is logged every control period.
+    assert!(r.log.iter().any(|l| l.friction_mu < 0.65));
 }

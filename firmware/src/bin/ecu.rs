@@ -61,6 +61,11 @@ systick_monotonic!(Mono, MONO_HZ);
 static UP_FD: AtomicUsize = AtomicUsize::new(0);
 /// Last steering command, `f32` bits (the panic handler holds it).
 static LAST_DELTA_BITS: AtomicU32 = AtomicU32::new(0);
+/// The control task's friction estimate `μ̂` (`firmware::friction`), `f32` bits,
+/// written by `control` each period and read by `plan` with the estimate at its
+/// release (a word: no lock; 0 before the first period, which `plan` takes as no
+/// estimate).
+static FRICTION_MU_BITS: AtomicU32 = AtomicU32::new(0);
 /// Core clock ticks spent in `control` so far, link included (the plan task
 /// subtracts them from its elapsed time).
 static CONTROL_TICKS: AtomicU32 = AtomicU32::new(0);
@@ -490,6 +495,7 @@ mod app {
                 .lock(|plan| control.run(&e, plan, e.stamp_us));
             let fault = link::fault_code(control.last_fault);
             LAST_DELTA_BITS.store(act.delta_rad.to_bits(), Ordering::Relaxed);
+            FRICTION_MU_BITS.store(control.friction_mu().to_bits(), Ordering::Relaxed);
             let ticks = core_ticks().saturating_sub(t1).min(u32::MAX as u64) as u32;
             let mut frame = actuation_frame(est.seq, &act, fault, ticks);
             frame.plan = cx.shared.plan_event.lock(|p| p.take());
@@ -513,9 +519,11 @@ mod app {
             activation = activation.wrapping_add(1);
             let release_us = k as u64 * 100_000;
             let est = cx.shared.estimate.lock(|e| *e);
+            let friction_mu = f32::from_bits(FRICTION_MU_BITS.load(Ordering::Relaxed));
             let t0 = core_ticks();
             let c0 = CONTROL_TICKS.load(Ordering::Relaxed);
             let planner = &mut *cx.local.planner;
+            planner.set_friction_limit(friction_mu);
             let result = planner.run(&est);
             // The record's copy of the plan, taken before the swap, outside the lock.
             let computed = planner.pending().copied();
