@@ -9,9 +9,11 @@ Peers (dense, as ours):
         min 1/2 x'Hx + f'x + sum 1/2 rho_i s_i^2 (its penalty is s^2 / (2 rho));
       - "slack": the standard form with explicit slack variables (80-106 variables),
         all variable bounds (s >= 0 included) as simple bounds.
-    Cold: no active constraint given. Warm: the constraints active at DAQP's own
-    solution of the previous QP (file order, as the MPC) marked active in `sense`
-    (bit 1, bit 2 for a lower side), the same warm start ours gets.
+    Cold: no active constraint given. Warm, native form: the working set our solve
+    started from (the corpus's `warm_start`: the MPC's previous working set with its
+    rows renumbered for this QP) marked active in `sense` (bit 1, bit 2 for a lower
+    side), the same warm start ours gets; slack form (other indices): the constraints
+    active at DAQP's own solution of the previous QP in file order.
     Time: DAQP's own figures, setup_time (workspace, Cholesky factor of H, the rows
     times R^-1, i.e. what our solve() also does) + solve_time (the iterations).
     "solve only" columns give solve_time alone.
@@ -91,6 +93,11 @@ class Qp:
         self.cold_us = entry.get("solve_us_cold")
         self.warm_us = entry.get("solve_us_warm")
         self.iters_ours = entry["iterations"]
+        # Our warm start: (index in DAQP's native order, lower side?).
+        self.warm_start = [
+            (w["bound"] if "bound" in w else n + w["row"], w["side"] == "lower")
+            for w in entry.get("warm_start", [])
+        ]
 
     def objective(self, x):
         """Native objective, the slack of a soft row being its violation."""
@@ -188,7 +195,12 @@ def run_daqp(qps, form, reps):
             sense[bl == bu] = DAQP_EQ
             rho = None
         size = len(sense)
-        warm = warm_sense(sense, prev_lam if prev_size == size else None)
+        if form == "native":
+            warm = sense.copy()
+            for i, lower in q.warm_start:
+                warm[i] |= DAQP_ACTIVE | (DAQP_LOWER if lower else 0)
+        else:
+            warm = warm_sense(sense, prev_lam if prev_size == size else None)
         res = {}
         for mode, s in (("cold", sense), ("warm", warm)):
             tot, sol = [], []

@@ -546,8 +546,9 @@ impl<T: Real> Mpc<T> {
         &self.last_report
     }
 
-    /// [`Mpc::step`], calling `before(problem)` on each condensed QP before it is
-    /// solved and `after(solution)` after (to record the QPs; no cost otherwise).
+    /// [`Mpc::step`], calling `before(solver)` on the solver holding each condensed
+    /// QP and the working set its solve starts from (the warm start) before it is
+    /// solved, and `after(solution)` after (to record the QPs; no cost otherwise).
     ///
     /// # Work bound
     ///
@@ -568,7 +569,7 @@ impl<T: Real> Mpc<T> {
         est: &StateEstimate<T>,
         mu: T,
         plan: &mut Plan<T>,
-        before: impl FnMut(&MpcQpProblem<T>),
+        before: impl FnMut(&MpcQp<T>),
         after: impl FnMut(&MpcQpSolution<T>),
     ) -> Result<MpcReport<T>, MpcError> {
         let mut report = MpcReport::default();
@@ -597,7 +598,7 @@ impl<T: Real> Mpc<T> {
         est: &StateEstimate<T>,
         mu: T,
         plan: &mut Plan<T>,
-        mut before: impl FnMut(&MpcQpProblem<T>),
+        mut before: impl FnMut(&MpcQp<T>),
         mut after: impl FnMut(&MpcQpSolution<T>),
         report: &mut MpcReport<T>,
     ) -> Result<(), MpcError> {
@@ -682,7 +683,7 @@ impl<T: Real> Mpc<T> {
             self.renumber_working_set();
             self.solver.settings.max_iter = left;
             self.solver.settings.warm_start = true;
-            before(self.solver.problem());
+            before(&self.solver);
             let status = self.solver.solve();
             self.keep_working_set();
             let sol = self.solver.solution();

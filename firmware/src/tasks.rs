@@ -246,7 +246,7 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
     pub fn run_observed(
         &mut self,
         est: &StateEstimate<T>,
-        before: impl FnMut(&crate::mpc::MpcQpProblem<T>),
+        before: impl FnMut(&crate::mpc::MpcQp<T>),
         after: impl FnMut(&crate::mpc::MpcQpSolution<T>),
     ) -> Result<MpcReport<T>, MpcError> {
         self.stats.activations = self.stats.activations.wrapping_add(1);

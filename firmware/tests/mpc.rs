@@ -349,7 +349,7 @@ fn warm_start_takes_fewer_qp_iterations_than_cold_start() {
             &e,
             1.0,
             &mut plan,
-            |q| copy = Some(Box::new(q.clone())),
+            |q| copy = Some(Box::new(q.problem().clone())),
             |sol| its = sol.iterations,
         )
         .unwrap();

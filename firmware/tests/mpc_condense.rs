@@ -10,7 +10,9 @@
 use firmware::bicycle::{self, BicycleGeometry, DELTA, NU, NX, S, V, X, Y};
 use firmware::mpc::{obstacle_offset, Mpc, MpcQpProblem, MpcSettings, SteeringReference};
 use firmware::mpc::{MAX_OBSTACLE_ROWS, NV};
-use firmware::obstacles::{Obstacle, ObstacleManager, ObstacleSettings, Parabola};
+use firmware::obstacles::{
+    obstacle_speed_cap, Obstacle, ObstacleManager, ObstacleSettings, Parabola,
+};
 use firmware::plan::{Plan, HORIZON, PLAN_DT_S};
 use firmware::reference_path::ReferencePath;
 use firmware::state_estimate::StateEstimate;
@@ -181,7 +183,17 @@ fn reference(
         let row = combine(&sens, &[(X, t[0]), (Y, t[1]), (S, kappa * ey - 1.0)]);
         let d = ex - dot_u(&row, u);
         r.cost(&row, 2.0 * w.q_x, d);
-        let vh = v_heur(&st.velocity, path, s, v0, mu);
+        // V_heur, capped near obstacles on the outside of a bend.
+        let cap = obstacle_speed_cap(
+            &st.velocity,
+            path,
+            obstacles,
+            s,
+            v0,
+            st.ay_fraction * mu * f64::from(firmware::G),
+            st.obstacle_offset_buffer_m,
+        );
+        let vh = v_heur(&st.velocity, path, s, v0, mu).min(cap);
         let row = combine(&sens, &[(V, 1.0)]);
         let d = x[V] - dot_u(&row, u) - vh;
         r.cost(&row, 2.0 * w.q_v, d);
@@ -325,7 +337,7 @@ fn condensing_matches_the_dense_reference() {
                     &est,
                     1.0,
                     &mut plan,
-                    |p| qps.push(Box::new(p.clone())),
+                    |q| qps.push(Box::new(q.problem().clone())),
                     |s| sols.push(s.x),
                 )
                 .unwrap();

@@ -42,6 +42,7 @@
 //! | `native` | the problem in our solver's own form, see below |
 //! | `precision`, `step`, `pass`, `objective`, `added`, `removed`, `refactorizations` | run information: `"f64"`/`"f32"`, MPC step (0.1 s each), pass within the step, our objective (with slack penalties), our working-set counters |
 //! | `solve_us_cold`, `solve_us_warm` | only with `--time`: our f64 solver's time on this QP, µs, from an empty working set and warm-started as in the MPC ([`time_solves`] says what is timed) |
+//! | `warm_start` | the working set our solve started from, in order: `{"bound": j}` (variable `j`) or `{"row": i}` (general row `i` of `native`), each with `"side": "lower"\|"upper"`; empty on a cold start |
 //!
 //! A hard row `lo ≤ aᵀx ≤ hi` is written as it is. A soft row (weight `ρ > 0`, meaning
 //! `lo − s ≤ aᵀx ≤ hi + s` with cost `½ρs²`, `s ≥ 0`) gets a slack variable `s` with `ρ`
@@ -53,9 +54,11 @@
 //! `n` (32), `m` (general rows), `H` (`n×n` row-major; only the upper triangle is read,
 //! the lower one is as the MPC left it), `f`, `A` (`m×n`), `lo`, `hi` (`null` for ∓∞),
 //! `x_lo`, `x_hi` (`n`, `null` for ∓∞), `soft` (`m` weights `ρ_i`, 0 for hard rows) and
-//! `max_iter`. Feeding these to one solver in file order, warm start on, reproduces the
-//! MPC's solves (the MPC warm-starts each QP from the previous QP's working set and
-//! clears it on a cold step, which only the first step is).
+//! `max_iter`. Feeding these to one solver in file order, each with its `warm_start` set
+//! ([`replay`]), reproduces the MPC's solves bit for bit: the MPC warm-starts each QP
+//! from the previous QP's working set with its rows renumbered for this QP (rows are
+//! kept by what they constrain, and an obstacle row appearing at an early node moves
+//! the later ones), and clears it on a cold step, which only the first step is.
 //!
 //! # Use
 //!
@@ -77,7 +80,7 @@ use firmware::obstacles::{Obstacle, ObstacleManager};
 use crate::closed_loop;
 use crate::vehicle::VehicleParams;
 use firmware::plan::Plan;
-use firmware::qp::QpStatus;
+use firmware::qp::{ActiveConstraint, ConstraintIndex, QpStatus, Side};
 use firmware::reference_path::ReferencePath;
 use firmware::state_estimate::StateEstimate;
 use firmware::Real;
@@ -191,10 +194,73 @@ pub struct CorpusEntry {
     /// set, µs (median of the repetitions; see [`time_solves`] for what is timed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub solve_us_cold: Option<f64>,
-    /// With `qp-corpus --time`: the same, warm-started from the working set the
-    /// previous QP of the file order left (as in the MPC), µs.
+    /// With `qp-corpus --time`: the same, warm-started from the working set the MPC's
+    /// solve started from (`warm_start`), µs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub solve_us_warm: Option<f64>,
+    /// The working set our solve started from (the MPC's warm start), in order.
+    #[serde(default)]
+    pub warm_start: Vec<WarmStartEntry>,
+}
+
+/// One entry of the working set a corpus QP's solve started from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WarmStartIndex {
+    /// The bound on variable `j`.
+    Bound(u16),
+    /// General row `i` of the native problem.
+    Row(u16),
+}
+
+/// One entry of `warm_start`: the constraint and the side held (`"lower"`, `"upper"`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WarmStartEntry {
+    /// The constraint.
+    #[serde(flatten)]
+    pub index: WarmStartIndex,
+    /// `"lower"` or `"upper"`.
+    pub side: WarmStartSide,
+}
+
+/// The side of a working-set entry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WarmStartSide {
+    /// Held at its lower bound.
+    Lower,
+    /// Held at its upper bound.
+    Upper,
+}
+
+impl WarmStartEntry {
+    /// From the solver's working-set entry.
+    pub fn from_active(e: &ActiveConstraint) -> Self {
+        Self {
+            index: match e.index {
+                ConstraintIndex::Bound(j) => WarmStartIndex::Bound(j),
+                ConstraintIndex::Row(i) => WarmStartIndex::Row(i),
+            },
+            side: match e.side {
+                Side::Lower => WarmStartSide::Lower,
+                Side::Upper => WarmStartSide::Upper,
+            },
+        }
+    }
+
+    /// The solver's working-set entry.
+    pub fn to_active(self) -> ActiveConstraint {
+        ActiveConstraint {
+            index: match self.index {
+                WarmStartIndex::Bound(j) => ConstraintIndex::Bound(j),
+                WarmStartIndex::Row(i) => ConstraintIndex::Row(i),
+            },
+            side: match self.side {
+                WarmStartSide::Lower => Side::Lower,
+                WarmStartSide::Upper => Side::Upper,
+            },
+        }
+    }
 }
 
 /// The corpus name of a solver status (`"optimal"`, `"iteration_limit"`, …).
@@ -616,6 +682,7 @@ impl CorpusEntry {
             refactorizations: solution.refactorizations,
             solve_us_cold: None,
             solve_us_warm: None,
+            warm_start: Vec::new(),
         }
     }
 }
@@ -776,7 +843,8 @@ fn record_in<T: Real>(
     let dt = T::from_f64(STEP_S / PLANT_SUBSTEPS as f64);
     for step in 0..steps {
         // Written by `before`, taken by `after`: both closures need it.
-        let pending: RefCell<Option<Box<MpcQpProblem<T>>>> = RefCell::new(None);
+        let pending: RefCell<Option<(Box<MpcQpProblem<T>>, Vec<WarmStartEntry>)>> =
+            RefCell::new(None);
         let mut pass = 0u32;
         let res = mpc.step_observed(
             &settings,
@@ -785,12 +853,19 @@ fn record_in<T: Real>(
             &est,
             mu,
             &mut plan,
-            |p| *pending.borrow_mut() = Some(Box::new(p.clone())),
+            |q| {
+                let ws = q
+                    .working_set()
+                    .iter()
+                    .map(WarmStartEntry::from_active)
+                    .collect();
+                *pending.borrow_mut() = Some((Box::new(q.problem().clone()), ws));
+            },
             |s| {
-                if let Some(p) = pending.borrow_mut().take() {
-                    out.push(CorpusEntry::from_solve(
-                        &p, s, max_iter, precision, step, pass,
-                    ));
+                if let Some((p, ws)) = pending.borrow_mut().take() {
+                    let mut e = CorpusEntry::from_solve(&p, s, max_iter, precision, step, pass);
+                    e.warm_start = ws;
+                    out.push(e);
                 }
                 pass += 1;
             },
@@ -853,20 +928,29 @@ pub fn native_problems<T: Real>(entries: &[CorpusEntry]) -> Result<Vec<Box<MpcQp
         .collect()
 }
 
-/// Solves `problems` in order with one solver of precision `T`: warm-started from the
-/// previous solve's working set (`warm`, as the MPC does) or from an empty one.
+/// Solves `problems` in order with one solver of precision `T`: each from the
+/// working set the MPC's solve started from (`warm_starts`, one per problem: the
+/// corpus's `warm_start`), which reproduces the MPC's solves bit for bit, or, with
+/// `None`, from an empty one (cold).
 pub fn replay<T: Real>(
     problems: &[Box<MpcQpProblem<T>>],
     max_iter: u32,
-    warm: bool,
+    warm_starts: Option<&[Vec<WarmStartEntry>]>,
 ) -> Vec<Replay> {
     let mut solver = Box::new(MpcQp::<T>::new());
     solver.settings.max_iter = max_iter;
-    solver.settings.warm_start = warm;
+    solver.settings.warm_start = warm_starts.is_some();
     problems
         .iter()
-        .map(|p| {
+        .enumerate()
+        .map(|(k, p)| {
             *solver.problem_mut() = (**p).clone();
+            match warm_starts.and_then(|w| w.get(k)) {
+                Some(ws) => {
+                    solver.set_working_set_from(ws.iter().map(|e| e.to_active()));
+                }
+                None => solver.clear_working_set(),
+            }
             let st = solver.solve();
             let s = solver.solution();
             Replay {
@@ -893,9 +977,8 @@ pub const MIN_TIME_REPS: usize = 5;
 /// condenses in place) and the solver's state copy made before each repetition, so that
 /// every repetition starts from the same state.
 ///
-/// *Cold*: an empty working set. *Warm*: the working set the previous QP (in file
-/// order) left, as in the MPC; the state carried on is that of the last repetition, so
-/// the sequence is the one [`replay`] gives. Each QP gets its `max_iter`.
+/// *Cold*: an empty working set. *Warm*: the working set the MPC's solve started from
+/// (the entry's `warm_start`), as [`replay`] gives it. Each QP gets its `max_iter`.
 pub fn time_solves(entries: &[CorpusEntry], reps: usize) -> Result<Vec<(f64, f64)>> {
     ensure!(
         reps >= MIN_TIME_REPS,
@@ -928,9 +1011,8 @@ pub fn time_solves(entries: &[CorpusEntry], reps: usize) -> Result<Vec<(f64, f64
             median(&samples)
         };
         let cold_us = time_from(&cold, &mut run);
+        warm.set_working_set_from(e.warm_start.iter().map(|w| w.to_active()));
         let warm_us = time_from(&warm, &mut run);
-        // `run` holds the state after the last warm repetition: carry it on.
-        std::mem::swap(&mut warm, &mut run);
         out.push((cold_us, warm_us));
     }
     Ok(out)

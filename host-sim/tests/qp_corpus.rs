@@ -63,10 +63,15 @@ fn the_built_in_run_records_every_step_and_all_are_optimal() {
 fn iteration_counts_are_recorded_and_a_warm_replay_reproduces_them() {
     let c = corpus();
     assert!(c.iter().any(|e| e.iterations > 0));
-    // Replaying the native problems in order on one warm-started solver is exactly what
-    // the MPC did: same iterations, same bits.
+    // Replaying the native problems in order, each from the working set the MPC's
+    // solve started from, is exactly what the MPC did: same iterations, same bits.
     let probs = native_problems::<f64>(c).unwrap();
-    let warm = replay(&probs, c[0].native.max_iter, true);
+    let sets: Vec<_> = c.iter().map(|e| e.warm_start.clone()).collect();
+    assert!(
+        sets.iter().skip(3).any(|w| !w.is_empty()),
+        "warm starts recorded"
+    );
+    let warm = replay(&probs, c[0].native.max_iter, Some(&sets));
     for (k, (e, r)) in c.iter().zip(&warm).enumerate() {
         assert_eq!(r.iterations, e.iterations, "QP {k}");
         assert_eq!(r.x[..], e.x[..N_DECISION], "QP {k}");
@@ -79,7 +84,7 @@ fn warm_start_takes_no_more_iterations_than_cold() {
     let probs = native_problems::<f64>(c).unwrap();
     let max_iter = c[0].native.max_iter;
     let warm: Vec<u32> = c.iter().map(|e| e.iterations).collect();
-    let cold_runs = replay(&probs, max_iter, false);
+    let cold_runs = replay(&probs, max_iter, None);
     assert!(cold_runs.iter().all(|r| r.status == "optimal"));
     let cold: Vec<u32> = cold_runs.iter().map(|r| r.iterations).collect();
     let (wm, wx) = median_max(&warm);
