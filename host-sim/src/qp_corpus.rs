@@ -843,8 +843,7 @@ fn record_in<T: Real>(
     let dt = T::from_f64(STEP_S / PLANT_SUBSTEPS as f64);
     for step in 0..steps {
         // Written by `before`, taken by `after`: both closures need it.
-        let pending: RefCell<Option<(Box<MpcQpProblem<T>>, Vec<WarmStartEntry>)>> =
-            RefCell::new(None);
+        let pending: RefCell<Option<PendingQp<T>>> = RefCell::new(None);
         let mut pass = 0u32;
         let res = mpc.step_observed(
             &settings,
@@ -927,6 +926,9 @@ pub fn native_problems<T: Real>(entries: &[CorpusEntry]) -> Result<Vec<Box<MpcQp
         })
         .collect()
 }
+
+/// A QP copied before its solve, with the working set the solve starts from.
+type PendingQp<T> = (Box<MpcQpProblem<T>>, Vec<WarmStartEntry>);
 
 /// Solves `problems` in order with one solver of precision `T`: each from the
 /// working set the MPC's solve started from (`warm_starts`, one per problem: the
