@@ -267,6 +267,7 @@ def accuracy(qps, xs):
 def record(args):
     cmd = ["cargo", "run", "--release", "-q", "-p", "host-sim", "--", "qp-corpus",
            "--out", args.corpus, "--time", "--time-reps", str(args.ours_reps)]
+    cmd += args.scenario.split()
     print("$ " + " ".join(cmd), flush=True)
     subprocess.run(cmd, check=True, cwd=os.path.join(os.path.dirname(__file__), ".."))
 
@@ -280,6 +281,9 @@ def main():
     ap.add_argument("--proxsuite-reps", type=int, default=1,
                     help="repetitions per QP for proxsuite (ms per solve)")
     ap.add_argument("--ours-reps", type=int, default=21, help="--time-reps with --record")
+    ap.add_argument("--scenario", default="",
+                    help="extra qp-corpus options with --record, e.g. "
+                         "'--track paper --obstacles paper --steps 1000'")
     ap.add_argument("--skip", default="", help="comma list of peers to skip: daqp,proxsuite")
     args = ap.parse_args()
     if args.reps < 1:
