@@ -849,10 +849,16 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         if self.closed && b - a >= self.length {
             return self.max_abs_curvature;
         }
+        self.max_curvature_between_by(a, b, T::abs)
+    }
+
+    /// The largest `g(κ)` over `[a, b]` (`a <= b`): the end values and the vertices
+    /// in between, from one lookup of `a`.
+    fn max_curvature_between_by(&self, a: T, b: T, g: impl Fn(T) -> T) -> T {
         // κ(a) as curvature_at(a) computes it, from the one lookup of `a`.
         let (i0, ds0, f0, _) = self.locate_any(a);
         let ka = lerp(self.curvature[i0], self.curvature[self.next_vertex(i0)], f0);
-        self.max_abs_curvature_scan(a, b, i0, ds0, ka)
+        self.max_curvature_scan(a, b, i0, ds0, ka, g)
     }
 
     /// [`Self::max_abs_curvature_between`]`(s0_m, s1_m)` (same value) for the
@@ -978,10 +984,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         } else {
             (s1_m, s0_m)
         };
-        let (i0, ds0, f0, _) = self.locate_any(a);
-        let ka = lerp(self.curvature[i0], self.curvature[self.next_vertex(i0)], f0);
         // A range of a lap or more: every vertex (the scan stops after one lap).
-        self.max_curvature_scan(a, b, i0, ds0, ka, |k| sign * k)
+        self.max_curvature_between_by(a, b, |k| sign * k)
     }
 
     /// The largest `g(κ)` over the end values and the vertices of `[a, b]`.

@@ -3,10 +3,11 @@
 
 use core::f64::consts::PI;
 use firmware::obstacles::{
-    build_parabola, constraint_value_and_gradient, minimal_apex, Obstacle, ObstacleError,
-    ObstacleManager, ObstacleSettings, Parabola, Side, MAX_OBSTACLES,
+    build_parabola, constraint_value_and_gradient, minimal_apex, obstacle_speed_cap, Obstacle,
+    ObstacleError, ObstacleManager, ObstacleSettings, Parabola, Side, MAX_OBSTACLES,
 };
 use firmware::reference_path::ReferencePath;
+use firmware::velocity_planner::VelocityPlannerSettings;
 use proptest::prelude::*;
 
 /// Straight open path along X from −100 m to 200 m, half-widths 4 m each side.
@@ -331,4 +332,68 @@ fn linearised_half_plane_is_tangent_and_conservative_outside() {
             assert!(!par.contains(q), "{q:?}");
         }
     }
+}
+
+/// The speed cap near obstacles binds where the car must swerve towards the inside
+/// of a bend (the obstacle on its outside), at `sqrt(a_y,lim/(κ + 2c))`; an obstacle
+/// on the inside, one on a straight, and one beside the centre line that needs no
+/// swerve leave the car above its top speed.
+#[test]
+fn speed_cap_binds_only_for_an_obstacle_on_the_outside_of_a_bend() {
+    let r = 50.0;
+    let pts: Vec<[f64; 2]> = (0..200)
+        .map(|i| {
+            let a = 2.0 * PI * i as f64 / 200.0;
+            [r * a.cos(), r * a.sin()]
+        })
+        .collect();
+    let mut bend: ReferencePath<f64, 256> = ReferencePath::new();
+    bend.load(&pts, None, true).unwrap();
+    let v_max = 25.0;
+    let s = ObstacleSettings::for_vehicle(1.8, 4.45, 1.0, v_max);
+    let vel = VelocityPlannerSettings::default();
+    let ay_lim = 0.5 * 9.81;
+    let box_at = |path: &ReferencePath<f64, 256>, s_m: f64, lateral: f64| {
+        let p = path.position_at(s_m);
+        let h = path.heading_at(s_m);
+        let n = [-h.sin(), h.cos()];
+        let c = [p[0] + lateral * n[0], p[1] + lateral * n[1]];
+        let v: Vec<[f64; 2]> = [[-1.0, -0.5], [1.0, -0.5], [1.0, 0.5], [-1.0, 0.5]]
+            .iter()
+            .map(|d| {
+                [
+                    c[0] + d[0] * h.cos() - d[1] * h.sin(),
+                    c[1] + d[0] * h.sin() + d[1] * h.cos(),
+                ]
+            })
+            .collect();
+        Obstacle::from_vertices(1, &v).unwrap()
+    };
+    let cap = |path: &ReferencePath<f64, 256>, o: &Obstacle<f64>| {
+        let par = build_parabola(&s, path, 0, o).unwrap();
+        (
+            par,
+            obstacle_speed_cap(&vel, path, &[par], 40.0, 20.0, ay_lim, 0.2),
+        )
+    };
+    // 1 m right of the centre line of a left bend: the car passes on its left, the
+    // inside; its swerve adds to the bend.
+    let (par, outside) = cap(&bend, &box_at(&bend, 60.0, -1.0));
+    assert_eq!(par.side, Side::Left);
+    let expected = (ay_lim / (1.0 / r + 2.0 * s.steepness_1pm)).sqrt();
+    assert!(
+        (outside - expected).abs() < 0.05 * expected,
+        "{outside} vs {expected}"
+    );
+    assert!(outside < v_max);
+    // 1 m left of it (the inside): the car passes on the outside, no cap below
+    // `V_max·√2` (the boundary's own curvature alone).
+    let (par, inside) = cap(&bend, &box_at(&bend, 60.0, 1.0));
+    assert_eq!(par.side, Side::Right);
+    assert!(inside > v_max, "{inside}");
+    // Far beside the centre line (the centre line stays free): no swerve, no cap.
+    let (_, aside) = cap(&bend, &box_at(&bend, 60.0, -3.0));
+    assert!(aside.is_infinite(), "{aside}");
+    // Out of the preview window: no cap.
+    assert!(obstacle_speed_cap(&vel, &bend, &[par], 200.0, 20.0, ay_lim, 0.2).is_infinite());
 }

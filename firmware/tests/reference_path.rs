@@ -147,6 +147,42 @@ fn max_abs_curvature_between_sees_the_curve_ahead() {
 }
 
 #[test]
+fn signed_curvature_tells_left_bends_from_right_ones() {
+    // Straight of 100 m, a left arc of radius 10 m, then a right arc of radius 20 m.
+    let mut pts = vec![];
+    for i in 0..=50 {
+        pts.push([2.0 * i as f64, 0.0]);
+    }
+    for k in 1..=30 {
+        let a = 0.5 * PI * k as f64 / 30.0;
+        pts.push([100.0 + 10.0 * a.sin(), 10.0 - 10.0 * a.cos()]);
+    }
+    // From (110, 10) heading +Y, turning right about (130, 10).
+    for k in 1..=30 {
+        let a = 0.5 * PI * k as f64 / 30.0;
+        pts.push([130.0 - 20.0 * a.cos(), 10.0 + 20.0 * a.sin()]);
+    }
+    let mut p: ReferencePath<f64, 256> = ReferencePath::new();
+    p.load(&pts, None, false).unwrap();
+    let left_end = 100.0 + 0.5 * PI * 10.0;
+    // Over the left arc: the sharpest left bend is 1/10, no right bend at all.
+    let l = p.max_signed_curvature_between(105.0, left_end - 3.0, 1.0);
+    let r = p.max_signed_curvature_between(105.0, left_end - 3.0, -1.0);
+    assert!(close(l, 0.1, 0.01) && r < 0.0, "{l} {r}");
+    // Over both arcs: left 1/10, right 1/20; the absolute maximum is the left one.
+    let l = p.max_signed_curvature_between(105.0, left_end + 20.0, 1.0);
+    let r = p.max_signed_curvature_between(left_end + 20.0, 105.0, -1.0);
+    assert!(close(l, 0.1, 0.01) && close(r, 0.05, 0.01), "{l} {r}");
+    assert!(close(
+        p.max_abs_curvature_between(105.0, left_end + 20.0),
+        l,
+        0.0
+    ));
+    // On the straight: no bend either way.
+    assert!(p.max_signed_curvature_between(10.0, 80.0, 1.0).abs() < 1e-9);
+}
+
+#[test]
 fn projection_of_a_circle_point() {
     let r = 50.0;
     let mut p: ReferencePath<f64, 512> = ReferencePath::new();
