@@ -758,7 +758,7 @@ impl<T: Real> Mpc<T> {
         let qp = self.solver.problem_mut();
         let c = &mut self.condensing;
         let accel = input_bounds_and_regularisation(qp, st, mu);
-        let ay_limit = st.ay_fraction * mu * T::lit(crate::G);
+        let ay_limit = validity.ay_limit_mps2();
         let buffer = st.obstacle_offset_buffer_m;
         let cap = |s: T| obstacle_speed_cap(&st.velocity, path, obstacles, s, v0, ay_limit, buffer);
         v_heur[0] = velocity_planner::v_heur(&st.velocity, path, xi0[IS], v0, mu).min(cap(xi0[IS]));
@@ -1293,6 +1293,15 @@ impl<T: Real> Condensing<T> {
         add_square_root_rows(&mut qp.h, &mut self.cost, ncols);
     }
 
+    /// Row `sub` of kind `kind` at the current node.
+    fn id_here(&self, kind: RowKind, sub: u16) -> RowId {
+        RowId {
+            kind,
+            node: self.node,
+            sub,
+        }
+    }
+
     /// Appends `row` with bounds `lo ≤ rowᵀu ≤ hi` and soft weight `rho`, as row
     /// `sub` of its kind at the current node.
     fn push(
@@ -1304,11 +1313,7 @@ impl<T: Real> Condensing<T> {
         hi: T,
         rho: T,
     ) -> bool {
-        let id = RowId {
-            kind,
-            node: self.node,
-            sub,
-        };
+        let id = self.id_here(kind, sub);
         push_row_of(qp, &mut self.row_id, &self.row, id, lo, hi, rho)
     }
 
@@ -1330,19 +1335,8 @@ impl<T: Real> Condensing<T> {
         };
         let (row, d) = (&self.lateral.0, self.lateral.1);
         let rho = T::TWO * st.weights.q_road;
-        push_row_of(
-            qp,
-            &mut self.row_id,
-            row,
-            RowId {
-                kind: RowKind::Road,
-                node: self.node,
-                sub: 0,
-            },
-            lo - d,
-            hi - d,
-            rho,
-        );
+        let id = self.id_here(RowKind::Road, 0);
+        push_row_of(qp, &mut self.row_id, row, id, lo - d, hi - d, rho);
     }
 
     /// Validity (soft): `±δ ≤ δ_max(V̄) + δ_max'(V̄)(V − V̄) + δ_tol`.
@@ -1387,11 +1381,7 @@ impl<T: Real> Condensing<T> {
         self.push(qp, RowKind::Validity, 0, -T::INFINITY, hi, rho);
         let d = (-xbar[IDELTA] - sv_bar) - dot(&minus, u_bar, ncols);
         let hi = dmax - sv_bar - d;
-        let id = RowId {
-            kind: RowKind::Validity,
-            node: self.node,
-            sub: 1,
-        };
+        let id = self.id_here(RowKind::Validity, 1);
         push_row_of(qp, &mut self.row_id, &minus, id, -T::INFINITY, hi, rho);
     }
 

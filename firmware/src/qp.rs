@@ -556,12 +556,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// Sets the working set the next (warm-started) solve starts from; keeps at most
     /// `W` entries and returns how many were kept. Entries are validated at the solve.
     pub fn set_working_set(&mut self, set: &[ActiveConstraint]) -> usize {
-        let k = set.len().min(W);
-        for (d, s) in self.work.ws.iter_mut().zip(set.iter()) {
-            *d = *s;
-        }
-        self.work.n = k;
-        k
+        self.set_working_set_from(set.iter().copied())
     }
 
     /// [`QpSolver::set_working_set`] from an iterator (no buffer needed); keeps at

@@ -164,8 +164,8 @@ pub struct CurvatureWindow<T> {
     /// The last window, unwrapped arc lengths, m (`valid` false: none).
     a: T,
     b: T,
-    /// Largest `|κ|` (1/m) of the vertices scanned inside the window, and the
-    /// unwrapped arc length (m) of the last vertex that attains it.
+    /// Largest `|κ|` (1/m) of the vertices scanned inside the window (−∞ when
+    /// none), and the unwrapped arc length (m) of the last vertex that attains it.
     vmax: T,
     vpos: T,
     /// Segment the scan goes on with, and the unwrapped arc length of its start, m.
@@ -184,7 +184,7 @@ impl<T: Real> CurvatureWindow<T> {
         Self {
             a: T::ZERO,
             b: T::ZERO,
-            vmax: T::ZERO,
+            vmax: T::NEG_INFINITY,
             vpos: T::ZERO,
             seg: 0,
             pos: T::ZERO,
@@ -841,11 +841,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         if self.n == 0 {
             return T::ZERO;
         }
-        let (a, b) = if s0_m <= s1_m {
-            (s0_m, s1_m)
-        } else {
-            (s1_m, s0_m)
-        };
+        let (a, b) = sorted(s0_m, s1_m);
         if self.closed && b - a >= self.length {
             return self.max_abs_curvature;
         }
@@ -903,28 +899,17 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             return self.max_abs_curvature_from(at, s0_m, s1_m);
         }
         // The kept maximum stands for the vertices in `(s0_m, win.b)` if it is
-        // attained there (or is 0: all scanned vertices flat); the scan then goes on
-        // from `win.b`, which must not lie before the new start.
+        // attained there (or is at most 0: no vertex, or all scanned vertices flat);
+        // the scan then goes on from `win.b`, which must not lie before the new start.
         let keep = win.valid
             && s0_m >= win.a
             && s0_m < win.b
             && s1_m >= win.b
-            && (win.vpos > s0_m || win.vmax == T::ZERO);
+            && (win.vpos > s0_m || win.vmax <= T::ZERO);
         if !keep {
-            let (i0, ds0) = (at.segment, at.segment_offset_m);
-            *win = CurvatureWindow {
-                a: s0_m,
-                b: s0_m,
-                vmax: T::ZERO,
-                vpos: T::ZERO,
-                seg: i0,
-                pos: if self.closed { s0_m - ds0 } else { self.s[i0] },
-                steps: 0,
-                ended: false,
-                valid: true,
-            };
+            *win = self.window_at(s0_m, at.segment, at.segment_offset_m);
         }
-        self.scan_vertices(win, s1_m);
+        self.scan_vertices(win, s1_m, T::abs);
         win.a = s0_m;
         win.b = s1_m;
         at.curvature_1pm
@@ -933,9 +918,24 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             .max(win.vmax)
     }
 
-    /// Takes the vertices before `b` (unwrapped, m) into the window's maximum, as
-    /// [`Self::max_abs_curvature_scan`] does from where the window's scan stopped.
-    fn scan_vertices(&self, win: &mut CurvatureWindow<T>, b: T) {
+    /// A window starting at `a` (unwrapped, m), which lies in segment `i0` at `ds0`
+    /// (m) along it, with no vertex scanned yet.
+    fn window_at(&self, a: T, i0: usize, ds0: T) -> CurvatureWindow<T> {
+        CurvatureWindow {
+            a,
+            b: a,
+            seg: i0,
+            // Unwrapped arc length of the start of segment i0.
+            pos: if self.closed { a - ds0 } else { self.s[i0] },
+            valid: true,
+            ..CurvatureWindow::new()
+        }
+    }
+
+    /// Takes the vertices before `b` (unwrapped, m) into the window's maximum of
+    /// `g(κ)`, from where the window's scan stopped; the scan stops after one lap
+    /// or at the end of an open path.
+    fn scan_vertices(&self, win: &mut CurvatureWindow<T>, b: T, g: impl Fn(T) -> T) {
         let segments = self.segment_count();
         while win.steps < self.n && !win.ended {
             if win.seg >= self.n {
@@ -955,7 +955,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 win.ended = true;
                 break;
             }
-            let kv = self.curvature[v].abs();
+            let kv = g(self.curvature[v]);
             if kv >= win.vmax {
                 win.vmax = kv;
                 win.vpos = next;
@@ -979,42 +979,17 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         if self.n == 0 {
             return T::ZERO;
         }
-        let (a, b) = if s0_m <= s1_m {
-            (s0_m, s1_m)
-        } else {
-            (s1_m, s0_m)
-        };
+        let (a, b) = sorted(s0_m, s1_m);
         // A range of a lap or more: every vertex (the scan stops after one lap).
         self.max_curvature_between_by(a, b, |k| sign * k)
     }
 
-    /// The largest `g(κ)` over the end values and the vertices of `[a, b]`.
+    /// The largest `g(κ)` over the end values and the vertices of `[a, b]`, `a`
+    /// in segment `i0` at `ds0` along it, `ka = κ(a)`.
     fn max_curvature_scan(&self, a: T, b: T, i0: usize, ds0: T, ka: T, g: impl Fn(T) -> T) -> T {
-        let mut k = g(ka).max(g(self.curvature_at(b)));
-        // Unwrapped arc length of the start of segment i0.
-        let base = if self.closed { a - ds0 } else { self.s[i0] };
-        let mut pos = base;
-        let segments = self.segment_count();
-        let mut seg = i0;
-        for _ in 0..self.n {
-            if seg >= self.n {
-                seg = 0; // (i0 + step) mod n
-            }
-            if seg >= segments {
-                break;
-            }
-            pos += self.seg_len[seg];
-            if pos >= b {
-                break;
-            }
-            let v = self.next_vertex(seg);
-            if !self.closed && v == 0 {
-                break;
-            }
-            k = k.max(g(self.curvature[v]));
-            seg += 1;
-        }
-        k
+        let mut win = self.window_at(a, i0, ds0);
+        self.scan_vertices(&mut win, b, &g);
+        g(ka).max(g(self.curvature_at(b))).max(win.vmax)
     }
 
     /// Projects the point `p` (`[x, y]`, m) on the path: the closest point of the
@@ -1120,6 +1095,15 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             point_m: foot,
             segment: i,
         })
+    }
+}
+
+/// `(a, b)` in increasing order (as given when not comparable).
+fn sorted<T: Real>(a: T, b: T) -> (T, T) {
+    if a <= b {
+        (a, b)
+    } else {
+        (b, a)
     }
 }
 

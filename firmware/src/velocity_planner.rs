@@ -139,13 +139,9 @@ pub fn v_heur<T: Real, const CAP: usize>(
     v_now_mps: T,
     mu: T,
 ) -> T {
-    let v = v_now_mps.max(T::ZERO);
-    let d = settings.preview_distance_m(v);
-    let kappa = path.max_abs_curvature_between(s_node_m, s_node_m + d);
-    let curve = settings.curve_speed_mps(kappa, mu);
-    let v_max = settings.v_max_mps(mu);
-    let v_inc = v + settings.delta_v_mps.max(T::ZERO);
-    curve.min(v_max).min(v_inc).max(T::ZERO)
+    v_heur_with(settings, v_now_mps, mu, |d| {
+        path.max_abs_curvature_between(s_node_m, s_node_m + d)
+    })
 }
 
 /// [`v_heur`] at the abscissa `s_node_m` that `at` was sampled at
@@ -162,9 +158,21 @@ pub fn v_heur_at<T: Real, const CAP: usize>(
     v_now_mps: T,
     mu: T,
 ) -> T {
+    v_heur_with(settings, v_now_mps, mu, |d| {
+        path.max_abs_curvature_window(window, at, s_node_m, s_node_m + d)
+    })
+}
+
+/// `V_heur` from the largest `|κ|` over the preview distance `d` (m), which
+/// `kappa_over(d)` gives (1/m): the formula [`v_heur`] and [`v_heur_at`] share.
+fn v_heur_with<T: Real>(
+    settings: &VelocityPlannerSettings<T>,
+    v_now_mps: T,
+    mu: T,
+    kappa_over: impl FnOnce(T) -> T,
+) -> T {
     let v = v_now_mps.max(T::ZERO);
-    let d = settings.preview_distance_m(v);
-    let kappa = path.max_abs_curvature_window(window, at, s_node_m, s_node_m + d);
+    let kappa = kappa_over(settings.preview_distance_m(v));
     let curve = settings.curve_speed_mps(kappa, mu);
     let v_max = settings.v_max_mps(mu);
     let v_inc = v + settings.delta_v_mps.max(T::ZERO);
