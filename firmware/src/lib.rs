@@ -19,6 +19,7 @@
 //! | [`low_level`] | low-level control: torque dispatch, `δ = δ_ol + δ_cl` |
 //! | [`plan`], [`state_estimate`] | the two resources the tasks share |
 //! | [`tasks`] | the 100 Hz `control` and 10 Hz `plan` tasks |
+//! | [`deadline`] | the tasks' releases, response times, misses and overruns on the ECU's clock; the watchdog |
 //! | [`vehicle_config`] | the car's numbers the settings derive from |
 //! | [`link`] | frames between the ECU and the simulator (processor-in-the-loop) |
 //!
@@ -29,6 +30,7 @@
 pub mod real;
 
 pub mod bicycle;
+pub mod deadline;
 pub mod friction;
 pub mod link;
 pub mod low_level;
