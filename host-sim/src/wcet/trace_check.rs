@@ -1,0 +1,1478 @@
+//! Replays a QEMU execution trace against the control-flow graphs: observed loop
+//! iterations and activation costs, to check the static analysis against a run.
+//!
+//! The log is QEMU's `-d in_asm,exec,nochain` output (see [`super::cpi`]): every
+//! translation block (TB) is listed once (`IN:`), every execution is a `Trace` line.
+//! The executed instruction stream is rebuilt TB by TB, with the icount corrections
+//! of [`super::cpi`] (an execution `Stopped` before it ran is dropped, one rewound
+//! by `cpu_io_recompile` counts up to the rewound instruction), and walked
+//! instruction by instruction: a TB may span several basic blocks and a basic block
+//! several TBs, so a block is entered when its first instruction executes.
+//!
+//! **Contexts.** Thread mode and every exception handler activation is an execution
+//! context with its own call stack. An exception is entered between two TBs: a TB
+//! starting at a handler's entry that is not the target of the current context's
+//! last branch pushes a new context; a return (`bx lr`, `pop {.., pc}`) executed in
+//! the handler's own frame (call depth 0; tail calls keep the depth) is the exception
+//! return and pops it, the preempted context resuming where it stopped (tail-chained
+//! handlers work the same way). A conditional return at depth 0 is resolved at the
+//! context's next instruction: if an exception enters between a not-taken
+//! conditional return and the next instruction, the entry is seen as a preemption
+//! (costs are still attributed right; only the nesting differs).
+//!
+//! **Loops.** Within one frame, entering block `B` of the function from block `A` is
+//! an edge. If `B` is a loop's header, the edge is either one of the loop's back
+//! edges (one more iteration of the current entry) or an entry (from outside the
+//! loop, or the frame's first block: the function was called or tail-called). The
+//! result is, per loop, the entries seen and the largest number of back-edge
+//! traversals in one entry: the quantity a loop bound bounds.
+//!
+//! **Activations.** Per root (a task's handler), each activation from exception
+//! entry to exception return adds, for every block entered in its own context, the
+//! block's `instructions` and static worst-case `cycles` (the numbers the static
+//! analysis uses); instructions of nested exceptions are theirs, not the
+//! preempted activation's.
+
+use super::cfg::{Instruction, Program};
+use super::loops::Loop;
+use super::WcetError;
+use serde::Serialize;
+use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::io::BufRead;
+use std::path::Path;
+
+/// Names of the Cortex-M fault and system handlers recognised as exception entries
+/// by [`check_trace`] in addition to the roots.
+pub const SYSTEM_HANDLERS: [&str; 11] = [
+    "HardFault",
+    "HardFault_",
+    "DefaultHandler",
+    "DefaultHandler_",
+    "NonMaskableInt",
+    "MemoryManagement",
+    "BusFault",
+    "UsageFault",
+    "SVCall",
+    "PendSV",
+    "DebugMonitor",
+];
+
+/// How many of the largest activation costs [`RootObservation::largest_instructions`]
+/// keeps.
+pub const LARGEST_KEPT: usize = 10;
+
+/// How many diagnostic examples [`TraceCheck::examples`] keeps.
+const MAX_EXAMPLES: usize = 20;
+
+/// What one loop did in the trace.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct LoopObservation {
+    /// Function index in the [`Program`].
+    pub function: usize,
+    /// Demangled function name.
+    pub function_name: String,
+    /// Loop index in the function's loops (as given to [`check_trace`]).
+    pub loop_index: usize,
+    /// Address of the loop header's first instruction.
+    pub header: u32,
+    /// Entries seen (the header reached from outside the loop).
+    pub entries: u64,
+    /// Back-edge traversals seen, all entries together.
+    pub back_edges: u64,
+    /// Largest number of back-edge traversals in one entry.
+    pub max_back_edges: u64,
+    /// Back edges taken in an entry the trace did not show (the loop was running
+    /// when the trace began, or the context was lost): they are in `back_edges`,
+    /// and in `max_back_edges` as an entry of their own.
+    pub back_edges_without_entry: u64,
+    /// Per execution context that ran the loop (a root's task name, `thread`, or a
+    /// handler's name): `(context, entries, max_back_edges)`.
+    pub by_context: Vec<(String, u64, u64)>,
+}
+
+/// What the activations of one root did in the trace.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct RootObservation {
+    /// Task name, as given.
+    pub name: String,
+    /// The root's function index.
+    pub function: usize,
+    /// Complete activations seen (exception entry to exception return).
+    pub activations: u64,
+    /// Largest activation cost, instructions (sum of the entered blocks'
+    /// `instructions`, nested exceptions excluded).
+    pub max_instructions: u64,
+    /// Largest activation cost, static worst-case cycles (sum of the entered
+    /// blocks' `cycles`, nested exceptions excluded).
+    pub max_cycles: u64,
+    /// Largest number of instructions actually executed in one activation (nested
+    /// exceptions excluded); equal to `max_instructions` unless a block was left
+    /// before its end.
+    pub max_executed: u64,
+    /// The largest activation costs, instructions (up to [`LARGEST_KEPT`],
+    /// descending).
+    pub largest_instructions: Vec<u64>,
+    /// Sum of the activations' instructions (block costs).
+    pub total_instructions: u64,
+    /// Sum of the activations' static cycles.
+    pub total_cycles: u64,
+    /// Activations preempted at least once by another exception.
+    pub preempted_activations: u64,
+    /// Activations still running at the end of the trace (not counted above).
+    pub incomplete: u64,
+}
+
+/// The replay of a trace.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct TraceCheck {
+    /// Every loop executed at least once (entered or iterated), by function then
+    /// loop index.
+    pub loops: Vec<LoopObservation>,
+    /// Per root, in the order given.
+    pub roots: Vec<RootObservation>,
+    /// Activations of exception handlers that are not roots (faults), by name.
+    pub other_handlers: Vec<(String, u64)>,
+    /// Translation block executions replayed.
+    pub tb_executions: u64,
+    /// Instructions replayed.
+    pub instructions: u64,
+    /// Block entries (each block execution counted once).
+    pub block_entries: u64,
+    /// Exception entries recognised.
+    pub exception_entries: u64,
+    /// Executed instructions at an address that is no instruction of any function
+    /// of the disassembly.
+    pub outside_functions: u64,
+    /// `Trace` lines whose translation is not in the log (skipped; the stream is
+    /// broken there).
+    pub untraced_executions: u64,
+    /// Executions QEMU stopped before they ran or rewound (dropped, or replayed up
+    /// to where execution resumed).
+    pub abandoned_executions: u64,
+    /// Control transfers the graphs do not have: an edge between blocks that is no
+    /// successor edge, a return elsewhere than after its call, a jump into the
+    /// middle of another function, a fall-through that did not fall through.
+    pub unexpected_transfers: u64,
+    /// The first few unexpected transfers and other oddities, described.
+    pub examples: Vec<String>,
+}
+
+impl TraceCheck {
+    /// The loops observed in a context (a root's task name, `thread`, or a handler's
+    /// name).
+    pub fn loops_of(&self, context: &str) -> Vec<&LoopObservation> {
+        self.loops
+            .iter()
+            .filter(|l| l.by_context.iter().any(|(c, _, _)| c == context))
+            .collect()
+    }
+
+    /// Checks the observed loops against static bounds `(function, loop, max back
+    /// edges per entry)`: one message per loop whose observed maximum exceeds its
+    /// bound (the bound is then wrong, or the graph is).
+    pub fn violations(&self, bounds: &[(usize, usize, u64)]) -> Vec<String> {
+        let mut out = Vec::new();
+        for &(function, loop_index, bound) in bounds {
+            let Some(seen) = self
+                .loops
+                .iter()
+                .find(|l| l.function == function && l.loop_index == loop_index)
+            else {
+                continue;
+            };
+            if seen.max_back_edges > bound {
+                out.push(format!(
+                    "{}: loop {} at {:#010x}: bound {} back edges per entry, observed {} (in {} entries)",
+                    seen.function_name,
+                    loop_index,
+                    seen.header,
+                    bound,
+                    seen.max_back_edges,
+                    seen.entries
+                ));
+            }
+        }
+        out
+    }
+}
+
+/// The exception handlers of an ELF's vector table (`.vector_table`: word 0 the
+/// initial stack pointer, word 1 `Reset`, then one handler address | 1 per
+/// exception), as function indices of `program`, without `Reset`.
+pub fn vector_table_handlers(elf: &Path, program: &Program) -> Result<Vec<usize>, WcetError> {
+    use object::{Object, ObjectSection};
+    let data = std::fs::read(elf).map_err(|source| WcetError::Io {
+        path: elf.to_path_buf(),
+        source,
+    })?;
+    let file = object::File::parse(&*data).map_err(|e| WcetError::Elf {
+        path: elf.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let section = file
+        .section_by_name(".vector_table")
+        .ok_or_else(|| WcetError::Elf {
+            path: elf.to_path_buf(),
+            message: "no .vector_table section".to_string(),
+        })?;
+    let bytes = section.data().map_err(|e| WcetError::Elf {
+        path: elf.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let words: Vec<u32> = bytes
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    let reset = words.get(1).copied().unwrap_or(0) & !1;
+    let mut out: Vec<usize> = words
+        .iter()
+        .skip(2)
+        .filter(|&&w| w != 0 && w & !1 != reset)
+        .filter_map(|&w| program.at(w & !1))
+        .collect();
+    out.sort_unstable();
+    out.dedup();
+    Ok(out)
+}
+
+/// Replays `log` against `program`. `loops[f]` are the natural loops of function
+/// `f` (an empty list for a function without loops or not analysed); `roots` are
+/// the tasks' `(name, handler function)`. Exception entries are recognised at the
+/// roots and at the functions named in [`SYSTEM_HANDLERS`].
+pub fn check_trace<R: BufRead>(
+    log: R,
+    program: &Program,
+    loops: &[Vec<Loop>],
+    roots: &[(String, usize)],
+) -> Result<TraceCheck, WcetError> {
+    let handlers: Vec<usize> = SYSTEM_HANDLERS
+        .iter()
+        .flat_map(|n| program.find(n))
+        .filter(|&f| {
+            let func = &program.functions[f];
+            SYSTEM_HANDLERS
+                .iter()
+                .any(|n| func.demangled == *n || func.name == *n)
+        })
+        .collect();
+    check_trace_with_handlers(log, program, loops, roots, &handlers)
+}
+
+/// [`check_trace`] with the exception handlers (besides the roots) given, e.g. by
+/// [`vector_table_handlers`].
+pub fn check_trace_with_handlers<R: BufRead>(
+    log: R,
+    program: &Program,
+    loops: &[Vec<Loop>],
+    roots: &[(String, usize)],
+    handlers: &[usize],
+) -> Result<TraceCheck, WcetError> {
+    let mut replay = Replay::new(program, loops, roots, handlers);
+    let mut stream = TbStream::new(log);
+    while let Some(event) = stream.next_event(|a| replay.resolve(a))? {
+        match event {
+            Event::Executed { tb, count } => {
+                let insns: Vec<Resolved> = stream
+                    .translations
+                    .get(tb)
+                    .map(|t| t.iter().take(count).copied().collect())
+                    .unwrap_or_default();
+                replay.tb(&insns);
+            }
+            Event::Untraced => replay.break_stream(),
+        }
+    }
+    let mut check = replay.finish();
+    check.untraced_executions = stream.untraced;
+    check.abandoned_executions = stream.abandoned;
+    Ok(check)
+}
+
+/// An executed instruction, resolved once per translation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Resolved {
+    address: u32,
+    /// `(function, instruction index, block starting here)`.
+    at: Option<(usize, usize, Option<usize>)>,
+}
+
+/// What the log's reader hands the replay.
+enum Event {
+    /// The first `count` instructions of translation `tb` ran.
+    Executed { tb: usize, count: usize },
+    /// An execution of an unknown translation: the stream is broken.
+    Untraced,
+}
+
+fn hex(s: &str) -> Option<u32> {
+    u32::from_str_radix(s.trim().trim_start_matches("0x"), 16).ok()
+}
+
+/// The TB host code pointer, the first `0x…` word of a `Trace` or `Stopped` line.
+fn host_pointer(line: &str) -> Option<u64> {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix("0x"))
+        .and_then(|h| u64::from_str_radix(h, 16).ok())
+}
+
+/// The pc of a `Trace` line's `[cs_base/pc/flags/cflags]`, or of a `Stopped`
+/// line's `[pc]`.
+fn bracket_pc(line: &str) -> Option<u32> {
+    let open = line.find('[')?;
+    let close = line[open..].find(']')? + open;
+    let inside = line.get(open + 1..close)?;
+    let mut fields = inside.split('/');
+    let first = fields.next()?;
+    match fields.next() {
+        Some(pc) => hex(pc),
+        None => hex(first),
+    }
+}
+
+/// Streams a QEMU log into executed (prefixes of) translations, applying the icount
+/// corrections: an execution is handed out only once the next event shows it was
+/// not stopped or rewound.
+struct TbStream<R> {
+    log: R,
+    line: String,
+    number: u64,
+    translations: Vec<Vec<Resolved>>,
+    /// Translation not yet executed, by start pc.
+    pending: HashMap<u32, usize>,
+    /// (host pointer, pc) to translation.
+    bound: HashMap<(u64, u32), usize>,
+    /// The last execution, not yet confirmed: translation, host pointer, pc.
+    last: Option<(usize, u64, u32)>,
+    /// A translation rewound to its start: its executed prefix is known at the next
+    /// `Trace` line.
+    rewound: Option<usize>,
+    /// An `IN:` listing being read.
+    block: Option<Vec<Resolved>>,
+    untraced: u64,
+    abandoned: u64,
+    /// Events ready to hand out, oldest first.
+    ready: VecDeque<Event>,
+    done: bool,
+}
+
+impl<R: BufRead> TbStream<R> {
+    fn new(log: R) -> Self {
+        TbStream {
+            log,
+            line: String::new(),
+            number: 0,
+            translations: Vec::new(),
+            pending: HashMap::new(),
+            bound: HashMap::new(),
+            last: None,
+            rewound: None,
+            block: None,
+            untraced: 0,
+            abandoned: 0,
+            ready: VecDeque::new(),
+            done: false,
+        }
+    }
+
+    fn position(&self, tb: usize, pc: u32) -> Option<usize> {
+        self.translations
+            .get(tb)?
+            .iter()
+            .position(|i| i.address == pc)
+    }
+
+    fn close_listing(&mut self) {
+        if let Some(insns) = self.block.take() {
+            if let Some(first) = insns.first() {
+                self.pending.insert(first.address, self.translations.len());
+                self.translations.push(insns);
+            }
+        }
+    }
+
+    /// The next event; `resolve` maps an instruction address to the program.
+    fn next_event(
+        &mut self,
+        resolve: impl Fn(u32) -> Resolved,
+    ) -> Result<Option<Event>, WcetError> {
+        loop {
+            if let Some(e) = self.ready.pop_front() {
+                return Ok(Some(e));
+            }
+            if self.done {
+                return Ok(None);
+            }
+            self.line.clear();
+            let n = self
+                .log
+                .read_line(&mut self.line)
+                .map_err(|source| WcetError::Io {
+                    path: "QEMU log".into(),
+                    source,
+                })?;
+            if n == 0 {
+                self.done = true;
+                self.close_listing();
+                if let Some((tb, _, _)) = self.last.take() {
+                    let count = self.translations.get(tb).map_or(0, Vec::len);
+                    self.ready.push_back(Event::Executed { tb, count });
+                }
+                continue;
+            }
+            self.number += 1;
+            let text = self.line.trim_end().to_string();
+            if self.block.is_some() {
+                if text.starts_with("0x") {
+                    if let Some(address) = text.split_once(':').and_then(|(a, _)| hex(a)) {
+                        if let Some(b) = self.block.as_mut() {
+                            b.push(resolve(address));
+                        }
+                        continue;
+                    }
+                }
+                self.close_listing();
+            }
+            if text.starts_with("Trace ") {
+                let format_error = |message: &str| WcetError::LogFormat {
+                    line: self.number,
+                    message: message.to_string(),
+                    text: text.chars().take(120).collect(),
+                };
+                let pc = bracket_pc(&text)
+                    .ok_or_else(|| format_error("no [cs_base/pc/flags/cflags] in a Trace line"))?;
+                let host = host_pointer(&text)
+                    .ok_or_else(|| format_error("no TB host pointer in a Trace line"))?;
+                self.trace(host, pc);
+            } else if text.starts_with("IN:") {
+                self.block = Some(Vec::new());
+            } else if let Some(rest) = text.strip_prefix("Stopped execution of TB chain before") {
+                if let Some(pc) = bracket_pc(rest) {
+                    let host = host_pointer(rest);
+                    if let Some((_, h, start)) = self.last {
+                        if start == pc && host.is_none_or(|x| x == h) {
+                            self.last = None;
+                            self.abandoned += 1;
+                        }
+                    }
+                }
+            } else if let Some(rest) =
+                text.strip_prefix("cpu_io_recompile: rewound execution of TB to")
+            {
+                if let (Some(pc), Some((tb, _, _))) = (hex(rest), self.last) {
+                    if let Some(done) = self.position(tb, pc) {
+                        self.last = None;
+                        self.abandoned += 1;
+                        if done > 0 {
+                            self.ready.push_back(Event::Executed { tb, count: done });
+                        } else {
+                            self.rewound = Some(tb);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    fn trace(&mut self, host: u64, pc: u32) {
+        if let Some(tb) = self.rewound.take() {
+            if let Some(done) = self.position(tb, pc).filter(|&d| d > 0) {
+                self.ready.push_back(Event::Executed { tb, count: done });
+            }
+        }
+        if let Some((tb, _, _)) = self.last.take() {
+            let count = self.translations.get(tb).map_or(0, Vec::len);
+            self.ready.push_back(Event::Executed { tb, count });
+        }
+        if let Some(tb) = self.pending.remove(&pc) {
+            self.bound.insert((host, pc), tb);
+        }
+        match self.bound.get(&(host, pc)).copied() {
+            Some(tb) => self.last = Some((tb, host, pc)),
+            None => {
+                self.untraced += 1;
+                self.ready.push_back(Event::Untraced);
+            }
+        }
+    }
+}
+
+/// What an instruction does to the call stack.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Straight,
+    /// A direct or indirect jump (`b`, `cbz`, `tbb`, `bx rN`, `mov pc, ..`).
+    Jump,
+    /// `bl`, `blx`.
+    Call,
+    /// `bx lr`, `pop {.., pc}` and the like.
+    Return,
+}
+
+/// `bne` → (`b`, true); only a condition suffix that leaves a flow mnemonic counts.
+fn strip_condition(base: &str) -> (&str, bool) {
+    const CONDITIONS: [&str; 16] = [
+        "eq", "ne", "cs", "hs", "cc", "lo", "mi", "pl", "vs", "vc", "hi", "ls", "ge", "lt", "gt",
+        "le",
+    ];
+    if base.len() > 2 {
+        let (head, tail) = base.split_at(base.len() - 2);
+        if CONDITIONS.contains(&tail)
+            && matches!(
+                head,
+                "b" | "bx"
+                    | "pop"
+                    | "ldm"
+                    | "ldmia"
+                    | "ldmfd"
+                    | "ldr"
+                    | "bl"
+                    | "blx"
+                    | "mov"
+                    | "add"
+            )
+        {
+            return (head, true);
+        }
+    }
+    (base, false)
+}
+
+/// Kind of an instruction and whether it is conditional.
+fn kind(i: &Instruction) -> (Kind, bool) {
+    let (plain, conditional) = strip_condition(i.base());
+    let k = match plain {
+        "bl" | "blx" => Kind::Call,
+        "bx" if i.first_operand() == "lr" => Kind::Return,
+        _ if i.pops_pc() => Kind::Return,
+        "b" | "cbz" | "cbnz" | "bx" | "tbb" | "tbh" => Kind::Jump,
+        "mov" | "ldr" | "add" if i.first_operand() == "pc" => Kind::Jump,
+        _ => Kind::Straight,
+    };
+    (k, conditional)
+}
+
+/// The last instruction a context executed.
+#[derive(Debug, Clone, Copy)]
+struct Last {
+    function: usize,
+    index: usize,
+}
+
+/// One function activation on a context's call stack.
+#[derive(Debug, Clone)]
+struct Frame {
+    function: usize,
+    /// The block last entered in this frame.
+    block: Option<usize>,
+    /// Where the call returns to (`None` for a context's first frame).
+    return_to: Option<u32>,
+    /// Loops of the function entered and not left: (loop index, back edges so far).
+    active: Vec<(usize, u64)>,
+}
+
+/// Who an execution context is, for the loop statistics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+enum Owner {
+    Thread,
+    Root(usize),
+    Handler(usize),
+}
+
+/// An execution context: thread mode or one exception activation.
+#[derive(Debug, Clone)]
+struct Context {
+    owner: Owner,
+    frames: Vec<Frame>,
+    last: Option<Last>,
+    instructions: u64,
+    cycles: u64,
+    executed: u64,
+    preempted: bool,
+}
+
+impl Context {
+    fn new(owner: Owner) -> Self {
+        Context {
+            owner,
+            frames: Vec::new(),
+            last: None,
+            instructions: 0,
+            cycles: 0,
+            executed: 0,
+            preempted: false,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Default)]
+struct LoopStats {
+    entries: u64,
+    back_edges: u64,
+    max: u64,
+    orphan: u64,
+    /// Per owner: (entries, max back edges).
+    by_owner: BTreeMap<Owner, (u64, u64)>,
+}
+
+/// The replay's state.
+struct Replay<'a> {
+    program: &'a Program,
+    loops: &'a [Vec<Loop>],
+    roots: &'a [(String, usize)],
+    /// Instruction address → (function, instruction index).
+    index: HashMap<u32, (usize, usize)>,
+    /// (function, header block) → loop indices.
+    headers: HashMap<(usize, usize), Vec<usize>>,
+    /// Handler entry address → owner of its contexts.
+    handlers: HashMap<u32, Owner>,
+    kinds: HashMap<(usize, usize), (Kind, bool)>,
+    stack: Vec<Context>,
+    loop_stats: BTreeMap<(usize, usize), LoopStats>,
+    root_stats: Vec<RootObservation>,
+    other: BTreeMap<usize, u64>,
+    tb_executions: u64,
+    instructions: u64,
+    block_entries: u64,
+    exception_entries: u64,
+    outside: u64,
+    unexpected: u64,
+    examples: Vec<String>,
+}
+
+impl<'a> Replay<'a> {
+    fn new(
+        program: &'a Program,
+        loops: &'a [Vec<Loop>],
+        roots: &'a [(String, usize)],
+        handlers: &[usize],
+    ) -> Self {
+        let mut index = HashMap::new();
+        for (f, func) in program.functions.iter().enumerate() {
+            for (k, i) in func.instructions.iter().enumerate() {
+                index.insert(i.address, (f, k));
+            }
+        }
+        let mut headers: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
+        for (f, ls) in loops.iter().enumerate() {
+            for (l, lp) in ls.iter().enumerate() {
+                headers.entry((f, lp.header)).or_default().push(l);
+            }
+        }
+        let mut handler_map = HashMap::new();
+        for &h in handlers {
+            if let Some(func) = program.functions.get(h) {
+                handler_map.insert(func.address, Owner::Handler(h));
+            }
+        }
+        for (r, (_, f)) in roots.iter().enumerate() {
+            if let Some(func) = program.functions.get(*f) {
+                handler_map.insert(func.address, Owner::Root(r));
+            }
+        }
+        let root_stats = roots
+            .iter()
+            .map(|(name, f)| RootObservation {
+                name: name.clone(),
+                function: *f,
+                activations: 0,
+                max_instructions: 0,
+                max_cycles: 0,
+                max_executed: 0,
+                largest_instructions: Vec::new(),
+                total_instructions: 0,
+                total_cycles: 0,
+                preempted_activations: 0,
+                incomplete: 0,
+            })
+            .collect();
+        Replay {
+            program,
+            loops,
+            roots,
+            index,
+            headers,
+            handlers: handler_map,
+            kinds: HashMap::new(),
+            stack: vec![Context::new(Owner::Thread)],
+            loop_stats: BTreeMap::new(),
+            root_stats,
+            other: BTreeMap::new(),
+            tb_executions: 0,
+            instructions: 0,
+            block_entries: 0,
+            exception_entries: 0,
+            outside: 0,
+            unexpected: 0,
+            examples: Vec::new(),
+        }
+    }
+
+    fn resolve(&self, address: u32) -> Resolved {
+        let at = self.index.get(&address).map(|&(f, k)| {
+            let func = &self.program.functions[f];
+            let block = func
+                .block_at(address)
+                .filter(|&b| func.blocks[b].start == address);
+            (f, k, block)
+        });
+        Resolved { address, at }
+    }
+
+    fn note(&mut self, message: impl FnOnce() -> String) {
+        self.unexpected += 1;
+        if self.examples.len() < MAX_EXAMPLES {
+            self.examples.push(message());
+        }
+    }
+
+    fn name(&self, f: usize) -> &str {
+        self.program
+            .functions
+            .get(f)
+            .map_or("?", |x| x.demangled.as_str())
+    }
+
+    fn owner_name(&self, owner: Owner) -> String {
+        match owner {
+            Owner::Thread => "thread".to_string(),
+            Owner::Root(r) => self
+                .roots
+                .get(r)
+                .map_or_else(|| format!("root {r}"), |x| x.0.clone()),
+            Owner::Handler(f) => self.name(f).to_string(),
+        }
+    }
+
+    fn instruction(&self, l: Last) -> Option<&'a Instruction> {
+        let program: &'a Program = self.program;
+        program.functions.get(l.function)?.instructions.get(l.index)
+    }
+
+    fn kind_of(&mut self, l: Last) -> (Kind, bool) {
+        if let Some(&k) = self.kinds.get(&(l.function, l.index)) {
+            return k;
+        }
+        let k = self.instruction(l).map_or((Kind::Straight, false), kind);
+        self.kinds.insert((l.function, l.index), k);
+        k
+    }
+
+    /// The trace lost an execution: no context knows where it is.
+    fn break_stream(&mut self) {
+        for c in &mut self.stack {
+            c.last = None;
+        }
+    }
+
+    fn tb(&mut self, insns: &[Resolved]) {
+        if insns.is_empty() {
+            return;
+        }
+        self.tb_executions += 1;
+        for (n, r) in insns.iter().enumerate() {
+            self.step(n == 0, *r);
+        }
+    }
+
+    /// Pops the top context (an exception return) and records its activation.
+    fn pop_context(&mut self) {
+        if self.stack.len() <= 1 {
+            return;
+        }
+        let Some(c) = self.stack.pop() else {
+            return;
+        };
+        match c.owner {
+            Owner::Root(r) => {
+                if let Some(s) = self.root_stats.get_mut(r) {
+                    s.activations += 1;
+                    s.max_instructions = s.max_instructions.max(c.instructions);
+                    s.max_cycles = s.max_cycles.max(c.cycles);
+                    s.max_executed = s.max_executed.max(c.executed);
+                    let at = s
+                        .largest_instructions
+                        .partition_point(|&x| x >= c.instructions);
+                    s.largest_instructions.insert(at, c.instructions);
+                    s.largest_instructions.truncate(LARGEST_KEPT);
+                    s.total_instructions += c.instructions;
+                    s.total_cycles += c.cycles;
+                    s.preempted_activations += u64::from(c.preempted);
+                }
+            }
+            Owner::Handler(f) => *self.other.entry(f).or_insert(0) += 1,
+            Owner::Thread => {}
+        }
+    }
+
+    fn step(&mut self, tb_start: bool, r: Resolved) {
+        self.instructions += 1;
+        let Some((f, k, block)) = r.at else {
+            self.outside += 1;
+            if let Some(c) = self.stack.last_mut() {
+                c.last = None;
+                c.executed += 1;
+            }
+            return;
+        };
+        // Exception entry: a TB at a handler's entry that the context did not jump to.
+        if tb_start {
+            if let Some(&owner) = self.handlers.get(&r.address) {
+                let jumped_here = self
+                    .stack
+                    .last()
+                    .and_then(|c| c.last)
+                    .and_then(|l| self.instruction(l))
+                    .is_some_and(|i| i.target == Some(r.address));
+                if !jumped_here {
+                    if let Some(c) = self.stack.last_mut() {
+                        c.preempted = true;
+                    }
+                    self.exception_entries += 1;
+                    self.stack.push(Context::new(owner));
+                }
+            }
+        }
+        // Where this instruction is relative to the context's last one.
+        loop {
+            let depth = self.stack.len();
+            let Some(last) = self.stack.last().and_then(|c| c.last) else {
+                self.restart_frame(f);
+                break;
+            };
+            let (kind, _) = self.kind_of(last);
+            let fall = self
+                .instruction(last)
+                .map_or(0, |i| i.address.wrapping_add(i.bytes));
+            let top_function = self
+                .stack
+                .last()
+                .and_then(|c| c.frames.last())
+                .map(|fr| fr.function);
+            if kind == Kind::Call && r.address != fall {
+                if self.program.at(r.address) != Some(f) {
+                    let from = self.name(last.function).to_string();
+                    let address = r.address;
+                    self.note(|| format!("call from {from} to {address:#010x}, no function entry"));
+                }
+                if let Some(c) = self.stack.last_mut() {
+                    c.frames.push(Frame {
+                        function: f,
+                        block: None,
+                        return_to: Some(fall),
+                        active: Vec::new(),
+                    });
+                }
+                break;
+            }
+            if kind == Kind::Return && r.address != fall {
+                let frames = self.stack.last().map_or(0, |c| c.frames.len());
+                if frames <= 1 {
+                    if depth > 1 {
+                        // Exception return (a conditional one, resolved now).
+                        self.pop_context();
+                        continue;
+                    }
+                    let from = self.name(last.function).to_string();
+                    let address = r.address;
+                    self.note(|| format!("return from {from} with no caller, to {address:#010x}"));
+                    self.restart_frame(f);
+                    break;
+                }
+                let popped = self.stack.last_mut().and_then(|c| c.frames.pop());
+                let back_in = self
+                    .stack
+                    .last()
+                    .and_then(|c| c.frames.last())
+                    .map(|fr| fr.function);
+                let expected = popped.and_then(|p| p.return_to);
+                if expected != Some(r.address) || back_in != Some(f) {
+                    let from = self.name(last.function).to_string();
+                    let address = r.address;
+                    let expected =
+                        expected.map_or("no caller".to_string(), |e| format!("{e:#010x}"));
+                    self.note(|| {
+                        format!("return from {from} to {address:#010x}, expected {expected}")
+                    });
+                    self.restart_frame(f);
+                }
+                break;
+            }
+            if top_function == Some(f) {
+                if kind == Kind::Straight && r.address != fall {
+                    let from = self.instruction(last).map_or(0, |i| i.address);
+                    let address = r.address;
+                    self.note(|| format!("{from:#010x} fell through to {address:#010x}"));
+                }
+                break;
+            }
+            if self.program.at(r.address) == Some(f) {
+                // Tail call: the callee takes the frame's place.
+                if let Some(fr) = self.stack.last_mut().and_then(|c| c.frames.last_mut()) {
+                    fr.function = f;
+                    fr.block = None;
+                    fr.active.clear();
+                }
+                break;
+            }
+            let from = self.instruction(last).map_or(0, |i| i.address);
+            let address = r.address;
+            self.note(|| format!("{from:#010x} went to {address:#010x}, inside another function"));
+            self.restart_frame(f);
+            break;
+        }
+        if let Some(b) = block {
+            self.enter_block(f, b);
+        }
+        let depth = self.stack.len();
+        let Some(c) = self.stack.last_mut() else {
+            return;
+        };
+        c.last = Some(Last {
+            function: f,
+            index: k,
+        });
+        c.executed += 1;
+        let frames = c.frames.len();
+        let (kind, conditional) = self.kind_of(Last {
+            function: f,
+            index: k,
+        });
+        if kind == Kind::Return && !conditional && frames <= 1 && depth > 1 {
+            self.pop_context();
+        }
+    }
+
+    /// Starts the top context's innermost frame over in function `f` (the first
+    /// instruction of a context, or after a transfer the graphs do not explain).
+    fn restart_frame(&mut self, f: usize) {
+        let Some(c) = self.stack.last_mut() else {
+            return;
+        };
+        match c.frames.last_mut() {
+            Some(fr) if fr.function == f => {}
+            Some(fr) => {
+                fr.function = f;
+                fr.block = None;
+                fr.active.clear();
+            }
+            None => c.frames.push(Frame {
+                function: f,
+                block: None,
+                return_to: None,
+                active: Vec::new(),
+            }),
+        }
+    }
+
+    fn enter_block(&mut self, f: usize, b: usize) {
+        self.block_entries += 1;
+        let program = self.program;
+        let loops = self.loops;
+        let Some(block) = program.functions.get(f).and_then(|x| x.blocks.get(b)) else {
+            return;
+        };
+        let Some(c) = self.stack.last_mut() else {
+            return;
+        };
+        c.instructions += block.instructions;
+        c.cycles += block.cycles;
+        let owner = c.owner;
+        let Some(frame) = c.frames.last_mut() else {
+            return;
+        };
+        let prev = frame.block.replace(b);
+        let mut odd_edge = None;
+        if let Some(a) = prev {
+            let from = program.functions.get(f).and_then(|x| x.blocks.get(a));
+            if from.is_some_and(|x| !x.successors.contains(&b)) {
+                odd_edge = from.map(|x| (x.start, block.start));
+            }
+        }
+        if let Some(ls) = self.headers.get(&(f, b)) {
+            for &l in ls {
+                let Some(lp) = loops.get(f).and_then(|x| x.get(l)) else {
+                    continue;
+                };
+                let stats = self.loop_stats.entry((f, l)).or_default();
+                let back = prev.is_some_and(|a| lp.back_edges.contains(&(a, b)));
+                if back {
+                    stats.back_edges += 1;
+                    let count = match frame.active.iter_mut().find(|(x, _)| *x == l) {
+                        Some((_, n)) => {
+                            *n += 1;
+                            *n
+                        }
+                        None => {
+                            stats.orphan += 1;
+                            frame.active.push((l, 1));
+                            1
+                        }
+                    };
+                    stats.max = stats.max.max(count);
+                    let o = stats.by_owner.entry(owner).or_insert((0, 0));
+                    o.1 = o.1.max(count);
+                } else {
+                    stats.entries += 1;
+                    stats.by_owner.entry(owner).or_insert((0, 0)).0 += 1;
+                    match frame.active.iter_mut().find(|(x, _)| *x == l) {
+                        Some((_, n)) => *n = 0,
+                        None => frame.active.push((l, 0)),
+                    }
+                }
+            }
+        }
+        if let Some((from, to)) = odd_edge {
+            let name = self.name(f).to_string();
+            self.note(|| format!("{name}: edge {from:#010x} -> {to:#010x} is not in the graph"));
+        }
+    }
+
+    fn finish(mut self) -> TraceCheck {
+        while self.stack.len() > 1 {
+            if let Some(c) = self.stack.pop() {
+                if let Owner::Root(r) = c.owner {
+                    if let Some(s) = self.root_stats.get_mut(r) {
+                        s.incomplete += 1;
+                    }
+                }
+            }
+        }
+        let loops = self
+            .loop_stats
+            .iter()
+            .map(|(&(f, l), s)| {
+                let function = self.program.functions.get(f);
+                let header = self
+                    .loops
+                    .get(f)
+                    .and_then(|x| x.get(l))
+                    .and_then(|lp| function?.blocks.get(lp.header))
+                    .map_or(0, |b| b.start);
+                LoopObservation {
+                    function: f,
+                    function_name: self.name(f).to_string(),
+                    loop_index: l,
+                    header,
+                    entries: s.entries,
+                    back_edges: s.back_edges,
+                    max_back_edges: s.max,
+                    back_edges_without_entry: s.orphan,
+                    by_context: s
+                        .by_owner
+                        .iter()
+                        .map(|(&o, &(e, m))| (self.owner_name(o), e, m))
+                        .collect(),
+                }
+            })
+            .collect();
+        let other_handlers = self
+            .other
+            .iter()
+            .map(|(&f, &n)| (self.name(f).to_string(), n))
+            .collect();
+        TraceCheck {
+            loops,
+            roots: self.root_stats,
+            other_handlers,
+            tb_executions: self.tb_executions,
+            instructions: self.instructions,
+            block_entries: self.block_entries,
+            exception_entries: self.exception_entries,
+            outside_functions: self.outside,
+            untraced_executions: 0,
+            abandoned_executions: 0,
+            unexpected_transfers: self.unexpected,
+            examples: self.examples,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wcet::cfg::{build_program, parse_disassembly, IndirectTargets, MemoryModel};
+    use crate::wcet::loops::natural_loops;
+    use std::collections::HashMap;
+
+    /// `USART1` (the `plan` root): a loop tested at its header (`cmp; beq` out,
+    /// body `adds; bl helper; b` back), so a trip count of n is n back edges.
+    /// `USART2` (`control`): a loop tested at its bottom (`bne` back), n trips are
+    /// n - 1 back edges. `main`: the idle loop. `SysTick` tail-calls `helper`.
+    const DISASSEMBLY: &str = "
+/tmp/ecu:\tfile format elf32-littlearm
+
+Disassembly of section .text:
+
+08000100 <USART1>:
+ 8000100: b580         \tpush\t{r7, lr}
+ 8000102: 2000         \tmovs\tr0, #0x0
+ 8000104: 4288         \tcmp\tr0, r1
+ 8000106: d003         \tbeq\t0x8000110 <USART1+0x10> @ imm = #0x6
+ 8000108: 3001         \tadds\tr0, #0x1
+ 800010a: f000 f809    \tbl\t0x8000120 <helper>    @ imm = #0x12
+ 800010e: e7f9         \tb\t0x8000104 <USART1+0x4> @ imm = #-0xe
+ 8000110: bd80         \tpop\t{r7, pc}
+
+08000120 <helper>:
+ 8000120: 4770         \tbx\tlr
+
+08000200 <USART2>:
+ 8000200: 2000         \tmovs\tr0, #0x0
+ 8000202: 3001         \tadds\tr0, #0x1
+ 8000204: 4290         \tcmp\tr0, r2
+ 8000206: d1fc         \tbne\t0x8000202 <USART2+0x2> @ imm = #-0x8
+ 8000208: 4770         \tbx\tlr
+
+08000300 <main>:
+ 8000300: bf30         \twfi
+ 8000302: e7fd         \tb\t0x8000300 <main>     @ imm = #-0x6
+
+08000400 <SysTick>:
+ 8000400: 2000         \tmovs\tr0, #0x0
+ 8000402: e68d         \tb\t0x8000120 <helper>   @ imm = #-0x2e6
+";
+
+    /// Writes a QEMU log: each translation listed before its first execution.
+    /// Addresses are offsets from the start of flash.
+    #[derive(Default)]
+    struct Log {
+        text: String,
+        hosts: HashMap<Vec<u32>, u64>,
+    }
+
+    const FLASH: u32 = 0x0800_0000;
+
+    impl Log {
+        fn host(&self, offsets: &[u32]) -> u64 {
+            self.hosts.get(offsets).copied().unwrap_or(0)
+        }
+
+        fn tb(&mut self, offsets: &[u32]) {
+            let next = 0x7f00_0000_0000 + 0x100 * (self.hosts.len() as u64 + 1);
+            let host = match self.hosts.get(offsets) {
+                Some(&h) => h,
+                None => {
+                    self.text.push_str("----------------\nIN: f\n");
+                    for o in offsets {
+                        let a = FLASH + o;
+                        self.text.push_str(&format!("0x{a:08x}:  bf00       nop\n"));
+                    }
+                    self.text.push('\n');
+                    self.hosts.insert(offsets.to_vec(), next);
+                    next
+                }
+            };
+            let pc = FLASH + offsets.first().copied().unwrap_or(0);
+            self.text.push_str(&format!(
+                "Trace 0: 0x{host:x} [00800408/{pc:08x}/00000110/ff020200] f\n"
+            ));
+        }
+
+        fn line(&mut self, text: &str) {
+            self.text.push_str(text);
+            self.text.push('\n');
+        }
+
+        /// One activation of USART2 with `trips` trips of its loop.
+        fn control(&mut self, trips: u32) {
+            self.control_ticked(trips, None);
+        }
+
+        /// One activation of USART2 with `trips` trips of its loop, preempted by
+        /// SysTick after trip `tick`.
+        fn control_ticked(&mut self, trips: u32, tick: Option<u32>) {
+            self.tb(&[0x200, 0x202, 0x204, 0x206]);
+            for trip in 1..trips {
+                if tick == Some(trip) {
+                    self.tb(&[0x400, 0x402]);
+                    self.tb(&[0x120]);
+                }
+                self.tb(&[0x202, 0x204, 0x206]);
+            }
+            self.tb(&[0x208]);
+        }
+    }
+
+    struct Fixture {
+        program: Program,
+        loops: Vec<Vec<Loop>>,
+        roots: Vec<(String, usize)>,
+    }
+
+    fn fixture() -> Result<Fixture, Box<dyn std::error::Error>> {
+        let raw = parse_disassembly(DISASSEMBLY);
+        let program = build_program(
+            &raw,
+            &IndirectTargets::default(),
+            &MemoryModel::STM32F405,
+            |s: &str| s.to_string(),
+        )?;
+        let loops = program
+            .functions
+            .iter()
+            .map(|f| natural_loops(f).map_err(|c| format!("irreducible {c:?}")))
+            .collect::<Result<Vec<_>, _>>()?;
+        let plan = program.at(0x0800_0100).ok_or("no USART1")?;
+        let control = program.at(0x0800_0200).ok_or("no USART2")?;
+        let systick = program.at(0x0800_0400).ok_or("no SysTick")?;
+        Ok(Fixture {
+            program,
+            loops,
+            roots: vec![
+                ("plan".into(), plan),
+                ("control".into(), control),
+                ("systick".into(), systick),
+            ],
+        })
+    }
+
+    /// The trace of the synthetic program: idle, then plan with trip counts 4, 7, 5;
+    /// the second preempted three times by control (after a `bl`, in the middle of
+    /// a block split over two TBs, at a TB boundary that is a block boundary); the
+    /// first with a rewound TB and a stopped one.
+    fn synthetic_log() -> String {
+        let mut log = Log::default();
+        log.tb(&[0x300, 0x302]);
+        log.tb(&[0x300, 0x302]);
+        for (activation, trips) in [4u32, 7, 5].into_iter().enumerate() {
+            log.tb(&[0x100, 0x102, 0x104, 0x106]);
+            for trip in 0..trips {
+                match (activation, trip) {
+                    (1, 2) => {
+                        // Preempted after the bl, before the callee's first TB.
+                        log.tb(&[0x108, 0x10a]);
+                        log.control(3);
+                        log.tb(&[0x120]);
+                    }
+                    (1, 4) => {
+                        // The block split over two TBs, preempted in between.
+                        log.tb(&[0x108]);
+                        log.control(2);
+                        log.tb(&[0x10a]);
+                        log.tb(&[0x120]);
+                    }
+                    (0, 1) => {
+                        // icount: the TB rewound at the bl, which runs alone.
+                        log.tb(&[0x108, 0x10a]);
+                        log.line("cpu_io_recompile: rewound execution of TB to 0800010a");
+                        log.tb(&[0x10a]);
+                        log.tb(&[0x120]);
+                    }
+                    _ => {
+                        log.tb(&[0x108, 0x10a]);
+                        log.tb(&[0x120]);
+                    }
+                }
+                log.tb(&[0x10e]);
+                if (activation, trip) == (1, 5) {
+                    // Preempted between two TBs at a block boundary, and control
+                    // preempted by SysTick (which ends in a tail call).
+                    log.control_ticked(4, Some(2));
+                }
+                if (activation, trip) == (0, 2) {
+                    // Started, stopped before it ran, started again.
+                    log.tb(&[0x104, 0x106]);
+                    let host = log.host(&[0x104, 0x106]);
+                    log.line(&format!(
+                        "Stopped execution of TB chain before 0x{host:x} [08000104] f"
+                    ));
+                }
+                log.tb(&[0x104, 0x106]);
+            }
+            log.tb(&[0x110]);
+            log.tb(&[0x300, 0x302]);
+        }
+        // A control activation from idle.
+        log.control(6);
+        log.tb(&[0x300, 0x302]);
+        log.text
+    }
+
+    fn loop_of(check: &TraceCheck, function: usize) -> Result<&LoopObservation, String> {
+        check
+            .loops
+            .iter()
+            .find(|l| l.function == function)
+            .ok_or_else(|| format!("no loop seen in function {function}"))
+    }
+    #[test]
+    fn loops_and_activations_of_a_synthetic_trace() -> Result<(), Box<dyn std::error::Error>> {
+        let fx = fixture()?;
+        let log = synthetic_log();
+        let check = check_trace(log.as_bytes(), &fx.program, &fx.loops, &fx.roots)?;
+        assert_eq!(check.unexpected_transfers, 0, "{:?}", check.examples);
+        assert_eq!(check.outside_functions, 0);
+        assert_eq!(check.untraced_executions, 0);
+        assert_eq!(check.abandoned_executions, 2);
+        let (plan, control) = (fx.roots[0].1, fx.roots[1].1);
+        // Top-tested loop: n trips are n back edges.
+        let l = loop_of(&check, plan)?;
+        assert_eq!(l.entries, 3);
+        assert_eq!(l.max_back_edges, 7);
+        assert_eq!(l.back_edges, 4 + 7 + 5);
+        assert_eq!(l.back_edges_without_entry, 0);
+        assert_eq!(l.header, 0x0800_0104);
+        assert_eq!(l.by_context, vec![("plan".to_string(), 3, 7)]);
+        // Bottom-tested loop: n trips are n - 1 back edges; activations 3, 2, 4, 6.
+        let l = loop_of(&check, control)?;
+        assert_eq!(l.entries, 4);
+        assert_eq!(l.max_back_edges, 5);
+        assert_eq!(l.back_edges, 2 + 1 + 3 + 5);
+        // The idle loop: entered once, iterated at every return to thread mode.
+        let main = fx.program.at(0x0800_0300).ok_or("no main")?;
+        let l = loop_of(&check, main)?;
+        assert_eq!((l.entries, l.back_edges), (1, 5));
+        assert_eq!(check.loops_of("thread").len(), 1);
+
+        // Activation costs: the executed blocks' static costs.
+        let blocks = |f: usize| &fx.program.functions[f].blocks;
+        let cost = |f: usize, counts: &[u64]| -> (u64, u64) {
+            blocks(f)
+                .iter()
+                .zip(counts)
+                .fold((0, 0), |(i, c), (b, &n)| {
+                    (i + n * b.instructions, c + n * b.cycles)
+                })
+        };
+        let helper = fx.program.at(0x0800_0120).ok_or("no helper")?;
+        assert_eq!(blocks(plan).len(), 4);
+        let plan_cost = |n: u64| {
+            let (i, c) = cost(plan, &[1, n + 1, n, 1]);
+            let (hi, hc) = cost(helper, &[n]);
+            (i + hi, c + hc)
+        };
+        let control_cost = |n: u64| cost(control, &[1, n, 1]);
+        let p = &check.roots[0];
+        assert_eq!(p.activations, 3);
+        assert_eq!((p.max_instructions, p.max_cycles), plan_cost(7));
+        assert_eq!(p.max_instructions, 5 + 6 * 7);
+        assert_eq!(p.max_executed, p.max_instructions);
+        assert_eq!(
+            p.total_instructions,
+            plan_cost(4).0 + plan_cost(7).0 + plan_cost(5).0
+        );
+        assert_eq!(
+            p.total_cycles,
+            plan_cost(4).1 + plan_cost(7).1 + plan_cost(5).1
+        );
+        assert_eq!(p.preempted_activations, 1);
+        assert_eq!(p.incomplete, 0);
+        let c = &check.roots[1];
+        assert_eq!(c.activations, 4);
+        assert_eq!((c.max_instructions, c.max_cycles), control_cost(6));
+        assert_eq!(
+            c.total_instructions,
+            [3, 2, 4, 6].iter().map(|&n| control_cost(n).0).sum::<u64>()
+        );
+        let t = &check.roots[2];
+        assert_eq!((t.activations, t.max_instructions), (1, 2 + 1));
+        assert_eq!(c.preempted_activations, 1);
+        assert_eq!(check.exception_entries, 3 + 4 + 1);
+        // Every replayed instruction was in a block counted once.
+        let all: u64 = check.roots.iter().map(|r| r.total_instructions).sum();
+        assert_eq!(check.instructions, all + 6 * 2);
+        Ok(())
+    }
+
+    #[test]
+    fn bounds_below_the_observation_are_violations() -> Result<(), Box<dyn std::error::Error>> {
+        let fx = fixture()?;
+        let log = synthetic_log();
+        let check = check_trace(log.as_bytes(), &fx.program, &fx.loops, &fx.roots)?;
+        let plan = fx.roots[0].1;
+        assert!(check.violations(&[(plan, 0, 7)]).is_empty());
+        let v = check.violations(&[(plan, 0, 6)]);
+        assert_eq!(v.len(), 1);
+        assert!(
+            v[0].contains("USART1") && v[0].contains("0x08000104"),
+            "{v:?}"
+        );
+        assert!(
+            v[0].contains("bound 6") && v[0].contains("observed 7"),
+            "{v:?}"
+        );
+        // A loop never seen is no violation.
+        assert!(check.violations(&[(plan, 5, 0)]).is_empty());
+        Ok(())
+    }
+
+    #[test]
+    fn a_trace_line_without_pc_is_named() -> Result<(), Box<dyn std::error::Error>> {
+        let fx = fixture()?;
+        let err = check_trace(
+            "Trace 0: garbage\n".as_bytes(),
+            &fx.program,
+            &fx.loops,
+            &fx.roots,
+        );
+        assert!(matches!(err, Err(WcetError::LogFormat { line: 1, .. })));
+        Ok(())
+    }
+
+    /// Tool, not a check: `TRACE_CHECK_LOG=qemu.log TRACE_CHECK_ELF=ecu cargo test
+    /// --release -p host-sim --lib trace_check::tests::check_the_trace_in_trace_check_log
+    /// -- --ignored --nocapture` replays a saved PIL trace against the ELF's graphs
+    /// (roots `USART1` plan, `USART2` control, `SysTick` systick) and prints the
+    /// result.
+    #[test]
+    #[ignore = "needs a QEMU log in TRACE_CHECK_LOG and its ELF in TRACE_CHECK_ELF"]
+    fn check_the_trace_in_trace_check_log() -> Result<(), Box<dyn std::error::Error>> {
+        let log = std::env::var("TRACE_CHECK_LOG")?;
+        let elf = std::path::PathBuf::from(std::env::var("TRACE_CHECK_ELF")?);
+        let objdump = crate::wcet::stack::llvm_objdump_path()?;
+        let out = std::process::Command::new(objdump)
+            .arg("-d")
+            .arg(&elf)
+            .output()?;
+        let text = String::from_utf8_lossy(&out.stdout);
+        let raw = parse_disassembly(&text);
+        let program = build_program(
+            &raw,
+            &IndirectTargets::default(),
+            &MemoryModel::STM32F405,
+            crate::wcet::demangle,
+        )?;
+        let loops: Vec<Vec<Loop>> = program
+            .functions
+            .iter()
+            .map(|f| natural_loops(f).unwrap_or_default())
+            .collect();
+        let mut roots = Vec::new();
+        for (task, symbol) in [
+            ("plan", "USART1"),
+            ("control", "USART2"),
+            ("systick", "SysTick"),
+        ] {
+            let f = *program.find(symbol).first().ok_or(symbol)?;
+            roots.push((task.to_string(), f));
+        }
+        let handlers = vector_table_handlers(&elf, &program)?;
+        let file = std::fs::File::open(&log)?;
+        let check = check_trace_with_handlers(
+            std::io::BufReader::with_capacity(1 << 20, file),
+            &program,
+            &loops,
+            &roots,
+            &handlers,
+        )?;
+        let mut summary = check.clone();
+        summary.loops.clear();
+        eprintln!("{}", serde_json::to_string_pretty(&summary)?);
+        let mut seen = check.loops.clone();
+        seen.sort_by_key(|l| std::cmp::Reverse(l.max_back_edges));
+        for l in &seen {
+            eprintln!(
+                "max {:>6} entries {:>6} back edges {:>8} without entry {} {:#010x} {} #{} {:?}",
+                l.max_back_edges,
+                l.entries,
+                l.back_edges,
+                l.back_edges_without_entry,
+                l.header,
+                l.function_name,
+                l.loop_index,
+                l.by_context
+            );
+        }
+        Ok(())
+    }
+}
