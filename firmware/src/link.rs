@@ -6,7 +6,13 @@
 //! `Ready`) and before a `Stop` → `Done`. While driving, the next window of the
 //! road arrives as `PathChunk`s then a [`Down::Window`] (the ECU holds a window,
 //! not the whole circuit). Version 2 added `Window` and
-//! [`PlanEventFrame::window`]. Everything here works on fixed buffers: no heap, no `alloc`,
+//! [`PlanEventFrame::window_ticks`]. Version 3: the ECU watches its own deadlines
+//! ([`crate::deadline`]): [`ActuationFrame`] carries its release and send
+//! instants and the control task's counts ([`TaskTimingFrame`]) and watchdog
+//! trips, [`PlanEventFrame`] its end instant and the plan task's counts;
+//! [`SensorFrame::route_frames`] announces the frames of a window of the road sent
+//! on the route channel (the plan task receives them); the fault codes
+//! [`FAULT_HARDFAULT`] and [`FAULT_DEADLINE`]. Everything here works on fixed buffers: no heap, no `alloc`,
 //! no panic; every refused frame is a [`FrameError`] value the receiver counts.
 //!
 //! # Wire format
@@ -41,7 +47,7 @@
 //!   delimiters in a row) are idle and ignored.
 //!
 //! The largest frames: [`MAX_DOWN_FRAME_BYTES`] (a `PathChunk`, 269 bytes) and
-//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 249 bytes), both
+//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 335 bytes), both
 //! including the delimiter and checked at compile time against
 //! [`MAX_FRAME_BYTES`].
 //!
@@ -85,7 +91,7 @@ use crate::state_estimate::StateEstimate;
 use crate::vehicle_config::VehicleConfig;
 
 /// Version of this wire format, the first byte of every raw frame.
-pub const LINK_VERSION: u8 = 2;
+pub const LINK_VERSION: u8 = 3;
 /// The largest encoded frame, bytes, including its 0x00 delimiter.
 pub const MAX_FRAME_BYTES: usize = 512;
 /// Track rows per [`PathChunkFrame`].
@@ -189,6 +195,10 @@ pub struct SensorFrame {
     pub seq: u32,
     /// The state estimate (its `stamp_us` is the simulated time, µs; SI units).
     pub estimate: StateEstimate<f32>,
+    /// Frames of the road (`PathChunk`s then a `Window`) the host wrote on the
+    /// route channel since the last sensor frame, frames (version 3): the plan
+    /// task reads them after it next publishes.
+    pub route_frames: u16,
 }
 
 /// ECU → host.
@@ -241,8 +251,49 @@ pub struct ActuationFrame {
     /// frame decoding and encoding (a stand-in for the vehicle's bus drivers) are
     /// not included.
     pub control_ticks: u32,
+    /// The control release this activation ran at, µs on the ECU's timeline
+    /// (release `k` at `k`·10 ms; version 3).
+    pub release_us: u64,
+    /// When this frame was sent, µs on the ECU's timeline (`now_us()`): the
+    /// activation's completion; the plant applies the actuation from then.
+    pub sent_us: u64,
+    /// The control task's deadline counts, this activation's completion included
+    /// (its skipped releases are counted at its end, so they show in the next
+    /// frame).
+    pub control: TaskTimingFrame,
+    /// Times the control task's watchdog saw no new plan for more than
+    /// [`crate::deadline::PLAN_WATCHDOG_PERIODS`] plan periods, trips.
+    pub watchdog_trips: u32,
     /// The plan activation that finished since the last actuation frame, if any.
     pub plan: Option<PlanEventFrame>,
+}
+
+/// A task's deadline counts on the ECU's clock, cumulative since `Start` (see
+/// [`crate::deadline::DeadlineCounts`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TaskTimingFrame {
+    /// Releases that ran, activations.
+    pub releases: u32,
+    /// Late completions plus skipped releases, misses.
+    pub deadline_misses: u32,
+    /// Releases skipped because the task was still busy, releases.
+    pub skipped_releases: u32,
+    /// Activations over their cycle budget, activations.
+    pub budget_overruns: u32,
+    /// Largest response time, µs.
+    pub max_response_us: u32,
+}
+
+impl From<crate::deadline::DeadlineCounts> for TaskTimingFrame {
+    fn from(c: crate::deadline::DeadlineCounts) -> Self {
+        Self {
+            releases: c.releases,
+            deadline_misses: c.deadline_misses,
+            skipped_releases: c.skipped_releases,
+            budget_overruns: c.budget_overruns,
+            max_response_us: c.max_response_us,
+        }
+    }
 }
 
 /// One finished plan activation, as the ECU saw it.
@@ -252,8 +303,16 @@ pub struct PlanEventFrame {
     pub activation: u32,
     /// Release time of the activation (the estimate's stamp it planned from), µs.
     pub release_us: u64,
-    /// Time the activation finished, µs, on the same clock as `release_us`.
+    /// Time the activation finished (its plan published or dropped), µs, on the
+    /// same clock as `release_us`.
     pub finish_us: u64,
+    /// Time the activation ended, µs: after the window of the road it received
+    /// and adopted after publishing (`finish_us` without one). The next release
+    /// is the first not yet past then (version 3).
+    pub end_us: u64,
+    /// The plan task's deadline counts, this activation's completion and the
+    /// releases it skipped included (version 3).
+    pub timing: TaskTimingFrame,
     /// ECU clock ticks (168 MHz) of the plan task itself, preemption by the
     /// control task excluded.
     pub ticks: u32,
@@ -301,6 +360,7 @@ impl PlanEventFrame {
         window_ticks: u32,
         plan: Option<&Plan<f32>>,
     ) -> Self {
+        // `end_us` and `timing` are set by the caller once the activation ends.
         let sat16 = |x: u32| x.min(u16::MAX as u32) as u16;
         let mut nodes_xy = [[0.0f32; 2]; PLAN_NODES];
         let mut v_heur0_mps = 0.0;
@@ -314,6 +374,8 @@ impl PlanEventFrame {
             activation,
             release_us,
             finish_us,
+            end_us: finish_us,
+            timing: TaskTimingFrame::default(),
             ticks,
             status: mpc_status_code(result),
             published,
@@ -361,9 +423,12 @@ const TAG_BYTES: usize = 1;
 const VEHICLE_MAX_BYTES: usize = 8 * F32_BYTES;
 /// Largest postcard encoding of a [`StateEstimate<f32>`], bytes.
 const ESTIMATE_MAX_BYTES: usize = U64_MAX_BYTES + 7 * F32_BYTES;
+/// Largest postcard encoding of a [`TaskTimingFrame`] (5 `u32`), bytes.
+const TIMING_MAX_BYTES: usize = 5 * U32_MAX_BYTES;
 /// Largest postcard encoding of a [`PlanEventFrame`], bytes.
 const PLAN_EVENT_MAX_BYTES: usize = U32_MAX_BYTES
-    + 2 * U64_MAX_BYTES
+    + 3 * U64_MAX_BYTES
+    + TIMING_MAX_BYTES
     + U32_MAX_BYTES
     + 3
     + 6 * U16_MAX_BYTES
@@ -379,14 +444,22 @@ pub const MAX_DOWN_PAYLOAD_BYTES: usize = TAG_BYTES
         ),
         max(
             3 + U32_MAX_BYTES + MAX_VERTICES * 2 * F32_BYTES, // Obstacle
-            U32_MAX_BYTES + ESTIMATE_MAX_BYTES,               // Sensor
+            U32_MAX_BYTES + ESTIMATE_MAX_BYTES + U16_MAX_BYTES, // Sensor
         ),
     );
 /// Largest postcard encoding of an [`Up`], bytes (an `Actuation` with a plan event).
 pub const MAX_UP_PAYLOAD_BYTES: usize = TAG_BYTES
     + max(
         max(1 + U16_MAX_BYTES, 3 * U32_MAX_BYTES), // Ready, Done
-        U32_MAX_BYTES + 8 * F32_BYTES + 2 + U32_MAX_BYTES + 1 + PLAN_EVENT_MAX_BYTES,
+        U32_MAX_BYTES
+            + 8 * F32_BYTES
+            + 2
+            + U32_MAX_BYTES
+            + 2 * U64_MAX_BYTES
+            + TIMING_MAX_BYTES
+            + U32_MAX_BYTES
+            + 1
+            + PLAN_EVENT_MAX_BYTES,
     );
 /// Largest encoded [`Down`] frame, bytes, delimiter included.
 pub const MAX_DOWN_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_DOWN_PAYLOAD_BYTES);
@@ -694,6 +767,12 @@ pub const fn mode_name(code: u8) -> &'static str {
 
 /// [`ActuationFrame::fault`] of the ECU's panic handler: zero torque, steering held.
 pub const FAULT_PANIC: u8 = 255;
+/// [`ActuationFrame::fault`] of the ECU's fault handler (HardFault, and MemManage,
+/// BusFault and UsageFault escalated to it): zero torque, steering held.
+pub const FAULT_HARDFAULT: u8 = 254;
+/// [`ActuationFrame::fault`] of the control task's consecutive-miss rule
+/// ([`crate::deadline::CONTROL_MISS_LIMIT`]): zero torque, steering held.
+pub const FAULT_DEADLINE: u8 = 253;
 
 /// [`ActuationFrame::fault`] of a control result's fault: 0 none,
 /// `NonFiniteEstimate` 1, `NonFinitePlan` 2, `InvalidPlan` 3, `Numerical` 4.
@@ -720,7 +799,8 @@ pub const fn fault_from_code(code: u8) -> Result<Option<ControlFault>, u8> {
     }
 }
 
-/// Name of an [`ActuationFrame::fault`] code (`"None"` for 0), or `"Unknown"`.
+/// Name of an [`ActuationFrame::fault`] code (`"None"` for 0; `"Panic"`,
+/// `"HardFault"`, `"DeadlineMisses"` for the ECU's own codes), or `"Unknown"`.
 pub const fn fault_name(code: u8) -> &'static str {
     match fault_from_code(code) {
         Ok(None) => "None",
@@ -728,6 +808,9 @@ pub const fn fault_name(code: u8) -> &'static str {
         Ok(Some(ControlFault::NonFinitePlan)) => "NonFinitePlan",
         Ok(Some(ControlFault::InvalidPlan)) => "InvalidPlan",
         Ok(Some(ControlFault::Numerical)) => "Numerical",
+        Err(FAULT_PANIC) => "Panic",
+        Err(FAULT_HARDFAULT) => "HardFault",
+        Err(FAULT_DEADLINE) => "DeadlineMisses",
         Err(_) => "Unknown",
     }
 }

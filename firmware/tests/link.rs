@@ -103,6 +103,8 @@ fn plan_event(big: u64, v: f32) -> PlanEventFrame {
         activation: big as u32,
         release_us: big,
         finish_us: big,
+        end_us: big,
+        timing: timing(big),
         ticks: big as u32,
         status: big as u8,
         published: true,
@@ -119,6 +121,16 @@ fn plan_event(big: u64, v: f32) -> PlanEventFrame {
     }
 }
 
+fn timing(big: u64) -> TaskTimingFrame {
+    TaskTimingFrame {
+        releases: big as u32,
+        deadline_misses: big as u32,
+        skipped_releases: big as u32,
+        budget_overruns: big as u32,
+        max_response_us: big as u32,
+    }
+}
+
 fn actuation(big: u64, v: f32, plan: Option<PlanEventFrame>) -> ActuationFrame {
     ActuationFrame {
         seq: big as u32,
@@ -130,6 +142,10 @@ fn actuation(big: u64, v: f32, plan: Option<PlanEventFrame>) -> ActuationFrame {
         mode: big as u8,
         fault: big as u8,
         control_ticks: big as u32,
+        release_us: big,
+        sent_us: big,
+        control: timing(big),
+        watchdog_trips: big as u32,
         plan,
     }
 }
@@ -160,6 +176,7 @@ fn all_down(big: u64, v: f32) -> Vec<Down> {
         Down::Sensor(SensorFrame {
             seq: big as u32,
             estimate: estimate(big, v),
+            route_frames: big as u16,
         }),
         Down::Stop,
         Down::Window(WindowFrame {
@@ -263,11 +280,11 @@ fn frame_layout_is_version_postcard_crc_cobs() {
     // The CRC is CRC-32/ISO-HDLC (check value of "123456789").
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
     assert_eq!(crc.checksum(b"123456789"), 0xCBF4_3926);
-    // Pinned bytes: `Down::Start` is version 2, tag 3, then its CRC (zlib.crc32(b"\x02\x03")
-    // = 0xEAE621C7), stuffed.
+    // Pinned bytes: `Down::Start` is version 3, tag 3, then its CRC (zlib.crc32(b"\x03\x03")
+    // = 0xF3FD1086), stuffed.
     assert_eq!(
         frame_of(&Down::Start),
-        [0x07, 0x02, 0x03, 0xC7, 0x21, 0xE6, 0xEA, 0x00]
+        [0x07, 0x03, 0x03, 0x86, 0x10, 0xFD, 0xF3, 0x00]
     );
 }
 
@@ -345,7 +362,9 @@ fn largest_frames_fit_max_frame_bytes() {
     assert_eq!(largest_down_payload, MAX_DOWN_PAYLOAD_BYTES);
     assert_eq!(largest_up_payload, MAX_UP_PAYLOAD_BYTES);
     assert_eq!(MAX_DOWN_FRAME_BYTES, 269);
-    assert_eq!(MAX_UP_FRAME_BYTES, 249);
+    // Version 3: release and send instants, the two tasks' deadline counts, the
+    // watchdog's trips and the plan's end (249 bytes in version 2).
+    assert_eq!(MAX_UP_FRAME_BYTES, 335);
     assert_eq!(frame_of(&downs[1]).len(), MAX_DOWN_FRAME_BYTES);
 }
 
@@ -563,6 +582,15 @@ fn status_codes_round_trip_and_names_are_distinct() {
         assert_ne!(fault_name(fault_code(f)), "Unknown");
     }
     assert_eq!(fault_from_code(5), Err(5));
+    assert_eq!(fault_name(5), "Unknown");
+    // The ECU's own codes: outside the control faults, named, distinct.
+    let own = [FAULT_PANIC, FAULT_HARDFAULT, FAULT_DEADLINE];
+    let names: std::collections::HashSet<_> = own.iter().map(|&c| fault_name(c)).collect();
+    assert_eq!(names.len(), 3);
+    for c in own {
+        assert!(fault_from_code(c).is_err());
+        assert_ne!(fault_name(c), "Unknown");
+    }
 
     for (i, e) in SetupError::ALL.into_iter().enumerate() {
         assert_eq!(usize::from(e.code()), i + 1);
@@ -628,10 +656,16 @@ fn any_down() -> impl Strategy<Value = Down> {
                 vertices,
             })
         });
-    let sensor = (any::<u32>(), any::<u64>(), prop::array::uniform7(any_f32())).prop_map(
-        |(seq, stamp_us, v)| {
+    let sensor = (
+        any::<u32>(),
+        any::<u64>(),
+        prop::array::uniform7(any_f32()),
+        any::<u16>(),
+    )
+        .prop_map(|(seq, stamp_us, v, route_frames)| {
             Down::Sensor(SensorFrame {
                 seq,
+                route_frames,
                 estimate: StateEstimate {
                     stamp_us,
                     x_m: v[0],
@@ -643,8 +677,7 @@ fn any_down() -> impl Strategy<Value = Down> {
                     delta_rad: v[6],
                 },
             })
-        },
-    );
+        });
     let window = (any::<u16>(), any_f32(), any::<bool>()).prop_map(|(rows, origin_m, closed)| {
         Down::Window(WindowFrame {
             rows,
@@ -663,9 +696,20 @@ fn any_down() -> impl Strategy<Value = Down> {
     ]
 }
 
+fn any_timing() -> impl Strategy<Value = TaskTimingFrame> {
+    any::<(u32, u32, u32, u32, u32)>().prop_map(|(a, b, c, d, e)| TaskTimingFrame {
+        releases: a,
+        deadline_misses: b,
+        skipped_releases: c,
+        budget_overruns: d,
+        max_response_us: e,
+    })
+}
+
 fn any_plan_event() -> impl Strategy<Value = PlanEventFrame> {
     (
         any::<(u32, u64, u64, u32, u8, bool, u8)>(),
+        (any::<u64>(), any_timing()),
         any::<(u16, u16, u16, u16, u16, u16, u32)>(),
         prop::array::uniform17(prop::array::uniform2(any_f32())),
         any_f32(),
@@ -673,6 +717,7 @@ fn any_plan_event() -> impl Strategy<Value = PlanEventFrame> {
         .prop_map(
             |(
                 (activation, release_us, finish_us, ticks, status, published, passes),
+                (end_us, timing),
                 (
                     qp_iterations,
                     qp_added,
@@ -688,6 +733,8 @@ fn any_plan_event() -> impl Strategy<Value = PlanEventFrame> {
                 activation,
                 release_us,
                 finish_us,
+                end_us,
+                timing,
                 ticks,
                 status,
                 published,
@@ -709,22 +756,34 @@ fn any_up() -> impl Strategy<Value = Up> {
     let actuation = (
         any::<(u32, u8, u8, u32)>(),
         prop::array::uniform8(any_f32()),
+        (any::<u64>(), any::<u64>(), any_timing(), any::<u32>()),
         prop::option::of(any_plan_event()),
     )
-        .prop_map(|((seq, mode, fault, control_ticks), f, plan)| {
-            Up::Actuation(ActuationFrame {
-                seq,
-                torque_nm: [f[0], f[1], f[2], f[3]],
-                delta_rad: f[4],
-                delta_ol_rad: f[5],
-                delta_cl_rad: f[6],
-                v_ref_mps: f[7],
-                mode,
-                fault,
-                control_ticks,
+        .prop_map(
+            |(
+                (seq, mode, fault, control_ticks),
+                f,
+                (release_us, sent_us, control, watchdog_trips),
                 plan,
-            })
-        });
+            )| {
+                Up::Actuation(ActuationFrame {
+                    seq,
+                    torque_nm: [f[0], f[1], f[2], f[3]],
+                    delta_rad: f[4],
+                    delta_ol_rad: f[5],
+                    delta_cl_rad: f[6],
+                    v_ref_mps: f[7],
+                    mode,
+                    fault,
+                    control_ticks,
+                    release_us,
+                    sent_us,
+                    control,
+                    watchdog_trips,
+                    plan,
+                })
+            },
+        );
     prop_oneof![
         any::<(u8, u16)>().prop_map(|(status, detail)| Up::Ready(ReadyFrame { status, detail })),
         actuation,

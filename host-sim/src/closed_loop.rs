@@ -10,18 +10,28 @@
 //! # Timeline
 //!
 //! Simulated time advances in plant steps (1 ms by default). Every 10 ms the
-//! driver calls [`Ecu::control`] on the plant's state at that instant and holds the
-//! actuation it returns until the next call. Every 100 ms the `plan` task is
+//! driver calls [`Ecu::control`] on the plant's state at that instant. The
+//! actuation it returns acts from the instant the ECU sent it
+//! ([`ControlOutput::sent_us`]), as on a car: the plant holds its inputs over a
+//! step, so the actuation takes effect at the first plant step at or after the
+//! start of the step containing the send instant, i.e. at `⌊sent / step⌋·step`
+//! (never before the release it answers), and is held until the next one takes
+//! effect. An answer sent within the first plant step after its release (every
+//! answer of an ECU meeting its deadlines at 168 MHz: about 60 µs) acts at the
+//! release, so on-time answers give the same trajectory as before; a late answer
+//! acts late. Every 100 ms the `plan` task is
 //! released on the state at its release (after `control`, which has the higher
 //! priority, ran at the same instant). How long it runs and when its plan is
 //! published is the ECU's to say ([`SimulatedEcu`]: see [`crate::ecu`]).
 //!
 //! # Deadlines and budgets
 //!
-//! Budgets are in ECU cycles (control 5,000, plan 8.4 M); deadlines are times: a
+//! Budgets are in ECU cycles (control 5,000, plan 15.96 M); deadlines are times: a
 //! plan activation whose response time exceeds its 100 ms period, and a control
-//! activation whose cycles over the ECU clock exceed its 10 ms period, are deadline
-//! misses. An activation over its cycle budget is a budget overrun, counted apart
+//! activation whose answer is sent more than its 10 ms period after its release
+//! ([`ControlOutput::sent_us`]), are deadline misses, and so is every skipped
+//! release of either task (counted apart too: `plan_skipped_releases`,
+//! `control_skipped_releases`). An activation over its cycle budget is a budget overrun, counted apart
 //! (it may or may not miss its deadline, depending on the clock). All are counted
 //! and reported, never absorbed.
 //!
@@ -276,14 +286,20 @@ pub struct Summary {
     /// Plan releases whose response time exceeded the 100 ms period, skipped
     /// releases included.
     pub plan_deadline_misses: u64,
+    /// Plan releases skipped because the task was still running (the activation
+    /// before ran, window adoption included, past them).
+    pub plan_skipped_releases: u64,
     /// Plan activations over their cycle budget (deadline met or not).
     pub plan_budget_overruns: u64,
     /// Largest estimated cost of a control activation, cycles.
     pub control_max_cost_cycles: f64,
     /// Largest estimated cost of a control activation, instructions.
     pub control_max_instructions: f64,
-    /// Control activations whose cycles over the ECU clock exceeded the 10 ms period.
+    /// Control activations whose answer was sent more than the 10 ms period after
+    /// their release, skipped control releases included.
     pub control_deadline_misses: u64,
+    /// Control releases the ECU skipped because the task was still running.
+    pub control_skipped_releases: u64,
     /// Control activations over their cycle budget (deadline met or not).
     pub control_budget_overruns: u64,
     /// Control activations.
@@ -311,6 +327,26 @@ pub struct Summary {
     pub plan_budget_cycles: f64,
     /// Budget of one control activation, cycles.
     pub control_budget_cycles: f64,
+    /// The ECU's own count of `plan` deadline misses (late completions and
+    /// skipped releases, on its clock: `firmware::deadline`), null without an ECU
+    /// that counts (the in-process run).
+    pub ecu_plan_deadline_misses: Option<u64>,
+    /// The ECU's own count of skipped `plan` releases, null without an ECU.
+    pub ecu_skipped_releases: Option<u64>,
+    /// The ECU's own count of `plan` budget overruns (its own clock ticks over
+    /// the budget in cycles: at `-icount shift=4` a tick is 1/2.69 of an
+    /// instruction, so this is at least the host's count), null without an ECU.
+    pub ecu_plan_budget_overruns: Option<u64>,
+    /// The ECU's own count of `control` deadline misses, null without an ECU.
+    pub ecu_control_deadline_misses: Option<u64>,
+    /// The ECU's own count of skipped `control` releases, null without an ECU.
+    pub ecu_control_skipped_releases: Option<u64>,
+    /// The ECU's own count of `control` budget overruns (its clock's ticks), null
+    /// without an ECU.
+    pub ecu_control_budget_overruns: Option<u64>,
+    /// Times the ECU's watchdog saw no new plan for more than
+    /// `firmware::deadline::PLAN_WATCHDOG_PERIODS` plan periods, null without an ECU.
+    pub ecu_watchdog_trips: Option<u64>,
 }
 
 /// Everything a run produces.
@@ -448,6 +484,8 @@ pub fn run_with<T: Real, E: Ecu<T>>(
     let mut plant = Plant::with_step(*vehicle, init, opts.plant_dt_s).context("plant")?;
 
     let mut inputs = Inputs::default();
+    // Actuations waiting for the plant step they take effect at, in order.
+    let mut pending: std::collections::VecDeque<(u64, Inputs)> = Default::default();
     let mut res = RunResult::default();
     let mut meter = Meter::new(scenario, vehicle, opts);
     let mut host_us: Vec<f64> = Vec::new();
@@ -499,10 +537,15 @@ pub fn run_with<T: Real, E: Ecu<T>>(
                 meter.sum.max_abs_plan_ay_mps2 = meter.sum.max_abs_plan_ay_mps2.max(ay);
             }
             let act = c.actuation;
-            inputs = Inputs {
-                torque_nm: act.wheel_torque_nm.map(|x| x.to_f64()),
-                delta_rad: act.delta_rad.to_f64(),
-            };
+            // From the plant step containing the send instant (module docs).
+            let apply_us = (c.sent_us / step_us * step_us).max(t_us);
+            pending.push_back((
+                apply_us,
+                Inputs {
+                    torque_nm: act.wheel_torque_nm.map(|x| x.to_f64()),
+                    delta_rad: act.delta_rad.to_f64(),
+                },
+            ));
             let mut row = meter.measure(t_us, &st, &out, &act, ecu.active_plan(), last_status);
             if let Some(mu) = c.friction_mu {
                 row.friction_mu = mu;
@@ -519,6 +562,13 @@ pub fn run_with<T: Real, E: Ecu<T>>(
             if t_us.is_multiple_of(1_000_000) {
                 progress(t_us as f64 * 1e-6, meter.progress_m);
             }
+        }
+        while let Some(&(at, next)) = pending.front() {
+            if at > t_us {
+                break;
+            }
+            inputs = next;
+            pending.pop_front();
         }
         plant
             .step(&inputs, opts.mu_road)
@@ -612,8 +662,20 @@ impl<'a> Meter<'a> {
         }
         res.control_costs.push(c.cycles);
         res.control_instructions.push(c.instructions);
-        if c.cycles / opts.ecu_clock_hz * 1e6 > CONTROL_PERIOD_US as f64 {
+        if c.sent_us.saturating_sub(c.release_us) > CONTROL_PERIOD_US {
             sum.control_deadline_misses += 1;
+        }
+        sum.control_deadline_misses += u64::from(c.control_skipped_releases);
+        sum.control_skipped_releases += u64::from(c.control_skipped_releases);
+        sum.plan_skipped_releases += u64::from(c.skipped_releases);
+        if let Some(e) = &c.ecu_counts {
+            sum.ecu_plan_deadline_misses = Some(e.plan.deadline_misses);
+            sum.ecu_skipped_releases = Some(e.plan.skipped_releases);
+            sum.ecu_plan_budget_overruns = Some(e.plan.budget_overruns);
+            sum.ecu_control_deadline_misses = Some(e.control.deadline_misses);
+            sum.ecu_control_skipped_releases = Some(e.control.skipped_releases);
+            sum.ecu_control_budget_overruns = Some(e.control.budget_overruns);
+            sum.ecu_watchdog_trips = Some(e.watchdog_trips);
         }
         if c.cycles > opts.control_budget_cycles {
             sum.control_budget_overruns += 1;

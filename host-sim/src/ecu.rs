@@ -13,7 +13,9 @@
 //!
 //! At each call at `t` (a multiple of 10 ms): a plan activation that has finished
 //! by `t` publishes its plan (if optimal), then `control` runs on the estimate and
-//! the current plan; when `t` is a multiple of 100 ms the `plan` task is released
+//! the current plan, its actuation sent at `t` plus its modelled cycles over the
+//! clock (control releases are never skipped in this model: a control activation
+//! longer than its period shows as a deadline miss); when `t` is a multiple of 100 ms the `plan` task is released
 //! after it (lower priority) on the same estimate. The host computes the plan at
 //! once, but the activation finishes, and publishes, at
 //!
@@ -88,11 +90,62 @@ pub struct PlanActivation {
     pub max_validity_slack_rad: f64,
 }
 
+/// One task's deadline counts as the ECU itself counted them on its own clock
+/// (`firmware::deadline`), cumulative.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct EcuTaskCounts {
+    /// Releases that ran.
+    pub releases: u64,
+    /// Late completions plus skipped releases.
+    pub deadline_misses: u64,
+    /// Releases skipped because the task was still busy.
+    pub skipped_releases: u64,
+    /// Activations over their cycle budget, counted in the ECU's own clock ticks.
+    pub budget_overruns: u64,
+    /// Largest response time, µs.
+    pub max_response_us: u64,
+}
+
+impl From<firmware::link::TaskTimingFrame> for EcuTaskCounts {
+    fn from(t: firmware::link::TaskTimingFrame) -> Self {
+        Self {
+            releases: t.releases.into(),
+            deadline_misses: t.deadline_misses.into(),
+            skipped_releases: t.skipped_releases.into(),
+            budget_overruns: t.budget_overruns.into(),
+            max_response_us: t.max_response_us.into(),
+        }
+    }
+}
+
+/// What an ECU that watches its own deadlines reports (processor in the loop).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct EcuCounts {
+    /// The `plan` task's counts (as of the last plan event received).
+    pub plan: EcuTaskCounts,
+    /// The `control` task's counts.
+    pub control: EcuTaskCounts,
+    /// Times the control task's watchdog saw no new plan for too long.
+    pub watchdog_trips: u64,
+}
+
 /// What one control activation produced.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ControlOutput<T> {
-    /// The actuation to hold until the next control activation.
+    /// The actuation to hold until the next one takes effect.
     pub actuation: Actuation<T>,
+    /// The control release this activation ran at, µs (the call's `t_us` unless
+    /// the ECU fell behind).
+    pub release_us: u64,
+    /// When the ECU sent the actuation, µs on the same timeline: the plant applies
+    /// it from the plant step containing that instant (see [`crate::closed_loop`]).
+    /// Its response time is `sent_us − release_us`.
+    pub sent_us: u64,
+    /// Control releases the ECU skipped before this one (it was still busy).
+    pub control_skipped_releases: u32,
+    /// The ECU's own deadline counts after this activation, `None` when the ECU
+    /// does not count them (the modelled ECU).
+    pub ecu_counts: Option<EcuCounts>,
     /// Instructions of this control activation.
     pub instructions: f64,
     /// Its cycles (instructions × cycles per instruction), ECU cycles.
@@ -384,6 +437,9 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
         }
         let actuation = self.control.run(est, &self.shared_plan, t_us);
         let instructions = self.cost_model.control_instructions();
+        let cycles = instructions * self.cycles_per_instruction;
+        // The actuation leaves when the modelled activation ends.
+        let sent_us = t_us + (cycles / self.ecu_clock_hz * 1e6).ceil() as u64;
         let mut skipped_releases = 0;
         if t_us.is_multiple_of(PLAN_PERIOD_US) {
             self.releases += 1;
@@ -396,8 +452,12 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
         }
         Ok(ControlOutput {
             actuation,
+            release_us: t_us,
+            sent_us,
+            control_skipped_releases: 0,
+            ecu_counts: None,
             instructions,
-            cycles: instructions * self.cycles_per_instruction,
+            cycles,
             plans,
             skipped_releases,
             friction_mu: Some(self.control.friction_mu().to_f64()),

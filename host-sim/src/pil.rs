@@ -26,7 +26,20 @@
 //! See [`firmware::link`]: versioned, CRC-32, COBS-delimited postcard frames.
 //! Set-up: `Config`, `PathChunk`s, `Obstacle`s, `Start` → `Ready`; then `Sensor`
 //! → `Actuation` every period; `Stop` → `Done`. Garbled, short, wrong-version,
-//! stale or out-of-order frames are refused and counted on both sides.
+//! stale or out-of-order frames are refused and counted on both sides. The next
+//! window of the road goes on a third FIFO (`ecu.route`), announced by the count
+//! in the next sensor frame: the ECU's plan task reads it after it publishes.
+//!
+//! # Deadlines, counted twice
+//!
+//! Each actuation frame carries the control release it answers and its send
+//! instant on the ECU's clock, each plan event its release, finish and end; the
+//! host counts misses and skipped releases from these stamps, and budget
+//! overruns from the measured ticks, as the driver does for any ECU. The ECU
+//! counts them itself ([`firmware::deadline`]) and sends its counts in the same
+//! frames; [`count_mismatches`] compares the two and `host-sim pil` fails when
+//! they differ. The plant applies each actuation from the instant the ECU sent it
+//! ([`crate::closed_loop`]).
 
 use std::fs::{self, File};
 use std::io::{BufWriter, Read, Write};
@@ -51,7 +64,66 @@ use crate::ecu::{ControlOutput, Ecu, PlanActivation};
 use crate::route::{RouteFeeder, Window};
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleParams;
-use firmware::tasks::PLAN_PERIOD_US;
+use firmware::deadline::{CONTROL_BUDGET_CYCLES, PLAN_BUDGET_CYCLES};
+use firmware::tasks::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
+
+/// Releases of a task of period `period_us` skipped by an activation released at
+/// `release_us` that ended at `end_us` (µs): those after its release and before
+/// the first not yet past at its end (one exactly at the end is not past).
+pub fn skipped_between(release_us: u64, end_us: u64, period_us: u64) -> u32 {
+    let next_due = release_us + period_us;
+    if end_us <= next_due {
+        0
+    } else {
+        (end_us - next_due).div_ceil(period_us) as u32
+    }
+}
+
+/// Where the ECU's own deadline counts differ from the host's: the summary's
+/// misses and skipped releases (counted by the driver from the frames' stamps)
+/// and the host's count of budget overruns on the ECU's clock; one line each,
+/// empty when they agree (or when there is no ECU count).
+pub fn count_mismatches(s: &crate::closed_loop::Summary, ticks: &TickOverruns) -> Vec<String> {
+    let pairs = [
+        (
+            "plan deadline misses",
+            s.ecu_plan_deadline_misses,
+            s.plan_deadline_misses,
+        ),
+        (
+            "plan skipped releases",
+            s.ecu_skipped_releases,
+            s.plan_skipped_releases,
+        ),
+        (
+            "plan budget overruns (ECU clock)",
+            s.ecu_plan_budget_overruns,
+            ticks.plan,
+        ),
+        (
+            "control deadline misses",
+            s.ecu_control_deadline_misses,
+            s.control_deadline_misses,
+        ),
+        (
+            "control skipped releases",
+            s.ecu_control_skipped_releases,
+            s.control_skipped_releases,
+        ),
+        (
+            "control budget overruns (ECU clock)",
+            s.ecu_control_budget_overruns,
+            ticks.control,
+        ),
+    ];
+    pairs
+        .iter()
+        .filter_map(|&(name, ecu, host)| match ecu {
+            Some(e) if e != host => Some(format!("{name}: ECU {e}, host {host}")),
+            _ => None,
+        })
+        .collect()
+}
 
 /// ECU core clock, Hz: QEMU's SysTick counts at this rate of virtual time.
 pub const ECU_CLOCK_HZ: f64 = 168e6;
@@ -98,6 +170,19 @@ pub struct LinkCounters {
     pub stale: u64,
 }
 
+/// The host's own count, from the frames' raw ticks, of the ECU's budget
+/// overruns on the ECU's clock (its ticks of a task's own execution over the
+/// budget in cycles), to compare with the ECU's (the summary's
+/// `*_budget_overruns` are the host's estimate for the real part: instructions ×
+/// cycles per instruction).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct TickOverruns {
+    /// Plan activations whose ticks exceeded the plan budget.
+    pub plan: u64,
+    /// Control activations whose ticks exceeded the control budget.
+    pub control: u64,
+}
+
 enum Incoming {
     Frame(Box<Up>),
     Bad,
@@ -115,6 +200,16 @@ pub struct QemuEcu {
     pub counters: LinkCounters,
     /// The plan the ECU's control task follows (positions only), as reported.
     pub active: Plan<f32>,
+    /// The route channel (`ecu.route`): the next window of the road.
+    route: BufWriter<File>,
+    /// Route frames written since the last sensor frame (announced in the next).
+    route_frames: u16,
+    /// The last control release the ECU reported, µs.
+    last_release_us: Option<u64>,
+    /// The plan task's counts as of the last plan event.
+    plan_counts: crate::ecu::EcuTaskCounts,
+    /// Budget overruns on the ECU's clock, counted by the host from the ticks.
+    pub tick_overruns: TickOverruns,
 }
 
 impl Drop for QemuEcu {
@@ -190,8 +285,10 @@ impl QemuEcu {
         let dir = fs::canonicalize(&opts.work_dir)?;
         let down_path = dir.join("ecu.down");
         let up_path = dir.join("ecu.up");
+        let route_path = dir.join("ecu.route");
         mkfifo(&down_path)?;
         mkfifo(&up_path)?;
+        mkfifo(&route_path)?;
         // The ECU's defmt log goes to the semihosting console, QEMU's stdout.
         let defmt_log = File::create(dir.join("ecu.defmt"))?;
         let qemu_log = File::create(dir.join("qemu.log"))?;
@@ -222,17 +319,18 @@ impl QemuEcu {
                     opts.qemu.display()
                 )
             })?;
-        // Open both FIFOs in the ECU's order (down, then up), on a thread: an open
+        // Open the FIFOs in the ECU's order (down, up, route), on a thread: an open
         // blocks until QEMU opens the other end.
         let (tx, rx) = mpsc::channel();
         {
-            let (d, u) = (down_path.clone(), up_path.clone());
+            let (d, u, r) = (down_path.clone(), up_path.clone(), route_path.clone());
             thread::spawn(move || {
-                let r = File::options()
-                    .write(true)
-                    .open(&d)
-                    .and_then(|down| File::open(&u).map(|up| (down, up)));
-                let _ = tx.send(r);
+                let opened = File::options().write(true).open(&d).and_then(|down| {
+                    let up = File::open(&u)?;
+                    let route = File::options().write(true).open(&r)?;
+                    Ok((down, up, route))
+                });
+                let _ = tx.send(opened);
             });
         }
         let mut ecu = None;
@@ -240,8 +338,7 @@ impl QemuEcu {
         for _ in 0..(opts.frame_timeout_s * 20.0).ceil() as u64 {
             match rx.recv_timeout(Duration::from_millis(50)) {
                 Ok(r) => {
-                    let (down, up) = r.context("opening the ECU link FIFOs")?;
-                    ecu = Some((down, up));
+                    ecu = Some(r.context("opening the ECU link FIFOs")?);
                     break;
                 }
                 Err(RecvTimeoutError::Timeout) => {
@@ -253,7 +350,7 @@ impl QemuEcu {
                 Err(RecvTimeoutError::Disconnected) => bail!("the link opener stopped"),
             }
         }
-        let Some((down, up)) = ecu else {
+        let Some((down, up, route)) = ecu else {
             let _ = child.kill();
             bail!(
                 "the ECU did not open its link within {} s (is {} the ECU application?)",
@@ -269,6 +366,11 @@ impl QemuEcu {
             seq: 0,
             counters: LinkCounters::default(),
             active: Plan::zeroed(),
+            route: BufWriter::new(route),
+            route_frames: 0,
+            last_release_us: None,
+            plan_counts: Default::default(),
+            tick_overruns: TickOverruns::default(),
         };
         ecu.set_up(scenario, vehicle, sim)?;
         Ok(ecu)
@@ -367,9 +469,20 @@ impl QemuEcu {
         }
     }
 
-    /// Sends rows of a window in `PathChunk` frames (the first starting at row 0).
-    fn send_rows(&mut self, rows: &[[f64; 4]]) -> Result<()> {
-        for (c, chunk) in rows.chunks(PATH_CHUNK_ROWS).enumerate() {
+    /// Writes a frame on the route channel.
+    fn send_route(&mut self, msg: &Down) -> Result<()> {
+        let mut buf = [0u8; MAX_FRAME_BYTES];
+        let n = link::encode(msg, &mut buf).map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
+        self.route
+            .write_all(&buf[..n])
+            .context("the ECU closed its route channel")?;
+        self.route_frames = self.route_frames.saturating_add(1);
+        Ok(())
+    }
+
+    /// The `PathChunk` frames of a window's rows (the first starting at row 0).
+    fn chunks(rows: &[[f64; 4]]) -> impl Iterator<Item = Down> + '_ {
+        rows.chunks(PATH_CHUNK_ROWS).enumerate().map(|(c, chunk)| {
             let mut f = PathChunkFrame {
                 first: (c * PATH_CHUNK_ROWS) as u16,
                 count: chunk.len() as u8,
@@ -378,7 +491,14 @@ impl QemuEcu {
             for (dst, src) in f.rows.iter_mut().zip(chunk) {
                 *dst = src.map(|x| x as f32);
             }
-            self.send(&Down::PathChunk(f))?;
+            Down::PathChunk(f)
+        })
+    }
+
+    /// Sends rows of a window in `PathChunk` frames (the first starting at row 0).
+    fn send_rows(&mut self, rows: &[[f64; 4]]) -> Result<()> {
+        for f in Self::chunks(rows) {
+            self.send(&f)?;
         }
         Ok(())
     }
@@ -386,9 +506,11 @@ impl QemuEcu {
     /// One control period: sends the estimate at `t_us`, returns the ECU's answer.
     pub fn exchange(&mut self, est: &StateEstimate<f32>) -> Result<link::ActuationFrame> {
         self.seq = self.seq.wrapping_add(1);
+        let route_frames = std::mem::take(&mut self.route_frames);
         self.send(&Down::Sensor(SensorFrame {
             seq: self.seq,
             estimate: *est,
+            route_frames,
         }))?;
         loop {
             match self.receive()? {
@@ -402,7 +524,14 @@ impl QemuEcu {
                 }
                 Up::Actuation(a) if a.fault == link::FAULT_PANIC => {
                     bail!(
-                        "the ECU panicked (it commanded zero torque, steering held at {:.3} rad)",
+                        "the ECU panicked (it commanded zero torque, steering held at {:.3} rad, and stopped; its line is in {})",
+                        a.delta_rad,
+                        self.opts.work_dir.join("qemu.log").display()
+                    )
+                }
+                Up::Actuation(a) if a.fault == link::FAULT_HARDFAULT => {
+                    bail!(
+                        "the ECU took a HardFault (a MemManage, BusFault or UsageFault escalated, or a HardFault proper: e.g. a stack overflow into flip-link's guard); it commanded zero torque, steering held at {:.3} rad, and stopped",
                         a.delta_rad
                     )
                 }
@@ -553,15 +682,36 @@ impl Ecu<f32> for QemuEcu {
         let mut plans = Vec::new();
         let mut skipped_releases = 0;
         if let Some(p) = &frame.plan {
-            // Releases that fell while this activation ran were skipped.
-            let next_release = p.release_us + PLAN_PERIOD_US;
-            if p.finish_us > next_release {
-                skipped_releases = ((p.finish_us - next_release) / PLAN_PERIOD_US + 1) as u32;
+            // Releases that fell while this activation ran, up to its end (its
+            // window adoption included), were skipped.
+            skipped_releases = skipped_between(p.release_us, p.end_us, PLAN_PERIOD_US);
+            if u64::from(p.ticks) > PLAN_BUDGET_CYCLES {
+                self.tick_overruns.plan += 1;
             }
+            self.plan_counts = p.timing.into();
             plans.push(self.activation_of(p));
         }
+        if u64::from(frame.control_ticks) > CONTROL_BUDGET_CYCLES {
+            self.tick_overruns.control += 1;
+        }
+        // Control releases the ECU skipped: the gap to the last one it reported.
+        let control_skipped_releases = match self.last_release_us {
+            Some(last) => {
+                (frame.release_us.saturating_sub(last) / CONTROL_PERIOD_US).saturating_sub(1) as u32
+            }
+            None => 0,
+        };
+        self.last_release_us = Some(frame.release_us);
         Ok(ControlOutput {
             actuation: actuation_of(&frame),
+            release_us: frame.release_us,
+            sent_us: frame.sent_us,
+            control_skipped_releases,
+            ecu_counts: Some(crate::ecu::EcuCounts {
+                plan: self.plan_counts,
+                control: frame.control.into(),
+                watchdog_trips: frame.watchdog_trips.into(),
+            }),
             instructions,
             cycles: instructions * self.opts.cycles_per_instruction,
             plans,
@@ -575,12 +725,18 @@ impl Ecu<f32> for QemuEcu {
     }
 
     fn set_window(&mut self, _t_us: u64, w: &Window) -> Result<()> {
-        self.send_rows(&w.rows)?;
-        self.send(&Down::Window(link::WindowFrame {
+        // On the route channel, announced by the next sensor frame.
+        for f in Self::chunks(&w.rows) {
+            self.send_route(&f)?;
+        }
+        self.send_route(&Down::Window(link::WindowFrame {
             rows: w.rows.len() as u16,
             origin_m: w.origin_m as f32,
             closed: w.closed,
-        }))
+        }))?;
+        self.route
+            .flush()
+            .context("the ECU closed its route channel")
     }
 }
 
@@ -668,6 +824,12 @@ pub struct PilReport {
     pub refit: Option<crate::cost_model::CostModel>,
     /// Against the in-process run (f32, same inputs).
     pub comparison: Option<Comparison>,
+    /// The host's count of budget overruns on the ECU's clock (from the frames'
+    /// ticks), beside the ECU's own (`summary.json`'s `ecu_*_budget_overruns`).
+    pub tick_overruns: TickOverruns,
+    /// Where the ECU's own deadline counts differ from the host's (empty: they
+    /// agree; `host-sim pil` then fails).
+    pub count_mismatches: Vec<String>,
     /// Wall time of the PIL run, s.
     pub wall_s: f64,
 }
@@ -804,6 +966,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
     });
     bar.finish_and_clear();
     let counters = ecu.counters;
+    let tick_overruns = ecu.tick_overruns;
     let done = match &result {
         Ok(_) => Some(ecu.stop()?),
         Err(_) => None,
@@ -854,6 +1017,8 @@ pub fn run(args: &PilArgs) -> Result<()> {
             percentile(&result.control_instructions, 1.0),
         ),
         comparison,
+        tick_overruns,
+        count_mismatches: count_mismatches(&result.summary, &tick_overruns),
         wall_s,
     };
     let pil_path = args.run.out.join("pil.json");
@@ -893,11 +1058,34 @@ pub fn run(args: &PilArgs) -> Result<()> {
             ),
         }
     }
+    let opt = |x: Option<u64>| x.map_or("-".to_string(), |v| v.to_string());
+    println!(
+        "deadlines, ECU's own count / host's: plan misses {} / {}, skipped releases {} / {}, budget overruns (ECU clock) {} / {}; control misses {} / {}, skipped releases {} / {}, budget overruns (ECU clock) {} / {}; watchdog trips {}",
+        opt(s.ecu_plan_deadline_misses),
+        s.plan_deadline_misses,
+        opt(s.ecu_skipped_releases),
+        s.plan_skipped_releases,
+        opt(s.ecu_plan_budget_overruns),
+        tick_overruns.plan,
+        opt(s.ecu_control_deadline_misses),
+        s.control_deadline_misses,
+        opt(s.ecu_control_skipped_releases),
+        s.control_skipped_releases,
+        opt(s.ecu_control_budget_overruns),
+        tick_overruns.control,
+        opt(s.ecu_watchdog_trips),
+    );
     println!(
         "PIL wall time {:.1} s; wrote {}",
         wall_s,
         args.run.out.display()
     );
+    if !report.count_mismatches.is_empty() {
+        bail!(
+            "the ECU's own deadline counts differ from the host's: {} (pil.json: count_mismatches)",
+            report.count_mismatches.join("; ")
+        );
+    }
     if let Some(limit) = args.max_model_underestimate_pct {
         if e.max_under_pct > limit {
             bail!(

@@ -4,7 +4,7 @@
 //! | task | priority | released | does |
 //! |---|---|---|---|
 //! | `control` | 2 (high) | every 10 ms by the monotonic | reads the sensor frame, [`ControlTask::run`] on the shared plan, sends the actuator frame |
-//! | `plan` | 1 (low) | every 100 ms by the monotonic | [`PlanTask::run`] outside any lock, then [`PlanTask::publish`] (a buffer swap) inside a short lock on the shared plan |
+//! | `plan` | 1 (low) | every 100 ms by the monotonic | [`PlanTask::run`] outside any lock, then [`PlanTask::publish`] (a buffer swap) inside a short lock on the shared plan; then receives and adopts a new window of the road, if one was sent |
 //!
 //! No maths here: the app calls the same library functions the simulator calls.
 //!
@@ -17,6 +17,20 @@
 //! Releases that fall while the plan task is still running are skipped, not
 //! queued, so the next activation plans from a fresh state.
 //!
+//! **The ECU watches its own deadlines** ([`firmware::deadline`]): each task's
+//! releases (release `k` at `k` periods on the timeline, whose start is the
+//! first `control` release), completions (`control`: the actuation frame sent;
+//! `plan`: the plan published), response times, deadline misses, budget
+//! overruns (its own core clock cycles, preemption excluded, over 5,000 /
+//! 15.96 M) and skipped releases are counted on its own clock and sent in every
+//! actuation frame (`plan`'s with its plan event). A `control` overrun is not
+//! absorbed: the releases that fell during it are skipped and counted, and after
+//! [`firmware::deadline::CONTROL_MISS_LIMIT`] consecutive misses the control task
+//! latches the safe actuation (zero torque, steering held, as the panic path; fault
+//! [`link::FAULT_DEADLINE`]). Its watchdog counts the times no new plan came for
+//! more than [`firmware::deadline::PLAN_WATCHDOG_PERIODS`] plan periods (the
+//! late-plan policy stops the car).
+//!
 //! **Link.** In the processor-in-the-loop run (`host-sim pil`) the simulator
 //! starts QEMU in a folder holding two FIFOs, `ecu.down` (host → ECU) and
 //! `ecu.up` (ECU → host), which the ECU opens through semihosting. Semihosting
@@ -25,8 +39,18 @@
 //! come from the sensor fusion and go to the actuators over CAN; the frames
 //! ([`firmware::link`]) are the same.
 //!
-//! **Panic**: the handler commands zero torque with the steering held, sends it as
-//! an actuator frame and stops.
+//! **Route**: the next window of the road comes on a channel of its own
+//! (`ecu.route`), announced by the count in the sensor frame; the plan task
+//! receives it after it publishes (it is the planner's input), so a window never
+//! delays an actuation.
+//!
+//! **Panic and faults**: the panic handler and the HardFault handler (MemManage,
+//! BusFault and UsageFault are left disabled in SHCSR, so they escalate to
+//! HardFault) command zero torque with the steering held, send it as an actuator
+//! frame with the fault code ([`link::FAULT_PANIC`], [`link::FAULT_HARDFAULT`]),
+//! write a fixed line to the semihosting stderr and stop. Nothing on that path
+//! formats (no `defmt`, no `core::fmt`) or can panic, and a static guard sends a
+//! second entry straight to the exit: the handlers cannot re-enter themselves.
 //!
 //! Build: `cargo ecu`; run in the loop with the simulator: `host-sim pil`.
 #![no_std]
@@ -34,11 +58,14 @@
 // Semihosting calls, painting the stack and the panic handler's actuator frame.
 #![allow(unsafe_code)]
 
-use core::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 
 use cortex_m_semihosting::{debug, syscall};
 use defmt_semihosting as _;
-use firmware::link::{self, ActuationFrame, Down, FrameReader, Up, MAX_FRAME_BYTES};
+use firmware::deadline::{DeadlineMonitor, PlanWatchdog};
+use firmware::link::{
+    self, ActuationFrame, Down, FrameReader, Up, MAX_DOWN_FRAME_BYTES, MAX_FRAME_BYTES,
+};
 use firmware::low_level::Actuation;
 use firmware::tasks::{ControlTask, PlanTask};
 use rtic_monotonics::systick::prelude::*;
@@ -59,6 +86,19 @@ systick_monotonic!(Mono, MONO_HZ);
 
 /// Host file descriptor of the up-link (0: not open), for the panic handler.
 static UP_FD: AtomicUsize = AtomicUsize::new(0);
+/// Host file descriptor of the semihosting stderr (0: not open), for the panic
+/// handler's fixed line.
+static ERR_FD: AtomicUsize = AtomicUsize::new(0);
+/// Set by the first entry into [`safe_stop`]: a second entry (a fault inside the
+/// handler) goes straight to the exit.
+static STOPPING: AtomicBool = AtomicBool::new(false);
+/// Frames the host wrote on the route channel that the plan task has not read
+/// yet (announced by `control` from the sensor frames), frames.
+static ROUTE_PENDING: AtomicU32 = AtomicU32::new(0);
+/// Route frames the plan task refused, frames.
+static ROUTE_REJECTED: AtomicU32 = AtomicU32::new(0);
+/// Monotonic tick (ms) of the timeline's start: the first `control` release.
+static START_MONO_TICKS: AtomicU32 = AtomicU32::new(0);
 /// Last steering command, `f32` bits (the panic handler holds it).
 static LAST_DELTA_BITS: AtomicU32 = AtomicU32::new(0);
 /// The control task's friction estimate `μ̂` (`firmware::friction`), `f32` bits,
@@ -69,7 +109,8 @@ static FRICTION_MU_BITS: AtomicU32 = AtomicU32::new(0);
 /// Core clock ticks spent in `control` so far, link included (the plan task
 /// subtracts them from its elapsed time).
 static CONTROL_TICKS: AtomicU32 = AtomicU32::new(0);
-/// Core clock tick count at the start of the timeline (t = 0).
+/// Core clock tick count at the start of the timeline (t = 0): the start of the
+/// monotonic tick of the first release.
 static EPOCH_TICKS: AtomicU32 = AtomicU32::new(0);
 /// High bits of the epoch (the 64-bit tick count's upper half).
 static EPOCH_TICKS_HI: AtomicU32 = AtomicU32::new(0);
@@ -99,6 +140,14 @@ fn now_us() -> u64 {
     core_ticks().saturating_sub(epoch_ticks()) * 1_000_000 / SYSCLK_HZ as u64
 }
 
+/// The monotonic's instant of a time on the timeline, `t_us` µs (whole ms).
+fn instant_at(t_us: u64) -> <Mono as rtic_monotonics::Monotonic>::Instant {
+    let start = START_MONO_TICKS.load(Ordering::Relaxed);
+    <Mono as rtic_monotonics::Monotonic>::Instant::from_ticks(
+        start.wrapping_add((t_us / 1_000) as u32),
+    )
+}
+
 /// The two FIFOs to the simulator, through semihosting.
 pub struct Link {
     down: usize,
@@ -121,35 +170,59 @@ fn sh_open(name: &[u8], mode: usize) -> Option<usize> {
     }
 }
 
+/// Writes `bytes` to the host file `fd`; false when the host took none of a
+/// write. No slicing that can panic: the panic path uses it.
 fn sh_write(fd: usize, mut bytes: &[u8]) -> bool {
     while !bytes.is_empty() {
         let left = unsafe { syscall!(WRITE, fd, bytes.as_ptr(), bytes.len()) };
         if left >= bytes.len() {
             return false;
         }
-        bytes = &bytes[bytes.len() - left..];
+        bytes = match bytes.get(bytes.len() - left..) {
+            Some(rest) => rest,
+            None => return false,
+        };
     }
     true
 }
 
+/// Reads up to `buf.len()` bytes of the host file `fd`; the count, 0 at its end.
+fn sh_read(fd: usize, buf: &mut [u8]) -> usize {
+    let n = buf.len();
+    let left = unsafe { syscall!(READ, fd, buf.as_mut_ptr(), n) };
+    n.saturating_sub(left)
+}
+
 impl Link {
-    /// Opens `ecu.down` for reading and `ecu.up` for writing, in that order (the
-    /// simulator opens them in the same order).
-    pub fn open() -> Option<Self> {
+    /// Opens `ecu.down` for reading, `ecu.up` for writing and `ecu.route` for
+    /// reading, in that order (the simulator opens them in the same order), and
+    /// the semihosting stderr (`:tt`, append) for the panic handler's line.
+    pub fn open() -> Option<(Self, RouteLink)> {
         const R_BINARY: usize = 1;
         const W_TRUNC_BINARY: usize = 5;
+        const APPEND: usize = 8;
         let down = sh_open(b"ecu.down\0", R_BINARY)?;
         let up = sh_open(b"ecu.up\0", W_TRUNC_BINARY)?;
         UP_FD.store(up, Ordering::Relaxed);
-        Some(Self {
-            down,
-            up,
-            reader: FrameReader::new(),
-            rx: [0; 64],
-            rx_len: 0,
-            rx_pos: 0,
-            rejected: 0,
-        })
+        let route = sh_open(b"ecu.route\0", R_BINARY)?;
+        if let Some(err) = sh_open(b":tt\0", APPEND) {
+            ERR_FD.store(err, Ordering::Relaxed);
+        }
+        Some((
+            Self {
+                down,
+                up,
+                reader: FrameReader::new(),
+                rx: [0; 64],
+                rx_len: 0,
+                rx_pos: 0,
+                rejected: 0,
+            },
+            RouteLink {
+                fd: route,
+                reader: FrameReader::new(),
+            },
+        ))
     }
 
     /// The next well-formed host frame (refused frames are counted and skipped);
@@ -157,12 +230,11 @@ impl Link {
     pub fn receive(&mut self) -> Option<Down> {
         loop {
             if self.rx_pos == self.rx_len {
-                let n = self.rx.len();
-                let left = unsafe { syscall!(READ, self.down, self.rx.as_mut_ptr(), n) };
-                if left >= n {
+                let got = sh_read(self.down, &mut self.rx);
+                if got == 0 {
                     return None; // end of file: the host is gone
                 }
-                self.rx_len = n - left;
+                self.rx_len = got;
                 self.rx_pos = 0;
             }
             let byte = self.rx[self.rx_pos];
@@ -186,6 +258,46 @@ impl Link {
         match link::encode(msg, &mut buf) {
             Ok(n) => sh_write(self.up, &buf[..n]),
             Err(_) => false,
+        }
+    }
+}
+
+/// The route channel (`ecu.route`): the frames of the next window of the road,
+/// read by the plan task (one byte at a time: they are few).
+pub struct RouteLink {
+    fd: usize,
+    reader: FrameReader<MAX_DOWN_FRAME_BYTES>,
+}
+
+impl RouteLink {
+    /// Reads `frames` frames of the road into `staging` (refused ones are counted
+    /// in [`ROUTE_REJECTED`]); stops early when the host closed the channel. Not
+    /// inlined: its decoded frame lives on the stack only while it runs, not beside
+    /// the MPC step's frames in the plan task's.
+    #[inline(never)]
+    fn receive(&mut self, frames: u32, staging: &mut Staging) {
+        let mut left = frames;
+        let mut byte = [0u8; 1];
+        while left > 0 {
+            if sh_read(self.fd, &mut byte) == 0 {
+                return;
+            }
+            let ok = match self.reader.push(byte[0]) {
+                None => continue,
+                Some(Ok(frame)) => match link::decode::<Down>(frame) {
+                    Ok(Down::PathChunk(c)) => staging.chunk(&c),
+                    Ok(Down::Window(w)) => {
+                        staging.complete(&w);
+                        true
+                    }
+                    _ => false,
+                },
+                Some(Err(_)) => false,
+            };
+            if !ok {
+                ROUTE_REJECTED.fetch_add(1, Ordering::Relaxed);
+            }
+            left -= 1;
         }
     }
 }
@@ -307,6 +419,8 @@ fn add_control_ticks(t0: u64) {
     CONTROL_TICKS.fetch_add(whole, Ordering::Relaxed);
 }
 
+/// An actuation frame: the actuation, its fault code and the activation's own
+/// ticks; the caller fills in the instants and the counts.
 fn actuation_frame(seq: u32, a: &Actuation<f32>, fault: u8, ticks: u32) -> ActuationFrame {
     ActuationFrame {
         seq,
@@ -318,6 +432,10 @@ fn actuation_frame(seq: u32, a: &Actuation<f32>, fault: u8, ticks: u32) -> Actua
         mode: link::mode_code(a.mode),
         fault,
         control_ticks: ticks,
+        release_us: 0,
+        sent_us: 0,
+        control: link::TaskTimingFrame::default(),
+        watchdog_trips: 0,
         plan: None,
     }
 }
@@ -340,9 +458,6 @@ mod app {
         plan: &'static mut Plan<f32>,
         /// The last plan activation's record, until `control` reports it.
         plan_event: Option<PlanEventFrame>,
-        /// The next window of the road, as `control` receives it; `plan` adopts it
-        /// (in a static, as `plan`).
-        staging: &'static mut Staging,
     }
 
     #[local]
@@ -350,6 +465,10 @@ mod app {
         control: ControlTask<f32>,
         link: &'static mut Link,
         planner: &'static mut PlanTask<f32, PATH_CAP>,
+        /// The route channel and the next window of the road being received
+        /// (the plan task's; in statics, as `planner`).
+        route: &'static mut RouteLink,
+        staging: &'static mut Staging,
     }
 
     #[init(local = [
@@ -357,6 +476,7 @@ mod app {
         plan_storage: Plan<f32> = Plan::zeroed(),
         staging_storage: Staging = Staging::new(),
         link_storage: Option<Link> = None,
+        route_storage: Option<RouteLink> = None,
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         paint_stack();
@@ -364,10 +484,14 @@ mod app {
         // The set-up's work runs in functions of their own, so their frames are gone
         // when `init` returns and the tasks it spawned run on this stack (RTIC
         // enables interrupts before `init`'s caller returns).
-        let link = cx.local.link_storage.insert(open_link());
+        let (link, route) = open_link(cx.local.link_storage, cx.local.route_storage);
         let planner = cx.local.planner_storage;
         let control = set_up(link, planner);
-        let epoch = core_ticks();
+        // The timeline starts at the beginning of the monotonic's current tick: the
+        // first release of both tasks.
+        let start = Mono::now().ticks();
+        START_MONO_TICKS.store(start, Ordering::Relaxed);
+        let epoch = u64::from(start) * u64::from(TICKS_PER_MONO);
         EPOCH_TICKS.store(epoch as u32, Ordering::Relaxed);
         EPOCH_TICKS_HI.store((epoch >> 32) as u32, Ordering::Relaxed);
         let _ = control::spawn();
@@ -377,27 +501,32 @@ mod app {
                 estimate: StateEstimate::zeroed(),
                 plan: cx.local.plan_storage,
                 plan_event: None,
-                staging: cx.local.staging_storage,
             },
             Local {
                 control,
                 link,
                 planner,
+                route,
+                staging: cx.local.staging_storage,
             },
         )
     }
 
-    /// Opens the link to the simulator, or stops the ECU saying why.
+    /// Opens the link to the simulator into its storage (so `init`'s own frame
+    /// holds no link), or stops the ECU saying why.
     #[inline(never)]
-    fn open_link() -> Link {
-        defmt::info!("ecu: waiting for the simulator on ecu.down / ecu.up");
-        let Some(link) = Link::open() else {
+    fn open_link(
+        link: &'static mut Option<Link>,
+        route: &'static mut Option<RouteLink>,
+    ) -> (&'static mut Link, &'static mut RouteLink) {
+        defmt::info!("ecu: waiting for the simulator on ecu.down / ecu.up / ecu.route");
+        let Some((l, r)) = Link::open() else {
             defmt::error!(
-                "ecu: no link: run it from `host-sim pil` (it creates ecu.down and ecu.up)"
+                "ecu: no link: run it from `host-sim pil` (it creates ecu.down, ecu.up and ecu.route)"
             );
             exit(false)
         };
-        link
+        (link.insert(l), route.insert(r))
     }
 
     /// The set-up from the simulator's frames (car, first window, obstacles), then
@@ -443,46 +572,42 @@ mod app {
     }
 
     /// The 100 Hz control task: sensor frame in, [`ControlTask::run`], actuator
-    /// frame out. Deadline: its 10 ms period.
-    #[task(priority = 2, shared = [estimate, plan, plan_event, staging], local = [control, link])]
+    /// frame out. Deadline: its 10 ms period. Releases that fall while it runs
+    /// are skipped and counted; [`firmware::deadline::CONTROL_MISS_LIMIT`]
+    /// consecutive misses latch the safe actuation (module docs).
+    #[task(priority = 2, shared = [estimate, plan, plan_event], local = [control, link])]
     async fn control(mut cx: control::Context) {
-        let mut release = Mono::now();
+        let mut monitor = DeadlineMonitor::control();
+        let mut watchdog = PlanWatchdog::plan();
         loop {
+            Mono::delay_until(instant_at(monitor.release_us())).await;
+            let release_us = monitor.start();
             let t0 = core_ticks();
-            let msg = cx.local.link.receive();
-            let est = match msg {
-                Some(Down::Sensor(f)) => f,
-                Some(Down::Stop) | None => {
-                    let (used, size) = stack_high_water();
-                    defmt::info!("ecu: stop; stack high-water {} of {} bytes", used, size);
-                    let rejected = cx.local.link.rejected;
-                    cx.local.link.send(&Up::Done(DoneFrame {
-                        stack_high_water_bytes: used,
-                        stack_size_bytes: size,
-                        rejected_frames: rejected,
-                    }));
-                    exit(msg.is_some())
-                }
-                Some(Down::PathChunk(c)) => {
-                    // The next window's rows (a short copy under the staging lock).
-                    let ok = cx.shared.staging.lock(|st| st.chunk(&c));
-                    if !ok {
-                        cx.local.link.rejected = cx.local.link.rejected.wrapping_add(1);
+            let est = loop {
+                match cx.local.link.receive() {
+                    Some(Down::Sensor(f)) => break f,
+                    msg @ (Some(Down::Stop) | None) => {
+                        let (used, size) = stack_high_water();
+                        defmt::info!("ecu: stop; stack high-water {} of {} bytes", used, size);
+                        let rejected = cx
+                            .local
+                            .link
+                            .rejected
+                            .wrapping_add(ROUTE_REJECTED.load(Ordering::Relaxed));
+                        cx.local.link.send(&Up::Done(DoneFrame {
+                            stack_high_water_bytes: used,
+                            stack_size_bytes: size,
+                            rejected_frames: rejected,
+                        }));
+                        exit(msg.is_some())
                     }
-                    // Receiving is this task's time, not the preempted plan's.
-                    add_control_ticks(t0);
-                    continue;
-                }
-                Some(Down::Window(w)) => {
-                    cx.shared.staging.lock(|st| st.complete(&w));
-                    add_control_ticks(t0);
-                    continue;
-                }
-                Some(_) => {
-                    cx.local.link.rejected = cx.local.link.rejected.wrapping_add(1);
-                    continue;
+                    Some(_) => cx.local.link.rejected = cx.local.link.rejected.wrapping_add(1),
                 }
             };
+            // A window of the road sent on the route channel: the plan task reads it.
+            if est.route_frames > 0 {
+                ROUTE_PENDING.fetch_add(u32::from(est.route_frames), Ordering::Relaxed);
+            }
             // The task's own work: the PIL link's frame decoding and encoding stand
             // in for the vehicle's bus drivers and are measured apart.
             let t1 = core_ticks();
@@ -493,31 +618,46 @@ mod app {
                 .shared
                 .plan
                 .lock(|plan| control.run(&e, plan, e.stamp_us));
-            let fault = link::fault_code(control.last_fault);
-            LAST_DELTA_BITS.store(act.delta_rad.to_bits(), Ordering::Relaxed);
+            let mut fault = link::fault_code(control.last_fault);
+            watchdog.check(release_us, control.state().plans_seen);
             FRICTION_MU_BITS.store(control.friction_mu().to_bits(), Ordering::Relaxed);
             let ticks = core_ticks().saturating_sub(t1).min(u32::MAX as u64) as u32;
+            // Completion: the actuation leaves now.
+            let sent_us = now_us();
+            monitor.complete(sent_us, u64::from(ticks));
+            let act = if monitor.safe_stop() {
+                // K consecutive misses: zero torque, the steering held where it was.
+                fault = link::FAULT_DEADLINE;
+                Actuation::safe(f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed)), 0.0)
+            } else {
+                LAST_DELTA_BITS.store(act.delta_rad.to_bits(), Ordering::Relaxed);
+                act
+            };
             let mut frame = actuation_frame(est.seq, &act, fault, ticks);
+            frame.release_us = release_us;
+            frame.sent_us = sent_us;
+            frame.control = monitor.counts().into();
+            frame.watchdog_trips = watchdog.trips();
             frame.plan = cx.shared.plan_event.lock(|p| p.take());
             cx.local.link.send(&Up::Actuation(frame));
             add_control_ticks(t0);
-            release += 10.millis();
-            Mono::delay_until(release).await;
+            // The next release not yet past: the ones that fell during an overrun
+            // are skipped and counted, not absorbed.
+            monitor.next_release(now_us());
         }
     }
 
     /// The 10 Hz plan task: [`PlanTask::run`] on the estimate at its release, then
-    /// the plan published by a swap. Deadline: its 100 ms period (see the
-    /// deadline policy above).
-    #[task(priority = 1, shared = [estimate, plan, plan_event, staging], local = [planner])]
+    /// the plan published by a swap; then a window of the road, if one was sent.
+    /// Deadline: its 100 ms period (see the deadline policy above).
+    #[task(priority = 1, shared = [estimate, plan, plan_event], local = [planner, route, staging])]
     async fn plan(mut cx: plan::Context) {
-        let start = Mono::now();
+        let mut monitor = DeadlineMonitor::plan();
         let mut activation: u32 = 0;
-        let mut k: u32 = 0; // release index: t = k · 100 ms
         loop {
-            Mono::delay_until(start + (k * 100).millis()).await;
+            Mono::delay_until(instant_at(monitor.release_us())).await;
             activation = activation.wrapping_add(1);
-            let release_us = k as u64 * 100_000;
+            let release_us = monitor.start();
             let est = cx.shared.estimate.lock(|e| *e);
             let friction_mu = f32::from_bits(FRICTION_MU_BITS.load(Ordering::Relaxed));
             let t0 = core_ticks();
@@ -534,10 +674,18 @@ mod app {
             let own = t1
                 .saturating_sub(t0)
                 .saturating_sub(c1.wrapping_sub(c0) as u64);
-            // After publishing, in the slack before the next release: a complete new
-            // window of the road, its rows copied into the path's storage under the
-            // lock, the path computed outside it (the next activation plans on it).
-            let window = cx.shared.staging.lock(|st| st.take_into(planner));
+            monitor.complete(finish_us, own);
+            // After publishing, in the slack before the next release: the frames of
+            // a window of the road announced since, then a complete window adopted
+            // (its rows copied into the path's storage, the path computed; the next
+            // activation plans on it).
+            let frames = ROUTE_PENDING.swap(0, Ordering::Relaxed);
+            if frames > 0 {
+                cx.local.route.receive(frames, cx.local.staging);
+            }
+            let t2 = core_ticks();
+            let c2 = CONTROL_TICKS.load(Ordering::Relaxed);
+            let window = cx.local.staging.take_into(planner);
             if let Some(w) = window {
                 if planner
                     .adopt_window(w.rows as usize, w.origin_m, w.closed)
@@ -546,15 +694,15 @@ mod app {
                     defmt::error!("ecu: window refused");
                 }
             }
-            let c2 = CONTROL_TICKS.load(Ordering::Relaxed);
+            let c3 = CONTROL_TICKS.load(Ordering::Relaxed);
             let window_ticks = match window {
                 Some(_) => core_ticks()
-                    .saturating_sub(t1)
-                    .saturating_sub(c2.wrapping_sub(c1) as u64)
+                    .saturating_sub(t2)
+                    .saturating_sub(c3.wrapping_sub(c2) as u64)
                     .clamp(1, u32::MAX as u64) as u32,
                 None => 0,
             };
-            let event = PlanEventFrame::new(
+            let mut event = PlanEventFrame::new(
                 activation,
                 release_us,
                 finish_us,
@@ -565,14 +713,13 @@ mod app {
                 window_ticks,
                 computed.as_ref(),
             );
-            cx.shared.plan_event.lock(|p| *p = Some(event));
             // The next release: the next multiple of 100 ms not yet past (releases
-            // that fell while this one ran are skipped, not queued).
+            // that fell while this one ran are skipped, not queued, and counted).
             let end_us = now_us();
-            k += 1;
-            while (k as u64) * 100_000 < end_us {
-                k += 1;
-            }
+            monitor.next_release(end_us);
+            event.end_us = end_us;
+            event.timing = monitor.counts().into();
+            cx.shared.plan_event.lock(|p| *p = Some(event));
         }
     }
 }
@@ -583,24 +730,49 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
     // handler's work below (the stack bound counts `safe_stop`'s chain once, not
     // at every priority level).
     cortex_m::interrupt::disable();
-    safe_stop()
+    safe_stop(link::FAULT_PANIC)
 }
 
-/// Safe actuators after a panic, interrupts disabled: zero torque on every wheel,
-/// the steering held where it was; then the ECU stops.
+/// HardFault, and the configurable faults escalated to it: MemManage, BusFault
+/// and UsageFault are not enabled in SCB SHCSR, so the core raises HardFault for
+/// them (a stack overflow into flip-link's guard, an invalid instruction, a bus
+/// error). Safe actuators, a fault frame, stop.
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    cortex_m::interrupt::disable();
+    safe_stop(link::FAULT_HARDFAULT)
+}
+
+/// Safe actuators after a panic or a fault (`fault`: [`link::FAULT_PANIC`] or
+/// [`link::FAULT_HARDFAULT`]), interrupts disabled: zero torque on every wheel,
+/// the steering held where it was, sent as an actuator frame; a fixed line on the
+/// semihosting stderr; then the ECU stops. It neither formats nor panics, and a
+/// second entry (a fault on this path) exits at once: it cannot re-enter itself.
 #[inline(never)]
-fn safe_stop() -> ! {
+fn safe_stop(fault: u8) -> ! {
+    if STOPPING.swap(true, Ordering::Relaxed) {
+        exit(false)
+    }
     let delta = f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed));
     let fd = UP_FD.load(Ordering::Relaxed);
     if fd != 0 {
         let a = Actuation::safe(delta, 0.0);
-        let mut frame = actuation_frame(u32::MAX, &a, link::FAULT_PANIC, 0);
-        frame.plan = None;
+        let frame = actuation_frame(u32::MAX, &a, fault, 0);
         let mut buf = [0u8; MAX_FRAME_BYTES];
         if let Ok(n) = link::encode(&Up::Actuation(frame), &mut buf) {
-            sh_write(fd, &buf[..n]);
+            if let Some(bytes) = buf.get(..n) {
+                sh_write(fd, bytes);
+            }
         }
     }
-    defmt::error!("ecu: panic: zero torque, steering held");
+    let err = ERR_FD.load(Ordering::Relaxed);
+    if err != 0 {
+        let line: &[u8] = if fault == link::FAULT_HARDFAULT {
+            b"ecu: HardFault: zero torque, steering held; stopped\n"
+        } else {
+            b"ecu: panic: zero torque, steering held; stopped\n"
+        };
+        sh_write(err, line);
+    }
     exit(false)
 }
