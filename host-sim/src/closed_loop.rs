@@ -12,11 +12,11 @@
 //! Simulated time advances in plant steps (1 ms by default). Every 10 ms the
 //! driver calls [`Ecu::control`] on the plant's state at that instant. The
 //! actuation it returns acts from the instant the ECU sent it
-//! ([`ControlOutput::sent_us`]), as on a car: the plant holds its inputs over a
-//! step, so the actuation takes effect at the first plant step at or after the
-//! start of the step containing the send instant, i.e. at `⌊sent / step⌋·step`
-//! (never before the release it answers), and is held until the next one takes
-//! effect. An answer sent within the first plant step after its release (every
+//! ([`ControlOutput::sent_us`]), as on a car: the plant steps at 1 kHz with its
+//! inputs held over a step, so the actuation takes effect at the first plant step
+//! at or after its send instant rounded down to the step grid, i.e. from the step
+//! during which it was sent, `⌊sent / step⌋·step` (never before the release it
+//! answers), and is held until the next one takes effect. An answer sent within the first plant step after its release (every
 //! answer of an ECU meeting its deadlines at 168 MHz: about 60 µs) acts at the
 //! release, so on-time answers give the same trajectory as before; a late answer
 //! acts late. Every 100 ms the `plan` task is

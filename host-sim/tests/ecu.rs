@@ -1,5 +1,8 @@
 //! The firmware side of the closed loop: the modelled ECU ([`SimulatedEcu`]) behind
-//! the [`Ecu`] trait, its cost model, its deadlines on slow ECUs.
+//! the [`Ecu`] trait, its cost model, its deadlines on slow ECUs, when an answer
+//! acts on the plant; and (`real_ecu_*`, ignored: they need `cargo ecu` and fail
+//! without it; `.ci/run` runs them with `cargo test -p host-sim --test ecu --
+//! --ignored`) the ECU application's panic and fault handlers.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use firmware::state_estimate::StateEstimate;
@@ -315,4 +318,268 @@ fn a_control_activation_slower_than_its_period_is_a_deadline_miss() {
         r.summary.control_budget_overruns,
         r.summary.control_activations
     );
+}
+
+/// The modelled ECU with the send instant of its answers moved: `delay_us` µs
+/// later for the activation released at `at_us`.
+struct LateAnswer {
+    inner: SimulatedEcu<f32>,
+    at_us: u64,
+    delay_us: u64,
+}
+
+impl Ecu<f32> for LateAnswer {
+    fn control(
+        &mut self,
+        t_us: u64,
+        est: &StateEstimate<f32>,
+    ) -> anyhow::Result<ControlOutput<f32>> {
+        let mut out = self.inner.control(t_us, est)?;
+        if t_us == self.at_us {
+            out.sent_us = t_us + self.delay_us;
+        }
+        Ok(out)
+    }
+
+    fn active_plan(&self) -> &firmware::plan::Plan<f32> {
+        self.inner.active_plan()
+    }
+
+    fn set_window(&mut self, t_us: u64, w: &host_sim::route::Window) -> anyhow::Result<()> {
+        self.inner.set_window(t_us, w)
+    }
+}
+
+fn run_with_answer_sent(at_us: u64, delay_us: u64) -> RunResult {
+    let scenario = Scenario::paper(true);
+    let v = VehicleParams::default();
+    let opts = SimOptions {
+        max_duration_s: 3.0,
+        ..SimOptions::default()
+    };
+    let mut ecu = LateAnswer {
+        inner: SimulatedEcu::<f32>::new(&scenario, &v, &opts).unwrap(),
+        at_us,
+        delay_us,
+    };
+    closed_loop::run_with(&scenario, &v, &opts, &mut ecu, |_, _| {}).unwrap()
+}
+
+#[test]
+fn an_answer_acts_from_the_plant_step_it_was_sent_in_so_only_a_late_one_changes_the_trajectory() {
+    let at_us = 1_500_000;
+    let nominal = run_with_answer_sent(at_us, 0);
+    // Sent within the first plant step (1 ms) after its release: the same
+    // trajectory bit for bit.
+    let early = run_with_answer_sent(at_us, 999);
+    assert_eq!(nominal.log, early.log);
+    // Sent 4.5 ms late: it acts from the step at 4 ms; until then the plant holds
+    // the previous answer. The trajectory is the same up to the release and
+    // differs after it.
+    let late = run_with_answer_sent(at_us, 4_500);
+    let k = (at_us / 10_000) as usize;
+    assert_eq!(nominal.log[..=k], late.log[..=k]);
+    assert_ne!(nominal.log[k + 1], late.log[k + 1]);
+    // A response time of 4.5 ms is within the 10 ms deadline: no miss. Past it,
+    // one.
+    assert_eq!(late.summary.control_deadline_misses, 0);
+    let missed = run_with_answer_sent(at_us, 10_001);
+    assert_eq!(missed.summary.control_deadline_misses, 1);
+}
+
+#[test]
+fn the_modelled_ecu_reports_no_ecu_counts_and_the_summary_writes_null() {
+    let r = paper_at(168.0, 1.0);
+    let s = &r.summary;
+    for v in [
+        s.ecu_plan_deadline_misses,
+        s.ecu_skipped_releases,
+        s.ecu_plan_budget_overruns,
+        s.ecu_control_deadline_misses,
+        s.ecu_control_skipped_releases,
+        s.ecu_control_budget_overruns,
+        s.ecu_watchdog_trips,
+    ] {
+        assert_eq!(v, None);
+    }
+    let json: serde_json::Value = serde_json::to_value(s).unwrap();
+    assert!(json["ecu_plan_deadline_misses"].is_null());
+    assert!(json["ecu_watchdog_trips"].is_null());
+    assert_eq!(json["plan_skipped_releases"], 0);
+    assert_eq!(json["control_skipped_releases"], 0);
+}
+
+#[test]
+fn the_host_counts_skipped_releases_from_the_end_of_an_activation() {
+    use host_sim::pil::skipped_between;
+    // Ends before or exactly at the next release: nothing skipped.
+    assert_eq!(skipped_between(0, 40_000, 100_000), 0);
+    assert_eq!(skipped_between(0, 100_000, 100_000), 0);
+    // Published at 90 ms but a window adopted until 130 ms: the release at 100 ms
+    // fell while it ran (the ECU counts from the same end).
+    assert_eq!(skipped_between(0, 130_000, 100_000), 1);
+    assert_eq!(skipped_between(300_000, 500_000, 100_000), 1);
+    assert_eq!(skipped_between(300_000, 500_001, 100_000), 2);
+    // The same as the ECU's monitor.
+    for end in (0..2_000_000u64).step_by(7_919) {
+        let mut m = firmware::deadline::DeadlineMonitor::plan();
+        m.start();
+        assert_eq!(
+            m.next_release(end).skipped,
+            skipped_between(0, end, 100_000),
+            "{end}"
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The real ECU application (`cargo ecu`): ignored by `cargo test`; `.ci/run`
+// runs them after building it, and they fail when it is missing.
+// ---------------------------------------------------------------------------
+
+fn real_ecu_elf() -> std::path::PathBuf {
+    let elf = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../target/thumbv7em-none-eabihf/release/ecu");
+    assert!(
+        elf.is_file(),
+        "build the ECU application first: cargo ecu ({} is missing)",
+        elf.display()
+    );
+    elf
+}
+
+/// `llvm-objdump` of the `llvm-tools` component.
+fn llvm_objdump() -> std::path::PathBuf {
+    let out = std::process::Command::new("rustc")
+        .args(["--print", "sysroot"])
+        .output()
+        .expect("rustc");
+    let sysroot = String::from_utf8(out.stdout).unwrap();
+    let found = walk(std::path::Path::new(sysroot.trim()).join("lib/rustlib"))
+        .into_iter()
+        .find(|p| p.file_name().is_some_and(|n| n == "llvm-objdump"));
+    found.expect("llvm-objdump: rustup component add llvm-tools")
+}
+
+fn walk(dir: std::path::PathBuf) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    if let Ok(rd) = std::fs::read_dir(&dir) {
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                out.extend(walk(p));
+            } else {
+                out.push(p);
+            }
+        }
+    }
+    out
+}
+
+/// Direct calls and branches to other functions in the disassembly, by function.
+fn call_graph(disassembly: &str) -> std::collections::HashMap<String, Vec<String>> {
+    let mut graph: std::collections::HashMap<String, Vec<String>> = Default::default();
+    let mut current: Option<String> = None;
+    for line in disassembly.lines() {
+        let t = line.trim_end();
+        if let Some(name) = t.strip_suffix(">:").and_then(|l| l.split_once(" <")) {
+            current = Some(name.1.to_string());
+            graph.entry(name.1.to_string()).or_default();
+            continue;
+        }
+        let Some(f) = &current else { continue };
+        let mut words = t.split_whitespace();
+        let (Some(_addr), Some(op)) = (words.next(), words.next()) else {
+            continue;
+        };
+        if !(op.starts_with('b') && op != "bic" && !op.starts_with("bfi") && op != "bkpt") {
+            continue;
+        }
+        if let Some((_, target)) = t.rsplit_once(" <") {
+            let target = target.trim_end_matches('>');
+            let target = target.split('+').next().unwrap_or(target);
+            if target != f {
+                graph.entry(f.clone()).or_default().push(target.to_string());
+            }
+        }
+        if op.starts_with("blx") && !t.contains('<') {
+            // An indirect call: the graph would not be complete.
+            graph
+                .entry(f.clone())
+                .or_default()
+                .push("<indirect>".to_string());
+        }
+    }
+    graph
+}
+
+#[test]
+#[ignore = "needs the ECU application (`cargo ecu`) and llvm-objdump; .ci/run runs it"]
+fn real_ecu_panic_and_fault_handlers_cannot_reach_the_panic_handler_again() {
+    let elf = real_ecu_elf();
+    let out = std::process::Command::new(llvm_objdump())
+        .args(["-d", "--demangle", "--no-show-raw-insn"])
+        .arg(&elf)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let graph = call_graph(&String::from_utf8_lossy(&out.stdout));
+    let roots: Vec<&String> = graph
+        .keys()
+        .filter(|n| {
+            n.ends_with("rust_begin_unwind")
+                || n.as_str() == "HardFault"
+                || n.contains("__cortex_m_rt_HardFault")
+                || n.starts_with("ecu::safe_stop")
+        })
+        .collect();
+    println!("roots: {roots:?}");
+    assert!(roots.iter().any(|n| n.ends_with("rust_begin_unwind")));
+    assert!(roots.iter().any(|n| n.as_str() == "HardFault"));
+    assert!(roots.iter().any(|n| n.starts_with("ecu::safe_stop")));
+    let panicky = |n: &str| {
+        n.ends_with("rust_begin_unwind") || n.contains("core::panicking") || n == "<indirect>"
+    };
+    for root in roots {
+        // Everything reachable from the root, and the path to it.
+        let mut parent: std::collections::HashMap<&str, &str> = Default::default();
+        let mut stack = vec![root.as_str()];
+        parent.insert(root.as_str(), "");
+        while let Some(f) = stack.pop() {
+            for g in graph.get(f).into_iter().flatten() {
+                if !parent.contains_key(g.as_str()) {
+                    parent.insert(g.as_str(), f);
+                    stack.push(g.as_str());
+                }
+            }
+        }
+        println!("{root}: {} functions reachable", parent.len());
+        assert!(parent.len() > 1, "{root} calls nothing: the graph is wrong");
+        for f in parent.keys().filter(|f| **f != root.as_str() && panicky(f)) {
+            let mut chain = vec![*f];
+            while let Some(p) = parent.get(chain[chain.len() - 1]).filter(|p| !p.is_empty()) {
+                chain.push(p);
+            }
+            panic!("{root} can reach {f}: {}", chain.join(" <- "));
+        }
+    }
+}
+
+#[test]
+#[ignore = "needs the ECU application (`cargo ecu`) and llvm-objdump; .ci/run runs it"]
+fn real_ecu_has_a_hardfault_handler_of_its_own() {
+    let elf = real_ecu_elf();
+    let out = std::process::Command::new(llvm_objdump())
+        .args(["-t", "--demangle"])
+        .arg(&elf)
+        .output()
+        .unwrap();
+    let symbols = String::from_utf8_lossy(&out.stdout);
+    // cortex-m-rt's trampoline jumps to the application's handler, not its
+    // default infinite loop.
+    assert!(
+        symbols.contains("ecu::__cortex_m_rt_HardFault"),
+        "no HardFault handler in the ECU application"
+    );
+    assert!(symbols.contains("ecu::safe_stop"));
 }

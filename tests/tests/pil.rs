@@ -4,7 +4,8 @@
 //!
 //! They need `qemu-system-arm` and the ECU application built first, so they are
 //! ignored by `cargo test`; `.ci/run` builds the application and runs them:
-//! `cargo ecu && cargo test -p end-to-end --test pil -- --ignored`.
+//! `cargo ecu && cargo test -p end-to-end --test pil -- --ignored`. Run without
+//! the application they fail, saying how to build it.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use std::path::PathBuf;
@@ -12,7 +13,7 @@ use std::path::PathBuf;
 use host_sim::closed_loop::{run_with, RunResult, SimOptions};
 use host_sim::cost_model::{CostModel, Counters};
 use host_sim::obstacle_file::Obstacle;
-use host_sim::pil::{PilOptions, QemuEcu};
+use host_sim::pil::{count_mismatches, PilOptions, QemuEcu, TickOverruns};
 use host_sim::scenario::{paper_pose_at, Scenario};
 use host_sim::vehicle::VehicleParams;
 
@@ -50,6 +51,7 @@ fn drive(
     RunResult,
     firmware::link::DoneFrame,
     host_sim::pil::LinkCounters,
+    TickOverruns,
 ) {
     let opts = SimOptions {
         max_duration_s: duration_s,
@@ -59,23 +61,53 @@ fn drive(
     let mut ecu = QemuEcu::start(scenario, &vehicle, &opts, &pil_options(name, shift)).unwrap();
     let r = run_with(scenario, &vehicle, &opts, &mut ecu, |_, _| {}).unwrap();
     let counters = ecu.counters;
+    let ticks = ecu.tick_overruns;
     let done = ecu.stop().unwrap();
-    (r, done, counters)
+    (r, done, counters, ticks)
+}
+
+/// The ECU's own deadline counts are there and equal the host's.
+fn assert_counts_agree(r: &RunResult, ticks: &TickOverruns) {
+    let s = &r.summary;
+    let mismatches = count_mismatches(s, ticks);
+    assert!(mismatches.is_empty(), "{mismatches:?}");
+    assert_eq!(s.ecu_plan_deadline_misses, Some(s.plan_deadline_misses));
+    assert_eq!(s.ecu_skipped_releases, Some(s.plan_skipped_releases));
+    assert_eq!(
+        s.ecu_control_deadline_misses,
+        Some(s.control_deadline_misses)
+    );
+    assert_eq!(
+        s.ecu_control_skipped_releases,
+        Some(s.control_skipped_releases)
+    );
+    assert_eq!(s.ecu_plan_budget_overruns, Some(ticks.plan));
+    assert_eq!(s.ecu_control_budget_overruns, Some(ticks.control));
+    assert!(s.ecu_watchdog_trips.is_some());
 }
 
 #[test]
 #[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
 fn the_ecu_in_the_loop_drives_round_the_obstacles_within_its_deadlines() {
-    let (r, done, link) = drive(&Scenario::paper(true), 4, 25.0, "obstacles");
+    let (r, done, link, ticks) = drive(&Scenario::paper(true), 4, 25.0, "obstacles");
     let s = &r.summary;
     println!("{}", serde_json::to_string_pretty(s).unwrap());
-    // Past the first obstacles, on the road, every deadline met on the ECU's clock.
+    // Past the first obstacles, on the road, every deadline met on the ECU's clock:
+    // the ECU's own counts, equal to the host's count from the frames' stamps.
     assert!(s.distance_m > 300.0, "drove only {} m", s.distance_m);
     assert_eq!(s.collisions, 0);
     assert!(s.max_abs_lateral_error_m < 3.0);
     assert_eq!(s.plan_failures, 0);
-    assert_eq!(s.plan_deadline_misses, 0);
-    assert_eq!(s.control_deadline_misses, 0);
+    assert_counts_agree(&r, &ticks);
+    assert_eq!(s.ecu_plan_deadline_misses, Some(0));
+    assert_eq!(s.ecu_skipped_releases, Some(0));
+    assert_eq!(s.ecu_control_deadline_misses, Some(0));
+    assert_eq!(s.ecu_control_skipped_releases, Some(0));
+    assert_eq!(s.ecu_plan_budget_overruns, Some(0));
+    assert_eq!(s.ecu_control_budget_overruns, Some(0));
+    assert_eq!(s.ecu_watchdog_trips, Some(0));
+    // Windows of the road arrived (on the route channel) and were adopted.
+    assert!(r.plan_activations.iter().any(|a| a.window));
     // Every release ran and was reported (the last one may still be running when
     // the run ends), with its instructions measured.
     let reported = r.plan_activations.len() as u64;
@@ -111,20 +143,29 @@ fn the_ecu_in_the_loop_drives_round_the_obstacles_within_its_deadlines() {
 
 #[test]
 #[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
-fn an_ecu_too_slow_for_its_plans_counts_the_misses_and_keeps_the_car_safe() {
+fn an_ecu_too_slow_for_its_plans_counts_the_misses_as_the_host_does_and_keeps_the_car_safe() {
     // 2^8 = 256 ns per instruction (an ECU ~40× slower than the 168 MHz part): a
     // plan activation over ~0.39 M instructions (100 ms) finishes past its deadline
-    // on the ECU's own clock: the cold start and most warm steps. (At 2^9 the plans
-    // fail and the car stops under control: see the README's known limitations.)
-    let (r, _, _) = drive(&Scenario::paper(true), 8, 20.0, "slow");
+    // on the ECU's own clock: the cold start and some warm steps, and a window of
+    // the road received and adopted after publishing runs past the next release.
+    // (At 2^9 the plans fail and the car stops under control: see the README's
+    // known limitations.)
+    let (r, _, _, ticks) = drive(&Scenario::paper(true), 8, 12.0, "slow");
     let s = &r.summary;
     println!("{}", serde_json::to_string_pretty(s).unwrap());
+    // The ECU counted misses and skipped releases itself, as many as the host.
+    assert_counts_agree(&r, &ticks);
     assert!(
-        s.plan_deadline_misses >= 3,
-        "{} misses",
-        s.plan_deadline_misses
+        s.ecu_plan_deadline_misses.unwrap() >= 3,
+        "{:?} misses",
+        s.ecu_plan_deadline_misses
     );
+    assert!(s.ecu_skipped_releases.unwrap() >= 1);
     assert!(r.plan_activations.iter().any(|a| a.deadline_miss));
+    // Every control activation is over its 5,000-cycle budget on this clock (an
+    // instruction is 43 of its cycles), none misses its 10 ms deadline.
+    assert_eq!(s.ecu_control_budget_overruns, Some(s.control_activations));
+    assert_eq!(s.ecu_control_deadline_misses, Some(0));
     // The late plans are followed (the policy): no collision, on the road.
     assert_eq!(s.collisions, 0);
     assert!(
@@ -137,6 +178,21 @@ fn an_ecu_too_slow_for_its_plans_counts_the_misses_and_keeps_the_car_safe() {
         "{}",
         s.stop_reason
     );
+}
+
+#[test]
+#[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
+fn an_ecu_slower_still_skips_control_releases_and_counts_them_as_the_host_does() {
+    // 2^10 = 1,024 ns per instruction: the cold start runs for seconds, every plan
+    // release it spans is skipped, the watchdog trips, and a control activation
+    // is late enough to skip a control release: the ECU's counts equal the host's.
+    let (r, _, _, ticks) = drive(&Scenario::paper(true), 10, 4.0, "slower");
+    let s = &r.summary;
+    println!("{}", serde_json::to_string_pretty(s).unwrap());
+    assert_counts_agree(&r, &ticks);
+    assert!(s.ecu_skipped_releases.unwrap() >= 30);
+    assert!(s.ecu_control_skipped_releases.unwrap() >= 1);
+    assert_eq!(s.ecu_watchdog_trips, Some(1));
 }
 
 #[test]
