@@ -47,6 +47,10 @@ pub struct WcetArgs {
     /// Relative growth allowed against --expected.
     #[arg(long, default_value_t = 0.05)]
     pub margin: f64,
+    /// Only the static analysis of the ELF (control-flow graphs, loops, IPET):
+    /// writes `static.json` and `static.md`, runs no PIL lap.
+    #[arg(long)]
+    pub static_only: bool,
     /// Output directory (created).
     #[arg(long)]
     pub out: PathBuf,
@@ -154,6 +158,9 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     }
     fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
+    if args.static_only {
+        return static_analysis(args);
+    }
     let run_dirs = if args.pil.is_empty() {
         let mut dirs = Vec::new();
         for (obstacles, mu) in [("none", 1.0), ("paper", 1.0), ("none", 0.5), ("paper", 0.5)] {
@@ -228,6 +235,9 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     };
     let r = report::build_report(&inputs)?;
     report::write_report(&args.out, &r)?;
+    // The static analysis of the binary: its own files beside the report while it
+    // does not yet bound every task.
+    static_analysis(args)?;
     fs::write(
         args.out.join("cost_model.json"),
         serde_json::to_string_pretty(&model)?,
@@ -268,5 +278,39 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         }
         println!("within {} (+{:.0} %)", e.display(), args.margin * 100.0);
     }
+    Ok(())
+}
+
+/// The static analysis of the ELF (control-flow graphs, loops, IPET), written as
+/// `static.json` and `static.md`, with a line per task.
+fn static_analysis(args: &WcetArgs) -> Result<()> {
+    let analysis = crate::wcet::analysis::analyse(&args.elf)
+        .with_context(|| format!("static analysis of {}", args.elf.display()))?;
+    analysis.write(&args.out)?;
+    for t in &analysis.tasks {
+        println!(
+            "static analysis, {}: {} functions, {} loops ({} bounded), {}",
+            t.name,
+            t.functions,
+            t.loops,
+            t.bounded_loops,
+            match (
+                t.static_bound_instructions,
+                t.static_bound_cycles,
+                &t.refused
+            ) {
+                (Some(i), Some(c), _) => format!("bound {i} instructions, {c} cycles"),
+                (_, _, Some(why)) => format!("no bound: {why}"),
+                _ => "no bound".to_string(),
+            }
+        );
+    }
+    println!(
+        "static analysis: {} unbounded loop(s), {} unresolved indirect call(s), {} recursion(s); wrote {}",
+        analysis.unbounded_loops,
+        analysis.unresolved_indirect_calls.len(),
+        analysis.recursions.len(),
+        args.out.join("static.md").display()
+    );
     Ok(())
 }

@@ -2,16 +2,30 @@
 //!
 //! | module | concept |
 //! |---|---|
+//! | [`cfg`] | control-flow graphs from the Thumb-2 disassembly; per-block worst-case cycles under a stated memory model |
+//! | [`loops`] | dominators and natural loops; irreducible cycles refused |
+//! | [`bounds`] | loop bounds recognised from the binary (counted loops) |
+//! | [`ipet`] | implicit path enumeration: a task's bound as a linear program (`good_lp`, `microlp`) |
+//! | [`rta`] | response-time analysis, fixed priorities with RTIC's stack resource policy |
+//! | [`analysis`] | the static analysis put together (`static.json`, `static.md`) |
+//! | [`trace_check`] | QEMU execution traces replayed against the graphs: loop trip counts per entry, activation costs with the same block costs |
 //! | [`stack`] | static stack bound: frame sizes from `llvm-objdump` prologues, call graph, preemption levels |
 //! | [`cpi`] | cycles-per-instruction bound from a QEMU execution trace and a Cortex-M4 timing table |
 //! | [`report`] | the timing and memory report (`wcet.json`, `wcet.md`) from PIL runs, the ELF and the two bounds; CI comparison |
 //!
 //! All are library functions; the `host-sim wcet` command wires them together.
 
+pub mod analysis;
+pub mod bounds;
+pub mod cfg;
 pub mod command;
 pub mod cpi;
+pub mod ipet;
+pub mod loops;
 pub mod report;
+pub mod rta;
 pub mod stack;
+pub mod trace_check;
 
 use std::path::PathBuf;
 

@@ -178,10 +178,19 @@ pub fn llvm_tool_path(tool: &str) -> Result<PathBuf, WcetError> {
 
 /// Disassembles `elf` with `llvm-objdump -d --no-show-raw-insn` (mangled names).
 pub fn disassemble(elf: &Path) -> Result<String, WcetError> {
+    objdump(elf, &["-d", "--no-show-raw-insn"])
+}
+
+/// Disassembles `elf` with `llvm-objdump -d`, raw bytes shown (instruction sizes
+/// and the data inside `.text`, for the control-flow graphs).
+pub fn disassemble_with_bytes(elf: &Path) -> Result<String, WcetError> {
+    objdump(elf, &["-d"])
+}
+
+fn objdump(elf: &Path, args: &[&str]) -> Result<String, WcetError> {
     let objdump = llvm_objdump_path()?;
     let out = Command::new(&objdump)
-        .arg("-d")
-        .arg("--no-show-raw-insn")
+        .args(args)
         .arg(elf)
         .output()
         .map_err(|e| WcetError::Tool {

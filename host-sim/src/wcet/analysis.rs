@@ -1,0 +1,378 @@
+//! The static worst-case timing analysis of the ECU ELF, put together: control-flow
+//! graphs ([`super::cfg`]), natural loops ([`super::loops`]), loop bounds recognised
+//! from the binary ([`super::bounds`]), source locations from the DWARF line table,
+//! and the IPET bound of each task ([`super::ipet`]) when every loop it reaches is
+//! bounded. Written as `static.json` and `static.md` beside the timing report.
+//!
+//! What it refuses, it says: a loop without a bound, an irreducible cycle (two
+//! entries, no header to bound), an indirect call no rule resolves, a recursion.
+//! A task with any of these gets no bound, and the reasons are listed.
+
+use super::cfg::{self, IndirectTargets, MemoryModel, Program};
+use super::ipet::{self, Cost, LoopFact, Per};
+use super::loops::{self, reverse_post_order, Loop};
+use super::{bounds, demangle};
+use anyhow::{Context, Result};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// The ECU's tasks as the RTIC application binds them: name and handler symbol.
+/// `plan` runs in the priority-1 dispatcher, `control` in the priority-2 one, the
+/// monotonic's timer queue in `SysTick`.
+pub const ECU_TASKS: [(&str, &str); 3] = [
+    ("control", "USART2"),
+    ("plan", "USART1"),
+    ("systick", "SysTick"),
+];
+
+/// Targets of the ECU binary's indirect calls: RTIC's executor calls its wakers
+/// through `core::task::RawWakerVTable` (the dispatchers, the SysTick timer queue
+/// and `delay_until`), and the executor's `waker_wake` jumps to the task's pend
+/// function (`FnOnce::call_once` closures that pend the dispatcher interrupt).
+pub fn ecu_indirect_targets() -> IndirectTargets {
+    let waker = vec!["rtic::export::executor::waker_".to_string()];
+    IndirectTargets {
+        rules: vec![
+            ("SysTick".into(), waker.clone()),
+            ("USART1".into(), waker.clone()),
+            ("USART2".into(), waker.clone()),
+            ("rtic_time::".into(), waker),
+            (
+                "rtic::export::executor::waker_wake".into(),
+                vec!["core::ops::function::FnOnce::call_once".into()],
+            ),
+        ],
+    }
+}
+
+/// A loop of the binary reachable from a task.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LoopEntry {
+    /// Tasks that reach it.
+    pub tasks: Vec<String>,
+    /// Function holding the loop (demangled).
+    pub function: String,
+    /// Address of the loop's header.
+    pub header: String,
+    /// Source file of its latch (the innermost frame of the firmware's own code
+    /// when there is one).
+    pub file: String,
+    /// Source line.
+    pub line: u32,
+    /// Most back edges per entry, if known.
+    pub bound: Option<u64>,
+    /// Where the bound comes from (`binary` for a recognised counted loop).
+    pub source: Option<String>,
+    /// Largest back edges per entry seen in a QEMU trace (`null` until checked).
+    pub observed_max: Option<u64>,
+}
+
+/// One task's static figures.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TaskStatic {
+    /// Task name.
+    pub name: String,
+    /// Its handler symbol.
+    pub root: String,
+    /// Functions reachable from it.
+    pub functions: usize,
+    /// Loops reachable from it.
+    pub loops: usize,
+    /// Of those, with a bound.
+    pub bounded_loops: usize,
+    /// Irreducible cycles (function: blocks' addresses).
+    pub irreducible: Vec<String>,
+    /// The IPET bound in instructions, when the analysis could give one.
+    pub static_bound_instructions: Option<u64>,
+    /// The IPET bound in worst-case cycles of the memory model.
+    pub static_bound_cycles: Option<u64>,
+    /// Why there is no bound.
+    pub refused: Option<String>,
+    /// The bound's top contributors (function, cycles).
+    pub top_functions: Vec<(String, f64)>,
+}
+
+/// The whole static analysis.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StaticAnalysis {
+    /// The ELF analysed.
+    pub elf: String,
+    /// The processor and memory model the cycles assume.
+    pub assumptions: Vec<String>,
+    /// Per task.
+    pub tasks: Vec<TaskStatic>,
+    /// Every loop reachable from a task.
+    pub loops: Vec<LoopEntry>,
+    /// Loops reachable from a task without a bound.
+    pub unbounded_loops: usize,
+    /// Indirect calls and jumps no rule resolves, and jumps to no function.
+    pub unresolved_indirect_calls: Vec<String>,
+    /// Cycles of the call graph reachable from a task.
+    pub recursions: Vec<Vec<String>>,
+}
+
+/// Source location of `address`: the innermost frame in the firmware's own
+/// sources if any, else the innermost frame.
+fn location(loader: &addr2line::Loader, address: u32) -> (String, u32) {
+    let mut first: Option<(String, u32)> = None;
+    if let Ok(mut frames) = loader.find_frames(u64::from(address)) {
+        while let Ok(Some(frame)) = frames.next() {
+            let Some(loc) = frame.location else {
+                continue;
+            };
+            let file = loc.file.unwrap_or("?").to_string();
+            let here = (file.clone(), loc.line.unwrap_or(0));
+            if file.contains("/firmware/src/") {
+                return here;
+            }
+            first.get_or_insert(here);
+        }
+    }
+    first.unwrap_or_else(|| ("?".into(), 0))
+}
+
+/// The source path from the workspace on (`firmware/src/mpc.rs`), or the file name
+/// with its crate folder for a dependency.
+fn short_path(file: &str) -> String {
+    if let Some(i) = file.find("/firmware/src/") {
+        return file[i + 1..].to_string();
+    }
+    let parts: Vec<&str> = file.rsplit('/').take(3).collect();
+    parts.into_iter().rev().collect::<Vec<_>>().join("/")
+}
+
+/// Runs the analysis on `elf`.
+pub fn analyse(elf: &Path) -> Result<StaticAnalysis> {
+    let text = super::stack::disassemble_with_bytes(elf)?;
+    let raw = cfg::parse_disassembly(&text);
+    let memory = MemoryModel::STM32F405;
+    let program: Program = cfg::build_program(&raw, &ecu_indirect_targets(), &memory, demangle)?;
+    let ctx = addr2line::Loader::new(elf)
+        .map_err(|e| anyhow::anyhow!("DWARF line table of {}: {e}", elf.display()))?;
+
+    let mut all_loops: Vec<Vec<Loop>> = Vec::with_capacity(program.functions.len());
+    let mut irreducible: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+    for (k, f) in program.functions.iter().enumerate() {
+        match loops::natural_loops(f) {
+            Ok(l) => all_loops.push(l),
+            Err(blocks) => {
+                irreducible.insert(k, blocks);
+                all_loops.push(Vec::new());
+            }
+        }
+    }
+    let mut facts: Vec<LoopFact> = Vec::new();
+    for (k, ls) in all_loops.iter().enumerate() {
+        for (x, l) in ls.iter().enumerate() {
+            if let Some(b) = bounds::constant_bound(&program.functions[k], l) {
+                facts.push(LoopFact {
+                    function: k,
+                    loop_index: x,
+                    bound: b,
+                    per: Per::Entry,
+                });
+            }
+        }
+    }
+    let mut loop_rows: BTreeMap<(usize, usize), LoopEntry> = BTreeMap::new();
+    let mut tasks = Vec::new();
+    let mut unresolved = Vec::new();
+    let mut recursions = Vec::new();
+    for (name, symbol) in ECU_TASKS {
+        let roots = program.find(symbol);
+        let Some(&root) = roots.first() else {
+            anyhow::bail!(
+                "no function `{symbol}` (task `{name}`) in {}: is it the ECU application?",
+                elf.display()
+            );
+        };
+        let reach = program.reachable(&[root]);
+        let mut n_loops = 0;
+        let mut n_bounded = 0;
+        let mut irr = Vec::new();
+        for &f in &reach {
+            let func = &program.functions[f];
+            let live = reverse_post_order(func);
+            for &b in &live {
+                for p in &func.blocks[b].problems {
+                    if !unresolved.contains(p) {
+                        unresolved.push(p.clone());
+                    }
+                }
+            }
+            if let Some(blocks) = irreducible.get(&f) {
+                irr.push(format!(
+                    "{}: {} blocks from {:#x}",
+                    func.demangled,
+                    blocks.len(),
+                    blocks
+                        .first()
+                        .and_then(|&b| func.blocks.get(b))
+                        .map_or(0, |b| b.start)
+                ));
+            }
+            for (x, l) in all_loops[f].iter().enumerate() {
+                n_loops += 1;
+                let fact = facts.iter().find(|q| q.function == f && q.loop_index == x);
+                if fact.is_some() {
+                    n_bounded += 1;
+                }
+                let row = loop_rows.entry((f, x)).or_insert_with(|| {
+                    let latch = l.back_edges.first().map_or(l.header, |e| e.0);
+                    let addr = func
+                        .blocks
+                        .get(latch)
+                        .and_then(|b| func.instructions.get(b.end.saturating_sub(1)))
+                        .map_or(0, |i| i.address);
+                    let (file, line) = location(&ctx, addr);
+                    LoopEntry {
+                        tasks: Vec::new(),
+                        function: func.demangled.clone(),
+                        header: format!("{:#x}", func.blocks.get(l.header).map_or(0, |b| b.start)),
+                        file: short_path(&file),
+                        line,
+                        bound: fact.map(|q| q.bound),
+                        source: fact.map(|_| "binary".to_string()),
+                        observed_max: None,
+                    }
+                });
+                row.tasks.push(name.to_string());
+            }
+        }
+        let recs = program.recursions(&[root]);
+        for r in &recs {
+            if !recursions.contains(r) {
+                recursions.push(r.clone());
+            }
+        }
+        let mut refused: Vec<String> = Vec::new();
+        if !irr.is_empty() {
+            refused.push(format!("{} irreducible cycle(s)", irr.len()));
+        }
+        let (mut bi, mut bc, mut top) = (None, None, Vec::new());
+        if irr.is_empty() {
+            match ipet::task_bound(&program, &all_loops, root, &facts, Cost::Instructions) {
+                Ok(b) => bi = Some(b.bound),
+                Err(e) => refused.push(match e {
+                    ipet::IpetError::Unbounded(l) => format!("{} loop(s) without a bound", l.len()),
+                    other => other.to_string(),
+                }),
+            }
+            if bi.is_some() {
+                match ipet::task_bound(&program, &all_loops, root, &facts, Cost::Cycles) {
+                    Ok(b) => {
+                        bc = Some(b.bound);
+                        top = b.by_function.into_iter().take(10).collect();
+                    }
+                    Err(e) => refused.push(e.to_string()),
+                }
+            }
+        }
+        tasks.push(TaskStatic {
+            name: name.to_string(),
+            root: symbol.to_string(),
+            functions: reach.len(),
+            loops: n_loops,
+            bounded_loops: n_bounded,
+            irreducible: irr,
+            static_bound_instructions: bi,
+            static_bound_cycles: bc,
+            refused: (!refused.is_empty()).then(|| refused.join("; ")),
+            top_functions: top,
+        });
+    }
+    let loops: Vec<LoopEntry> = loop_rows.into_values().collect();
+    Ok(StaticAnalysis {
+        elf: elf.display().to_string(),
+        assumptions: memory.assumptions(),
+        unbounded_loops: loops.iter().filter(|l| l.bound.is_none()).count(),
+        tasks,
+        loops,
+        unresolved_indirect_calls: unresolved,
+        recursions,
+    })
+}
+
+impl StaticAnalysis {
+    /// The Markdown report.
+    pub fn markdown(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(s, "# Static worst-case timing analysis of `{}`\n", self.elf);
+        let _ = writeln!(
+            s,
+            "Control-flow graphs from the Thumb-2 disassembly, natural loops, loop bounds \
+             recognised from the binary, IPET with `good_lp`/`microlp`. A task gets a bound \
+             only when every loop it reaches is bounded, no cycle is irreducible, every \
+             indirect call is resolved and there is no recursion.\n"
+        );
+        let _ = writeln!(s, "| task | root | functions | loops (bounded) | irreducible | bound, instructions | bound, cycles | refused because |");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+        for t in &self.tasks {
+            let opt = |v: Option<u64>| v.map_or("–".to_string(), |x| x.to_string());
+            let _ = writeln!(
+                s,
+                "| {} | `{}` | {} | {} ({}) | {} | {} | {} | {} |",
+                t.name,
+                t.root,
+                t.functions,
+                t.loops,
+                t.bounded_loops,
+                t.irreducible.len(),
+                opt(t.static_bound_instructions),
+                opt(t.static_bound_cycles),
+                t.refused.as_deref().unwrap_or("")
+            );
+        }
+        let _ = writeln!(
+            s,
+            "\n**Unbounded loops:** {}. **Unresolved indirect calls:** {}. **Recursions:** {}.\n",
+            self.unbounded_loops,
+            self.unresolved_indirect_calls.len(),
+            self.recursions.len()
+        );
+        for r in &self.recursions {
+            let _ = writeln!(s, "- recursion: {}", r.join(" → "));
+        }
+        for u in &self.unresolved_indirect_calls {
+            let _ = writeln!(s, "- unresolved: `{u}`");
+        }
+        for t in &self.tasks {
+            for i in &t.irreducible {
+                let _ = writeln!(s, "- irreducible ({}): {i}", t.name);
+            }
+        }
+        let _ = writeln!(s, "\n## Processor and memory model\n");
+        for a in &self.assumptions {
+            let _ = writeln!(s, "- {a}");
+        }
+        let _ = writeln!(s, "\n## Loops\n\n| tasks | function | header | source | bound (back edges per entry) | from |");
+        let _ = writeln!(s, "|---|---|---|---|---|---|");
+        for l in &self.loops {
+            let _ = writeln!(
+                s,
+                "| {} | `{}` | {} | {}:{} | {} | {} |",
+                l.tasks.join(", "),
+                l.function,
+                l.header,
+                l.file,
+                l.line,
+                l.bound.map_or("**none**".to_string(), |b| b.to_string()),
+                l.source.as_deref().unwrap_or("")
+            );
+        }
+        s
+    }
+
+    /// Writes `static.json` and `static.md` into `dir`.
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let json = serde_json::to_string_pretty(self)?;
+        std::fs::write(dir.join("static.json"), json)
+            .with_context(|| format!("writing {}", dir.join("static.json").display()))?;
+        std::fs::write(dir.join("static.md"), self.markdown())
+            .with_context(|| format!("writing {}", dir.join("static.md").display()))?;
+        Ok(())
+    }
+}

@@ -1,0 +1,869 @@
+//! Control-flow graphs of a thumbv7em ELF, from its Thumb-2 disassembly.
+//!
+//! `llvm-objdump -d` (raw bytes shown) gives every function's instructions and the
+//! data inside `.text` (literal pools, `tbb`/`tbh` tables, bracketed by the ELF's
+//! mapping symbols). A function's basic blocks start at its entry, at every target
+//! of a jump inside it (table entries included) and after every instruction that
+//! ends a block: a jump, a conditional jump, a return, a tail call, a call of a
+//! function that never returns. Calls (`bl`, resolved `blx`) do not end a block:
+//! a block lists the functions it calls.
+//!
+//! An instruction inside an `IT` block is conditional: executed or not, its cost is
+//! charged (the bound does not rely on the condition); a conditional jump or return
+//! inside an `IT` block ends the block with two successors, as `b<cond>` does.
+//!
+//! Indirect calls and jumps (`blx rN`, `bx rN` other than `bx lr`, `ldr pc, ..` not
+//! popping the stack) have no static target: they are resolved by a list of their
+//! possible targets (see [`IndirectTargets`]), checked against the symbol table;
+//! one the list does not cover is reported unresolved, which is an error of the
+//! analysis.
+
+use super::cpi::{instruction_timing, Class};
+use super::WcetError;
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+
+/// One instruction of the disassembly.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Instruction {
+    /// Address (Thumb bit clear).
+    pub address: u32,
+    /// Encoding size, bytes (2 or 4).
+    pub bytes: u32,
+    /// Mnemonic as printed (`ldr.w`, `bne`, `vmla.f32`, `itte`).
+    pub mnemonic: String,
+    /// Operands, without the trailing `@ comment`.
+    pub operands: String,
+    /// Target address of a direct branch or call (`b`, `bl`, `cbz`, ...).
+    pub target: Option<u32>,
+}
+
+impl Instruction {
+    /// The mnemonic without width qualifier (`.w`, `.n`) or data type (`.f32`).
+    pub fn base(&self) -> &str {
+        self.mnemonic.split('.').next().unwrap_or(&self.mnemonic)
+    }
+
+    /// The first operand (`pc` in `pop {r4, pc}` is not it: see [`Self::pops_pc`]).
+    pub fn first_operand(&self) -> &str {
+        self.operands.split(',').next().unwrap_or("").trim()
+    }
+
+    /// Loads the program counter from the stack (`pop {.., pc}`, `ldm sp!, {.., pc}`,
+    /// `ldr pc, [sp], #4`): a return.
+    pub fn pops_pc(&self) -> bool {
+        let b = strip_condition(self.base());
+        let list_has_pc = || {
+            self.operands
+                .split(['{', '}', ','])
+                .any(|r| r.trim() == "pc" || r.trim().ends_with("-pc"))
+        };
+        match b {
+            "pop" => list_has_pc(),
+            "ldm" | "ldmia" | "ldmfd" => self.operands.starts_with("sp!") && list_has_pc(),
+            "ldr" => self.first_operand() == "pc" && self.operands.contains("[sp]"),
+            _ => false,
+        }
+    }
+
+    /// Worst-case cycles of the instruction alone (Cortex-M4 TRM table of
+    /// [`super::cpi`]) and its class.
+    pub fn timing(&self) -> (Class, u32) {
+        instruction_timing(&self.mnemonic, &self.operands)
+    }
+}
+
+/// Condition codes of the Thumb-2 instruction set.
+const CONDITIONS: [&str; 16] = [
+    "eq", "ne", "cs", "hs", "cc", "lo", "mi", "pl", "vs", "vc", "hi", "ls", "ge", "lt", "gt", "le",
+];
+
+/// `bne` → `b`, `popeq` → `pop`, `bx` unchanged (only a two-letter condition suffix
+/// that leaves a known base is stripped).
+fn strip_condition(base: &str) -> &str {
+    if base.len() > 2 {
+        let (head, tail) = base.split_at(base.len() - 2);
+        if CONDITIONS.contains(&tail)
+            && matches!(
+                head,
+                "b" | "bx" | "pop" | "ldm" | "ldmia" | "ldr" | "bl" | "blx" | "mov" | "tbb"
+            )
+        {
+            return head;
+        }
+    }
+    base
+}
+
+/// Whether the (width-stripped) mnemonic carries a condition suffix of its own
+/// (`bne`, `popeq`).
+fn has_condition(base: &str) -> bool {
+    strip_condition(base) != base
+}
+
+/// Number of instructions an `IT` instruction makes conditional (1–4), if `base`
+/// is one (`it`, `ite`, `ittt`, `itete`).
+fn it_length(base: &str) -> Option<usize> {
+    let rest = base.strip_prefix("it")?;
+    (rest.len() <= 3 && rest.chars().all(|c| c == 't' || c == 'e')).then_some(rest.len() + 1)
+}
+
+/// Bytes of data inside `.text` (a literal pool or a jump table).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DataRun {
+    /// Address of the first byte.
+    pub address: u32,
+    /// The bytes, in memory order.
+    pub bytes: Vec<u8>,
+}
+
+/// A function of the disassembly: its instructions and the data between them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RawFunction {
+    /// Symbol (mangled).
+    pub name: String,
+    /// Other symbols at the same address.
+    pub aliases: Vec<String>,
+    /// Start address.
+    pub address: u32,
+    /// Instructions, in address order.
+    pub instructions: Vec<Instruction>,
+    /// Data inside the function (literal pools, jump tables), in address order.
+    pub data: Vec<DataRun>,
+}
+
+fn hex(s: &str) -> Option<u32> {
+    u32::from_str_radix(s.trim().trim_start_matches("0x"), 16).ok()
+}
+
+/// Parses `llvm-objdump -d` output (with raw bytes) into functions.
+pub fn parse_disassembly(text: &str) -> Vec<RawFunction> {
+    let mut functions: Vec<RawFunction> = Vec::new();
+    for line in text.lines() {
+        if let Some(rest) = line.strip_suffix(">:") {
+            if let Some((addr, name)) = rest.split_once(" <") {
+                if let Some(address) = hex(addr) {
+                    // Several symbols at one address are printed one after the other,
+                    // the body under the last.
+                    if let Some(f) = functions
+                        .last_mut()
+                        .filter(|f| f.address == address && f.instructions.is_empty())
+                    {
+                        let old = std::mem::replace(&mut f.name, name.to_string());
+                        f.aliases.push(old);
+                    } else {
+                        functions.push(RawFunction {
+                            name: name.to_string(),
+                            aliases: Vec::new(),
+                            address,
+                            instructions: Vec::new(),
+                            data: Vec::new(),
+                        });
+                    }
+                }
+            }
+            continue;
+        }
+        let Some(f) = functions.last_mut() else {
+            continue;
+        };
+        if !line.starts_with(' ') {
+            continue;
+        }
+        let mut fields = line.splitn(3, '\t');
+        let head = fields.next().unwrap_or("");
+        let Some((addr, raw)) = head.trim_start().split_once(':') else {
+            continue;
+        };
+        let Some(address) = hex(addr) else {
+            continue;
+        };
+        let raw_tokens: Vec<&str> = raw.split_whitespace().collect();
+        let mnemonic = fields.next().unwrap_or("").trim();
+        let rest = fields.next().unwrap_or("");
+        if mnemonic.is_empty() {
+            continue;
+        }
+        if mnemonic.starts_with('.') {
+            // Data: raw bytes printed in memory order, two hex digits each.
+            let bytes: Vec<u8> = raw_tokens
+                .iter()
+                .filter(|t| t.len() == 2)
+                .filter_map(|t| u8::from_str_radix(t, 16).ok())
+                .collect();
+            match f.data.last_mut() {
+                Some(d) if d.address + d.bytes.len() as u32 == address => d.bytes.extend(bytes),
+                _ => f.data.push(DataRun { address, bytes }),
+            }
+            continue;
+        }
+        // Instruction: one or two 16-bit halfwords.
+        let bytes = raw_tokens
+            .iter()
+            .filter(|t| t.len() == 4 && t.chars().all(|c| c.is_ascii_hexdigit()))
+            .count() as u32
+            * 2;
+        let operands = rest.split('@').next().unwrap_or("").trim().to_string();
+        // `b 0x80010fe <f+0x12>`, `cbz r0, 0x800033c <f+0x58>`.
+        let target = operands
+            .split_whitespace()
+            .find(|t| t.starts_with("0x"))
+            .and_then(hex);
+        f.instructions.push(Instruction {
+            address,
+            bytes: bytes.max(2),
+            mnemonic: mnemonic.to_string(),
+            operands,
+            target,
+        });
+    }
+    functions.retain(|f| !f.instructions.is_empty());
+    functions
+}
+
+/// How a block ends.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Exit {
+    /// Falls through or jumps to its successors inside the function.
+    Internal,
+    /// Returns to the caller (possibly conditionally, with a fall-through successor).
+    Return,
+    /// Jumps to the entry of another function, which returns for this one.
+    TailCall(usize),
+    /// Calls a function that never returns (panics, the fault path): the activation
+    /// does not complete through this block.
+    NoReturn,
+    /// An indirect jump (a tail call through a register) with the listed targets.
+    IndirectTail(Vec<usize>),
+}
+
+/// A basic block.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Block {
+    /// Address of its first instruction.
+    pub start: u32,
+    /// Index range of its instructions in the function's `instructions`.
+    pub first: usize,
+    /// One past its last instruction.
+    pub end: usize,
+    /// Successor blocks inside the function (indices).
+    pub successors: Vec<usize>,
+    /// Functions called from the block (indices into the program), once per call
+    /// instruction.
+    pub calls: Vec<usize>,
+    /// How it ends.
+    pub exit: Exit,
+    /// What the analysis could not resolve in this block: an indirect call or jump
+    /// no rule covers, a branch to an address that starts no function. An error
+    /// when the block is reachable from a task.
+    pub problems: Vec<String>,
+    /// Instructions executed, counted as QEMU counts them (each instruction of the
+    /// block once, conditional ones included).
+    pub instructions: u64,
+    /// Worst-case cycles (see [`MemoryModel`]).
+    pub cycles: u64,
+}
+
+/// A function's control-flow graph.
+#[derive(Debug, Clone)]
+pub struct Function {
+    /// Symbol (mangled).
+    pub name: String,
+    /// Demangled name without hash.
+    pub demangled: String,
+    /// Other symbols at its address.
+    pub aliases: Vec<String>,
+    /// Entry address.
+    pub address: u32,
+    /// Instructions.
+    pub instructions: Vec<Instruction>,
+    /// Blocks; block 0 is the entry.
+    pub blocks: Vec<Block>,
+    /// `false` when no path returns (panic handlers, `exit`).
+    pub returns: bool,
+}
+
+impl Function {
+    /// The block holding the instruction at `address`.
+    pub fn block_at(&self, address: u32) -> Option<usize> {
+        let i = self.blocks.partition_point(|b| b.start <= address);
+        let b = i.checked_sub(1)?;
+        let block = self.blocks.get(b)?;
+        let last = self.instructions.get(block.end.checked_sub(1)?)?;
+        (address <= last.address).then_some(b)
+    }
+
+    /// Predecessors of each block.
+    pub fn predecessors(&self) -> Vec<Vec<usize>> {
+        let mut preds = vec![Vec::new(); self.blocks.len()];
+        for (b, block) in self.blocks.iter().enumerate() {
+            for &s in &block.successors {
+                if let Some(p) = preds.get_mut(s) {
+                    p.push(b);
+                }
+            }
+        }
+        preds
+    }
+}
+
+/// The memory model under which the block cycles are worst cases. Every term is
+/// pessimistic (the ART accelerator's instruction and data caches are assumed to
+/// miss on every access, and fetch never overlaps execution).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct MemoryModel {
+    /// Flash wait states (5 at 168 MHz and 3.3 V, RM0090 table 10).
+    pub flash_wait_states: u32,
+    /// Bytes delivered by one flash access (128-bit lines).
+    pub flash_line_bytes: u32,
+    /// `[flash_start, flash_end)`: code there is fetched through the flash.
+    pub flash: (u32, u32),
+}
+
+impl MemoryModel {
+    /// The STM32F405 at 168 MHz: 5 wait states, 16-byte lines, flash at 0x0800_0000.
+    pub const STM32F405: MemoryModel = MemoryModel {
+        flash_wait_states: 5,
+        flash_line_bytes: 16,
+        flash: (0x0800_0000, 0x0810_0000),
+    };
+
+    /// The assumptions, for the report.
+    pub fn assumptions(&self) -> Vec<String> {
+        vec![
+            format!(
+                "Core: Cortex-M4F; per-instruction worst cases from the Cortex-M4 TRM (r0p1, \
+                 chapter 3): every branch taken with a 3-cycle pipeline refill (conditional \
+                 ones and instructions skipped by IT included), loads/stores 2 (LDRD/STRD 3), \
+                 LDM/STM/PUSH/POP 1+N (+3 loading pc), SDIV/UDIV 12, VDIV/VSQRT 14, \
+                 VMLA/VFMA family 3, VMOV core<->FPU 2, VLDM/VSTM 1+N; unknown instructions 4."
+            ),
+            format!(
+                "Instruction fetch: from flash with {} wait states, {}-byte lines, the ART \
+                 accelerator's instruction cache and prefetch assumed to miss on every line: \
+                 each line a block touches costs {} cycles, added to (not overlapped with) the \
+                 block's execution.",
+                self.flash_wait_states,
+                self.flash_line_bytes,
+                self.flash_wait_states + 1
+            ),
+            format!(
+                "Data: every load that is not relative to sp may read flash (literal pools, \
+                 .rodata, jump tables, constants): each costs {} wait states more (the ART's \
+                 data cache assumed to miss). Stack accesses and stores go to zero-wait SRAM.",
+                self.flash_wait_states
+            ),
+            "Bus: no DMA, no other master; the core is the only user of the flash and SRAM \
+             buses. Interrupt entry and exit: 12 cycles each (TRM, with FPU lazy stacking \
+             reserving the frame), charged per preemption in the response-time analysis."
+                .to_string(),
+        ]
+    }
+
+    /// Worst-case cycles of a block's instructions.
+    pub fn block_cycles(&self, insns: &[Instruction]) -> u64 {
+        let mut cycles: u64 = 0;
+        for i in insns {
+            let (class, c) = i.timing();
+            cycles += u64::from(c);
+            let from_sp = i.operands.contains("[sp");
+            let loads = matches!(
+                class,
+                Class::Load | Class::LoadMultiple | Class::TableBranch
+            ) || (class == Class::FpuLoadStore
+                && (i.base().starts_with("vldr") || i.base().starts_with("vldm")));
+            if loads && !from_sp {
+                cycles += u64::from(self.flash_wait_states);
+            }
+        }
+        // Fetch: every flash line the block's bytes touch.
+        if let (Some(first), Some(last)) = (insns.first(), insns.last()) {
+            if (self.flash.0..self.flash.1).contains(&first.address) {
+                let line = u64::from(self.flash_line_bytes);
+                let lo = u64::from(first.address) / line;
+                let hi = (u64::from(last.address) + u64::from(last.bytes) - 1) / line;
+                cycles += (hi - lo + 1) * u64::from(self.flash_wait_states + 1);
+            }
+        }
+        cycles
+    }
+}
+
+/// Targets of the indirect calls and jumps, by the function they are in: a caller
+/// (demangled prefix) to its possible callees (demangled prefixes), each of which
+/// must match at least one symbol.
+#[derive(Debug, Clone, Default)]
+pub struct IndirectTargets {
+    /// `(caller prefix, callee prefixes)`.
+    pub rules: Vec<(String, Vec<String>)>,
+}
+
+/// The whole program's graphs.
+#[derive(Debug, Clone)]
+pub struct Program {
+    /// Functions in address order.
+    pub functions: Vec<Function>,
+    by_address: HashMap<u32, usize>,
+}
+
+impl Program {
+    /// The function starting at `address`.
+    pub fn at(&self, address: u32) -> Option<usize> {
+        self.by_address.get(&(address & !1)).copied()
+    }
+
+    /// The function containing `address`.
+    pub fn containing(&self, address: u32) -> Option<usize> {
+        let i = self.functions.partition_point(|f| f.address <= address);
+        let f = i.checked_sub(1)?;
+        let func = self.functions.get(f)?;
+        let last = func.instructions.last()?;
+        (address < last.address + last.bytes).then_some(f)
+    }
+
+    /// Functions whose symbol, alias or demangled name (without hash) equals `name`,
+    /// or else whose demangled name starts with it.
+    pub fn find(&self, name: &str) -> Vec<usize> {
+        let exact: Vec<usize> = (0..self.functions.len())
+            .filter(|&i| {
+                let f = &self.functions[i];
+                f.name == name || f.demangled == name || f.aliases.iter().any(|a| a == name)
+            })
+            .collect();
+        if !exact.is_empty() {
+            return exact;
+        }
+        (0..self.functions.len())
+            .filter(|&i| self.functions[i].demangled.starts_with(name))
+            .collect()
+    }
+
+    /// Functions reachable from `roots` through calls, tail calls and resolved
+    /// indirect calls (roots included), in discovery order.
+    pub fn reachable(&self, roots: &[usize]) -> Vec<usize> {
+        let mut seen = vec![false; self.functions.len()];
+        let mut order = Vec::new();
+        let mut stack: Vec<usize> = roots.to_vec();
+        while let Some(f) = stack.pop() {
+            if std::mem::replace(&mut seen[f], true) {
+                continue;
+            }
+            order.push(f);
+            for b in &self.functions[f].blocks {
+                stack.extend(b.calls.iter().copied());
+                match &b.exit {
+                    Exit::TailCall(t) => stack.push(*t),
+                    Exit::IndirectTail(ts) => stack.extend(ts.iter().copied()),
+                    _ => {}
+                }
+            }
+        }
+        order
+    }
+
+    /// Cycles in the call graph reachable from `roots` (each as its function names):
+    /// recursion, which the analysis refuses.
+    pub fn recursions(&self, roots: &[usize]) -> Vec<Vec<String>> {
+        let reach = self.reachable(roots);
+        let callees = |f: usize| -> BTreeSet<usize> {
+            let mut s = BTreeSet::new();
+            for b in &self.functions[f].blocks {
+                s.extend(b.calls.iter().copied());
+                match &b.exit {
+                    Exit::TailCall(t) => {
+                        s.insert(*t);
+                    }
+                    Exit::IndirectTail(ts) => s.extend(ts.iter().copied()),
+                    _ => {}
+                }
+            }
+            s
+        };
+        // Tarjan's strongly connected components, iteratively.
+        let n = self.functions.len();
+        let mut index = vec![usize::MAX; n];
+        let mut low = vec![0usize; n];
+        let mut on = vec![false; n];
+        let mut st: Vec<usize> = Vec::new();
+        let mut next = 0;
+        let mut out = Vec::new();
+        for &r in &reach {
+            if index[r] != usize::MAX {
+                continue;
+            }
+            let mut work: Vec<(usize, Vec<usize>)> = vec![(r, callees(r).into_iter().collect())];
+            index[r] = next;
+            low[r] = next;
+            next += 1;
+            st.push(r);
+            on[r] = true;
+            while let Some((v, mut rest)) = work.pop() {
+                if let Some(w) = rest.pop() {
+                    work.push((v, rest));
+                    if index[w] == usize::MAX {
+                        index[w] = next;
+                        low[w] = next;
+                        next += 1;
+                        st.push(w);
+                        on[w] = true;
+                        work.push((w, callees(w).into_iter().collect()));
+                    } else if on[w] {
+                        low[v] = low[v].min(index[w]);
+                    }
+                    continue;
+                }
+                if let Some((parent, _)) = work.last() {
+                    let p = *parent;
+                    low[p] = low[p].min(low[v]);
+                }
+                if low[v] == index[v] {
+                    let mut comp = Vec::new();
+                    while let Some(w) = st.pop() {
+                        on[w] = false;
+                        comp.push(w);
+                        if w == v {
+                            break;
+                        }
+                    }
+                    let self_call = comp.len() == 1 && callees(v).contains(&v);
+                    if comp.len() > 1 || self_call {
+                        out.push(
+                            comp.iter()
+                                .map(|&f| self.functions[f].demangled.clone())
+                                .collect(),
+                        );
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+/// What one instruction does to control flow.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Flow {
+    Straight,
+    Call(u32),
+    IndirectCall,
+    Jump { target: u32, conditional: bool },
+    Return { conditional: bool },
+    IndirectJump { conditional: bool },
+    Table,
+    Trap,
+}
+
+fn flow(i: &Instruction, in_it: bool) -> Flow {
+    let base = i.base();
+    let plain = strip_condition(base);
+    let conditional = has_condition(base) || in_it;
+    match plain {
+        "bl" => i.target.map_or(Flow::IndirectCall, Flow::Call),
+        "blx" => match i.target {
+            Some(t) => Flow::Call(t),
+            None => Flow::IndirectCall,
+        },
+        "b" | "cbz" | "cbnz" => match i.target {
+            Some(target) => Flow::Jump {
+                target,
+                conditional: conditional || plain != "b",
+            },
+            None => Flow::IndirectJump { conditional },
+        },
+        "bx" if i.first_operand() == "lr" => Flow::Return { conditional },
+        "bx" => Flow::IndirectJump { conditional },
+        "tbb" | "tbh" => Flow::Table,
+        "udf" => Flow::Trap,
+        _ if i.pops_pc() => Flow::Return { conditional },
+        "mov" | "ldr" | "add" if i.first_operand() == "pc" => Flow::IndirectJump { conditional },
+        _ => Flow::Straight,
+    }
+}
+
+/// Targets of a `tbb`/`tbh` at index `at`: the table follows the instruction, its
+/// entries are halfword offsets from the instruction's address + 4.
+fn table_targets(f: &RawFunction, at: usize) -> Vec<u32> {
+    let Some(i) = f.instructions.get(at) else {
+        return Vec::new();
+    };
+    let base = i.address + 4;
+    let Some(data) = f.data.iter().find(|d| d.address == base) else {
+        return Vec::new();
+    };
+    let halfword = strip_condition(i.base()) == "tbh";
+    let entries: Vec<u32> = if halfword {
+        data.bytes
+            .chunks_exact(2)
+            .map(|c| u32::from(u16::from_le_bytes([c[0], c[1]])))
+            .collect()
+    } else {
+        data.bytes.iter().map(|&b| u32::from(b)).collect()
+    };
+    let starts: BTreeSet<u32> = f.instructions.iter().map(|i| i.address).collect();
+    entries
+        .into_iter()
+        .map(|e| base + 2 * e)
+        // A padding byte at the table's end points into the table itself.
+        .filter(|t| starts.contains(t))
+        .collect()
+}
+
+/// Builds every function's graph. `indirect` lists the targets of indirect calls;
+/// `demangle` gives the demangled name without hash.
+pub fn build_program(
+    raw: &[RawFunction],
+    indirect: &IndirectTargets,
+    memory: &MemoryModel,
+    demangle: impl Fn(&str) -> String,
+) -> Result<Program, WcetError> {
+    let mut by_address = HashMap::new();
+    for (k, f) in raw.iter().enumerate() {
+        by_address.insert(f.address, k);
+    }
+    let demangled: Vec<String> = raw.iter().map(|f| demangle(&f.name)).collect();
+    // Indirect targets per caller.
+    let targets_of = |caller: usize, unresolved: &mut Vec<String>, what: String| -> Vec<usize> {
+        let name = &demangled[caller];
+        let mut out = Vec::new();
+        let mut covered = false;
+        for (prefix, callees) in &indirect.rules {
+            if name.starts_with(prefix.as_str()) {
+                covered = true;
+                for c in callees {
+                    let hits: Vec<usize> = (0..raw.len())
+                        .filter(|&k| {
+                            demangled[k].starts_with(c.as_str())
+                                || raw[k].name == *c
+                                || raw[k].aliases.iter().any(|a| a == c)
+                        })
+                        .collect();
+                    if hits.is_empty() {
+                        unresolved.push(format!(
+                            "{what}: listed target `{c}` is no symbol of the binary"
+                        ));
+                    }
+                    out.extend(hits);
+                }
+            }
+        }
+        if !covered {
+            unresolved.push(what);
+        }
+        out.sort_unstable();
+        out.dedup();
+        out
+    };
+
+    // First pass: per function, block boundaries and raw edges.
+    struct Pending {
+        leaders: BTreeSet<usize>,
+        /// Per instruction index: (flow, table targets).
+        flows: Vec<Flow>,
+        tables: BTreeMap<usize, Vec<u32>>,
+    }
+    let mut pending = Vec::with_capacity(raw.len());
+    for f in raw {
+        let mut leaders = BTreeSet::from([0usize]);
+        let index: HashMap<u32, usize> = f
+            .instructions
+            .iter()
+            .enumerate()
+            .map(|(k, i)| (i.address, k))
+            .collect();
+        let mut flows = Vec::with_capacity(f.instructions.len());
+        let mut tables = BTreeMap::new();
+        let mut it_left = 0usize;
+        for (k, i) in f.instructions.iter().enumerate() {
+            let in_it = it_left > 0;
+            it_left = it_left.saturating_sub(1);
+            if let Some(n) = it_length(i.base()) {
+                it_left = n;
+            }
+            let fl = flow(i, in_it);
+            match &fl {
+                Flow::Jump { target, .. } => {
+                    if let Some(&t) = index.get(target) {
+                        leaders.insert(t);
+                    }
+                    leaders.insert(k + 1);
+                }
+                Flow::Return { .. } | Flow::IndirectJump { .. } | Flow::Trap => {
+                    leaders.insert(k + 1);
+                }
+                Flow::Table => {
+                    let ts = table_targets(f, k);
+                    for t in &ts {
+                        if let Some(&x) = index.get(t) {
+                            leaders.insert(x);
+                        }
+                    }
+                    tables.insert(k, ts);
+                    leaders.insert(k + 1);
+                }
+                Flow::Straight | Flow::Call(_) | Flow::IndirectCall => {}
+            }
+            flows.push(fl);
+        }
+        leaders.retain(|&l| l < f.instructions.len());
+        pending.push(Pending {
+            leaders,
+            flows,
+            tables,
+        });
+    }
+
+    // Which functions return: iterate to a fixed point (a function returns if some
+    // block returns, or tail-calls a function that returns).
+    let mut returns = vec![false; raw.len()];
+    loop {
+        let mut changed = false;
+        for (k, f) in raw.iter().enumerate() {
+            if returns[k] {
+                continue;
+            }
+            let p = &pending[k];
+            let r = p.flows.iter().enumerate().any(|(x, fl)| match fl {
+                Flow::Return { .. } => true,
+                Flow::Jump { target, .. } => {
+                    let inside = f.instructions.iter().any(|i| i.address == *target);
+                    !inside && by_address.get(target).is_some_and(|&t| returns[t])
+                }
+                Flow::IndirectJump { .. } => true,
+                _ => {
+                    let _ = x;
+                    false
+                }
+            });
+            if r {
+                returns[k] = true;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+
+    // Second pass: blocks, with calls to non-returning functions ending blocks.
+    let mut functions = Vec::with_capacity(raw.len());
+    for (k, f) in raw.iter().enumerate() {
+        let p = &pending[k];
+        let mut leaders = p.leaders.clone();
+        for (x, fl) in p.flows.iter().enumerate() {
+            if let Flow::Call(t) = fl {
+                if by_address.get(t).is_some_and(|&c| !returns[c]) {
+                    leaders.insert(x + 1);
+                }
+            }
+        }
+        leaders.retain(|&l| l < f.instructions.len());
+        let starts: Vec<usize> = leaders.iter().copied().collect();
+        let block_of_insn = |x: usize| starts.partition_point(|&s| s <= x) - 1;
+        let index: HashMap<u32, usize> = f
+            .instructions
+            .iter()
+            .enumerate()
+            .map(|(x, i)| (i.address, x))
+            .collect();
+        let mut blocks = Vec::with_capacity(starts.len());
+        for (b, &first) in starts.iter().enumerate() {
+            let end = starts.get(b + 1).copied().unwrap_or(f.instructions.len());
+            let mut calls = Vec::new();
+            let mut successors = Vec::new();
+            let mut exit = Exit::Internal;
+            let mut falls = true;
+            let mut unresolved: Vec<String> = Vec::new();
+            for x in first..end {
+                let i = &f.instructions[x];
+                let here = || {
+                    format!(
+                        "{}: {:#x} {} {}",
+                        demangled[k], i.address, i.mnemonic, i.operands
+                    )
+                };
+                match &p.flows[x] {
+                    Flow::Call(t) => match by_address.get(t) {
+                        Some(&c) => {
+                            calls.push(c);
+                            if !returns[c] {
+                                exit = Exit::NoReturn;
+                                falls = false;
+                            }
+                        }
+                        None => unresolved.push(format!("{}: calls no function", here())),
+                    },
+                    Flow::IndirectCall => {
+                        calls.extend(targets_of(k, &mut unresolved, here()));
+                    }
+                    Flow::Jump {
+                        target,
+                        conditional,
+                    } => {
+                        if let Some(&t) = index.get(target) {
+                            successors.push(block_of_insn(t));
+                        } else if let Some(&c) = by_address.get(target) {
+                            exit = Exit::TailCall(c);
+                        } else {
+                            unresolved.push(format!("{}: jumps to no function", here()));
+                        }
+                        falls = *conditional;
+                    }
+                    Flow::Return { conditional } => {
+                        exit = Exit::Return;
+                        falls = *conditional;
+                    }
+                    Flow::IndirectJump { conditional } => {
+                        exit = Exit::IndirectTail(targets_of(k, &mut unresolved, here()));
+                        falls = *conditional;
+                    }
+                    Flow::Table => {
+                        let ts = p.tables.get(&x).cloned().unwrap_or_default();
+                        if ts.is_empty() {
+                            unresolved.push(format!("{} (jump table not found)", here()));
+                        }
+                        for t in ts {
+                            if let Some(&y) = index.get(&t) {
+                                successors.push(block_of_insn(y));
+                            }
+                        }
+                        falls = false;
+                    }
+                    Flow::Trap => {
+                        exit = Exit::NoReturn;
+                        falls = false;
+                    }
+                    Flow::Straight => {}
+                }
+            }
+            if falls && end < f.instructions.len() {
+                successors.push(b + 1);
+            }
+            successors.sort_unstable();
+            successors.dedup();
+            let insns = &f.instructions[first..end];
+            blocks.push(Block {
+                start: insns.first().map_or(0, |i| i.address),
+                first,
+                end,
+                successors,
+                calls,
+                exit,
+                problems: unresolved,
+                instructions: insns.len() as u64,
+                cycles: memory.block_cycles(insns),
+            });
+        }
+        functions.push(Function {
+            name: f.name.clone(),
+            demangled: demangled[k].clone(),
+            aliases: f.aliases.clone(),
+            address: f.address,
+            instructions: f.instructions.clone(),
+            blocks,
+            returns: returns[k],
+        });
+    }
+    Ok(Program {
+        functions,
+        by_address,
+    })
+}

@@ -1,0 +1,284 @@
+//! Implicit path enumeration (IPET): the worst-case cost of a task as a linear
+//! program over its blocks' execution counts.
+//!
+//! Every block `b` reachable from the task's entry gets a count `x_b ≥ 0`, every
+//! edge a count `e ≥ 0`, every function an entry count `n_f`. The program
+//! maximises `Σ cost_b · x_b` subject to
+//!
+//! * flow conservation: `x_b = Σ in-edges (+ n_f at the entry) = Σ out-edges (+ exits)`;
+//! * calls: `n_f = Σ` over the blocks that call `f` of their counts (one per call
+//!   instruction; an indirect call counts towards each listed target: sound and
+//!   pessimistic), plus the tail calls into `f`; the task's entry `n_root = 1`;
+//! * loop bounds: `Σ back edges ≤ B · Σ entry edges` per loop ([`Per::Entry`]), or
+//!   `Σ back edges ≤ B · n_root` for a flow fact over the whole activation
+//!   ([`Per::Activation`]): caps that span loops are linear constraints, not
+//!   products of worst cases;
+//! * paths that never return (a call of a panic handler, a trap) are not part of a
+//!   completing activation: their blocks get count 0.
+//!
+//! The counts are continuous: the linear relaxation's optimum is at least the
+//! integer optimum, so the bound stays an upper bound. Solved with `microlp`
+//! through `good_lp` (pure Rust).
+
+use super::cfg::{Exit, Program};
+use super::loops::{reverse_post_order, Loop};
+use good_lp::{
+    constraint, variable, Expression, ProblemVariables, Solution, SolverModel, Variable,
+};
+use std::collections::HashMap;
+
+/// What a loop bound counts against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum Per {
+    /// Back edges per entry of the loop.
+    Entry,
+    /// Back edges per activation of the task (a cap that spans the loop's entries).
+    Activation,
+}
+
+/// A bound on one loop.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LoopFact {
+    /// Function index in the program.
+    pub function: usize,
+    /// Loop index in that function's loops.
+    pub loop_index: usize,
+    /// Most back edges taken, per [`Self::per`].
+    pub bound: u64,
+    /// What the bound counts against.
+    pub per: Per,
+}
+
+/// Which cost a block contributes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cost {
+    /// Instructions, as QEMU counts them.
+    Instructions,
+    /// Worst-case cycles of the memory model.
+    Cycles,
+}
+
+/// A task's bound and what it is made of.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct IpetBound {
+    /// The bound (the linear program's optimum, rounded up).
+    pub bound: u64,
+    /// Per function: its blocks' cost on the worst path, most first.
+    pub by_function: Vec<(String, f64)>,
+    /// Variables and constraints of the linear program.
+    pub variables: usize,
+    /// Constraints of the linear program.
+    pub constraints: usize,
+}
+
+/// Why no bound could be computed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum IpetError {
+    /// Loops reachable from the task without a bound.
+    #[error("{} loop(s) without a bound: {}", .0.len(), .0.join("; "))]
+    Unbounded(Vec<String>),
+    /// The call graph is recursive.
+    #[error("recursion: {}", .0.join(" -> "))]
+    Recursion(Vec<String>),
+    /// The linear program could not be solved.
+    #[error("the IPET linear program failed: {0}")]
+    Solver(String),
+}
+
+/// The worst-case cost of one activation of the task entered at `root`.
+pub fn task_bound(
+    program: &Program,
+    loops: &[Vec<Loop>],
+    root: usize,
+    facts: &[LoopFact],
+    cost: Cost,
+) -> Result<IpetBound, IpetError> {
+    if let Some(r) = program.recursions(&[root]).into_iter().next() {
+        return Err(IpetError::Recursion(r));
+    }
+    let reach = program.reachable(&[root]);
+    let fact_of: HashMap<(usize, usize), &LoopFact> = facts
+        .iter()
+        .map(|f| ((f.function, f.loop_index), f))
+        .collect();
+    let fact_ref = &fact_of;
+    let missing: Vec<String> = reach
+        .iter()
+        .flat_map(|&f| {
+            let func = &program.functions[f];
+            loops
+                .get(f)
+                .map(|ls| ls.as_slice())
+                .unwrap_or(&[])
+                .iter()
+                .enumerate()
+                .filter(move |(k, _)| !fact_ref.contains_key(&(f, *k)))
+                .map(move |(_, l)| {
+                    format!(
+                        "{} loop at {:#x}",
+                        func.demangled,
+                        func.blocks.get(l.header).map_or(0, |b| b.start)
+                    )
+                })
+        })
+        .collect();
+    if !missing.is_empty() {
+        return Err(IpetError::Unbounded(missing));
+    }
+
+    let mut vars = ProblemVariables::new();
+    let mut constraints = Vec::new();
+    let mut objective = Expression::from(0.0);
+    let mut n_entry: HashMap<usize, Variable> = HashMap::new();
+    for &f in &reach {
+        n_entry.insert(f, vars.add(variable().min(0.0)));
+    }
+    // Incoming calls per function.
+    let mut calls_into: HashMap<usize, Expression> = HashMap::new();
+    let mut per_function: Vec<(usize, Expression)> = Vec::new();
+    let mut count = 0usize;
+    for &f in &reach {
+        let func = &program.functions[f];
+        let live = reverse_post_order(func);
+        let mut x: HashMap<usize, Variable> = HashMap::new();
+        for &b in &live {
+            x.insert(b, vars.add(variable().min(0.0)));
+        }
+        let mut edges: HashMap<(usize, usize), Variable> = HashMap::new();
+        let mut inflow: HashMap<usize, Expression> = HashMap::new();
+        let mut fcost = Expression::from(0.0);
+        for &b in &live {
+            let block = &func.blocks[b];
+            let xb = x[&b];
+            let mut out = Expression::from(0.0);
+            for &s in &block.successors {
+                let e = vars.add(variable().min(0.0));
+                edges.insert((b, s), e);
+                out += e;
+                *inflow.entry(s).or_insert_with(|| Expression::from(0.0)) += e;
+            }
+            let exits = block.successors.is_empty() || block.exit != Exit::Internal;
+            match &block.exit {
+                Exit::NoReturn => constraints.push(constraint!(xb == 0.0)),
+                _ if exits => {
+                    let r = vars.add(variable().min(0.0));
+                    out += r;
+                    match &block.exit {
+                        Exit::TailCall(t) => {
+                            *calls_into
+                                .entry(*t)
+                                .or_insert_with(|| Expression::from(0.0)) += r;
+                        }
+                        Exit::IndirectTail(ts) => {
+                            for t in ts {
+                                *calls_into
+                                    .entry(*t)
+                                    .or_insert_with(|| Expression::from(0.0)) += r;
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+                _ => {}
+            }
+            constraints.push(constraint!(xb == out));
+            for &c in &block.calls {
+                *calls_into.entry(c).or_insert_with(|| Expression::from(0.0)) += xb;
+            }
+            let c = match cost {
+                Cost::Instructions => block.instructions,
+                Cost::Cycles => block.cycles,
+            } as f64;
+            objective += c * xb;
+            fcost += c * xb;
+            count += 1;
+        }
+        for &b in &live {
+            let mut inn = inflow.remove(&b).unwrap_or_else(|| Expression::from(0.0));
+            if b == 0 {
+                inn += n_entry[&f];
+            }
+            constraints.push(constraint!(x[&b] == inn));
+        }
+        // Loop bounds.
+        for (k, l) in loops
+            .get(f)
+            .map(|v| v.as_slice())
+            .unwrap_or(&[])
+            .iter()
+            .enumerate()
+        {
+            let Some(fact) = fact_of.get(&(f, k)) else {
+                continue;
+            };
+            let back: Expression = l
+                .back_edges
+                .iter()
+                .filter_map(|e| edges.get(e))
+                .fold(Expression::from(0.0), |a, &v| a + v);
+            let bound = fact.bound as f64;
+            match fact.per {
+                Per::Entry => {
+                    let mut entries = Expression::from(0.0);
+                    for &(p, h) in &l.entry_edges {
+                        if p == usize::MAX {
+                            entries += n_entry[&f];
+                        } else if let Some(&e) = edges.get(&(p, h)) {
+                            entries += e;
+                        }
+                    }
+                    constraints.push(constraint!(back <= bound * entries));
+                }
+                Per::Activation => {
+                    constraints.push(constraint!(back <= bound * n_entry[&root]));
+                }
+            }
+        }
+        per_function.push((f, fcost));
+    }
+    for &f in &reach {
+        let n = n_entry[&f];
+        if f == root {
+            constraints.push(constraint!(n == 1.0));
+        } else {
+            let inn = calls_into
+                .remove(&f)
+                .unwrap_or_else(|| Expression::from(0.0));
+            constraints.push(constraint!(n == inn));
+        }
+    }
+    let variables = vars.len();
+    let n_constraints = constraints.len();
+    let mut problem = vars.maximise(objective.clone()).using(good_lp::microlp);
+    for c in constraints {
+        problem = problem.with(c);
+    }
+    let solution = problem
+        .solve()
+        .map_err(|e| IpetError::Solver(e.to_string()))?;
+    let value = solution.eval(&objective);
+    let mut by_function: Vec<(String, f64)> = per_function
+        .iter()
+        .map(|(f, e)| (program.functions[*f].demangled.clone(), solution.eval(e)))
+        .filter(|(_, v)| *v > 0.5)
+        .collect();
+    by_function.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let _ = count;
+    Ok(IpetBound {
+        bound: round_up(value),
+        by_function,
+        variables,
+        constraints: n_constraints,
+    })
+}
+
+/// The optimum as an integer: a value within the simplex's tolerance (1e-7
+/// relative) of an integer is that integer; anything else is rounded up.
+fn round_up(value: f64) -> u64 {
+    let nearest = value.round();
+    if (value - nearest).abs() <= 1e-7 * value.abs().max(1.0) {
+        nearest.max(0.0) as u64
+    } else {
+        value.ceil().max(0.0) as u64
+    }
+}

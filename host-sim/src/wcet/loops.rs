@@ -1,0 +1,224 @@
+//! Natural loops of a function's control-flow graph.
+//!
+//! Dominators by the iterative algorithm of Cooper, Harvey and Kennedy ("A Simple,
+//! Fast Dominance Algorithm", 2001) over the reverse post-order; a back edge is an
+//! edge `t → h` whose head `h` dominates its tail; the natural loop of `h` is `h`
+//! and every block that reaches one of its back edges' tails without passing
+//! through `h`. A cycle that no back edge closes (an irreducible loop: two entries)
+//! has no header to bound and is refused.
+
+use super::cfg::Function;
+use std::collections::BTreeSet;
+
+/// A natural loop.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Loop {
+    /// Header block (the loop's only entry).
+    pub header: usize,
+    /// Blocks of the loop, header included, ascending.
+    pub blocks: Vec<usize>,
+    /// Back edges `(tail, header)`.
+    pub back_edges: Vec<(usize, usize)>,
+    /// Entry edges `(outside block, header)`; the function's entry counts as one
+    /// when the header is block 0 (`usize::MAX` as its tail).
+    pub entry_edges: Vec<(usize, usize)>,
+    /// The innermost loop containing this one (index into the function's loops).
+    pub parent: Option<usize>,
+}
+
+/// Blocks reachable from the entry, in reverse post-order.
+pub fn reverse_post_order(f: &Function) -> Vec<usize> {
+    let n = f.blocks.len();
+    let mut seen = vec![false; n];
+    let mut post = Vec::with_capacity(n);
+    if n == 0 {
+        return post;
+    }
+    let mut stack: Vec<(usize, usize)> = vec![(0, 0)];
+    seen[0] = true;
+    while let Some((b, k)) = stack.pop() {
+        if let Some(&s) = f.blocks[b].successors.get(k) {
+            stack.push((b, k + 1));
+            if !seen[s] {
+                seen[s] = true;
+                stack.push((s, 0));
+            }
+        } else {
+            post.push(b);
+        }
+    }
+    post.reverse();
+    post
+}
+
+/// Immediate dominator of every block reachable from the entry (`None` for the
+/// entry and for unreachable blocks).
+pub fn immediate_dominators(f: &Function) -> Vec<Option<usize>> {
+    let n = f.blocks.len();
+    let rpo = reverse_post_order(f);
+    let mut order = vec![usize::MAX; n];
+    for (k, &b) in rpo.iter().enumerate() {
+        order[b] = k;
+    }
+    let preds = f.predecessors();
+    let mut idom: Vec<Option<usize>> = vec![None; n];
+    if n == 0 {
+        return idom;
+    }
+    idom[0] = Some(0);
+    let intersect = |idom: &[Option<usize>], mut a: usize, mut b: usize| -> usize {
+        while a != b {
+            while order[a] > order[b] {
+                a = idom[a].unwrap_or(0);
+            }
+            while order[b] > order[a] {
+                b = idom[b].unwrap_or(0);
+            }
+        }
+        a
+    };
+    let mut changed = true;
+    while changed {
+        changed = false;
+        for &b in rpo.iter().skip(1) {
+            let mut new: Option<usize> = None;
+            for &p in &preds[b] {
+                if idom[p].is_none() {
+                    continue;
+                }
+                new = Some(match new {
+                    None => p,
+                    Some(x) => intersect(&idom, p, x),
+                });
+            }
+            if new.is_some() && idom[b] != new {
+                idom[b] = new;
+                changed = true;
+            }
+        }
+    }
+    idom[0] = None;
+    idom
+}
+
+/// Whether `a` dominates `b`.
+fn dominates(idom: &[Option<usize>], a: usize, mut b: usize) -> bool {
+    loop {
+        if a == b {
+            return true;
+        }
+        match idom[b] {
+            Some(p) => b = p,
+            None => return false,
+        }
+    }
+}
+
+/// The loops of a function, or the blocks of an irreducible cycle.
+pub fn natural_loops(f: &Function) -> Result<Vec<Loop>, Vec<usize>> {
+    let idom = immediate_dominators(f);
+    let rpo = reverse_post_order(f);
+    let reachable: BTreeSet<usize> = rpo.iter().copied().collect();
+    let preds = f.predecessors();
+    let mut loops: Vec<Loop> = Vec::new();
+    for &h in &rpo {
+        let backs: Vec<(usize, usize)> = preds[h]
+            .iter()
+            .filter(|&&t| reachable.contains(&t) && dominates(&idom, h, t))
+            .map(|&t| (t, h))
+            .collect();
+        if backs.is_empty() {
+            continue;
+        }
+        let mut body = BTreeSet::from([h]);
+        let mut stack: Vec<usize> = backs.iter().map(|&(t, _)| t).collect();
+        while let Some(b) = stack.pop() {
+            if body.insert(b) {
+                stack.extend(preds[b].iter().copied().filter(|p| reachable.contains(p)));
+            }
+        }
+        let mut entry_edges: Vec<(usize, usize)> = preds[h]
+            .iter()
+            .filter(|p| reachable.contains(p) && !body.contains(p))
+            .map(|&p| (p, h))
+            .collect();
+        if h == 0 {
+            entry_edges.push((usize::MAX, 0));
+        }
+        loops.push(Loop {
+            header: h,
+            blocks: body.into_iter().collect(),
+            back_edges: backs,
+            entry_edges,
+            parent: None,
+        });
+    }
+    // Irreducible cycles: a cycle left after removing every back edge.
+    let back: BTreeSet<(usize, usize)> = loops
+        .iter()
+        .flat_map(|l| l.back_edges.iter().copied())
+        .collect();
+    if let Some(cycle) = forward_cycle(f, &reachable, &back) {
+        return Err(cycle);
+    }
+    // Nesting: the smallest loop strictly containing each loop.
+    let sets: Vec<BTreeSet<usize>> = loops
+        .iter()
+        .map(|l| l.blocks.iter().copied().collect())
+        .collect();
+    for i in 0..loops.len() {
+        let mut best: Option<usize> = None;
+        for j in 0..loops.len() {
+            if i != j && sets[j].is_superset(&sets[i]) && sets[j].len() > sets[i].len() {
+                best = match best {
+                    Some(b) if sets[b].len() <= sets[j].len() => Some(b),
+                    _ => Some(j),
+                };
+            }
+        }
+        loops[i].parent = best;
+    }
+    Ok(loops)
+}
+
+/// A cycle of the graph without the back edges, if any (its blocks).
+fn forward_cycle(
+    f: &Function,
+    reachable: &BTreeSet<usize>,
+    back: &BTreeSet<(usize, usize)>,
+) -> Option<Vec<usize>> {
+    let n = f.blocks.len();
+    // Kahn's algorithm: what cannot be ordered lies on or behind a cycle.
+    let mut indegree = vec![0usize; n];
+    for &b in reachable {
+        for &s in &f.blocks[b].successors {
+            if !back.contains(&(b, s)) && reachable.contains(&s) {
+                indegree[s] += 1;
+            }
+        }
+    }
+    let mut ready: Vec<usize> = reachable
+        .iter()
+        .copied()
+        .filter(|&b| indegree[b] == 0)
+        .collect();
+    let mut done = 0;
+    while let Some(b) = ready.pop() {
+        done += 1;
+        for &s in &f.blocks[b].successors {
+            if !back.contains(&(b, s)) && reachable.contains(&s) {
+                indegree[s] -= 1;
+                if indegree[s] == 0 {
+                    ready.push(s);
+                }
+            }
+        }
+    }
+    (done < reachable.len()).then(|| {
+        reachable
+            .iter()
+            .copied()
+            .filter(|&b| indegree[b] > 0)
+            .collect()
+    })
+}

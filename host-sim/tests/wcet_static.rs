@@ -1,0 +1,156 @@
+//! The static WCET analysis on small hand-written disassemblies: graphs, loops,
+//! constant loop bounds and the IPET bound, each checked against a count done by
+//! hand.
+#![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use host_sim::wcet::cfg::{self, IndirectTargets, MemoryModel, Program};
+use host_sim::wcet::ipet::{self, Cost, IpetError, LoopFact, Per};
+use host_sim::wcet::{bounds, demangle, loops};
+
+/// `root` runs a loop of 16 iterations (r4 from 16 down to 0) calling `leaf`.
+const COUNTED: &str = "
+08000000 <root>:
+ 8000000: b510         \tpush\t{r4, lr}
+ 8000002: 2410         \tmovs\tr4, #0x10
+ 8000004: f000 f806    \tbl\t0x8000014 <leaf> @ imm = #0xc
+ 8000008: 3c01         \tsubs\tr4, #0x1
+ 800000a: d1fb         \tbne\t0x8000004 <root+0x4> @ imm = #-0xa
+ 800000c: bd10         \tpop\t{r4, pc}
+
+08000014 <leaf>:
+ 8000014: 4770         \tbx\tlr
+";
+
+/// `a` calls `b`, which calls `a`.
+const RECURSIVE: &str = "
+08000000 <a>:
+ 8000000: b580         \tpush\t{r7, lr}
+ 8000002: f000 f801    \tbl\t0x8000008 <b> @ imm = #0x2
+ 8000006: bd80         \tpop\t{r7, pc}
+
+08000008 <b>:
+ 8000008: b580         \tpush\t{r7, lr}
+ 800000a: f7ff fff9    \tbl\t0x8000000 <a> @ imm = #-0xe
+ 800000e: bd80         \tpop\t{r7, pc}
+";
+
+fn program(text: &str) -> Program {
+    let raw = cfg::parse_disassembly(text);
+    cfg::build_program(
+        &raw,
+        &IndirectTargets::default(),
+        &MemoryModel::STM32F405,
+        demangle,
+    )
+    .unwrap()
+}
+
+fn all_loops(p: &Program) -> Vec<Vec<loops::Loop>> {
+    p.functions
+        .iter()
+        .map(|f| loops::natural_loops(f).unwrap())
+        .collect()
+}
+
+#[test]
+fn blocks_loops_and_the_counted_bound() {
+    let p = program(COUNTED);
+    let root = p.find("root")[0];
+    let f = &p.functions[root];
+    let starts: Vec<u32> = f.blocks.iter().map(|b| b.start).collect();
+    assert_eq!(starts, vec![0x8000000, 0x8000004, 0x800000c]);
+    assert_eq!(f.blocks[1].calls, vec![p.find("leaf")[0]]);
+    let ls = loops::natural_loops(f).unwrap();
+    assert_eq!(ls.len(), 1);
+    assert_eq!(ls[0].header, 1);
+    assert_eq!(ls[0].back_edges, vec![(1, 1)]);
+    // 16 iterations: the back edge is taken 15 times.
+    assert_eq!(bounds::constant_bound(f, &ls[0]), Some(15));
+}
+
+#[test]
+fn ipet_counts_the_worst_path_by_hand() {
+    let p = program(COUNTED);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let facts = [LoopFact {
+        function: root,
+        loop_index: 0,
+        bound: 15,
+        per: Per::Entry,
+    }];
+    let b = ipet::task_bound(&p, &ls, root, &facts, Cost::Instructions).unwrap();
+    // 2 (prologue) + 16 × 3 (loop) + 1 (return) + 16 × 1 (leaf).
+    assert_eq!(b.bound, 67);
+    // A tighter fact gives a smaller bound: the loop fact is in the program.
+    let tighter = [LoopFact {
+        bound: 7,
+        ..facts[0].clone()
+    }];
+    let t = ipet::task_bound(&p, &ls, root, &tighter, Cost::Instructions).unwrap();
+    assert_eq!(t.bound, 2 + 8 * 3 + 1 + 8);
+    // Per activation: the same here (one entry per activation).
+    let act = [LoopFact {
+        per: Per::Activation,
+        ..facts[0].clone()
+    }];
+    let a = ipet::task_bound(&p, &ls, root, &act, Cost::Instructions).unwrap();
+    assert_eq!(a.bound, 67);
+    // Cycles are at least the instructions.
+    let c = ipet::task_bound(&p, &ls, root, &facts, Cost::Cycles).unwrap();
+    assert!(c.bound > 67);
+}
+
+#[test]
+fn a_loop_without_a_bound_is_refused() {
+    let p = program(COUNTED);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    match ipet::task_bound(&p, &ls, root, &[], Cost::Instructions) {
+        Err(IpetError::Unbounded(l)) => assert_eq!(l.len(), 1, "{l:?}"),
+        other => panic!("expected a refusal, got {other:?}"),
+    }
+}
+
+#[test]
+fn recursion_is_refused() {
+    let p = program(RECURSIVE);
+    let ls = all_loops(&p);
+    let a = p.find("a")[0];
+    assert_eq!(p.recursions(&[a]).len(), 1);
+    assert!(matches!(
+        ipet::task_bound(&p, &ls, a, &[], Cost::Instructions),
+        Err(IpetError::Recursion(_))
+    ));
+}
+
+/// The ECU application (built by `cargo ecu`; CI runs this after building it).
+const ECU_ELF: &str = "../target/thumbv7em-none-eabihf/release/ecu";
+
+#[test]
+#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
+    let elf = std::path::Path::new(ECU_ELF);
+    assert!(
+        elf.is_file(),
+        "{ECU_ELF} is missing: build it with `cargo ecu`"
+    );
+    let a = host_sim::wcet::analysis::analyse(elf).unwrap();
+    assert!(
+        a.unresolved_indirect_calls.is_empty(),
+        "{:?}",
+        a.unresolved_indirect_calls
+    );
+    assert!(a.recursions.is_empty(), "{:?}", a.recursions);
+    // Every task is found and reaches code; the loops listed are the tasks' own.
+    for t in &a.tasks {
+        assert!(t.functions > 0, "{}", t.name);
+        assert!(t.bounded_loops <= t.loops);
+    }
+    let plan = a.tasks.iter().find(|t| t.name == "plan").unwrap();
+    assert!(plan.loops > 50, "the MPC's loops: {}", plan.loops);
+    // Each bound recognised from the binary names a source line.
+    for l in a.loops.iter().filter(|l| l.bound.is_some()) {
+        assert!(l.line > 0, "{l:?}");
+    }
+}
