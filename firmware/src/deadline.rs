@@ -43,7 +43,9 @@
 //!   late-plan policy already brings the car to a controlled stop when the plan
 //!   being followed runs out.
 
+use crate::low_level::Actuation;
 use crate::tasks::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
+use crate::Real;
 
 /// Budget of one `control` activation, ECU core clock cycles (its own work,
 /// preemption excluded; its deadline is its 10 ms period).
@@ -251,6 +253,23 @@ impl DeadlineMonitor {
     /// The counts so far.
     pub const fn counts(&self) -> DeadlineCounts {
         self.counts
+    }
+}
+
+/// The control task's output under the consecutive-miss rule: `computed` while
+/// `monitor` has not latched its safe stop; after it has, the safe actuation of
+/// the panic path, zero torque on every wheel with the steering held at
+/// `held_delta_rad` (rad: the last command sent before the stop), and `true`
+/// (send it with [`crate::link::FAULT_DEADLINE`]).
+pub fn control_output<T: Real>(
+    monitor: &DeadlineMonitor,
+    computed: Actuation<T>,
+    held_delta_rad: T,
+) -> (Actuation<T>, bool) {
+    if monitor.safe_stop() {
+        (Actuation::safe(held_delta_rad, T::ZERO), true)
+    } else {
+        (computed, false)
     }
 }
 

@@ -153,6 +153,42 @@ fn k_consecutive_control_misses_latch_the_safe_stop() {
 }
 
 #[test]
+fn after_k_consecutive_misses_the_control_output_is_zero_torque_with_the_steering_held() {
+    use firmware::low_level::{Actuation, Mode};
+    let computed = Actuation {
+        wheel_torque_nm: [120.0f32, 120.0, 0.0, 0.0],
+        delta_rad: 0.05,
+        mode: Mode::Following,
+        ..Actuation::safe(0.05f32, 0.0)
+    };
+    let held = 0.031f32;
+    let mut m = DeadlineMonitor::control();
+    // A late answer (miss 1) that skips the next release (miss 2): still the
+    // computed actuation.
+    let r = m.start();
+    m.complete(r + CONTROL_PERIOD_US + 1, 1);
+    m.next_release(r + CONTROL_PERIOD_US + 1);
+    assert_eq!(m.consecutive_misses(), CONTROL_MISS_LIMIT - 1);
+    let (out, stopped) = control_output(&m, computed, held);
+    assert!(!stopped);
+    assert_eq!(out, computed);
+    // The next answer late too: the K-th consecutive miss latches the stop, and
+    // this very answer goes out safe.
+    let r = m.start();
+    m.complete(r + CONTROL_PERIOD_US + 1, 1);
+    assert!(m.safe_stop());
+    for _ in 0..5 {
+        let (out, stopped) = control_output(&m, computed, held);
+        assert!(stopped);
+        assert_eq!(out.wheel_torque_nm, [0.0; 4], "zero torque");
+        assert_eq!(out.torque_total_nm, 0.0);
+        assert_eq!(out.delta_rad, held, "steering held");
+        assert_eq!(out.mode, Mode::Safe);
+        activation(&mut m, 100, 1, 0);
+    }
+}
+
+#[test]
 fn one_long_overrun_skips_enough_releases_to_latch_the_safe_stop() {
     // A control activation that answers in time but stays busy 25 ms: the
     // releases at 10 and 20 ms are skipped (2 misses); a third consecutive miss

@@ -62,7 +62,7 @@ use core::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 
 use cortex_m_semihosting::{debug, syscall};
 use defmt_semihosting as _;
-use firmware::deadline::{DeadlineMonitor, PlanWatchdog};
+use firmware::deadline::{self, DeadlineMonitor, PlanWatchdog};
 use firmware::link::{
     self, ActuationFrame, Down, FrameReader, Up, MAX_DOWN_FRAME_BYTES, MAX_FRAME_BYTES,
 };
@@ -625,14 +625,14 @@ mod app {
             // Completion: the actuation leaves now.
             let sent_us = now_us();
             monitor.complete(sent_us, u64::from(ticks));
-            let act = if monitor.safe_stop() {
-                // K consecutive misses: zero torque, the steering held where it was.
+            // K consecutive misses: zero torque, the steering held where it was.
+            let held = f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed));
+            let (act, stopped) = deadline::control_output(&monitor, act, held);
+            if stopped {
                 fault = link::FAULT_DEADLINE;
-                Actuation::safe(f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed)), 0.0)
             } else {
                 LAST_DELTA_BITS.store(act.delta_rad.to_bits(), Ordering::Relaxed);
-                act
-            };
+            }
             let mut frame = actuation_frame(est.seq, &act, fault, ticks);
             frame.release_us = release_us;
             frame.sent_us = sent_us;
