@@ -218,10 +218,7 @@ impl Link {
                 rx_pos: 0,
                 rejected: 0,
             },
-            RouteLink {
-                fd: route,
-                reader: FrameReader::new(),
-            },
+            RouteLink { fd: route },
         ))
     }
 
@@ -266,23 +263,25 @@ impl Link {
 /// read by the plan task (one byte at a time: they are few).
 pub struct RouteLink {
     fd: usize,
-    reader: FrameReader<MAX_DOWN_FRAME_BYTES>,
 }
 
 impl RouteLink {
     /// Reads `frames` frames of the road into `staging` (refused ones are counted
     /// in [`ROUTE_REJECTED`]); stops early when the host closed the channel. Not
     /// inlined: its decoded frame lives on the stack only while it runs, not beside
-    /// the MPC step's frames in the plan task's.
+    /// the MPC step's frames in the plan task's. Its frame buffer is on the stack
+    /// too (no static RAM): the host writes whole frames and announces them, so
+    /// no frame is left half read between two calls.
     #[inline(never)]
     fn receive(&mut self, frames: u32, staging: &mut Staging) {
+        let mut reader: FrameReader<MAX_DOWN_FRAME_BYTES> = FrameReader::new();
         let mut left = frames;
         let mut byte = [0u8; 1];
         while left > 0 {
             if sh_read(self.fd, &mut byte) == 0 {
                 return;
             }
-            let ok = match self.reader.push(byte[0]) {
+            let ok = match reader.push(byte[0]) {
                 None => continue,
                 Some(Ok(frame)) => match link::decode::<Down>(frame) {
                     Ok(Down::PathChunk(c)) => staging.chunk(&c),
@@ -768,9 +767,9 @@ fn safe_stop(fault: u8) -> ! {
     let err = ERR_FD.load(Ordering::Relaxed);
     if err != 0 {
         let line: &[u8] = if fault == link::FAULT_HARDFAULT {
-            b"ecu: HardFault: zero torque, steering held; stopped\n"
+            b"ecu: HardFault: safe stop\n"
         } else {
-            b"ecu: panic: zero torque, steering held; stopped\n"
+            b"ecu: panic: safe stop\n"
         };
         sh_write(err, line);
     }
