@@ -16,13 +16,14 @@
 //! inputs held over a step, so the actuation takes effect at the first plant step
 //! at or after its send instant rounded down to the step grid, i.e. from the step
 //! during which it was sent, `⌊sent / step⌋·step` (never before the release it
-//! answers), and is held until the next one takes effect. An answer sent within the first plant step after its release (every
-//! answer of an ECU meeting its deadlines at 168 MHz: about 60 µs) acts at the
-//! release, so on-time answers give the same trajectory as before; a late answer
-//! acts late. Every 100 ms the `plan` task is
-//! released on the state at its release (after `control`, which has the higher
-//! priority, ran at the same instant). How long it runs and when its plan is
-//! published is the ECU's to say ([`SimulatedEcu`]: see [`crate::ecu`]).
+//! answers), and is held until the next one takes effect. An answer sent within
+//! the first plant step after its release (every answer of the ECU at 168 MHz in
+//! PIL: at most 0.1 ms, the first 0.58 ms) acts at the release, so on-time answers
+//! give the same trajectory as before; a late answer acts late. Every 100 ms the
+//! `plan` task is released on the state at its release (after `control`, which
+//! has the higher priority, ran at the same instant). How long it runs and when
+//! its plan is published is the ECU's to say ([`SimulatedEcu`]: see
+//! [`crate::ecu`]).
 //!
 //! # Deadlines and budgets
 //!

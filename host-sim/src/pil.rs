@@ -210,6 +210,8 @@ pub struct QemuEcu {
     plan_counts: crate::ecu::EcuTaskCounts,
     /// Budget overruns on the ECU's clock, counted by the host from the ticks.
     pub tick_overruns: TickOverruns,
+    /// The ECU's own counts in the last actuation frame (response times included).
+    pub ecu_counts: Option<crate::ecu::EcuCounts>,
 }
 
 impl Drop for QemuEcu {
@@ -371,6 +373,7 @@ impl QemuEcu {
             last_release_us: None,
             plan_counts: Default::default(),
             tick_overruns: TickOverruns::default(),
+            ecu_counts: None,
         };
         ecu.set_up(scenario, vehicle, sim)?;
         Ok(ecu)
@@ -702,16 +705,17 @@ impl Ecu<f32> for QemuEcu {
             None => 0,
         };
         self.last_release_us = Some(frame.release_us);
+        self.ecu_counts = Some(crate::ecu::EcuCounts {
+            plan: self.plan_counts,
+            control: frame.control.into(),
+            watchdog_trips: frame.watchdog_trips.into(),
+        });
         Ok(ControlOutput {
             actuation: actuation_of(&frame),
             release_us: frame.release_us,
             sent_us: frame.sent_us,
             control_skipped_releases,
-            ecu_counts: Some(crate::ecu::EcuCounts {
-                plan: self.plan_counts,
-                control: frame.control.into(),
-                watchdog_trips: frame.watchdog_trips.into(),
-            }),
+            ecu_counts: self.ecu_counts,
             instructions,
             cycles: instructions * self.opts.cycles_per_instruction,
             plans,
@@ -828,8 +832,12 @@ pub struct PilReport {
     /// ticks), beside the ECU's own (`summary.json`'s `ecu_*_budget_overruns`).
     pub tick_overruns: TickOverruns,
     /// Where the ECU's own deadline counts differ from the host's (empty: they
-    /// agree; `host-sim pil` then fails).
+    /// agree; otherwise `host-sim pil` fails).
     pub count_mismatches: Vec<String>,
+    /// The ECU's own counts at the end of the run, per task: releases, misses,
+    /// skipped releases, budget overruns, largest response time (µs); watchdog
+    /// trips.
+    pub ecu_counts: Option<crate::ecu::EcuCounts>,
     /// Wall time of the PIL run, s.
     pub wall_s: f64,
 }
@@ -967,6 +975,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
     bar.finish_and_clear();
     let counters = ecu.counters;
     let tick_overruns = ecu.tick_overruns;
+    let ecu_counts = ecu.ecu_counts;
     let done = match &result {
         Ok(_) => Some(ecu.stop()?),
         Err(_) => None,
@@ -1019,6 +1028,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
         comparison,
         tick_overruns,
         count_mismatches: count_mismatches(&result.summary, &tick_overruns),
+        ecu_counts,
         wall_s,
     };
     let pil_path = args.run.out.join("pil.json");
@@ -1060,7 +1070,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
     }
     let opt = |x: Option<u64>| x.map_or("-".to_string(), |v| v.to_string());
     println!(
-        "deadlines, ECU's own count / host's: plan misses {} / {}, skipped releases {} / {}, budget overruns (ECU clock) {} / {}; control misses {} / {}, skipped releases {} / {}, budget overruns (ECU clock) {} / {}; watchdog trips {}",
+        "deadlines, ECU's own count / host's: plan misses {} / {}, skipped releases {} / {}, budget overruns (ECU clock) {} / {}; control misses {} / {}, skipped releases {} / {}, budget overruns (ECU clock) {} / {}; watchdog trips {}; largest response times on the ECU: plan {} µs, control {} µs",
         opt(s.ecu_plan_deadline_misses),
         s.plan_deadline_misses,
         opt(s.ecu_skipped_releases),
@@ -1074,6 +1084,8 @@ pub fn run(args: &PilArgs) -> Result<()> {
         opt(s.ecu_control_budget_overruns),
         tick_overruns.control,
         opt(s.ecu_watchdog_trips),
+        opt(ecu_counts.map(|c| c.plan.max_response_us)),
+        opt(ecu_counts.map(|c| c.control.max_response_us)),
     );
     println!(
         "PIL wall time {:.1} s; wrote {}",
