@@ -1,4 +1,4 @@
-//! Memory footprint of the solver at the MPC's sizes.
+//! Memory footprint of the QP solver the MPC uses ([`firmware::mpc::MpcQp`]).
 #![allow(
     missing_docs,
     clippy::unwrap_used,
@@ -7,23 +7,49 @@
     clippy::needless_range_loop
 )]
 
-use firmware::qp::{ldl_len, QpSolver};
+use firmware::mpc::{MpcQp, NC, NV, WS};
+use firmware::qp::ldl_len;
 
-/// The MPC's configuration: N = 32 variables, M = 96 rows, W = 48 working set, f32.
-type MpcQp = QpSolver<f32, 32, 96, 48, { ldl_len(48) }>;
+/// The MPC's solver in f32: N = `NV` = 32 variables, M = `NC` = 80 rows, W = `WS` =
+/// 48 working-set entries.
+type Solver = MpcQp<f32>;
 
-/// Bound on the f32 size, bytes. The problem data alone (H 4096 + A 12288 + bounds,
-/// f and soft weights 1536) is 17 920 B; the packed LDLᵀ of a 48-entry working set is
-/// 4704 B; the rest is vectors of length N, M or W.
-const SIZE_BOUND: usize = 24 * 1024;
+/// f32 values of the solver, by what they hold: the problem (H `NV²` = 1024, A
+/// `NC·NV` = 2560, f, x_lo, x_hi `3·NV` = 96, lo, hi, soft `3·NC` = 240: 3920, that
+/// is 15 680 B), the packed LDLᵀ of the working set (`ldl_len(WS)` = 1176, 4704 B),
+/// the working set's multipliers and scratch (`2·WS` = 96), two vectors of length N
+/// (64) and the solution (x, λ_bounds `2·NV` = 64, λ_rows `NC` = 80): 5400 values,
+/// 21 600 B.
+const F32_VALUES: usize =
+    NV * NV + NC * NV + 3 * NV + 3 * NC + ldl_len(WS) + 2 * WS + 2 * NV + 2 * NV + NC;
 
-static SOLVER: MpcQp = MpcQp::new();
+/// Bytes of the solver's bookkeeping arrays: the working set (6 B an entry: 288 B),
+/// a state byte per variable (readiness, active side: `2·NV` = 64 B) and per row
+/// (active side, transformation code: `2·NC` = 160 B): 512 B.
+const INDEX_BYTES: usize = 6 * WS + 2 * NV + 2 * NC;
+
+/// Allowance for the scalars (settings, counters, the working-set length and row
+/// count as `usize`, status and flags) and padding, bytes. Measured on the host
+/// (64-bit `usize`): 22 200 B in all, 88 B of them scalars and padding.
+const SCALAR_BYTES: usize = 128;
+
+/// Bound on the size, bytes: 21 600 + 512 + 128 = 22 240 B. A field or an array
+/// added to the solver, or the MPC's sizes grown, fails it.
+const SIZE_BOUND: usize = 4 * F32_VALUES + INDEX_BYTES + SCALAR_BYTES;
+
+static SOLVER: Solver = Solver::new();
 
 #[test]
-fn f32_size_for_the_mpc() {
-    let size = core::mem::size_of::<MpcQp>();
-    println!("size_of QpSolver<f32, 32, 96, 48> = {size} bytes");
+fn f32_size_of_the_mpcs_qp_solver() {
+    let size = core::mem::size_of::<Solver>();
+    println!(
+        "size_of MpcQp<f32> (QpSolver<f32, {NV}, {NC}, {WS}>) = {size} bytes, bound {SIZE_BOUND}"
+    );
+    assert_eq!((NV, NC, WS), (32, 80, 48), "the comments' arithmetic");
+    assert_eq!(SIZE_BOUND, 22_240);
     assert!(size <= SIZE_BOUND, "{size} > {SIZE_BOUND}");
+    // The arrays alone are most of it: the bound is not loose.
+    assert!(size >= 4 * F32_VALUES + INDEX_BYTES, "{size}");
     // Usable as a static initialiser.
     assert_eq!(SOLVER.working_set().len(), 0);
 }
