@@ -1,7 +1,10 @@
-//! Worst-case analyses on the real ECU binary `mpc_step` (built by `.ci/ecu-check`
-//! or `cargo build --release -p firmware --target thumbv7em-none-eabihf --features ecu
-//! --bin mpc_step`). Each test says why it skips when the binary, `llvm-objdump`
-//! (`rustup component add llvm-tools`) or the QEMU log is absent.
+//! Worst-case analyses on the real ECU binary `mpc_step`. The tests that read it are
+//! ignored by `cargo test` and fail when it is missing: build it first (`.ci/ecu-check`
+//! does, or `cargo build --release -p firmware --target thumbv7em-none-eabihf
+//! --features ecu --bin mpc_step`), then `cargo test -p host-sim --test wcet_ecu --
+//! --ignored --skip cpi_bound_of_a_qemu_log` (as `.ci/run` does). They also need
+//! `llvm-objdump` (`rustup component add llvm-tools`). `cpi_bound_of_a_qemu_log` is
+//! run by hand on a QEMU log.
 #![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::path::PathBuf;
@@ -9,33 +12,40 @@ use std::path::PathBuf;
 use host_sim::wcet::cpi::{analyse_log, elf_functions, Region};
 use host_sim::wcet::stack::{analyse_elf, llvm_objdump_path, PriorityLevel};
 
-/// `WCET_ELF`, or `mpc_step` in the workspace's target directory.
-fn mpc_step() -> Option<PathBuf> {
-    let path = std::env::var_os("WCET_ELF")
+/// How to build `mpc_step`.
+const BUILD: &str =
+    "cargo build --release -p firmware --target thumbv7em-none-eabihf --features ecu --bin mpc_step";
+
+/// `WCET_ELF`, or `mpc_step` in the workspace's target directory (which may not
+/// exist).
+fn mpc_step_path() -> PathBuf {
+    std::env::var_os("WCET_ELF")
         .map(PathBuf::from)
         .unwrap_or_else(|| {
             let target = std::env::var_os("CARGO_TARGET_DIR")
                 .map(PathBuf::from)
                 .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target"));
             target.join("thumbv7em-none-eabihf/release/mpc_step")
-        });
-    if path.is_file() {
-        Some(path)
-    } else {
-        eprintln!(
-            "skipped: {} not built (cargo build --release -p firmware --target thumbv7em-none-eabihf --features ecu --bin mpc_step)",
-            path.display()
-        );
-        None
-    }
+        })
+}
+
+/// The `mpc_step` binary; fails when it has not been built.
+fn mpc_step() -> PathBuf {
+    let path = mpc_step_path();
+    assert!(
+        path.is_file(),
+        "the ECU binary {} is missing: build it first ({BUILD})",
+        path.display()
+    );
+    path
 }
 
 #[test]
+#[ignore = "needs the ECU binary mpc_step (cargo build --release -p firmware --target thumbv7em-none-eabihf --features ecu --bin mpc_step) and llvm-objdump; .ci/run runs it"]
 fn stack_bound_of_mpc_step_main() {
-    let Some(elf) = mpc_step() else { return };
+    let elf = mpc_step();
     if let Err(e) = llvm_objdump_path() {
-        eprintln!("skipped: {e}");
-        return;
+        panic!("llvm-objdump is needed: {e}");
     }
     let levels = [
         PriorityLevel {
@@ -75,26 +85,28 @@ fn stack_bound_of_mpc_step_main() {
 
 /// Run by hand on a log written by
 /// `qemu-system-arm ... -d in_asm,exec,nochain -D LOG -kernel mpc_step`:
-/// `WCET_QEMU_LOG=LOG cargo test -p host-sim --test wcet_ecu -- --nocapture`.
+/// `WCET_QEMU_LOG=LOG cargo test -p host-sim --test wcet_ecu -- --ignored --exact
+/// cpi_bound_of_a_qemu_log --nocapture` (regions of `mpc_step` when it is built).
 #[test]
+#[ignore = "by hand: needs WCET_QEMU_LOG, a qemu-system-arm -d in_asm,exec,nochain log"]
 fn cpi_bound_of_a_qemu_log() {
-    let Some(log) = std::env::var_os("WCET_QEMU_LOG").map(PathBuf::from) else {
-        eprintln!("skipped: set WCET_QEMU_LOG to a qemu-system-arm -d in_asm,exec,nochain log");
-        return;
-    };
+    let log = std::env::var_os("WCET_QEMU_LOG")
+        .map(PathBuf::from)
+        .expect("set WCET_QEMU_LOG to a qemu-system-arm -d in_asm,exec,nochain log");
     let limit = std::env::var("WCET_MAX_TBS")
         .ok()
         .and_then(|s| s.parse().ok());
-    let regions = match mpc_step() {
-        Some(elf) => {
-            let symbols = elf_functions(&elf).expect("reading the ELF symbols");
-            vec![
-                Region::from_prefix(&symbols, "firmware::"),
-                Region::from_prefix(&symbols, "firmware::mpc::"),
-                Region::from_prefix(&symbols, "firmware::qp::"),
-            ]
-        }
-        None => Vec::new(),
+    let elf = mpc_step_path();
+    let regions = if elf.is_file() {
+        let symbols = elf_functions(&elf).expect("reading the ELF symbols");
+        vec![
+            Region::from_prefix(&symbols, "firmware::"),
+            Region::from_prefix(&symbols, "firmware::mpc::"),
+            Region::from_prefix(&symbols, "firmware::qp::"),
+        ]
+    } else {
+        eprintln!("{} not built: no regions", elf.display());
+        Vec::new()
     };
     let file = std::fs::File::open(&log).expect("opening the log");
     let started = std::time::Instant::now();
