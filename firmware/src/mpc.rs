@@ -85,6 +85,13 @@ pub const MAX_OBSTACLE_ROWS: usize = 32;
 pub const NC: usize = ROWS_PER_NODE * HORIZON + MAX_OBSTACLE_ROWS;
 /// Working-set capacity of the QP solver.
 pub const WS: usize = 48;
+/// QP iterations one activation may run, summed over its passes
+/// ([`MpcSettings::qp_max_iter`] of [`MpcSettings::paper`], the ECU's settings):
+/// the flow fact that bounds the plan task's worst case.
+pub const QP_MAX_ITER: u32 = 90;
+/// Linearise–solve passes on a cold start ([`MpcSettings::cold_start_iterations`]
+/// of [`MpcSettings::paper`]).
+pub const COLD_START_PASSES: u8 = 3;
 
 /// The QP solver sized for the MPC.
 pub type MpcQp<T> = QpSolver<T, NV, NC, WS, { ldl_len(WS) }>;
@@ -284,12 +291,12 @@ impl<T: Real> MpcSettings<T> {
                 ..VelocityPlannerSettings::default()
             },
             steering_reference: SteeringReference::PathCurvature,
-            cold_start_iterations: 3,
+            cold_start_iterations: COLD_START_PASSES,
             // The closed-loop laps need at most 22 per activation, the harshest
             // tests (obstacles across the road, cold starts) up to ~60 for the first
             // pass; 90 keeps the plan task's worst case (`host-sim wcet`: 3 passes
             // and 90 iterations at the largest working set) within its budget.
-            qp_max_iter: 90,
+            qp_max_iter: QP_MAX_ITER,
         }
     }
 

@@ -47,6 +47,9 @@ use crate::Real;
 
 /// Period of the `control` task, µs.
 pub const CONTROL_PERIOD_US: u64 = 10_000;
+/// Rows of the window of the road the ECU holds (its `PlanTask`'s path capacity;
+/// the simulator sends the next window as the car moves on).
+pub const ECU_PATH_ROWS: usize = 320;
 /// Period of the `plan` task, µs.
 pub const PLAN_PERIOD_US: u64 = 100_000;
 /// Weight of the newest value in the plan task's low-pass filter of the yaw

@@ -13,7 +13,7 @@ use anyhow::{bail, Result};
 use crate::track::Track;
 
 /// Rows of a window: the ECU's path capacity.
-pub const WINDOW_ROWS: usize = 320;
+pub const WINDOW_ROWS: usize = firmware::tasks::ECU_PATH_ROWS;
 /// Road kept behind the car at the start of a window, m.
 pub const BEHIND_M: f64 = 40.0;
 /// Distance the car drives into a window before the next one is sent, m.

@@ -73,7 +73,7 @@ use rtic_monotonics::systick::prelude::*;
 /// Rows of the window of the road the ECU holds (not the whole circuit: its RAM
 /// does not grow with the track; the simulator sends the next window as the car
 /// moves on).
-pub const PATH_CAP: usize = 320;
+pub const PATH_CAP: usize = firmware::tasks::ECU_PATH_ROWS;
 /// Core clock, Hz (STM32F405 at 168 MHz; QEMU's SysTick counts at this rate of
 /// virtual time).
 pub const SYSCLK_HZ: u32 = 168_000_000;

@@ -8,10 +8,11 @@
 //! entries, no header to bound), an indirect call no rule resolves, a recursion.
 //! A task with any of these gets no bound, and the reasons are listed.
 
+use super::cfg::Function;
 use super::cfg::{self, IndirectTargets, MemoryModel, Program};
 use super::ipet::{self, Cost, LoopFact, Per};
 use super::loops::{self, reverse_post_order, Loop};
-use super::{bounds, demangle};
+use super::{annotations, bounds, demangle};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -63,8 +64,13 @@ pub struct LoopEntry {
     pub line: u32,
     /// Most back edges per entry, if known.
     pub bound: Option<u64>,
-    /// Where the bound comes from (`binary` for a recognised counted loop).
+    /// Where the bound comes from: `binary` for a recognised counted loop, else
+    /// the annotation (`file:line: expression`).
     pub source: Option<String>,
+    /// Why the binary's shape was not recognised (for a loop without a bound).
+    pub why_unbounded: Option<String>,
+    /// An irreducible cycle (several entries), bounded by its edges into them.
+    pub irreducible: bool,
     /// Largest back edges per entry seen in a QEMU trace (`null` until checked).
     pub observed_max: Option<u64>,
 }
@@ -144,7 +150,7 @@ fn short_path(file: &str) -> String {
 }
 
 /// Runs the analysis on `elf`.
-pub fn analyse(elf: &Path) -> Result<StaticAnalysis> {
+pub fn analyse(elf: &Path, firmware_src: &Path) -> Result<StaticAnalysis> {
     let text = super::stack::disassemble_with_bytes(elf)?;
     let raw = cfg::parse_disassembly(&text);
     let memory = MemoryModel::STM32F405;
@@ -163,16 +169,85 @@ pub fn analyse(elf: &Path) -> Result<StaticAnalysis> {
             }
         }
     }
+    // Bounds: recognised from the binary, else the source's annotation at the
+    // loop's line (DWARF), refused when a nested loop would share its parent's.
+    let annotations = annotations::scan_firmware(firmware_src)
+        .map_err(|e| anyhow::anyhow!("loop annotations in {}: {e}", firmware_src.display()))?;
+    let by_line: BTreeMap<(String, u32), &annotations::Annotation> = annotations
+        .iter()
+        .map(|a| ((a.file.clone(), a.line), a))
+        .collect();
     let mut facts: Vec<LoopFact> = Vec::new();
+    let mut origin: BTreeMap<(usize, usize), String> = BTreeMap::new();
+    let mut notes: BTreeMap<(usize, usize), String> = BTreeMap::new();
     for (k, ls) in all_loops.iter().enumerate() {
+        let func = &program.functions[k];
+        let mut matched: Vec<Option<(String, u32)>> = vec![None; ls.len()];
         for (x, l) in ls.iter().enumerate() {
-            if let Some(b) = bounds::constant_bound(&program.functions[k], l) {
-                facts.push(LoopFact {
-                    function: k,
-                    loop_index: x,
-                    bound: b,
-                    per: Per::Entry,
-                });
+            if !l.irreducible {
+                if let Some(b) = bounds::constant_bound(func, l) {
+                    facts.push(LoopFact {
+                        function: k,
+                        loop_index: x,
+                        bound: b,
+                        per: Per::Entry,
+                    });
+                    origin.insert((k, x), "binary".into());
+                    continue;
+                }
+            }
+            let hit = candidate_addresses(func, l)
+                .into_iter()
+                .map(|a| {
+                    let (file, line) = location(&ctx, a);
+                    (short_path(&file), line)
+                })
+                .find(|key| by_line.contains_key(key));
+            let Some(key) = hit else {
+                notes.insert((k, x), bounds::why_not(func, l));
+                continue;
+            };
+            matched[x] = Some(key.clone());
+            let a = by_line[&key];
+            facts.push(LoopFact {
+                function: k,
+                loop_index: x,
+                bound: a.bound,
+                per: match a.scope {
+                    annotations::Scope::Entry => Per::Entry,
+                    annotations::Scope::Activation => Per::Activation,
+                },
+            });
+            origin.insert(
+                (k, x),
+                format!(
+                    "{}:{}: `{}`{}",
+                    a.file,
+                    a.line,
+                    a.expression,
+                    if a.scope == annotations::Scope::Activation {
+                        " per activation"
+                    } else {
+                        ""
+                    }
+                ),
+            );
+        }
+        // A loop nested in a loop matched to the same annotation has none of its own.
+        for (x, l) in ls.iter().enumerate() {
+            let mut p = l.parent;
+            while let Some(q) = p {
+                if matched[x].is_some() && matched[x] == matched[q] {
+                    facts.retain(|f| !(f.function == k && f.loop_index == x));
+                    origin.remove(&(k, x));
+                    notes.insert(
+                        (k, x),
+                        "nested in a loop with the same annotation: annotate it on its own line"
+                            .into(),
+                    );
+                    break;
+                }
+                p = ls[q].parent;
             }
         }
     }
@@ -234,7 +309,9 @@ pub fn analyse(elf: &Path) -> Result<StaticAnalysis> {
                         file: short_path(&file),
                         line,
                         bound: fact.map(|q| q.bound),
-                        source: fact.map(|_| "binary".to_string()),
+                        source: origin.get(&(f, x)).cloned(),
+                        why_unbounded: notes.get(&(f, x)).cloned(),
+                        irreducible: l.irreducible,
                         observed_max: None,
                     }
                 });
@@ -375,4 +452,30 @@ impl StaticAnalysis {
             .with_context(|| format!("writing {}", dir.join("static.md").display()))?;
         Ok(())
     }
+}
+
+/// Addresses whose source line may carry a loop's annotation, most telling first:
+/// each back edge's branch, the header's first instruction, then the other
+/// instructions of the latches and the header.
+fn candidate_addresses(f: &Function, l: &Loop) -> Vec<u32> {
+    let mut out = Vec::new();
+    let block_insns = |b: usize| {
+        f.blocks
+            .get(b)
+            .map(|blk| &f.instructions[blk.first..blk.end])
+            .unwrap_or(&[])
+    };
+    for &(t, _) in &l.back_edges {
+        if let Some(i) = block_insns(t).last() {
+            out.push(i.address);
+        }
+    }
+    if let Some(i) = block_insns(l.header).first() {
+        out.push(i.address);
+    }
+    for &(t, _) in &l.back_edges {
+        out.extend(block_insns(t).iter().rev().map(|i| i.address));
+    }
+    out.extend(block_insns(l.header).iter().map(|i| i.address));
+    out
 }

@@ -443,6 +443,32 @@ pub fn constant_bound(f: &Function, l: &Loop) -> Option<u64> {
     None
 }
 
+/// Why a loop is not recognised as counted (for the report and for annotating it).
+pub fn why_not(f: &Function, l: &Loop) -> String {
+    if l.back_edges.len() != 1 {
+        return format!("{} back edges", l.back_edges.len());
+    }
+    if l.entry_edges.len() != 1 {
+        return format!("{} entries", l.entry_edges.len());
+    }
+    let (latch, header) = l.back_edges[0];
+    let lb = &f.blocks[latch];
+    let Some(branch) = lb.end.checked_sub(1).and_then(|x| f.instructions.get(x)) else {
+        return "empty latch".into();
+    };
+    if branch.target != Some(f.blocks[header].start) || condition(branch).is_none() {
+        return format!("latch ends in `{} {}`", branch.mnemonic, branch.operands);
+    }
+    let flagger = f.instructions[lb.first..lb.end - 1]
+        .iter()
+        .rev()
+        .find(|i| sets_flags(i));
+    match flagger {
+        None => "no compare in the latch".into(),
+        Some(i) => format!("counter of `{} {}` not recognised", i.mnemonic, i.operands),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -47,6 +47,10 @@ pub struct WcetArgs {
     /// Relative growth allowed against --expected.
     #[arg(long, default_value_t = 0.05)]
     pub margin: f64,
+    /// The firmware's sources, where the loop annotations (`// wcet-bound:`) are
+    /// read.
+    #[arg(long, default_value = "firmware/src")]
+    pub firmware_src: PathBuf,
     /// Only the static analysis of the ELF (control-flow graphs, loops, IPET):
     /// writes `static.json` and `static.md`, runs no PIL lap.
     #[arg(long)]
@@ -284,7 +288,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
 /// The static analysis of the ELF (control-flow graphs, loops, IPET), written as
 /// `static.json` and `static.md`, with a line per task.
 fn static_analysis(args: &WcetArgs) -> Result<()> {
-    let analysis = crate::wcet::analysis::analyse(&args.elf)
+    let analysis = crate::wcet::analysis::analyse(&args.elf, &args.firmware_src)
         .with_context(|| format!("static analysis of {}", args.elf.display()))?;
     analysis.write(&args.out)?;
     for t in &analysis.tasks {

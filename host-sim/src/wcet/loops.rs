@@ -24,6 +24,10 @@ pub struct Loop {
     pub entry_edges: Vec<(usize, usize)>,
     /// The innermost loop containing this one (index into the function's loops).
     pub parent: Option<usize>,
+    /// An irreducible cycle (several entry blocks): `header` is its first entry
+    /// block, `back_edges` every edge from inside the cycle to one of its entry
+    /// blocks, `entry_edges` every edge from outside into it.
+    pub irreducible: bool,
 }
 
 /// Blocks reachable from the entry, in reverse post-order.
@@ -151,13 +155,50 @@ pub fn natural_loops(f: &Function) -> Result<Vec<Loop>, Vec<usize>> {
             back_edges: backs,
             entry_edges,
             parent: None,
+            irreducible: false,
         });
     }
-    // Irreducible cycles: a cycle left after removing every back edge.
-    let back: BTreeSet<(usize, usize)> = loops
+    // Irreducible cycles: strongly connected parts left after removing every back
+    // edge. Each becomes a loop whose "back edges" are the edges into its entry
+    // blocks from inside; if cycles remain without them, the graph is refused.
+    let mut back: BTreeSet<(usize, usize)> = loops
         .iter()
         .flat_map(|l| l.back_edges.iter().copied())
         .collect();
+    for region in cyclic_regions(f, &reachable, &back) {
+        let set: BTreeSet<usize> = region.iter().copied().collect();
+        let mut entries: BTreeSet<usize> = BTreeSet::new();
+        let mut entry_edges = Vec::new();
+        for &b in &region {
+            for &p in &preds[b] {
+                if reachable.contains(&p) && !set.contains(&p) && !back.contains(&(p, b)) {
+                    entries.insert(b);
+                    entry_edges.push((p, b));
+                }
+            }
+            if b == 0 {
+                entries.insert(0);
+                entry_edges.push((usize::MAX, 0));
+            }
+        }
+        let mut pseudo: Vec<(usize, usize)> = Vec::new();
+        for &b in &region {
+            for &s in &f.blocks[b].successors {
+                if entries.contains(&s) && !back.contains(&(b, s)) {
+                    pseudo.push((b, s));
+                }
+            }
+        }
+        back.extend(pseudo.iter().copied());
+        loops.push(Loop {
+            header: entries.iter().next().copied().unwrap_or(region[0]),
+            blocks: region,
+            back_edges: pseudo,
+            entry_edges,
+            parent: None,
+            irreducible: true,
+        });
+    }
     if let Some(cycle) = forward_cycle(f, &reachable, &back) {
         return Err(cycle);
     }
@@ -221,4 +262,73 @@ fn forward_cycle(
             .filter(|&b| indegree[b] > 0)
             .collect()
     })
+}
+
+/// Strongly connected regions with a cycle, of the graph without the `back`
+/// edges (Tarjan's algorithm, iterative).
+fn cyclic_regions(
+    f: &Function,
+    reachable: &BTreeSet<usize>,
+    back: &BTreeSet<(usize, usize)>,
+) -> Vec<Vec<usize>> {
+    let n = f.blocks.len();
+    let succ = |b: usize| -> Vec<usize> {
+        f.blocks[b]
+            .successors
+            .iter()
+            .copied()
+            .filter(|&s| reachable.contains(&s) && !back.contains(&(b, s)))
+            .collect()
+    };
+    let mut index = vec![usize::MAX; n];
+    let mut low = vec![0usize; n];
+    let mut on = vec![false; n];
+    let mut st: Vec<usize> = Vec::new();
+    let mut next = 0;
+    let mut out = Vec::new();
+    for &r in reachable {
+        if index[r] != usize::MAX {
+            continue;
+        }
+        index[r] = next;
+        low[r] = next;
+        next += 1;
+        st.push(r);
+        on[r] = true;
+        let mut work: Vec<(usize, Vec<usize>)> = vec![(r, succ(r))];
+        while let Some((v, mut rest)) = work.pop() {
+            if let Some(w) = rest.pop() {
+                work.push((v, rest));
+                if index[w] == usize::MAX {
+                    index[w] = next;
+                    low[w] = next;
+                    next += 1;
+                    st.push(w);
+                    on[w] = true;
+                    work.push((w, succ(w)));
+                } else if on[w] {
+                    low[v] = low[v].min(index[w]);
+                }
+                continue;
+            }
+            if let Some(p) = work.last().map(|w| w.0) {
+                low[p] = low[p].min(low[v]);
+            }
+            if low[v] == index[v] {
+                let mut comp = Vec::new();
+                while let Some(w) = st.pop() {
+                    on[w] = false;
+                    comp.push(w);
+                    if w == v {
+                        break;
+                    }
+                }
+                if comp.len() > 1 || succ(v).contains(&v) {
+                    comp.sort_unstable();
+                    out.push(comp);
+                }
+            }
+        }
+    }
+    out
 }

@@ -5,6 +5,7 @@
 //! | [`cfg`] | control-flow graphs from the Thumb-2 disassembly; per-block worst-case cycles under a stated memory model |
 //! | [`loops`] | dominators and natural loops; irreducible cycles refused |
 //! | [`bounds`] | loop bounds recognised from the binary (counted loops) |
+//! | [`annotations`] | loop bounds written beside the loops in the firmware source (`// wcet-bound: EXPR`), matched through the DWARF line table |
 //! | [`ipet`] | implicit path enumeration: a task's bound as a linear program (`good_lp`, `microlp`) |
 //! | [`rta`] | response-time analysis, fixed priorities with RTIC's stack resource policy |
 //! | [`analysis`] | the static analysis put together (`static.json`, `static.md`) |
@@ -16,6 +17,7 @@
 //! All are library functions; the `host-sim wcet` command wires them together.
 
 pub mod analysis;
+pub mod annotations;
 pub mod bounds;
 pub mod cfg;
 pub mod command;

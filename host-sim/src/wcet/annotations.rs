@@ -1,0 +1,285 @@
+//! Loop bounds written beside the loops in the firmware's source, as expressions
+//! of the firmware's own constants, matched to the binary's loops through the
+//! DWARF line table.
+//!
+//! ```text
+//! // wcet-bound: HORIZON
+//! for k in 0..HORIZON {
+//!
+//! while i < m { // wcet-bound: NC
+//!
+//! // wcet-bound: QP_MAX_ITER per activation
+//! loop {
+//! ```
+//!
+//! The expression bounds the loop's iterations per entry (or, with `per
+//! activation`, over the task's whole activation: a cap that spans the loop's
+//! entries, such as the QP iterations summed over the MPC's passes); a loop of
+//! `n` iterations takes its back edge at most `n` times, so the expression is also
+//! the bound on back edges. It is made of integer literals, the names in
+//! [`firmware_constants`], `+ - * /` (integer division rounding up) and
+//! parentheses. A comment alone on its line applies to the next line of code; a
+//! comment after code applies to its own line.
+//!
+//! A binary loop is matched by the source line of its back-edge branch, else of
+//! the first instruction of its header, else of the other instructions of those
+//! two blocks (each the innermost frame in the firmware's own sources, inlining
+//! followed). A loop nested in another loop matched to the same annotation is
+//! refused: it needs its own.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// What an annotation bounds against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum Scope {
+    /// Iterations per entry of the loop.
+    Entry,
+    /// Iterations over one activation of the task.
+    Activation,
+}
+
+/// One `// wcet-bound:` annotation.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct Annotation {
+    /// The file, relative to the workspace (`firmware/src/mpc.rs`).
+    pub file: String,
+    /// The 1-based line of the loop it annotates.
+    pub line: u32,
+    /// The expression as written.
+    pub expression: String,
+    /// Its value.
+    pub bound: u64,
+    /// Per entry or per activation.
+    pub scope: Scope,
+}
+
+/// The firmware's constants an annotation may name, with their values (read from
+/// the firmware crate itself, so they cannot drift from the code).
+pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
+    use firmware::{link, mpc, obstacles, plan, tasks};
+    BTreeMap::from([
+        ("HORIZON", plan::HORIZON as u64),
+        ("NX", firmware::bicycle::NX as u64),
+        ("NU", firmware::bicycle::NU as u64),
+        ("NV", mpc::NV as u64),
+        ("NC", mpc::NC as u64),
+        ("WS", mpc::WS as u64),
+        ("ROWS_PER_NODE", mpc::ROWS_PER_NODE as u64),
+        ("MAX_OBSTACLE_ROWS", mpc::MAX_OBSTACLE_ROWS as u64),
+        ("QP_MAX_ITER", u64::from(mpc::QP_MAX_ITER)),
+        ("COLD_START_PASSES", u64::from(mpc::COLD_START_PASSES)),
+        ("MAX_OBSTACLES", obstacles::MAX_OBSTACLES as u64),
+        ("MAX_VERTICES", obstacles::MAX_VERTICES as u64),
+        ("ECU_PATH_ROWS", tasks::ECU_PATH_ROWS as u64),
+        ("PATH_CHUNK_ROWS", link::PATH_CHUNK_ROWS as u64),
+        ("MAX_FRAME_BYTES", link::MAX_FRAME_BYTES as u64),
+        ("TORQUE_HISTORY", firmware::friction::TORQUE_HISTORY as u64),
+    ])
+}
+
+/// Evaluates an annotation's expression.
+pub fn evaluate(expr: &str, constants: &BTreeMap<&'static str, u64>) -> Result<u64, String> {
+    #[derive(Debug, Clone, PartialEq)]
+    enum Tok {
+        Num(u64),
+        Op(char),
+    }
+    let mut toks = Vec::new();
+    let chars: Vec<char> = expr.chars().collect();
+    let mut i = 0;
+    while i < chars.len() {
+        let c = chars[i];
+        if c.is_whitespace() {
+            i += 1;
+        } else if c.is_ascii_digit() {
+            let start = i;
+            while i < chars.len() && (chars[i].is_ascii_digit() || chars[i] == '_') {
+                i += 1;
+            }
+            let s: String = chars[start..i].iter().filter(|&&c| c != '_').collect();
+            toks.push(Tok::Num(s.parse().map_err(|e| format!("`{s}`: {e}"))?));
+        } else if c.is_ascii_alphabetic() || c == '_' {
+            let start = i;
+            while i < chars.len() && (chars[i].is_ascii_alphanumeric() || chars[i] == '_') {
+                i += 1;
+            }
+            let name: String = chars[start..i].iter().collect();
+            let v = constants.get(name.as_str()).ok_or_else(|| {
+                format!(
+                    "unknown constant `{name}` (known: {})",
+                    constants.keys().copied().collect::<Vec<_>>().join(", ")
+                )
+            })?;
+            toks.push(Tok::Num(*v));
+        } else if "+-*/()".contains(c) {
+            toks.push(Tok::Op(c));
+            i += 1;
+        } else {
+            return Err(format!("unexpected `{c}` in `{expr}`"));
+        }
+    }
+    // Shunting-yard to reverse Polish notation, then evaluation.
+    let prec = |c: char| if c == '+' || c == '-' { 1 } else { 2 };
+    let mut out: Vec<Tok> = Vec::new();
+    let mut ops: Vec<char> = Vec::new();
+    for t in toks {
+        match t {
+            Tok::Num(_) => out.push(t),
+            Tok::Op('(') => ops.push('('),
+            Tok::Op(')') => loop {
+                match ops.pop() {
+                    Some('(') => break,
+                    Some(o) => out.push(Tok::Op(o)),
+                    None => return Err(format!("unbalanced `)` in `{expr}`")),
+                }
+            },
+            Tok::Op(o) => {
+                while let Some(&top) = ops.last() {
+                    if top != '(' && prec(top) >= prec(o) {
+                        out.push(Tok::Op(top));
+                        ops.pop();
+                    } else {
+                        break;
+                    }
+                }
+                ops.push(o);
+            }
+        }
+    }
+    while let Some(o) = ops.pop() {
+        if o == '(' {
+            return Err(format!("unbalanced `(` in `{expr}`"));
+        }
+        out.push(Tok::Op(o));
+    }
+    let mut stack: Vec<u64> = Vec::new();
+    for t in out {
+        match t {
+            Tok::Num(v) => stack.push(v),
+            Tok::Op(o) => {
+                let (Some(b), Some(a)) = (stack.pop(), stack.pop()) else {
+                    return Err(format!("malformed expression `{expr}`"));
+                };
+                stack.push(
+                    match o {
+                        '+' => a.checked_add(b),
+                        '-' => a.checked_sub(b),
+                        '*' => a.checked_mul(b),
+                        _ => (b != 0).then(|| a.div_ceil(b)),
+                    }
+                    .ok_or_else(|| format!("`{expr}` overflows, goes negative or divides by 0"))?,
+                );
+            }
+        }
+    }
+    match stack.as_slice() {
+        [v] => Ok(*v),
+        _ => Err(format!("malformed expression `{expr}`")),
+    }
+}
+
+/// The marker of an annotation comment.
+pub const MARKER: &str = "// wcet-bound:";
+
+/// Parses the annotations of one source file's text (`file` as it is reported).
+pub fn parse_source(
+    file: &str,
+    text: &str,
+    constants: &BTreeMap<&'static str, u64>,
+) -> Result<Vec<Annotation>, String> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = Vec::new();
+    for (k, line) in lines.iter().enumerate() {
+        let Some(pos) = line.find(MARKER) else {
+            continue;
+        };
+        let spec = line[pos + MARKER.len()..].trim();
+        let (expr, scope) = match spec.strip_suffix("per activation") {
+            Some(e) => (e.trim(), Scope::Activation),
+            None => (spec, Scope::Entry),
+        };
+        let bound = evaluate(expr, constants).map_err(|e| format!("{file}:{}: {e}", k + 1))?;
+        let alone = line[..pos].trim().is_empty();
+        let target = if alone {
+            // The next line that is neither blank nor a comment.
+            (k + 1..lines.len())
+                .find(|&j| {
+                    let t = lines[j].trim();
+                    !t.is_empty() && !t.starts_with("//") && !t.starts_with("#[")
+                })
+                .ok_or_else(|| format!("{file}:{}: annotation before no code", k + 1))?
+        } else {
+            k
+        };
+        out.push(Annotation {
+            file: file.to_string(),
+            line: target as u32 + 1,
+            expression: expr.to_string(),
+            bound,
+            scope,
+        });
+    }
+    Ok(out)
+}
+
+/// The annotations of every `.rs` file under `firmware_src` (the firmware crate's
+/// `src`), files reported as `firmware/src/...`.
+pub fn scan_firmware(firmware_src: &Path) -> Result<Vec<Annotation>, String> {
+    let constants = firmware_constants();
+    let mut files: Vec<PathBuf> = Vec::new();
+    let mut dirs = vec![firmware_src.to_path_buf()];
+    while let Some(d) = dirs.pop() {
+        let entries = std::fs::read_dir(&d).map_err(|e| format!("{}: {e}", d.display()))?;
+        for e in entries.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                dirs.push(p);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                files.push(p);
+            }
+        }
+    }
+    files.sort();
+    let mut out = Vec::new();
+    for p in files {
+        let text = std::fs::read_to_string(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+        let rel = p
+            .strip_prefix(firmware_src)
+            .map(|r| format!("firmware/src/{}", r.display()))
+            .unwrap_or_else(|_| p.display().to_string());
+        out.extend(parse_source(&rel, &text, &constants)?);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn expressions() {
+        let c = firmware_constants();
+        assert_eq!(evaluate("HORIZON", &c), Ok(16));
+        assert_eq!(evaluate("HORIZON * NU + 1", &c), Ok(33));
+        assert_eq!(evaluate("(HORIZON + 1) * 2", &c), Ok(34));
+        assert_eq!(evaluate("17 / 4", &c), Ok(5));
+        assert!(evaluate("HORIZONS", &c).is_err());
+        assert!(evaluate("1 - 2", &c).is_err());
+        assert!(evaluate("(1 + 2", &c).is_err());
+    }
+
+    #[test]
+    fn comments_apply_to_the_loop_line() {
+        let c = firmware_constants();
+        let text = "fn f() {\n    // wcet-bound: HORIZON\n    for k in 0..HORIZON {\n        while x { // wcet-bound: 3 per activation\n        }\n    }\n}\n";
+        let a = parse_source("firmware/src/x.rs", text, &c).unwrap_or_default();
+        assert_eq!(a.len(), 2);
+        assert_eq!((a[0].line, a[0].bound, a[0].scope), (3, 16, Scope::Entry));
+        assert_eq!(
+            (a[1].line, a[1].bound, a[1].scope),
+            (4, 3, Scope::Activation)
+        );
+        assert!(parse_source("x.rs", "// wcet-bound: NOPE\nloop {}\n", &c).is_err());
+    }
+}
