@@ -567,6 +567,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     ) -> usize {
         let mut k = 0;
         for (d, s) in self.work.ws.iter_mut().zip(set) {
+            // wcet-bound: WS
             *d = s;
             k += 1;
         }
@@ -669,12 +670,14 @@ fn nonfinite_probe<T: Real>(v: &[T]) -> T {
     let chunks = v.chunks_exact(4);
     let rest = chunks.remainder();
     for c in chunks {
+        // wcet-bound: NV / 4
         for (a, &x) in acc.iter_mut().zip(c) {
             *a += x * T::ZERO;
         }
     }
     let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
     for &x in rest {
+        // wcet-bound: 3
         s += x * T::ZERO;
     }
     s
@@ -693,10 +696,12 @@ fn validate<T: Real, const N: usize, const M: usize>(
     let mut probe = nonfinite_probe(&p.f);
     // Only the upper triangle of `H` (or of its factor) is ever read.
     for (j, r) in p.h.iter().enumerate() {
+        // wcet-bound: NV
         probe += nonfinite_probe(r.get(j..).unwrap_or(&[]));
     }
     let full = N - N % 4;
     for (r, code) in rows.iter().zip(row_code.iter_mut()) {
+        // wcet-bound: NC
         // A NaN or ±∞ is nonzero: it lies in the prefix up to the last group of four
         // with a nonzero entry (the rest are zeros), so only that prefix needs the
         // finiteness probe. A group is zero when the sum of its magnitudes is (a NaN
@@ -719,6 +724,7 @@ fn validate<T: Real, const N: usize, const M: usize>(
         bad_bound |= l > h || l == T::INFINITY || h == -T::INFINITY;
     }
     for ((&l, &h), &s) in p.lo.iter().zip(p.hi.iter()).zip(p.soft.iter()).take(p.m) {
+        // wcet-bound: NC
         nan |= is_nan(l) || is_nan(h) || !s.is_finite();
         bad_bound |= l > h || l == T::INFINITY || h == -T::INFINITY || s < T::ZERO;
     }
@@ -738,13 +744,16 @@ fn validate<T: Real, const N: usize, const M: usize>(
 fn prepare_factor<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
     let mut floored = 0u32;
     for j in 0..N {
+        // wcet-bound: NV
         if h[j][j] < T::ZERO {
             for v in h[j].iter_mut().skip(j) {
+                // wcet-bound: NV
                 *v = -*v;
             }
         }
         let mut col = T::ZERO;
         for i in 0..=j {
+            // wcet-bound: NV
             col += h[i][j] * h[i][j];
         }
         let norm = col.sqrt();
@@ -809,10 +818,12 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
     let tiny = T::EPSILON * T::from_usize(N);
     let mut floored = 0u32;
     for j in 0..N {
+        // wcet-bound: NV
         // Column j of R: R[k][j] for k ≤ j, from H[k][j] (upper triangle).
         let mut d = h[j][j];
         let scale = d.abs();
         for k in 0..j {
+            // wcet-bound: NV
             d -= h[k][j] * h[k][j];
         }
         if !d.is_finite() || !(scale > T::ZERO) {
@@ -829,8 +840,10 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
         let rjj = d.sqrt();
         h[j][j] = rjj;
         for i in (j + 1)..N {
+            // wcet-bound: NV
             let mut s = h[j][i];
             for k in 0..j {
+                // wcet-bound: NV
                 s -= h[k][j] * h[k][i];
             }
             h[j][i] = s / rjj;
@@ -846,10 +859,12 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
 /// rows of `R`); zero entries skipped.
 fn solve_transposed<T: Real, const N: usize>(r: &[[T; N]; N], x: &mut [T; N], start: usize) {
     for j in start..N {
+        // wcet-bound: NV
         // Σ_{start≤k<j} y_k R_kj in four partial sums, as `dot4` groups them.
         let mut acc = [T::ZERO; 4];
         let mut k = start;
         while k + 4 <= j {
+            // wcet-bound: NV / 4
             for (q, a) in acc.iter_mut().enumerate() {
                 *a += x[k + q] * r[k + q][j];
             }
@@ -857,6 +872,7 @@ fn solve_transposed<T: Real, const N: usize>(r: &[[T; N]; N], x: &mut [T; N], st
         }
         let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
         while k < j {
+            // wcet-bound: 3
             s += x[k] * r[k][j];
             k += 1;
         }
@@ -869,6 +885,7 @@ fn solve_transposed<T: Real, const N: usize>(r: &[[T; N]; N], x: &mut [T; N], st
 /// a contiguous dot product over row `j` of `R`).
 fn solve_upper<T: Real, const N: usize>(r: &[[T; N]; N], u: &[T; N], x: &mut [T; N]) {
     for j in (0..N).rev() {
+        // wcet-bound: NV
         let s = dot_from(&r[j], x, j + 1);
         x[j] = (u[j] - s) / r[j][j];
     }
@@ -1008,6 +1025,7 @@ fn dot4<T: Real>(a: &[T], b: &[T]) -> T {
     let (ra, rb) = (ca.remainder(), cb.remainder());
     let mut acc = [T::ZERO; 4];
     for (x, y) in ca.zip(cb) {
+        // wcet-bound: NV / 4
         for ((s, &p), &q) in acc.iter_mut().zip(x).zip(y) {
             *s += p * q;
         }
@@ -1126,6 +1144,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let count = if settings.warm_start { self.n } else { 0 };
         self.bound_ready.fill(false);
         for r in 0..count.min(W) {
+            // wcet-bound: WS
             self.prepare(p, self.ws[r].index);
         }
         self.rebuild(p, tols, count);
@@ -1172,6 +1191,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         self.updates = 0;
         let mut dropped = 0;
         for r in 0..count.min(W) {
+            // wcet-bound: WS
             let e = self.ws[r];
             let l = self.lam[r];
             if !self.admissible(p, e) {
@@ -1203,13 +1223,16 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let s = row_start(n);
         // b_l = M_{l,e}
         for l in 0..n {
+            // wcet-bound: WS
             self.ldl[s + l] = mdot(p, self.ws[l].index, e.index);
         }
         // Forward solve with the unit lower L: y = L⁻¹ b.
         for l in 0..n {
+            // wcet-bound: WS
             let sl = row_start(l);
             let mut acc = self.ldl[s + l];
             for k in 0..l {
+                // wcet-bound: WS
                 acc -= self.ldl[sl + k] * self.ldl[s + k];
             }
             self.ldl[s + l] = acc;
@@ -1217,6 +1240,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let diag = mdot(p, e.index, e.index) + delta(p, e.index);
         let mut dn = diag;
         for l in 0..n {
+            // wcet-bound: WS
             let dl = self.ldl[row_start(l) + l];
             let y = self.ldl[s + l];
             let lv = y / dl;
@@ -1260,16 +1284,19 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let mut alpha = self.ldl[row_start(pos) + pos];
         // z (new indices pos..n-1) = old column pos of L below the diagonal.
         for r in (pos + 1)..n {
+            // wcet-bound: WS
             self.tmp[r - 1] = self.ldl[row_start(r) + pos];
         }
         // Shift rows pos+1..n up by one, dropping column pos (destinations precede
         // sources, so a forward copy is safe).
         for r in (pos + 1)..n {
+            // wcet-bound: WS
             let src = row_start(r);
             let dst = row_start(r - 1);
             let mut k = 0;
             for c in 0..=r {
                 if c == pos {
+                    // wcet-bound: WS
                     continue;
                 }
                 self.ldl[dst + k] = self.ldl[src + c];
@@ -1278,7 +1305,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         for r in pos..(n - 1) {
             self.ws[r] = self.ws[r + 1];
-            self.lam[r] = self.lam[r + 1];
+            self.lam[r] = self.lam[r + 1]; // wcet-bound: WS
         }
         let nn = n - 1;
         self.n = nn;
@@ -1286,6 +1313,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         for j in pos..nn {
             let pj = self.tmp[j];
             if pj == T::ZERO {
+                // wcet-bound: WS
                 continue;
             }
             let dj_idx = row_start(j) + j;
@@ -1295,6 +1323,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             alpha = dj * alpha / dnew;
             self.ldl[dj_idx] = dnew;
             for r in (j + 1)..nn {
+                // wcet-bound: WS
                 let idx = row_start(r) + j;
                 self.tmp[r] -= pj * self.ldl[idx];
                 self.ldl[idx] += beta * self.tmp[r];
@@ -1306,10 +1335,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     fn ldl_solve_tmp(&mut self) {
         let n = self.n;
         for r in 0..n {
+            // wcet-bound: WS
             let s = row_start(r);
             let mut acc = self.tmp[r];
             for k in 0..r {
-                acc -= self.ldl[s + k] * self.tmp[k];
+                acc -= self.ldl[s + k] * self.tmp[k]; // wcet-bound: WS
             }
             self.tmp[r] = acc;
         }
@@ -1319,6 +1349,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // Lᵀ x = y by columns of Lᵀ (rows of the packed L, contiguous): once x_r is
         // final, its share leaves the entries above it.
         for r in (1..n).rev() {
+            // wcet-bound: WS
             let xr = self.tmp[r];
             if xr == T::ZERO {
                 continue;
@@ -1329,6 +1360,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.ldl.get(s..s + r).unwrap_or(&[]),
             );
             for (t, &l) in t.iter_mut().zip(l) {
+                // wcet-bound: WS
                 *t -= l * xr;
             }
         }
@@ -1337,6 +1369,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// `λ*` for the current working set, into `tmp`; false if not finite.
     fn solve_lam_star(&mut self, p: &QpProblem<T, N, M>) -> bool {
         for k in 0..self.n {
+            // wcet-bound: WS
             let e = self.ws[k];
             let b = held_bound(p, e);
             self.tmp[k] = -(b + con_row(p, e.index).dot(&self.v));
@@ -1356,6 +1389,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             *u = -*v;
         }
         for k in 0..self.n {
+            // wcet-bound: WS
             let l = self.lam[k];
             if l == T::ZERO {
                 continue;
@@ -1400,11 +1434,13 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
         };
         for j in 0..N {
+            // wcet-bound: NV
             if self.bound_state[j].is_none() {
                 consider(x[j], p.x_lo[j], p.x_hi[j], ConstraintIndex::Bound(j as u16));
             }
         }
         for i in 0..p.m.min(M) {
+            // wcet-bound: NC
             if self.row_state[i].is_none() {
                 // m̃_iᵀu once the row is transformed, else a_iᵀx (the same value).
                 let val = match self.row_code[i] {
@@ -1440,6 +1476,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let mut checked_refactor = false;
         loop {
             if sol.iterations >= settings.max_iter {
+                // wcet-bound: QP_MAX_ITER per activation
                 return QpStatus::IterationLimit;
             }
             sol.iterations += 1;
@@ -1454,11 +1491,13 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             for k in 0..self.n {
                 let e = self.ws[k];
                 if Self::is_equality(p, e.index) {
+                    // wcet-bound: WS
                     continue;
                 }
                 let sg = sign::<T>(e.side);
                 let ls = sg * self.tmp[k];
                 if ls < -tols.dual {
+                    // wcet-bound: WS
                     let l = (sg * self.lam[k]).max(T::ZERO);
                     let ratio = l / (l - ls);
                     if block.is_none_or(|(_, r)| ratio < r) {
@@ -1468,6 +1507,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
             if let Some((pos, alpha)) = block {
                 for k in 0..self.n {
+                    // wcet-bound: WS
                     let mut l = self.lam[k] + alpha * (self.tmp[k] - self.lam[k]);
                     let e = self.ws[k];
                     if !Self::is_equality(p, e.index) && sign::<T>(e.side) * l < T::ZERO {
@@ -1530,6 +1570,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let mut lam_e = T::ZERO;
         let mut refactored = false;
         for _ in 0..=W {
+            // wcet-bound: WS + 1
             match self.append(p, e, tols) {
                 Ok(()) => {
                     self.lam[self.n - 1] = lam_e;
@@ -1551,9 +1592,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             let s = row_start(n);
             let mut cmax = T::ZERO;
             for r in (0..n).rev() {
+                // wcet-bound: WS
                 let mut acc = -self.ldl[s + r];
                 for k in (r + 1)..n {
-                    acc -= self.ldl[row_start(k) + r] * self.tmp[k];
+                    acc -= self.ldl[row_start(k) + r] * self.tmp[k]; // wcet-bound: WS
                 }
                 self.tmp[r] = acc;
                 cmax = cmax.max(acc.abs());
@@ -1564,11 +1606,13 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             for k in 0..n {
                 let ek = self.ws[k];
                 if Self::is_equality(p, ek.index) {
+                    // wcet-bound: WS
                     continue;
                 }
                 let sg = sign::<T>(ek.side);
                 let rate = sg * sigma * self.tmp[k];
                 if rate < -noise {
+                    // wcet-bound: WS
                     let t = (sg * self.lam[k]).max(T::ZERO) / -rate;
                     if block.is_none_or(|(_, r)| t < r) {
                         block = Some((k, t));
@@ -1590,6 +1634,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 return Err(QpStatus::Infeasible);
             };
             for k in 0..n {
+                // wcet-bound: WS
                 let mut l = self.lam[k] + t * sigma * self.tmp[k];
                 let ek = self.ws[k];
                 if !Self::is_equality(p, ek.index) && sign::<T>(ek.side) * l < T::ZERO {
@@ -1610,12 +1655,14 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// recomputed) only if every multiplier keeps its sign.
     fn refine(&mut self, p: &QpProblem<T, N, M>, x: &mut [T; N]) {
         for k in 0..self.n {
+            // wcet-bound: WS
             let e = self.ws[k];
             let b = held_bound(p, e);
             self.tmp[k] = con_row(p, e.index).dot(&self.u) - b - self.lam[k] * delta(p, e.index);
         }
         self.ldl_solve_tmp();
         for k in 0..self.n {
+            // wcet-bound: WS
             let l = self.lam[k] + self.tmp[k];
             let e = self.ws[k];
             if !l.is_finite() || (!Self::is_equality(p, e.index) && sign::<T>(e.side) * l < T::ZERO)
@@ -1633,6 +1680,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// within `tol` relative to `1 + |b_k + λ_k/ρ_k|`.
     fn working_set_holds(&self, p: &QpProblem<T, N, M>, tol: T) -> bool {
         (0..self.n).all(|k| {
+            // wcet-bound: WS
             let e = self.ws[k];
             let b = held_bound(p, e);
             let val = con_row(p, e.index).dot(&self.u);
@@ -1654,6 +1702,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         sol.lambda_bounds.fill(T::ZERO);
         let mut soft_cost = T::ZERO;
         for k in 0..self.n {
+            // wcet-bound: WS
             let l = self.lam[k];
             match self.ws[k].index {
                 ConstraintIndex::Bound(j) => {
