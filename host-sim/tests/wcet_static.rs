@@ -135,7 +135,8 @@ fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
         elf.is_file(),
         "{ECU_ELF} is missing: build it with `cargo ecu`"
     );
-    let a = host_sim::wcet::analysis::analyse(elf, std::path::Path::new("../firmware/src")).unwrap();
+    let a = host_sim::wcet::analysis::analyse(elf, std::path::Path::new("../firmware/src"), &[])
+        .unwrap();
     assert!(
         a.unresolved_indirect_calls.is_empty(),
         "{:?}",

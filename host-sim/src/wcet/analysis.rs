@@ -17,7 +17,7 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The ECU's tasks as the RTIC application binds them: name and handler symbol.
 /// `plan` runs in the priority-1 dispatcher, `control` in the priority-2 one, the
@@ -98,6 +98,14 @@ pub struct TaskStatic {
     pub refused: Option<String>,
     /// The bound's top contributors (function, cycles).
     pub top_functions: Vec<(String, f64)>,
+    /// Activations of the task seen in the traces.
+    pub observed_activations: u64,
+    /// Largest traced activation, instructions (its executed blocks' counts).
+    pub observed_max_instructions: Option<u64>,
+    /// Largest traced activation with the same block cycle costs as the bound.
+    pub observed_max_cycles: Option<u64>,
+    /// `static_bound_cycles / observed_max_cycles`.
+    pub tightness: Option<f64>,
 }
 
 /// The whole static analysis.
@@ -117,6 +125,11 @@ pub struct StaticAnalysis {
     pub unresolved_indirect_calls: Vec<String>,
     /// Cycles of the call graph reachable from a task.
     pub recursions: Vec<Vec<String>>,
+    /// QEMU traces the loop bounds were checked against.
+    pub traces: Vec<String>,
+    /// Loop bounds a trace exceeded, and traced activations above their task's
+    /// bound: each an error of the analysis (a wrong annotation or recogniser).
+    pub violations: Vec<String>,
 }
 
 /// Source location of `address`: the innermost frame in the firmware's own
@@ -150,7 +163,7 @@ fn short_path(file: &str) -> String {
 }
 
 /// Runs the analysis on `elf`.
-pub fn analyse(elf: &Path, firmware_src: &Path) -> Result<StaticAnalysis> {
+pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<StaticAnalysis> {
     let text = super::stack::disassemble_with_bytes(elf)?;
     let raw = cfg::parse_disassembly(&text);
     let memory = MemoryModel::STM32F405;
@@ -358,10 +371,73 @@ pub fn analyse(elf: &Path, firmware_src: &Path) -> Result<StaticAnalysis> {
             static_bound_cycles: bc,
             refused: (!refused.is_empty()).then(|| refused.join("; ")),
             top_functions: top,
+            observed_activations: 0,
+            observed_max_instructions: None,
+            observed_max_cycles: None,
+            tightness: None,
         });
+    }
+    // Every bound checked against execution: per loop the largest back-edge count
+    // per entry seen, per task the largest activation with the same block costs.
+    let mut violations = Vec::new();
+    let handlers = super::trace_check::vector_table_handlers(elf, &program)?;
+    let roots: Vec<(String, usize)> = ECU_TASKS
+        .iter()
+        .filter_map(|(n, sym)| program.find(sym).first().map(|&r| (n.to_string(), r)))
+        .collect();
+    for trace in traces {
+        let file = std::fs::File::open(trace)
+            .with_context(|| format!("opening the QEMU trace {}", trace.display()))?;
+        let check = super::trace_check::check_trace_with_handlers(
+            std::io::BufReader::with_capacity(1 << 20, file),
+            &program,
+            &all_loops,
+            &roots,
+            &handlers,
+        )?;
+        for o in &check.loops {
+            if let Some(row) = loop_rows.get_mut(&(o.function, o.loop_index)) {
+                row.observed_max = Some(row.observed_max.unwrap_or(0).max(o.max_back_edges));
+            }
+        }
+        let entry_bounds: Vec<(usize, usize, u64)> = facts
+            .iter()
+            .filter(|f| f.per == Per::Entry)
+            .map(|f| (f.function, f.loop_index, f.bound))
+            .collect();
+        violations.extend(
+            check
+                .violations(&entry_bounds)
+                .into_iter()
+                .map(|v| format!("{}: {v}", trace.display())),
+        );
+        for r in &check.roots {
+            if let Some(t) = tasks.iter_mut().find(|t| t.name == r.name) {
+                t.observed_activations += r.activations;
+                t.observed_max_instructions = Some(
+                    t.observed_max_instructions
+                        .unwrap_or(0)
+                        .max(r.max_instructions),
+                );
+                t.observed_max_cycles = Some(t.observed_max_cycles.unwrap_or(0).max(r.max_cycles));
+            }
+        }
+    }
+    for t in &mut tasks {
+        if let (Some(b), Some(o)) = (t.static_bound_cycles, t.observed_max_cycles) {
+            t.tightness = (o > 0).then(|| b as f64 / o as f64);
+            if b < o {
+                violations.push(format!(
+                    "task {}: a traced activation costs {o} cycles, above the static bound {b}",
+                    t.name
+                ));
+            }
+        }
     }
     let loops: Vec<LoopEntry> = loop_rows.into_values().collect();
     Ok(StaticAnalysis {
+        traces: traces.iter().map(|t| t.display().to_string()).collect(),
+        violations,
         elf: elf.display().to_string(),
         assumptions: memory.assumptions(),
         unbounded_loops: loops.iter().filter(|l| l.bound.is_none()).count(),
@@ -384,21 +460,24 @@ impl StaticAnalysis {
              only when every loop it reaches is bounded, no cycle is irreducible, every \
              indirect call is resolved and there is no recursion.\n"
         );
-        let _ = writeln!(s, "| task | root | functions | loops (bounded) | irreducible | bound, instructions | bound, cycles | refused because |");
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(s, "| task | root | functions | loops (bounded) | bound, instructions | bound, cycles | traced activations | observed max, instructions / cycles | tightness | refused because |");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
         for t in &self.tasks {
             let opt = |v: Option<u64>| v.map_or("–".to_string(), |x| x.to_string());
             let _ = writeln!(
                 s,
-                "| {} | `{}` | {} | {} ({}) | {} | {} | {} | {} |",
+                "| {} | `{}` | {} | {} ({}) | {} | {} | {} | {} / {} | {} | {} |",
                 t.name,
                 t.root,
                 t.functions,
                 t.loops,
                 t.bounded_loops,
-                t.irreducible.len(),
                 opt(t.static_bound_instructions),
                 opt(t.static_bound_cycles),
+                t.observed_activations,
+                opt(t.observed_max_instructions),
+                opt(t.observed_max_cycles),
+                t.tightness.map_or("–".to_string(), |x| format!("{x:.2}")),
                 t.refused.as_deref().unwrap_or("")
             );
         }
@@ -409,6 +488,17 @@ impl StaticAnalysis {
             self.unresolved_indirect_calls.len(),
             self.recursions.len()
         );
+        if !self.traces.is_empty() {
+            let _ = writeln!(
+                s,
+                "Checked against {} QEMU trace(s): {} violation(s).\n",
+                self.traces.len(),
+                self.violations.len()
+            );
+        }
+        for v in &self.violations {
+            let _ = writeln!(s, "- **violation**: {v}");
+        }
         for r in &self.recursions {
             let _ = writeln!(s, "- recursion: {}", r.join(" → "));
         }
@@ -424,19 +514,23 @@ impl StaticAnalysis {
         for a in &self.assumptions {
             let _ = writeln!(s, "- {a}");
         }
-        let _ = writeln!(s, "\n## Loops\n\n| tasks | function | header | source | bound (back edges per entry) | from |");
-        let _ = writeln!(s, "|---|---|---|---|---|---|");
+        let _ = writeln!(s, "\n## Loops\n\n| tasks | function | header | source | bound | observed max (back edges per entry) | from |");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|");
         for l in &self.loops {
             let _ = writeln!(
                 s,
-                "| {} | `{}` | {} | {}:{} | {} | {} |",
+                "| {} | `{}` | {} | {}:{} | {} | {} | {} |",
                 l.tasks.join(", "),
                 l.function,
                 l.header,
                 l.file,
                 l.line,
                 l.bound.map_or("**none**".to_string(), |b| b.to_string()),
-                l.source.as_deref().unwrap_or("")
+                l.observed_max.map_or("–".to_string(), |b| b.to_string()),
+                l.source
+                    .as_deref()
+                    .or(l.why_unbounded.as_deref())
+                    .unwrap_or("")
             );
         }
         s

@@ -6,8 +6,6 @@
 use std::fs::{self, File};
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::thread;
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
@@ -51,6 +49,10 @@ pub struct WcetArgs {
     /// read.
     #[arg(long, default_value = "firmware/src")]
     pub firmware_src: PathBuf,
+    /// QEMU execution traces (`host-sim pil --trace FILE`) to check the loop bounds
+    /// and the task bounds against, besides the one this command records.
+    #[arg(long, num_args = 1..)]
+    pub check_trace: Vec<PathBuf>,
     /// Only the static analysis of the ELF (control-flow graphs, loops, IPET):
     /// writes `static.json` and `static.md`, runs no PIL lap.
     #[arg(long)]
@@ -88,37 +90,20 @@ fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -
     }
 }
 
-/// Runs a short PIL run with QEMU's execution trace going into a FIFO that a
-/// thread parses as it is written, and returns the trace's CPI bound.
-fn cpi_from_trace(args: &WcetArgs) -> Result<CpiReport> {
+/// Runs a short PIL run with QEMU's execution trace written to a file, and
+/// returns the trace's CPI bound and the file (for the static analysis' check of
+/// its loop bounds).
+fn cpi_from_trace(args: &WcetArgs) -> Result<(CpiReport, PathBuf)> {
     let dir = args.out.join("trace");
     fs::create_dir_all(&dir)?;
-    let fifo = dir.join("qemu-trace.fifo");
-    if fifo.exists() {
-        fs::remove_file(&fifo)?;
-    }
-    let ok = Command::new("mkfifo")
-        .arg(&fifo)
-        .status()
-        .context("running mkfifo")?
-        .success();
-    if !ok {
-        bail!("mkfifo {} failed", fifo.display());
-    }
-    let reader = {
-        let fifo = fifo.clone();
-        thread::spawn(move || -> Result<CpiReport> {
-            let f = File::open(&fifo).with_context(|| format!("opening {}", fifo.display()))?;
-            cpi::analyse_log(BufReader::with_capacity(1 << 20, f), None, &[])
-                .map_err(|e| anyhow!("{e}"))
-        })
-    };
+    let log = dir.join("qemu-trace.log");
     let mut a = pil_args(dir.join("run"), "paper", 1.0, args.trace_seconds, &args.elf);
-    a.trace = Some(fs::canonicalize(&fifo)?);
+    a.trace = Some(std::path::absolute(&log)?);
     pil::run(&a)?;
-    reader
-        .join()
-        .map_err(|_| anyhow!("the trace parser stopped"))?
+    let f = File::open(&log).with_context(|| format!("opening {}", log.display()))?;
+    let report = cpi::analyse_log(BufReader::with_capacity(1 << 20, f), None, &[])
+        .map_err(|e| anyhow!("{e}"))?;
+    Ok((report, log))
 }
 
 /// A CPI report standing for a bound given on the command line.
@@ -163,7 +148,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     if args.static_only {
-        return static_analysis(args);
+        return static_analysis(args, &args.check_trace);
     }
     let run_dirs = if args.pil.is_empty() {
         let mut dirs = Vec::new();
@@ -183,6 +168,8 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     } else {
         args.pil.clone()
     };
+    let mut traces = args.check_trace.clone();
+    let mut made: Option<PathBuf> = None;
     let cpi = match args.cpi_bound {
         Some(c) if c.is_finite() && c >= 1.0 => given_cpi(c),
         Some(c) => bail!("--cpi-bound must be at least 1 cycle per instruction, got {c}"),
@@ -191,7 +178,10 @@ pub fn run(args: &WcetArgs) -> Result<()> {
                 "PIL run with QEMU's execution trace ({} s) for the CPI bound",
                 args.trace_seconds
             );
-            cpi_from_trace(args)?
+            let (report, log) = cpi_from_trace(args)?;
+            traces.push(log.clone());
+            made = Some(log);
+            report
         }
     };
 
@@ -241,7 +231,12 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     report::write_report(&args.out, &r)?;
     // The static analysis of the binary: its own files beside the report while it
     // does not yet bound every task.
-    static_analysis(args)?;
+    let checked = static_analysis(args, &traces);
+    if let Some(log) = made {
+        // Large (tens of MB a simulated second) and fully read by now.
+        let _ = fs::remove_file(log);
+    }
+    checked?;
     fs::write(
         args.out.join("cost_model.json"),
         serde_json::to_string_pretty(&model)?,
@@ -287,8 +282,8 @@ pub fn run(args: &WcetArgs) -> Result<()> {
 
 /// The static analysis of the ELF (control-flow graphs, loops, IPET), written as
 /// `static.json` and `static.md`, with a line per task.
-fn static_analysis(args: &WcetArgs) -> Result<()> {
-    let analysis = crate::wcet::analysis::analyse(&args.elf, &args.firmware_src)
+fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
+    let analysis = crate::wcet::analysis::analyse(&args.elf, &args.firmware_src, traces)
         .with_context(|| format!("static analysis of {}", args.elf.display()))?;
     analysis.write(&args.out)?;
     for t in &analysis.tasks {
@@ -316,5 +311,12 @@ fn static_analysis(args: &WcetArgs) -> Result<()> {
         analysis.recursions.len(),
         args.out.join("static.md").display()
     );
+    if !analysis.violations.is_empty() {
+        bail!(
+            "the static analysis is contradicted by execution ({} violation(s)): {}",
+            analysis.violations.len(),
+            analysis.violations.join("; ")
+        );
+    }
     Ok(())
 }
