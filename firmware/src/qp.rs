@@ -426,7 +426,8 @@ impl<T: Real, const N: usize, const M: usize> Default for QpSolution<T, N, M> {
 struct Workspace<T, const N: usize, const M: usize, const W: usize, const WL: usize> {
     /// Working set entries `0..n`.
     ws: [ActiveConstraint; W],
-    /// Entries in use.
+    /// Entries in use, `≤ W` (`commit` refuses at `W`, `set_working_set_from` keeps at
+    /// most `W`, `rebuild` starts from 0): it bounds every loop over the working set.
     n: usize,
     /// Current (dual-feasible) multipliers of the working set (`W`).
     lam: [T; W],
@@ -566,8 +567,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         set: impl IntoIterator<Item = ActiveConstraint>,
     ) -> usize {
         let mut k = 0;
+        // At most W entries (the zip with `ws`); the ECU's `set` (mpc.rs
+        // `renumber_working_set`) filters at most WS warm entries in all.
+        // wcet-bound: WS
         for (d, s) in self.work.ws.iter_mut().zip(set) {
-            // wcet-bound: WS
             *d = s;
             k += 1;
         }
@@ -669,15 +672,17 @@ fn nonfinite_probe<T: Real>(v: &[T]) -> T {
     let mut acc = [T::ZERO; 4];
     let chunks = v.chunks_exact(4);
     let rest = chunks.remainder();
+    // `v` has at most N entries (validate: `f`, a suffix of a row of `H`, a row's
+    // prefix), so at most N/4 chunks and 3 left over.
+    // wcet-bound: NV / 4
     for c in chunks {
-        // wcet-bound: NV / 4
         for (a, &x) in acc.iter_mut().zip(c) {
             *a += x * T::ZERO;
         }
     }
     let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    // wcet-bound: 3
     for &x in rest {
-        // wcet-bound: 3
         s += x * T::ZERO;
     }
     s
@@ -695,13 +700,13 @@ fn validate<T: Real, const N: usize, const M: usize>(
     let rows = p.a.get(..p.m).unwrap_or(&[]);
     let mut probe = nonfinite_probe(&p.f);
     // Only the upper triangle of `H` (or of its factor) is ever read.
+    // wcet-bound: NV
     for (j, r) in p.h.iter().enumerate() {
-        // wcet-bound: NV
         probe += nonfinite_probe(r.get(j..).unwrap_or(&[]));
     }
     let full = N - N % 4;
+    // wcet-bound: NC
     for (r, code) in rows.iter().zip(row_code.iter_mut()) {
-        // wcet-bound: NC
         // A NaN or ±∞ is nonzero: it lies in the prefix up to the last group of four
         // with a nonzero entry (the rest are zeros), so only that prefix needs the
         // finiteness probe. A group is zero when the sum of its magnitudes is (a NaN
@@ -723,8 +728,8 @@ fn validate<T: Real, const N: usize, const M: usize>(
         nan |= is_nan(l) || is_nan(h);
         bad_bound |= l > h || l == T::INFINITY || h == -T::INFINITY;
     }
+    // wcet-bound: NC
     for ((&l, &h), &s) in p.lo.iter().zip(p.hi.iter()).zip(p.soft.iter()).take(p.m) {
-        // wcet-bound: NC
         nan |= is_nan(l) || is_nan(h) || !s.is_finite();
         bad_bound |= l > h || l == T::INFINITY || h == -T::INFINITY || s < T::ZERO;
     }
@@ -743,17 +748,17 @@ fn validate<T: Real, const N: usize, const M: usize>(
 /// [`factor_h_counted`] does. `None` for a zero or non-finite column.
 fn prepare_factor<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
     let mut floored = 0u32;
+    // wcet-bound: NV
     for j in 0..N {
-        // wcet-bound: NV
         if h[j][j] < T::ZERO {
+            // wcet-bound: NV
             for v in h[j].iter_mut().skip(j) {
-                // wcet-bound: NV
                 *v = -*v;
             }
         }
         let mut col = T::ZERO;
+        // wcet-bound: NV
         for i in 0..=j {
-            // wcet-bound: NV
             col += h[i][j] * h[i][j];
         }
         let norm = col.sqrt();
@@ -817,13 +822,13 @@ fn factor_h<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> bool {
 fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
     let tiny = T::EPSILON * T::from_usize(N);
     let mut floored = 0u32;
+    // wcet-bound: NV
     for j in 0..N {
-        // wcet-bound: NV
         // Column j of R: R[k][j] for k ≤ j, from H[k][j] (upper triangle).
         let mut d = h[j][j];
         let scale = d.abs();
+        // wcet-bound: NV
         for k in 0..j {
-            // wcet-bound: NV
             d -= h[k][j] * h[k][j];
         }
         if !d.is_finite() || !(scale > T::ZERO) {
@@ -839,11 +844,11 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
         }
         let rjj = d.sqrt();
         h[j][j] = rjj;
+        // wcet-bound: NV
         for i in (j + 1)..N {
-            // wcet-bound: NV
             let mut s = h[j][i];
+            // wcet-bound: NV
             for k in 0..j {
-                // wcet-bound: NV
                 s -= h[k][j] * h[k][i];
             }
             h[j][i] = s / rjj;
@@ -858,21 +863,22 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
 /// once `y_j` is final, its share leaves the later entries (contiguous, like the
 /// rows of `R`); zero entries skipped.
 fn solve_transposed<T: Real, const N: usize>(r: &[[T; N]; N], x: &mut [T; N], start: usize) {
+    // wcet-bound: NV
     for j in start..N {
-        // wcet-bound: NV
         // Σ_{start≤k<j} y_k R_kj in four partial sums, as `dot4` groups them.
         let mut acc = [T::ZERO; 4];
         let mut k = start;
+        // k steps by 4 from `start` to at most j < N: at most N/4 passes, then j − k ≤ 3.
+        // wcet-bound: NV / 4
         while k + 4 <= j {
-            // wcet-bound: NV / 4
             for (q, a) in acc.iter_mut().enumerate() {
                 *a += x[k + q] * r[k + q][j];
             }
             k += 4;
         }
         let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+        // wcet-bound: 3
         while k < j {
-            // wcet-bound: 3
             s += x[k] * r[k][j];
             k += 1;
         }
@@ -884,8 +890,8 @@ fn solve_transposed<T: Real, const N: usize>(r: &[[T; N]; N], x: &mut [T; N], st
 /// diagonal), by back substitution `x_j = (u_j − Σ_{k>j} R_jk x_k) / R_jj` (each sum
 /// a contiguous dot product over row `j` of `R`).
 fn solve_upper<T: Real, const N: usize>(r: &[[T; N]; N], u: &[T; N], x: &mut [T; N]) {
+    // wcet-bound: NV
     for j in (0..N).rev() {
-        // wcet-bound: NV
         let s = dot_from(&r[j], x, j + 1);
         x[j] = (u[j] - s) / r[j][j];
     }
@@ -1024,8 +1030,9 @@ fn dot4<T: Real>(a: &[T], b: &[T]) -> T {
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
     let (ra, rb) = (ca.remainder(), cb.remainder());
     let mut acc = [T::ZERO; 4];
+    // Every caller passes slices of `[T; N]` rows (at most N entries): N/4 chunks.
+    // wcet-bound: NV / 4
     for (x, y) in ca.zip(cb) {
-        // wcet-bound: NV / 4
         for ((s, &p), &q) in acc.iter_mut().zip(x).zip(y) {
             *s += p * q;
         }
@@ -1143,8 +1150,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     fn start(&mut self, p: &mut QpProblem<T, N, M>, settings: &QpSettings<T>, tols: Tols<T>) {
         let count = if settings.warm_start { self.n } else { 0 };
         self.bound_ready.fill(false);
+        // wcet-bound: WS
         for r in 0..count.min(W) {
-            // wcet-bound: WS
             self.prepare(p, self.ws[r].index);
         }
         self.rebuild(p, tols, count);
@@ -1190,8 +1197,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         self.n = 0;
         self.updates = 0;
         let mut dropped = 0;
+        // wcet-bound: WS
         for r in 0..count.min(W) {
-            // wcet-bound: WS
             let e = self.ws[r];
             let l = self.lam[r];
             if !self.admissible(p, e) {
@@ -1222,25 +1229,25 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         let s = row_start(n);
         // b_l = M_{l,e}
+        // wcet-bound: WS
         for l in 0..n {
-            // wcet-bound: WS
             self.ldl[s + l] = mdot(p, self.ws[l].index, e.index);
         }
         // Forward solve with the unit lower L: y = L⁻¹ b.
+        // wcet-bound: WS
         for l in 0..n {
-            // wcet-bound: WS
             let sl = row_start(l);
             let mut acc = self.ldl[s + l];
+            // wcet-bound: WS
             for k in 0..l {
-                // wcet-bound: WS
                 acc -= self.ldl[sl + k] * self.ldl[s + k];
             }
             self.ldl[s + l] = acc;
         }
         let diag = mdot(p, e.index, e.index) + delta(p, e.index);
         let mut dn = diag;
+        // wcet-bound: WS
         for l in 0..n {
-            // wcet-bound: WS
             let dl = self.ldl[row_start(l) + l];
             let y = self.ldl[s + l];
             let lv = y / dl;
@@ -1283,20 +1290,22 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         let mut alpha = self.ldl[row_start(pos) + pos];
         // z (new indices pos..n-1) = old column pos of L below the diagonal.
+        // `n ≤ W` (see `Workspace::n`) bounds this and every loop over the working set.
+        // wcet-bound: WS
         for r in (pos + 1)..n {
-            // wcet-bound: WS
             self.tmp[r - 1] = self.ldl[row_start(r) + pos];
         }
         // Shift rows pos+1..n up by one, dropping column pos (destinations precede
         // sources, so a forward copy is safe).
+        // wcet-bound: WS
         for r in (pos + 1)..n {
-            // wcet-bound: WS
             let src = row_start(r);
             let dst = row_start(r - 1);
             let mut k = 0;
             for c in 0..=r {
+                // Bounds the `for c in 0..=r` loop above (its back edge is here): r < n ≤ W.
+                // wcet-bound: WS
                 if c == pos {
-                    // wcet-bound: WS
                     continue;
                 }
                 self.ldl[dst + k] = self.ldl[src + c];
@@ -1305,6 +1314,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         for r in pos..(n - 1) {
             self.ws[r] = self.ws[r + 1];
+            // Bounds the `for r in pos..(n - 1)` loop (its back edge is on this line).
             self.lam[r] = self.lam[r + 1]; // wcet-bound: WS
         }
         let nn = n - 1;
@@ -1312,8 +1322,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // Rank-one update of the trailing block (rows/cols pos..nn) by alpha z zᵀ.
         for j in pos..nn {
             let pj = self.tmp[j];
+            // Bounds the `for j in pos..nn` loop (the `continue` is its back edge).
+            // wcet-bound: WS
             if pj == T::ZERO {
-                // wcet-bound: WS
                 continue;
             }
             let dj_idx = row_start(j) + j;
@@ -1322,8 +1333,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             let beta = pj * alpha / dnew;
             alpha = dj * alpha / dnew;
             self.ldl[dj_idx] = dnew;
+            // wcet-bound: WS
             for r in (j + 1)..nn {
-                // wcet-bound: WS
                 let idx = row_start(r) + j;
                 self.tmp[r] -= pj * self.ldl[idx];
                 self.ldl[idx] += beta * self.tmp[r];
@@ -1334,11 +1345,12 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// Solves `(M_WW + D) x = tmp` in place in `tmp[0..n]`.
     fn ldl_solve_tmp(&mut self) {
         let n = self.n;
+        // wcet-bound: WS
         for r in 0..n {
-            // wcet-bound: WS
             let s = row_start(r);
             let mut acc = self.tmp[r];
             for k in 0..r {
+                // Bounds the `for k in 0..r` loop: r < n ≤ W.
                 acc -= self.ldl[s + k] * self.tmp[k]; // wcet-bound: WS
             }
             self.tmp[r] = acc;
@@ -1348,8 +1360,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         // Lᵀ x = y by columns of Lᵀ (rows of the packed L, contiguous): once x_r is
         // final, its share leaves the entries above it.
+        // wcet-bound: WS
         for r in (1..n).rev() {
-            // wcet-bound: WS
             let xr = self.tmp[r];
             if xr == T::ZERO {
                 continue;
@@ -1359,8 +1371,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.tmp.get_mut(..r).unwrap_or(&mut []),
                 self.ldl.get(s..s + r).unwrap_or(&[]),
             );
+            // wcet-bound: WS
             for (t, &l) in t.iter_mut().zip(l) {
-                // wcet-bound: WS
                 *t -= l * xr;
             }
         }
@@ -1368,8 +1380,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
 
     /// `λ*` for the current working set, into `tmp`; false if not finite.
     fn solve_lam_star(&mut self, p: &QpProblem<T, N, M>) -> bool {
+        // wcet-bound: WS
         for k in 0..self.n {
-            // wcet-bound: WS
             let e = self.ws[k];
             let b = held_bound(p, e);
             self.tmp[k] = -(b + con_row(p, e.index).dot(&self.v));
@@ -1388,8 +1400,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         for (u, v) in self.u.iter_mut().zip(self.v.iter()) {
             *u = -*v;
         }
+        // wcet-bound: WS
         for k in 0..self.n {
-            // wcet-bound: WS
             let l = self.lam[k];
             if l == T::ZERO {
                 continue;
@@ -1433,14 +1445,14 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 cand = Some(ActiveConstraint { index, side });
             }
         };
+        // wcet-bound: NV
         for j in 0..N {
-            // wcet-bound: NV
             if self.bound_state[j].is_none() {
                 consider(x[j], p.x_lo[j], p.x_hi[j], ConstraintIndex::Bound(j as u16));
             }
         }
+        // wcet-bound: NC
         for i in 0..p.m.min(M) {
-            // wcet-bound: NC
             if self.row_state[i].is_none() {
                 // m̃_iᵀu once the row is transformed, else a_iᵀx (the same value).
                 let val = match self.row_code[i] {
@@ -1475,8 +1487,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let mut blocked: Option<ConstraintIndex> = None;
         let mut checked_refactor = false;
         loop {
+            // One back edge per iteration, counted in `sol.iterations` ≤ `settings.max_iter`,
+            // which the MPC (mpc.rs `step_inner`) sets to what is left of the activation's
+            // `qp_max_iter` (QP_MAX_ITER on the ECU) after its earlier passes.
+            // wcet-bound: QP_MAX_ITER per activation
             if sol.iterations >= settings.max_iter {
-                // wcet-bound: QP_MAX_ITER per activation
                 return QpStatus::IterationLimit;
             }
             sol.iterations += 1;
@@ -1490,14 +1505,15 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             let mut block: Option<(usize, T)> = None;
             for k in 0..self.n {
                 let e = self.ws[k];
+                // Bounds the `for k in 0..self.n` loop (n ≤ W; back edges at the `continue`s).
+                // wcet-bound: WS
                 if Self::is_equality(p, e.index) {
-                    // wcet-bound: WS
                     continue;
                 }
                 let sg = sign::<T>(e.side);
                 let ls = sg * self.tmp[k];
+                // wcet-bound: WS
                 if ls < -tols.dual {
-                    // wcet-bound: WS
                     let l = (sg * self.lam[k]).max(T::ZERO);
                     let ratio = l / (l - ls);
                     if block.is_none_or(|(_, r)| ratio < r) {
@@ -1506,8 +1522,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 }
             }
             if let Some((pos, alpha)) = block {
+                // wcet-bound: WS
                 for k in 0..self.n {
-                    // wcet-bound: WS
                     let mut l = self.lam[k] + alpha * (self.tmp[k] - self.lam[k]);
                     let e = self.ws[k];
                     if !Self::is_equality(p, e.index) && sign::<T>(e.side) * l < T::ZERO {
@@ -1569,8 +1585,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // Multiplier the new constraint has accumulated over null-space steps.
         let mut lam_e = T::ZERO;
         let mut refactored = false;
+        // `0..=W`: W + 1 attempts.
+        // wcet-bound: WS + 1
         for _ in 0..=W {
-            // wcet-bound: WS + 1
             match self.append(p, e, tols) {
                 Ok(()) => {
                     self.lam[self.n - 1] = lam_e;
@@ -1591,10 +1608,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             let n = self.n;
             let s = row_start(n);
             let mut cmax = T::ZERO;
+            // wcet-bound: WS
             for r in (0..n).rev() {
-                // wcet-bound: WS
                 let mut acc = -self.ldl[s + r];
                 for k in (r + 1)..n {
+                    // Bounds the `for k in (r + 1)..n` loop: n ≤ W.
                     acc -= self.ldl[row_start(k) + r] * self.tmp[k]; // wcet-bound: WS
                 }
                 self.tmp[r] = acc;
@@ -1605,14 +1623,15 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             let mut block: Option<(usize, T)> = None;
             for k in 0..n {
                 let ek = self.ws[k];
+                // Bounds the `for k in 0..n` loop (n ≤ W; back edges at the `continue`s).
+                // wcet-bound: WS
                 if Self::is_equality(p, ek.index) {
-                    // wcet-bound: WS
                     continue;
                 }
                 let sg = sign::<T>(ek.side);
                 let rate = sg * sigma * self.tmp[k];
+                // wcet-bound: WS
                 if rate < -noise {
-                    // wcet-bound: WS
                     let t = (sg * self.lam[k]).max(T::ZERO) / -rate;
                     if block.is_none_or(|(_, r)| t < r) {
                         block = Some((k, t));
@@ -1633,8 +1652,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 }
                 return Err(QpStatus::Infeasible);
             };
+            // wcet-bound: WS
             for k in 0..n {
-                // wcet-bound: WS
                 let mut l = self.lam[k] + t * sigma * self.tmp[k];
                 let ek = self.ws[k];
                 if !Self::is_equality(p, ek.index) && sign::<T>(ek.side) * l < T::ZERO {
@@ -1654,15 +1673,15 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// `Δλ = (M̃_W M̃_Wᵀ + D_W)⁻¹ r` with the same factor; kept (and `u`, `x`
     /// recomputed) only if every multiplier keeps its sign.
     fn refine(&mut self, p: &QpProblem<T, N, M>, x: &mut [T; N]) {
+        // wcet-bound: WS
         for k in 0..self.n {
-            // wcet-bound: WS
             let e = self.ws[k];
             let b = held_bound(p, e);
             self.tmp[k] = con_row(p, e.index).dot(&self.u) - b - self.lam[k] * delta(p, e.index);
         }
         self.ldl_solve_tmp();
+        // wcet-bound: WS
         for k in 0..self.n {
-            // wcet-bound: WS
             let l = self.lam[k] + self.tmp[k];
             let e = self.ws[k];
             if !l.is_finite() || (!Self::is_equality(p, e.index) && sign::<T>(e.side) * l < T::ZERO)
@@ -1679,8 +1698,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// Whether every working-set constraint holds at `u`: `m̃_kᵀu = b_k + λ_k/ρ_k`
     /// within `tol` relative to `1 + |b_k + λ_k/ρ_k|`.
     fn working_set_holds(&self, p: &QpProblem<T, N, M>, tol: T) -> bool {
+        // `n ≤ W` entries checked.
+        // wcet-bound: WS
         (0..self.n).all(|k| {
-            // wcet-bound: WS
             let e = self.ws[k];
             let b = held_bound(p, e);
             let val = con_row(p, e.index).dot(&self.u);
@@ -1701,8 +1721,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         sol.lambda_rows.fill(T::ZERO);
         sol.lambda_bounds.fill(T::ZERO);
         let mut soft_cost = T::ZERO;
+        // wcet-bound: WS
         for k in 0..self.n {
-            // wcet-bound: WS
             let l = self.lam[k];
             match self.ws[k].index {
                 ConstraintIndex::Bound(j) => {
