@@ -79,6 +79,21 @@ pub const DEFAULT_SEARCH_BEHIND_M: f32 = 20.0;
 /// Default length of path searched ahead of the hint by [`ReferencePath::project`], m.
 pub const DEFAULT_SEARCH_AHEAD_M: f32 = 40.0;
 
+/// Most steps of the binary search that finds a distance's segment, on a path
+/// of the ECU's window ([`crate::tasks::ECU_PATH_ROWS`] vertices, so at most as
+/// many segments): [`binary_search_steps`] of it, steps (for the WCET analysis).
+pub const ECU_PATH_SEARCH_STEPS: usize = binary_search_steps(crate::tasks::ECU_PATH_ROWS);
+
+/// Most steps of a binary search over `len` entries that halves `hi - lo` from
+/// `len` until it is 1: `⌈log₂ len⌉` (0 for `len ≤ 1`), steps.
+pub const fn binary_search_steps(len: usize) -> usize {
+    if len <= 1 {
+        0
+    } else {
+        (usize::BITS - (len - 1).leading_zeros()) as usize
+    }
+}
+
 /// Why a path could not be loaded. Point indices refer to the slice given to
 /// [`ReferencePath::load`]. After an error the path is empty.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -395,7 +410,9 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 if !(w[0].abs() <= far && w[1].abs() <= far) {
                     return Err(PathError::NonFinite { index: i });
                 }
-                if w[0] < T::ZERO || w[1] < T::ZERO {
+                // WCET: this line closes the `for i in 0..count` loop above; in the ECU `validate`
+                // is reached only from `load_staged`, which refuses count > CAP (= ECU_PATH_ROWS) first.
+                if w[0] < T::ZERO || w[1] < T::ZERO { // wcet-bound: ECU_PATH_ROWS
                     return Err(PathError::NegativeWidth { index: i });
                 }
             }
@@ -413,7 +430,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 capacity: CAP,
             });
         }
-        for i in 1..n {
+        // WCET: n <= CAP (= ECU_PATH_ROWS in the ECU), checked just above.
+        for i in 1..n { // wcet-bound: ECU_PATH_ROWS
             if same_point(get(i - 1).0, get(i).0) {
                 return Err(PathError::RepeatedPoint { index: i });
             }
@@ -501,7 +519,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         // Segments, arc length, unwrapped segment headings (kept in `heading` for now).
         let mut s = T::ZERO;
         let mut prev_theta = T::ZERO;
-        for i in 0..m {
+        // WCET: m = segment_count() <= n <= CAP (= ECU_PATH_ROWS in the ECU).
+        for i in 0..m { // wcet-bound: ECU_PATH_ROWS
             let a = self.xy[i];
             let b = self.xy[(i + 1) % n];
             let dx = b[0] - a[0];
@@ -529,23 +548,25 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             let first = self.heading[0];
             let last = self.heading[m - 1];
             self.total_turn = (last - first) + wrap_pi(first - last);
-            for i in (1..m).rev() {
+            for i in (1..m).rev() { // wcet-bound: ECU_PATH_ROWS
                 self.heading[i] = T::HALF * (self.heading[i - 1] + self.heading[i]);
             }
             self.heading[0] = T::HALF * (last - self.total_turn + first);
         } else {
             self.total_turn = self.heading[m - 1] - self.heading[0];
             self.heading[n - 1] = self.heading[m - 1];
-            for i in (1..m).rev() {
+            for i in (1..m).rev() { // wcet-bound: ECU_PATH_ROWS
                 self.heading[i] = T::HALF * (self.heading[i - 1] + self.heading[i]);
             }
         }
         // Vertex curvatures: circle through the vertices about `h` before and after.
         let max_steps = if closed { (n - 1) / 2 } else { n - 1 };
-        for i in 0..n {
+        // WCET: n <= CAP (= ECU_PATH_ROWS in the ECU); the two step loops below take at
+        // most max_steps <= n - 1 steps each (the half-window in metres only stops them earlier).
+        for i in 0..n { // wcet-bound: ECU_PATH_ROWS
             let mut ia = i;
             let mut back = T::ZERO;
-            for _ in 0..max_steps {
+            for _ in 0..max_steps { // wcet-bound: ECU_PATH_ROWS
                 if back >= h || (!closed && ia == 0) {
                     break;
                 }
@@ -554,7 +575,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             }
             let mut ic = i;
             let mut ahead = T::ZERO;
-            for _ in 0..max_steps {
+            for _ in 0..max_steps { // wcet-bound: ECU_PATH_ROWS
                 if ahead >= h || (!closed && ic == n - 1) {
                     break;
                 }
@@ -572,7 +593,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             self.curvature[n - 1] = self.curvature[n - 2];
         }
         let mut kmax = T::ZERO;
-        for k in self.curvature.iter().take(n) {
+        // WCET: `curvature` holds CAP (= ECU_PATH_ROWS in the ECU) entries.
+        for k in self.curvature.iter().take(n) { // wcet-bound: ECU_PATH_ROWS
             kmax = kmax.max(k.abs());
         }
         self.max_abs_curvature = kmax;
@@ -677,7 +699,9 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         // Largest i < m with s[i] <= w (binary search, s[0] = 0).
         let mut lo = 0usize;
         let mut hi = m; // invariant: s[lo] <= w (or lo == 0), answer < hi
-        while hi - lo > 1 {
+        // WCET: hi - lo starts at m <= CAP and becomes floor or ceil of its half each
+        // step: ceil(log2 m) steps ([`ECU_PATH_SEARCH_STEPS`] for the ECU's CAP).
+        while hi - lo > 1 { // wcet-bound: ECU_PATH_SEARCH_STEPS
             let mid = lo + (hi - lo) / 2;
             if self.s[mid] <= w {
                 lo = mid;
@@ -937,7 +961,9 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
     /// or at the end of an open path.
     fn scan_vertices(&self, win: &mut CurvatureWindow<T>, b: T, g: impl Fn(T) -> T) {
         let segments = self.segment_count();
-        while win.steps < self.n && !win.ended {
+        // WCET: `win.steps` grows by one each pass and the scan stops at n <= CAP
+        // (= ECU_PATH_ROWS in the ECU); every other exit is a break.
+        while win.steps < self.n && !win.ended { // wcet-bound: ECU_PATH_ROWS
             if win.seg >= self.n {
                 win.seg = 0;
             }
@@ -1034,7 +1060,9 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                     self.s[i0]
                 };
                 let mut count = 0;
-                for step in 0..m {
+                // WCET: m <= CAP (= ECU_PATH_ROWS in the ECU); the search window is in metres,
+                // not in segments (segments may be short), so only m caps it.
+                for step in 0..m { // wcet-bound: ECU_PATH_ROWS
                     let seg = (i0 + step) % m;
                     if step > 0 && pos > end {
                         break;
@@ -1050,7 +1078,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             _ => (0, m),
         };
         let mut best: Option<(T, usize, T)> = None; // (dist², segment, t)
-        for step in 0..count {
+        // WCET: count <= m <= CAP (= ECU_PATH_ROWS in the ECU).
+        for step in 0..count { // wcet-bound: ECU_PATH_ROWS
             let i = (first + step) % m;
             let a = self.xy[i];
             let d = self.dir[i];
