@@ -427,7 +427,9 @@ pub fn obstacle_speed_cap<T: Real, const CAP: usize>(
 ) -> T {
     let d = velocity.preview_distance_m(v_now_mps.max(T::ZERO));
     let mut cap = T::INFINITY;
-    for o in parabolas {
+    // WCET: the only caller (the MPC step, from `PlanTask`) passes
+    // `ObstacleManager::parabolas()`, a `Vec` of capacity MAX_OBSTACLES.
+    for o in parabolas { // wcet-bound: MAX_OBSTACLES
         let swerve = match o.side {
             Side::Left => o.eta_apex_m + offset_buffer_m > T::ZERO,
             Side::Right => o.eta_apex_m - offset_buffer_m < T::ZERO,
@@ -455,7 +457,9 @@ pub fn constraint_value_and_gradient<T: Real>(parabola: &Parabola<T>, p: [T; 2])
 pub fn minimal_apex<T: Real>(points: &[(T, T)], c: T) -> Option<(T, T)> {
     let f = |x0: T| {
         let mut m = -T::INFINITY;
-        for &(xi, e) in points {
+        // WCET: `points` is `build_inner`'s `pts` (its only caller), a `Vec` of capacity
+        // MAX_POINTS = 2 * MAX_VERTICES; every loop of this function walks it.
+        for &(xi, e) in points { // wcet-bound: 2 * MAX_VERTICES
             let d = xi - x0;
             m = m.max(e + c * d * d);
         }
@@ -467,7 +471,8 @@ pub fn minimal_apex<T: Real>(points: &[(T, T)], c: T) -> Option<(T, T)> {
             return;
         }
         let v = f(x0);
-        let better = match best {
+        // WCET: loops the compiler closes on this line walk `points` (<= 2 * MAX_VERTICES).
+        let better = match best { // wcet-bound: 2 * MAX_VERTICES
             None => true,
             Some((_, bv)) => v < bv,
         };
@@ -475,11 +480,11 @@ pub fn minimal_apex<T: Real>(points: &[(T, T)], c: T) -> Option<(T, T)> {
             best = Some((x0, v));
         }
     };
-    for &(xi, _) in points {
+    for &(xi, _) in points { // wcet-bound: 2 * MAX_VERTICES
         consider(xi);
     }
-    for (i, &(xi, ei)) in points.iter().enumerate() {
-        for &(xk, ek) in points.iter().skip(i + 1) {
+    for (i, &(xi, ei)) in points.iter().enumerate() { // wcet-bound: 2 * MAX_VERTICES
+        for &(xk, ek) in points.iter().skip(i + 1) { // wcet-bound: 2 * MAX_VERTICES
             let dx = xi - xk;
             if dx != T::ZERO {
                 // e_i + c(ξ_i − x)² = e_k + c(ξ_k − x)²  ⇔  x = ((e_i − e_k) + c(ξ_i² − ξ_k²)) / (2c(ξ_i − ξ_k))
@@ -531,7 +536,8 @@ fn build_inner<T: Real, const CAP: usize>(
     }
     let mut cx = T::ZERO;
     let mut cy = T::ZERO;
-    for (k, v) in verts.iter().enumerate() {
+    // WCET: `o.vertices` is a `Vec` of capacity MAX_VERTICES.
+    for (k, v) in verts.iter().enumerate() { // wcet-bound: MAX_VERTICES
         if !v[0].is_finite() || !v[1].is_finite() {
             return Err(ObstacleError::NonFiniteVertex {
                 obstacle,
@@ -552,7 +558,7 @@ fn build_inner<T: Real, const CAP: usize>(
     let mut all_right = true;
     let mut best_abs = T::INFINITY;
     let mut best_s = pc.s_m;
-    for v in verts.iter() {
+    for v in verts.iter() { // wcet-bound: MAX_VERTICES
         if let Some(pv) = path.project(*v, Some(pc.s_m)) {
             all_left &= pv.lateral_m > T::ZERO;
             all_right &= pv.lateral_m < T::ZERO;
@@ -592,7 +598,7 @@ fn build_inner<T: Real, const CAP: usize>(
     let mut local: Vec<(T, T), MAX_VERTICES> = Vec::new();
     let mut eta_min = T::INFINITY;
     let mut eta_max = -T::INFINITY;
-    for v in verts.iter() {
+    for v in verts.iter() { // wcet-bound: MAX_VERTICES
         let (xi, eta) = frame.to_local(*v);
         eta_min = eta_min.min(eta);
         eta_max = eta_max.max(eta);
@@ -613,7 +619,8 @@ fn build_inner<T: Real, const CAP: usize>(
     let m_y = settings.lateral_margin_m();
     let m_x = settings.half_car_length_m;
     let mut pts: Vec<(T, T), MAX_POINTS> = Vec::new();
-    for &(xi, eta) in local.iter() {
+    // WCET: `local` is a `Vec` of capacity MAX_VERTICES.
+    for &(xi, eta) in local.iter() { // wcet-bound: MAX_VERTICES
         let e = sigma * eta + m_y;
         let _ = pts.push((xi - m_x, e));
         let _ = pts.push((xi + m_x, e));
@@ -685,7 +692,7 @@ impl<T: Real> ObstacleManager<T> {
                 capacity: MAX_OBSTACLES,
             });
         }
-        for (k, o) in obstacles.iter().enumerate().take(MAX_OBSTACLES) {
+        for (k, o) in obstacles.iter().enumerate().take(MAX_OBSTACLES) { // wcet-bound: MAX_OBSTACLES
             match build_inner(settings, path, k, o) {
                 Ok((p, blocked)) => {
                     let _ = self.parabolas.push(p);
