@@ -175,7 +175,9 @@ fn sh_open(name: &[u8], mode: usize) -> Option<usize> {
 fn sh_write(fd: usize, mut bytes: &[u8]) -> bool {
     while !bytes.is_empty() {
         let left = unsafe { syscall!(WRITE, fd, bytes.as_ptr(), bytes.len()) };
-        if left >= bytes.len() {
+        // WCET: each pass returns or drops at least one byte (left < len), so at most
+        // bytes.len() passes: a frame (<= MAX_FRAME_BYTES) or `safe_stop`'s line (< 30 bytes).
+        if left >= bytes.len() { // wcet-bound: MAX_FRAME_BYTES
             return false;
         }
         bytes = match bytes.get(bytes.len() - left..) {
@@ -348,7 +350,9 @@ fn stack_high_water() -> (u32, u32) {
     let top = core::ptr::addr_of!(_stack_start) as usize;
     let bottom = (stack_bottom() + 3) & !3;
     let mut p = bottom;
-    while p < top && unsafe { core::ptr::read_volatile(p as *const u32) } == PAINT {
+    // WCET: one word per pass from `bottom` up to `top`, both in the 128 KiB of RAM
+    // (memory.x): at most 128 KiB / 4 passes (reached only from the stop path).
+    while p < top && unsafe { core::ptr::read_volatile(p as *const u32) } == PAINT { // wcet-bound: 128 * 1024 / 4
         p += 4;
     }
     ((top - p) as u32, (top - bottom) as u32)
@@ -403,7 +407,8 @@ impl Staging {
     /// Copies a complete window into the planner's path storage.
     fn take_into(&mut self, planner: &mut PlanTask<f32, PATH_CAP>) -> Option<link::WindowFrame> {
         let w = self.ready.take()?;
-        for (i, r) in self.rows.iter().take(w.rows as usize).enumerate() {
+        // WCET: `rows` holds PATH_CAP = ECU_PATH_ROWS rows.
+        for (i, r) in self.rows.iter().take(w.rows as usize).enumerate() { // wcet-bound: ECU_PATH_ROWS
             planner.path.stage_row(i, *r);
         }
         self.received = 0;
@@ -579,7 +584,14 @@ mod app {
         let mut monitor = DeadlineMonitor::control();
         let mut watchdog = PlanWatchdog::plan();
         loop {
-            Mono::delay_until(instant_at(monitor.release_us())).await;
+            // WCET: the analysis bounds one activation (one job: from its release to the next
+            // suspension); a poll resumes in this loop, so it is a cycle with two entries. A job
+            // ends with `next_release(now)`, the first release not yet past at its end, so it
+            // suspends here; a poll that finds that release already past (preempted between
+            // computing it and the await) runs a second job, which is another activation for the
+            // response-time analysis. (The timer queue's list walk inlined here, deleting this
+            // task's node, runs once per resumption over at most 2 nodes: one per task.)
+            Mono::delay_until(instant_at(monitor.release_us())).await; // wcet-bound: 1 per activation
             let release_us = monitor.start();
             let t0 = core_ticks();
             let est = loop {
@@ -654,7 +666,10 @@ mod app {
         let mut monitor = DeadlineMonitor::plan();
         let mut activation: u32 = 0;
         loop {
-            Mono::delay_until(instant_at(monitor.release_us())).await;
+            // WCET: one activation per pass, as in `control` (`next_release(end_us)` below is the
+            // first release not yet past at the job's end; a poll that finds it already past runs
+            // a second job, another activation for the response-time analysis).
+            Mono::delay_until(instant_at(monitor.release_us())).await; // wcet-bound: 1 per activation
             activation = activation.wrapping_add(1);
             let release_us = monitor.start();
             let est = cx.shared.estimate.lock(|e| *e);
@@ -749,7 +764,10 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
 /// second entry (a fault on this path) exits at once: it cannot re-enter itself.
 #[inline(never)]
 fn safe_stop(fault: u8) -> ! {
-    if STOPPING.swap(true, Ordering::Relaxed) {
+    // WCET: an exclusive store (the swap's LDREX/STREX retry) fails only if an exception
+    // is taken between the two; both callers (panic, HardFault) disable interrupts first, and
+    // the exceptions that still can (NMI, HardFault) do not return here: no retry.
+    if STOPPING.swap(true, Ordering::Relaxed) { // wcet-bound: 1
         exit(false)
     }
     let delta = f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed));
