@@ -429,7 +429,8 @@ pub fn obstacle_speed_cap<T: Real, const CAP: usize>(
     let mut cap = T::INFINITY;
     // WCET: the only caller (the MPC step, from `PlanTask`) passes
     // `ObstacleManager::parabolas()`, a `Vec` of capacity MAX_OBSTACLES.
-    for o in parabolas { // wcet-bound: MAX_OBSTACLES
+    // wcet-bound: MAX_OBSTACLES
+    for o in parabolas {
         let swerve = match o.side {
             Side::Left => o.eta_apex_m + offset_buffer_m > T::ZERO,
             Side::Right => o.eta_apex_m - offset_buffer_m < T::ZERO,
@@ -459,7 +460,8 @@ pub fn minimal_apex<T: Real>(points: &[(T, T)], c: T) -> Option<(T, T)> {
         let mut m = -T::INFINITY;
         // WCET: `points` is `build_inner`'s `pts` (its only caller), a `Vec` of capacity
         // MAX_POINTS = 2 * MAX_VERTICES; every loop of this function walks it.
-        for &(xi, e) in points { // wcet-bound: 2 * MAX_VERTICES
+        // wcet-bound: 2 * MAX_VERTICES
+        for &(xi, e) in points {
             let d = xi - x0;
             m = m.max(e + c * d * d);
         }
@@ -472,7 +474,8 @@ pub fn minimal_apex<T: Real>(points: &[(T, T)], c: T) -> Option<(T, T)> {
         }
         let v = f(x0);
         // WCET: loops the compiler closes on this line walk `points` (<= 2 * MAX_VERTICES).
-        let better = match best { // wcet-bound: 2 * MAX_VERTICES
+        // wcet-bound: 2 * MAX_VERTICES
+        let better = match best {
             None => true,
             Some((_, bv)) => v < bv,
         };
@@ -480,11 +483,14 @@ pub fn minimal_apex<T: Real>(points: &[(T, T)], c: T) -> Option<(T, T)> {
             best = Some((x0, v));
         }
     };
-    for &(xi, _) in points { // wcet-bound: 2 * MAX_VERTICES
+    // wcet-bound: 2 * MAX_VERTICES
+    for &(xi, _) in points {
         consider(xi);
     }
-    for (i, &(xi, ei)) in points.iter().enumerate() { // wcet-bound: 2 * MAX_VERTICES
-        for &(xk, ek) in points.iter().skip(i + 1) { // wcet-bound: 2 * MAX_VERTICES
+    // wcet-bound: 2 * MAX_VERTICES
+    for (i, &(xi, ei)) in points.iter().enumerate() {
+        // wcet-bound: 2 * MAX_VERTICES
+        for &(xk, ek) in points.iter().skip(i + 1) {
             let dx = xi - xk;
             if dx != T::ZERO {
                 // e_i + c(ξ_i − x)² = e_k + c(ξ_k − x)²  ⇔  x = ((e_i − e_k) + c(ξ_i² − ξ_k²)) / (2c(ξ_i − ξ_k))
@@ -537,7 +543,8 @@ fn build_inner<T: Real, const CAP: usize>(
     let mut cx = T::ZERO;
     let mut cy = T::ZERO;
     // WCET: `o.vertices` is a `Vec` of capacity MAX_VERTICES.
-    for (k, v) in verts.iter().enumerate() { // wcet-bound: MAX_VERTICES
+    // wcet-bound: MAX_VERTICES
+    for (k, v) in verts.iter().enumerate() {
         if !v[0].is_finite() || !v[1].is_finite() {
             return Err(ObstacleError::NonFiniteVertex {
                 obstacle,
@@ -558,7 +565,8 @@ fn build_inner<T: Real, const CAP: usize>(
     let mut all_right = true;
     let mut best_abs = T::INFINITY;
     let mut best_s = pc.s_m;
-    for v in verts.iter() { // wcet-bound: MAX_VERTICES
+    // wcet-bound: MAX_VERTICES
+    for v in verts.iter() {
         if let Some(pv) = path.project(*v, Some(pc.s_m)) {
             all_left &= pv.lateral_m > T::ZERO;
             all_right &= pv.lateral_m < T::ZERO;
@@ -598,7 +606,8 @@ fn build_inner<T: Real, const CAP: usize>(
     let mut local: Vec<(T, T), MAX_VERTICES> = Vec::new();
     let mut eta_min = T::INFINITY;
     let mut eta_max = -T::INFINITY;
-    for v in verts.iter() { // wcet-bound: MAX_VERTICES
+    // wcet-bound: MAX_VERTICES
+    for v in verts.iter() {
         let (xi, eta) = frame.to_local(*v);
         eta_min = eta_min.min(eta);
         eta_max = eta_max.max(eta);
@@ -620,7 +629,8 @@ fn build_inner<T: Real, const CAP: usize>(
     let m_x = settings.half_car_length_m;
     let mut pts: Vec<(T, T), MAX_POINTS> = Vec::new();
     // WCET: `local` is a `Vec` of capacity MAX_VERTICES.
-    for &(xi, eta) in local.iter() { // wcet-bound: MAX_VERTICES
+    // wcet-bound: MAX_VERTICES
+    for &(xi, eta) in local.iter() {
         let e = sigma * eta + m_y;
         let _ = pts.push((xi - m_x, e));
         let _ = pts.push((xi + m_x, e));
@@ -692,7 +702,8 @@ impl<T: Real> ObstacleManager<T> {
                 capacity: MAX_OBSTACLES,
             });
         }
-        for (k, o) in obstacles.iter().enumerate().take(MAX_OBSTACLES) { // wcet-bound: MAX_OBSTACLES
+        // wcet-bound: MAX_OBSTACLES
+        for (k, o) in obstacles.iter().enumerate().take(MAX_OBSTACLES) {
             match build_inner(settings, path, k, o) {
                 Ok((p, blocked)) => {
                     let _ = self.parabolas.push(p);

@@ -412,7 +412,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 }
                 // WCET: this line closes the `for i in 0..count` loop above; in the ECU `validate`
                 // is reached only from `load_staged`, which refuses count > CAP (= ECU_PATH_ROWS) first.
-                if w[0] < T::ZERO || w[1] < T::ZERO { // wcet-bound: ECU_PATH_ROWS
+                // wcet-bound: ECU_PATH_ROWS
+                if w[0] < T::ZERO || w[1] < T::ZERO {
                     return Err(PathError::NegativeWidth { index: i });
                 }
             }
@@ -431,7 +432,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             });
         }
         // WCET: n <= CAP (= ECU_PATH_ROWS in the ECU), checked just above.
-        for i in 1..n { // wcet-bound: ECU_PATH_ROWS
+        // wcet-bound: ECU_PATH_ROWS
+        for i in 1..n {
             if same_point(get(i - 1).0, get(i).0) {
                 return Err(PathError::RepeatedPoint { index: i });
             }
@@ -520,7 +522,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         let mut s = T::ZERO;
         let mut prev_theta = T::ZERO;
         // WCET: m = segment_count() <= n <= CAP (= ECU_PATH_ROWS in the ECU).
-        for i in 0..m { // wcet-bound: ECU_PATH_ROWS
+        // wcet-bound: ECU_PATH_ROWS
+        for i in 0..m {
             let a = self.xy[i];
             let b = self.xy[(i + 1) % n];
             let dx = b[0] - a[0];
@@ -548,14 +551,16 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             let first = self.heading[0];
             let last = self.heading[m - 1];
             self.total_turn = (last - first) + wrap_pi(first - last);
-            for i in (1..m).rev() { // wcet-bound: ECU_PATH_ROWS
+            // wcet-bound: ECU_PATH_ROWS
+            for i in (1..m).rev() {
                 self.heading[i] = T::HALF * (self.heading[i - 1] + self.heading[i]);
             }
             self.heading[0] = T::HALF * (last - self.total_turn + first);
         } else {
             self.total_turn = self.heading[m - 1] - self.heading[0];
             self.heading[n - 1] = self.heading[m - 1];
-            for i in (1..m).rev() { // wcet-bound: ECU_PATH_ROWS
+            // wcet-bound: ECU_PATH_ROWS
+            for i in (1..m).rev() {
                 self.heading[i] = T::HALF * (self.heading[i - 1] + self.heading[i]);
             }
         }
@@ -563,10 +568,12 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         let max_steps = if closed { (n - 1) / 2 } else { n - 1 };
         // WCET: n <= CAP (= ECU_PATH_ROWS in the ECU); the two step loops below take at
         // most max_steps <= n - 1 steps each (the half-window in metres only stops them earlier).
-        for i in 0..n { // wcet-bound: ECU_PATH_ROWS
+        // wcet-bound: ECU_PATH_ROWS
+        for i in 0..n {
             let mut ia = i;
             let mut back = T::ZERO;
-            for _ in 0..max_steps { // wcet-bound: ECU_PATH_ROWS
+            // wcet-bound: ECU_PATH_ROWS
+            for _ in 0..max_steps {
                 if back >= h || (!closed && ia == 0) {
                     break;
                 }
@@ -575,7 +582,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             }
             let mut ic = i;
             let mut ahead = T::ZERO;
-            for _ in 0..max_steps { // wcet-bound: ECU_PATH_ROWS
+            // wcet-bound: ECU_PATH_ROWS
+            for _ in 0..max_steps {
                 if ahead >= h || (!closed && ic == n - 1) {
                     break;
                 }
@@ -594,7 +602,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         }
         let mut kmax = T::ZERO;
         // WCET: `curvature` holds CAP (= ECU_PATH_ROWS in the ECU) entries.
-        for k in self.curvature.iter().take(n) { // wcet-bound: ECU_PATH_ROWS
+        // wcet-bound: ECU_PATH_ROWS
+        for k in self.curvature.iter().take(n) {
             kmax = kmax.max(k.abs());
         }
         self.max_abs_curvature = kmax;
@@ -699,9 +708,11 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         // Largest i < m with s[i] <= w (binary search, s[0] = 0).
         let mut lo = 0usize;
         let mut hi = m; // invariant: s[lo] <= w (or lo == 0), answer < hi
+
         // WCET: hi - lo starts at m <= CAP and becomes floor or ceil of its half each
         // step: ceil(log2 m) steps ([`ECU_PATH_SEARCH_STEPS`] for the ECU's CAP).
-        while hi - lo > 1 { // wcet-bound: ECU_PATH_SEARCH_STEPS
+        // wcet-bound: ECU_PATH_SEARCH_STEPS
+        while hi - lo > 1 {
             let mid = lo + (hi - lo) / 2;
             if self.s[mid] <= w {
                 lo = mid;
@@ -963,7 +974,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         let segments = self.segment_count();
         // WCET: `win.steps` grows by one each pass and the scan stops at n <= CAP
         // (= ECU_PATH_ROWS in the ECU); every other exit is a break.
-        while win.steps < self.n && !win.ended { // wcet-bound: ECU_PATH_ROWS
+        // wcet-bound: ECU_PATH_ROWS
+        while win.steps < self.n && !win.ended {
             if win.seg >= self.n {
                 win.seg = 0;
             }
@@ -1062,7 +1074,8 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 let mut count = 0;
                 // WCET: m <= CAP (= ECU_PATH_ROWS in the ECU); the search window is in metres,
                 // not in segments (segments may be short), so only m caps it.
-                for step in 0..m { // wcet-bound: ECU_PATH_ROWS
+                // wcet-bound: ECU_PATH_ROWS
+                for step in 0..m {
                     let seg = (i0 + step) % m;
                     if step > 0 && pos > end {
                         break;
@@ -1078,8 +1091,10 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             _ => (0, m),
         };
         let mut best: Option<(T, usize, T)> = None; // (dist², segment, t)
+
         // WCET: count <= m <= CAP (= ECU_PATH_ROWS in the ECU).
-        for step in 0..count { // wcet-bound: ECU_PATH_ROWS
+        // wcet-bound: ECU_PATH_ROWS
+        for step in 0..count {
             let i = (first + step) % m;
             let a = self.xy[i];
             let d = self.dir[i];

@@ -177,7 +177,8 @@ fn sh_write(fd: usize, mut bytes: &[u8]) -> bool {
         let left = unsafe { syscall!(WRITE, fd, bytes.as_ptr(), bytes.len()) };
         // WCET: each pass returns or drops at least one byte (left < len), so at most
         // bytes.len() passes: a frame (<= MAX_FRAME_BYTES) or `safe_stop`'s line (< 30 bytes).
-        if left >= bytes.len() { // wcet-bound: MAX_FRAME_BYTES
+        // wcet-bound: MAX_FRAME_BYTES
+        if left >= bytes.len() {
             return false;
         }
         bytes = match bytes.get(bytes.len() - left..) {
@@ -352,7 +353,8 @@ fn stack_high_water() -> (u32, u32) {
     let mut p = bottom;
     // WCET: one word per pass from `bottom` up to `top`, both in the 128 KiB of RAM
     // (memory.x): at most 128 KiB / 4 passes (reached only from the stop path).
-    while p < top && unsafe { core::ptr::read_volatile(p as *const u32) } == PAINT { // wcet-bound: 128 * 1024 / 4
+    // wcet-bound: 128 * 1024 / 4
+    while p < top && unsafe { core::ptr::read_volatile(p as *const u32) } == PAINT {
         p += 4;
     }
     ((top - p) as u32, (top - bottom) as u32)
@@ -408,7 +410,8 @@ impl Staging {
     fn take_into(&mut self, planner: &mut PlanTask<f32, PATH_CAP>) -> Option<link::WindowFrame> {
         let w = self.ready.take()?;
         // WCET: `rows` holds PATH_CAP = ECU_PATH_ROWS rows.
-        for (i, r) in self.rows.iter().take(w.rows as usize).enumerate() { // wcet-bound: ECU_PATH_ROWS
+        // wcet-bound: ECU_PATH_ROWS
+        for (i, r) in self.rows.iter().take(w.rows as usize).enumerate() {
             planner.path.stage_row(i, *r);
         }
         self.received = 0;
@@ -767,7 +770,8 @@ fn safe_stop(fault: u8) -> ! {
     // WCET: an exclusive store (the swap's LDREX/STREX retry) fails only if an exception
     // is taken between the two; both callers (panic, HardFault) disable interrupts first, and
     // the exceptions that still can (NMI, HardFault) do not return here: no retry.
-    if STOPPING.swap(true, Ordering::Relaxed) { // wcet-bound: 1
+    // wcet-bound: 1
+    if STOPPING.swap(true, Ordering::Relaxed) {
         exit(false)
     }
     let delta = f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed));
