@@ -668,6 +668,9 @@ impl<T: Real> Mpc<T> {
             settings.cold_start_iterations.max(1) as u32
         };
         let mut v_heur = [T::ZERO; HORIZON + 1];
+        // `passes` is 1 (warm) or `cold_start_iterations.max(1)`; the ECU's settings
+        // (MpcSettings::paper, via VehicleConfig::mpc_settings) set it to COLD_START_PASSES.
+        // wcet-bound: COLD_START_PASSES
         for _ in 0..passes {
             // The iteration cap is the activation's: this pass gets what is left.
             let left = settings.qp_max_iter.saturating_sub(report.qp_iterations);
@@ -727,6 +730,7 @@ impl<T: Real> Mpc<T> {
         plan.v_heur_mps = v_heur;
         let mut xi = xi0;
         plan.nodes[0] = bicycle::node_from_state(&xi);
+        // wcet-bound: HORIZON
         for k in 0..HORIZON {
             let u = self.u_bar[k];
             xi = settings.geometry.step(&xi, &u, dt);
@@ -772,6 +776,7 @@ impl<T: Real> Mpc<T> {
         c.start(st);
         let mut window = CurvatureWindow::new();
         let mut xbar = *xi0;
+        // wcet-bound: HORIZON
         for k in 0..HORIZON {
             // tan δ̄ once, for the friction ellipse and the linearisation.
             let tan_delta = xbar[IDELTA].tan();
@@ -801,14 +806,18 @@ impl<T: Real> Mpc<T> {
     /// next solve's warm start.
     fn keep_working_set(&mut self) {
         let mut n = 0;
+        // The working set is at most WS entries (the solver's array of WS); the compiler
+        // splits this loop, its parts found at the two annotated lines below: WS each.
         for e in self.solver.working_set() {
             let entry = match e.index {
                 ConstraintIndex::Bound(j) => WarmEntry::Bound(j, e.side),
+                // wcet-bound: WS
                 ConstraintIndex::Row(i) => match self.condensing.row_id.get(i as usize) {
                     Some(&id) => WarmEntry::Row(id, e.side),
                     None => continue,
                 },
             };
+            // wcet-bound: WS
             if let Some(d) = self.warm_set.get_mut(n) {
                 *d = entry;
                 n += 1;
@@ -838,8 +847,9 @@ impl<T: Real> Mpc<T> {
                     else {
                         return None;
                     };
+                    // A node's rows `node_first[node]..node_first[node + 1]`: row counts `qp.m` <= NC.
                     let i =
-                        (first as usize..end as usize).find(|&i| c.row_id.get(i) == Some(&id))?;
+                        (first as usize..end as usize).find(|&i| c.row_id.get(i) == Some(&id))?; // wcet-bound: NC
                     Some(ActiveConstraint {
                         index: ConstraintIndex::Row(i as u16),
                         side,
@@ -852,6 +862,7 @@ impl<T: Real> Mpc<T> {
     fn slack_diagnostics(&self, report: &mut MpcReport<T>) {
         let m = self.solver.problem().m.min(NC);
         let (mut v, mut o, mut r) = (T::ZERO, T::ZERO, T::ZERO);
+        // wcet-bound: NC
         for i in 0..m {
             let s = self.solver.slack(i);
             match self.condensing.row_id[i].kind {
@@ -882,6 +893,8 @@ pub fn obstacle_offset<T: Real, const CAP: usize>(
     buffer_m: T,
 ) -> T {
     let (mut left, mut right) = (T::ZERO, T::ZERO);
+    // `obstacles`: the plan task's parabolas, a heapless::Vec of MAX_OBSTACLES.
+    // wcet-bound: MAX_OBSTACLES
     for o in obstacles {
         let Some(s) = o.relevant_s_at(path, s_m) else {
             continue;
@@ -1151,6 +1164,7 @@ impl<T: Real> Condensing<T> {
         } else {
             (&b[0], &mut a[0])
         };
+        // wcet-bound: NX
         for i in 0..NX {
             let out = &mut new[i];
             // Row i of A has at most four nonzeros (the kinematic bicycle's
@@ -1159,10 +1173,14 @@ impl<T: Real> Condensing<T> {
             let mut terms: [(&[T; NV], T); 4] = [(&old[0], T::ZERO); 4];
             let mut cnt = 0;
             let mut extra = false;
+            // Over the NX entries of row i; the compiler splits this loop (runs of zeros
+            // skipped), each part at the two annotated lines below advancing `l`: NX each.
             for (l, &ail) in lin.a[i].iter().enumerate() {
+                // wcet-bound: NX
                 if ail == T::ZERO {
                     continue;
                 }
+                // wcet-bound: NX
                 match terms.get_mut(cnt) {
                     Some(t) => {
                         *t = (&old[l], ail);
@@ -1172,6 +1190,7 @@ impl<T: Real> Condensing<T> {
                 }
             }
             let [(s0, a0), (s1, a1), (s2, a2), (s3, a3)] = terms;
+            // `o` is `out[..NU·k]` with k < HORIZON: fewer than NV entries.
             let o = &mut out[..used];
             match cnt {
                 0 => o.fill(T::ZERO),
@@ -1181,16 +1200,19 @@ impl<T: Real> Condensing<T> {
                     }
                 }
                 2 => {
+                    // wcet-bound: NV
                     for (j, d) in o.iter_mut().enumerate() {
                         *d = a0 * s0[j] + a1 * s1[j];
                     }
                 }
                 3 => {
+                    // wcet-bound: NV
                     for (j, d) in o.iter_mut().enumerate() {
                         *d = (a0 * s0[j] + a1 * s1[j]) + a2 * s2[j];
                     }
                 }
                 4 if !extra => {
+                    // wcet-bound: NV
                     for (j, d) in o.iter_mut().enumerate() {
                         *d = ((a0 * s0[j] + a1 * s1[j]) + a2 * s2[j]) + a3 * s3[j];
                     }
@@ -1202,6 +1224,7 @@ impl<T: Real> Condensing<T> {
                         if ail == T::ZERO {
                             continue;
                         }
+                        // wcet-bound: NV
                         for (d, s) in o.iter_mut().zip(old[l][..used].iter()) {
                             *d += ail * *s;
                         }
@@ -1365,12 +1388,15 @@ impl<T: Real> Condensing<T> {
         let plus = &mut self.row;
         plus.fill(T::ZERO);
         let neg_slope = -slope;
+        // ncols = NU·(k + 1) <= NU·HORIZON = NV (condense, the only caller).
         if neg_slope == T::ZERO {
+            // wcet-bound: NV
             for j in 0..ncols {
                 plus[j] += sd[j];
                 minus[j] += -sd[j];
             }
         } else {
+            // wcet-bound: NV
             for j in 0..ncols {
                 let t = neg_slope * sv[j];
                 plus[j] = (plus[j] + sd[j]) + t;
@@ -1408,6 +1434,8 @@ impl<T: Real> Condensing<T> {
         u_bar: &[[T; NU]; HORIZON],
         ncols: usize,
     ) {
+        // `obstacles`: the plan task's parabolas, a heapless::Vec of MAX_OBSTACLES.
+        // wcet-bound: MAX_OBSTACLES
         for o in obstacles {
             let Some(s) = o.relevant_s_at(path, fr.s) else {
                 continue;
@@ -1452,6 +1480,7 @@ fn add_square_root_rows<T: Real>(
     ncols: usize,
 ) {
     let n = ncols.min(NV);
+    // wcet-bound: NV
     for k in 0..n {
         let v = x[k];
         x[k] = [T::ZERO; COST_ROWS];
@@ -1475,6 +1504,7 @@ fn add_square_root_rows<T: Real>(
         let (rk, xs) = (&mut r[k], &mut x[k + 1..n]);
         // The four rows as scalars (registers), summed in the order of the rows.
         let [v0, v1, v2, v3] = v;
+        // wcet-bound: NV
         for (rkj, xj) in rk[k + 1..n].iter_mut().zip(xs.iter_mut()) {
             let [x0, x1, x2, x3] = *xj;
             let mut d = w0 * *rkj;
@@ -1505,11 +1535,15 @@ fn lin_row_into<T: Real>(
     let mut used: [(&[T; NV], T); 3] = [(&sens[0], T::ZERO); 3];
     let mut cnt = 0;
     let mut extra = false;
+    // `terms` has 1 or 3 entries (the arrays of tracking_costs and obstacle_rows);
+    // the compiler splits this loop, its parts at the two annotated lines below: 3 each.
     for &(state, coef) in terms {
         if coef == T::ZERO {
             continue;
         }
+        // wcet-bound: 3
         if let Some(srow) = sens.get(state) {
+            // wcet-bound: 3
             match used.get_mut(cnt) {
                 Some(t) => {
                     *t = (srow, coef);
@@ -1575,6 +1609,8 @@ fn cost_row_of<T: Real>(
     ncols: usize,
     d: T,
 ) {
+    // ncols = NU·(k + 1) <= NU·HORIZON = NV (tracking_costs, from condense).
+    // wcet-bound: NV
     for j in 0..ncols {
         qp.f[j] += w * row[j] * d;
         cost[j][r] = sw * row[j];
@@ -1604,6 +1640,8 @@ fn push_row_of<T: Real>(
 
 fn dot<T: Real>(row: &[T; NV], u: &[[T; NU]; HORIZON], ncols: usize) -> T {
     let mut acc = T::ZERO;
+    // ncols <= NV: NU·(k + 1) from condense, or `ncols.min(NV)` in lin_row_into.
+    // wcet-bound: NV
     for j in 0..ncols {
         acc += row[j] * u[j / 2][j % 2];
     }
@@ -1621,6 +1659,7 @@ fn interpolate_nodes<T: Real>(values: &[T; HORIZON + 1], t: T) -> T {
 /// Re-samples piecewise-constant inputs shifted by `shift` intervals: each new
 /// interval gets the average of the old inputs over it; past the end, the last.
 fn shift_inputs<T: Real>(old: &[[T; NU]; HORIZON], shift: T, new: &mut [[T; NU]; HORIZON]) {
+    // wcet-bound: HORIZON
     for k in 0..HORIZON {
         let a = shift + T::from_usize(k);
         let b = a + T::ONE;
@@ -1628,6 +1667,8 @@ fn shift_inputs<T: Real>(old: &[[T; NU]; HORIZON], shift: T, new: &mut [[T; NU];
         let j0 = a.floor();
         let mut j = (j0.to_f32() as usize).min(HORIZON);
         let mut t = a;
+        // `j` (>= 0) grows by one each iteration and the loop stops past HORIZON.
+        // wcet-bound: HORIZON + 1
         while t < b && j <= HORIZON {
             let end = (T::from_usize(j) + T::ONE).min(b);
             let src = old[j.min(HORIZON - 1)];
