@@ -344,12 +344,14 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         let length = self.path.length_m();
         let closed = self.path.is_closed();
         let mut inside = 0;
+        // wcet-bound: MAX_OBSTACLES
         for i in 0..self.obstacle_list.len() {
             let o = &self.obstacle_list[i];
             let n = T::from_usize(o.vertices.len().max(1));
             let c = o
                 .vertices
                 .iter()
+                // wcet-bound: MAX_VERTICES
                 .fold([T::ZERO; 2], |a, v| [a[0] + v[0], a[1] + v[1]]);
             // On the polyline: an open window's end segments, extended, can pass
             // near a far part of the road and claim the obstacle for it.
@@ -401,7 +403,9 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         if !self.ready {
             return false;
         }
-        core::mem::swap(&mut self.working, shared);
+        // The swap's loop moves a word or more per iteration: a Plan<f32> is 154 words (stamp 2,
+        // dt 1, HORIZON + 1 nodes of 6 and as many V_heur, HORIZON inputs of NU).
+        core::mem::swap(&mut self.working, shared); // wcet-bound: 3 + (HORIZON + 1) * 7 + HORIZON * NU
         self.ready = false;
         self.stats.published = self.stats.published.wrapping_add(1);
         true
