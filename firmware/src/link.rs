@@ -297,7 +297,9 @@ impl From<crate::deadline::DeadlineCounts> for TaskTimingFrame {
 }
 
 /// One finished plan activation, as the ECU saw it.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+// The derived serialize_field's loops found at this line are postcard's varint
+// bytes of one integer field: at most 10 (a u64, 64 bits in 7-bit groups).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)] // wcet-bound: 10
 pub struct PlanEventFrame {
     /// Plan activation number since `Start`, dimensionless (0 first).
     pub activation: u32,
@@ -967,6 +969,9 @@ fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, FrameError> {
     let len = buf.len();
     let mut read = 0;
     let mut write = 0;
+    // len < MAX_FRAME_BYTES (decode, the only caller, refuses longer frames) and `read`
+    // grows by `code` >= 1 each iteration.
+    // wcet-bound: MAX_FRAME_BYTES
     while read < len {
         let code = match buf.get(read) {
             Some(&c) if c != 0 => usize::from(c),
@@ -976,6 +981,8 @@ fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, FrameError> {
         if end > len {
             return Err(FrameError::Cobs);
         }
+        // A block's code is one byte (<= 255): at most 254 data bytes.
+        // wcet-bound: 254
         for i in read + 1..end {
             let byte = match buf.get(i) {
                 Some(&b) if b != 0 => b,
@@ -1024,6 +1031,8 @@ pub fn decode<'a, M: Deserialize<'a>>(frame: &'a mut [u8]) -> Result<M, FrameErr
         return Err(FrameError::Version { got: version });
     }
     let crc: [u8; CRC_BYTES] = crc.try_into().map_err(|_| FrameError::TooShort)?;
+    // The CRC's loop takes at least a byte of `body` (< MAX_FRAME_BYTES) per iteration.
+    // wcet-bound: MAX_FRAME_BYTES
     if CRC32.checksum(body) != u32::from_le_bytes(crc) {
         return Err(FrameError::Checksum);
     }
