@@ -88,6 +88,10 @@ pub struct TaskStatic {
     pub loops: usize,
     /// Of those, with a bound.
     pub bounded_loops: usize,
+    /// Loops in functions that never return (the panic, fault and `exit` paths,
+    /// which end the activation with the actuators safe): not part of a
+    /// completing activation, not counted above.
+    pub excluded_loops: usize,
     /// Irreducible cycles (function: blocks' addresses).
     pub irreducible: Vec<String>,
     /// The IPET bound in instructions, when the analysis could give one.
@@ -279,6 +283,7 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
         let reach = program.reachable(&[root]);
         let mut n_loops = 0;
         let mut n_bounded = 0;
+        let mut n_excluded = 0;
         let mut irr = Vec::new();
         for &f in &reach {
             let func = &program.functions[f];
@@ -300,6 +305,11 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                         .and_then(|&b| func.blocks.get(b))
                         .map_or(0, |b| b.start)
                 ));
+            }
+            if !func.returns {
+                // Panic, fault and exit paths end the activation: excluded.
+                n_excluded += all_loops[f].len();
+                continue;
             }
             for (x, l) in all_loops[f].iter().enumerate() {
                 n_loops += 1;
@@ -366,6 +376,7 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
             functions: reach.len(),
             loops: n_loops,
             bounded_loops: n_bounded,
+            excluded_loops: n_excluded,
             irreducible: irr,
             static_bound_instructions: bi,
             static_bound_cycles: bc,

@@ -801,7 +801,14 @@ pub fn build_program(
                         if let Some(&t) = index.get(target) {
                             successors.push(block_of_insn(t));
                         } else if let Some(&c) = by_address.get(target) {
-                            exit = Exit::TailCall(c);
+                            // A tail call of a function that never returns ends the
+                            // activation as a call of it does.
+                            exit = if returns[c] {
+                                Exit::TailCall(c)
+                            } else {
+                                calls.push(c);
+                                Exit::NoReturn
+                            };
                         } else {
                             unresolved.push(format!("{}: jumps to no function", here()));
                         }
