@@ -587,14 +587,12 @@ mod app {
         let mut monitor = DeadlineMonitor::control();
         let mut watchdog = PlanWatchdog::plan();
         loop {
-            // WCET: the analysis bounds one activation (one job: from its release to the next
-            // suspension); a poll resumes in this loop, so it is a cycle with two entries. A job
-            // ends with `next_release(now)`, the first release not yet past at its end, so it
-            // suspends here; a poll that finds that release already past (preempted between
-            // computing it and the await) runs a second job, which is another activation for the
-            // response-time analysis. (The timer queue's list walk inlined here, deleting this
-            // task's node, runs once per resumption over at most 2 nodes: one per task.)
-            Mono::delay_until(instant_at(monitor.release_us())).await; // wcet-bound: 1 per activation
+            // WCET: a poll resumes in this loop, so the binary has a cycle with several entry
+            // blocks (irreducible). A job ends with `next_release(now)`, the first release not
+            // yet past at its end, so it suspends here. Not yet bounded: "1 per activation"
+            // was contradicted by the traces (a control job crosses two of the cycle's entry
+            // edges), and the count per job has not been derived from the binary.
+            Mono::delay_until(instant_at(monitor.release_us())).await;
             let release_us = monitor.start();
             let t0 = core_ticks();
             let est = loop {
@@ -669,10 +667,8 @@ mod app {
         let mut monitor = DeadlineMonitor::plan();
         let mut activation: u32 = 0;
         loop {
-            // WCET: one activation per pass, as in `control` (`next_release(end_us)` below is the
-            // first release not yet past at the job's end; a poll that finds it already past runs
-            // a second job, another activation for the response-time analysis).
-            Mono::delay_until(instant_at(monitor.release_us())).await; // wcet-bound: 1 per activation
+            // WCET: as in `control`, an irreducible cycle not yet bounded.
+            Mono::delay_until(instant_at(monitor.release_us())).await;
             activation = activation.wrapping_add(1);
             let release_us = monitor.start();
             let est = cx.shared.estimate.lock(|e| *e);

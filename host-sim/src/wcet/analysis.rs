@@ -318,13 +318,12 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                     n_bounded += 1;
                 }
                 let row = loop_rows.entry((f, x)).or_insert_with(|| {
-                    let latch = l.back_edges.first().map_or(l.header, |e| e.0);
-                    let addr = func
-                        .blocks
-                        .get(latch)
-                        .and_then(|b| func.instructions.get(b.end.saturating_sub(1)))
-                        .map_or(0, |i| i.address);
-                    let (file, line) = location(&ctx, addr);
+                    // The first of the loop's telling instructions with a line.
+                    let (file, line) = candidate_addresses(func, l)
+                        .into_iter()
+                        .map(|a| location(&ctx, a))
+                        .find(|(_, line)| *line > 0)
+                        .unwrap_or_else(|| ("?".into(), 0));
                     LoopEntry {
                         tasks: Vec::new(),
                         function: func.demangled.clone(),
@@ -411,9 +410,10 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                 row.observed_max = Some(row.observed_max.unwrap_or(0).max(o.max_back_edges));
             }
         }
+        // A cap per activation is also a cap per entry (an entry is within one
+        // activation): both are checked against the largest count per entry.
         let entry_bounds: Vec<(usize, usize, u64)> = facts
             .iter()
-            .filter(|f| f.per == Per::Entry)
             .map(|f| (f.function, f.loop_index, f.bound))
             .collect();
         violations.extend(
