@@ -155,3 +155,125 @@ fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
         assert!(l.line > 0, "{l:?}");
     }
 }
+
+/// A copy of the firmware's sources with `edit` applied to one file (line count
+/// unchanged, so the ELF's line table still matches).
+fn edited_sources(file: &str, edit: impl Fn(&str) -> String) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let src = std::path::Path::new("../firmware/src");
+    let mut stack = vec![src.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            let rel = p.strip_prefix(src).unwrap();
+            if p.is_dir() {
+                std::fs::create_dir_all(dir.path().join(rel)).unwrap();
+                stack.push(p);
+            } else {
+                let text = std::fs::read_to_string(&p).unwrap();
+                let text = if rel == std::path::Path::new(file) {
+                    let new = edit(&text);
+                    assert_ne!(new, text, "the edit changed nothing in {file}");
+                    assert_eq!(new.lines().count(), text.lines().count());
+                    new
+                } else {
+                    text
+                };
+                std::fs::write(dir.path().join(rel), text).unwrap();
+            }
+        }
+    }
+    dir
+}
+
+#[test]
+#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+fn a_loop_whose_annotation_is_removed_is_refused() {
+    let elf = std::path::Path::new(ECU_ELF);
+    assert!(
+        elf.is_file(),
+        "{ECU_ELF} is missing: build it with `cargo ecu`"
+    );
+    let src = std::path::Path::new("../firmware/src");
+    let before = host_sim::wcet::analysis::analyse(elf, src, &[]).unwrap();
+    let edited = edited_sources("mpc.rs", |t| {
+        t.replace(
+            "// wcet-bound: COLD_START_PASSES",
+            "// (bound removed by a test)",
+        )
+    });
+    let after = host_sim::wcet::analysis::analyse(elf, edited.path(), &[]).unwrap();
+    assert!(
+        after.unbounded_loops > before.unbounded_loops,
+        "{} -> {}",
+        before.unbounded_loops,
+        after.unbounded_loops
+    );
+    let passes = |a: &host_sim::wcet::analysis::StaticAnalysis| {
+        a.loops
+            .iter()
+            .filter(|l| l.file == "firmware/src/mpc.rs" && l.bound.is_none())
+            .count()
+    };
+    assert!(passes(&after) > passes(&before));
+    let plan = after.tasks.iter().find(|t| t.name == "plan").unwrap();
+    assert!(plan.static_bound_instructions.is_none());
+    assert!(plan
+        .refused
+        .as_deref()
+        .unwrap_or("")
+        .contains("without a bound"));
+}
+
+#[test]
+#[ignore = "needs the ECU binary and QEMU: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
+    let elf = std::path::Path::new(ECU_ELF);
+    assert!(
+        elf.is_file(),
+        "{ECU_ELF} is missing: build it with `cargo ecu`"
+    );
+    let out = tempfile::tempdir().unwrap();
+    let trace = out.path().join("trace.log");
+    // One simulated second of the paper lap: the cold start walks the whole
+    // window of the road (320 rows).
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .args([
+            "pil",
+            "--obstacles",
+            "paper",
+            "--duration",
+            "1",
+            "--no-plots",
+            "--no-compare",
+        ])
+        .arg("--elf")
+        .arg(elf)
+        .arg("--trace")
+        .arg(&trace)
+        .arg("--out")
+        .arg(out.path().join("pil"))
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let src = std::path::Path::new("../firmware/src");
+    let honest = host_sim::wcet::analysis::analyse(elf, src, &[trace.clone()]).unwrap();
+    assert!(honest.violations.is_empty(), "{:?}", honest.violations);
+    assert!(honest
+        .loops
+        .iter()
+        .any(|l| l.observed_max.unwrap_or(0) >= 300));
+    let edited = edited_sources("reference_path.rs", |t| {
+        t.replace("// wcet-bound: ECU_PATH_ROWS", "// wcet-bound: 10")
+    });
+    let wrong = host_sim::wcet::analysis::analyse(elf, edited.path(), &[trace]).unwrap();
+    assert!(!wrong.violations.is_empty());
+    assert!(
+        wrong
+            .violations
+            .iter()
+            .any(|v| v.contains("bound 10 back edges")),
+        "{:?}",
+        wrong.violations
+    );
+}
