@@ -75,7 +75,10 @@ pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
         ("PATH_CHUNK_ROWS", link::PATH_CHUNK_ROWS as u64),
         ("MAX_FRAME_BYTES", link::MAX_FRAME_BYTES as u64),
         ("TORQUE_HISTORY", firmware::friction::TORQUE_HISTORY as u64),
-        ("ECU_PATH_SEARCH_STEPS", firmware::reference_path::ECU_PATH_SEARCH_STEPS as u64),
+        (
+            "ECU_PATH_SEARCH_STEPS",
+            firmware::reference_path::ECU_PATH_SEARCH_STEPS as u64,
+        ),
     ])
 }
 
