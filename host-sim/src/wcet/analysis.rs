@@ -156,6 +156,18 @@ fn location(loader: &addr2line::Loader, address: u32) -> (String, u32) {
     first.unwrap_or_else(|| ("?".into(), 0))
 }
 
+/// The innermost frame of `address` (inlining followed): for the facts about
+/// dependency code, which is inlined into the firmware's functions.
+fn innermost(loader: &addr2line::Loader, address: u32) -> Option<(String, u32)> {
+    let mut frames = loader.find_frames(u64::from(address)).ok()?;
+    while let Ok(Some(frame)) = frames.next() {
+        if let Some(loc) = frame.location {
+            return Some((loc.file.unwrap_or("?").to_string(), loc.line.unwrap_or(0)));
+        }
+    }
+    None
+}
+
 /// The source path from the workspace on (`firmware/src/mpc.rs`), or the file name
 /// with its crate folder for a dependency.
 fn short_path(file: &str) -> String {
@@ -190,8 +202,10 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
     // loop's line (DWARF), refused when a nested loop would share its parent's.
     let annotations = annotations::scan_firmware(firmware_src)
         .map_err(|e| anyhow::anyhow!("loop annotations in {}: {e}", firmware_src.display()))?;
+    let dependency_facts = annotations::dependency_facts();
     let by_line: BTreeMap<(String, u32), &annotations::Annotation> = annotations
         .iter()
+        .chain(dependency_facts.iter())
         .map(|a| ((a.file.clone(), a.line), a))
         .collect();
     let mut facts: Vec<LoopFact> = Vec::new();
@@ -213,13 +227,22 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                     continue;
                 }
             }
-            let hit = candidate_addresses(func, l)
-                .into_iter()
-                .map(|a| {
+            let candidates = candidate_addresses(func, l);
+            let hit = candidates
+                .iter()
+                .map(|&a| {
                     let (file, line) = location(&ctx, a);
                     (short_path(&file), line)
                 })
-                .find(|key| by_line.contains_key(key));
+                .find(|key| by_line.contains_key(key))
+                .or_else(|| {
+                    // A dependency's loop, inlined or not: the facts about its code.
+                    candidates
+                        .iter()
+                        .filter_map(|&a| innermost(&ctx, a))
+                        .map(|(file, line)| (short_path(&file), line))
+                        .find(|key| by_line.contains_key(key))
+                });
             let Some(key) = hit else {
                 notes.insert((k, x), bounds::why_not(func, l));
                 continue;

@@ -82,6 +82,49 @@ pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
     ])
 }
 
+/// Loop bounds of the dependencies' code the ECU runs (whose sources are not
+/// ours to annotate), each keyed by the crate's file (`crate-version/src/file.rs`,
+/// as the DWARF line table names it, so a new version of the crate is not
+/// matched) and the line the analysis reports for the loop, with why it holds.
+/// Checked against the traces like the firmware's annotations.
+pub fn dependency_facts() -> Vec<Annotation> {
+    // The ECU app's tasks waiting on the monotonic: `control` and `plan`.
+    const ASYNC_TASKS: u64 = 2;
+    let fact = |file: &str, line: u32, bound: u64, why: &str| Annotation {
+        file: file.to_string(),
+        line,
+        expression: format!("{bound} ({why})"),
+        bound,
+        scope: Scope::Entry,
+    };
+    vec![
+        fact(
+            "rtic-time-2.0.1/src/linked_list.rs",
+            81,
+            ASYNC_TASKS,
+            "delete walks the timer list: one node per waiting task",
+        ),
+        fact(
+            "rtic-time-2.0.1/src/linked_list.rs",
+            143,
+            ASYNC_TASKS,
+            "insert walks the timer list: one node per waiting task",
+        ),
+        fact(
+            "rtic-time-2.0.1/src/timer_queue.rs",
+            123,
+            2 * ASYNC_TASKS + 1,
+            "each pass pops one expired timer or re-arms once after a missed compare",
+        ),
+        fact(
+            "crc-3.4.0/src/crc32.rs",
+            150,
+            15,
+            "the bytes left after the 16-byte slices",
+        ),
+    ]
+}
+
 /// Evaluates an annotation's expression.
 pub fn evaluate(expr: &str, constants: &BTreeMap<&'static str, u64>) -> Result<u64, String> {
     #[derive(Debug, Clone, PartialEq)]
