@@ -257,7 +257,7 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
         .unwrap();
     assert!(status.success());
     let src = std::path::Path::new("../firmware/src");
-    let honest = host_sim::wcet::analysis::analyse(elf, src, &[trace.clone()]).unwrap();
+    let honest = host_sim::wcet::analysis::analyse(elf, src, std::slice::from_ref(&trace)).unwrap();
     assert!(honest.violations.is_empty(), "{:?}", honest.violations);
     assert!(honest
         .loops
