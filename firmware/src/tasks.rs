@@ -346,7 +346,9 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         let mut inside = 0;
         // wcet-bound: MAX_OBSTACLES
         for i in 0..self.obstacle_list.len() {
-            let o = &self.obstacle_list[i];
+            // The compiler makes the `continue` path below an inner loop of its own,
+            // headed here, over the same indices.
+            let o = &self.obstacle_list[i]; // wcet-bound: MAX_OBSTACLES
             let n = T::from_usize(o.vertices.len().max(1));
             let c = o
                 .vertices

@@ -199,7 +199,7 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
         }
     }
     // Bounds: recognised from the binary, else the source's annotation at the
-    // loop's line (DWARF), refused when a nested loop would share its parent's.
+    // loop's line (DWARF), never the one an enclosing loop took.
     let annotations = annotations::scan_firmware(firmware_src)
         .map_err(|e| anyhow::anyhow!("loop annotations in {}: {e}", firmware_src.display()))?;
     let dependency_facts = annotations::dependency_facts();
@@ -214,7 +214,27 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
     for (k, ls) in all_loops.iter().enumerate() {
         let func = &program.functions[k];
         let mut matched: Vec<Option<(String, u32)>> = vec![None; ls.len()];
-        for (x, l) in ls.iter().enumerate() {
+        // Outer loops first: an inner loop does not take an annotation one of its
+        // enclosing loops took (the compiler may put both back edges on one line);
+        // it takes the next of its lines that has one, or none.
+        let depth = |mut x: usize| {
+            let mut d = 0;
+            while let Some(p) = ls[x].parent {
+                d += 1;
+                x = p;
+            }
+            d
+        };
+        let mut order: Vec<usize> = (0..ls.len()).collect();
+        order.sort_by_key(|&x| depth(x));
+        for x in order {
+            let l = &ls[x];
+            let mut taken: Vec<(String, u32)> = Vec::new();
+            let mut p = l.parent;
+            while let Some(q) = p {
+                taken.extend(matched[q].iter().cloned());
+                p = ls[q].parent;
+            }
             if !l.irreducible {
                 if let Some(b) = bounds::constant_bound(func, l) {
                     facts.push(LoopFact {
@@ -234,17 +254,28 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                     let (file, line) = location(&ctx, a);
                     (short_path(&file), line)
                 })
-                .find(|key| by_line.contains_key(key))
+                .find(|key| by_line.contains_key(key) && !taken.contains(key))
                 .or_else(|| {
                     // A dependency's loop, inlined or not: the facts about its code.
                     candidates
                         .iter()
                         .filter_map(|&a| innermost(&ctx, a))
                         .map(|(file, line)| (short_path(&file), line))
-                        .find(|key| by_line.contains_key(key))
+                        .find(|key| by_line.contains_key(key) && !taken.contains(key))
                 });
             let Some(key) = hit else {
-                notes.insert((k, x), bounds::why_not(func, l));
+                let shares = candidates.iter().any(|&a| {
+                    let (file, line) = location(&ctx, a);
+                    taken.contains(&(short_path(&file), line))
+                });
+                notes.insert(
+                    (k, x),
+                    if shares {
+                        "its only annotated line is its enclosing loop's: annotate another of its lines (its header's)".into()
+                    } else {
+                        bounds::why_not(func, l)
+                    },
+                );
                 continue;
             };
             matched[x] = Some(key.clone());
@@ -272,23 +303,6 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                     }
                 ),
             );
-        }
-        // A loop nested in a loop matched to the same annotation has none of its own.
-        for (x, l) in ls.iter().enumerate() {
-            let mut p = l.parent;
-            while let Some(q) = p {
-                if matched[x].is_some() && matched[x] == matched[q] {
-                    facts.retain(|f| !(f.function == k && f.loop_index == x));
-                    origin.remove(&(k, x));
-                    notes.insert(
-                        (k, x),
-                        "nested in a loop with the same annotation: annotate it on its own line"
-                            .into(),
-                    );
-                    break;
-                }
-                p = ls[q].parent;
-            }
         }
     }
     let mut loop_rows: BTreeMap<(usize, usize), LoopEntry> = BTreeMap::new();
