@@ -79,7 +79,7 @@ fn ipet_counts_the_worst_path_by_hand() {
         bound: 15,
         per: Per::Entry,
     }];
-    let b = ipet::task_bound(&p, &ls, root, &facts, Cost::Instructions).unwrap();
+    let b = ipet::task_bound(&p, &ls, root, &facts, 0, Cost::Instructions).unwrap();
     // 2 (prologue) + 16 × 3 (loop) + 1 (return) + 16 × 1 (leaf).
     assert_eq!(b.bound, 67);
     // A tighter fact gives a smaller bound: the loop fact is in the program.
@@ -87,17 +87,17 @@ fn ipet_counts_the_worst_path_by_hand() {
         bound: 7,
         ..facts[0].clone()
     }];
-    let t = ipet::task_bound(&p, &ls, root, &tighter, Cost::Instructions).unwrap();
+    let t = ipet::task_bound(&p, &ls, root, &tighter, 0, Cost::Instructions).unwrap();
     assert_eq!(t.bound, 2 + 8 * 3 + 1 + 8);
     // Per activation: the same here (one entry per activation).
     let act = [LoopFact {
         per: Per::Activation,
         ..facts[0].clone()
     }];
-    let a = ipet::task_bound(&p, &ls, root, &act, Cost::Instructions).unwrap();
+    let a = ipet::task_bound(&p, &ls, root, &act, 0, Cost::Instructions).unwrap();
     assert_eq!(a.bound, 67);
     // Cycles are at least the instructions.
-    let c = ipet::task_bound(&p, &ls, root, &facts, Cost::Cycles).unwrap();
+    let c = ipet::task_bound(&p, &ls, root, &facts, 0, Cost::Cycles).unwrap();
     assert!(c.bound > 67);
 }
 
@@ -106,7 +106,7 @@ fn a_loop_without_a_bound_is_refused() {
     let p = program(COUNTED);
     let ls = all_loops(&p);
     let root = p.find("root")[0];
-    match ipet::task_bound(&p, &ls, root, &[], Cost::Instructions) {
+    match ipet::task_bound(&p, &ls, root, &[], 0, Cost::Instructions) {
         Err(IpetError::Unbounded(l)) => assert_eq!(l.len(), 1, "{l:?}"),
         other => panic!("expected a refusal, got {other:?}"),
     }
@@ -119,7 +119,7 @@ fn recursion_is_refused() {
     let a = p.find("a")[0];
     assert_eq!(p.recursions(&[a]).len(), 1);
     assert!(matches!(
-        ipet::task_bound(&p, &ls, a, &[], Cost::Instructions),
+        ipet::task_bound(&p, &ls, a, &[], 0, Cost::Instructions),
         Err(IpetError::Recursion(_))
     ));
 }
@@ -276,4 +276,35 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
         "{:?}",
         wrong.violations
     );
+}
+
+/// An atomic increment: load-exclusive, add, store-exclusive, retry on failure.
+const EXCLUSIVE: &str = "
+08000000 <root>:
+ 8000000: e850 1f00    \tldrex\tr1, [r0]
+ 8000004: 3101         \tadds\tr1, #0x1
+ 8000006: e840 1200    \tstrex\tr2, r1, [r0]
+ 800000a: 2a00         \tcmp\tr2, #0x0
+ 800000c: d1f8         \tbne\t0x8000000 <root> @ imm = #-0x10
+ 800000e: 4770         \tbx\tlr
+";
+
+#[test]
+fn retry_loops_share_the_activations_retries() {
+    let p = program(EXCLUSIVE);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    assert_eq!(ls[root].len(), 1);
+    let facts = [LoopFact {
+        function: root,
+        loop_index: 0,
+        bound: 1,
+        per: Per::Preemption,
+    }];
+    // Without preemption the store succeeds at once: 5 + 1 instructions.
+    let none = ipet::task_bound(&p, &ls, root, &facts, 0, Cost::Instructions).unwrap();
+    assert_eq!(none.bound, 6);
+    // Three retries allowed: 4 × 5 + 1.
+    let three = ipet::task_bound(&p, &ls, root, &facts, 3, Cost::Instructions).unwrap();
+    assert_eq!(three.bound, 21);
 }

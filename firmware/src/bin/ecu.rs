@@ -121,6 +121,8 @@ fn core_ticks() -> u64 {
         let a = Mono::now().ticks();
         let cvr = cortex_m::peripheral::SYST::get_current();
         let b = Mono::now().ticks();
+        // A retry needs a SysTick between the two reads: one per preemption.
+        // wcet-bound: 1 per preemption
         if a == b {
             let within = (TICKS_PER_MONO - 1).saturating_sub(cvr);
             return a as u64 * TICKS_PER_MONO as u64 + within as u64;

@@ -28,6 +28,53 @@ pub const ECU_TASKS: [(&str, &str); 3] = [
     ("systick", "SysTick"),
 ];
 
+/// The ECU's schedule: task name, priority (higher preempts), period = deadline
+/// in µs. SysTick is the monotonic's 1 kHz tick (`systick_monotonic!(Mono, 1_000)`
+/// in the ECU app), above both tasks.
+pub const ECU_SCHEDULE: [(&str, u8, u64); 3] = [
+    ("systick", 3, 1_000),
+    ("control", 2, firmware::tasks::CONTROL_PERIOD_US),
+    ("plan", 1, firmware::tasks::PLAN_PERIOD_US),
+];
+
+/// Preemptions of one activation of `task` that meets its deadline:
+/// `Σ_{higher} ⌈D / T_j⌉` over [`ECU_SCHEDULE`] (each a chance for a retry loop to
+/// retry once). Faults are not counted: they end the activation.
+pub fn preemptions_of(task: &str) -> u64 {
+    let Some(&(_, prio, deadline)) = ECU_SCHEDULE.iter().find(|t| t.0 == task) else {
+        return 0;
+    };
+    ECU_SCHEDULE
+        .iter()
+        .filter(|t| t.1 > prio)
+        .map(|t| deadline.div_ceil(t.2))
+        .sum()
+}
+
+/// Whether a loop is a load-exclusive/store-exclusive retry (an atomic
+/// read-modify-write): it retries only when the exclusive monitor was cleared,
+/// which on a single Cortex-M core an exception entry or return does.
+fn is_exclusive_retry(f: &Function, l: &Loop) -> bool {
+    let has = |prefix: &str| {
+        l.blocks.iter().any(|&b| {
+            f.blocks.get(b).is_some_and(|blk| {
+                f.instructions[blk.first..blk.end]
+                    .iter()
+                    .any(|i| i.base().starts_with(prefix))
+            })
+        })
+    };
+    // The back edge is taken on the store's failure: the latch holds the store.
+    let latch_stores = l.back_edges.first().is_some_and(|&(t, _)| {
+        f.blocks.get(t).is_some_and(|blk| {
+            f.instructions[blk.first..blk.end]
+                .iter()
+                .any(|i| i.base().starts_with("strex"))
+        })
+    });
+    !l.irreducible && l.back_edges.len() == 1 && has("ldrex") && latch_stores
+}
+
 /// Targets of the ECU binary's indirect calls: RTIC's executor calls its wakers
 /// through `core::task::RawWakerVTable` (the dispatchers, the SysTick timer queue
 /// and `delay_until`), and the executor's `waker_wake` jumps to the task's pend
@@ -235,6 +282,20 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                 taken.extend(matched[q].iter().cloned());
                 p = ls[q].parent;
             }
+            if is_exclusive_retry(func, l) {
+                facts.push(LoopFact {
+                    function: k,
+                    loop_index: x,
+                    bound: 1,
+                    per: Per::Preemption,
+                });
+                origin.insert(
+                    (k, x),
+                    "load/store-exclusive retry: 1 per preemption (an exception clears the monitor)"
+                        .into(),
+                );
+                continue;
+            }
             if !l.irreducible {
                 if let Some(b) = bounds::constant_bound(func, l) {
                     facts.push(LoopFact {
@@ -287,6 +348,7 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                 per: match a.scope {
                     annotations::Scope::Entry => Per::Entry,
                     annotations::Scope::Activation => Per::Activation,
+                    annotations::Scope::Preemption => Per::Preemption,
                 },
             });
             origin.insert(
@@ -296,10 +358,10 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                     a.file,
                     a.line,
                     a.expression,
-                    if a.scope == annotations::Scope::Activation {
-                        " per activation"
-                    } else {
-                        ""
+                    match a.scope {
+                        annotations::Scope::Activation => " per activation",
+                        annotations::Scope::Preemption => " per preemption",
+                        annotations::Scope::Entry => "",
                     }
                 ),
             );
@@ -387,9 +449,25 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
         if !irr.is_empty() {
             refused.push(format!("{} irreducible cycle(s)", irr.len()));
         }
+        // Retries per activation: each preemption can make the exclusive retry loop
+        // it interrupts retry once, and each `per preemption` annotation's loop
+        // retry its bound's times (one exception can do both).
+        let per_preemption: u64 = 1 + annotations
+            .iter()
+            .filter(|a| a.scope == annotations::Scope::Preemption)
+            .map(|a| a.bound)
+            .sum::<u64>();
+        let preemptions = preemptions_of(name) * per_preemption;
         let (mut bi, mut bc, mut top) = (None, None, Vec::new());
         if irr.is_empty() {
-            match ipet::task_bound(&program, &all_loops, root, &facts, Cost::Instructions) {
+            match ipet::task_bound(
+                &program,
+                &all_loops,
+                root,
+                &facts,
+                preemptions,
+                Cost::Instructions,
+            ) {
                 Ok(b) => bi = Some(b.bound),
                 Err(e) => refused.push(match e {
                     ipet::IpetError::Unbounded(l) => format!("{} loop(s) without a bound", l.len()),
@@ -397,7 +475,14 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                 }),
             }
             if bi.is_some() {
-                match ipet::task_bound(&program, &all_loops, root, &facts, Cost::Cycles) {
+                match ipet::task_bound(
+                    &program,
+                    &all_loops,
+                    root,
+                    &facts,
+                    preemptions,
+                    Cost::Cycles,
+                ) {
                     Ok(b) => {
                         bc = Some(b.bound);
                         top = b.by_function.into_iter().take(10).collect();
@@ -449,9 +534,20 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
         }
         // A cap per activation is also a cap per entry (an entry is within one
         // activation): both are checked against the largest count per entry.
+        let most_preemptions = ECU_TASKS
+            .iter()
+            .map(|(n, _)| preemptions_of(n))
+            .max()
+            .unwrap_or(0);
         let entry_bounds: Vec<(usize, usize, u64)> = facts
             .iter()
-            .map(|f| (f.function, f.loop_index, f.bound))
+            .map(|f| {
+                let b = match f.per {
+                    Per::Preemption => f.bound.max(1) * most_preemptions * 2,
+                    _ => f.bound,
+                };
+                (f.function, f.loop_index, b)
+            })
             .collect();
         violations.extend(
             check

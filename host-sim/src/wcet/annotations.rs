@@ -10,6 +10,8 @@
 //!
 //! // wcet-bound: QP_MAX_ITER per activation
 //! loop {
+//!
+//! let now = loop { // wcet-bound: 1 per preemption
 //! ```
 //!
 //! The expression bounds the loop's iterations per entry (or, with `per
@@ -37,6 +39,10 @@ pub enum Scope {
     Entry,
     /// Iterations over one activation of the task.
     Activation,
+    /// Iterations per preemption of the task's activation, summed over every such
+    /// loop the task runs: a retry loop whose retry needs an interrupt between
+    /// two reads (a load-exclusive/store-exclusive pair, a counter read twice).
+    Preemption,
 }
 
 /// One `// wcet-bound:` annotation.
@@ -242,9 +248,12 @@ pub fn parse_source(
             continue;
         };
         let spec = line[pos + MARKER.len()..].trim();
-        let (expr, scope) = match spec.strip_suffix("per activation") {
-            Some(e) => (e.trim(), Scope::Activation),
-            None => (spec, Scope::Entry),
+        let (expr, scope) = if let Some(e) = spec.strip_suffix("per activation") {
+            (e.trim(), Scope::Activation)
+        } else if let Some(e) = spec.strip_suffix("per preemption") {
+            (e.trim(), Scope::Preemption)
+        } else {
+            (spec, Scope::Entry)
         };
         let bound = evaluate(expr, constants).map_err(|e| format!("{file}:{}: {e}", k + 1))?;
         let alone = line[..pos].trim().is_empty();
@@ -328,5 +337,8 @@ mod tests {
             (4, 3, Scope::Activation)
         );
         assert!(parse_source("x.rs", "// wcet-bound: NOPE\nloop {}\n", &c).is_err());
+        let r = parse_source("x.rs", "loop { // wcet-bound: 1 per preemption\n", &c)
+            .unwrap_or_default();
+        assert_eq!((r[0].bound, r[0].scope), (1, Scope::Preemption));
     }
 }

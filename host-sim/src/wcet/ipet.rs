@@ -34,6 +34,10 @@ pub enum Per {
     Entry,
     /// Back edges per activation of the task (a cap that spans the loop's entries).
     Activation,
+    /// A retry loop that retries only when an exception came in between: all such
+    /// loops share one cap, the task's retries per activation (the `retries`
+    /// argument of [`task_bound`]); the fact's own bound is not used.
+    Preemption,
 }
 
 /// A bound on one loop.
@@ -91,6 +95,7 @@ pub fn task_bound(
     loops: &[Vec<Loop>],
     root: usize,
     facts: &[LoopFact],
+    retries: u64,
     cost: Cost,
 ) -> Result<IpetBound, IpetError> {
     if let Some(r) = program.recursions(&[root]).into_iter().next() {
@@ -139,6 +144,9 @@ pub fn task_bound(
     let mut calls_into: HashMap<usize, Expression> = HashMap::new();
     let mut per_function: Vec<(usize, Expression)> = Vec::new();
     let mut count = 0usize;
+    // Retries per preemption: one constraint over all such loops.
+    let mut retry_edges = Expression::from(0.0);
+    let mut any_retry = false;
     for &f in &reach {
         let func = &program.functions[f];
         let live = reverse_post_order(func);
@@ -234,9 +242,17 @@ pub fn task_bound(
                 Per::Activation => {
                     constraints.push(constraint!(back <= bound * n_entry[&root]));
                 }
+                Per::Preemption => {
+                    retry_edges += back;
+                    any_retry = true;
+                }
             }
         }
         per_function.push((f, fcost));
+    }
+    if any_retry {
+        let cap = retries as f64;
+        constraints.push(constraint!(retry_edges <= cap * n_entry[&root]));
     }
     for &f in &reach {
         let n = n_entry[&f];
