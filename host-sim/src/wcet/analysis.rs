@@ -258,6 +258,7 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
     let mut facts: Vec<LoopFact> = Vec::new();
     let mut origin: BTreeMap<(usize, usize), String> = BTreeMap::new();
     let mut notes: BTreeMap<(usize, usize), String> = BTreeMap::new();
+    let mut source_line: BTreeMap<(usize, usize), (String, u32)> = BTreeMap::new();
     for (k, ls) in all_loops.iter().enumerate() {
         let func = &program.functions[k];
         let mut matched: Vec<Option<(String, u32)>> = vec![None; ls.len()];
@@ -276,6 +277,19 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
         order.sort_by_key(|&x| depth(x));
         for x in order {
             let l = &ls[x];
+            // The loop's telling instructions, and their lines (innermost frame in
+            // the firmware's sources): for the annotation and for the report.
+            let candidates = candidate_addresses(func, l);
+            let keys: Vec<(String, u32)> = candidates
+                .iter()
+                .map(|&a| {
+                    let (file, line) = location(&ctx, a);
+                    (short_path(&file), line)
+                })
+                .collect();
+            if let Some(key) = keys.iter().find(|(_, line)| *line > 0) {
+                source_line.insert((k, x), key.clone());
+            }
             let mut taken: Vec<(String, u32)> = Vec::new();
             let mut p = l.parent;
             while let Some(q) = p {
@@ -308,14 +322,10 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                     continue;
                 }
             }
-            let candidates = candidate_addresses(func, l);
-            let hit = candidates
+            let hit = keys
                 .iter()
-                .map(|&a| {
-                    let (file, line) = location(&ctx, a);
-                    (short_path(&file), line)
-                })
-                .find(|key| by_line.contains_key(key) && !taken.contains(key))
+                .find(|key| by_line.contains_key(*key) && !taken.contains(*key))
+                .cloned()
                 .or_else(|| {
                     // A dependency's loop, inlined or not: the facts about its code.
                     candidates
@@ -325,10 +335,7 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                         .find(|key| by_line.contains_key(key) && !taken.contains(key))
                 });
             let Some(key) = hit else {
-                let shares = candidates.iter().any(|&a| {
-                    let (file, line) = location(&ctx, a);
-                    taken.contains(&(short_path(&file), line))
-                });
+                let shares = keys.iter().any(|key| taken.contains(key));
                 notes.insert(
                     (k, x),
                     if shares {
@@ -417,17 +424,15 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                     n_bounded += 1;
                 }
                 let row = loop_rows.entry((f, x)).or_insert_with(|| {
-                    // The first of the loop's telling instructions with a line.
-                    let (file, line) = candidate_addresses(func, l)
-                        .into_iter()
-                        .map(|a| location(&ctx, a))
-                        .find(|(_, line)| *line > 0)
+                    let (file, line) = source_line
+                        .get(&(f, x))
+                        .cloned()
                         .unwrap_or_else(|| ("?".into(), 0));
                     LoopEntry {
                         tasks: Vec::new(),
                         function: func.demangled.clone(),
                         header: format!("{:#x}", func.blocks.get(l.header).map_or(0, |b| b.start)),
-                        file: short_path(&file),
+                        file,
                         line,
                         bound: fact.map(|q| q.bound),
                         source: origin.get(&(f, x)).cloned(),

@@ -437,8 +437,25 @@ impl Program {
             .collect()
     }
 
-    /// Functions reachable from `roots` through calls, tail calls and resolved
-    /// indirect calls (roots included), in discovery order.
+    /// Functions `f` calls, tail-calls or may reach through a resolved indirect
+    /// call or jump.
+    pub fn callees(&self, f: usize) -> BTreeSet<usize> {
+        let mut s = BTreeSet::new();
+        for b in &self.functions[f].blocks {
+            s.extend(b.calls.iter().copied());
+            match &b.exit {
+                Exit::TailCall(t) => {
+                    s.insert(*t);
+                }
+                Exit::IndirectTail(ts) => s.extend(ts.iter().copied()),
+                _ => {}
+            }
+        }
+        s
+    }
+
+    /// Functions reachable from `roots` through [`Self::callees`] (roots
+    /// included), in discovery order.
     pub fn reachable(&self, roots: &[usize]) -> Vec<usize> {
         let mut seen = vec![false; self.functions.len()];
         let mut order = Vec::new();
@@ -448,14 +465,7 @@ impl Program {
                 continue;
             }
             order.push(f);
-            for b in &self.functions[f].blocks {
-                stack.extend(b.calls.iter().copied());
-                match &b.exit {
-                    Exit::TailCall(t) => stack.push(*t),
-                    Exit::IndirectTail(ts) => stack.extend(ts.iter().copied()),
-                    _ => {}
-                }
-            }
+            stack.extend(self.callees(f));
         }
         order
     }
@@ -463,79 +473,16 @@ impl Program {
     /// Cycles in the call graph reachable from `roots` (each as its function names):
     /// recursion, which the analysis refuses.
     pub fn recursions(&self, roots: &[usize]) -> Vec<Vec<String>> {
-        let reach = self.reachable(roots);
-        let callees = |f: usize| -> BTreeSet<usize> {
-            let mut s = BTreeSet::new();
-            for b in &self.functions[f].blocks {
-                s.extend(b.calls.iter().copied());
-                match &b.exit {
-                    Exit::TailCall(t) => {
-                        s.insert(*t);
-                    }
-                    Exit::IndirectTail(ts) => s.extend(ts.iter().copied()),
-                    _ => {}
-                }
-            }
-            s
-        };
-        // Tarjan's strongly connected components, iteratively.
-        let n = self.functions.len();
-        let mut index = vec![usize::MAX; n];
-        let mut low = vec![0usize; n];
-        let mut on = vec![false; n];
-        let mut st: Vec<usize> = Vec::new();
-        let mut next = 0;
-        let mut out = Vec::new();
-        for &r in &reach {
-            if index[r] != usize::MAX {
-                continue;
-            }
-            let mut work: Vec<(usize, Vec<usize>)> = vec![(r, callees(r).into_iter().collect())];
-            index[r] = next;
-            low[r] = next;
-            next += 1;
-            st.push(r);
-            on[r] = true;
-            while let Some((v, mut rest)) = work.pop() {
-                if let Some(w) = rest.pop() {
-                    work.push((v, rest));
-                    if index[w] == usize::MAX {
-                        index[w] = next;
-                        low[w] = next;
-                        next += 1;
-                        st.push(w);
-                        on[w] = true;
-                        work.push((w, callees(w).into_iter().collect()));
-                    } else if on[w] {
-                        low[v] = low[v].min(index[w]);
-                    }
-                    continue;
-                }
-                if let Some((parent, _)) = work.last() {
-                    let p = *parent;
-                    low[p] = low[p].min(low[v]);
-                }
-                if low[v] == index[v] {
-                    let mut comp = Vec::new();
-                    while let Some(w) = st.pop() {
-                        on[w] = false;
-                        comp.push(w);
-                        if w == v {
-                            break;
-                        }
-                    }
-                    let self_call = comp.len() == 1 && callees(v).contains(&v);
-                    if comp.len() > 1 || self_call {
-                        out.push(
-                            comp.iter()
-                                .map(|&f| self.functions[f].demangled.clone())
-                                .collect(),
-                        );
-                    }
-                }
-            }
-        }
-        out
+        super::graph::cyclic_components(self.functions.len(), self.reachable(roots), |f| {
+            self.callees(f).into_iter().collect()
+        })
+        .into_iter()
+        .map(|c| {
+            c.iter()
+                .map(|&f| self.functions[f].demangled.clone())
+                .collect()
+        })
+        .collect()
     }
 }
 

@@ -247,14 +247,8 @@ pub struct ElfSymbol {
 /// Function symbols of an ELF file's symbol table.
 pub fn elf_functions(elf: &Path) -> Result<Vec<ElfSymbol>, WcetError> {
     use object::{Object, ObjectSymbol, SymbolKind};
-    let data = std::fs::read(elf).map_err(|source| WcetError::Io {
-        path: elf.to_path_buf(),
-        source,
-    })?;
-    let file = object::File::parse(&*data).map_err(|e| WcetError::Elf {
-        path: elf.to_path_buf(),
-        message: e.to_string(),
-    })?;
+    let data = super::read_elf(elf)?;
+    let file = super::parse_elf(elf, &data)?;
     Ok(file
         .symbols()
         .filter(|s| s.kind() == SymbolKind::Text)

@@ -265,70 +265,18 @@ fn forward_cycle(
 }
 
 /// Strongly connected regions with a cycle, of the graph without the `back`
-/// edges (Tarjan's algorithm, iterative).
+/// edges.
 fn cyclic_regions(
     f: &Function,
     reachable: &BTreeSet<usize>,
     back: &BTreeSet<(usize, usize)>,
 ) -> Vec<Vec<usize>> {
-    let n = f.blocks.len();
-    let succ = |b: usize| -> Vec<usize> {
+    super::graph::cyclic_components(f.blocks.len(), reachable.iter().copied(), |b| {
         f.blocks[b]
             .successors
             .iter()
             .copied()
             .filter(|&s| reachable.contains(&s) && !back.contains(&(b, s)))
             .collect()
-    };
-    let mut index = vec![usize::MAX; n];
-    let mut low = vec![0usize; n];
-    let mut on = vec![false; n];
-    let mut st: Vec<usize> = Vec::new();
-    let mut next = 0;
-    let mut out = Vec::new();
-    for &r in reachable {
-        if index[r] != usize::MAX {
-            continue;
-        }
-        index[r] = next;
-        low[r] = next;
-        next += 1;
-        st.push(r);
-        on[r] = true;
-        let mut work: Vec<(usize, Vec<usize>)> = vec![(r, succ(r))];
-        while let Some((v, mut rest)) = work.pop() {
-            if let Some(w) = rest.pop() {
-                work.push((v, rest));
-                if index[w] == usize::MAX {
-                    index[w] = next;
-                    low[w] = next;
-                    next += 1;
-                    st.push(w);
-                    on[w] = true;
-                    work.push((w, succ(w)));
-                } else if on[w] {
-                    low[v] = low[v].min(index[w]);
-                }
-                continue;
-            }
-            if let Some(p) = work.last().map(|w| w.0) {
-                low[p] = low[p].min(low[v]);
-            }
-            if low[v] == index[v] {
-                let mut comp = Vec::new();
-                while let Some(w) = st.pop() {
-                    on[w] = false;
-                    comp.push(w);
-                    if w == v {
-                        break;
-                    }
-                }
-                if comp.len() > 1 || succ(v).contains(&v) {
-                    comp.sort_unstable();
-                    out.push(comp);
-                }
-            }
-        }
-    }
-    out
+    })
 }

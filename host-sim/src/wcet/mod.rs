@@ -4,6 +4,7 @@
 //! |---|---|
 //! | [`cfg`] | control-flow graphs from the Thumb-2 disassembly; per-block worst-case cycles under a stated memory model |
 //! | [`loops`] | dominators and natural loops; irreducible cycles refused |
+//! | [`graph`] | strongly connected components (recursion, irreducible cycles) |
 //! | [`bounds`] | loop bounds recognised from the binary (counted loops) |
 //! | [`annotations`] | loop bounds written beside the loops in the firmware source (`// wcet-bound: EXPR`), matched through the DWARF line table |
 //! | [`ipet`] | implicit path enumeration: a task's bound as a linear program (`good_lp`, `microlp`) |
@@ -22,6 +23,7 @@ pub mod bounds;
 pub mod cfg;
 pub mod command;
 pub mod cpi;
+pub mod graph;
 pub mod ipet;
 pub mod loops;
 pub mod report;
@@ -29,7 +31,7 @@ pub mod rta;
 pub mod stack;
 pub mod trace_check;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// What went wrong in a worst-case analysis, phrased so that whoever reads it knows
 /// what to fix.
@@ -80,6 +82,22 @@ pub enum WcetError {
         /// The offending line, shortened.
         text: String,
     },
+}
+
+/// The bytes of an ELF file.
+pub fn read_elf(elf: &Path) -> Result<Vec<u8>, WcetError> {
+    std::fs::read(elf).map_err(|source| WcetError::Io {
+        path: elf.to_path_buf(),
+        source,
+    })
+}
+
+/// Parses the bytes [`read_elf`] read.
+pub fn parse_elf<'d>(elf: &Path, data: &'d [u8]) -> Result<object::File<'d>, WcetError> {
+    object::File::parse(data).map_err(|e| WcetError::Elf {
+        path: elf.to_path_buf(),
+        message: e.to_string(),
+    })
 }
 
 /// Demangles a Rust symbol (legacy or v0) without its hash; other symbols unchanged.

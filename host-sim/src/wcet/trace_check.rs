@@ -201,14 +201,8 @@ impl TraceCheck {
 /// exception), as function indices of `program`, without `Reset`.
 pub fn vector_table_handlers(elf: &Path, program: &Program) -> Result<Vec<usize>, WcetError> {
     use object::{Object, ObjectSection};
-    let data = std::fs::read(elf).map_err(|source| WcetError::Io {
-        path: elf.to_path_buf(),
-        source,
-    })?;
-    let file = object::File::parse(&*data).map_err(|e| WcetError::Elf {
-        path: elf.to_path_buf(),
-        message: e.to_string(),
-    })?;
+    let data = super::read_elf(elf)?;
+    let file = super::parse_elf(elf, &data)?;
     let section = file
         .section_by_name(".vector_table")
         .ok_or_else(|| WcetError::Elf {
