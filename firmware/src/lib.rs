@@ -15,6 +15,7 @@
 //! | [`qp`] | our dense active-set QP solver |
 //! | [`mpc`] | the local MPC planner (linearise, condense, solve) |
 //! | [`pid`] | PID controller |
+//! | [`longitudinal_estimator`] | online estimate of the car's effective mass and driving resistances |
 //! | [`friction`] | online friction check: `μ̂` from what the tyres deliver |
 //! | [`low_level`] | low-level control: torque dispatch, `δ = δ_ol + δ_cl` |
 //! | [`plan`], [`state_estimate`] | the two resources the tasks share |
@@ -33,6 +34,7 @@ pub mod bicycle;
 pub mod deadline;
 pub mod friction;
 pub mod link;
+pub mod longitudinal_estimator;
 pub mod low_level;
 pub mod mpc;
 pub mod obstacles;

@@ -1,0 +1,738 @@
+//! Online estimate of the car's longitudinal dynamics: its effective mass and its
+//! driving resistances, from the wheel torque and the measured speed while the
+//! tyres are far from their limit (not in the paper, which knows its car).
+//!
+//! # Why
+//!
+//! The friction check ([`crate::friction`]) reads slip as the shortfall of the
+//! measured acceleration on the one the wheel torque asks. A car heavier than
+//! configured (passengers, luggage, a trailer), or with more drag, shows such a
+//! shortfall too, at every demand. Estimated here, the mass and the resistances
+//! leave slip as what remains: a shortfall that grows with the force demanded
+//! beyond what the tyres far from their limit showed.
+//!
+//! # Model
+//!
+//! With `T` the total wheel torque applied over a period (N·m), `r` the wheel
+//! radius, `m₀` the configured mass and `V` the speed, the longitudinal dynamics
+//! off the tyres' limit, normalised by `m₀`:
+//!
+//! ```text
+//! y = T/(r·m₀) = k·V̇ + r₀ + r₂·(V/V_ref)²        m/s²
+//! θ = [k, r₀, r₂]:  k = m/m₀ (effective mass ratio: wheel inertias included),
+//!                   r₀ = F₀/m₀ (rolling resistance, grade; m/s²),
+//!                   r₂ = c₂·V_ref²/m₀ (aerodynamic drag at V_ref = 30 m/s; m/s²)
+//! ```
+//!
+//! The speed is not differentiated: `y`, `V` and `(V/V_ref)²` go through the same
+//! second-order low-pass filter `H = 1/(τs + 1)²` (two cascaded first-order
+//! filters, forward Euler), and `V̇` is replaced by the derivative of the filtered
+//! speed, `(v₁ − v₂)/τ`, which equals `H·V̇` exactly in the discrete recursion. So
+//! the regression `H·y = k·H·V̇ + r₀ + r₂·H·(V/V_ref)²` holds without lag between
+//! its sides, and the speed's white noise reaches `H·V̇` attenuated to about
+//! `0.13·σ_V/τ` (0.09 m/s² at σ_V = 0.2 m/s, τ = 0.3 s) instead of `σ_V/Δt`.
+//!
+//! # Estimator
+//!
+//! Recursive least squares with exponential forgetting (memory
+//! [`LongitudinalConfig::memory_s`], `λ = 1 − Δt/memory`), `φ = [H·V̇, 1, H·q]`:
+//!
+//! ```text
+//! g = P·φ / (λ + φᵀ·P·φ),   θ ← clamp(θ + g·(H·y − θᵀφ)),   P ← (P − g·φᵀ·P)/λ
+//! ```
+//!
+//! * **Gate** (the tyres far from their limit, the model valid): a sample counts
+//!   only when, for the whole of the last [`LongitudinalConfig::settle_s`] (the
+//!   filters' memory), the speed was at least [`LongitudinalConfig::min_speed_mps`],
+//!   no slip was flagged, the demand `|y|/k̂` was at most
+//!   [`LongitudinalConfig::demand_fraction`] of `μ̂·g` (of the driven axle's share
+//!   when driving), and the lateral acceleration `|V·ψ̇|` at most
+//!   [`LongitudinalConfig::lateral_fraction`] of `μ̂·g` (cornering drag is not in
+//!   the model).
+//! * **Excitation**: a sample whose filtered demand `|H·y − r₀ − r₂·H·q|/k̂` (the
+//!   torque's, free of the speed's noise) is under
+//!   [`LongitudinalConfig::excitation_mps2`] (steady cruise) informs the
+//!   resistances only (`φ = [0, 1, H·q]` against `H·y − k̂·H·V̇`) and without
+//!   forgetting (`λ = 1`): no information on the mass means none is forgotten, so
+//!   `P` cannot wind up, and the speed's noise in `H·V̇` cannot drag `k` to 0.
+//! * **Bounds**: `θ` is clamped to `[k_min, k_max] × [−r₀,max, r₀,max] ×
+//!   [0, r₂,max]`; the trace of `P` is held at most its prior's (scaled down when
+//!   above); a non-finite or non-positive diagonal resets `P` to its prior.
+//! * **Uncertainty** of the mass ratio, used by the friction check as a tolerance
+//!   on the relative shortfall: `u = u_max·sqrt(P₀₀/P₀₀,prior)` (at most
+//!   [`LongitudinalConfig::mass_uncertainty_max`]: before any sample a shortfall
+//!   the heaviest car allowed would show is not slip).
+//!
+//! Non-finite inputs are refused (the filters restart, `θ` and `P` are kept).
+//!
+//! # Cost
+//!
+//! Per period about 90 floating-point operations, one division (the RLS gain;
+//! the inverse mass ratio only on an update) and one square root (on the FPU);
+//! no loop, no branch on data but the gate; 84 bytes of state in `f32`.
+
+use crate::Real;
+
+/// Reference speed of the drag term `r₂·(V/V_ref)²`, m/s.
+pub const V_REF_MPS: f32 = 30.0;
+
+/// Settings of the estimator (module docs). Valid when
+/// [`LongitudinalConfig::validate`] says so.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LongitudinalConfig<T> {
+    /// Configured mass `m₀`, kg, > 0.
+    pub mass_kg: T,
+    /// Effective wheel radius `r`, m, > 0.
+    pub wheel_radius_m: T,
+    /// Time constant `τ` of each of the two low-pass stages, s, > 0.
+    pub filter_time_s: T,
+    /// Memory of the forgetting, s, > 0 (`λ = 1 − Δt/memory`).
+    pub memory_s: T,
+    /// Time the gate must have held before a sample counts, s, ≥ 0.
+    pub settle_s: T,
+    /// Smallest speed of a sample, m/s, ≥ 0.
+    pub min_speed_mps: T,
+    /// Largest demand of a sample as a fraction of `μ̂·g` (of the driven axle's
+    /// share when driving), in `(0, 1]`.
+    pub demand_fraction: T,
+    /// Largest lateral acceleration of a sample as a fraction of `μ̂·g`, in `(0, 1]`.
+    pub lateral_fraction: T,
+    /// Filtered demand under which a sample informs the resistances only and
+    /// forgets nothing, m/s², ≥ 0.
+    pub excitation_mps2: T,
+    /// Bounds of the mass ratio `k = m/m₀`: `[min, max]`, `0 < min ≤ 1 ≤ max`.
+    pub mass_ratio_bounds: [T; 2],
+    /// Bound of `|r₀|`, m/s², ≥ 0.
+    pub r0_max_mps2: T,
+    /// Bound of `r₂` (drag at [`V_REF_MPS`]), m/s², ≥ 0.
+    pub r2_max_mps2: T,
+    /// Prior variances (the diagonal of `P` at the start) of `k`, `r₀`, `r₂`:
+    /// `[1, (m/s²)², (m/s²)²]` per `(m/s²)²` of residual, each > 0.
+    pub prior_variance: [T; 3],
+    /// Uncertainty of the mass ratio at the prior, `u_max`, in `[0, 1)`.
+    pub mass_uncertainty_max: T,
+}
+
+/// Why a [`LongitudinalConfig`] was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LongitudinalConfigError {
+    /// Mass or wheel radius not finite and positive.
+    InvalidVehicle,
+    /// A time constant, the memory or the settling time out of range.
+    InvalidTiming,
+    /// A gate's fraction, speed or excitation out of range.
+    InvalidGate,
+    /// A parameter's bound or prior out of range.
+    InvalidBounds,
+}
+
+impl<T: Real> LongitudinalConfig<T> {
+    /// The settings for a car of configured mass `mass_kg` (kg) on wheels of
+    /// radius `wheel_radius_m` (m):
+    ///
+    /// * filters `τ = 0.3 s` (two stages), a sample counts after 1.2 s of gate
+    ///   (`4τ`: the filters have forgotten all but 2 % of what came before);
+    /// * memory 20 s of excited samples;
+    /// * gate: above 3 m/s, demand at most 0.5 of `μ̂·g` (a tyre at half its
+    ///   friction gives its force at a few % of slip), lateral at most 0.3;
+    /// * excitation 0.2 m/s² of filtered demand;
+    /// * `k ∈ [0.6, 1.8]` (a car 40 % lighter to 80 % heavier than configured),
+    ///   `|r₀| ≤ 1 m/s²` (a 10 % grade), `r₂ ∈ [0, 1] m/s²` at 30 m/s (four times
+    ///   the default car's drag);
+    /// * prior variances `[0.05, 0.05, 0.05]`, uncertainty 0.35 at the prior
+    ///   (a car 1.5 times heavier gives a relative shortfall of 0.33).
+    pub fn for_car(mass_kg: T, wheel_radius_m: T) -> Self {
+        Self {
+            mass_kg,
+            wheel_radius_m,
+            filter_time_s: T::lit(0.3),
+            memory_s: T::lit(20.0),
+            settle_s: T::lit(1.2),
+            min_speed_mps: T::lit(3.0),
+            demand_fraction: T::HALF,
+            lateral_fraction: T::lit(0.3),
+            excitation_mps2: T::lit(0.2),
+            mass_ratio_bounds: [T::lit(0.6), T::lit(1.8)],
+            r0_max_mps2: T::ONE,
+            r2_max_mps2: T::ONE,
+            prior_variance: [T::lit(0.05); 3],
+            mass_uncertainty_max: T::lit(0.35),
+        }
+    }
+
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), LongitudinalConfigError> {
+        let pos = |x: T| x.is_finite() && x > T::ZERO;
+        let nonneg = |x: T| x.is_finite() && x >= T::ZERO;
+        let fraction = |x: T| pos(x) && x <= T::ONE;
+        if !(pos(self.mass_kg) && pos(self.wheel_radius_m)) {
+            return Err(LongitudinalConfigError::InvalidVehicle);
+        }
+        if !(pos(self.filter_time_s) && pos(self.memory_s) && nonneg(self.settle_s)) {
+            return Err(LongitudinalConfigError::InvalidTiming);
+        }
+        if !(nonneg(self.min_speed_mps)
+            && fraction(self.demand_fraction)
+            && fraction(self.lateral_fraction)
+            && nonneg(self.excitation_mps2))
+        {
+            return Err(LongitudinalConfigError::InvalidGate);
+        }
+        let [lo, hi] = self.mass_ratio_bounds;
+        let [p0, p1, p2] = self.prior_variance;
+        if !(pos(lo)
+            && lo <= T::ONE
+            && hi.is_finite()
+            && hi >= T::ONE
+            && nonneg(self.r0_max_mps2)
+            && nonneg(self.r2_max_mps2)
+            && pos(p0)
+            && pos(p1)
+            && pos(p2)
+            && nonneg(self.mass_uncertainty_max)
+            && self.mass_uncertainty_max < T::ONE)
+        {
+            return Err(LongitudinalConfigError::InvalidBounds);
+        }
+        Ok(())
+    }
+}
+
+/// One period's measurements for [`LongitudinalEstimator::update`] (SI units).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LongitudinalSample<T> {
+    /// Time since the previous sample, s, > 0.
+    pub dt_s: T,
+    /// Measured speed `V`, m/s.
+    pub v_mps: T,
+    /// Total wheel torque applied over the period that ended at the measurement,
+    /// N·m.
+    pub torque_nm: T,
+    /// Lateral acceleration `V·ψ̇`, m/s².
+    pub lateral_mps2: T,
+    /// The grip the tyres have at most, `μ̂·g`, m/s².
+    pub grip_mps2: T,
+    /// The driven axle's share of the weight when driving, in `(0, 1]`.
+    pub driven_share: T,
+    /// True when slip is flagged (the friction check): no sample counts.
+    pub slipping: bool,
+}
+
+/// The estimator's state (module docs): filters, parameters, covariance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LongitudinalEstimator<T> {
+    /// `θ = [k, r₀, r₂]`: mass ratio, m/s², m/s².
+    theta: [T; 3],
+    /// `1/k`.
+    inv_k: T,
+    /// `P` (symmetric), its upper triangle `[p00, p01, p02, p11, p12, p22]`.
+    p: [T; 6],
+    /// The filters' stages: speed (m/s), `y` (m/s²), `(V/V_ref)²`: `[stage 1, stage 2]`.
+    v_f: [T; 2],
+    y_f: [T; 2],
+    q_f: [T; 2],
+    /// Time the gate has held, s (`< 0`: the filters restart at the next sample).
+    clean_s: T,
+    /// Samples that counted (wrapping).
+    updates: u32,
+}
+
+impl<T: Real> Default for LongitudinalEstimator<T> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<T: Real> LongitudinalEstimator<T> {
+    /// The configured car (`k = 1`, no resistance) and a zero covariance: a valid
+    /// `const` initialiser; [`LongitudinalEstimator::start`] sets the prior.
+    pub const fn new() -> Self {
+        Self {
+            theta: [T::ONE, T::ZERO, T::ZERO],
+            inv_k: T::ONE,
+            p: [T::ZERO; 6],
+            v_f: [T::ZERO; 2],
+            y_f: [T::ZERO; 2],
+            q_f: [T::ZERO; 2],
+            clean_s: T::NEG_INFINITY,
+            updates: 0,
+        }
+    }
+
+    /// Forgets everything: the configured car, no resistance, the prior
+    /// covariance of `cfg` (valid: [`LongitudinalConfig::validate`]).
+    pub fn start(&mut self, cfg: &LongitudinalConfig<T>) {
+        *self = Self::new();
+        self.reset_covariance(cfg);
+    }
+
+    fn reset_covariance(&mut self, cfg: &LongitudinalConfig<T>) {
+        let [a, b, c] = cfg.prior_variance;
+        self.p = [a, T::ZERO, T::ZERO, b, T::ZERO, c];
+    }
+
+    /// The mass ratio `k = m/m₀`, dimensionless, within its bounds.
+    pub fn mass_ratio(&self) -> T {
+        self.theta[0]
+    }
+
+    /// `1/k`, dimensionless.
+    pub fn inverse_mass_ratio(&self) -> T {
+        self.inv_k
+    }
+
+    /// The estimated effective mass `k·m₀`, kg.
+    pub fn mass_kg(&self, cfg: &LongitudinalConfig<T>) -> T {
+        self.theta[0] * cfg.mass_kg
+    }
+
+    /// `[r₀, r₂]`: the resistance per configured mass at rest and the drag at
+    /// [`V_REF_MPS`], m/s² each.
+    pub fn resistance_terms_mps2(&self) -> [T; 2] {
+        [self.theta[1], self.theta[2]]
+    }
+
+    /// The driving resistance per configured mass at the speed `v_mps` (m/s),
+    /// `r₀ + r₂·(V/V_ref)²`, m/s² (times `m₀`: the force, N).
+    pub fn resistance_mps2(&self, v_mps: T) -> T {
+        let q = v_mps * T::lit(1.0 / V_REF_MPS);
+        self.theta[1] + self.theta[2] * q * q
+    }
+
+    /// The acceleration the torque `torque_nm` (N·m) gives the estimated car at
+    /// the speed `v_mps` (m/s) when its tyres grip, m/s²: `(y − r(V))/k`.
+    pub fn expected_accel_mps2(&self, cfg: &LongitudinalConfig<T>, torque_nm: T, v_mps: T) -> T {
+        let y = torque_nm / (cfg.mass_kg * cfg.wheel_radius_m);
+        (y - self.resistance_mps2(v_mps)) * self.inv_k
+    }
+
+    /// The uncertainty `u` of the mass ratio (module docs), dimensionless, in
+    /// `[0, mass_uncertainty_max]`: a relative shortfall under `u` may be mass.
+    pub fn mass_uncertainty(&self, cfg: &LongitudinalConfig<T>) -> T {
+        let ratio = (self.p[0] / cfg.prior_variance[0]).clamp(T::ZERO, T::ONE);
+        cfg.mass_uncertainty_max * ratio.sqrt()
+    }
+
+    /// Samples that counted so far (wrapping).
+    pub fn updates(&self) -> u32 {
+        self.updates
+    }
+
+    /// The filters restart at the next sample (a gap, a fault); `θ` and `P` kept.
+    pub fn restart(&mut self) {
+        self.clean_s = T::NEG_INFINITY;
+    }
+
+    /// One period (module docs). `inv_mr` is `1/(m₀·r)` (1/(kg·m)), precomputed by
+    /// the caller. Returns true when the sample counted.
+    pub fn update(
+        &mut self,
+        cfg: &LongitudinalConfig<T>,
+        inv_mr: T,
+        s: &LongitudinalSample<T>,
+    ) -> bool {
+        let y = s.torque_nm * inv_mr;
+        let q = s.v_mps * T::lit(1.0 / V_REF_MPS);
+        let q = q * q;
+        let finite = (y + q + s.dt_s + s.lateral_mps2 + s.grip_mps2 + s.driven_share).is_finite();
+        if !(finite && s.dt_s > T::ZERO) {
+            self.restart();
+            return false;
+        }
+        if self.clean_s < T::ZERO {
+            // Filters at rest on the first sample.
+            self.v_f = [s.v_mps; 2];
+            self.y_f = [y; 2];
+            self.q_f = [q; 2];
+            self.clean_s = T::ZERO;
+            return false;
+        }
+        // Two first-order stages; H·V̇ = (v₁ − v₂)/τ after stage 1, before stage 2.
+        let inv_tau = T::ONE / cfg.filter_time_s;
+        let kf = (s.dt_s * inv_tau).min(T::ONE);
+        let v1 = self.v_f[0] + kf * (s.v_mps - self.v_f[0]);
+        let accel = (v1 - self.v_f[1]) * inv_tau;
+        self.v_f = [v1, self.v_f[1] + kf * (v1 - self.v_f[1])];
+        let y1 = self.y_f[0] + kf * (y - self.y_f[0]);
+        let y2 = self.y_f[1] + kf * (y1 - self.y_f[1]);
+        self.y_f = [y1, y2];
+        let q1 = self.q_f[0] + kf * (q - self.q_f[0]);
+        let q2 = self.q_f[1] + kf * (q1 - self.q_f[1]);
+        self.q_f = [q1, q2];
+
+        // The gate, over the filters' memory.
+        let demand = (y - self.resistance_mps2(s.v_mps)) * self.inv_k;
+        let share = if demand > T::ZERO {
+            s.driven_share
+        } else {
+            T::ONE
+        };
+        let open = !s.slipping
+            && s.v_mps >= cfg.min_speed_mps
+            && demand.abs() <= cfg.demand_fraction * s.grip_mps2 * share
+            && s.lateral_mps2.abs() <= cfg.lateral_fraction * s.grip_mps2;
+        self.clean_s = if open { self.clean_s + s.dt_s } else { T::ZERO };
+        if self.clean_s < cfg.settle_s {
+            return false;
+        }
+        // Excitation: the filtered demand (the torque's, free of the speed's noise).
+        let excited =
+            ((y2 - self.theta[1] - self.theta[2] * q2) * self.inv_k).abs() >= cfg.excitation_mps2;
+        if excited {
+            self.rls(cfg, [accel, T::ONE, q2], y2, s.dt_s / cfg.memory_s);
+        } else {
+            // Steady: the resistances only (the acceleration's share, from the
+            // mass ratio as it stands, taken out), nothing forgotten.
+            let y = y2 - self.theta[0] * accel;
+            self.rls(cfg, [T::ZERO, T::ONE, q2], y, T::ZERO);
+        }
+        true
+    }
+
+    /// One recursive-least-squares step on `φ`, `y` (module docs), forgetting the
+    /// fraction `forget` (`1 − λ`, dimensionless).
+    fn rls(&mut self, cfg: &LongitudinalConfig<T>, phi: [T; 3], y: T, forget: T) {
+        let [p00, p01, p02, p11, p12, p22] = self.p;
+        let [a, b, c] = phi;
+        let pf = [
+            p00 * a + p01 * b + p02 * c,
+            p01 * a + p11 * b + p12 * c,
+            p02 * a + p12 * b + p22 * c,
+        ];
+        // 1/λ to first order: (Δt/memory)² ≤ 1e-6 at 100 Hz.
+        let (lambda, inv_lambda) = (T::ONE - forget, T::ONE + forget);
+        let inv_s = T::ONE / (lambda + a * pf[0] + b * pf[1] + c * pf[2]);
+        let g = [pf[0] * inv_s, pf[1] * inv_s, pf[2] * inv_s];
+        let [k, r0, r2] = self.theta;
+        let e = y - (k * a + r0 * b + r2 * c);
+        let [lo, hi] = cfg.mass_ratio_bounds;
+        let k = (k + g[0] * e).clamp(lo, hi);
+        let r0 = (r0 + g[1] * e).clamp(-cfg.r0_max_mps2, cfg.r0_max_mps2);
+        let r2 = (r2 + g[2] * e).clamp(T::ZERO, cfg.r2_max_mps2);
+        // A NaN from a degenerate P keeps the last parameters (clamp passes NaN).
+        if (k + r0 + r2).is_finite() {
+            self.theta = [k, r0, r2];
+            self.inv_k = T::ONE / k;
+        }
+        let mut p = [
+            (p00 - g[0] * pf[0]) * inv_lambda,
+            (p01 - g[0] * pf[1]) * inv_lambda,
+            (p02 - g[0] * pf[2]) * inv_lambda,
+            (p11 - g[1] * pf[1]) * inv_lambda,
+            (p12 - g[1] * pf[2]) * inv_lambda,
+            (p22 - g[2] * pf[2]) * inv_lambda,
+        ];
+        let trace = p[0] + p[3] + p[5];
+        let [v0, v1, v2] = cfg.prior_variance;
+        let trace_max = v0 + v1 + v2;
+        if !(trace.is_finite() && p[0] > T::ZERO && p[3] > T::ZERO && p[5] > T::ZERO) {
+            self.reset_covariance(cfg);
+        } else {
+            if trace > trace_max {
+                let f = trace_max / trace;
+                p = [p[0] * f, p[1] * f, p[2] * f, p[3] * f, p[4] * f, p[5] * f];
+            }
+            self.p = p;
+        }
+        self.updates = self.updates.wrapping_add(1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const M: f64 = 1500.0;
+    const R: f64 = 0.3;
+    const DT: f64 = 0.01;
+
+    fn cfg() -> LongitudinalConfig<f64> {
+        LongitudinalConfig::for_car(M, R)
+    }
+
+    /// A deterministic pseudo-random normal sample (SplitMix64 + Box–Muller).
+    struct Rng(u64);
+    impl Rng {
+        fn uniform(&mut self) -> f64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        }
+        fn normal(&mut self) -> f64 {
+            let (u, v) = (self.uniform().max(1e-12), self.uniform());
+            (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+        }
+    }
+
+    /// A car of mass `m` (kg) with resistance `f0 + c2·V²` (N) driven on a
+    /// repeating pattern of moderate accelerations and brakings; the speed is
+    /// measured with white noise `sigma` (m/s). `slip(t, a_cmd)` (m/s²) takes
+    /// away acceleration the torque asked (a wheel that spins), unflagged.
+    struct Car {
+        m: f64,
+        f0: f64,
+        c2: f64,
+        v: f64,
+        t: f64,
+        sigma: f64,
+        rng: Rng,
+    }
+
+    impl Car {
+        fn new(m: f64, f0: f64, c2: f64, sigma: f64) -> Self {
+            Self {
+                m,
+                f0,
+                c2,
+                v: 20.0,
+                t: 0.0,
+                sigma,
+                rng: Rng(7),
+            }
+        }
+
+        /// Runs `secs`, feeding the estimator; `accel_cmd(t)` is the acceleration
+        /// asked of the configured car (m/s²) before resistance.
+        fn run(
+            &mut self,
+            e: &mut LongitudinalEstimator<f64>,
+            secs: f64,
+            accel_cmd: impl Fn(f64) -> f64,
+            slip: impl Fn(f64, f64) -> f64,
+        ) {
+            let c = cfg();
+            let inv_mr = 1.0 / (M * R);
+            for _ in 0..(secs / DT).round() as usize {
+                let a_cmd = accel_cmd(self.t);
+                // The torque a controller would apply: the configured car's
+                // feed-forward plus the true resistance (a PID's integral).
+                let torque = (M * a_cmd + self.f0 + self.c2 * self.v * self.v) * R;
+                let force = torque / R - self.f0 - self.c2 * self.v * self.v;
+                let lost = slip(self.t, a_cmd);
+                self.v += (force / self.m - lost) * DT;
+                self.t += DT;
+                let meas = self.v + self.sigma * self.rng.normal();
+                e.update(
+                    &c,
+                    inv_mr,
+                    &LongitudinalSample {
+                        dt_s: DT,
+                        v_mps: meas,
+                        torque_nm: torque,
+                        lateral_mps2: 0.0,
+                        grip_mps2: 9.81,
+                        driven_share: 0.585,
+                        // Not flagged: the demand gate alone keeps slip out.
+                        slipping: false,
+                    },
+                );
+            }
+        }
+    }
+
+    /// Gentle driving: ±1.5 m/s² in 4 s cycles with cruise in between.
+    fn pattern(t: f64) -> f64 {
+        match (t % 12.0) as u32 {
+            0..=3 => 1.5,
+            4..=5 => 0.0,
+            6..=9 => -1.5,
+            _ => 0.0,
+        }
+    }
+
+    fn started() -> LongitudinalEstimator<f64> {
+        let mut e = LongitudinalEstimator::new();
+        e.start(&cfg());
+        e
+    }
+
+    #[test]
+    fn default_settings_are_valid_and_bad_ones_refused() {
+        assert_eq!(cfg().validate(), Ok(()));
+        let mut c = cfg();
+        c.mass_kg = f64::NAN;
+        assert_eq!(c.validate(), Err(LongitudinalConfigError::InvalidVehicle));
+        let mut c = cfg();
+        c.filter_time_s = 0.0;
+        assert_eq!(c.validate(), Err(LongitudinalConfigError::InvalidTiming));
+        let mut c = cfg();
+        c.demand_fraction = 1.5;
+        assert_eq!(c.validate(), Err(LongitudinalConfigError::InvalidGate));
+        let mut c = cfg();
+        c.mass_ratio_bounds = [1.2, 2.0];
+        assert_eq!(c.validate(), Err(LongitudinalConfigError::InvalidBounds));
+        let mut c = cfg();
+        c.mass_uncertainty_max = 1.0;
+        assert_eq!(c.validate(), Err(LongitudinalConfigError::InvalidBounds));
+    }
+
+    #[test]
+    fn a_car_as_configured_is_found_as_configured() {
+        let mut e = started();
+        let mut car = Car::new(M, 0.0, 0.0, 0.0);
+        car.run(&mut e, 60.0, pattern, |_, _| 0.0);
+        assert!(e.updates() > 1000, "updates {}", e.updates());
+        assert!(
+            (e.mass_ratio() - 1.0).abs() < 0.02,
+            "k = {}",
+            e.mass_ratio()
+        );
+        assert!(e.resistance_mps2(20.0).abs() < 0.05);
+        // The uncertainty fell from its prior's.
+        assert!(e.mass_uncertainty(&cfg()) < 0.15);
+    }
+
+    #[test]
+    fn a_known_resistance_is_found() {
+        // 200 N of rolling resistance and the default car's drag, 0.418 N/(m/s)².
+        let mut e = started();
+        let mut car = Car::new(M, 200.0, 0.418, 0.0);
+        car.run(&mut e, 120.0, pattern, |_, _| 0.0);
+        let expected = |v: f64| (200.0 + 0.418 * v * v) / M;
+        for v in [15.0, 20.0, 25.0] {
+            let r = e.resistance_mps2(v);
+            assert!(
+                (r - expected(v)).abs() < 0.03,
+                "r({v}) = {r}, expected {}",
+                expected(v)
+            );
+        }
+        assert!(
+            (e.mass_ratio() - 1.0).abs() < 0.03,
+            "k = {}",
+            e.mass_ratio()
+        );
+    }
+
+    #[test]
+    fn a_mass_step_is_followed_within_its_memory() {
+        let mut e = started();
+        let mut car = Car::new(M, 100.0, 0.418, 0.0);
+        car.run(&mut e, 40.0, pattern, |_, _| 0.0);
+        assert!((e.mass_ratio() - 1.0).abs() < 0.03);
+        // 30 % heavier from now on (a trailer hitched).
+        car.m = 1.3 * M;
+        car.run(&mut e, 60.0, pattern, |_, _| 0.0);
+        let k = e.mass_ratio();
+        assert!((k - 1.3).abs() < 0.04, "k = {k}");
+        // The acceleration expected of 3 m/s² asked is the heavier car's.
+        let a = e.expected_accel_mps2(&cfg(), 3.0 * M * R, 0.0);
+        assert!((a - 3.0 / 1.3).abs() < 0.1, "a = {a}");
+    }
+
+    #[test]
+    fn speed_noise_at_four_times_level_one_leaves_the_mass_within_five_percent() {
+        let mut e = started();
+        let mut car = Car::new(1.3 * M, 100.0, 0.418, 0.2);
+        car.run(&mut e, 120.0, pattern, |_, _| 0.0);
+        let k = e.mass_ratio();
+        assert!((k - 1.3).abs() < 0.065, "k = {k}");
+    }
+
+    #[test]
+    fn slip_at_high_demand_during_a_mass_change_is_not_taken_for_mass() {
+        let mut e = started();
+        let mut car = Car::new(M, 100.0, 0.418, 0.05);
+        car.run(&mut e, 30.0, pattern, |_, _| 0.0);
+        // Heavier, and every 12 s a hard acceleration (4.5 m/s² asked, beyond
+        // half the driven axle's grip) that spins the wheels: 2 m/s² lost.
+        car.m = 1.3 * M;
+        let hard = |t: f64| if t % 12.0 < 2.0 { 4.5 } else { pattern(t) };
+        car.run(
+            &mut e,
+            90.0,
+            hard,
+            |t, _| if t % 12.0 < 2.0 { 2.0 } else { 0.0 },
+        );
+        let k = e.mass_ratio();
+        // The spins would read as k ≈ 1.3·4.5/(4.5 − 2.6) ≫ 1.3.
+        assert!((k - 1.3).abs() < 0.05, "k = {k}");
+    }
+
+    #[test]
+    fn steady_cruise_does_not_wind_the_covariance_up() {
+        let mut e = started();
+        let mut car = Car::new(M, 100.0, 0.418, 0.2);
+        car.run(&mut e, 40.0, pattern, |_, _| 0.0);
+        let u = e.mass_uncertainty(&cfg());
+        // Ten minutes at a steady speed: the resistance's torque only.
+        car.run(&mut e, 600.0, |_| 0.0, |_, _| 0.0);
+        assert!(e.mass_uncertainty(&cfg()) <= u * 1.01);
+        assert!(
+            (e.mass_ratio() - 1.0).abs() < 0.05,
+            "k = {}",
+            e.mass_ratio()
+        );
+    }
+
+    #[test]
+    fn non_finite_samples_are_refused() {
+        let mut e = started();
+        let mut car = Car::new(M, 0.0, 0.0, 0.0);
+        car.run(&mut e, 30.0, pattern, |_, _| 0.0);
+        let before = e;
+        let inv = 1.0 / (M * R);
+        for bad in [f64::NAN, f64::INFINITY] {
+            let s = LongitudinalSample {
+                dt_s: DT,
+                v_mps: bad,
+                torque_nm: 100.0,
+                lateral_mps2: 0.0,
+                grip_mps2: 9.81,
+                driven_share: 0.6,
+                slipping: false,
+            };
+            assert!(!e.update(&cfg(), inv, &s));
+            assert_eq!(e.mass_ratio(), before.mass_ratio());
+            assert_eq!(e.resistance_terms_mps2(), before.resistance_terms_mps2());
+        }
+    }
+
+    mod props {
+        use super::*;
+        use proptest::prelude::*;
+
+        proptest! {
+            /// Whatever finite (and wild) samples come, the parameters stay within
+            /// their bounds, the covariance's diagonal positive and bounded, and
+            /// everything finite.
+            #[test]
+            fn estimates_stay_within_their_bounds(
+                samples in proptest::collection::vec(
+                    (1e-4f64..0.1, -50.0f64..80.0, -3e4f64..3e4, -20.0f64..20.0,
+                     0.0f64..20.0, 0.05f64..1.0, any::<bool>()),
+                    1..400),
+                seed_k in 0.0f64..1.0,
+            ) {
+                let c = cfg();
+                let mut e = started();
+                // Start anywhere in the bounds.
+                e.theta[0] = 0.6 + 1.2 * seed_k;
+                e.inv_k = 1.0 / e.theta[0];
+                let inv = 1.0 / (M * R);
+                for (dt, v, t, lat, grip, share, slip) in samples {
+                    let s = LongitudinalSample {
+                        dt_s: dt, v_mps: v, torque_nm: t, lateral_mps2: lat,
+                        grip_mps2: grip, driven_share: share, slipping: slip,
+                    };
+                    e.update(&c, inv, &s);
+                    let [k, r0, r2] = e.theta;
+                    prop_assert!((0.6..=1.8).contains(&k), "k = {}", k);
+                    prop_assert!((-1.0..=1.0).contains(&r0), "r0 = {}", r0);
+                    prop_assert!((0.0..=1.0).contains(&r2), "r2 = {}", r2);
+                    prop_assert!((e.inverse_mass_ratio() * k - 1.0).abs() < 1e-9);
+                    let [p00, _, _, p11, _, p22] = e.p;
+                    prop_assert!(p00 > 0.0 && p11 > 0.0 && p22 > 0.0);
+                    let [v0, v1, v2] = c.prior_variance;
+                    prop_assert!(p00 + p11 + p22 <= (v0 + v1 + v2) * (1.0 + 1e-9));
+                    prop_assert!(e.p.iter().all(|x| x.is_finite()));
+                    let u = e.mass_uncertainty(&c);
+                    prop_assert!((0.0..=0.35).contains(&u));
+                    prop_assert!(e.expected_accel_mps2(&c, t, v).is_finite());
+                }
+            }
+        }
+    }
+}
