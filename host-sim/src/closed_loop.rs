@@ -70,6 +70,7 @@ pub use crate::cost_model::CostModel;
 pub use crate::ecu::{ControlOutput, Ecu, PlanActivation, SimulatedEcu};
 use crate::obstacle_file;
 use crate::plant::{Inputs, Plant, State};
+use crate::road_friction::{judge, patches_to_string, MuSample, RoadFriction};
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleParams;
 
@@ -212,6 +213,9 @@ pub struct LogRow {
     /// The control task's friction estimate `μ̂` (`firmware::friction`): `inf`
     /// before any slip, NaN when the ECU does not report it (processor in the loop).
     pub friction_mu: f64,
+    /// The road's friction under the car: the lowest of the four wheels' (they
+    /// differ on the edge of a `--mu-patch`; see [`crate::road_friction`]).
+    pub road_mu: f64,
 }
 
 /// A published plan's positions (for the trajectory figure).
@@ -311,6 +315,25 @@ pub struct Summary {
     /// (`firmware::friction`: below the planner's `μ` when a slip showed the road
     /// slipperier), null when the ECU does not report it (processor in the loop).
     pub friction_mu_min: Option<f64>,
+    /// The patches of road with their own friction, `START:LENGTH:MU` joined by `;`
+    /// (empty without any).
+    pub mu_patches: String,
+    /// Lowest road friction under the car over the run ([`LogRow::road_mu`]).
+    pub road_mu_min: f64,
+    /// `μ̂` fell below 0.9 × the lowest road μ under the car over the last 10 s at
+    /// some sample: a false alarm of the friction check
+    /// ([`crate::road_friction::judge`]); null when the ECU does not report `μ̂`.
+    pub mu_false_drop: Option<bool>,
+    /// When `μ̂` first fell that low, s (null if it never did).
+    pub mu_false_drop_s: Option<f64>,
+    /// The slowest recovery after leaving a patch of lower grip: time from the exit
+    /// until `μ̂ ≥ 0.9 × road μ`, s (null without an exit that recovered, or when
+    /// the ECU does not report `μ̂`).
+    pub mu_recovery_s: Option<f64>,
+    /// Exits from a patch of lower grip after which `μ̂` did not reach 0.9 × the
+    /// road's μ before the next exit or the end of the run (null when the ECU does
+    /// not report `μ̂`).
+    pub mu_unrecovered_exits: Option<u32>,
     /// Median host wall time of the ECU's work at a plan release (the plan
     /// activation and the control activation before it), µs (information only).
     pub plan_host_us_p50: f64,
@@ -494,6 +517,16 @@ pub fn run_with<T: Real, E: Ecu<T>>(
 
     // The road the ECU holds: a window, the next one sent as the car moves on.
     let mut feeder = crate::route::RouteFeeder::new(&scenario.track)?;
+    // The road's friction along the track, and where the car was at the last sample:
+    // arc length (m), speed (m/s), time (µs), to place the wheels between samples.
+    let road = RoadFriction::new(
+        opts.mu_road,
+        &scenario.mu_patches,
+        &scenario.track.name,
+        scenario.track.length(),
+        scenario.track.closed,
+    )?;
+    let mut at_sample = (0.0, 0.0, 0u64);
     feeder.first();
     let s_start = scenario
         .track
@@ -548,6 +581,12 @@ pub fn run_with<T: Real, E: Ecu<T>>(
                 },
             ));
             let mut row = meter.measure(t_us, &st, &out, &act, ecu.active_plan(), last_status);
+            at_sample = (meter.s_prev, st.vx_mps, t_us);
+            row.road_mu = road
+                .wheels_mu(meter.s_prev, vehicle.lf_m, vehicle.lr_m)
+                .into_iter()
+                .fold(f64::INFINITY, f64::min);
+            meter.sum.road_mu_min = meter.sum.road_mu_min.min(row.road_mu);
             if let Some(mu) = c.friction_mu {
                 row.friction_mu = mu;
                 if mu.is_finite() {
@@ -571,14 +610,37 @@ pub fn run_with<T: Real, E: Ecu<T>>(
             inputs = next;
             pending.pop_front();
         }
+        let mu = if road.is_uniform() {
+            [opts.mu_road; 4]
+        } else {
+            let (s, v, t0) = at_sample;
+            let s_now = s + v * (t_us - t0) as f64 * 1e-6;
+            road.wheels_mu(s_now, vehicle.lf_m, vehicle.lr_m)
+        };
         plant
-            .step(&inputs, opts.mu_road)
+            .step_on(&inputs, mu)
             .with_context(|| format!("plant step at t = {:.3} s", t_us as f64 * 1e-6))?;
         t_us += step_us;
         step += 1;
     }
 
     let mut sum = meter.finish(t_us, stop_reason, &res);
+    sum.mu_patches = patches_to_string(&scenario.mu_patches);
+    let samples: Vec<MuSample> = res
+        .log
+        .iter()
+        .map(|r| MuSample {
+            t_s: r.t_s,
+            road_mu: r.road_mu,
+            mu_hat: r.friction_mu,
+        })
+        .collect();
+    if let Some(v) = judge(&samples) {
+        sum.mu_false_drop = Some(v.false_drop);
+        sum.mu_false_drop_s = v.first_false_drop_s;
+        sum.mu_recovery_s = v.recovery_s;
+        sum.mu_unrecovered_exits = Some(v.unrecovered_exits);
+    }
     let lift = plant.wheel_lift();
     sum.wheel_lift_s = lift.lifted_s;
     sum.first_wheel_lift_s = lift.first_lift_s;
@@ -627,6 +689,7 @@ impl<'a> Meter<'a> {
             sum: Summary {
                 mu: opts.mu_road,
                 mu_planner: opts.mu_planner,
+                road_mu_min: f64::INFINITY,
                 plan_budget_cycles: opts.plan_budget_cycles,
                 control_budget_cycles: opts.control_budget_cycles,
                 ..Summary::default()
@@ -779,6 +842,7 @@ impl<'a> Meter<'a> {
             plan_status,
             control_mode: mode_name(act.mode),
             friction_mu: f64::NAN,
+            road_mu: f64::NAN,
         }
     }
 

@@ -4,10 +4,12 @@
 use std::path::Path;
 
 use anyhow::Result;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::closed_loop::{LogRow, RunResult};
 use crate::plot::{draw_error, register_font, FONT};
+use crate::road_friction::RoadFriction;
 use crate::scenario::Scenario;
 
 const W: u32 = 1400;
@@ -144,7 +146,15 @@ fn trajectory(path: &Path, sc: &Scenario, r: &RunResult) -> Result<()> {
     root.fill(&WHITE).map_err(|e| draw_error(path, e))?;
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            format!("{}: actual (blue), plans (green), obstacles (red)", tr.name),
+            format!(
+                "{}: actual (blue), plans (green), obstacles (red){}",
+                tr.name,
+                if sc.mu_patches.is_empty() {
+                    ""
+                } else {
+                    ", road patches (shaded)"
+                }
+            ),
             (FONT, 24),
         )
         .margin(15)
@@ -171,6 +181,7 @@ fn trajectory(path: &Path, sc: &Scenario, r: &RunResult) -> Result<()> {
             .draw_series(LineSeries::new(pts, grey.stroke_width(1)))
             .map_err(|e| draw_error(path, e))?;
     }
+    draw_patches(&mut chart, path, sc, r.summary.mu, &left, &right)?;
     for o in &sc.obstacles {
         let poly: Vec<(f64, f64)> = o.vertices.iter().map(|p| (p[0], p[1])).collect();
         chart
@@ -194,6 +205,84 @@ fn trajectory(path: &Path, sc: &Scenario, r: &RunResult) -> Result<()> {
         )
         .map_err(|e| draw_error(path, e))?;
     root.present().map_err(|e| draw_error(path, e))?;
+    Ok(())
+}
+
+/// Shades the road's patches of their own friction (`--mu-patch`) between the
+/// edges `left`, `right` (one point per track point) and lists them in a legend.
+fn draw_patches<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    path: &Path,
+    sc: &Scenario,
+    base_mu: f64,
+    left: &[(f64, f64)],
+    right: &[(f64, f64)],
+) -> Result<()> {
+    let tr = &sc.track;
+    if sc.mu_patches.is_empty() || left.len() < 2 {
+        return Ok(());
+    }
+    let road = RoadFriction::new(base_mu, &sc.mu_patches, &tr.name, tr.length(), tr.closed)?;
+    // Arc length of each edge point, the first point again at the lap's end.
+    let mut s_pts = tr.arc_lengths();
+    let (mut l, mut r) = (left.to_vec(), right.to_vec());
+    if tr.closed {
+        s_pts.push(tr.length());
+        l.push(left[0]);
+        r.push(right[0]);
+    }
+    let at = |edge: &[(f64, f64)], s: f64| -> (f64, f64) {
+        let k = s_pts.partition_point(|&x| x <= s).clamp(1, s_pts.len() - 1);
+        let (s0, s1) = (s_pts[k - 1], s_pts[k]);
+        let f = if s1 > s0 {
+            ((s - s0) / (s1 - s0)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let (a, b) = (edge[k - 1], edge[k]);
+        (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1))
+    };
+    let blue = RGBColor(30, 110, 230);
+    for (i, p) in sc.mu_patches.iter().enumerate() {
+        // The spans of this patch (two when it runs over the lap line).
+        let spans: Vec<(f64, f64)> = road.patch_spans(i).collect();
+        let shade = blue.mix((0.15 + 0.5 * (1.0 - p.mu / base_mu.max(p.mu))).min(0.65));
+        for (n, &(a, b)) in spans.iter().enumerate() {
+            let inner = s_pts.iter().filter(|&&x| x > a && x < b);
+            let mut poly = vec![at(&l, a)];
+            poly.extend(inner.clone().map(|&x| at(&l, x)));
+            poly.push(at(&l, b));
+            poly.push(at(&r, b));
+            let mut back: Vec<(f64, f64)> = inner.map(|&x| at(&r, x)).collect();
+            back.reverse();
+            poly.extend(back);
+            poly.push(at(&r, a));
+            let series = chart
+                .draw_series(std::iter::once(Polygon::new(poly, shade.filled())))
+                .map_err(|e| draw_error(path, e))?;
+            if n == 0 {
+                series
+                    .label(format!(
+                        "patch {}: μ {} from {} m, {} m long",
+                        i + 1,
+                        p.mu,
+                        p.start_m,
+                        p.length_m
+                    ))
+                    .legend(move |(x, y)| {
+                        Rectangle::new([(x, y - 6), (x + 16, y + 6)], shade.filled())
+                    });
+            }
+        }
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT, 16))
+        .draw()
+        .map_err(|e| draw_error(path, e))?;
     Ok(())
 }
 

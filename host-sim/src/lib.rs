@@ -11,6 +11,7 @@
 //! | [`tire_table`] | tyre forces for a table of slips (`tire` command) |
 //! | [`track`] | track files (racetrack-database CSV), projection, curvature |
 //! | [`obstacle_file`] | obstacle files (`id,x_m,y_m`), polygon distances, footprints |
+//! | [`road_friction`] | friction that changes along the road (`--mu-patch`); μ̂ judged against it |
 //! | [`scenario`] | the built-in `paper` scenario and `--track`/`--obstacles` resolution |
 //! | [`cost_model`] | the tasks' cost model on the ECU (instructions), fitted on PIL measurements |
 //! | [`pil`] | processor in the loop: the ECU application in QEMU against the plant |
@@ -41,6 +42,7 @@ pub mod pil;
 pub mod plant;
 pub mod plot;
 pub mod qp_corpus;
+pub mod road_friction;
 pub mod route;
 pub mod run;
 pub mod scenario;

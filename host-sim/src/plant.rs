@@ -359,8 +359,8 @@ struct StepInputs {
     torque_nm: [f64; 4],
     /// Brake-lock speed of each wheel's torque, rad/s.
     lock_radps: [f64; 4],
-    /// Road friction.
-    mu: f64,
+    /// Road friction under each wheel `[fl, fr, rl, rr]`.
+    mu: [f64; 4],
 }
 
 /// Wheel lift seen by the plant since it started.
@@ -387,7 +387,7 @@ pub struct Plant {
     dt_s: f64,
     time_s: f64,
     last_inputs: Inputs,
-    mu: f64,
+    mu: [f64; 4],
     lift: WheelLift,
 }
 
@@ -426,7 +426,7 @@ impl Plant {
             dt_s,
             time_s: 0.0,
             last_inputs: Inputs::default(),
-            mu: 1.0,
+            mu: [1.0; 4],
             lift: WheelLift::default(),
         })
     }
@@ -434,6 +434,12 @@ impl Plant {
     /// Advances one step `dt` with `inputs` held constant on a road of friction `mu`.
     /// On error the state is left as it was before the call.
     pub fn step(&mut self, inputs: &Inputs, mu: f64) -> Result<(), PlantError> {
+        self.step_on(inputs, [mu; 4])
+    }
+
+    /// As [`Plant::step`], each wheel `[fl, fr, rl, rr]` on a road of its own
+    /// friction `mu` (friction that changes along the road).
+    pub fn step_on(&mut self, inputs: &Inputs, mu: [f64; 4]) -> Result<(), PlantError> {
         for (i, t) in inputs.torque_nm.iter().enumerate() {
             if !t.is_finite() {
                 return Err(PlantError::Input(
@@ -449,8 +455,8 @@ impl Plant {
         if !inputs.delta_rad.is_finite() {
             return Err(PlantError::Input("delta_rad"));
         }
-        if !(mu >= 0.0 && mu.is_finite()) {
-            return Err(PlantError::Mu(mu));
+        if let Some(&bad) = mu.iter().find(|m| !(**m >= 0.0 && m.is_finite())) {
+            return Err(PlantError::Mu(bad));
         }
         let max = self.params.max_steer_rad;
         let inp = Inputs {
@@ -553,7 +559,7 @@ impl Plant {
     }
 
     /// Loads, slips, forces and accelerations at the current state with the inputs
-    /// and friction of the last step (zero torque, straight, `μ = 1` before any step).
+    /// and frictions of the last step (zero torque, straight, `μ = 1` before any step).
     pub fn outputs(&self) -> Outputs {
         let y = self.state.to_array();
         let si = self.step_inputs(&self.last_inputs, self.mu);
@@ -564,7 +570,7 @@ impl Plant {
     }
 
     /// The per-step part of the derivative for the (clamped) inputs `inp`.
-    fn step_inputs(&self, inp: &Inputs, mu: f64) -> StepInputs {
+    fn step_inputs(&self, inp: &Inputs, mu: [f64; 4]) -> StepInputs {
         let front = inp.delta_rad.sin_cos();
         let rear = (0.0, 1.0);
         let (dt, ir) = (self.dt_s, self.params.wheel_inertia_kg_m2);
@@ -689,7 +695,7 @@ impl Plant {
         let d = &self.derived;
         let lifted = fz_spring <= 0.0;
         let fz = fz_spring.max(0.0);
-        let at = tire::AtLoad::new(fz, si.mu, &p.tyre);
+        let at = tire::AtLoad::new(fz, si.mu[i], &p.tyre);
         // Slip ratio (paper's definition, floored denominators).
         let rw = p.r_eff_m * omega;
         let k = match at {

@@ -1,5 +1,5 @@
-//! Scenarios: a track, its obstacles, the road friction and the initial state;
-//! the built-in `paper` scenario, and resolution of the command-line choices
+//! Scenarios: a track, its obstacles, the road friction (and its patches) and the
+//! initial state; the built-in `paper` scenario, and resolution of the command-line choices
 //! `--track paper|FILE` and `--obstacles none|paper|FILE`.
 //!
 //! # The `paper` track
@@ -26,6 +26,7 @@ use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 use crate::obstacle_file::{
     load_obstacles_path, obstacles_to_csv_string, vehicle_footprint, Obstacle, ObstacleError,
 };
+use crate::road_friction::MuPatch;
 use crate::track::{pose_along, Track, TrackError, TrackPiece};
 
 /// Half-width of the `paper` track on each side of the centre line (m).
@@ -261,6 +262,9 @@ pub struct Scenario {
     pub obstacles: Vec<Obstacle>,
     /// Road friction coefficient (-).
     pub mu: f64,
+    /// Patches of road with their own friction (`--mu-patch`; see
+    /// [`crate::road_friction`]); none by default.
+    pub mu_patches: Vec<MuPatch>,
     /// Initial longitudinal speed (m/s).
     pub initial_speed_mps: f64,
     /// Initial pose `[x (m), y (m), heading (rad)]`: on the centre line at
@@ -301,6 +305,7 @@ impl Scenario {
                 Vec::new()
             },
             mu: PAPER_MU,
+            mu_patches: Vec::new(),
             initial_speed_mps: PAPER_INITIAL_SPEED_MPS,
             start_pose: [0.0, 0.0, 0.0],
         }
@@ -343,6 +348,7 @@ pub fn resolve(
         track,
         obstacles,
         mu: PAPER_MU,
+        mu_patches: Vec::new(),
         initial_speed_mps: PAPER_INITIAL_SPEED_MPS,
     })
 }
