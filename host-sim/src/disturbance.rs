@@ -71,6 +71,49 @@ pub const NOISE_UNIT: NoiseSigmas = NoiseSigmas {
     yaw_rate_radps: 0.005,
 };
 
+/// A noise level: a multiple of [`NOISE_UNIT`] (`--noise`: `none` 0, `low` 1,
+/// `medium` 2, `high` 4, or a number ≥ 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseLevel(pub f64);
+
+impl std::str::FromStr for NoiseLevel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let k = match s {
+            "none" => 0.0,
+            "low" => 1.0,
+            "medium" => 2.0,
+            "high" => 4.0,
+            _ => s.parse::<f64>().map_err(|_| {
+                format!("noise level {s:?}: none, low, medium, high or a number ≥ 0")
+            })?,
+        };
+        if !(k.is_finite() && k >= 0.0) {
+            return Err(format!("noise level {s:?} must be a number ≥ 0"));
+        }
+        Ok(NoiseLevel(k))
+    }
+}
+
+/// Checks a delay of the estimate given on the command line (`--delay-ms`), ms.
+pub fn check_delay_ms(d: f64) -> Result<(), String> {
+    if !(d.is_finite() && (0.0..=1000.0).contains(&d)) {
+        return Err(format!("--delay-ms wants delays in [0, 1000] ms, got {d}"));
+    }
+    Ok(())
+}
+
+/// The seed of a run's random draws from its track's name and a seed number (FNV-1a
+/// of the name, mixed with the number): the same noise on a track across frictions,
+/// vehicles and faults, and `run` with a sweep run's factors replays it.
+pub fn run_seed(track_name: &str, seed: u32) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in track_name.bytes() {
+        h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+    }
+    h ^ u64::from(seed).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
 /// A small, fast, reproducible pseudo-random generator (SplitMix64, Steele et al.
 /// 2014); its output depends only on the seed, on every platform.
 #[derive(Clone, Debug)]

@@ -950,7 +950,13 @@ pub fn run(args: &PilArgs) -> Result<()> {
             args.cpi
         );
     }
+    let c = &args.run.conditions;
+    if c.noise.0 != 0.0 || c.delay_ms != 0.0 {
+        bail!("--noise and --delay-ms disturb the in-process ECU's estimate; PIL does not apply them: use `host-sim run` or `host-sim sweep`");
+    }
     let (vehicle, scenario, mut opts) = crate::run::prepare(&args.run)?;
+    // The plant's car (a load the ECU is not told of, `--mass-scale`).
+    let plant_car = vehicle.with_mass_scale(c.mass_scale);
     opts.cycles_per_instruction = args.cpi;
     let pil_opts = PilOptions {
         elf: args.elf.clone(),
@@ -968,7 +974,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
         indicatif::ProgressStyle::with_template("{spinner} PIL: simulated {pos} s  {msg}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
     );
-    let result = closed_loop::run_with(&scenario, &vehicle, &opts, &mut ecu, |t, d| {
+    let result = closed_loop::run_with(&scenario, &plant_car, &opts, &mut ecu, |t, d| {
         bar.set_position(t as u64);
         bar.set_message(format!("{d:.0} m driven"));
     });
@@ -1001,7 +1007,8 @@ pub fn run(args: &PilArgs) -> Result<()> {
     let comparison = if args.no_compare {
         None
     } else {
-        let host = closed_loop::run::<f32>(&scenario, &vehicle, &opts, |_, _| {})?;
+        let mut host_ecu = closed_loop::SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts)?;
+        let host = closed_loop::run_with(&scenario, &plant_car, &opts, &mut host_ecu, |_, _| {})?;
         // The in-process run beside it, for a look at any divergence.
         crate::run::write_outputs(&args.run.out.join("host"), &scenario, &host, false)?;
         Some(compare(&result, &host))
@@ -1037,6 +1044,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
 
     let s = &result.summary;
     println!("{}", crate::run::summary_line(&scenario, s));
+    println!("{}", crate::run::friction_line(s));
     if !s.completed {
         println!("stopped: {}", s.stop_reason);
     }

@@ -3,14 +3,16 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::closed_loop::{self, RunResult, SimOptions};
+use crate::disturbance::{check_delay_ms, run_seed, Disturbances, DisturbedEcu, NoiseLevel};
 use crate::figures;
+use crate::road_friction::{MuPatch, RoadFriction};
 use crate::scenario::{self, Scenario};
-use crate::vehicle::VehicleParams;
+use crate::vehicle::{check_mass_scale, VehicleParams};
 
 pub use crate::closed_loop::Precision;
 
@@ -57,6 +59,64 @@ pub struct RunArgs {
     /// Output directory (created).
     #[arg(long)]
     pub out: PathBuf,
+    /// Road patches, load, noise and delay.
+    #[command(flatten)]
+    pub conditions: ConditionArgs,
+}
+
+/// The drive's conditions `run` and `pil` share with `sweep` (one value each here,
+/// parsed and checked as the sweep does).
+#[derive(Debug, Clone, PartialEq, Args)]
+pub struct ConditionArgs {
+    /// A patch of road with its own friction, `START_M:LENGTH_M:MU`: from START_M
+    /// metres along the lap (the centre line's arc length from its first point),
+    /// LENGTH_M metres long, friction MU (the rest of the road has --mu). Repeatable;
+    /// wraps over laps.
+    #[arg(long = "mu-patch", value_name = "START_M:LENGTH_M:MU")]
+    pub mu_patches: Vec<MuPatch>,
+    /// Scale of the plant's mass and inertias, in (0.2, 5) (the firmware is told the
+    /// nominal car: an unknown load).
+    #[arg(long, default_value_t = 1.0)]
+    pub mass_scale: f64,
+    /// Noise on the state estimate: none, low, medium, high or a multiple of the
+    /// level-1 σ (`run` only; the seed is the sweep's seed 0 for the track).
+    #[arg(long, default_value = "none")]
+    pub noise: NoiseLevel,
+    /// Delay of the state estimate, ms, rounded to 10 ms (`run` only).
+    #[arg(long, default_value_t = 0.0)]
+    pub delay_ms: f64,
+}
+
+impl Default for ConditionArgs {
+    fn default() -> Self {
+        Self {
+            mu_patches: Vec::new(),
+            mass_scale: 1.0,
+            noise: NoiseLevel(0.0),
+            delay_ms: 0.0,
+        }
+    }
+}
+
+impl ConditionArgs {
+    /// Checks the load, the noise level and the delay (the patches are checked
+    /// against the track by [`prepare`]).
+    pub fn check(&self) -> Result<()> {
+        check_mass_scale(self.mass_scale).map_err(|e| anyhow!(e))?;
+        check_delay_ms(self.delay_ms).map_err(|e| anyhow!(e))?;
+        Ok(())
+    }
+
+    /// The noise and delay on the estimate of a run on `track_name` (seed 0 of
+    /// the sweep's seeds for that track).
+    pub fn disturbances(&self, track_name: &str) -> Disturbances {
+        Disturbances {
+            noise_scale: self.noise.0,
+            delay_ms: self.delay_ms,
+            seed: run_seed(track_name, 0),
+            ..Disturbances::default()
+        }
+    }
 }
 
 /// Loads the vehicle file or the built-in vehicle.
@@ -83,6 +143,29 @@ pub fn simulate(
     precision: Precision,
     show_progress: bool,
 ) -> Result<RunResult> {
+    let plain = Disturbances::default();
+    simulate_with(
+        scenario,
+        vehicle,
+        vehicle,
+        opts,
+        &plain,
+        precision,
+        show_progress,
+    )
+}
+
+/// As [`simulate`], the plant's car `plant_car` (the firmware is told of
+/// `vehicle`) and the estimate behind `d` (noise, delay).
+pub fn simulate_with(
+    scenario: &Scenario,
+    vehicle: &VehicleParams,
+    plant_car: &VehicleParams,
+    opts: &SimOptions,
+    d: &Disturbances,
+    precision: Precision,
+    show_progress: bool,
+) -> Result<RunResult> {
     let bar = if show_progress {
         let b = ProgressBar::new(opts.max_duration_s.ceil() as u64);
         b.set_style(
@@ -99,9 +182,28 @@ pub fn simulate(
             b.set_message(format!("{d:.0} m driven"));
         }
     };
-    let result = match precision {
-        Precision::F32 => closed_loop::run::<f32>(scenario, vehicle, opts, progress),
-        Precision::F64 => closed_loop::run::<f64>(scenario, vehicle, opts, progress),
+    let result = if *d == Disturbances::default() {
+        match precision {
+            Precision::F32 => {
+                let mut ecu = closed_loop::SimulatedEcu::<f32>::new(scenario, vehicle, opts)?;
+                closed_loop::run_with(scenario, plant_car, opts, &mut ecu, progress)
+            }
+            Precision::F64 => {
+                let mut ecu = closed_loop::SimulatedEcu::<f64>::new(scenario, vehicle, opts)?;
+                closed_loop::run_with(scenario, plant_car, opts, &mut ecu, progress)
+            }
+        }
+    } else {
+        match precision {
+            Precision::F32 => {
+                let mut ecu = DisturbedEcu::<f32>::new(scenario, vehicle, opts, d.clone())?;
+                closed_loop::run_with(scenario, plant_car, opts, &mut ecu, progress)
+            }
+            Precision::F64 => {
+                let mut ecu = DisturbedEcu::<f64>::new(scenario, vehicle, opts, d.clone())?;
+                closed_loop::run_with(scenario, plant_car, opts, &mut ecu, progress)
+            }
+        }
     };
     if let Some(b) = &bar {
         b.finish_and_clear();
@@ -109,8 +211,9 @@ pub fn simulate(
     result
 }
 
-/// Checks `run`'s arguments and resolves the vehicle, the scenario and the options
-/// (shared by `run` and `pil`).
+/// Checks `run`'s arguments and resolves the vehicle (the nominal car, the one the
+/// firmware is told of), the scenario (with its `--mu-patch` patches, checked
+/// against the track) and the options (shared by `run` and `pil`).
 pub fn prepare(args: &RunArgs) -> Result<(VehicleParams, Scenario, SimOptions)> {
     check_mu("--mu", args.mu)?;
     let planner_mu = args.planner_mu.unwrap_or(args.mu);
@@ -136,8 +239,17 @@ pub fn prepare(args: &RunArgs) -> Result<(VehicleParams, Scenario, SimOptions)> 
             args.ecu_mhz
         );
     }
+    args.conditions.check()?;
     let vehicle = load_vehicle(args.vehicle.as_deref())?;
-    let scenario = scenario::resolve(&args.track, &args.obstacles, !args.open)?;
+    let mut scenario = scenario::resolve(&args.track, &args.obstacles, !args.open)?;
+    RoadFriction::new(
+        args.mu,
+        &args.conditions.mu_patches,
+        &scenario.track.name,
+        scenario.track.length(),
+        scenario.track.closed,
+    )?;
+    scenario.mu_patches = args.conditions.mu_patches.clone();
     let opts = SimOptions {
         mu_road: args.mu,
         mu_planner: planner_mu,
@@ -171,13 +283,49 @@ pub fn summary_line(scenario: &Scenario, s: &crate::closed_loop::Summary) -> Str
     )
 }
 
+/// The line `run` and `pil` print on the road's friction and the firmware's `μ̂`.
+pub fn friction_line(s: &crate::closed_loop::Summary) -> String {
+    let opt = |x: Option<f64>, unit: &str| x.map_or("-".to_string(), |v| format!("{v:.3}{unit}"));
+    format!(
+        "friction: road μ min {:.2}{} | μ̂ min {} | false drop {} | slowest recovery after a patch {}{}",
+        s.road_mu_min,
+        if s.mu_patches.is_empty() {
+            String::new()
+        } else {
+            format!(" (patches {})", s.mu_patches)
+        },
+        opt(s.friction_mu_min, ""),
+        match (s.mu_false_drop, s.mu_false_drop_s) {
+            (Some(true), Some(t)) => format!("yes, first at {t:.2} s"),
+            (Some(_), _) => "no".into(),
+            (None, _) => "-".into(),
+        },
+        opt(s.mu_recovery_s, " s"),
+        match s.mu_unrecovered_exits {
+            Some(n) if n > 0 => format!(" ({n} exits not recovered)"),
+            _ => String::new(),
+        },
+    )
+}
+
 /// `host-sim run`.
 pub fn run(args: &RunArgs) -> Result<()> {
     let (vehicle, scenario, opts) = prepare(args)?;
-    let result = simulate(&scenario, &vehicle, &opts, args.precision, true)?;
+    let plant_car = vehicle.with_mass_scale(args.conditions.mass_scale);
+    let d = args.conditions.disturbances(&scenario.track.name);
+    let result = simulate_with(
+        &scenario,
+        &vehicle,
+        &plant_car,
+        &opts,
+        &d,
+        args.precision,
+        true,
+    )?;
     write_outputs(&args.out, &scenario, &result, !args.no_plots)?;
     let s = &result.summary;
     println!("{}", summary_line(&scenario, s));
+    println!("{}", friction_line(s));
     if !s.completed {
         println!("stopped: {}", s.stop_reason);
     }

@@ -53,13 +53,17 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::closed_loop::{self, SimOptions, Summary};
-use crate::disturbance::{Disturbances, DisturbedEcu, Dropout, DropoutKind, LateObstacle};
+pub use crate::disturbance::NoiseLevel;
+use crate::disturbance::{
+    check_delay_ms, run_seed, Disturbances, DisturbedEcu, Dropout, DropoutKind, LateObstacle,
+};
 use crate::faults::{classify, Fault, Outcome, RunFacts, FAULT_START_S};
 use crate::obstacle_placement::{box_at, random_obstacles, widths_at, RoadCheck};
+use crate::road_friction::{MuPatch, RoadFriction};
 use crate::run::{check_mu, load_vehicle};
 use crate::scenario::{self, Scenario};
 use crate::sweep_figures;
-use crate::vehicle::VehicleParams;
+use crate::vehicle::{check_mass_scale, VehicleParams};
 
 /// Arguments of `host-sim sweep`.
 #[derive(Debug, Clone, Args)]
@@ -91,6 +95,10 @@ pub struct SweepArgs {
     /// Fault scenarios, comma-separated (see `host-sim sweep --help` and the README).
     #[arg(long, value_delimiter = ',', default_value = "none")]
     pub faults: Vec<Fault>,
+    /// A patch of road with its own friction in every run, `START_M:LENGTH_M:MU`
+    /// (metres along the lap, metres, friction; repeatable; wraps over laps).
+    #[arg(long = "mu-patch", value_name = "START_M:LENGTH_M:MU")]
+    pub mu_patches: Vec<MuPatch>,
     /// Seeds per combination (0..N).
     #[arg(long, default_value_t = 1)]
     pub seeds: u32,
@@ -169,29 +177,6 @@ impl FromStr for Shard {
     }
 }
 
-/// A noise level: a multiple of [`crate::disturbance::NOISE_UNIT`].
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NoiseLevel(pub f64);
-
-impl FromStr for NoiseLevel {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let k = match s {
-            "none" => 0.0,
-            "low" => 1.0,
-            "medium" => 2.0,
-            "high" => 4.0,
-            _ => s.parse::<f64>().map_err(|_| {
-                format!("noise level {s:?}: none, low, medium, high or a number ≥ 0")
-            })?,
-        };
-        if !(k.is_finite() && k >= 0.0) {
-            return Err(format!("noise level {s:?} must be a number ≥ 0"));
-        }
-        Ok(NoiseLevel(k))
-    }
-}
-
 /// The obstacles of every run.
 #[derive(Clone, Debug, PartialEq)]
 pub enum ObstacleSpec {
@@ -267,11 +252,7 @@ impl RunSpec {
     /// The seed of the run's random draws: the track's name and the seed column
     /// (the same obstacles and noise across frictions, vehicles and faults).
     pub fn rng_seed(&self) -> u64 {
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        for b in self.track_name().bytes() {
-            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
-        }
-        h ^ u64::from(self.seed).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        run_seed(&self.track_name(), self.seed)
     }
 
     fn columns(&self) -> Vec<String> {
@@ -401,14 +382,10 @@ fn check_args(args: &SweepArgs) -> Result<ObstacleSpec> {
         check_mu("--mu/--mu-planner", mu)?;
     }
     for &k in &args.mass_scale {
-        if !(k.is_finite() && k > 0.2 && k < 5.0) {
-            bail!("--mass-scale wants factors in (0.2, 5), got {k}");
-        }
+        check_mass_scale(k).map_err(|e| anyhow!(e))?;
     }
     for &d in &args.delay_ms {
-        if !(d.is_finite() && (0.0..=1000.0).contains(&d)) {
-            bail!("--delay-ms wants delays in [0, 1000] ms, got {d}");
-        }
+        check_delay_ms(d).map_err(|e| anyhow!(e))?;
     }
     if args.laps == 0 || args.seeds == 0 {
         bail!("--laps and --seeds must be at least 1");
@@ -419,6 +396,24 @@ fn check_args(args: &SweepArgs) -> Result<ObstacleSpec> {
     args.obstacles
         .parse::<ObstacleSpec>()
         .map_err(|e| anyhow!(e))
+}
+
+/// Checks that the patches fit every track and road friction of `specs` before any
+/// run starts (a patch past a lap's end is the command's mistake, not a run's).
+fn check_patches(specs: &[RunSpec], patches: &[MuPatch]) -> Result<()> {
+    if patches.is_empty() {
+        return Ok(());
+    }
+    let mut seen: Vec<&str> = Vec::new();
+    for spec in specs {
+        if seen.contains(&spec.track.as_str()) {
+            continue;
+        }
+        seen.push(&spec.track);
+        let track = scenario::resolve(&spec.track, "none", true)?.track;
+        RoadFriction::new(spec.mu, patches, &track.name, track.length(), true)?;
+    }
+    Ok(())
 }
 
 /// What one run produced: its factors and its `sweep.csv` cells after them.
@@ -444,6 +439,8 @@ pub struct Common {
     pub obstacle_dir: Option<PathBuf>,
     /// Where and for which runs to write the run's outputs (`<dir>/<index>/`).
     pub log_dir: Option<(PathBuf, LogRuns)>,
+    /// Patches of road with their own friction, in every run.
+    pub mu_patches: Vec<MuPatch>,
 }
 
 /// Runs one run and returns its row (an error is a row too).
@@ -472,16 +469,6 @@ fn check_cell(fault: Fault, facts: Option<&RunFacts>) -> String {
     }
 }
 
-/// The plant's car: the nominal one with mass and inertias × `k`.
-fn scaled(v: &VehicleParams, k: f64) -> VehicleParams {
-    let mut p = *v;
-    p.mass_kg *= k;
-    p.ix_kg_m2 *= k;
-    p.iy_kg_m2 *= k;
-    p.iz_kg_m2 *= k;
-    p
-}
-
 /// The late-obstacle fault's box: 2 m × 2 m at half the lap, its centre 0.8 m off
 /// the centre line on the side the firmware finds room beside it.
 fn late_obstacle_box(scn: &Scenario, check: &RoadCheck) -> Result<crate::obstacle_file::Obstacle> {
@@ -495,8 +482,9 @@ fn late_obstacle_box(scn: &Scenario, check: &RoadCheck) -> Result<crate::obstacl
 
 fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
     let mut scn = scenario::resolve(&spec.track, "none", true)?;
+    scn.mu_patches = common.mu_patches.clone();
     let nominal = load_vehicle(spec.vehicle.as_deref())?;
-    let plant_car = scaled(&nominal, spec.mass_scale);
+    let plant_car = nominal.with_mass_scale(spec.mass_scale);
     let mut opts = SimOptions {
         mu_road: spec.mu,
         mu_planner: spec.mu_planner,
@@ -729,7 +717,9 @@ pub fn run(args: &SweepArgs) -> Result<()> {
         laps: args.laps,
         duration_s: args.duration,
         log_dir: args.logs.map(|w| (out.join("runs"), w)),
+        mu_patches: args.mu_patches.clone(),
     };
+    check_patches(&mine, &args.mu_patches)?;
     fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let wall = Instant::now();
     let rows = run_all(&mine, &common, args.jobs, true)?;

@@ -258,6 +258,17 @@ impl VehicleParams {
         Ok(())
     }
 
+    /// The car with its mass and inertias × `k` (a load the firmware is not told
+    /// of: `--mass-scale`); geometry, suspension and tyres unchanged.
+    pub fn with_mass_scale(&self, k: f64) -> Self {
+        let mut p = *self;
+        p.mass_kg *= k;
+        p.ix_kg_m2 *= k;
+        p.iy_kg_m2 *= k;
+        p.iz_kg_m2 *= k;
+        p
+    }
+
     /// Static normal load on each wheel `[fl, fr, rl, rr]`, N: `M_T·g·l_r/(2L)` front,
     /// `M_T·g·l_f/(2L)` rear.
     pub fn static_loads_n(&self) -> [f64; 4] {
@@ -266,6 +277,15 @@ impl VehicleParams {
         let rear = self.mass_kg * G * self.lf_m / (2.0 * l);
         [front, front, rear, rear]
     }
+}
+
+/// Checks a scale of the plant's mass and inertias given on the command line
+/// (`--mass-scale`): in (0.2, 5).
+pub fn check_mass_scale(k: f64) -> Result<(), String> {
+    if !(k.is_finite() && k > 0.2 && k < 5.0) {
+        return Err(format!("--mass-scale wants factors in (0.2, 5), got {k}"));
+    }
+    Ok(())
 }
 
 /// Standard gravity used by the plant, m/s² (the value of `firmware::G`).

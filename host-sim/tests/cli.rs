@@ -122,3 +122,63 @@ fn an_ecu_clock_that_is_not_positive_is_refused_with_a_clear_message() {
         assert!(err.contains("--ecu-mhz must be a positive"), "{mhz}: {err}");
     }
 }
+
+#[test]
+fn a_bad_mu_patch_is_refused_with_the_reason_and_the_lap_length() {
+    let dir = tempfile::tempdir().unwrap();
+    for (spec, want) in [
+        ("300:200", "START_M:LENGTH_M:MU"),
+        ("300:x:0.5", "LENGTH_M \"x\" is not a finite number"),
+        ("300:0:0.5", "LENGTH_M must be a positive length"),
+        ("300:-20:0.5", "LENGTH_M must be a positive length"),
+        ("300:200:0", "MU must be a friction coefficient in (0, 2]"),
+        ("300:200:nan", "MU \"nan\" is not a finite number"),
+        ("-5:200:0.5", "START_M must be ≥ 0"),
+        // The paper track's lap is 980.6 m long.
+        (
+            "5000:200:0.5",
+            "past the end of the lap of track `paper` (980.6",
+        ),
+        ("0:3000:0.5", "does not fit track `paper` (980.6"),
+    ] {
+        for cmd in ["run", "pil", "sweep"] {
+            let mut c = host_sim();
+            c.arg(cmd).arg(format!("--mu-patch={spec}"));
+            if cmd == "sweep" {
+                c.args(["--tracks", "paper"]);
+            }
+            let o = c
+                .arg("--no-plots")
+                .arg("--out")
+                .arg(dir.path())
+                .output()
+                .unwrap();
+            assert!(!o.status.success(), "{cmd} {spec}");
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert!(err.contains(want), "{cmd} {spec}: {err}");
+            assert!(!err.contains("panicked"), "{cmd} {spec}: {err}");
+        }
+    }
+}
+
+#[test]
+fn run_refuses_a_bad_load_noise_or_delay() {
+    let dir = tempfile::tempdir().unwrap();
+    for (arg, want) in [
+        ("--mass-scale=0", "--mass-scale wants factors in (0.2, 5)"),
+        ("--mass-scale=nan", "--mass-scale wants factors"),
+        ("--noise=loud", "none, low, medium, high or a number"),
+        ("--delay-ms=-10", "--delay-ms wants delays in [0, 1000] ms"),
+    ] {
+        let o = host_sim()
+            .arg("run")
+            .arg(arg)
+            .args(["--no-plots", "--out"])
+            .arg(dir.path())
+            .output()
+            .unwrap();
+        assert!(!o.status.success(), "{arg}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(want), "{arg}: {err}");
+    }
+}

@@ -127,6 +127,7 @@ fn run_fault(track: &str, fault: Fault) -> Vec<(String, String)> {
         duration_s: 300.0,
         obstacle_dir: None,
         log_dir: None,
+        mu_patches: Vec::new(),
     };
     let row = execute(&spec, &common);
     header().into_iter().skip(10).zip(row.cells).collect()

@@ -78,6 +78,7 @@ fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -
             ecu_mhz: 168.0,
             no_plots: true,
             out,
+            conditions: Default::default(),
         },
         elf: elf.to_path_buf(),
         icount_shift: 4,
