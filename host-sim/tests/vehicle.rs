@@ -85,3 +85,43 @@ fn an_unreadable_file_names_the_path() {
     assert!(matches!(e, VehicleError::Io { .. }));
     assert!(e.to_string().contains("/nonexistent/car.toml"), "{e}");
 }
+
+/// The light and heavy cars shipped beside the template.
+fn shipped(name: &str) -> VehicleParams {
+    let p = format!("{}/vehicles/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+    VehicleParams::from_toml_file(&p).unwrap_or_else(|e| panic!("{p}: {e}"))
+}
+
+#[test]
+fn the_light_and_heavy_cars_are_valid_and_differ_from_the_default_as_their_class() {
+    let d = VehicleParams::default();
+    let light = shipped("light");
+    let heavy = shipped("heavy");
+    for v in [&light, &heavy] {
+        v.validate().unwrap();
+        // Yaw inertia near m·l_f·l_r (NHTSA's measurements; the files' sources).
+        let k = v.iz_kg_m2 / (v.mass_kg * v.lf_m * v.lr_m);
+        assert!((0.85..=1.15).contains(&k), "I_z/(m·l_f·l_r) = {k}");
+        // Most of the weight on the front (driven) axle, as for the default car.
+        assert!(v.lr_m > v.lf_m);
+    }
+    assert!(light.mass_kg < 0.85 * d.mass_kg && light.iz_kg_m2 < d.iz_kg_m2);
+    assert!(light.lf_m + light.lr_m < d.lf_m + d.lr_m);
+    assert!(heavy.mass_kg > 1.4 * d.mass_kg && heavy.iz_kg_m2 > 1.5 * d.iz_kg_m2);
+    assert!(heavy.h_m > d.h_m + 0.1, "SUV: higher centre of gravity");
+    // SUV: the static stability factor of the class, T/(2h) in [1.0, 1.3].
+    let ssf = heavy.lw_m / heavy.h_m;
+    assert!((1.0..=1.3).contains(&ssf), "{ssf}");
+    // Other tyres: a nominal load near each car's static front wheel load, and the
+    // SUV's all-season tyre grips less than the book's.
+    for v in [&light, &heavy] {
+        let front = v.static_loads_n()[0];
+        assert!(
+            (v.tyre.fnomin / front - 1.0).abs() < 0.1,
+            "{} vs {front}",
+            v.tyre.fnomin
+        );
+    }
+    assert!(heavy.tyre.lmuy < 1.0 && heavy.tyre.lky < 1.0);
+    assert_ne!(heavy.tyre, d.tyre);
+}
