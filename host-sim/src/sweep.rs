@@ -23,6 +23,19 @@
 //! - `--delay-ms`: the estimate the tasks see is that old (rounded to 10 ms).
 //! - `--faults`: see [`crate::faults`].
 //! - `--obstacles random:N`: see [`crate::obstacle_placement`].
+//! - `--mu-patch START_M:LENGTH_M:MU` (repeatable): patches of road with their own
+//!   friction, the same in every run (not a factor), checked against every track's
+//!   lap before the first run; see [`crate::road_friction`].
+//!
+//! # The friction check against the road
+//!
+//! Per run (summary fields, so columns of `sweep.csv`; definitions in
+//! [`crate::road_friction`]): `friction_mu_min` (the lowest `μ̂`), `road_mu_min`,
+//! `mu_false_drop` (at some 10 ms sample `μ̂ < 0.9·min` of the road μ under the car
+//! over the last 10 s) and `mu_false_drop_s` (when first), `mu_recovery_s` (the
+//! slowest return to `μ̂ ≥ 0.9·road μ` after leaving a patch of lower grip) and
+//! `mu_unrecovered_exits`. The aggregate counts the false drops per track and μ
+//! (`mu_false_drops`, a missed bound).
 //!
 //! # Outcome and off-road
 //!
@@ -843,6 +856,9 @@ pub struct Row {
     pub consistency_m: f64,
     /// Plan and control deadline misses.
     pub misses: u64,
+    /// The friction check's `μ̂` fell below 0.9 × the road's recent lowest μ
+    /// (`mu_false_drop`; false when not judged).
+    pub mu_false_drop: bool,
 }
 
 /// Parses `sweep.csv` records (with [`header`]'s columns).
@@ -871,6 +887,7 @@ pub fn parse_rows(records: &[Vec<String>]) -> Vec<Row> {
             consistency_m: num(r, "consistency_max_m"),
             misses: (num(r, "plan_deadline_misses") + num(r, "control_deadline_misses")).max(0.0)
                 as u64,
+            mu_false_drop: get(r, "mu_false_drop") == "true",
         })
         .collect()
 }
@@ -914,6 +931,8 @@ pub struct TrackMu {
     pub consistency_m: f64,
     /// Deadline misses.
     pub misses: u64,
+    /// Runs whose `μ̂` dropped falsely (`mu_false_drop`).
+    pub mu_false_drops: usize,
     /// Bounds missed (names).
     pub missed: Vec<&'static str>,
 }
@@ -1008,6 +1027,7 @@ pub fn aggregate(rows: &[Row], wall_s: Option<f64>) -> Aggregate {
                 plan_ay_over_mu_g: fmax(v.iter().map(|r| r.plan_ay_over_mu_g)),
                 consistency_m: fmax(v.iter().map(|r| r.consistency_m)),
                 misses: v.iter().map(|r| r.misses).sum(),
+                mu_false_drops: v.iter().filter(|r| r.mu_false_drop).count(),
                 missed: Vec::new(),
             };
             let mut missed = Vec::new();
@@ -1025,6 +1045,9 @@ pub fn aggregate(rows: &[Row], wall_s: Option<f64>) -> Aggregate {
             }
             if t.misses > 0 {
                 missed.push("misses");
+            }
+            if t.mu_false_drops > 0 {
+                missed.push("mu_false_drop");
             }
             TrackMu { missed, ..t }
         })
@@ -1078,13 +1101,13 @@ pub fn text_summary(a: &Aggregate) -> String {
     if a.per_track_mu.len() <= 40 {
         let _ = writeln!(
             t,
-            "{:<16} {:>5} {:>6} {:>8} {:>8} {:>8} {:>8} {:>6}  missed",
-            "track", "μ", "done", "lat max", "ay/μg", "plan", "consist", "misses"
+            "{:<16} {:>5} {:>6} {:>8} {:>8} {:>8} {:>8} {:>6} {:>6}  missed",
+            "track", "μ", "done", "lat max", "ay/μg", "plan", "consist", "misses", "μ̂ fd"
         );
         for r in &a.per_track_mu {
             let _ = writeln!(
                 t,
-                "{:<16} {:>5} {:>3}/{:<2} {:>8.3} {:>8.3} {:>8.3} {:>8.3} {:>6}  {}",
+                "{:<16} {:>5} {:>3}/{:<2} {:>8.3} {:>8.3} {:>8.3} {:>8.3} {:>6} {:>6}  {}",
                 r.track,
                 r.mu,
                 r.completed,
@@ -1094,6 +1117,7 @@ pub fn text_summary(a: &Aggregate) -> String {
                 r.plan_ay_over_mu_g,
                 r.consistency_m,
                 r.misses,
+                r.mu_false_drops,
                 r.missed.join(",")
             );
         }
@@ -1112,7 +1136,7 @@ pub fn text_summary(a: &Aggregate) -> String {
     }
     let _ = writeln!(
         t,
-        "bounds: lateral error ≤ {} m, |a_y| ≤ {} μg, consistency ≤ {} m, no misses",
+        "bounds: lateral error ≤ {} m, |a_y| ≤ {} μg, consistency ≤ {} m, no misses, no false drop of μ̂ (μ̂ fd: runs where μ̂ < 0.9 × the lowest road μ of the last 10 s)",
         a.bounds.lateral_error_m, a.bounds.ay_over_mu_g, a.bounds.consistency_m
     );
     for f in &a.faults {
@@ -1187,6 +1211,43 @@ mod tests {
             Ok(ObstacleSpec::Random(3.0))
         );
         assert!("random:x".parse::<ObstacleSpec>().is_err());
+    }
+
+    #[test]
+    fn false_drops_of_the_friction_estimate_are_counted_and_miss_a_bound() {
+        let h = header();
+        let record = |track: &str, drop: &str| -> Vec<String> {
+            h.iter()
+                .map(|c| match c.as_str() {
+                    "track" => track.to_string(),
+                    "mu" => "1".into(),
+                    "outcome" => "ok".into(),
+                    "completed" => "true".into(),
+                    "mu_false_drop" => drop.into(),
+                    "max_abs_lateral_error_m"
+                    | "ay_over_mu_g"
+                    | "plan_ay_over_mu_g"
+                    | "consistency_max_m"
+                    | "plan_deadline_misses"
+                    | "control_deadline_misses" => "0".into(),
+                    _ => String::new(),
+                })
+                .collect()
+        };
+        let rows = parse_rows(&[
+            record("a", "true"),
+            record("a", "false"),
+            record("b", "false"),
+            record("b", ""),
+        ]);
+        let agg = aggregate(&rows, None);
+        let a = &agg.per_track_mu[0];
+        let b = &agg.per_track_mu[1];
+        assert_eq!((a.track.as_str(), a.mu_false_drops), ("a", 1));
+        assert_eq!(a.missed, vec!["mu_false_drop"]);
+        assert_eq!((b.track.as_str(), b.mu_false_drops), ("b", 0));
+        assert!(b.missed.is_empty(), "{:?}", b.missed);
+        assert!(text_summary(&agg).contains("μ̂ fd"));
     }
 
     #[test]
