@@ -25,6 +25,15 @@
 //! its plan is published is the ECU's to say ([`SimulatedEcu`]: see
 //! [`crate::ecu`]).
 //!
+//! # The road's friction
+//!
+//! The plant steps on `SimOptions::mu_road`, or, with patches
+//! ([`Scenario::mu_patches`]), each wheel on the μ at its own arc length: the car's,
+//! projected at each 10 ms sample and advanced by its speed over the plant steps
+//! between samples, plus `l_f` ahead for the front wheels and `l_r` behind for the
+//! rear ones ([`crate::road_friction`]). The log's `road_mu` is the lowest of the
+//! four at the sample; the summary judges the ECU's `μ̂` against it.
+//!
 //! # Deadlines and budgets
 //!
 //! Budgets are in ECU cycles (control 5,000, plan 15.96 M); deadlines are times: a
