@@ -13,12 +13,15 @@
 //!
 //! ```text
 //! T = −K_P·e − K_D·V̇_f − K_I·∫e dτ  (+ T_ff)        total wheel torque, N·m
-//! T_ff = m·a_plan·r_eff                              (our addition, switchable)
+//! T_ff = (m·a_plan + F₀ + c₂·V²)·r_eff               (our addition, switchable)
 //! ```
 //!
 //! `T_ff` is **not in the paper** (a pure PID there): it feeds the plan's
 //! acceleration `u1` of the current interval forward through the vehicle's mass and
-//! wheel radius, so that the PID only corrects drag, grade and model error. It is
+//! wheel radius, and the driving resistances `F₀ + c₂·V²` (N), so that the PID only
+//! corrects model error. [`control`] uses the configured mass and no resistance
+//! (the PID's integral holds drag and grade); [`control_with_model`] the mass and
+//! resistances the `control` task estimates ([`crate::longitudinal_estimator`]). It is
 //! on by default; [`LowLevelConfig::accel_feedforward`] switches it off to get the
 //! paper's controller. `T` is limited to
 //! `[−max_braking_torque_nm, max_traction_torque_nm]`, the speed PID's anti-windup
@@ -497,9 +500,43 @@ fn signed_seconds<T: Real>(a_us: u64, b_us: u64) -> T {
     }
 }
 
+/// The car the feed-forward torque is computed for:
+/// `T_ff = (m·a_plan + F₀ + c₂·V²)·r_eff` (module doc).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CarModel<T> {
+    /// Effective mass `m`, kg, > 0.
+    pub mass_kg: T,
+    /// Resistance at rest `F₀` (rolling resistance, grade), N.
+    pub resistance_n: T,
+    /// Drag coefficient `c₂`, N/(m/s)², ≥ 0.
+    pub drag_n_per_mps2: T,
+    /// Acceleration the driven wheels may be asked for at most (the grip they
+    /// have), m/s², > 0 (+∞: none): the traction torque is limited to
+    /// `(m·a + F₀ + c₂·V²)·r_eff` (a traction control).
+    pub traction_grip_mps2: T,
+    /// Deceleration the brakes may be asked for at most, m/s², > 0 (+∞: none):
+    /// the braking torque is limited to `m·a·r_eff` (an anti-lock limit).
+    pub braking_grip_mps2: T,
+}
+
+impl<T: Real> CarModel<T> {
+    /// The configured car: [`LowLevelConfig::mass_kg`], no resistance (the speed
+    /// PID's integral holds it).
+    pub fn configured(cfg: &LowLevelConfig<T>) -> Self {
+        Self {
+            mass_kg: cfg.mass_kg,
+            resistance_n: T::ZERO,
+            drag_n_per_mps2: T::ZERO,
+            traction_grip_mps2: T::INFINITY,
+            braking_grip_mps2: T::INFINITY,
+        }
+    }
+}
+
 /// One 100 Hz step of the low-level controllers (module doc): the plan `plan`
 /// followed at time `now_us` (µs, the clock of [`Plan::stamp_us`]) from the state
-/// estimate `est`.
+/// estimate `est`, the feed-forward for the configured car
+/// ([`control_with_model`] for an estimated one).
 ///
 /// On `Err` the state is left untouched and the caller applies
 /// [`safe_actuation`]. The configuration must have passed
@@ -510,6 +547,20 @@ pub fn control<T: Real>(
     plan: &Plan<T>,
     est: &StateEstimate<T>,
     now_us: u64,
+) -> Result<Actuation<T>, ControlFault> {
+    control_with_model(cfg, state, plan, est, now_us, &CarModel::configured(cfg))
+}
+
+/// [`control`] with the feed-forward computed for `car` (e.g. the mass and
+/// resistances estimated by [`crate::longitudinal_estimator`]; a non-finite or
+/// non-positive mass falls back to the configured car's).
+pub fn control_with_model<T: Real>(
+    cfg: &LowLevelConfig<T>,
+    state: &mut LowLevelState<T>,
+    plan: &Plan<T>,
+    est: &StateEstimate<T>,
+    now_us: u64,
+    car: &CarModel<T>,
 ) -> Result<Actuation<T>, ControlFault> {
     if !est.is_finite() {
         return Err(ControlFault::NonFiniteEstimate);
@@ -558,10 +609,22 @@ pub fn control<T: Real>(
             s
         }
     };
-    let t_max = cfg.max_traction_torque_nm;
-    let b_max = cfg.max_braking_torque_nm;
+    // The car's model, or the configured car where it is not usable.
+    let resistance = car.resistance_n + car.drag_n_per_mps2 * v * v;
+    let (mass, resistance) = if (car.mass_kg + resistance).is_finite() && car.mass_kg > T::ZERO {
+        (car.mass_kg, resistance)
+    } else {
+        (cfg.mass_kg, T::ZERO)
+    };
+    let r = cfg.wheel_radius_m;
+    // Within the grip (`min` keeps the configured limit for +∞ or NaN grip).
+    let t_grip = ((mass * car.traction_grip_mps2 + resistance.max(T::ZERO)) * r).max(T::ZERO);
+    let t_max = cfg.max_traction_torque_nm.min(t_grip);
+    let b_max = cfg
+        .max_braking_torque_nm
+        .min((mass * car.braking_grip_mps2 * r).max(T::ZERO));
     let torque_ff = if cfg.accel_feedforward {
-        (cfg.mass_kg * now_ref.accel_mps2 * cfg.wheel_radius_m).clamp(-b_max, t_max)
+        ((mass * now_ref.accel_mps2 + resistance) * r).clamp(-b_max, t_max)
     } else {
         T::ZERO
     };

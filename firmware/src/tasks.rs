@@ -2,7 +2,7 @@
 //!
 //! | task | period | priority | deadline | does |
 //! |---|---|---|---|---|
-//! | [`ControlTask::run`] | 10 ms (100 Hz) | high | 10 ms, budget a few thousand cycles | follows the current plan: speed PID → wheel torques, `δ = δ_ol + δ_cl`; the friction check ([`crate::friction`]) |
+//! | [`ControlTask::run`] | 10 ms (100 Hz) | high | 10 ms, budget a few thousand cycles | follows the current plan: speed PID → wheel torques (feed-forward for the car's estimated mass and resistances, torque within the grip `μ̂·g`), `δ = δ_ol + δ_cl`; the friction check ([`crate::friction`]) and its estimate of the car ([`crate::longitudinal_estimator`]) |
 //! | [`PlanTask::run`] | 100 ms (10 Hz) | low | 100 ms | `V_heur` → obstacle parabolas → MPC, into its own buffer, with `min(μ, μ̂)` |
 //!
 //! They share two resources: the latest [`StateEstimate`] and the current [`Plan`]
@@ -37,7 +37,8 @@
 //! [`MpcSettings::qp_max_iter`] QP iterations (see [`Mpc::step_observed`]).
 
 use crate::friction::{FrictionConfig, FrictionEstimator};
-use crate::low_level::{self, Actuation, ControlFault, LowLevelConfig, LowLevelState};
+use crate::longitudinal_estimator::V_REF_MPS;
+use crate::low_level::{self, Actuation, CarModel, ControlFault, LowLevelConfig, LowLevelState};
 use crate::mpc::{Mpc, MpcError, MpcReport, MpcSettings};
 use crate::obstacles::{Obstacle, ObstacleManager, ObstacleSettings, MAX_OBSTACLES};
 use crate::plan::{Plan, HORIZON};
@@ -59,6 +60,12 @@ pub const STEER_FEEDBACK_GAIN: f32 = 0.2;
 
 /// The MPC's step [`crate::plan::PLAN_DT_S`] in µs (a test checks they agree).
 const PLAN_DT_US: u64 = 200_000;
+
+/// Fraction of the grip `μ̂·g` the low-level torque may ask of the tyres
+/// ([`ControlTask::car_model`]), dimensionless: the planner asks at most 0.8 of
+/// it; the speed PID's correction gets the rest, not more (under speed noise at
+/// four times level 1 it locked the front wheels on a μ = 0.3 road without it).
+pub const TORQUE_GRIP_FRACTION: f32 = 0.9;
 
 /// Oldest a plan may be when it is published (time since its release), µs: two
 /// periods. An older plan is dropped ([`PlanTask::publish_at`]).
@@ -457,16 +464,18 @@ pub struct ControlTask<T> {
 
 impl<T: Real> ControlTask<T> {
     /// A controller with a validated configuration; its friction check assumes
-    /// every wheel driven, no load transfer and a nominal `μ = 1`
-    /// ([`ControlTask::with_friction`] to say otherwise).
+    /// every wheel driven, no load transfer, the brake balance matched to the
+    /// axles' loads and a nominal `μ = 1` ([`ControlTask::with_friction`] to say
+    /// otherwise).
     pub fn new(config: LowLevelConfig<T>) -> Result<Self, low_level::LowLevelConfigError> {
-        let friction = FrictionConfig::for_car(
+        let mut friction = FrictionConfig::for_car(
             config.mass_kg,
             config.wheel_radius_m,
             T::ONE,
             T::ZERO,
             T::ONE,
         );
+        friction.front_load_share = config.brake_front_share;
         Self::with_friction(config, friction)
     }
 
@@ -514,12 +523,52 @@ impl<T: Real> ControlTask<T> {
         self.friction.mu()
     }
 
+    /// The car as the friction check estimates it
+    /// ([`crate::longitudinal_estimator`]): the feed-forward's model, and the
+    /// torque limits of the grip `μ̂·g` it found at the lateral acceleration
+    /// `lateral_mps2` (m/s²; the friction ellipse `sqrt(1 − (a_y/grip)²)`, at least
+    /// 0.3) ([`TORQUE_GRIP_FRACTION`] of it:
+    /// of the driven axle's share for traction; for braking, as much as the brake
+    /// balance lets each axle carry of it).
+    pub fn car_model(&self, lateral_mps2: T) -> CarModel<T> {
+        let lon = self.friction.longitudinal();
+        let m0 = self.friction_config.longitudinal.mass_kg;
+        let [r0, r2] = lon.resistance_terms_mps2();
+        let fc = &self.friction_config;
+        let mu = self.friction.mu().min(fc.mu_nominal);
+        let grip = mu * T::lit(crate::G * TORQUE_GRIP_FRACTION);
+        // The friction ellipse: what the lateral acceleration leaves, at least 0.3
+        // of it (a car sliding sideways still brakes).
+        let lat = lateral_mps2 / grip;
+        let ellipse = (T::ONE - lat * lat).max(T::lit(0.09)).sqrt();
+        let grip = grip * ellipse;
+        // Braking at that grip, the front axle carries `l_r/L + (h/L)·a/g` of the
+        // weight and gets `brake_front_share` of the torque: neither axle may be
+        // asked more than its share of the grip (an anti-lock limit).
+        let front_load =
+            fc.front_load_share + fc.cg_height_over_wheelbase * mu * T::lit(TORQUE_GRIP_FRACTION);
+        let front_brake = self.config.brake_front_share;
+        let axle = (front_load / front_brake.max(T::lit(0.01)))
+            .min((T::ONE - front_load) / (T::ONE - front_brake).max(T::lit(0.01)))
+            .min(T::ONE);
+        CarModel {
+            mass_kg: lon.mass_ratio() * m0,
+            resistance_n: r0 * m0,
+            drag_n_per_mps2: r2 * m0 * T::lit(1.0 / (V_REF_MPS * V_REF_MPS)),
+            traction_grip_mps2: grip * fc.driven_load_share,
+            braking_grip_mps2: grip * axle.max(T::ZERO),
+        }
+    }
+
     /// One 10 ms activation at `now_us` on `est` following `plan` (both read under
-    /// short locks by the caller). Never fails: on a fault (non-finite estimate,
+    /// short locks by the caller), its feed-forward for the car as estimated
+    /// ([`ControlTask::car_model`]). Never fails: on a fault (non-finite estimate,
     /// no valid plan) it returns the safe actuation and counts it.
     pub fn run(&mut self, est: &StateEstimate<T>, plan: &Plan<T>, now_us: u64) -> Actuation<T> {
         self.stats.activations = self.stats.activations.wrapping_add(1);
-        match low_level::control(&self.config, &mut self.state, plan, est, now_us) {
+        let car = self.car_model(est.vx_mps * est.yaw_rate_radps);
+        match low_level::control_with_model(&self.config, &mut self.state, plan, est, now_us, &car)
+        {
             Ok(a) => {
                 self.last_fault = None;
                 self.friction.update(
