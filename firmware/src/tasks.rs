@@ -38,7 +38,9 @@
 
 use crate::friction::{FrictionConfig, FrictionEstimator};
 use crate::longitudinal_estimator::V_REF_MPS;
-use crate::low_level::{self, Actuation, CarModel, ControlFault, LowLevelConfig, LowLevelState};
+use crate::low_level::{
+    self, Actuation, CarModel, ControlFault, LowLevelConfig, LowLevelState, Mode,
+};
 use crate::mpc::{Mpc, MpcError, MpcReport, MpcSettings};
 use crate::obstacles::{Obstacle, ObstacleManager, ObstacleSettings, MAX_OBSTACLES};
 use crate::plan::{Plan, HORIZON};
@@ -263,8 +265,17 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         self.ready = false;
         let (delta0, feedback) = self.initial_steering_and_feedback(est);
         self.steer_feedback_rad = feedback;
+        // The car does not reverse: a speed estimate below 0 is noise around a
+        // standstill (the MPC linearised at a negative speed plans backwards and
+        // the car, which only brakes, stands).
         let est = &StateEstimate {
             delta_rad: delta0,
+            // (not `max`: a NaN must stay NaN and be refused)
+            vx_mps: if est.vx_mps < T::ZERO {
+                T::ZERO
+            } else {
+                est.vx_mps
+            },
             ..*est
         };
         let mu = self.planning_mu();
@@ -447,6 +458,25 @@ pub struct ControlTaskStats {
     pub invalid_plans: u32,
 }
 
+/// Speed under which the car stands, m/s ([`ControlTask::stop_reason`]).
+pub const STANDSTILL_MPS: f32 = 0.5;
+
+/// Why the car stands ([`ControlTask::stop_reason`]): every controlled stop has one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StopReason {
+    /// The safe actuation after a fault (its reason: [`ControlTask::last_fault`]).
+    Fault(ControlFault),
+    /// No new plan came: the last one ran out and the controller stopped the car
+    /// ([`crate::low_level::Mode::Stopping`]).
+    PlanRanOut,
+    /// The plan being followed asks to stand (its speed at the current time is
+    /// under [`STANDSTILL_MPS`]): the planner's own choice (an obstacle, the end
+    /// of an open road, or a car it could not steer back to the road moving).
+    Planned,
+    /// The plan asks to move and the car does not yet (starting).
+    Starting,
+}
+
 /// The `control` task's local resources: configuration and controller state.
 #[derive(Clone, Debug)]
 pub struct ControlTask<T> {
@@ -460,6 +490,8 @@ pub struct ControlTask<T> {
     pub stats: ControlTaskStats,
     /// The last fault, if the last activation applied the safe actuation.
     pub last_fault: Option<ControlFault>,
+    /// Why the car stood at the last activation (`None`: it moved).
+    stop_reason: Option<StopReason>,
 }
 
 impl<T: Real> ControlTask<T> {
@@ -498,6 +530,7 @@ impl<T: Real> ControlTask<T> {
             friction,
             stats: ControlTaskStats::default(),
             last_fault: None,
+            stop_reason: None,
         })
     }
 
@@ -509,6 +542,13 @@ impl<T: Real> ControlTask<T> {
     /// The friction check ([`crate::friction`]): its estimate and events.
     pub fn friction(&self) -> &FrictionEstimator<T> {
         &self.friction
+    }
+
+    /// Why the car stood at the last activation (its measured speed under
+    /// [`STANDSTILL_MPS`]; a fault's safe actuation whatever the speed), `None`
+    /// when it moved: a controlled stop always has a stated reason.
+    pub fn stop_reason(&self) -> Option<StopReason> {
+        self.stop_reason
     }
 
     /// The friction check's settings.
@@ -527,7 +567,7 @@ impl<T: Real> ControlTask<T> {
     /// ([`crate::longitudinal_estimator`]): the feed-forward's model, and the
     /// torque limits of the grip `μ̂·g` it found at the lateral acceleration
     /// `lateral_mps2` (m/s²; the friction ellipse `sqrt(1 − (a_y/grip)²)`, at least
-    /// 0.3) ([`TORQUE_GRIP_FRACTION`] of it:
+    /// 0.3; half of it while slip is flagged) ([`TORQUE_GRIP_FRACTION`] of it:
     /// of the driven axle's share for traction; for braking, as much as the brake
     /// balance lets each axle carry of it).
     pub fn car_model(&self, lateral_mps2: T) -> CarModel<T> {
@@ -537,6 +577,14 @@ impl<T: Real> ControlTask<T> {
         let fc = &self.friction_config;
         let mu = self.friction.mu().min(fc.mu_nominal);
         let grip = mu * T::lit(crate::G * TORQUE_GRIP_FRACTION);
+        // While slip is flagged the wheels are past their peak (spinning or
+        // locked: without wheel speeds, the only sign): half the grip, so that
+        // they roll again (what an anti-lock system or a traction control does).
+        let grip = if self.friction.slipping() {
+            grip * T::HALF
+        } else {
+            grip
+        };
         // The friction ellipse: what the lateral acceleration leaves, at least 0.3
         // of it (a car sliding sideways still brakes).
         let lat = lateral_mps2 / grip;
@@ -571,6 +619,16 @@ impl<T: Real> ControlTask<T> {
         {
             Ok(a) => {
                 self.last_fault = None;
+                let still = T::lit(STANDSTILL_MPS);
+                self.stop_reason = if a.v_mps.abs() >= still {
+                    None
+                } else if a.mode == Mode::Stopping {
+                    Some(StopReason::PlanRanOut)
+                } else if a.v_ref_mps < still {
+                    Some(StopReason::Planned)
+                } else {
+                    Some(StopReason::Starting)
+                };
                 self.friction.update(
                     &self.friction_config,
                     now_us,
@@ -596,6 +654,7 @@ impl<T: Real> ControlTask<T> {
                     ControlFault::Numerical => {}
                 }
                 self.last_fault = Some(fault);
+                self.stop_reason = Some(StopReason::Fault(fault));
                 safe
             }
         }

@@ -7,7 +7,7 @@ use firmware::low_level::{LowLevelConfig, Mode};
 use firmware::mpc::{MpcError, MpcSettings};
 use firmware::plan::Plan;
 use firmware::state_estimate::StateEstimate;
-use firmware::tasks::{ControlTask, PlanTask, CONTROL_PERIOD_US, PLAN_PERIOD_US};
+use firmware::tasks::{ControlTask, PlanTask, StopReason, CONTROL_PERIOD_US, PLAN_PERIOD_US};
 
 const CAP: usize = 512;
 
@@ -107,6 +107,7 @@ fn plans_are_published_and_followed() {
     assert!(trace.iter().skip(1).all(|(_, m, _)| *m == Mode::Following));
     assert!(car.xi[2].abs() < 0.05, "lateral {}", car.xi[2]);
     assert!(car.xi[3] > 20.0, "speeds up on the straight: {}", car.xi[3]);
+    assert_eq!(control.stop_reason(), None);
 }
 
 #[test]
@@ -128,6 +129,8 @@ fn failed_plans_are_not_published_and_the_car_stops_under_control() {
     assert!(car.xi[3] < 0.1, "stopped: {}", car.xi[3]);
     assert!(car.xi[2].abs() < 0.3, "on the road: {}", car.xi[2]);
     assert_eq!(control.stats.safe_actuations, 0);
+    // The stop has its reason.
+    assert_eq!(control.stop_reason(), Some(StopReason::PlanRanOut));
 }
 
 #[test]
