@@ -145,6 +145,11 @@ pub struct FrictionConfig<T> {
     /// anti-lock limit, [`crate::tasks::ControlTask::car_model`];
     /// [`FrictionConfig::for_car`]: front-wheel drive, `driven_load_share`).
     pub front_load_share: T,
+    /// Height of the centre of gravity over the track, `h/t`, ≥ 0: cornering at
+    /// `a_y` takes about `2·(a_y/g)·(h/t)` of the driven axle's load off its inside
+    /// wheel, which gets half the torque (the traction limit,
+    /// [`crate::tasks::ControlTask::car_model`]; [`FrictionConfig::for_car`]: 0).
+    pub cg_height_over_track: T,
     /// Height of the centre of gravity over the wheelbase, `h/L`, ≥ 0: driving at
     /// `a` moves `h/L · a/g` of the weight off the front axle.
     pub cg_height_over_wheelbase: T,
@@ -232,6 +237,7 @@ impl<T: Real> FrictionConfig<T> {
             wheel_radius_m,
             driven_load_share,
             front_load_share: driven_load_share,
+            cg_height_over_track: T::ZERO,
             cg_height_over_wheelbase,
             mu_nominal,
             observer_time_s: T::lit(0.4),
@@ -268,6 +274,7 @@ impl<T: Real> FrictionConfig<T> {
             && pos(self.front_load_share)
             && self.front_load_share < T::ONE
             && nonneg(self.cg_height_over_wheelbase)
+            && nonneg(self.cg_height_over_track)
             && pos(self.mu_nominal)
             && pos(self.observer_time_s)
             && pos(self.filter_time_s)

@@ -568,7 +568,8 @@ impl<T: Real> ControlTask<T> {
     /// torque limits of the grip `μ̂·g` it found at the lateral acceleration
     /// `lateral_mps2` (m/s²; the friction ellipse `sqrt(1 − (a_y/grip)²)`, at least
     /// 0.3; half of it while slip is flagged) ([`TORQUE_GRIP_FRACTION`] of it:
-    /// of the driven axle's share for traction; for braking, as much as the brake
+    /// of the driven axle's share for traction, as much as its inside wheel
+    /// carries under the lateral load transfer; for braking, as much as the brake
     /// balance lets each axle carry of it).
     pub fn car_model(&self, lateral_mps2: T) -> CarModel<T> {
         let lon = self.friction.longitudinal();
@@ -603,7 +604,16 @@ impl<T: Real> ControlTask<T> {
             mass_kg: lon.mass_ratio() * m0,
             resistance_n: r0 * m0,
             drag_n_per_mps2: r2 * m0 * T::lit(1.0 / (V_REF_MPS * V_REF_MPS)),
-            traction_grip_mps2: grip * fc.driven_load_share,
+            // Each driven wheel gets half the torque: the inside one, unloaded
+            // by the lateral load transfer, spins first.
+            traction_grip_mps2: grip
+                * fc.driven_load_share
+                * (T::ONE
+                    - T::TWO
+                        * lateral_mps2.abs()
+                        * T::lit(1.0 / crate::G)
+                        * fc.cg_height_over_track)
+                    .max(T::lit(0.2)),
             braking_grip_mps2: grip * axle.max(T::ZERO),
         }
     }

@@ -92,15 +92,20 @@ impl<T: Real> VehicleConfig<T> {
     /// The friction check's settings ([`FrictionConfig::for_car`]) for this car
     /// planned with the friction `mu_planner`: its mass, wheel radius, the front
     /// axle's static share of the weight (front-wheel drive, as
-    /// [`VehicleConfig::mpc_settings`]) and `h/L`.
+    /// [`VehicleConfig::mpc_settings`]), `h/L` and `h/t` (the track `t` the width
+    /// less 0.25 m).
     pub fn friction_config(&self, mu_planner: T) -> FrictionConfig<T> {
-        FrictionConfig::for_car(
+        let mut c = FrictionConfig::for_car(
             self.mass_kg,
             self.wheel_radius_m,
             self.l_r_m / self.wheelbase_m(),
             self.cg_height_m / self.wheelbase_m(),
             mu_planner,
-        )
+        );
+        // The track: the body width less a tyre (0.25 m), at least half the width.
+        let track = (self.width_m - T::lit(0.25)).max(T::HALF * self.width_m);
+        c.cg_height_over_track = self.cg_height_m / track;
+        c
     }
 
     /// The `control` task for this car planned with the friction `mu_planner`:
