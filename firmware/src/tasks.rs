@@ -569,7 +569,8 @@ impl<T: Real> ControlTask<T> {
     /// `lateral_mps2` (m/s²; the friction ellipse `sqrt(1 − (a_y/grip)²)`, at least
     /// 0.3; half of it while slip is flagged) ([`TORQUE_GRIP_FRACTION`] of it:
     /// of the driven axle's share for traction, as much as its inside wheel
-    /// carries under the lateral load transfer; for braking, as much as the brake
+    /// carries under the lateral load transfer, for the lightest mass the
+    /// estimate allows (`1 − u` of it); for braking, as much as the brake
     /// balance lets each axle carry of it).
     pub fn car_model(&self, lateral_mps2: T) -> CarModel<T> {
         let lon = self.friction.longitudinal();
@@ -605,8 +606,12 @@ impl<T: Real> ControlTask<T> {
             resistance_n: r0 * m0,
             drag_n_per_mps2: r2 * m0 * T::lit(1.0 / (V_REF_MPS * V_REF_MPS)),
             // Each driven wheel gets half the torque: the inside one, unloaded
-            // by the lateral load transfer, spins first.
+            // by the lateral load transfer, spins first. For the lightest car the
+            // estimate allows, `m̂·(1 − u)`: a car lighter than configured has
+            // less load on its driven wheels (the heavy car at 0.8 of its mass
+            // spun them at the start, unseen, its lightness hiding the shortfall).
             traction_grip_mps2: grip
+                * (T::ONE - lon.mass_uncertainty(&fc.longitudinal))
                 * fc.driven_load_share
                 * (T::ONE
                     - T::TWO
