@@ -96,6 +96,12 @@ pub const LINK_VERSION: u8 = 3;
 pub const MAX_FRAME_BYTES: usize = 512;
 /// Track rows per [`PathChunkFrame`].
 pub const PATH_CHUNK_ROWS: usize = 16;
+
+/// Frames of one window of `rows` rows of the road on the route channel: its
+/// [`PathChunkFrame`]s and its [`WindowFrame`], frames.
+pub const fn route_frames(rows: usize) -> usize {
+    rows.div_ceil(PATH_CHUNK_ROWS) + 1
+}
 /// Plan nodes in a [`PlanEventFrame`] (`HORIZON + 1`, the plan's node count).
 pub const PLAN_NODES: usize = crate::plan::HORIZON + 1;
 
@@ -964,45 +970,42 @@ pub fn encode<M: Serialize + ?Sized>(msg: &M, out: &mut [u8]) -> Result<usize, F
     cobs.finish()
 }
 
-/// Decodes COBS in place; returns the decoded length, bytes.
+/// Decodes COBS in place; returns the decoded length, bytes. One pass over the
+/// bytes (a code byte opens each block; a block whose code is not 0xFF ends in a
+/// zero, written when the next block opens), so its cost is one step a byte.
 fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, FrameError> {
     let len = buf.len();
-    let mut read = 0;
     let mut write = 0;
-    // len < MAX_FRAME_BYTES (decode, the only caller, refuses longer frames) and `read`
-    // grows by `code` >= 1 each iteration.
+    // Index of the next code byte, and whether a zero goes before its block.
+    let mut next_code = 0;
+    let mut zero_before = false;
+    // len < MAX_FRAME_BYTES: decode, the only caller, refuses longer frames.
     // wcet-bound: MAX_FRAME_BYTES
-    while read < len {
-        let code = match buf.get(read) {
-            Some(&c) if c != 0 => usize::from(c),
+    for read in 0..len {
+        let byte = match buf.get(read) {
+            Some(&b) if b != 0 => b,
             _ => return Err(FrameError::Cobs),
         };
-        let end = read + code;
-        if end > len {
-            return Err(FrameError::Cobs);
-        }
-        // A block's code is one byte (<= 255): at most 254 data bytes.
-        // wcet-bound: 254
-        for i in read + 1..end {
-            let byte = match buf.get(i) {
-                Some(&b) if b != 0 => b,
-                _ => return Err(FrameError::Cobs),
-            };
-            // `write < i`: the output never overtakes the input.
-            match buf.get_mut(write) {
-                Some(slot) => *slot = byte,
-                None => return Err(FrameError::Cobs),
+        let out = if read == next_code {
+            next_code = read + usize::from(byte);
+            if next_code > len {
+                return Err(FrameError::Cobs);
             }
-            write += 1;
-        }
-        read = end;
-        if code != 0xFF && read < len {
-            match buf.get_mut(write) {
-                Some(slot) => *slot = 0,
-                None => return Err(FrameError::Cobs),
+            let zero = zero_before;
+            zero_before = byte != 0xFF;
+            if !zero {
+                continue;
             }
-            write += 1;
+            0
+        } else {
+            byte
+        };
+        // `write < read`: the output never overtakes the input.
+        match buf.get_mut(write) {
+            Some(slot) => *slot = out,
+            None => return Err(FrameError::Cobs),
         }
+        write += 1;
     }
     Ok(write)
 }

@@ -1193,6 +1193,8 @@ impl<T: Real> Condensing<T> {
             // `o` is `out[..NU·k]` with k < HORIZON: fewer than NV entries.
             let o = &mut out[..used];
             match cnt {
+                // WCET: fewer than NV f32.
+                // wcet-bound: NV * 4 bytes
                 0 => o.fill(T::ZERO),
                 1 => {
                     for (j, d) in o.iter_mut().enumerate() {
@@ -1218,6 +1220,7 @@ impl<T: Real> Condensing<T> {
                     }
                 }
                 _ => {
+                    // wcet-bound: NV * 4 bytes
                     o.fill(T::ZERO);
                     for l in 0..NX {
                         let ail = lin.a[i][l];
@@ -1554,6 +1557,8 @@ fn lin_row_into<T: Real>(
         }
     }
     if let Some(tail) = row.get_mut(n..) {
+        // WCET: `row` holds NV f32.
+        // wcet-bound: NV * 4 bytes
         tail.fill(T::ZERO);
     }
     let u = u_bar.as_flattened();

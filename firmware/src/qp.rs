@@ -941,6 +941,8 @@ fn store_inverse_row<T: Real, const N: usize>(h: &mut [[T; N]; N], j: usize) {
         h.get_mut(dst).and_then(|r| r.get_mut(..dst)),
         row.get(j + 1..),
     ) {
+        // WCET: fewer than N entries; on the ECU the QP is the MPC's, N = NV f32.
+        // wcet-bound: NV * 4 bytes
         d.copy_from_slice(src);
     }
 }
@@ -1562,7 +1564,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 continue;
             };
             blocked = None;
-            if let Err(st) = self.add(p, e, tols, sol) {
+            if let Err(st) = self.add(p, e, tols, sol, settings.max_iter) {
                 return st;
             }
         }
@@ -1571,13 +1573,15 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// Adds the violated constraint `e`. If it depends linearly on the working set,
     /// moves `λ` along the dual null-space direction (which keeps `u` and raises the
     /// dual cost) until a multiplier reaches zero, removes that constraint and tries
-    /// again (at most `W` times); no multiplier reaching zero means infeasible.
+    /// again (at most `W` times, each removal an iteration against `max_iter`: past
+    /// it, `IterationLimit`); no multiplier reaching zero means infeasible.
     fn add(
         &mut self,
         p: &mut QpProblem<T, N, M>,
         e: ActiveConstraint,
         tols: Tols<T>,
         sol: &mut QpSolution<T, N, M>,
+        max_iter: u32,
     ) -> Result<(), QpStatus> {
         self.prepare(p, e.index);
         let p = &*p;
@@ -1585,8 +1589,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // Multiplier the new constraint has accumulated over null-space steps.
         let mut lam_e = T::ZERO;
         let mut refactored = false;
-        // `0..=W`: W + 1 attempts.
-        // wcet-bound: WS + 1
+        // `0..=W`: W + 1 attempts. Each attempt after a removal counts as an
+        // iteration against `max_iter` (what is left of the activation's cap), the
+        // refactor-and-retry happens once per `add`: with the main loop's QP_MAX_ITER
+        // iterations, each at most one `add`, at most 2 · QP_MAX_ITER retries.
+        // wcet-bound: 2 * QP_MAX_ITER per activation
         for _ in 0..=W {
             match self.append(p, e, tols) {
                 Ok(()) => {
@@ -1600,6 +1607,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             if !refactored && self.updates > 0 {
                 // The small pivot may be accumulated rounding: refactor and retry.
                 refactored = true;
+                // WCET: once per `add` (the flag), not once per attempt.
+                // wcet-bound: 1 per loop entry
                 self.refactor(p, tols, sol);
                 continue;
             }
@@ -1662,6 +1671,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.lam[k] = l;
             }
             lam_e += t * sigma;
+            if sol.iterations >= max_iter {
+                return Err(QpStatus::IterationLimit);
+            }
+            sol.iterations += 1;
             self.remove(pos);
             sol.removed += 1;
         }

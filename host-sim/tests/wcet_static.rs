@@ -78,8 +78,18 @@ fn ipet_counts_the_worst_path_by_hand() {
         loop_index: 0,
         bound: 15,
         per: Per::Entry,
+        group: None,
     }];
-    let b = ipet::task_bound(&p, &ls, root, &facts, 0, Cost::Instructions).unwrap();
+    let b = ipet::task_bound(
+        &p,
+        &ls,
+        root,
+        &facts,
+        0,
+        &Default::default(),
+        Cost::Instructions,
+    )
+    .unwrap();
     // 2 (prologue) + 16 × 3 (loop) + 1 (return) + 16 × 1 (leaf).
     assert_eq!(b.bound, 67);
     // A tighter fact gives a smaller bound: the loop fact is in the program.
@@ -87,17 +97,35 @@ fn ipet_counts_the_worst_path_by_hand() {
         bound: 7,
         ..facts[0].clone()
     }];
-    let t = ipet::task_bound(&p, &ls, root, &tighter, 0, Cost::Instructions).unwrap();
+    let t = ipet::task_bound(
+        &p,
+        &ls,
+        root,
+        &tighter,
+        0,
+        &Default::default(),
+        Cost::Instructions,
+    )
+    .unwrap();
     assert_eq!(t.bound, 2 + 8 * 3 + 1 + 8);
     // Per activation: the same here (one entry per activation).
     let act = [LoopFact {
         per: Per::Activation,
         ..facts[0].clone()
     }];
-    let a = ipet::task_bound(&p, &ls, root, &act, 0, Cost::Instructions).unwrap();
+    let a = ipet::task_bound(
+        &p,
+        &ls,
+        root,
+        &act,
+        0,
+        &Default::default(),
+        Cost::Instructions,
+    )
+    .unwrap();
     assert_eq!(a.bound, 67);
     // Cycles are at least the instructions.
-    let c = ipet::task_bound(&p, &ls, root, &facts, 0, Cost::Cycles).unwrap();
+    let c = ipet::task_bound(&p, &ls, root, &facts, 0, &Default::default(), Cost::Cycles).unwrap();
     assert!(c.bound > 67);
 }
 
@@ -106,7 +134,15 @@ fn a_loop_without_a_bound_is_refused() {
     let p = program(COUNTED);
     let ls = all_loops(&p);
     let root = p.find("root")[0];
-    match ipet::task_bound(&p, &ls, root, &[], 0, Cost::Instructions) {
+    match ipet::task_bound(
+        &p,
+        &ls,
+        root,
+        &[],
+        0,
+        &Default::default(),
+        Cost::Instructions,
+    ) {
         Err(IpetError::Unbounded(l)) => assert_eq!(l.len(), 1, "{l:?}"),
         other => panic!("expected a refusal, got {other:?}"),
     }
@@ -119,7 +155,7 @@ fn recursion_is_refused() {
     let a = p.find("a")[0];
     assert_eq!(p.recursions(&[a]).len(), 1);
     assert!(matches!(
-        ipet::task_bound(&p, &ls, a, &[], 0, Cost::Instructions),
+        ipet::task_bound(&p, &ls, a, &[], 0, &Default::default(), Cost::Instructions),
         Err(IpetError::Recursion(_))
     ));
 }
@@ -300,11 +336,30 @@ fn retry_loops_share_the_activations_retries() {
         loop_index: 0,
         bound: 1,
         per: Per::Preemption,
+        group: None,
     }];
     // Without preemption the store succeeds at once: 5 + 1 instructions.
-    let none = ipet::task_bound(&p, &ls, root, &facts, 0, Cost::Instructions).unwrap();
+    let none = ipet::task_bound(
+        &p,
+        &ls,
+        root,
+        &facts,
+        0,
+        &Default::default(),
+        Cost::Instructions,
+    )
+    .unwrap();
     assert_eq!(none.bound, 6);
     // Three retries allowed: 4 × 5 + 1.
-    let three = ipet::task_bound(&p, &ls, root, &facts, 3, Cost::Instructions).unwrap();
+    let three = ipet::task_bound(
+        &p,
+        &ls,
+        root,
+        &facts,
+        3,
+        &Default::default(),
+        Cost::Instructions,
+    )
+    .unwrap();
     assert_eq!(three.bound, 21);
 }

@@ -150,6 +150,25 @@ fn instant_at(t_us: u64) -> <Mono as rtic_monotonics::Monotonic>::Instant {
     )
 }
 
+/// Frames the control task reads from the down-link per release at most: the
+/// sensor frame, and one before it (the rest of a garbled one, or another frame).
+const RECEIVE_FRAMES: usize = 2;
+
+/// Frames of one window of the road on the route channel: the most the plan task
+/// reads per activation.
+const ROUTE_FRAMES: u32 = link::route_frames(PATH_CAP) as u32;
+
+/// Why the control task got no sensor frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LinkEnd {
+    /// The host asked to stop.
+    Stop,
+    /// The host closed the link.
+    Closed,
+    /// [`RECEIVE_FRAMES`] frames without a sensor frame.
+    Garbled,
+}
+
 /// The two FIFOs to the simulator, through semihosting.
 pub struct Link {
     down: usize,
@@ -228,28 +247,83 @@ impl Link {
     }
 
     /// The next well-formed host frame (refused frames are counted and skipped);
-    /// `None` when the host closed the link.
+    /// `None` when the host closed the link. For the set-up, before the tasks run.
     pub fn receive(&mut self) -> Option<Down> {
         loop {
-            if self.rx_pos == self.rx_len {
-                let got = sh_read(self.down, &mut self.rx);
-                if got == 0 {
-                    return None; // end of file: the host is gone
-                }
-                self.rx_len = got;
-                self.rx_pos = 0;
+            match self.next_frame() {
+                Err(()) => return None,
+                Ok(None) => {}
+                Ok(Some(Ok(msg))) => return Some(msg),
+                Ok(Some(Err(()))) => self.rejected = self.rejected.wrapping_add(1),
             }
-            let byte = self.rx[self.rx_pos];
-            self.rx_pos += 1;
-            match self.reader.push(byte) {
+        }
+    }
+
+    /// The sensor frame of this release: at most [`RECEIVE_FRAMES`] frames of at
+    /// most [`MAX_DOWN_FRAME_BYTES`] bytes each. The host writes one frame per
+    /// release, so more without a sensor frame is a broken link, not something to
+    /// wait out. Other frames are counted as refused.
+    pub fn receive_sensor(&mut self) -> Result<link::SensorFrame, LinkEnd> {
+        // WCET: RECEIVE_FRAMES (2; an ECU constant, not the library's).
+        // wcet-bound: 2
+        for _ in 0..RECEIVE_FRAMES {
+            // One frame's bytes up to its delimiter; decoded after the loop, once
+            // per frame.
+            let mut ended = false;
+            // wcet-bound: MAX_DOWN_FRAME_BYTES
+            for _ in 0..MAX_DOWN_FRAME_BYTES {
+                let byte = self.next_byte().ok_or(LinkEnd::Closed)?;
+                if byte == 0 {
+                    ended = true;
+                    break;
+                }
+                // A byte inside a frame: the reader only stores it.
+                let _ = self.reader.push(byte);
+            }
+            if !ended {
+                self.reader.reset();
+                self.rejected = self.rejected.wrapping_add(1);
+                continue;
+            }
+            match self.reader.push(0) {
                 None => {}
                 Some(Ok(frame)) => match link::decode::<Down>(frame) {
-                    Ok(msg) => return Some(msg),
-                    Err(_) => self.rejected = self.rejected.wrapping_add(1),
+                    Ok(Down::Sensor(f)) => return Ok(f),
+                    Ok(Down::Stop) => return Err(LinkEnd::Stop),
+                    _ => self.rejected = self.rejected.wrapping_add(1),
                 },
                 Some(Err(_)) => self.rejected = self.rejected.wrapping_add(1),
             }
         }
+        Err(LinkEnd::Garbled)
+    }
+
+    /// The next byte of the down-link; `None` when the host closed it.
+    fn next_byte(&mut self) -> Option<u8> {
+        if self.rx_pos == self.rx_len {
+            let got = sh_read(self.down, &mut self.rx);
+            if got == 0 {
+                return None; // end of file: the host is gone
+            }
+            self.rx_len = got;
+            self.rx_pos = 0;
+        }
+        let byte = *self.rx.get(self.rx_pos)?;
+        self.rx_pos += 1;
+        Some(byte)
+    }
+
+    /// Consumes one byte of the down-link: `Ok(None)` inside a frame, `Ok(Some(_))`
+    /// at a frame's end (the message, or `Err` for a frame refused), `Err(())` when
+    /// the host closed the link.
+    #[allow(clippy::result_unit_err)]
+    fn next_frame(&mut self) -> Result<Option<Result<Down, ()>>, ()> {
+        let byte = self.next_byte().ok_or(())?;
+        Ok(match self.reader.push(byte) {
+            None => None,
+            Some(Ok(frame)) => Some(link::decode::<Down>(frame).map_err(|_| ())),
+            Some(Err(_)) => Some(Err(())),
+        })
     }
 
     /// Sends one frame to the host. Not inlined: its frame buffer then lives on the
@@ -271,8 +345,9 @@ pub struct RouteLink {
 }
 
 impl RouteLink {
-    /// Reads `frames` frames of the road into `staging` (refused ones are counted
-    /// in [`ROUTE_REJECTED`]); stops early when the host closed the channel. Not
+    /// Reads `frames` frames of the road into `staging` (at most [`ROUTE_FRAMES`],
+    /// each at most [`MAX_DOWN_FRAME_BYTES`] bytes; refused ones are counted in
+    /// [`ROUTE_REJECTED`]); stops early when the host closed the channel. Not
     /// inlined: its decoded frame lives on the stack only while it runs, not beside
     /// the MPC step's frames in the plan task's. Its frame buffer is on the stack
     /// too (no static RAM): the host writes whole frames and announces them, so
@@ -280,30 +355,61 @@ impl RouteLink {
     #[inline(never)]
     fn receive(&mut self, frames: u32, staging: &mut Staging) {
         let mut reader: FrameReader<MAX_DOWN_FRAME_BYTES> = FrameReader::new();
-        let mut left = frames;
         let mut byte = [0u8; 1];
-        while left > 0 {
-            if sh_read(self.fd, &mut byte) == 0 {
-                return;
+        // wcet-bound: ROUTE_FRAMES
+        for _ in 0..frames.min(ROUTE_FRAMES) {
+            // One frame's bytes up to its delimiter; decoded after the loop, once
+            // per frame.
+            let mut ended = false;
+            // wcet-bound: MAX_DOWN_FRAME_BYTES
+            for _ in 0..MAX_DOWN_FRAME_BYTES {
+                if sh_read(self.fd, &mut byte) == 0 {
+                    return;
+                }
+                if byte[0] == 0 {
+                    ended = true;
+                    break;
+                }
+                // A byte inside a frame: the reader only stores it.
+                let _ = reader.push(byte[0]);
             }
-            let ok = match reader.push(byte[0]) {
-                None => continue,
-                Some(Ok(frame)) => match link::decode::<Down>(frame) {
-                    Ok(Down::PathChunk(c)) => staging.chunk(&c),
-                    Ok(Down::Window(w)) => {
-                        staging.complete(&w);
-                        true
-                    }
+            let ok = ended
+                && match reader.push(0) {
+                    Some(Ok(frame)) => match link::decode::<Down>(frame) {
+                        Ok(Down::PathChunk(c)) => staging.chunk(&c),
+                        Ok(Down::Window(w)) => {
+                            staging.complete(&w);
+                            true
+                        }
+                        _ => false,
+                    },
                     _ => false,
-                },
-                Some(Err(_)) => false,
-            };
+                };
             if !ok {
+                reader.reset();
                 ROUTE_REJECTED.fetch_add(1, Ordering::Relaxed);
             }
-            left -= 1;
         }
     }
+}
+
+/// The end of the run, from the control task: the stack's high-water mark and the
+/// refused frames in a Done frame, then QEMU's exit (`ok` when the host asked to
+/// stop). Not inlined, and it never returns: the timing analysis leaves it out of
+/// the control task's activations.
+#[inline(never)]
+fn stop(link: &mut Link, ok: bool) -> ! {
+    let (used, size) = stack_high_water();
+    defmt::info!("ecu: stop; stack high-water {} of {} bytes", used, size);
+    let rejected = link
+        .rejected
+        .wrapping_add(ROUTE_REJECTED.load(Ordering::Relaxed));
+    link.send(&Up::Done(link::DoneFrame {
+        stack_high_water_bytes: used,
+        stack_size_bytes: size,
+        rejected_frames: rejected,
+    }));
+    exit(ok)
 }
 
 /// Ends the QEMU run.
@@ -396,6 +502,8 @@ impl Staging {
         if first != self.received || first + n > PATH_CAP || n > c.rows.len() {
             return false;
         }
+        // WCET: n <= PATH_CHUNK_ROWS rows of four f32.
+        // wcet-bound: PATH_CHUNK_ROWS * 16 bytes
         self.rows[first..first + n].copy_from_slice(&c.rows[..n]);
         self.received = first + n;
         true
@@ -419,6 +527,42 @@ impl Staging {
         self.received = 0;
         Some(w)
     }
+}
+
+/// The control task's own work, [`ControlTask::run`] on the estimate and the plan
+/// (inside the `plan` lock). Not inlined: the timing analysis bounds it alone,
+/// against [`deadline::CONTROL_BUDGET_CYCLES`].
+#[inline(never)]
+fn control_job(
+    control: &mut ControlTask<f32>,
+    e: &firmware::state_estimate::StateEstimate<f32>,
+    plan: &firmware::plan::Plan<f32>,
+) -> Actuation<f32> {
+    control.run(e, plan, e.stamp_us)
+}
+
+/// The plan task's own work: [`PlanTask::run`] on the estimate, planning with
+/// `friction_mu` (the control task's `μ̂`, 0 for none). Not inlined: the timing
+/// analysis bounds it alone, against [`deadline::PLAN_BUDGET_CYCLES`].
+#[inline(never)]
+fn plan_job(
+    planner: &mut PlanTask<f32, PATH_CAP>,
+    est: &firmware::state_estimate::StateEstimate<f32>,
+    friction_mu: f32,
+) -> Result<firmware::mpc::MpcReport<f32>, firmware::mpc::MpcError> {
+    planner.set_friction_limit(friction_mu);
+    planner.run(est)
+}
+
+/// The plan swap, inside the `plan` lock: the critical section that blocks the
+/// control task. Not inlined: the timing analysis bounds it alone.
+#[inline(never)]
+fn publish_plan(
+    planner: &mut PlanTask<f32, PATH_CAP>,
+    shared: &mut firmware::plan::Plan<f32>,
+    finish_us: u64,
+) -> bool {
+    planner.publish_at(shared, finish_us)
 }
 
 /// Adds the control task's ticks since `t0` (everything it did, the link's frames
@@ -452,7 +596,7 @@ fn actuation_frame(seq: u32, a: &Actuation<f32>, fault: u8, ticks: u32) -> Actua
 #[rtic::app(device = stm32f4::stm32f405, dispatchers = [USART1, USART2])]
 mod app {
     use super::*;
-    use firmware::link::{DoneFrame, PlanEventFrame, ReadyFrame};
+    use firmware::link::{PlanEventFrame, ReadyFrame};
     use firmware::mpc::MpcSettings;
     use firmware::plan::Plan;
     use firmware::setup::Setup;
@@ -589,34 +733,20 @@ mod app {
         let mut monitor = DeadlineMonitor::control();
         let mut watchdog = PlanWatchdog::plan();
         loop {
-            // WCET: a poll resumes in this loop, so the binary has a cycle with several entry
-            // blocks (irreducible). A job ends with `next_release(now)`, the first release not
-            // yet past at its end, so it suspends here. Not yet bounded: "1 per activation"
-            // was contradicted by the traces (a control job crosses two of the cycle's entry
-            // edges), and the count per job has not been derived from the binary.
+            // WCET: a poll resumes in this loop, so the binary has a cycle with two entry
+            // blocks (irreducible): the loop's head (the first poll) and the delay's
+            // resumption. A job crosses two of its edges into them: its end into the head,
+            // the head into the delay, which suspends: the job ended with `next_release(now)`,
+            // the first release not yet past. The bound is per job; a poll that finds its
+            // release already past runs that release's job too, which the response-time
+            // analysis counts as a release of its own (and the trace check flags).
+            // wcet-bound: 2 per activation
             Mono::delay_until(instant_at(monitor.release_us())).await;
             let release_us = monitor.start();
             let t0 = core_ticks();
-            let est = loop {
-                match cx.local.link.receive() {
-                    Some(Down::Sensor(f)) => break f,
-                    msg @ (Some(Down::Stop) | None) => {
-                        let (used, size) = stack_high_water();
-                        defmt::info!("ecu: stop; stack high-water {} of {} bytes", used, size);
-                        let rejected = cx
-                            .local
-                            .link
-                            .rejected
-                            .wrapping_add(ROUTE_REJECTED.load(Ordering::Relaxed));
-                        cx.local.link.send(&Up::Done(DoneFrame {
-                            stack_high_water_bytes: used,
-                            stack_size_bytes: size,
-                            rejected_frames: rejected,
-                        }));
-                        exit(msg.is_some())
-                    }
-                    Some(_) => cx.local.link.rejected = cx.local.link.rejected.wrapping_add(1),
-                }
+            let est = match cx.local.link.receive_sensor() {
+                Ok(f) => f,
+                Err(end) => stop(cx.local.link, end == LinkEnd::Stop),
             };
             // A window of the road sent on the route channel: the plan task reads it.
             if est.route_frames > 0 {
@@ -628,10 +758,7 @@ mod app {
             let e = est.estimate;
             cx.shared.estimate.lock(|s| *s = e);
             let control = &mut *cx.local.control;
-            let act = cx
-                .shared
-                .plan
-                .lock(|plan| control.run(&e, plan, e.stamp_us));
+            let act = cx.shared.plan.lock(|plan| control_job(control, &e, plan));
             let mut fault = link::fault_code(control.last_fault);
             watchdog.check(release_us, control.state().plans_seen);
             FRICTION_MU_BITS.store(control.friction_mu().to_bits(), Ordering::Relaxed);
@@ -669,7 +796,8 @@ mod app {
         let mut monitor = DeadlineMonitor::plan();
         let mut activation: u32 = 0;
         loop {
-            // WCET: as in `control`, an irreducible cycle not yet bounded.
+            // WCET: as in `control`: two edges into the cycle's entry blocks per job.
+            // wcet-bound: 2 per activation
             Mono::delay_until(instant_at(monitor.release_us())).await;
             activation = activation.wrapping_add(1);
             let release_us = monitor.start();
@@ -678,12 +806,11 @@ mod app {
             let t0 = core_ticks();
             let c0 = CONTROL_TICKS.load(Ordering::Relaxed);
             let planner = &mut *cx.local.planner;
-            planner.set_friction_limit(friction_mu);
-            let result = planner.run(&est);
+            let result = plan_job(planner, &est, friction_mu);
             // The record's copy of the plan, taken before the swap, outside the lock.
             let computed = planner.pending().copied();
             let finish_us = now_us();
-            let published = cx.shared.plan.lock(|p| planner.publish_at(p, finish_us));
+            let published = cx.shared.plan.lock(|p| publish_plan(planner, p, finish_us));
             let c1 = CONTROL_TICKS.load(Ordering::Relaxed);
             let t1 = core_ticks();
             let own = t1
@@ -694,9 +821,15 @@ mod app {
             // a window of the road announced since, then a complete window adopted
             // (its rows copied into the path's storage, the path computed; the next
             // activation plans on it).
+            // At most a window's frames per activation; the rest wait for the next.
             let frames = ROUTE_PENDING.swap(0, Ordering::Relaxed);
+            if frames > ROUTE_FRAMES {
+                ROUTE_PENDING.fetch_add(frames - ROUTE_FRAMES, Ordering::Relaxed);
+            }
             if frames > 0 {
-                cx.local.route.receive(frames, cx.local.staging);
+                cx.local
+                    .route
+                    .receive(frames.min(ROUTE_FRAMES), cx.local.staging);
             }
             let t2 = core_ticks();
             let c2 = CONTROL_TICKS.load(Ordering::Relaxed);
@@ -706,7 +839,9 @@ mod app {
                     .adopt_window(w.rows as usize, w.origin_m, w.closed)
                     .is_err()
                 {
-                    defmt::error!("ecu: window refused");
+                    // Counted with the refused route frames (the Done frame's
+                    // `rejected_frames`); no logging in a task.
+                    ROUTE_REJECTED.fetch_add(1, Ordering::Relaxed);
                 }
             }
             let c3 = CONTROL_TICKS.load(Ordering::Relaxed);

@@ -9,7 +9,7 @@
 //! A task with any of these gets no bound, and the reasons are listed.
 
 use super::cfg::Function;
-use super::cfg::{self, IndirectTargets, MemoryModel, Program};
+use super::cfg::{self, Exit, IndirectTargets, MemoryModel, Program};
 use super::ipet::{self, Cost, LoopFact, Per};
 use super::loops::{self, reverse_post_order, Loop};
 use super::{annotations, bounds, demangle};
@@ -26,6 +26,26 @@ pub const ECU_TASKS: [(&str, &str); 3] = [
     ("control", "USART2"),
     ("plan", "USART1"),
     ("systick", "SysTick"),
+];
+
+/// The tasks' own work, bounded apart (the ECU app keeps them out of line):
+/// section name, symbol, the task it runs in, its budget in cycles (what the ECU's
+/// deadline monitor holds it to; `None`: no budget of its own).
+pub const ECU_SECTIONS: [(&str, &str, &str, Option<u64>); 3] = [
+    (
+        "control_job",
+        "ecu::control_job",
+        "control",
+        Some(firmware::deadline::CONTROL_BUDGET_CYCLES),
+    ),
+    (
+        "plan_job",
+        "ecu::plan_job",
+        "plan",
+        Some(firmware::deadline::PLAN_BUDGET_CYCLES),
+    ),
+    // The plan swap inside the `plan` lock: what blocks the control task.
+    ("publish_plan", "ecu::publish_plan", "plan", None),
 ];
 
 /// The ECU's schedule: task name, priority (higher preempts), period = deadline
@@ -157,6 +177,14 @@ pub struct TaskStatic {
     pub observed_max_cycles: Option<u64>,
     /// `static_bound_cycles / observed_max_cycles`.
     pub tightness: Option<f64>,
+    /// The budget the ECU's deadline monitor holds the task's own work to, cycles.
+    pub budget_cycles: Option<u64>,
+    /// Response-time bound (`wcet::rta`): the static bound, blocking and the
+    /// higher priorities' interference; `None` when a bound is missing or the
+    /// iteration passed the deadline.
+    pub response_time_bound_us: Option<f64>,
+    /// Deadline (= period) of a task, µs; `None` for a section.
+    pub deadline_us: Option<f64>,
 }
 
 /// The whole static analysis.
@@ -203,26 +231,172 @@ fn location(loader: &addr2line::Loader, address: u32) -> (String, u32) {
     first.unwrap_or_else(|| ("?".into(), 0))
 }
 
-/// The innermost frame of `address` (inlining followed): for the facts about
-/// dependency code, which is inlined into the firmware's functions.
-fn innermost(loader: &addr2line::Loader, address: u32) -> Option<(String, u32)> {
-    let mut frames = loader.find_frames(u64::from(address)).ok()?;
-    while let Ok(Some(frame)) = frames.next() {
-        if let Some(loc) = frame.location {
-            return Some((loc.file.unwrap_or("?").to_string(), loc.line.unwrap_or(0)));
-        }
-    }
-    None
-}
-
 /// The source path from the workspace on (`firmware/src/mpc.rs`), or the file name
 /// with its crate folder for a dependency.
 fn short_path(file: &str) -> String {
     if let Some(i) = file.find("/firmware/src/") {
         return file[i + 1..].to_string();
     }
+    // A crate from the registry: from its `name-version` folder on.
+    if let Some(i) = file.find("/registry/src/") {
+        if let Some((_, rest)) = file[i + "/registry/src/".len()..].split_once('/') {
+            return rest.to_string();
+        }
+    }
     let parts: Vec<&str> = file.rsplit('/').take(3).collect();
     parts.into_iter().rev().collect::<Vec<_>>().join("/")
+}
+
+/// The register holding the size argument of a block copy or fill, by the
+/// function's name; `None` for other functions. The AEABI `memset`/`memclr`
+/// helpers take `(dest, n, c)`; `memcpy`, `memmove`, `memset` and the other AEABI
+/// helpers take the size third.
+pub fn copy_size_register(name: &str) -> Option<&'static str> {
+    let base = name.rsplit("::").next().unwrap_or(name);
+    if base.starts_with("__aeabi_memset") || base.starts_with("__aeabi_memclr") {
+        Some("r1")
+    } else if base.starts_with("__aeabi_memcpy")
+        || base.starts_with("__aeabi_memmove")
+        || matches!(base, "memcpy" | "memmove" | "memset")
+    {
+        Some("r2")
+    } else {
+        None
+    }
+}
+
+/// The block copies and fills of the program and their call sites with their
+/// sizes: a constant move into the size register before the call, else the
+/// `bytes` annotation at the call's source line.
+fn copy_sizes(
+    program: &Program,
+    ctx: &addr2line::Loader,
+    annotations: &[annotations::Annotation],
+) -> ipet::CopySizes {
+    let family: std::collections::BTreeSet<usize> = program
+        .functions
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| copy_size_register(&f.demangled).is_some())
+        .map(|(k, _)| k)
+        .collect();
+    let by_address: BTreeMap<u32, usize> = program
+        .functions
+        .iter()
+        .enumerate()
+        .map(|(k, f)| (f.address, k))
+        .collect();
+    let bytes_at: BTreeMap<(String, u32), u64> = annotations
+        .iter()
+        .filter(|a| a.scope == annotations::Scope::Bytes)
+        .map(|a| ((a.file.clone(), a.line), a.bound))
+        .collect();
+    // The tasks' completing activations: the sites elsewhere (init, the stop and
+    // fault paths) do not matter.
+    let roots: Vec<usize> = ECU_TASKS
+        .iter()
+        .filter_map(|(_, sym)| program.find(sym).first().copied())
+        .collect();
+    let mut sites = Vec::new();
+    for k in program.completing_reachable(&roots) {
+        let func = &program.functions[k];
+        if family.contains(&k) {
+            continue;
+        }
+        let preds = func.predecessors();
+        let live = func.completing();
+        for (b, block) in func.blocks.iter().enumerate() {
+            if !live[b] {
+                continue;
+            }
+            for i in block.first..block.end {
+                let ins = &func.instructions[i];
+                let Some(&callee) = ins.target.and_then(|t| by_address.get(&t)) else {
+                    continue;
+                };
+                let tail = i + 1 == block.end && block.exit == Exit::TailCall(callee);
+                if !family.contains(&callee) || !(ins.base().starts_with("bl") || tail) {
+                    continue;
+                }
+                let Some(reg) = copy_size_register(&program.functions[callee].demangled) else {
+                    continue;
+                };
+                let (file, line) = location(ctx, ins.address);
+                let key = (short_path(&file), line);
+                let bytes = bounds::constant_before(func, &preds, b, i, reg, 4)
+                    .or_else(|| bytes_at.get(&key).copied());
+                sites.push(ipet::CopySite {
+                    function: k,
+                    block: b,
+                    bytes,
+                    at: format!(
+                        "`{}` {:#x} ({}:{})",
+                        func.demangled, ins.address, key.0, key.1
+                    ),
+                });
+            }
+        }
+    }
+    // `per loop entry` annotations: the blocks whose instructions come from the
+    // line (in any frame of their inlining chain), grouped by the innermost loop
+    // around them.
+    let per_loop: BTreeMap<(String, u32), u64> = annotations
+        .iter()
+        .filter(|a| a.scope == annotations::Scope::LoopEntry)
+        .map(|a| ((a.file.clone(), a.line), a.bound))
+        .collect();
+    let mut caps = Vec::new();
+    if !per_loop.is_empty() {
+        for k in program.completing_reachable(&roots) {
+            let func = &program.functions[k];
+            let ls = loops::natural_loops(func).unwrap_or_default();
+            let mut groups: BTreeMap<(Option<usize>, u64), Vec<usize>> = BTreeMap::new();
+            for (b, block) in func.blocks.iter().enumerate() {
+                let hit = func.instructions[block.first..block.end]
+                    .iter()
+                    .filter(|i| i.base().starts_with("bl"))
+                    .flat_map(|i| frames(ctx, i.address))
+                    .find_map(|(file, line)| per_loop.get(&(short_path(&file), line)).copied());
+                let Some(bound) = hit else {
+                    continue;
+                };
+                // The innermost loop holding the block: the smallest.
+                let inner = ls
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, l)| l.blocks.binary_search(&b).is_ok())
+                    .min_by_key(|(_, l)| l.blocks.len())
+                    .map(|(x, _)| x);
+                groups.entry((inner, bound)).or_default().push(b);
+            }
+            for ((loop_index, bound), blocks) in groups {
+                caps.push(ipet::BlockCap {
+                    function: k,
+                    blocks,
+                    loop_index,
+                    bound,
+                });
+            }
+        }
+    }
+    ipet::CopySizes {
+        family,
+        sites,
+        caps,
+    }
+}
+
+/// Every frame of `address`'s inlining chain, innermost first.
+fn frames(loader: &addr2line::Loader, address: u32) -> Vec<(String, u32)> {
+    let mut out = Vec::new();
+    if let Ok(mut fr) = loader.find_frames(u64::from(address)) {
+        while let Ok(Some(frame)) = fr.next() {
+            if let Some(loc) = frame.location {
+                out.push((loc.file.unwrap_or("?").to_string(), loc.line.unwrap_or(0)));
+            }
+        }
+    }
+    out
 }
 
 /// Runs the analysis on `elf`.
@@ -253,8 +427,15 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
     let by_line: BTreeMap<(String, u32), &annotations::Annotation> = annotations
         .iter()
         .chain(dependency_facts.iter())
+        .filter(|a| {
+            !matches!(
+                a.scope,
+                annotations::Scope::Bytes | annotations::Scope::LoopEntry
+            )
+        })
         .map(|a| ((a.file.clone(), a.line), a))
         .collect();
+    let copies = copy_sizes(&program, &ctx, &annotations);
     let mut facts: Vec<LoopFact> = Vec::new();
     let mut origin: BTreeMap<(usize, usize), String> = BTreeMap::new();
     let mut notes: BTreeMap<(usize, usize), String> = BTreeMap::new();
@@ -296,12 +477,53 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                 taken.extend(matched[q].iter().cloned());
                 p = ls[q].parent;
             }
+            if copies.family.contains(&k) {
+                // A block copy or fill: one back edge per byte, the bytes at its
+                // call sites (the IPET's copy constraint); per entry, the largest.
+                let sizes: Vec<Option<u64>> = copies.sites.iter().map(|c| c.bytes).collect();
+                match sizes.iter().copied().collect::<Option<Vec<u64>>>() {
+                    Some(v) => {
+                        let most = v.into_iter().max().unwrap_or(0);
+                        facts.push(LoopFact {
+                            function: k,
+                            loop_index: x,
+                            bound: most,
+                            per: Per::Entry,
+                            group: None,
+                        });
+                        origin.insert(
+                            (k, x),
+                            format!(
+                                "block copy: one back edge per byte, Σ bytes over its {} call sites (the largest {most})",
+                                copies.sites.len()
+                            ),
+                        );
+                    }
+                    None => {
+                        let unknown: Vec<&str> = copies
+                            .sites
+                            .iter()
+                            .filter(|c| c.bytes.is_none())
+                            .map(|c| c.at.as_str())
+                            .collect();
+                        notes.insert(
+                            (k, x),
+                            format!(
+                                "block copy: sizes unknown at {} (annotate `// wcet-bound: EXPR bytes`)",
+                                unknown.join(", ")
+                            ),
+                        );
+                    }
+                }
+                continue;
+            }
             if is_exclusive_retry(func, l) {
                 facts.push(LoopFact {
                     function: k,
                     loop_index: x,
                     bound: 1,
                     per: Per::Preemption,
+                    group: None,
                 });
                 origin.insert(
                     (k, x),
@@ -317,6 +539,7 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                         loop_index: x,
                         bound: b,
                         per: Per::Entry,
+                        group: None,
                     });
                     origin.insert((k, x), "binary".into());
                     continue;
@@ -327,14 +550,52 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                 .find(|key| by_line.contains_key(*key) && !taken.contains(*key))
                 .cloned()
                 .or_else(|| {
-                    // A dependency's loop, inlined or not: the facts about its code.
+                    // A dependency's loop, inlined or not: the facts about its code
+                    // (at any frame of the inlining chain, innermost first).
                     candidates
                         .iter()
-                        .filter_map(|&a| innermost(&ctx, a))
+                        .flat_map(|&a| frames(&ctx, a))
                         .map(|(file, line)| (short_path(&file), line))
                         .find(|key| by_line.contains_key(key) && !taken.contains(key))
                 });
             let Some(key) = hit else {
+                // Its only annotated lines are an enclosing loop's: one source loop
+                // the compiler split into nested binary loops (a `continue` path, an
+                // unrolled remainder). It shares that loop's bound: their back edges
+                // together, against that loop's entries.
+                let mut q = l.parent;
+                while let Some(p) = q {
+                    if matched[p].as_ref().is_some_and(|m| keys.contains(m)) {
+                        break;
+                    }
+                    q = ls[p].parent;
+                }
+                let host = q.and_then(|p| {
+                    facts
+                        .iter()
+                        .find(|f| f.function == k && f.loop_index == p)
+                        .cloned()
+                        .map(|f| (p, f))
+                });
+                if let Some((p, hf)) = host {
+                    let rep = hf.group.unwrap_or(p);
+                    matched[x] = matched[p].clone();
+                    facts.push(LoopFact {
+                        function: k,
+                        loop_index: x,
+                        group: Some(rep),
+                        ..hf
+                    });
+                    origin.insert(
+                        (k, x),
+                        format!(
+                            "shares the bound of the loop at {:#x} (same source loop): {}",
+                            func.blocks.get(ls[rep].header).map_or(0, |b| b.start),
+                            origin.get(&(k, rep)).cloned().unwrap_or_default()
+                        ),
+                    );
+                    continue;
+                }
                 let shares = keys.iter().any(|key| taken.contains(key));
                 notes.insert(
                     (k, x),
@@ -353,10 +614,14 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                 loop_index: x,
                 bound: a.bound,
                 per: match a.scope {
-                    annotations::Scope::Entry => Per::Entry,
+                    // (`bytes` annotations are not in `by_line`.)
+                    annotations::Scope::Entry
+                    | annotations::Scope::Bytes
+                    | annotations::Scope::LoopEntry => Per::Entry,
                     annotations::Scope::Activation => Per::Activation,
                     annotations::Scope::Preemption => Per::Preemption,
                 },
+                group: None,
             });
             origin.insert(
                 (k, x),
@@ -368,7 +633,9 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                     match a.scope {
                         annotations::Scope::Activation => " per activation",
                         annotations::Scope::Preemption => " per preemption",
-                        annotations::Scope::Entry => "",
+                        annotations::Scope::Entry
+                        | annotations::Scope::Bytes
+                        | annotations::Scope::LoopEntry => "",
                     }
                 ),
             );
@@ -378,7 +645,12 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
     let mut tasks = Vec::new();
     let mut unresolved = Vec::new();
     let mut recursions = Vec::new();
-    for (name, symbol) in ECU_TASKS {
+    let units: Vec<(&str, &str, &str, Option<u64>)> = ECU_TASKS
+        .iter()
+        .map(|&(n, sym)| (n, sym, n, None))
+        .chain(ECU_SECTIONS.iter().copied())
+        .collect();
+    for (name, symbol, owner, budget) in units {
         let roots = program.find(symbol);
         let Some(&root) = roots.first() else {
             anyhow::bail!(
@@ -386,7 +658,8 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                 elf.display()
             );
         };
-        let reach = program.reachable(&[root]);
+        // What a completing activation can run: the stop and fault paths excluded.
+        let reach = program.completing_reachable(&[root]);
         let mut n_loops = 0;
         let mut n_bounded = 0;
         let mut n_excluded = 0;
@@ -417,7 +690,13 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                 n_excluded += all_loops[f].len();
                 continue;
             }
+            let live = func.completing();
             for (x, l) in all_loops[f].iter().enumerate() {
+                if !live.get(l.header).copied().unwrap_or(false) {
+                    // On a path that ends the activation: excluded.
+                    n_excluded += 1;
+                    continue;
+                }
                 n_loops += 1;
                 let fact = facts.iter().find(|q| q.function == f && q.loop_index == x);
                 if fact.is_some() {
@@ -462,7 +741,7 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
             .filter(|a| a.scope == annotations::Scope::Preemption)
             .map(|a| a.bound)
             .sum::<u64>();
-        let preemptions = preemptions_of(name) * per_preemption;
+        let preemptions = preemptions_of(owner) * per_preemption;
         let (mut bi, mut bc, mut top) = (None, None, Vec::new());
         if irr.is_empty() {
             match ipet::task_bound(
@@ -471,6 +750,7 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                 root,
                 &facts,
                 preemptions,
+                &copies,
                 Cost::Instructions,
             ) {
                 Ok(b) => bi = Some(b.bound),
@@ -486,6 +766,7 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                     root,
                     &facts,
                     preemptions,
+                    &copies,
                     Cost::Cycles,
                 ) {
                     Ok(b) => {
@@ -512,7 +793,50 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
             observed_max_instructions: None,
             observed_max_cycles: None,
             tightness: None,
+            budget_cycles: budget,
+            response_time_bound_us: None,
+            deadline_us: ECU_SCHEDULE
+                .iter()
+                .find(|t| t.0 == name)
+                .map(|t| t.2 as f64),
         });
+    }
+    // Response times: each task's static bound, the SysTick above both, the
+    // plan swap blocking the control task (the `plan` lock's ceiling is the
+    // control task's priority).
+    let cycles_of = |n: &str| {
+        tasks
+            .iter()
+            .find(|t: &&TaskStatic| t.name == n)
+            .and_then(|t| t.static_bound_cycles)
+    };
+    let mut activities = Vec::new();
+    let mut complete = true;
+    for &(n, prio, period) in &ECU_SCHEDULE {
+        let Some(c) = cycles_of(n) else {
+            complete = false;
+            break;
+        };
+        let (cs, ceiling) = match n {
+            "plan" => (cycles_of("publish_plan").unwrap_or(0) as f64, 2),
+            _ => (0.0, 0),
+        };
+        activities.push(super::rta::Activity {
+            name: n.to_string(),
+            priority: prio,
+            period_us: period as f64,
+            deadline_us: period as f64,
+            wcet_cycles: c as f64,
+            critical_section_cycles: cs,
+            critical_section_ceiling: ceiling,
+        });
+    }
+    if complete {
+        for r in super::rta::response_times(&activities, f64::from(super::CLOCK_HZ)) {
+            if let Some(t) = tasks.iter_mut().find(|t| t.name == r.name) {
+                t.response_time_bound_us = r.response_time_bound_us;
+            }
+        }
     }
     // Every bound checked against execution: per loop the largest back-edge count
     // per entry seen, per task the largest activation with the same block costs.
@@ -609,13 +933,22 @@ impl StaticAnalysis {
              only when every loop it reaches is bounded, no cycle is irreducible, every \
              indirect call is resolved and there is no recursion.\n"
         );
-        let _ = writeln!(s, "| task | root | functions | loops (bounded) | bound, instructions | bound, cycles | traced activations | observed max, instructions / cycles | tightness | refused because |");
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(s, "| task or section | root | functions | loops (bounded) | bound, instructions | bound, cycles | budget, cycles | response time bound / deadline, µs | traced activations | observed max, instructions / cycles | tightness | refused because |");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|");
         for t in &self.tasks {
             let opt = |v: Option<u64>| v.map_or("–".to_string(), |x| x.to_string());
+            let within = match (t.static_bound_cycles, t.budget_cycles) {
+                (Some(c), Some(b)) if c > b => " **over**",
+                _ => "",
+            };
+            let rt = match (t.deadline_us, t.response_time_bound_us) {
+                (Some(d), Some(r)) => format!("{r:.0} / {d:.0}"),
+                (Some(d), None) => format!("**none within** / {d:.0}"),
+                _ => "–".to_string(),
+            };
             let _ = writeln!(
                 s,
-                "| {} | `{}` | {} | {} ({}) | {} | {} | {} | {} / {} | {} | {} |",
+                "| {} | `{}` | {} | {} ({}) | {} | {} | {}{} | {} | {} | {} / {} | {} | {} |",
                 t.name,
                 t.root,
                 t.functions,
@@ -623,6 +956,9 @@ impl StaticAnalysis {
                 t.bounded_loops,
                 opt(t.static_bound_instructions),
                 opt(t.static_bound_cycles),
+                opt(t.budget_cycles),
+                within,
+                rt,
                 t.observed_activations,
                 opt(t.observed_max_instructions),
                 opt(t.observed_max_cycles),

@@ -12,6 +12,9 @@
 //! loop {
 //!
 //! let now = loop { // wcet-bound: 1 per preemption
+//!
+//! // wcet-bound: NV * 4 bytes
+//! tail.fill(T::ZERO);
 //! ```
 //!
 //! The expression bounds the loop's iterations per entry (or, with `per
@@ -22,6 +25,15 @@
 //! [`firmware_constants`], `+ - * /` (integer division rounding up) and
 //! parentheses. A comment alone on its line applies to the next line of code; a
 //! comment after code applies to its own line.
+//!
+//! With `per loop entry`, the annotation is not a loop's either: the code of its
+//! line (a call, inlined or not) runs at most EXPR times per entry of the
+//! innermost loop around it (a retry done once in a loop of attempts).
+//!
+//! With `bytes`, the annotation is not a loop's: it bounds the size of the block
+//! copies and fills (`memcpy`, `memset`, ...) called from its line, where the
+//! binary does not set the size to a constant before the call. Every loop of
+//! those functions takes at most one back edge per byte.
 //!
 //! A binary loop is matched by the source line of its back-edge branch, else of
 //! the first instruction of its header, else of the other instructions of those
@@ -43,6 +55,12 @@ pub enum Scope {
     /// loop the task runs: a retry loop whose retry needs an interrupt between
     /// two reads (a load-exclusive/store-exclusive pair, a counter read twice).
     Preemption,
+    /// Not a loop's: the most bytes a block copy or fill called from the line
+    /// moves.
+    Bytes,
+    /// Not a loop's: the most times the code of the line (a call, inlined or
+    /// not) runs per entry of the innermost loop around it.
+    LoopEntry,
 }
 
 /// One `// wcet-bound:` annotation.
@@ -80,6 +98,11 @@ pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
         ("ECU_PATH_ROWS", tasks::ECU_PATH_ROWS as u64),
         ("PATH_CHUNK_ROWS", link::PATH_CHUNK_ROWS as u64),
         ("MAX_FRAME_BYTES", link::MAX_FRAME_BYTES as u64),
+        ("MAX_DOWN_FRAME_BYTES", link::MAX_DOWN_FRAME_BYTES as u64),
+        (
+            "ROUTE_FRAMES",
+            link::route_frames(tasks::ECU_PATH_ROWS) as u64,
+        ),
         ("TORQUE_HISTORY", firmware::friction::TORQUE_HISTORY as u64),
         (
             "ECU_PATH_SEARCH_STEPS",
@@ -121,6 +144,35 @@ pub fn dependency_facts() -> Vec<Annotation> {
             123,
             2 * ASYNC_TASKS + 1,
             "each pass pops one expired timer or re-arms once after a missed compare",
+        ),
+        // compiler_builtins' u64 division (`u64_div_rem`, the delegate algorithm):
+        // restoring long division, one quotient bit per step, the bit `pow_lo`
+        // (`1 << shl`, shl < 32) shifted right each step, returning before it
+        // reaches 0: at most 32 steps. The binary's loops do 4 steps a pass (their
+        // latches shift `pow_lo` by 4): 8 back edges.
+        fact(
+            "int/specialized_div_rem/delegate.rs",
+            94,
+            8,
+            "restoring division: 32 quotient bits, 4 a pass",
+        ),
+        fact(
+            "int/specialized_div_rem/delegate.rs",
+            154,
+            8,
+            "restoring division: 32 quotient bits, 4 a pass",
+        ),
+        fact(
+            "int/specialized_div_rem/delegate.rs",
+            179,
+            8,
+            "restoring division: 32 quotient bits, 4 a pass",
+        ),
+        fact(
+            "postcard-1.2.0/src/ser/flavors.rs",
+            123,
+            firmware::link::MAX_FRAME_BYTES as u64,
+            "try_extend pushes byte by byte into the link's frame flavor, which refuses the bytes past MAX_FRAME_BYTES",
         ),
         fact(
             "crc-3.4.0/src/crc32.rs",
@@ -252,6 +304,10 @@ pub fn parse_source(
             (e.trim(), Scope::Activation)
         } else if let Some(e) = spec.strip_suffix("per preemption") {
             (e.trim(), Scope::Preemption)
+        } else if let Some(e) = spec.strip_suffix("per loop entry") {
+            (e.trim(), Scope::LoopEntry)
+        } else if let Some(e) = spec.strip_suffix("bytes") {
+            (e.trim(), Scope::Bytes)
         } else {
             (spec, Scope::Entry)
         };
@@ -340,5 +396,12 @@ mod tests {
         let r = parse_source("x.rs", "loop { // wcet-bound: 1 per preemption\n", &c)
             .unwrap_or_default();
         assert_eq!((r[0].bound, r[0].scope), (1, Scope::Preemption));
+        let b = parse_source(
+            "x.rs",
+            "    // wcet-bound: NV * 4 bytes\n    tail.fill(0.0);\n",
+            &c,
+        )
+        .unwrap_or_default();
+        assert_eq!((b[0].line, b[0].bound, b[0].scope), (2, 128, Scope::Bytes));
     }
 }

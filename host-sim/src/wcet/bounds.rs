@@ -250,6 +250,32 @@ fn last_write<'f>(
     }
 }
 
+/// The constant in register `r` when the instruction at index `at` of block `b`
+/// runs: the last write before it (in the block, then up to `depth` unique
+/// predecessors) is a constant move. For the sizes passed to block copies.
+pub fn constant_before(
+    f: &Function,
+    preds: &[Vec<usize>],
+    b: usize,
+    at: usize,
+    r: &str,
+    depth: usize,
+) -> Option<u64> {
+    let block = f.blocks.get(b)?;
+    let before = f.instructions.get(block.first..at.min(block.end))?;
+    let write = match before.iter().rev().find(|i| writes(i, r)) {
+        Some(i) => i,
+        None => {
+            let p = match preds.get(b)?.as_slice() {
+                [p] => *p,
+                _ => return None,
+            };
+            last_write(f, preds, p, r, depth)?
+        }
+    };
+    constant_move(write, r).and_then(|v| u64::try_from(v).ok())
+}
+
 /// Trip count from the counter's start distance to the limit `d = N − c`, its step
 /// `k` and the condition under which the loop goes on (after the update).
 fn trips(d: i64, k: i64, cond: &str) -> Option<i64> {

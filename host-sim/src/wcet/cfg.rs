@@ -304,6 +304,38 @@ impl Function {
         }
         preds
     }
+
+    /// Which blocks can complete: some path from them returns (or tail-calls)
+    /// without a call that never returns. The others end the activation (a panic,
+    /// the fault path, the end of the run): the analysis excludes them, their loops
+    /// and their calls.
+    pub fn completing(&self) -> Vec<bool> {
+        let preds = self.predecessors();
+        let mut done = vec![false; self.blocks.len()];
+        let mut stack: Vec<usize> = self
+            .blocks
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| {
+                matches!(
+                    b.exit,
+                    Exit::Return | Exit::TailCall(_) | Exit::IndirectTail(_)
+                )
+            })
+            .map(|(k, _)| k)
+            .collect();
+        while let Some(b) = stack.pop() {
+            if std::mem::replace(&mut done[b], true) {
+                continue;
+            }
+            for &p in &preds[b] {
+                if !done[p] && self.blocks[p].exit != Exit::NoReturn {
+                    stack.push(p);
+                }
+            }
+        }
+        done
+    }
 }
 
 /// The memory model under which the block cycles are worst cases. Every term is
@@ -452,6 +484,45 @@ impl Program {
             }
         }
         s
+    }
+
+    /// The functions `f` calls or tail-calls from its blocks that can complete
+    /// ([`Function::completing`]): the calls on paths that end the activation
+    /// (the stop and fault paths) left out.
+    pub fn completing_callees(&self, f: usize) -> BTreeSet<usize> {
+        let func = &self.functions[f];
+        let live = func.completing();
+        let mut s = BTreeSet::new();
+        for (b, block) in func.blocks.iter().enumerate() {
+            if !live[b] {
+                continue;
+            }
+            s.extend(block.calls.iter().copied());
+            match &block.exit {
+                Exit::TailCall(t) => {
+                    s.insert(*t);
+                }
+                Exit::IndirectTail(ts) => s.extend(ts.iter().copied()),
+                _ => {}
+            }
+        }
+        s
+    }
+
+    /// Functions an activation that completes can run, from `roots` through
+    /// [`Self::completing_callees`] (roots included), in discovery order.
+    pub fn completing_reachable(&self, roots: &[usize]) -> Vec<usize> {
+        let mut seen = vec![false; self.functions.len()];
+        let mut order = Vec::new();
+        let mut stack: Vec<usize> = roots.to_vec();
+        while let Some(f) = stack.pop() {
+            if std::mem::replace(&mut seen[f], true) {
+                continue;
+            }
+            order.push(f);
+            stack.extend(self.completing_callees(f));
+        }
+        order
     }
 
     /// Functions reachable from `roots` through [`Self::callees`] (roots

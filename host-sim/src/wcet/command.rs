@@ -312,6 +312,19 @@ fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
         analysis.recursions.len(),
         args.out.join("static.md").display()
     );
+    // What the analysis cannot give a bound through is an error, not a footnote.
+    if analysis.unbounded_loops > 0
+        || !analysis.unresolved_indirect_calls.is_empty()
+        || !analysis.recursions.is_empty()
+    {
+        bail!(
+            "the static analysis is incomplete: {} unbounded loop(s), {} unresolved indirect call(s), {} recursion(s) (see {})",
+            analysis.unbounded_loops,
+            analysis.unresolved_indirect_calls.len(),
+            analysis.recursions.len(),
+            args.out.join("static.md").display()
+        );
+    }
     if !analysis.violations.is_empty() {
         bail!(
             "the static analysis is contradicted by execution ({} violation(s)): {}",

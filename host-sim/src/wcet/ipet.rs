@@ -13,6 +13,8 @@
 //!   `Σ back edges ≤ B · n_root` for a flow fact over the whole activation
 //!   ([`Per::Activation`]): caps that span loops are linear constraints, not
 //!   products of worst cases;
+//! * block copies and fills ([`CopySizes`]): each loop of `memcpy`, `memset`, ...
+//!   takes at most `Σ bytes · x_site` back edges over the call sites;
 //! * paths that never return (a call of a panic handler, a trap) are not part of a
 //!   completing activation: their blocks get count 0.
 //!
@@ -51,6 +53,52 @@ pub struct LoopFact {
     pub bound: u64,
     /// What the bound counts against.
     pub per: Per,
+    /// Another loop of the same function (its index) whose bound this one shares:
+    /// one source loop the compiler split into nested binary loops. Their back
+    /// edges together are bounded, against the other loop's entries.
+    pub group: Option<usize>,
+}
+
+/// Block copies and fills (`memcpy`, `memset`, ...): functions whose loops are
+/// bounded by the bytes their callers pass, not per entry. Each of their loops
+/// takes at most one back edge per byte, so over an activation each loop's back
+/// edges are at most `Σ bytes × count` over the call sites.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CopySizes {
+    /// The copy and fill functions (indices in the program).
+    pub family: std::collections::BTreeSet<usize>,
+    /// Every call from outside the family into it.
+    pub sites: Vec<CopySite>,
+    /// Caps on blocks per loop entry (`per loop entry` annotations).
+    pub caps: Vec<BlockCap>,
+}
+
+/// A cap on blocks: they run at most `bound` times per entry of loop
+/// `loop_index` of their function (per entry of the function when `None`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BlockCap {
+    /// Function index.
+    pub function: usize,
+    /// The blocks.
+    pub blocks: Vec<usize>,
+    /// The innermost loop around them.
+    pub loop_index: Option<usize>,
+    /// Most executions of the blocks together per entry.
+    pub bound: u64,
+}
+
+/// One call of a copy or fill function.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CopySite {
+    /// The calling function.
+    pub function: usize,
+    /// The calling block.
+    pub block: usize,
+    /// The most bytes it moves: a constant the binary sets before the call, or
+    /// a `bytes` annotation at its line; `None` when neither.
+    pub bytes: Option<u64>,
+    /// Where (function, address, source line), for the messages.
+    pub at: String,
 }
 
 /// Which cost a block contributes.
@@ -96,12 +144,17 @@ pub fn task_bound(
     root: usize,
     facts: &[LoopFact],
     retries: u64,
+    copies: &CopySizes,
     cost: Cost,
 ) -> Result<IpetBound, IpetError> {
     if let Some(r) = program.recursions(&[root]).into_iter().next() {
         return Err(IpetError::Recursion(r));
     }
-    let reach = program.reachable(&[root]);
+    let reach = program.completing_reachable(&[root]);
+    let completing: HashMap<usize, Vec<bool>> = reach
+        .iter()
+        .map(|&f| (f, program.functions[f].completing()))
+        .collect();
     let fact_of: HashMap<(usize, usize), &LoopFact> = facts
         .iter()
         .map(|f| ((f.function, f.loop_index), f))
@@ -114,11 +167,13 @@ pub fn task_bound(
             // A function that never returns is entered only from paths the
             // program excludes (count 0): its loops need no bound.
             let needed = if func.returns { loops.get(f) } else { None };
+            let live = &completing[&f];
             needed
                 .map(|ls| ls.as_slice())
                 .unwrap_or(&[])
                 .iter()
                 .enumerate()
+                .filter(move |(_, l)| live.get(l.header).copied().unwrap_or(false))
                 .filter(move |(k, _)| !fact_ref.contains_key(&(f, *k)))
                 .map(move |(_, l)| {
                     format!(
@@ -129,6 +184,25 @@ pub fn task_bound(
                 })
         })
         .collect();
+    let mut missing = missing;
+    let in_reach: std::collections::HashSet<usize> = reach.iter().copied().collect();
+    let sites: Vec<&CopySite> = copies
+        .sites
+        .iter()
+        .filter(|c| in_reach.contains(&c.function))
+        .filter(|c| {
+            completing[&c.function]
+                .get(c.block)
+                .copied()
+                .unwrap_or(false)
+        })
+        .collect();
+    missing.extend(
+        sites
+            .iter()
+            .filter(|c| c.bytes.is_none())
+            .map(|c| format!("block copy of unknown size at {}", c.at)),
+    );
     if !missing.is_empty() {
         return Err(IpetError::Unbounded(missing));
     }
@@ -147,6 +221,9 @@ pub fn task_bound(
     // Retries per preemption: one constraint over all such loops.
     let mut retry_edges = Expression::from(0.0);
     let mut any_retry = false;
+    // Every block's count, for the copy sites; the copy functions' back edges.
+    let mut x_all: HashMap<(usize, usize), Variable> = HashMap::new();
+    let mut copy_loops: Vec<Expression> = Vec::new();
     for &f in &reach {
         let func = &program.functions[f];
         let live = reverse_post_order(func);
@@ -168,6 +245,10 @@ pub fn task_bound(
                 *inflow.entry(s).or_insert_with(|| Expression::from(0.0)) += e;
             }
             let exits = block.successors.is_empty() || block.exit != Exit::Internal;
+            let can_complete = completing[&f].get(b).copied().unwrap_or(false);
+            if !can_complete {
+                constraints.push(constraint!(xb == 0.0));
+            }
             match &block.exit {
                 Exit::NoReturn => constraints.push(constraint!(xb == 0.0)),
                 _ if exits => {
@@ -192,7 +273,7 @@ pub fn task_bound(
                 _ => {}
             }
             constraints.push(constraint!(xb == out));
-            for &c in &block.calls {
+            for &c in block.calls.iter().filter(|_| can_complete) {
                 *calls_into.entry(c).or_insert_with(|| Expression::from(0.0)) += xb;
             }
             let c = match cost {
@@ -203,6 +284,9 @@ pub fn task_bound(
             fcost += c * xb;
             count += 1;
         }
+        for (&b, &v) in &x {
+            x_all.insert((f, b), v);
+        }
         for &b in &live {
             let mut inn = inflow.remove(&b).unwrap_or_else(|| Expression::from(0.0));
             if b == 0 {
@@ -210,22 +294,67 @@ pub fn task_bound(
             }
             constraints.push(constraint!(x[&b] == inn));
         }
-        // Loop bounds.
-        for (k, l) in loops
+        // Caps on blocks per loop entry.
+        for cap in copies.caps.iter().filter(|c| c.function == f) {
+            let runs = cap
+                .blocks
+                .iter()
+                .filter_map(|b| x.get(b))
+                .fold(Expression::from(0.0), |a, &v| a + v);
+            let per = match cap.loop_index.and_then(|k| loops.get(f)?.get(k)) {
+                Some(l) => {
+                    let mut entries = Expression::from(0.0);
+                    for &(p, h) in &l.entry_edges {
+                        if p == usize::MAX {
+                            entries += n_entry[&f];
+                        } else if let Some(&e) = edges.get(&(p, h)) {
+                            entries += e;
+                        }
+                    }
+                    entries
+                }
+                None => Expression::from(n_entry[&f]),
+            };
+            let bound = cap.bound as f64;
+            constraints.push(constraint!(runs <= bound * per));
+        }
+        // Loop bounds. The members of a shared bound first (they are nested in
+        // the loop they share it with, which comes first in `loops`), so walk
+        // the loops inner to outer.
+        let mut shared: HashMap<(usize, usize), Expression> = HashMap::new();
+        let mut order: Vec<(usize, &Loop)> = loops
             .get(f)
             .map(|v| v.as_slice())
             .unwrap_or(&[])
             .iter()
             .enumerate()
-        {
-            let Some(fact) = fact_of.get(&(f, k)) else {
-                continue;
-            };
+            .collect();
+        order.sort_by_key(|(k, _)| {
+            std::cmp::Reverse(depth_of(loops.get(f).map_or(&[][..], |v| v), *k))
+        });
+        for (k, l) in order {
             let back: Expression = l
                 .back_edges
                 .iter()
                 .filter_map(|e| edges.get(e))
                 .fold(Expression::from(0.0), |a, &v| a + v);
+            if copies.family.contains(&f) {
+                copy_loops.push(back.clone());
+            }
+            let Some(fact) = fact_of.get(&(f, k)) else {
+                continue;
+            };
+            if let Some(g) = fact.group {
+                // Counted with the loop it shares its bound with, below.
+                *shared
+                    .entry((f, g))
+                    .or_insert_with(|| Expression::from(0.0)) += back;
+                continue;
+            }
+            let back = back
+                + shared
+                    .remove(&(f, k))
+                    .unwrap_or_else(|| Expression::from(0.0));
             let bound = fact.bound as f64;
             match fact.per {
                 Per::Entry => {
@@ -249,6 +378,17 @@ pub fn task_bound(
             }
         }
         per_function.push((f, fcost));
+    }
+    if !copy_loops.is_empty() {
+        let mut bytes = Expression::from(0.0);
+        for c in &sites {
+            if let (Some(n), Some(&v)) = (c.bytes, x_all.get(&(c.function, c.block))) {
+                bytes += n as f64 * v;
+            }
+        }
+        for back in copy_loops {
+            constraints.push(constraint!(back <= bytes.clone()));
+        }
     }
     if any_retry {
         let cap = retries as f64;
@@ -288,6 +428,16 @@ pub fn task_bound(
         variables,
         constraints: n_constraints,
     })
+}
+
+/// How many loops enclose loop `k`.
+fn depth_of(loops: &[Loop], mut k: usize) -> usize {
+    let mut d = 0;
+    while let Some(p) = loops.get(k).and_then(|l| l.parent) {
+        d += 1;
+        k = p;
+    }
+    d
 }
 
 /// The optimum as an integer: a value within the simplex's tolerance (1e-7
