@@ -363,3 +363,163 @@ fn retry_loops_share_the_activations_retries() {
     .unwrap();
     assert_eq!(three.bound, 21);
 }
+
+/// `root` copies 64 then 8 bytes with `memcpy`, a loop of one back edge per byte.
+const COPIES: &str = "
+08000000 <root>:
+ 8000000: b510         \tpush\t{r4, lr}
+ 8000002: 2240         \tmovs\tr2, #0x40
+ 8000004: f000 f80c    \tbl\t0x8000020 <memcpy> @ imm = #0x18
+ 8000008: 2208         \tmovs\tr2, #0x8
+ 800000a: f000 f809    \tbl\t0x8000020 <memcpy> @ imm = #0x12
+ 800000e: bd10         \tpop\t{r4, pc}
+
+08000020 <memcpy>:
+ 8000020: 3a01         \tsubs\tr2, #0x1
+ 8000022: d1fd         \tbne\t0x8000020 <memcpy> @ imm = #-0x6
+ 8000024: 4770         \tbx\tlr
+";
+
+#[test]
+fn block_copies_are_bounded_by_the_bytes_of_their_call_sites() {
+    let p = program(COPIES);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let copy = p.find("memcpy")[0];
+    // Per entry alone, each call may take the largest size's 64 back edges.
+    let facts = [LoopFact {
+        function: copy,
+        loop_index: 0,
+        bound: 64,
+        per: Per::Entry,
+        group: None,
+    }];
+    let per_entry = ipet::task_bound(
+        &p,
+        &ls,
+        root,
+        &facts,
+        0,
+        &Default::default(),
+        Cost::Instructions,
+    )
+    .unwrap();
+    // root 6 + per call (2 + 2·back + 1): 6 + 2·3 + 2·2·64 = 268.
+    assert_eq!(per_entry.bound, 268);
+    // The sizes the binary loads before each call (r2): 64 + 8 back edges in all.
+    let f = &p.functions[root];
+    let preds = f.predecessors();
+    let call_at = |addr: u32| {
+        f.instructions
+            .iter()
+            .position(|i| i.address == addr)
+            .unwrap()
+    };
+    let sizes: Vec<Option<u64>> = [0x8000004, 0x800000a]
+        .iter()
+        .map(|&a| bounds::constant_before(f, &preds, 0, call_at(a), "r2", 4))
+        .collect();
+    assert_eq!(sizes, vec![Some(64), Some(8)]);
+    let copies = ipet::CopySizes {
+        family: [copy].into_iter().collect(),
+        sites: sizes
+            .iter()
+            .map(|&bytes| ipet::CopySite {
+                function: root,
+                block: 0,
+                bytes,
+                at: "root".into(),
+            })
+            .collect(),
+        caps: Vec::new(),
+    };
+    let by_site = ipet::task_bound(&p, &ls, root, &facts, 0, &copies, Cost::Instructions).unwrap();
+    assert_eq!(by_site.bound, 6 + 2 * 3 + 2 * 72);
+    // A site whose size is unknown is an error of the analysis, not a guess.
+    let mut unknown = copies.clone();
+    unknown.sites[1].bytes = None;
+    assert!(matches!(
+        ipet::task_bound(&p, &ls, root, &facts, 0, &unknown, Cost::Instructions),
+        Err(IpetError::Unbounded(_))
+    ));
+}
+
+/// `root` returns at once, or counts `r0` down and panics: the loop is on a path
+/// that never completes.
+const ENDS_IN_PANIC: &str = "
+08000000 <root>:
+ 8000000: 2800         \tcmp\tr0, #0x0
+ 8000002: d000         \tbeq\t0x8000006 <root+0x6> @ imm = #0x0
+ 8000004: 4770         \tbx\tlr
+ 8000006: 3801         \tsubs\tr0, #0x1
+ 8000008: d1fd         \tbne\t0x8000006 <root+0x6> @ imm = #-0x6
+ 800000a: f000 f801    \tbl\t0x8000010 <panic> @ imm = #0x2
+
+08000010 <panic>:
+ 8000010: e7fe         \tb\t0x8000010 <panic> @ imm = #-0x4
+";
+
+#[test]
+fn loops_on_paths_that_never_complete_need_no_bound() {
+    let p = program(ENDS_IN_PANIC);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let f = &p.functions[root];
+    let live = f.completing();
+    let at = |a: u32| f.block_at(a).unwrap();
+    assert!(live[at(0x8000000)] && live[at(0x8000004)]);
+    assert!(!live[at(0x8000006)] && !live[at(0x800000a)]);
+    assert!(!p
+        .completing_reachable(&[root])
+        .contains(&p.find("panic")[0]));
+    // No fact for the count-down loop: the completing path is cmp, beq, bx lr.
+    let b = ipet::task_bound(
+        &p,
+        &ls,
+        root,
+        &[],
+        0,
+        &Default::default(),
+        Cost::Instructions,
+    )
+    .unwrap();
+    assert_eq!(b.bound, 3);
+}
+
+#[test]
+fn a_cap_per_loop_entry_bounds_the_blocks_of_its_line() {
+    let p = program(COUNTED);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let facts = [LoopFact {
+        function: root,
+        loop_index: 0,
+        bound: 15,
+        per: Per::Entry,
+        group: None,
+    }];
+    let free = ipet::task_bound(
+        &p,
+        &ls,
+        root,
+        &facts,
+        0,
+        &Default::default(),
+        Cost::Instructions,
+    )
+    .unwrap();
+    assert_eq!(free.bound, 67);
+    // The block with the call to `leaf` at most once per entry of the loop: the
+    // loop's body runs once, 2 + 3 + 1 (leaf) + 1.
+    let capped = ipet::CopySizes {
+        caps: vec![ipet::BlockCap {
+            function: root,
+            blocks: vec![1],
+            loop_index: Some(0),
+            bound: 1,
+        }],
+        ..Default::default()
+    };
+    let b = ipet::task_bound(&p, &ls, root, &facts, 0, &capped, Cost::Instructions).unwrap();
+    assert_eq!(b.bound, 7);
+}
