@@ -186,6 +186,16 @@ fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
     }
     let plan = a.tasks.iter().find(|t| t.name == "plan").unwrap();
     assert!(plan.loops > 50, "the MPC's loops: {}", plan.loops);
+    // Every loop of every task has a bound, and every task and section a static
+    // bound; the control task's own work stays within its goal of 2,000
+    // instructions (issue 16), statically.
+    assert_eq!(a.unbounded_loops, 0);
+    for t in &a.tasks {
+        assert!(t.static_bound_instructions.is_some(), "{t:?}");
+    }
+    let job = a.tasks.iter().find(|t| t.name == "control_job").unwrap();
+    let bound = job.static_bound_instructions.unwrap();
+    assert!(bound <= 2_000, "ControlTask::run: {bound} instructions");
     // Each bound recognised from the binary names a source line.
     for l in a.loops.iter().filter(|l| l.bound.is_some()) {
         assert!(l.line > 0, "{l:?}");
