@@ -214,21 +214,13 @@ pub struct StaticAnalysis {
 /// Source location of `address`: the innermost frame in the firmware's own
 /// sources if any, else the innermost frame.
 fn location(loader: &addr2line::Loader, address: u32) -> (String, u32) {
-    let mut first: Option<(String, u32)> = None;
-    if let Ok(mut frames) = loader.find_frames(u64::from(address)) {
-        while let Ok(Some(frame)) = frames.next() {
-            let Some(loc) = frame.location else {
-                continue;
-            };
-            let file = loc.file.unwrap_or("?").to_string();
-            let here = (file.clone(), loc.line.unwrap_or(0));
-            if file.contains("/firmware/src/") {
-                return here;
-            }
-            first.get_or_insert(here);
-        }
-    }
-    first.unwrap_or_else(|| ("?".into(), 0))
+    let chain = frames(loader, address);
+    chain
+        .iter()
+        .find(|(file, _)| file.contains("/firmware/src/"))
+        .or(chain.first())
+        .cloned()
+        .unwrap_or_else(|| ("?".into(), 0))
 }
 
 /// The source path from the workspace on (`firmware/src/mpc.rs`), or the file name
@@ -297,8 +289,9 @@ fn copy_sizes(
         .iter()
         .filter_map(|(_, sym)| program.find(sym).first().copied())
         .collect();
+    let reach = program.completing_reachable(&roots);
     let mut sites = Vec::new();
-    for k in program.completing_reachable(&roots) {
+    for &k in &reach {
         let func = &program.functions[k];
         if family.contains(&k) {
             continue;
@@ -347,7 +340,7 @@ fn copy_sizes(
         .collect();
     let mut caps = Vec::new();
     if !per_loop.is_empty() {
-        for k in program.completing_reachable(&roots) {
+        for &k in &reach {
             let func = &program.functions[k];
             let ls = loops::natural_loops(func).unwrap_or_default();
             let mut groups: BTreeMap<(Option<usize>, u64), Vec<usize>> = BTreeMap::new();
@@ -446,16 +439,8 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
         // Outer loops first: an inner loop does not take an annotation one of its
         // enclosing loops took (the compiler may put both back edges on one line);
         // it takes the next of its lines that has one, or none.
-        let depth = |mut x: usize| {
-            let mut d = 0;
-            while let Some(p) = ls[x].parent {
-                d += 1;
-                x = p;
-            }
-            d
-        };
         let mut order: Vec<usize> = (0..ls.len()).collect();
-        order.sort_by_key(|&x| depth(x));
+        order.sort_by_key(|&x| loops::depth(ls, x));
         for x in order {
             let l = &ls[x];
             // The loop's telling instructions, and their lines (innermost frame in

@@ -126,7 +126,7 @@ pub fn dependency_facts() -> Vec<Annotation> {
         bound,
         scope: Scope::Entry,
     };
-    vec![
+    let mut facts = vec![
         fact(
             "rtic-time-2.0.1/src/linked_list.rs",
             81,
@@ -145,29 +145,6 @@ pub fn dependency_facts() -> Vec<Annotation> {
             2 * ASYNC_TASKS + 1,
             "each pass pops one expired timer or re-arms once after a missed compare",
         ),
-        // compiler_builtins' u64 division (`u64_div_rem`, the delegate algorithm):
-        // restoring long division, one quotient bit per step, the bit `pow_lo`
-        // (`1 << shl`, shl < 32) shifted right each step, returning before it
-        // reaches 0: at most 32 steps. The binary's loops do 4 steps a pass (their
-        // latches shift `pow_lo` by 4): 8 back edges.
-        fact(
-            "int/specialized_div_rem/delegate.rs",
-            94,
-            8,
-            "restoring division: 32 quotient bits, 4 a pass",
-        ),
-        fact(
-            "int/specialized_div_rem/delegate.rs",
-            154,
-            8,
-            "restoring division: 32 quotient bits, 4 a pass",
-        ),
-        fact(
-            "int/specialized_div_rem/delegate.rs",
-            179,
-            8,
-            "restoring division: 32 quotient bits, 4 a pass",
-        ),
         fact(
             "postcard-1.2.0/src/ser/flavors.rs",
             123,
@@ -180,7 +157,21 @@ pub fn dependency_facts() -> Vec<Annotation> {
             15,
             "the bytes left after the 16-byte slices",
         ),
-    ]
+    ];
+    // compiler_builtins' u64 division (`u64_div_rem`, the delegate algorithm):
+    // restoring long division, one quotient bit per step, the bit `pow_lo`
+    // (`1 << shl`, shl < 32) shifted right each step, returning before it reaches
+    // 0: at most 32 steps. The binary's three loops do 4 steps a pass (their
+    // latches shift `pow_lo` by 4): 8 back edges.
+    for line in [94, 154, 179] {
+        facts.push(fact(
+            "int/specialized_div_rem/delegate.rs",
+            line,
+            8,
+            "restoring division: 32 quotient bits, 4 a pass",
+        ));
+    }
+    facts
 }
 
 /// Evaluates an annotation's expression.

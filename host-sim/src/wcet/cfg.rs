@@ -472,29 +472,22 @@ impl Program {
     /// Functions `f` calls, tail-calls or may reach through a resolved indirect
     /// call or jump.
     pub fn callees(&self, f: usize) -> BTreeSet<usize> {
-        let mut s = BTreeSet::new();
-        for b in &self.functions[f].blocks {
-            s.extend(b.calls.iter().copied());
-            match &b.exit {
-                Exit::TailCall(t) => {
-                    s.insert(*t);
-                }
-                Exit::IndirectTail(ts) => s.extend(ts.iter().copied()),
-                _ => {}
-            }
-        }
-        s
+        self.callees_from(f, |_| true)
     }
 
     /// The functions `f` calls or tail-calls from its blocks that can complete
     /// ([`Function::completing`]): the calls on paths that end the activation
     /// (the stop and fault paths) left out.
     pub fn completing_callees(&self, f: usize) -> BTreeSet<usize> {
-        let func = &self.functions[f];
-        let live = func.completing();
+        let live = self.functions[f].completing();
+        self.callees_from(f, |b| live[b])
+    }
+
+    /// The functions `f` calls or tail-calls from the blocks `take` accepts.
+    fn callees_from(&self, f: usize, take: impl Fn(usize) -> bool) -> BTreeSet<usize> {
         let mut s = BTreeSet::new();
-        for (b, block) in func.blocks.iter().enumerate() {
-            if !live[b] {
+        for (b, block) in self.functions[f].blocks.iter().enumerate() {
+            if !take(b) {
                 continue;
             }
             s.extend(block.calls.iter().copied());
@@ -512,22 +505,21 @@ impl Program {
     /// Functions an activation that completes can run, from `roots` through
     /// [`Self::completing_callees`] (roots included), in discovery order.
     pub fn completing_reachable(&self, roots: &[usize]) -> Vec<usize> {
-        let mut seen = vec![false; self.functions.len()];
-        let mut order = Vec::new();
-        let mut stack: Vec<usize> = roots.to_vec();
-        while let Some(f) = stack.pop() {
-            if std::mem::replace(&mut seen[f], true) {
-                continue;
-            }
-            order.push(f);
-            stack.extend(self.completing_callees(f));
-        }
-        order
+        self.reach_through(roots, |f| self.completing_callees(f))
     }
 
     /// Functions reachable from `roots` through [`Self::callees`] (roots
     /// included), in discovery order.
     pub fn reachable(&self, roots: &[usize]) -> Vec<usize> {
+        self.reach_through(roots, |f| self.callees(f))
+    }
+
+    /// Functions reachable from `roots` through `next`, in discovery order.
+    fn reach_through(
+        &self,
+        roots: &[usize],
+        next: impl Fn(usize) -> BTreeSet<usize>,
+    ) -> Vec<usize> {
         let mut seen = vec![false; self.functions.len()];
         let mut order = Vec::new();
         let mut stack: Vec<usize> = roots.to_vec();
@@ -536,7 +528,7 @@ impl Program {
                 continue;
             }
             order.push(f);
-            stack.extend(self.callees(f));
+            stack.extend(next(f));
         }
         order
     }

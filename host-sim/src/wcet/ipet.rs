@@ -23,7 +23,7 @@
 //! through `good_lp` (pure Rust).
 
 use super::cfg::{Exit, Program};
-use super::loops::{reverse_post_order, Loop};
+use super::loops::{depth, reverse_post_order, Loop};
 use good_lp::{
     constraint, variable, Expression, ProblemVariables, Solution, SolverModel, Variable,
 };
@@ -294,6 +294,19 @@ pub fn task_bound(
             }
             constraints.push(constraint!(x[&b] == inn));
         }
+        // A loop's entries: its entry edges (the function's entry for a loop
+        // headed at block 0).
+        let entries_of = |l: &Loop| {
+            let mut entries = Expression::from(0.0);
+            for &(p, h) in &l.entry_edges {
+                if p == usize::MAX {
+                    entries += n_entry[&f];
+                } else if let Some(&e) = edges.get(&(p, h)) {
+                    entries += e;
+                }
+            }
+            entries
+        };
         // Caps on blocks per loop entry.
         for cap in copies.caps.iter().filter(|c| c.function == f) {
             let runs = cap
@@ -302,17 +315,7 @@ pub fn task_bound(
                 .filter_map(|b| x.get(b))
                 .fold(Expression::from(0.0), |a, &v| a + v);
             let per = match cap.loop_index.and_then(|k| loops.get(f)?.get(k)) {
-                Some(l) => {
-                    let mut entries = Expression::from(0.0);
-                    for &(p, h) in &l.entry_edges {
-                        if p == usize::MAX {
-                            entries += n_entry[&f];
-                        } else if let Some(&e) = edges.get(&(p, h)) {
-                            entries += e;
-                        }
-                    }
-                    entries
-                }
+                Some(l) => entries_of(l),
                 None => Expression::from(n_entry[&f]),
             };
             let bound = cap.bound as f64;
@@ -330,7 +333,7 @@ pub fn task_bound(
             .enumerate()
             .collect();
         order.sort_by_key(|(k, _)| {
-            std::cmp::Reverse(depth_of(loops.get(f).map_or(&[][..], |v| v), *k))
+            std::cmp::Reverse(depth(loops.get(f).map_or(&[][..], |v| v), *k))
         });
         for (k, l) in order {
             let back: Expression = l
@@ -358,15 +361,7 @@ pub fn task_bound(
             let bound = fact.bound as f64;
             match fact.per {
                 Per::Entry => {
-                    let mut entries = Expression::from(0.0);
-                    for &(p, h) in &l.entry_edges {
-                        if p == usize::MAX {
-                            entries += n_entry[&f];
-                        } else if let Some(&e) = edges.get(&(p, h)) {
-                            entries += e;
-                        }
-                    }
-                    constraints.push(constraint!(back <= bound * entries));
+                    constraints.push(constraint!(back <= bound * entries_of(l)));
                 }
                 Per::Activation => {
                     constraints.push(constraint!(back <= bound * n_entry[&root]));
@@ -428,16 +423,6 @@ pub fn task_bound(
         variables,
         constraints: n_constraints,
     })
-}
-
-/// How many loops enclose loop `k`.
-fn depth_of(loops: &[Loop], mut k: usize) -> usize {
-    let mut d = 0;
-    while let Some(p) = loops.get(k).and_then(|l| l.parent) {
-        d += 1;
-        k = p;
-    }
-    d
 }
 
 /// The optimum as an integer: a value within the simplex's tolerance (1e-7

@@ -30,6 +30,16 @@ pub struct Loop {
     pub irreducible: bool,
 }
 
+/// How many loops of `loops` enclose loop `k`.
+pub fn depth(loops: &[Loop], mut k: usize) -> usize {
+    let mut d = 0;
+    while let Some(p) = loops.get(k).and_then(|l| l.parent) {
+        d += 1;
+        k = p;
+    }
+    d
+}
+
 /// Blocks reachable from the entry, in reverse post-order.
 pub fn reverse_post_order(f: &Function) -> Vec<usize> {
     let n = f.blocks.len();
