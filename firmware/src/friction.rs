@@ -90,18 +90,11 @@
 //! the road is still slippery) doubles it; reaching `μ_nominal` resets it.
 //! Constants ([`FrictionConfig::for_car`]): hold 2 s, 0.12·`μ_nominal` per s up
 //! to 0.9·`μ_nominal` (from a drop to 0.4 of it, 0.9 again 4.2 s after the hold:
-//! a wet patch costs the patch), then 0.002 per s (the rule before: the last 10 %
-//! is where a road uniformly slipperier than configured shows itself, and a
-//! planner friction 1.5 × the road's at 0.9 of it asks 1.08 of the road's, under
-//! the tyres' longitudinal peak of about 1.2); patience up to 32 (hold ≤ 20 s,
-//! rate ≥ 0.003 per s). Chosen on the simulator: with the hold 10 s and 0.002
-//! per s a lowered μ̂ took 50 s for 0.1 of μ; with 0.1 per s up to the nominal
-//! (no ceiling, no vigilance) a planner friction 1.5 × the road's (μ 0.5) went
-//! off the road on 3 of 17 circuits (Sochi, Shanghai, Suzuka), its second spin
-//! unseen under the 0.6 m/s² threshold; with the ceiling and the vigilance 0.6
-//! all 34 laps (17 circuits × μ 1, 0.5) are `ok` again. After a 200 m patch at
-//! μ 0.5 on a μ 1 road, μ̂ is back at 0.9 within 4.1–8.4 s of the exit on the 17
-//! circuits (before: 32–252 s, 3 exits never; 0.1 per s: 4.2–10.3 s).
+//! a wet patch costs the patch), then 0.002 per s (the last 10 % is where a road
+//! uniformly slipperier than configured shows itself, and a planner friction
+//! 1.5 × the road's at 0.9 of it asks 1.08 of the road's, under the tyres'
+//! longitudinal peak of about 1.2); patience up to 32 (hold ≤ 20 s, rate ≥ 0.003
+//! per s). The simulator runs that chose them: `docs/tuning.md`.
 //!
 //! **Standstill**: a car standing ([`FrictionConfig::standstill_mps`], 1 m/s) for
 //! [`FrictionConfig::standstill_s`] (2 s) asks nothing of the road: `μ̂` returns

@@ -188,7 +188,7 @@ fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
     assert!(plan.loops > 50, "the MPC's loops: {}", plan.loops);
     // Every loop of every task has a bound, and every task and section a static
     // bound; the control task's own work stays within its goal of 2,000
-    // instructions (issue 16), statically.
+    // instructions, statically.
     assert_eq!(a.unbounded_loops, 0);
     for t in &a.tasks {
         assert!(t.static_bound_instructions.is_some(), "{t:?}");
