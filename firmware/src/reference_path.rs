@@ -313,13 +313,6 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         self.curvature_half_window_m = h_m;
     }
 
-    /// Sets the path lengths searched behind and ahead of the hint by
-    /// [`Self::project`], m (negative values count as 0).
-    pub fn set_search_window_m(&mut self, behind_m: f32, ahead_m: f32) {
-        self.search_behind_m = behind_m.max(0.0);
-        self.search_ahead_m = ahead_m.max(0.0);
-    }
-
     /// Loads the centre line `points` (`[x, y]`, m) and optional `widths`
     /// (`[right, left]` half-widths, m, one per point), closed loop or open.
     ///
@@ -640,11 +633,6 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         self.closed
     }
 
-    /// True when track widths were loaded.
-    pub fn has_widths(&self) -> bool {
-        self.has_widths
-    }
-
     /// Heading change over one lap (closed) or from start to end (open), rad.
     pub fn total_turning_rad(&self) -> T {
         self.total_turn
@@ -659,15 +647,6 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
     pub fn vertex(&self, i: usize) -> Option<[T; 2]> {
         if i < self.n {
             self.xy.get(i).copied()
-        } else {
-            None
-        }
-    }
-
-    /// Arc length of vertex `i`, m, if loaded.
-    pub fn vertex_s_m(&self, i: usize) -> Option<T> {
-        if i < self.n {
-            self.s.get(i).copied()
         } else {
             None
         }
@@ -1034,7 +1013,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
     /// polyline (end segments of an open path extended to infinity).
     ///
     /// With `s_hint_m`, only the segments within `[hint − behind, hint + ahead]`
-    /// ([`Self::set_search_window_m`], defaults 20 m and 40 m) are searched, which
+    /// ([`DEFAULT_SEARCH_BEHIND_M`] and [`DEFAULT_SEARCH_AHEAD_M`]) are searched, which
     /// keeps the answer on the right branch where the track crosses or comes back
     /// near itself, and costs `O(window)`; on a closed path the returned `s_m` is
     /// unwrapped to the lap of the hint. Without a hint every segment is searched

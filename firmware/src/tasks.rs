@@ -181,11 +181,6 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         self.mpc.last_report()
     }
 
-    /// The MPC workspace (its solver holds the last QP's solution and working set).
-    pub fn mpc(&self) -> &Mpc<T> {
-        &self.mpc
-    }
-
     /// Forgets the MPC's previous solution: the next activation starts cold.
     pub fn reset(&mut self) {
         self.mpc.reset();
@@ -537,11 +532,6 @@ impl<T: Real> ControlTask<T> {
     /// The controller's state (PID states, plan being followed).
     pub fn state(&self) -> &LowLevelState<T> {
         &self.state
-    }
-
-    /// The friction check ([`crate::friction`]): its estimate and events.
-    pub fn friction(&self) -> &FrictionEstimator<T> {
-        &self.friction
     }
 
     /// Why the car stood at the last activation (its measured speed under

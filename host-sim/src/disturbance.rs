@@ -301,11 +301,6 @@ impl<T: Real> DisturbedEcu<T> {
         })
     }
 
-    /// The wrapped ECU.
-    pub fn inner(&self) -> &SimulatedEcu<T> {
-        &self.inner
-    }
-
     /// When the late obstacle was given to the planner, µs (`None`: not yet, or none).
     pub fn obstacle_appeared_at_us(&self) -> Option<u64> {
         self.appeared_at_us

@@ -29,7 +29,6 @@
 //! task is still running is skipped (see the late-plan policy in
 //! [`crate::closed_loop`]).
 
-use std::time::Instant;
 
 use anyhow::{anyhow, Result};
 use firmware::low_level::Actuation;
@@ -198,7 +197,6 @@ pub struct SimulatedEcu<T: Real> {
     in_flight: Option<InFlight>,
     busy_until_us: u64,
     releases: u32,
-    host_us: Vec<f64>,
     /// The next window of the road and when it arrived, µs; adopted at the end of
     /// the first plan activation that finishes after that.
     pending_window: Option<(Window, u64)>,
@@ -269,7 +267,6 @@ impl<T: Real> SimulatedEcu<T> {
             in_flight: None,
             busy_until_us: 0,
             releases: 0,
-            host_us: Vec::new(),
             pending_window: None,
         })
     }
@@ -285,18 +282,11 @@ impl<T: Real> SimulatedEcu<T> {
         &self.control
     }
 
-    /// Host wall time of each plan activation computed, µs (information only).
-    pub fn host_us(&self) -> &[f64] {
-        &self.host_us
-    }
-
     /// Runs the plan task released at `t_us` on `est` on the host; its record waits
     /// in flight until its modelled finish.
     fn release_plan(&mut self, t_us: u64, est: &StateEstimate<T>) {
-        let h0 = Instant::now();
         self.planner.set_friction_limit(self.control.friction_mu());
         let outcome = self.planner.run(est);
-        self.host_us.push(h0.elapsed().as_secs_f64() * 1e6);
         // Charged from the activation's own counters, a failed one's included.
         let report = *self.planner.last_report();
         let instructions = self.cost_model.plan_instructions(&report);

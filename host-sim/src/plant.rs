@@ -519,13 +519,6 @@ impl Plant {
         &self.state
     }
 
-    /// Replaces the state (e.g. to start a scenario), keeping the time.
-    pub fn set_state(&mut self, state: State) -> Result<(), PlantError> {
-        check_state(&state)?;
-        self.state = state;
-        Ok(())
-    }
-
     /// The vehicle parameters.
     pub fn params(&self) -> &VehicleParams {
         &self.params
@@ -544,11 +537,6 @@ impl Plant {
     /// Floor of the slip-angle denominator, m/s (see the module documentation).
     pub fn alpha_floor_mps(&self) -> f64 {
         self.derived.alpha_floor_mps
-    }
-
-    /// Floor of the slip-ratio denominator at a wheel load `fz_n` (N), m/s.
-    pub fn kappa_floor_mps(&self, fz_n: f64) -> f64 {
-        self.kappa_floor_for_stiffness(self.params.tyre.longitudinal_slip_stiffness_n(fz_n))
     }
 
     /// Floor of the slip-ratio denominator for a slip stiffness `k_n` (N), m/s.

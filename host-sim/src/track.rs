@@ -41,9 +41,6 @@ pub const DEFAULT_HALF_WIDTH_M: f64 = 3.5;
 /// Two points closer than this (m) are the same point.
 pub const SAME_POINT_M: f64 = 1e-6;
 
-/// Default maximum distance between points (m) for [`Track::resampled`].
-pub const DEFAULT_MAX_SPACING_M: f64 = 2.0;
-
 /// Half-length (m) of the arc-length window searched around a hint by
 /// [`Track::project`].
 pub const PROJECTION_WINDOW_M: f64 = 30.0;
