@@ -377,6 +377,8 @@ impl<T: Real> BicycleGeometry<T> {
         let dk4 = stage_derivative(&g4, &advance_m(&dk3, dt_s));
 
         let w = dt_s / T::lit(6.0);
+        // Zeroing `a` and `b` (the compiler sets the size far from the call).
+        // wcet-bound: (NX * NX + NX * NU) * 4 bytes
         let mut out = Discretization {
             x_next: *x,
             a: [[T::ZERO; NX]; NX],

@@ -89,6 +89,12 @@ pub const WS: usize = 48;
 /// ([`MpcSettings::qp_max_iter`] of [`MpcSettings::paper`], the ECU's settings):
 /// the flow fact that bounds the plan task's worst case.
 pub const QP_MAX_ITER: u32 = 90;
+/// QP refactorizations one activation may make, summed over its passes (each
+/// pass gets what is left as its [`crate::qp::QpSettings::max_refactorizations`]):
+/// with [`QP_MAX_ITER`], the flow fact that bounds the plan task's worst case. A
+/// refactorization rebuilds the factor of up to [`WS`] rows (about `WS³/6`
+/// multiply-adds); past the cap the pass ends as a numerical error.
+pub const QP_MAX_REFACTORIZATIONS: u32 = 2;
 /// Linearise–solve passes on a cold start ([`MpcSettings::cold_start_iterations`]
 /// of [`MpcSettings::paper`]).
 pub const COLD_START_PASSES: u8 = 3;
@@ -692,6 +698,8 @@ impl<T: Real> Mpc<T> {
             );
             self.renumber_working_set();
             self.solver.settings.max_iter = left;
+            self.solver.settings.max_refactorizations =
+                QP_MAX_REFACTORIZATIONS.saturating_sub(report.qp_refactorizations);
             self.solver.settings.warm_start = true;
             before(&self.solver);
             let status = self.solver.solve();

@@ -184,6 +184,10 @@ pub enum QpStatus {
     WorkingSetFull,
 }
 
+/// Refactorizations a solve may make unless its settings say otherwise
+/// ([`QpSettings::max_refactorizations`]).
+pub const DEFAULT_MAX_REFACTORIZATIONS: u32 = 2;
+
 /// Solver settings (tolerances in the units of the constraint values).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct QpSettings<T> {
@@ -203,19 +207,27 @@ pub struct QpSettings<T> {
     /// Iteration cap (one iteration adds or removes one constraint, or swaps one after
     /// a singular step). Bounds the worst-case time of a solve.
     pub max_iter: u32,
+    /// Refactorization cap: how many times a solve may rebuild its factor from
+    /// scratch after rounding spoiled it (the warm start's first build is not
+    /// one). A rebuild costs about `W³/6` multiply-adds, tens of iterations' worth:
+    /// past the cap the solve ends with [`QpStatus::NumericalError`]. Bounds the
+    /// worst-case time of a solve with the iteration cap.
+    pub max_refactorizations: u32,
     /// Start from the working set left by the previous solve (or set with
     /// [`QpSolver::set_working_set`]) instead of an empty one.
     pub warm_start: bool,
 }
 
 impl<T: Real> QpSettings<T> {
-    /// Precision-default tolerances, `max_iter` iterations, warm start on.
+    /// Precision-default tolerances, `max_iter` iterations,
+    /// [`DEFAULT_MAX_REFACTORIZATIONS`] refactorizations, warm start on.
     pub const fn new(max_iter: u32) -> Self {
         Self {
             primal_tol: T::ZERO,
             dual_tol: T::ZERO,
             pivot_tol: T::ZERO,
             max_iter,
+            max_refactorizations: DEFAULT_MAX_REFACTORIZATIONS,
             warm_start: true,
         }
     }
@@ -1193,6 +1205,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
 
     /// Rebuilds the factor from entries `ws[0..count]` (and their `lam`), dropping
     /// inadmissible and linearly dependent entries. Returns how many were dropped.
+    #[inline(never)]
     fn rebuild(&mut self, p: &QpProblem<T, N, M>, tols: Tols<T>, count: usize) -> usize {
         self.row_state.fill(None);
         self.bound_state.fill(None);
@@ -1219,6 +1232,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
 
     /// Appends constraint `e` as row `n` of the factor. On `Singular`, the row `n` of
     /// the packed storage holds `L_new = D⁻¹L⁻¹ M_{W,e}` but `n` is unchanged.
+    #[inline(never)]
     fn append(
         &mut self,
         p: &QpProblem<T, N, M>,
@@ -1240,7 +1254,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         for l in 0..n {
             let sl = row_start(l);
             let mut acc = self.ldl[s + l];
-            // wcet-bound: WS
+            // Σ l over l < n ≤ W (not inlined: one call, one append).
+            // wcet-bound: WS * (WS - 1) / 2 per call
             for k in 0..l {
                 acc -= self.ldl[sl + k] * self.ldl[s + k];
             }
@@ -1281,6 +1296,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
 
     /// Removes working-set entry `p` (and its multiplier): deletes its row and column
     /// of `LDLᵀ` and updates the trailing block by a rank-one update.
+    #[inline(never)]
     fn remove(&mut self, pos: usize) {
         let n = self.n;
         if pos >= n {
@@ -1305,8 +1321,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             let dst = row_start(r - 1);
             let mut k = 0;
             for c in 0..=r {
-                // Bounds the `for c in 0..=r` loop above (its back edge is here): r < n ≤ W.
-                // wcet-bound: WS
+                // Bounds the `for c in 0..=r` loop above (its back edge is here):
+                // Σ (r + 1) over r < n ≤ W per call.
+                // wcet-bound: WS * (WS + 1) / 2 per call
                 if c == pos {
                     continue;
                 }
@@ -1324,8 +1341,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // Rank-one update of the trailing block (rows/cols pos..nn) by alpha z zᵀ.
         for j in pos..nn {
             let pj = self.tmp[j];
-            // Bounds the `for j in pos..nn` loop (the `continue` is its back edge).
-            // wcet-bound: WS
+            // Bounds the `for j in pos..nn` loop (the `continue` is its back edge, and
+            // the compiler's loop that skips zero entries): j < nn < W per call.
+            // wcet-bound: WS per call
             if pj == T::ZERO {
                 continue;
             }
@@ -1334,8 +1352,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             let dnew = dj + alpha * pj * pj;
             let beta = pj * alpha / dnew;
             alpha = dj * alpha / dnew;
+            // The j loop's back edge past an empty inner loop is here.
+            // wcet-bound: WS per call
             self.ldl[dj_idx] = dnew;
-            // wcet-bound: WS
+            // Σ (nn − j − 1) over j < nn < W per call.
+            // wcet-bound: WS * (WS - 1) / 2 per call
             for r in (j + 1)..nn {
                 let idx = row_start(r) + j;
                 self.tmp[r] -= pj * self.ldl[idx];
@@ -1345,6 +1366,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     }
 
     /// Solves `(M_WW + D) x = tmp` in place in `tmp[0..n]`.
+    #[inline(never)]
     fn ldl_solve_tmp(&mut self) {
         let n = self.n;
         // wcet-bound: WS
@@ -1352,8 +1374,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             let s = row_start(r);
             let mut acc = self.tmp[r];
             for k in 0..r {
-                // Bounds the `for k in 0..r` loop: r < n ≤ W.
-                acc -= self.ldl[s + k] * self.tmp[k]; // wcet-bound: WS
+                // Bounds the `for k in 0..r` loop: Σ r over r < n ≤ W per call.
+                acc -= self.ldl[s + k] * self.tmp[k]; // wcet-bound: WS * (WS - 1) / 2 per call
             }
             self.tmp[r] = acc;
         }
@@ -1373,7 +1395,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.tmp.get_mut(..r).unwrap_or(&mut []),
                 self.ldl.get(s..s + r).unwrap_or(&[]),
             );
-            // wcet-bound: WS
+            // Σ r over 1 ≤ r < n ≤ W per call.
+            // wcet-bound: WS * (WS - 1) / 2 per call
             for (t, &l) in t.iter_mut().zip(l) {
                 *t -= l * xr;
             }
@@ -1468,12 +1491,26 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         cand.or(fallback)
     }
 
-    /// Refactors from scratch (dropping dependent entries); counts it.
-    fn refactor(&mut self, p: &QpProblem<T, N, M>, tols: Tols<T>, sol: &mut QpSolution<T, N, M>) {
+    /// Refactors from scratch (dropping dependent entries) and counts it; false,
+    /// and nothing done, once `max` refactorizations were made in this solve.
+    fn refactor(
+        &mut self,
+        p: &QpProblem<T, N, M>,
+        tols: Tols<T>,
+        sol: &mut QpSolution<T, N, M>,
+        max: u32,
+    ) -> bool {
+        if sol.refactorizations >= max {
+            return false;
+        }
         let n = self.n;
+        // The MPC gives each pass what is left of the activation's
+        // QP_MAX_REFACTORIZATIONS (mpc.rs `step_inner`).
+        // wcet-bound: QP_MAX_REFACTORIZATIONS times per activation
         let dropped = self.rebuild(p, tols, n);
         sol.refactorizations += 1;
         sol.removed += dropped as u32;
+        true
     }
 
     /// The main loop; returns the exit status (the solution is written by `output`).
@@ -1498,7 +1535,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
             sol.iterations += 1;
             if !self.solve_lam_star(p) {
-                self.refactor(p, tols, sol);
+                if !self.refactor(p, tols, sol, settings.max_refactorizations) {
+                    return QpStatus::NumericalError;
+                }
                 if !self.solve_lam_star(p) {
                     return QpStatus::NumericalError;
                 }
@@ -1560,11 +1599,13 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                     return QpStatus::NumericalError;
                 }
                 checked_refactor = true;
-                self.refactor(p, tols, sol);
+                if !self.refactor(p, tols, sol, settings.max_refactorizations) {
+                    return QpStatus::NumericalError;
+                }
                 continue;
             };
             blocked = None;
-            if let Err(st) = self.add(p, e, tols, sol, settings.max_iter) {
+            if let Err(st) = self.add(p, e, tols, sol, settings) {
                 return st;
             }
         }
@@ -1581,8 +1622,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         e: ActiveConstraint,
         tols: Tols<T>,
         sol: &mut QpSolution<T, N, M>,
-        max_iter: u32,
+        settings: &QpSettings<T>,
     ) -> Result<(), QpStatus> {
+        let max_iter = settings.max_iter;
         self.prepare(p, e.index);
         let p = &*p;
         let sigma = sign::<T>(e.side);
@@ -1605,12 +1647,12 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 Err(AppendError::Singular) => {}
             }
             if !refactored && self.updates > 0 {
-                // The small pivot may be accumulated rounding: refactor and retry.
+                // The small pivot may be accumulated rounding: refactor and retry
+                // (once per `add`, within the solve's refactorization cap).
                 refactored = true;
-                // WCET: once per `add` (the flag), not once per attempt.
-                // wcet-bound: 1 per loop entry
-                self.refactor(p, tols, sol);
-                continue;
+                if self.refactor(p, tols, sol, settings.max_refactorizations) {
+                    continue;
+                }
             }
             // Null-space direction: λ_e grows by t·σ, λ_W by t·σ·c with
             // c = −(M_WW + D)⁻¹ M_{W,e} = −L⁻ᵀ L_new.

@@ -162,3 +162,57 @@ fn f32_on_degenerate_problems() {
     println!("degenerate problems: {failures} f32 failures in 2000, worst relative f32/f64 |Δx| {worst:e}");
     assert!(failures <= 2, "{failures} f32 failures");
 }
+
+/// The refactorization cap: on degenerate f32 problems (where rounding spoils the
+/// factor), no solve makes more refactorizations than its settings allow, and a
+/// solve denied them ends `Optimal` at the same point (the null-space step) or as
+/// a `NumericalError`, never otherwise.
+#[test]
+fn refactorizations_stay_within_their_cap() {
+    let mut s = Box::new(QpSolver::<f32, N, M, W, { ldl_len(W) }>::new());
+    let mut refactoring = 0;
+    let mut denied_but_optimal = 0;
+    for seed in 0..2000u64 {
+        let mut rng = Rng::new(70_000 + seed);
+        let mut p = random_problem::<N, M>(&mut rng, Mix::all(M));
+        for j in 0..N {
+            p.h[j][j] += 1.0;
+        }
+        let q = to_f32(&p);
+        s.settings.warm_start = false;
+        s.settings.max_refactorizations = firmware::qp::DEFAULT_MAX_REFACTORIZATIONS;
+        *s.problem_mut() = q.clone();
+        let free = s.solve();
+        let used = s.solution().refactorizations;
+        assert!(
+            used <= firmware::qp::DEFAULT_MAX_REFACTORIZATIONS,
+            "seed {seed}: {used}"
+        );
+        if used == 0 {
+            continue;
+        }
+        refactoring += 1;
+        let x = s.solution().x;
+        s.settings.max_refactorizations = 0;
+        *s.problem_mut() = q;
+        let st = s.solve();
+        assert_eq!(s.solution().refactorizations, 0, "seed {seed}");
+        assert!(
+            matches!(st, QpStatus::Optimal | QpStatus::NumericalError) || st == free,
+            "seed {seed}: {st:?} (with refactorizations: {free:?})"
+        );
+        if st == QpStatus::Optimal && free == QpStatus::Optimal {
+            let scale = 1.0 + x.iter().map(|v| v.abs()).fold(0.0, f32::max);
+            let dx = x
+                .iter()
+                .zip(s.solution().x.iter())
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f32::max);
+            assert!(dx / scale < TOL32_DEGENERATE as f32, "seed {seed}: {dx}");
+            denied_but_optimal += 1;
+        }
+    }
+    println!("{refactoring} of 2000 solves refactored; {denied_but_optimal} optimal without");
+    // The corpus exercises the cap: some solves need a refactorization.
+    assert!(refactoring > 0);
+}

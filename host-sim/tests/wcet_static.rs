@@ -527,9 +527,119 @@ fn a_cap_per_loop_entry_bounds_the_blocks_of_its_line() {
             blocks: vec![1],
             loop_index: Some(0),
             bound: 1,
+            activation_group: None,
         }],
         ..Default::default()
     };
     let b = ipet::task_bound(&p, &ls, root, &facts, 0, &capped, Cost::Instructions).unwrap();
     assert_eq!(b.bound, 7);
+}
+
+/// `root` calls `mid` twice; `mid` runs an outer loop (r5) around an inner one
+/// (r4): a loop nest whose inner loop a bound per call caps over all its entries.
+const NESTED: &str = "
+08000000 <root>:
+ 8000000: b510         \tpush\t{r4, lr}
+ 8000002: f000 f805    \tbl\t0x8000010 <mid> @ imm = #0xa
+ 8000006: f000 f803    \tbl\t0x8000010 <mid> @ imm = #0x6
+ 800000a: bd10         \tpop\t{r4, pc}
+
+08000010 <mid>:
+ 8000010: 2504         \tmovs\tr5, #0x4
+ 8000012: 2404         \tmovs\tr4, #0x4
+ 8000014: 3c01         \tsubs\tr4, #0x1
+ 8000016: d1fd         \tbne\t0x8000014 <mid+0x4> @ imm = #-0x6
+ 8000018: 3d01         \tsubs\tr5, #0x1
+ 800001a: d1fa         \tbne\t0x8000012 <mid+0x2> @ imm = #-0xc
+ 800001c: 4770         \tbx\tlr
+";
+
+#[test]
+fn a_bound_per_call_caps_the_inner_loop_over_all_its_entries() {
+    let p = program(NESTED);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let mid = p.find("mid")[0];
+    let f = &p.functions[mid];
+    let at = |addr: u32| {
+        ls[mid]
+            .iter()
+            .position(|l| f.blocks[l.header].start == addr)
+            .unwrap()
+    };
+    let (outer, inner) = (at(0x8000012), at(0x8000014));
+    let facts = |per: Per| {
+        [
+            LoopFact {
+                function: mid,
+                loop_index: outer,
+                bound: 3,
+                per: Per::Entry,
+                group: None,
+            },
+            LoopFact {
+                function: mid,
+                loop_index: inner,
+                bound: 6,
+                per,
+                group: None,
+            },
+        ]
+    };
+    let bound = |per: Per| {
+        ipet::task_bound(
+            &p,
+            &ls,
+            root,
+            &facts(per),
+            0,
+            &Default::default(),
+            Cost::Instructions,
+        )
+        .unwrap()
+        .bound
+    };
+    // Per call of `mid`: movs r5 (1) + 4 × movs r4 (4) + the inner block
+    // (2 instructions) 4 entries + 6 back edges (20) + 4 × subs/bne r5 (8) + bx (1)
+    // = 34; root 4 + 2 × 34.
+    assert_eq!(bound(Per::Call), 72);
+    // Per entry: the inner block runs 4 + 4 × 6 = 28 times per call: 1 + 4 + 56 +
+    // 8 + 1 = 70; root 4 + 2 × 70.
+    assert_eq!(bound(Per::Entry), 144);
+}
+
+#[test]
+fn a_cap_per_activation_counts_every_copy_of_its_line_together() {
+    let p = program(COUNTED);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let facts = [LoopFact {
+        function: root,
+        loop_index: 0,
+        bound: 15,
+        per: Per::Entry,
+        group: None,
+    }];
+    let cap = |bound: u64| ipet::BlockCap {
+        function: root,
+        blocks: vec![1],
+        loop_index: None,
+        bound,
+        activation_group: Some(7),
+    };
+    let run = |caps: Vec<ipet::BlockCap>| {
+        let copies = ipet::CopySizes {
+            caps,
+            ..Default::default()
+        };
+        ipet::task_bound(&p, &ls, root, &facts, 0, &copies, Cost::Instructions)
+            .unwrap()
+            .bound
+    };
+    // The loop's body (the block with the call of `leaf`) at most 3 times per
+    // activation: 2 + 3 × (3 + 1) + 1.
+    assert_eq!(run(vec![cap(3)]), 15);
+    // Two copies of one line in one group share the cap: the body's runs are
+    // counted twice against 3, 1.5 runs: 2 + 1.5 × 4 + 1 (the linear relaxation).
+    assert_eq!(run(vec![cap(3), cap(3)]), 9);
 }

@@ -330,44 +330,54 @@ fn copy_sizes(
             }
         }
     }
-    // `per loop entry` annotations: the blocks whose instructions come from the
-    // line (in any frame of their inlining chain), grouped by the innermost loop
-    // around them.
-    let per_loop: BTreeMap<(String, u32), u64> = annotations
+    // `per loop entry` and `times per activation` annotations: the blocks whose
+    // calls come from the line (in any frame of their inlining chain), grouped by
+    // the innermost loop around them (per loop entry) or by annotation (per
+    // activation, every copy of the line together).
+    let capped: BTreeMap<(String, u32), (u64, Option<usize>)> = annotations
         .iter()
-        .filter(|a| a.scope == annotations::Scope::LoopEntry)
-        .map(|a| ((a.file.clone(), a.line), a.bound))
+        .enumerate()
+        .filter_map(|(k, a)| match a.scope {
+            annotations::Scope::LoopEntry => Some(((a.file.clone(), a.line), (a.bound, None))),
+            annotations::Scope::Runs => Some(((a.file.clone(), a.line), (a.bound, Some(k)))),
+            _ => None,
+        })
         .collect();
     let mut caps = Vec::new();
-    if !per_loop.is_empty() {
+    if !capped.is_empty() {
         for &k in &reach {
             let func = &program.functions[k];
             let ls = loops::natural_loops(func).unwrap_or_default();
-            let mut groups: BTreeMap<(Option<usize>, u64), Vec<usize>> = BTreeMap::new();
+            let mut groups: BTreeMap<(Option<usize>, u64, Option<usize>), Vec<usize>> =
+                BTreeMap::new();
             for (b, block) in func.blocks.iter().enumerate() {
                 let hit = func.instructions[block.first..block.end]
                     .iter()
                     .filter(|i| i.base().starts_with("bl"))
                     .flat_map(|i| frames(ctx, i.address))
-                    .find_map(|(file, line)| per_loop.get(&(short_path(&file), line)).copied());
-                let Some(bound) = hit else {
+                    .find_map(|(file, line)| capped.get(&(short_path(&file), line)).copied());
+                let Some((bound, group)) = hit else {
                     continue;
                 };
                 // The innermost loop holding the block: the smallest.
-                let inner = ls
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, l)| l.blocks.binary_search(&b).is_ok())
-                    .min_by_key(|(_, l)| l.blocks.len())
-                    .map(|(x, _)| x);
-                groups.entry((inner, bound)).or_default().push(b);
+                let inner = match group {
+                    Some(_) => None,
+                    None => ls
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, l)| l.blocks.binary_search(&b).is_ok())
+                        .min_by_key(|(_, l)| l.blocks.len())
+                        .map(|(x, _)| x),
+                };
+                groups.entry((inner, bound, group)).or_default().push(b);
             }
-            for ((loop_index, bound), blocks) in groups {
+            for ((loop_index, bound, activation_group), blocks) in groups {
                 caps.push(ipet::BlockCap {
                     function: k,
                     blocks,
                     loop_index,
                     bound,
+                    activation_group,
                 });
             }
         }
@@ -423,12 +433,29 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
         .filter(|a| {
             !matches!(
                 a.scope,
-                annotations::Scope::Bytes | annotations::Scope::LoopEntry
+                annotations::Scope::Bytes
+                    | annotations::Scope::LoopEntry
+                    | annotations::Scope::Runs
             )
         })
         .map(|a| ((a.file.clone(), a.line), a))
         .collect();
     let copies = copy_sizes(&program, &ctx, &annotations);
+    // A cap per activation that matches no call is stale (the code moved or was
+    // inlined away): the bound it was meant to give would be missing.
+    for (k, a) in annotations.iter().enumerate() {
+        if a.scope == annotations::Scope::Runs
+            && !copies.caps.iter().any(|c| c.activation_group == Some(k))
+        {
+            anyhow::bail!(
+                "{}:{}: `// wcet-bound: {} times per activation` matches no call the tasks make: \
+                 put it on the line of the call it caps (a function that is not inlined)",
+                a.file,
+                a.line,
+                a.expression
+            );
+        }
+    }
     let mut facts: Vec<LoopFact> = Vec::new();
     let mut origin: BTreeMap<(usize, usize), String> = BTreeMap::new();
     let mut notes: BTreeMap<(usize, usize), String> = BTreeMap::new();
@@ -594,6 +621,26 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
             };
             matched[x] = Some(key.clone());
             let a = by_line[&key];
+            if a.scope == annotations::Scope::Call {
+                // Per call of the function that holds the loop: sound only if the
+                // binary function is that function, not a caller it was inlined into.
+                let inlined = candidates.iter().any(|&addr| {
+                    let fr = frames(&ctx, addr);
+                    fr.iter()
+                        .position(|(file, line)| (short_path(file), *line) == key)
+                        .is_some_and(|at| at + 1 < fr.len())
+                });
+                if inlined {
+                    notes.insert(
+                        (k, x),
+                        format!(
+                            "{}:{}: a bound `per call` in code inlined into `{}`: mark its function #[inline(never)]",
+                            a.file, a.line, func.demangled
+                        ),
+                    );
+                    continue;
+                }
+            }
             facts.push(LoopFact {
                 function: k,
                 loop_index: x,
@@ -602,7 +649,9 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                     // (`bytes` annotations are not in `by_line`.)
                     annotations::Scope::Entry
                     | annotations::Scope::Bytes
-                    | annotations::Scope::LoopEntry => Per::Entry,
+                    | annotations::Scope::LoopEntry
+                    | annotations::Scope::Runs => Per::Entry,
+                    annotations::Scope::Call => Per::Call,
                     annotations::Scope::Activation => Per::Activation,
                     annotations::Scope::Preemption => Per::Preemption,
                 },
@@ -618,9 +667,11 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
                     match a.scope {
                         annotations::Scope::Activation => " per activation",
                         annotations::Scope::Preemption => " per preemption",
+                        annotations::Scope::Call => " per call",
                         annotations::Scope::Entry
                         | annotations::Scope::Bytes
-                        | annotations::Scope::LoopEntry => "",
+                        | annotations::Scope::LoopEntry
+                        | annotations::Scope::Runs => "",
                     }
                 ),
             );

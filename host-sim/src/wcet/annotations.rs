@@ -30,6 +30,18 @@
 //! line (a call, inlined or not) runs at most EXPR times per entry of the
 //! innermost loop around it (a retry done once in a loop of attempts).
 //!
+//! With `per call`, the bound counts the loop's iterations over one call of the
+//! function that holds it, summed over the loop's entries in that call: the
+//! inner loop of a triangular nest (`for l in 0..n { for k in 0..l {..} }` runs
+//! its body `n(n−1)/2` times, not `n·n`). The function must not be inlined
+//! into its callers (`#[inline(never)]`), or one "call" would be the caller's:
+//! the analysis refuses the bound where it is.
+//!
+//! With `times per activation`, the annotation is not a loop's: the calls made
+//! from its line (the `bl` instructions whose inlining chain holds the line) run
+//! at most EXPR times over one activation, summed over every copy of the line
+//! the compiler made: a recovery step the code caps per activation.
+//!
 //! With `bytes`, the annotation is not a loop's: it bounds the size of the block
 //! copies and fills (`memcpy`, `memset`, ...) called from its line, where the
 //! binary does not set the size to a constant before the call. Every loop of
@@ -61,6 +73,15 @@ pub enum Scope {
     /// Not a loop's: the most times the code of the line (a call, inlined or
     /// not) runs per entry of the innermost loop around it.
     LoopEntry,
+    /// Iterations per call of the function that holds the loop, over all the
+    /// entries of the loop in that call (a triangular loop nest: the inner loop
+    /// runs `0 + 1 + ... + (n − 1)` times per call). The function must not be
+    /// inlined (`#[inline(never)]`): the analysis checks it.
+    Call,
+    /// Not a loop's: the most times the calls of the line run over one activation
+    /// of the task, summed over every place the line's code was inlined (a
+    /// recovery step with its own cap per activation).
+    Runs,
 }
 
 /// One `// wcet-bound:` annotation.
@@ -93,6 +114,10 @@ pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
         ("MAX_OBSTACLE_ROWS", mpc::MAX_OBSTACLE_ROWS as u64),
         ("QP_MAX_ITER", u64::from(mpc::QP_MAX_ITER)),
         ("COLD_START_PASSES", u64::from(mpc::COLD_START_PASSES)),
+        (
+            "QP_MAX_REFACTORIZATIONS",
+            u64::from(mpc::QP_MAX_REFACTORIZATIONS),
+        ),
         ("MAX_OBSTACLES", obstacles::MAX_OBSTACLES as u64),
         ("MAX_VERTICES", obstacles::MAX_VERTICES as u64),
         ("ECU_PATH_ROWS", tasks::ECU_PATH_ROWS as u64),
@@ -291,7 +316,11 @@ pub fn parse_source(
             continue;
         };
         let spec = line[pos + MARKER.len()..].trim();
-        let (expr, scope) = if let Some(e) = spec.strip_suffix("per activation") {
+        let (expr, scope) = if let Some(e) = spec.strip_suffix("times per activation") {
+            (e.trim(), Scope::Runs)
+        } else if let Some(e) = spec.strip_suffix("per call") {
+            (e.trim(), Scope::Call)
+        } else if let Some(e) = spec.strip_suffix("per activation") {
             (e.trim(), Scope::Activation)
         } else if let Some(e) = spec.strip_suffix("per preemption") {
             (e.trim(), Scope::Preemption)
@@ -394,5 +423,16 @@ mod tests {
         )
         .unwrap_or_default();
         assert_eq!((b[0].line, b[0].bound, b[0].scope), (2, 128, Scope::Bytes));
+        let t = parse_source(
+            "x.rs",
+            "for k in 0..l { // wcet-bound: WS * (WS - 1) / 2 per call\n    // wcet-bound: 2 times per activation\n    self.rebuild();\n",
+            &c,
+        )
+        .unwrap_or_default();
+        assert_eq!(
+            (t[0].line, t[0].bound, t[0].scope),
+            (1, 48 * 47 / 2, Scope::Call)
+        );
+        assert_eq!((t[1].line, t[1].bound, t[1].scope), (3, 2, Scope::Runs));
     }
 }

@@ -13,6 +13,9 @@
 //!   `Σ back edges ≤ B · n_root` for a flow fact over the whole activation
 //!   ([`Per::Activation`]): caps that span loops are linear constraints, not
 //!   products of worst cases;
+//! * `Σ back edges ≤ B · n_f` for a bound per call of the loop's function
+//!   ([`Per::Call`]: a triangular nest), and `Σ x_b ≤ B · n_root` over the blocks
+//!   of a step capped per activation ([`BlockCap::activation_group`]);
 //! * block copies and fills ([`CopySizes`]): each loop of `memcpy`, `memset`, ...
 //!   takes at most `Σ bytes · x_site` back edges over the call sites;
 //! * paths that never return (a call of a panic handler, a trap) are not part of a
@@ -36,6 +39,9 @@ pub enum Per {
     Entry,
     /// Back edges per activation of the task (a cap that spans the loop's entries).
     Activation,
+    /// Back edges per call of the function holding the loop (the function is
+    /// not inlined: checked where the fact is made).
+    Call,
     /// A retry loop that retries only when an exception came in between: all such
     /// loops share one cap, the task's retries per activation (the `retries`
     /// argument of [`task_bound`]); the fact's own bound is not used.
@@ -74,7 +80,9 @@ pub struct CopySizes {
 }
 
 /// A cap on blocks: they run at most `bound` times per entry of loop
-/// `loop_index` of their function (per entry of the function when `None`).
+/// `loop_index` of their function (per entry of the function when `None`), or,
+/// with `activation_group` set, over one activation together with every other
+/// cap of the same group (one source line inlined in several places).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct BlockCap {
     /// Function index.
@@ -83,8 +91,12 @@ pub struct BlockCap {
     pub blocks: Vec<usize>,
     /// The innermost loop around them.
     pub loop_index: Option<usize>,
-    /// Most executions of the blocks together per entry.
+    /// Most executions of the blocks together per entry (per activation for a
+    /// group).
     pub bound: u64,
+    /// The caps counted together per activation (an index shared by the caps of
+    /// one annotation); `None` for a cap per loop entry.
+    pub activation_group: Option<usize>,
 }
 
 /// One call of a copy or fill function.
@@ -224,6 +236,9 @@ pub fn task_bound(
     // Every block's count, for the copy sites; the copy functions' back edges.
     let mut x_all: HashMap<(usize, usize), Variable> = HashMap::new();
     let mut copy_loops: Vec<Expression> = Vec::new();
+    // Per activation group: its bound and the runs of its blocks.
+    let mut group_runs: std::collections::BTreeMap<usize, (u64, Expression)> =
+        std::collections::BTreeMap::new();
     for &f in &reach {
         let func = &program.functions[f];
         let live = reverse_post_order(func);
@@ -307,13 +322,21 @@ pub fn task_bound(
             }
             entries
         };
-        // Caps on blocks per loop entry.
+        // Caps on blocks per loop entry, and the runs of the caps per activation.
         for cap in copies.caps.iter().filter(|c| c.function == f) {
             let runs = cap
                 .blocks
                 .iter()
                 .filter_map(|b| x.get(b))
                 .fold(Expression::from(0.0), |a, &v| a + v);
+            if let Some(g) = cap.activation_group {
+                let entry = group_runs
+                    .entry(g)
+                    .or_insert_with(|| (cap.bound, Expression::from(0.0)));
+                entry.0 = entry.0.min(cap.bound);
+                entry.1 += runs;
+                continue;
+            }
             let per = match cap.loop_index.and_then(|k| loops.get(f)?.get(k)) {
                 Some(l) => entries_of(l),
                 None => Expression::from(n_entry[&f]),
@@ -366,6 +389,9 @@ pub fn task_bound(
                 Per::Activation => {
                     constraints.push(constraint!(back <= bound * n_entry[&root]));
                 }
+                Per::Call => {
+                    constraints.push(constraint!(back <= bound * n_entry[&f]));
+                }
                 Per::Preemption => {
                     retry_edges += back;
                     any_retry = true;
@@ -384,6 +410,10 @@ pub fn task_bound(
         for back in copy_loops {
             constraints.push(constraint!(back <= bytes.clone()));
         }
+    }
+    for (_, (bound, runs)) in group_runs {
+        let bound = bound as f64;
+        constraints.push(constraint!(runs <= bound * n_entry[&root]));
     }
     if any_retry {
         let cap = retries as f64;
