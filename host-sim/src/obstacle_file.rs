@@ -46,24 +46,22 @@ pub struct Obstacle {
 #[derive(Debug, thiserror::Error)]
 pub enum ObstacleError {
     /// The file could not be opened or read.
-    #[error("{file}: cannot read the obstacle file: {source}")]
+    #[error("{file}: cannot read the obstacle file: {cause}")]
     Io {
         /// File name.
         file: String,
-        /// Underlying error.
-        #[source]
-        source: std::io::Error,
+        /// Why (in the message; not a `source()`, so a chain prints it once).
+        cause: std::io::Error,
     },
     /// The CSV structure itself is broken (e.g. invalid UTF-8).
-    #[error("{file}: line {line}: not a readable CSV line ({source}); save the obstacles as plain comma-separated text")]
+    #[error("{file}: line {line}: not a readable CSV line ({cause}); save the obstacles as plain comma-separated text")]
     Csv {
         /// File name.
         file: String,
         /// 1-based line number.
         line: u64,
-        /// Underlying error.
-        #[source]
-        source: csv::Error,
+        /// Why (in the message; not a `source()`, so a chain prints it once).
+        cause: csv::Error,
     },
     /// A header that is not `id,x_m,y_m`.
     #[error(
@@ -132,9 +130,9 @@ pub enum ObstacleError {
 pub fn load_obstacles_path(path: impl AsRef<Path>) -> Result<Vec<Obstacle>, ObstacleError> {
     let path = path.as_ref();
     let file = path.display().to_string();
-    let f = std::fs::File::open(path).map_err(|source| ObstacleError::Io {
+    let f = std::fs::File::open(path).map_err(|cause| ObstacleError::Io {
         file: file.clone(),
-        source,
+        cause,
     })?;
     load_obstacles_reader(f, &file)
 }
@@ -154,10 +152,10 @@ pub fn load_obstacles_reader(
     let mut out: Vec<(Obstacle, u64, u64)> = Vec::new();
     let mut first = true;
     for rec in rdr.records() {
-        let rec = rec.map_err(|source| ObstacleError::Csv {
+        let rec = rec.map_err(|cause| ObstacleError::Csv {
             file: file.to_string(),
-            line: source.position().map_or(0, |p| p.line()),
-            source,
+            line: cause.position().map_or(0, |p| p.line()),
+            cause,
         })?;
         let line = rec.position().map_or(0, |p| p.line());
         let head = rec.get(0).unwrap_or("");

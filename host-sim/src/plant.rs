@@ -312,9 +312,10 @@ pub struct Outputs {
 /// Why the plant refused to start or to step.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PlantError {
-    /// The vehicle parameters are unusable.
+    /// The vehicle parameters are unusable (the field and the reason in the
+    /// message; not a `source()`, so a chain prints them once).
     #[error("invalid vehicle parameters: {0}")]
-    Vehicle(#[from] InvalidField),
+    Vehicle(InvalidField),
     /// The step is not a positive number of at most 10 ms.
     #[error("integration step dt = {0} s: must be positive and at most 0.01 s")]
     Step(f64),
@@ -333,6 +334,12 @@ pub enum PlantError {
          check the vehicle file"
     )]
     Diverged(f64),
+}
+
+impl From<InvalidField> for PlantError {
+    fn from(e: InvalidField) -> Self {
+        PlantError::Vehicle(e)
+    }
 }
 
 /// Constants derived once from the parameters.

@@ -55,24 +55,22 @@ const COLUMN_NAMES: [&str; 4] = ["x_m", "y_m", "w_tr_right_m", "w_tr_left_m"];
 #[derive(Debug, thiserror::Error)]
 pub enum TrackError {
     /// The file could not be opened or read.
-    #[error("{file}: cannot read the track file: {source}")]
+    #[error("{file}: cannot read the track file: {cause}")]
     Io {
         /// File name.
         file: String,
-        /// Underlying error.
-        #[source]
-        source: std::io::Error,
+        /// Why (in the message; not a `source()`, so a chain prints it once).
+        cause: std::io::Error,
     },
     /// The CSV structure itself is broken (e.g. invalid UTF-8).
-    #[error("{file}: line {line}: not a readable CSV line ({source}); save the track as plain comma-separated text")]
+    #[error("{file}: line {line}: not a readable CSV line ({cause}); save the track as plain comma-separated text")]
     Csv {
         /// File name.
         file: String,
         /// 1-based line number.
         line: u64,
-        /// Underlying error.
-        #[source]
-        source: csv::Error,
+        /// Why (in the message; not a `source()`, so a chain prints it once).
+        cause: csv::Error,
     },
     /// A header line that does not name the expected columns.
     #[error("{file}: line {line}: unexpected header `{found}`; expected `# x_m,y_m,w_tr_right_m,w_tr_left_m` (or `x_m,y_m` for a centre line without widths)")]
@@ -253,9 +251,9 @@ impl Track {
     pub fn from_csv_path(path: impl AsRef<Path>, closed: bool) -> Result<Track, TrackError> {
         let path = path.as_ref();
         let file = path.display().to_string();
-        let f = std::fs::File::open(path).map_err(|source| TrackError::Io {
+        let f = std::fs::File::open(path).map_err(|cause| TrackError::Io {
             file: file.clone(),
-            source,
+            cause,
         })?;
         let mut track = Track::parse(f, &file, closed)?;
         track.name = path
@@ -288,10 +286,10 @@ impl Track {
         let mut w_left = Vec::new();
         let mut lines: Vec<u64> = Vec::new();
         for rec in rdr.records() {
-            let rec = rec.map_err(|source| TrackError::Csv {
+            let rec = rec.map_err(|cause| TrackError::Csv {
                 file: file.to_string(),
-                line: source.position().map_or(0, |p| p.line()),
-                source,
+                line: cause.position().map_or(0, |p| p.line()),
+                cause,
             })?;
             let line = rec.position().map_or(0, |p| p.line());
             let head = rec.get(0).unwrap_or("");

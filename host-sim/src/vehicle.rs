@@ -100,13 +100,13 @@ pub struct InvalidField {
 #[derive(Debug, thiserror::Error)]
 pub enum VehicleError {
     /// The file could not be read.
-    #[error("vehicle file {path}: cannot read it: {source}")]
+    #[error("vehicle file {path}: cannot read it: {cause}")]
     Io {
         /// The file, as given.
         path: String,
-        /// The operating-system error.
-        #[source]
-        source: std::io::Error,
+        /// The operating-system error (in the message; not a `source()`, so a
+        /// chain prints it once).
+        cause: std::io::Error,
     },
     /// The file is not valid TOML, or a field is missing, unknown or of the wrong type.
     #[error("vehicle file {path}: {message}")]
@@ -138,9 +138,9 @@ impl VehicleParams {
     pub fn from_toml_file(path: impl AsRef<Path>) -> Result<Self, VehicleError> {
         let path = path.as_ref();
         let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| VehicleError::Io {
+        let text = std::fs::read_to_string(path).map_err(|cause| VehicleError::Io {
             path: name.clone(),
-            source,
+            cause,
         })?;
         Self::from_toml_named(&text, &name)
     }
