@@ -5,6 +5,7 @@ use std::path::Path;
 
 use anyhow::Result;
 use plotters::coord::types::RangedCoordf64;
+use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::closed_loop::{LogRow, RunResult};
@@ -14,42 +15,102 @@ use crate::scenario::Scenario;
 
 const W: u32 = 1400;
 
+/// How a line of a time-series figure is drawn.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Stroke {
+    /// A solid line this wide, px.
+    Solid(u32),
+    /// A dashed line this wide, px.
+    Dashed(u32),
+}
+
+/// One line of a time-series figure: drawn in the order given (the last on top)
+/// and named in the legend.
+#[derive(Clone, Debug)]
+struct Line {
+    y: Vec<f64>,
+    label: &'static str,
+    color: RGBColor,
+    stroke: Stroke,
+}
+
+/// Dark green: the green of plotters is hard to read on white.
+const DARK_GREEN: RGBColor = RGBColor(0, 150, 0);
+
+/// One column of the log.
+fn column(log: &[LogRow], f: impl Fn(&LogRow) -> f64) -> Vec<f64> {
+    log.iter().map(f).collect()
+}
+
+/// A reference column: it exists from the first plan on (the actuators are safe
+/// before), NaN before.
+fn planned(log: &[LogRow], f: impl Fn(&LogRow) -> f64) -> Vec<f64> {
+    column(log, |l| {
+        if l.control_mode == "safe" && l.plan_status == "none" {
+            f64::NAN
+        } else {
+            f(l)
+        }
+    })
+}
+
+/// The speed figure's lines: the references dashed, the measured speed solid,
+/// wider and drawn last, so it shows where it follows them.
+fn speed_lines(log: &[LogRow]) -> Vec<Line> {
+    vec![
+        Line {
+            y: planned(log, |l| l.v_heur_mps),
+            label: "V_heur: the velocity planner's speed",
+            color: RED,
+            stroke: Stroke::Dashed(2),
+        },
+        Line {
+            y: planned(log, |l| l.v_ref_mps),
+            label: "V^r: the plan's reference speed",
+            color: DARK_GREEN,
+            // Wider than V, which follows it closely: it shows on both sides.
+            stroke: Stroke::Dashed(6),
+        },
+        Line {
+            y: column(log, |l| l.v_mps),
+            label: "V: measured",
+            color: BLUE,
+            stroke: Stroke::Solid(2),
+        },
+    ]
+}
+
 /// Draws every figure of a run into `dir`.
 pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
     register_font()?;
     trajectory(&dir.join("trajectory.png"), scenario, r)?;
-    // One column of the log.
-    let col = |f: &dyn Fn(&LogRow) -> f64| r.log.iter().map(f).collect::<Vec<f64>>();
-    // A reference column: it exists from the first plan on (the actuators are safe before).
-    let planned = |f: fn(&LogRow) -> f64| {
-        col(&|l: &LogRow| {
-            if l.control_mode == "safe" && l.plan_status == "none" {
-                f64::NAN
-            } else {
-                f(l)
-            }
-        })
-    };
-    let t = col(&|l| l.t_s);
+    let log = &r.log;
+    let t = column(log, |l| l.t_s);
     time_series(
         &dir.join("speed.png"),
-        "Speed: V_heur (red) and V^r (green) from the first plan, V (blue)",
+        "Speed (references from the first plan)",
         "m/s",
         &t,
-        &[
-            (&planned(|l| l.v_heur_mps), RED),
-            (&col(&|l| l.v_mps), BLUE),
-            (&planned(|l| l.v_ref_mps), GREEN),
-        ],
+        &speed_lines(log),
     )?;
     time_series(
         &dir.join("steering.png"),
-        "Steering: δ (blue), δ_cl (green)",
+        "Steering",
         "rad",
         &t,
         &[
-            (&col(&|l| l.delta_rad), BLUE),
-            (&col(&|l| l.delta_cl_rad), GREEN),
+            Line {
+                y: column(log, |l| l.delta_cl_rad),
+                label: "δ_cl: closed-loop part",
+                color: DARK_GREEN,
+                stroke: Stroke::Solid(2),
+            },
+            Line {
+                y: column(log, |l| l.delta_rad),
+                label: "δ: applied",
+                color: BLUE,
+                stroke: Stroke::Solid(2),
+            },
         ],
     )?;
     time_series(
@@ -57,19 +118,32 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
         "Front-left wheel torque",
         "N·m",
         &t,
-        &[(&col(&|l| l.torque_fl_nm), BLUE)],
+        &[Line {
+            y: column(log, |l| l.torque_fl_nm),
+            label: "front-left torque",
+            color: BLUE,
+            stroke: Stroke::Solid(2),
+        }],
     )?;
+    let mu_g = r.summary.mu * f64::from(firmware::G);
     time_series(
         &dir.join("lateral.png"),
-        "Lateral error (blue) and a_y / (μ·g) (red)",
+        "Lateral error and lateral acceleration",
         "m, -",
         &t,
         &[
-            (&col(&|l| l.lateral_error_m), BLUE),
-            (
-                &col(&|l| l.ay_mps2 / (r.summary.mu * f64::from(firmware::G))),
-                RED,
-            ),
+            Line {
+                y: column(log, |l| l.ay_mps2 / mu_g),
+                label: "a_y / (μ·g)",
+                color: RED,
+                stroke: Stroke::Solid(2),
+            },
+            Line {
+                y: column(log, |l| l.lateral_error_m),
+                label: "lateral error, m",
+                color: BLUE,
+                stroke: Stroke::Solid(2),
+            },
         ],
     )?;
     histogram(
@@ -286,17 +360,26 @@ fn draw_patches<'a, DB: DrawingBackend + 'a>(
     Ok(())
 }
 
-fn time_series(
-    path: &Path,
+fn time_series(path: &Path, title: &str, unit: &str, t: &[f64], lines: &[Line]) -> Result<()> {
+    let root = BitMapBackend::new(path, (W, 450)).into_drawing_area();
+    draw_time_series(&root, title, unit, t, lines).map_err(|e| draw_error(path, e))?;
+    root.present().map_err(|e| draw_error(path, e))?;
+    Ok(())
+}
+
+/// Draws `lines` against `t` on `root`, in order (the last on top), with a legend.
+fn draw_time_series<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
     title: &str,
     unit: &str,
     t: &[f64],
-    series: &[(&Vec<f64>, RGBColor)],
-) -> Result<()> {
+    lines: &[Line],
+) -> Result<(), String> {
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     let t1 = t.last().copied().unwrap_or(1.0).max(1e-3);
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for (s, _) in series {
-        for &v in s.iter() {
+    for line in lines {
+        for &v in &line.y {
             if v.is_finite() {
                 lo = lo.min(v);
                 hi = hi.max(v);
@@ -307,33 +390,62 @@ fn time_series(
         lo = -1.0;
         hi = 1.0;
     }
-    let pad = 0.05 * (hi - lo).max(1e-6);
-    let root = BitMapBackend::new(path, (W, 450)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| draw_error(path, e))?;
-    let mut chart = ChartBuilder::on(&root)
+    let span = (hi - lo).max(1e-6);
+    let pad = 0.05 * span;
+    // Head room above the data for the legend (upper right), so it hides none of it:
+    // about 24 px per line in a plot area of the height less the caption, margins
+    // and the time axis.
+    let plot_px = (f64::from(root.dim_in_pixel().1) - 110.0).max(50.0);
+    let legend = ((24.0 * lines.len() as f64 + 16.0) / plot_px).min(0.6);
+    let top = hi + pad + (span + 2.0 * pad) * legend / (1.0 - legend);
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart = ChartBuilder::on(root)
         .caption(title, (FONT, 22))
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(70)
-        .build_cartesian_2d(0.0..t1, (lo - pad)..(hi + pad))
-        .map_err(|e| draw_error(path, e))?;
+        .build_cartesian_2d(0.0..t1, (lo - pad)..top)
+        .map_err(err)?;
     chart
         .configure_mesh()
         .x_desc("t (s)")
         .y_desc(unit)
         .label_style((FONT, 14))
         .draw()
-        .map_err(|e| draw_error(path, e))?;
-    for (s, c) in series {
+        .map_err(err)?;
+    for line in lines {
+        let (color, stroke) = (line.color, line.stroke);
+        let style = match stroke {
+            Stroke::Solid(w) | Stroke::Dashed(w) => color.stroke_width(w),
+        };
         // Non-finite samples break the line (nothing is drawn there).
-        let points: Vec<(f64, f64)> = t.iter().copied().zip(s.iter().copied()).collect();
-        for run in points.split(|p| !p.1.is_finite()) {
-            chart
-                .draw_series(LineSeries::new(run.iter().copied(), c.stroke_width(2)))
-                .map_err(|e| draw_error(path, e))?;
+        let points: Vec<(f64, f64)> = t.iter().copied().zip(line.y.iter().copied()).collect();
+        let mut labelled = false;
+        for run in points.split(|p| !p.1.is_finite()).filter(|r| !r.is_empty()) {
+            let series = match stroke {
+                Stroke::Solid(_) => chart
+                    .draw_series(LineSeries::new(run.iter().copied(), style))
+                    .map_err(err)?,
+                Stroke::Dashed(_) => chart
+                    .draw_series(DashedLineSeries::new(run.iter().copied(), 8, 5, style))
+                    .map_err(err)?,
+            };
+            if !labelled {
+                labelled = true;
+                series.label(line.label).legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
+                });
+            }
         }
     }
-    root.present().map_err(|e| draw_error(path, e))?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT, 16))
+        .draw()
+        .map_err(err)?;
     Ok(())
 }
 
@@ -388,4 +500,66 @@ fn histogram(
         .map_err(|e| draw_error(path, e))?;
     root.present().map_err(|e| draw_error(path, e))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Pixels of exactly `c` in an RGB buffer.
+    fn count(buf: &[u8], c: RGBColor) -> usize {
+        buf.chunks(3).filter(|p| p == &[c.0, c.1, c.2]).count()
+    }
+
+    /// The speed figure of `log`, as RGB pixels, and its blue (measured) pixels.
+    fn speed_pixels(log: &[LogRow]) -> usize {
+        register_font().unwrap_or(());
+        let (w, h) = (600u32, 300u32);
+        let mut buf = vec![0u8; (w * h * 3) as usize];
+        {
+            let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+            let t = column(log, |l| l.t_s);
+            let drawn = draw_time_series(&root, "speed", "m/s", &t, &speed_lines(log));
+            assert_eq!(drawn, Ok(()));
+            assert_eq!(root.present().map_err(|e| e.to_string()), Ok(()));
+        }
+        count(&buf, BLUE)
+    }
+
+    fn log(v: impl Fn(f64) -> f64, reference: bool) -> Vec<LogRow> {
+        (0..500)
+            .map(|k| {
+                let t = k as f64 * 0.01;
+                let r = if reference { v(t) } else { f64::NAN };
+                LogRow {
+                    t_s: t,
+                    v_mps: v(t),
+                    v_ref_mps: r,
+                    v_heur_mps: r,
+                    control_mode: "track",
+                    plan_status: "optimal",
+                    ..LogRow::default()
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_measured_speed_is_drawn_on_top_of_the_references_and_in_the_legend() {
+        let v = |t: f64| 10.0 + t;
+        // The measured speed alone, then under references equal to it: as much of
+        // it shows (it is drawn last), not only its legend sample.
+        let alone = speed_pixels(&log(v, false));
+        let covered = speed_pixels(&log(v, true));
+        assert!(alone > 500, "{alone} blue pixels");
+        assert!(
+            covered * 10 >= alone * 9,
+            "the references hide the measured speed: {covered} of {alone} blue pixels show"
+        );
+        let lines = speed_lines(&log(v, true));
+        assert_eq!(lines.last().map(|l| l.label), Some("V: measured"));
+        assert!(lines.iter().all(|l| !l.label.is_empty()));
+        let colors: Vec<RGBColor> = lines.iter().map(|l| l.color).collect();
+        assert!(colors[..2].iter().all(|&c| c != BLUE), "{colors:?}");
+    }
 }
