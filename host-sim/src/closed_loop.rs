@@ -263,8 +263,9 @@ pub struct Summary {
     /// `V²·sin β(δ)/l_r` at every node but the first of every published plan (the
     /// quantity the validity limit keeps under `0.5·μ_planner·g`, slack aside; the
     /// first node is the measured state, its steering the low-level controller's
-    /// `δ_ol + δ_cl`, which no plan chose).
-    pub max_abs_plan_ay_mps2: f64,
+    /// `δ_ol + δ_cl`, which no plan chose). Null when the ECU reports its plans'
+    /// positions only (processor in the loop): not measured.
+    pub max_abs_plan_ay_mps2: Option<f64>,
     /// Simulated time with at least one wheel lifted off the road (load zero), s.
     pub wheel_lift_s: f64,
     /// Time at which a wheel first lifted off the road, s (null if none did).
@@ -521,6 +522,9 @@ pub fn run_with<T: Real, E: Ecu<T>>(
     let mut pending: std::collections::VecDeque<(u64, Inputs)> = Default::default();
     let mut res = RunResult::default();
     let mut meter = Meter::new(scenario, vehicle, opts);
+    if ecu.reports_plan_states() {
+        meter.sum.max_abs_plan_ay_mps2 = Some(0.0);
+    }
     let mut host_us: Vec<f64> = Vec::new();
     let mut last_status: &'static str = "none";
 
@@ -576,8 +580,9 @@ pub fn run_with<T: Real, E: Ecu<T>>(
                 if let Some(tr) = trace_of(ecu.active_plan(), p.finish_us) {
                     res.plans.push(tr);
                 }
-                let ay = plan_max_kinematic_ay(ecu.active_plan(), vehicle);
-                meter.sum.max_abs_plan_ay_mps2 = meter.sum.max_abs_plan_ay_mps2.max(ay);
+                if let Some(max) = meter.sum.max_abs_plan_ay_mps2.as_mut() {
+                    *max = max.max(plan_max_kinematic_ay(ecu.active_plan(), vehicle));
+                }
             }
             let act = c.actuation;
             // From the plant step containing the send instant (module docs).

@@ -29,7 +29,6 @@
 //! task is still running is skipped (see the late-plan policy in
 //! [`crate::closed_loop`]).
 
-
 use anyhow::{anyhow, Result};
 use firmware::low_level::Actuation;
 use firmware::mpc::MpcReport;
@@ -176,6 +175,12 @@ pub trait Ecu<T: Real> {
     /// activation of the instant `t_us` (µs) it is due; the plan task adopts it after its next
     /// publication (at the end of the activation running then, or of the next).
     fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()>;
+
+    /// Whether [`Self::active_plan`] carries each node's speed and steering (the
+    /// plan's lateral acceleration is measured from them), not only its positions.
+    fn reports_plan_states(&self) -> bool {
+        true
+    }
 }
 
 /// A plan activation computed on the host, waiting for its modelled finish.

@@ -1,8 +1,8 @@
-//! Named fault scenarios for `host-sim sweep --faults`, each with the behaviour the
-//! architecture promises under it, and the run outcome the sweep classifies every
-//! run into.
+//! Named fault scenarios (`--fault` of `run` and `sweep`; [`FAULT_KINDS`] is their
+//! one list, which `--help` prints), each with the behaviour the architecture
+//! promises under it, and the run outcome the sweep classifies every run into.
 //!
-//! | fault (`--faults`) | what happens | expected behaviour (checked) |
+//! | fault (`--fault`) | what happens | expected behaviour (checked) |
 //! |---|---|---|
 //! | `none` | nothing | `ok` |
 //! | `dropout-nan:N` (N = 20) | every estimate field NaN for N control periods (10 ms) from t = [`FAULT_START_S`] | both tasks refuse the estimate; `control` applies the safe actuation (gentle braking, steering held) in each of the N periods, then follows again: outcome `ok` and at least N safe actuations |
@@ -20,7 +20,7 @@ use serde::Serialize;
 /// Simulated time at which the dropouts start, s.
 pub const FAULT_START_S: f64 = 20.0;
 
-/// A named fault scenario (module docs).
+/// A named fault scenario (module docs; [`FAULT_KINDS`] lists them).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Fault {
     /// No fault.
@@ -39,24 +39,195 @@ pub enum Fault {
     SteerRate(f64),
 }
 
+/// The parameter of a fault scenario: `NAME:VALUE` on the command line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FaultParam {
+    /// Its placeholder in the help (`N`, `MHZ`, ...).
+    pub placeholder: &'static str,
+    /// What it is, with its unit.
+    pub meaning: &'static str,
+    /// Its value when the name is given alone.
+    pub default: f64,
+    /// Only whole numbers (a count of control periods).
+    pub whole: bool,
+}
+
+/// One fault scenario: its name, parameter, what it does and what is expected of
+/// the architecture under it. [`FAULT_KINDS`] is the one list: parsing, printing,
+/// the expected behaviour and the command-line help all read it.
+#[derive(Clone, Copy, Debug)]
+pub struct FaultKind {
+    /// Name on the command line and in `sweep.csv`.
+    pub name: &'static str,
+    /// Its parameter, if any.
+    pub param: Option<FaultParam>,
+    /// What happens.
+    pub what: &'static str,
+    /// What the architecture promises (checked per run by [`Fault::check`]).
+    pub expected: &'static str,
+    /// Whether a processor-in-the-loop run (`host-sim pil`) can apply it: the
+    /// dropouts, the steering rate limit and the late obstacle act around the
+    /// in-process ECU, and the overrun changes the modelled ECU's clock (in PIL
+    /// the ECU's own clock times the run).
+    pub pil: bool,
+    /// The fault with this parameter value (the default when given alone).
+    make: fn(f64) -> Fault,
+}
+
+/// Every fault scenario, `none` first.
+pub const FAULT_KINDS: [FaultKind; 7] = [
+    FaultKind {
+        name: "none",
+        param: None,
+        what: "nothing",
+        expected: "outcome ok",
+        pil: true,
+        make: |_| Fault::None,
+    },
+    FaultKind {
+        name: "dropout-nan",
+        param: Some(FaultParam {
+            placeholder: "N",
+            meaning: "control periods of 10 ms",
+            default: 20.0,
+            whole: true,
+        }),
+        what: "every estimate field NaN for N control periods from the fault's start",
+        expected: "safe actuation in each NaN period, then following again: outcome ok",
+        pil: false,
+        make: |n| Fault::DropoutNan(n as u32),
+    },
+    FaultKind {
+        name: "dropout-hold",
+        param: Some(FaultParam {
+            placeholder: "N",
+            meaning: "control periods of 10 ms",
+            default: 20.0,
+            whole: true,
+        }),
+        what: "no estimate update for N control periods from the fault's start",
+        expected: "keep following on the held estimate: outcome ok",
+        pil: false,
+        make: |n| Fault::DropoutHold(n as u32),
+    },
+    FaultKind {
+        name: "overrun",
+        param: Some(FaultParam {
+            placeholder: "MHZ",
+            meaning: "the ECU clock, MHz",
+            default: 20.0,
+            whole: false,
+        }),
+        what: "the modelled ECU clocked at MHZ instead of 168 MHz",
+        expected: "misses counted (> 0), the car keeps following: outcome deadline-miss",
+        pil: false,
+        make: Fault::Overrun,
+    },
+    FaultKind {
+        name: "mu-high",
+        param: Some(FaultParam {
+            placeholder: "F",
+            meaning: "planner friction over the road's",
+            default: 1.5,
+            whole: false,
+        }),
+        what: "the planner assumes F × the road's μ (at most 2)",
+        expected: "keep following (plan within the tyres' μg): outcome ok",
+        pil: true,
+        make: Fault::MuHigh,
+    },
+    FaultKind {
+        name: "late-obstacle",
+        param: Some(FaultParam {
+            placeholder: "D_M",
+            meaning: "distance before it, m",
+            default: 60.0,
+            whole: false,
+        }),
+        what: "a 2 m × 2 m box at half the lap, given to the planner only D_M metres before it",
+        expected: "replan around it or stop before it: outcome ok or stopped-safely",
+        pil: false,
+        make: Fault::LateObstacle,
+    },
+    FaultKind {
+        name: "steer-rate",
+        param: Some(FaultParam {
+            placeholder: "RAD_PER_S",
+            meaning: "steering rate limit, rad/s",
+            default: 0.5,
+            whole: false,
+        }),
+        what: "the steering actuator moves at most RAD_PER_S (the firmware does not know)",
+        expected: "keep following: outcome ok",
+        pil: false,
+        make: Fault::SteerRate,
+    },
+];
+
+impl FaultKind {
+    /// `name` or `name[:PARAM]`, as the command line takes it.
+    pub fn usage(&self) -> String {
+        match self.param {
+            None => self.name.to_string(),
+            Some(p) => format!("{}[:{}]", self.name, p.placeholder),
+        }
+    }
+}
+
+/// The fault scenarios for `--help`: one line each with its parameter, default,
+/// what it does, the expected behaviour and whether PIL can apply it.
+pub fn fault_help() -> String {
+    let mut t = format!(
+        "Fault scenarios, comma-separated (`sweep` runs each; `run` and `pil` take one); the fault's start is t = {FAULT_START_S} s:"
+    );
+    for k in &FAULT_KINDS {
+        t.push_str("\n  ");
+        t.push_str(&k.usage());
+        t.push_str(": ");
+        t.push_str(k.what);
+        if let Some(p) = k.param {
+            t.push_str(&format!(
+                "; {}: {}, default {}",
+                p.placeholder, p.meaning, p.default
+            ));
+        }
+        t.push_str(&format!(". Expected: {}.", k.expected));
+        if !k.pil {
+            t.push_str(" Not in `pil`.");
+        }
+    }
+    t
+}
+
 impl Fault {
+    /// Its row of [`FAULT_KINDS`].
+    pub fn kind(&self) -> &'static FaultKind {
+        let this = std::mem::discriminant(self);
+        FAULT_KINDS
+            .iter()
+            .find(|k| std::mem::discriminant(&(k.make)(1.0)) == this)
+            .unwrap_or(&FAULT_KINDS[0])
+    }
+
+    /// Its parameter's value, if it has one.
+    pub fn param(&self) -> Option<f64> {
+        match *self {
+            Fault::None => None,
+            Fault::DropoutNan(n) | Fault::DropoutHold(n) => Some(f64::from(n)),
+            Fault::Overrun(x) | Fault::MuHigh(x) | Fault::LateObstacle(x) | Fault::SteerRate(x) => {
+                Some(x)
+            }
+        }
+    }
+
     /// What the architecture promises under this fault (module docs).
     pub fn expected(&self) -> &'static str {
-        match self {
-            Fault::None => "outcome ok",
-            Fault::DropoutNan(_) => {
-                "safe actuation in each NaN period, then following again: outcome ok"
-            }
-            Fault::DropoutHold(_) => "keep following on the held estimate: outcome ok",
-            Fault::Overrun(_) => {
-                "misses counted (> 0), the car keeps following: outcome deadline-miss"
-            }
-            Fault::MuHigh(_) => "keep following (plan within the tyres' μg): outcome ok",
-            Fault::LateObstacle(_) => {
-                "replan around it or stop before it: outcome ok or stopped-safely"
-            }
-            Fault::SteerRate(_) => "keep following: outcome ok",
-        }
+        self.kind().expected
+    }
+
+    /// Whether a processor-in-the-loop run can apply it ([`FaultKind::pil`]).
+    pub fn applies_to_pil(&self) -> bool {
+        self.kind().pil
     }
 
     /// Whether a run showed the expected behaviour.
@@ -77,14 +248,9 @@ impl Fault {
 
 impl fmt::Display for Fault {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Fault::None => write!(f, "none"),
-            Fault::DropoutNan(n) => write!(f, "dropout-nan:{n}"),
-            Fault::DropoutHold(n) => write!(f, "dropout-hold:{n}"),
-            Fault::Overrun(m) => write!(f, "overrun:{m}"),
-            Fault::MuHigh(k) => write!(f, "mu-high:{k}"),
-            Fault::LateObstacle(d) => write!(f, "late-obstacle:{d}"),
-            Fault::SteerRate(r) => write!(f, "steer-rate:{r}"),
+        match self.param() {
+            None => write!(f, "{}", self.kind().name),
+            Some(x) => write!(f, "{}:{x}", self.kind().name),
         }
     }
 }
@@ -97,36 +263,28 @@ impl FromStr for Fault {
             Some((n, a)) => (n, Some(a)),
             None => (s, None),
         };
-        let num = |default: f64| -> Result<f64, String> {
-            match arg {
-                None => Ok(default),
-                Some(a) => match a.parse::<f64>() {
-                    Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
-                    _ => Err(format!("fault {s:?}: {a:?} is not a positive number")),
-                },
-            }
+        let Some(kind) = FAULT_KINDS.iter().find(|k| k.name == name) else {
+            let all: Vec<String> = FAULT_KINDS.iter().map(FaultKind::usage).collect();
+            return Err(format!(
+                "unknown fault {s:?}: one of {} (`host-sim sweep --help` says what each does)",
+                all.join(", ")
+            ));
         };
-        let periods = |default: f64| -> Result<u32, String> {
-            let n = num(default)?;
-            if n.fract() != 0.0 || n > 1e6 {
-                return Err(format!(
-                    "fault {s:?}: give a whole number of control periods"
-                ));
-            }
-            Ok(n as u32)
+        let x = match (kind.param, arg) {
+            (None, None) => 0.0,
+            (None, Some(_)) => return Err(format!("fault {s:?}: `{name}` takes no parameter")),
+            (Some(p), None) => p.default,
+            (Some(p), Some(a)) => match a.parse::<f64>() {
+                Ok(x) if x.is_finite() && x > 0.0 => {
+                    if p.whole && (x.fract() != 0.0 || x > 1e6) {
+                        return Err(format!("fault {s:?}: give a whole number of {}", p.meaning));
+                    }
+                    x
+                }
+                _ => return Err(format!("fault {s:?}: {a:?} is not a positive number")),
+            },
         };
-        match name {
-            "none" => Ok(Fault::None),
-            "dropout-nan" => Ok(Fault::DropoutNan(periods(20.0)?)),
-            "dropout-hold" => Ok(Fault::DropoutHold(periods(20.0)?)),
-            "overrun" => Ok(Fault::Overrun(num(20.0)?)),
-            "mu-high" => Ok(Fault::MuHigh(num(1.5)?)),
-            "late-obstacle" => Ok(Fault::LateObstacle(num(60.0)?)),
-            "steer-rate" => Ok(Fault::SteerRate(num(0.5)?)),
-            _ => Err(format!(
-                "unknown fault {s:?}: one of none, dropout-nan[:N], dropout-hold[:N], overrun[:MHZ], mu-high[:F], late-obstacle[:D_M], steer-rate[:RAD_PER_S]"
-            )),
-        }
+        Ok((kind.make)(x))
     }
 }
 
@@ -228,7 +386,34 @@ mod tests {
         }
         assert!("dropout-nan:2.5".parse::<Fault>().is_err());
         assert!("overrun:-1".parse::<Fault>().is_err());
+        assert!("none:3".parse::<Fault>().is_err());
         assert!("meteor".parse::<Fault>().is_err());
+    }
+
+    #[test]
+    fn every_row_of_the_table_parses_to_its_own_kind_and_back() {
+        let mut seen = Vec::new();
+        for k in &FAULT_KINDS {
+            let f: Fault = k.name.parse().unwrap_or(Fault::None);
+            assert_eq!(f.kind().name, k.name);
+            assert_eq!(f.param(), k.param.map(|p| p.default), "{}", k.name);
+            assert!(
+                fault_help().contains(&k.usage()),
+                "{} not in the help",
+                k.name
+            );
+            let d = std::mem::discriminant(&f);
+            assert!(
+                !seen.contains(&d),
+                "{} is a second row for one variant",
+                k.name
+            );
+            seen.push(d);
+        }
+        let e = "meteor".parse::<Fault>().err().unwrap_or_default();
+        for k in &FAULT_KINDS {
+            assert!(e.contains(&k.usage()), "{e}");
+        }
     }
 
     #[test]

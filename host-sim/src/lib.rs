@@ -13,6 +13,7 @@
 //! | [`obstacle_file`] | obstacle files (`id,x_m,y_m`), polygon distances, footprints |
 //! | [`road_friction`] | friction that changes along the road (`--mu-patch`); μ̂ judged against it |
 //! | [`scenario`] | the built-in `paper` scenario and `--track`/`--obstacles` resolution |
+//! | [`scenario_options`] | the scenario options `run`, `pil` and `sweep` share (one clap struct), their checks, the set-up of one run |
 //! | [`cost_model`] | the tasks' cost model on the ECU (instructions), fitted on PIL measurements |
 //! | [`pil`] | processor in the loop: the ECU application in QEMU against the plant |
 //! | [`closed_loop`] | the deterministic timeline: the plant against an ECU, budgets, deadlines |
@@ -46,6 +47,7 @@ pub mod road_friction;
 pub mod route;
 pub mod run;
 pub mod scenario;
+pub mod scenario_options;
 pub mod sweep;
 pub mod sweep_figures;
 pub mod tire;

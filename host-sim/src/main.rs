@@ -22,18 +22,19 @@ enum Command {
     Validity(host_sim::validity::ValidityArgs),
     /// A closed-loop drive: the 9-DoF plant against the firmware's two tasks on a
     /// deterministic timeline; writes log.csv, summary.json and the figures.
-    Run(host_sim::run::RunArgs),
+    Run(host_sim::run::RunCommand),
     /// Processor in the loop: the ECU application in QEMU against the plant; writes
     /// what `run` writes plus plan_activations.csv and pil.json (measured ECU costs).
-    Pil(host_sim::pil::PilArgs),
+    Pil(host_sim::pil::PilCommand),
     /// The ECU's worst-case timing and memory report (wcet.md, wcet.json) from PIL
     /// laps, a QEMU trace for the cycles-per-instruction bound and the ELF.
     Wcet(host_sim::wcet::command::WcetArgs),
     /// Every QP the MPC solves over a kinematic closed loop, one JSON file each (for solver benchmarks).
     QpCorpus(host_sim::qp_corpus::QpCorpusArgs),
     /// Many closed-loop runs: the cross product of tracks, frictions, vehicles, loads,
-    /// noise, delays, faults and seeds, in parallel; writes sweep.csv (one row per run),
-    /// sweep.json (the aggregate), figures and summary.txt.
+    /// noise, delays, faults and seeds (the options of `run`, lists here), in
+    /// parallel; writes sweep.csv (one row per run), sweep.json (the aggregate),
+    /// figures and summary.txt. Exits non-zero when a run could not run.
     Sweep(host_sim::sweep::SweepArgs),
     /// Joins the sweep.csv of shards (`sweep --only I/N`) into one sweep's outputs.
     SweepMerge(host_sim::sweep::MergeArgs),
@@ -43,9 +44,9 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
         Command::Tire(args) => host_sim::tire_table::run(args),
         Command::Validity(args) => host_sim::validity::run(args),
-        Command::Run(args) => host_sim::run::run(args),
+        Command::Run(args) => host_sim::run::command(args),
         Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
-        Command::Pil(args) => host_sim::pil::run(args),
+        Command::Pil(args) => host_sim::pil::command(args),
         Command::Wcet(args) => host_sim::wcet::command::run(args),
         Command::Sweep(args) => host_sim::sweep::run(args),
         Command::SweepMerge(args) => host_sim::sweep::merge(args),

@@ -609,7 +609,7 @@ pub fn setup_refusal(status: u8, detail: u16) -> String {
     match E::from_code(status) {
         Some(E::NoConfig) => "a frame came before the configuration (a simulator bug)".into(),
         Some(E::InvalidConfig) => {
-            "the vehicle's numbers or the planner's friction are not finite and positive: check the vehicle file and --planner-mu".into()
+            "the vehicle's numbers or the planner's friction are not finite and positive: check the vehicle file and --mu-planner".into()
         }
         Some(E::PathTooLong) => format!(
             "the track has more rows than the ECU's path holds ({detail}): resample the track to fewer points"
@@ -728,6 +728,11 @@ impl Ecu<f32> for QemuEcu {
         &self.active
     }
 
+    fn reports_plan_states(&self) -> bool {
+        // The plan events carry the nodes' positions only (`plan_of`).
+        false
+    }
+
     fn set_window(&mut self, _t_us: u64, w: &Window) -> Result<()> {
         // On the route channel, announced by the next sensor frame.
         for f in Self::chunks(&w.rows) {
@@ -744,13 +749,22 @@ impl Ecu<f32> for QemuEcu {
     }
 }
 
-/// Arguments of `host-sim pil`: those of `run`, and how to run the ECU.
+/// `host-sim pil`'s command line: `run`'s ([`crate::run::RunCommand`]: the same
+/// scenario options, refused where PIL cannot apply them), and how to run the ECU.
 #[derive(Debug, Clone, clap::Args)]
-pub struct PilArgs {
+pub struct PilCommand {
     /// The scenario and outputs, as for `run` (`--precision` must stay f32 and
     /// `--ecu-mhz` 168: the ECU's own clock times the run).
     #[command(flatten)]
-    pub run: crate::run::RunArgs,
+    pub run: crate::run::RunCommand,
+    /// How the ECU runs.
+    #[command(flatten)]
+    pub ecu: PilEcuArgs,
+}
+
+/// How `host-sim pil` runs the ECU.
+#[derive(Debug, Clone, clap::Args)]
+pub struct PilEcuArgs {
     /// The ECU application (build it with `cargo ecu`).
     #[arg(long, default_value = "target/thumbv7em-none-eabihf/release/ecu")]
     pub elf: PathBuf,
@@ -777,6 +791,49 @@ pub struct PilArgs {
     /// Fail when the simulator's cost model underestimates a measured plan
     /// activation by more than this, % (CI's check that the model stays honest).
     #[arg(long)]
+    pub max_model_underestimate_pct: Option<f64>,
+}
+
+impl PilCommand {
+    /// The PIL run's settings (one value of each scenario option, checked).
+    pub fn resolve(&self) -> Result<PilArgs> {
+        let e = self.ecu.clone();
+        Ok(PilArgs {
+            run: self.run.resolve("pil")?,
+            elf: e.elf,
+            icount_shift: e.icount_shift,
+            qemu: e.qemu,
+            cpi: e.cpi,
+            trace: e.trace,
+            no_compare: e.no_compare,
+            frame_timeout: e.frame_timeout,
+            max_model_underestimate_pct: e.max_model_underestimate_pct,
+        })
+    }
+}
+
+/// A PIL run's settings: the run's ([`crate::run::RunArgs`]) and how to run the ECU
+/// ([`PilEcuArgs`] has the meanings); what `pil`'s command line resolves to, or what
+/// a program builds (`wcet`).
+#[derive(Debug, Clone)]
+pub struct PilArgs {
+    /// The scenario and outputs.
+    pub run: crate::run::RunArgs,
+    /// The ECU application.
+    pub elf: PathBuf,
+    /// QEMU's `-icount shift`.
+    pub icount_shift: u32,
+    /// QEMU executable.
+    pub qemu: PathBuf,
+    /// Cycles per instruction.
+    pub cpi: f64,
+    /// QEMU's execution trace, if wanted.
+    pub trace: Option<PathBuf>,
+    /// Skip the comparison with the in-process run.
+    pub no_compare: bool,
+    /// Longest wall time to wait for one frame, s.
+    pub frame_timeout: f64,
+    /// Largest underestimate of the cost model allowed, %.
     pub max_model_underestimate_pct: Option<f64>,
 }
 
@@ -930,8 +987,12 @@ pub fn compare(pil: &RunResult, host: &RunResult) -> Comparison {
 use crate::closed_loop::RunResult;
 use crate::cost_model::percentile;
 
-/// `host-sim pil`.
-pub fn run(args: &PilArgs) -> Result<()> {
+/// Refuses what a PIL run cannot apply, saying why and where it applies: the
+/// in-process ECU's arithmetic and clock, and the disturbances applied around the
+/// in-process ECU (noise, delay, and every fault but those [`FaultKind::pil`] allows).
+///
+/// [`FaultKind::pil`]: crate::faults::FaultKind::pil
+pub fn check_pil_args(args: &PilArgs) -> Result<()> {
     if args.run.precision != closed_loop::Precision::F32 {
         bail!("--precision: the ECU computes in f32; PIL runs are f32 only");
     }
@@ -952,11 +1013,39 @@ pub fn run(args: &PilArgs) -> Result<()> {
     }
     let c = &args.run.conditions;
     if c.noise.0 != 0.0 || c.delay_ms != 0.0 {
-        bail!("--noise and --delay-ms disturb the in-process ECU's estimate; PIL does not apply them: use `host-sim run` or `host-sim sweep`");
+        bail!("--noise and --delay-ms disturb the estimate around the in-process ECU; PIL does not apply them: use `host-sim run` or `host-sim sweep`");
     }
-    let (vehicle, scenario, mut opts) = crate::run::prepare(&args.run)?;
-    // The plant's car (a load the ECU is not told of, `--mass-scale`).
-    let plant_car = vehicle.with_mass_scale(c.mass_scale);
+    if !c.fault.applies_to_pil() {
+        let pil: Vec<String> = crate::faults::FAULT_KINDS
+            .iter()
+            .filter(|k| k.pil)
+            .map(|k| k.usage())
+            .collect();
+        bail!(
+            "--fault {}: PIL cannot apply it (dropouts, the steering rate limit and the late obstacle act around the in-process ECU; an overrun changes the modelled ECU's clock, and in PIL the ECU's own clock times the run); PIL takes {}; use `host-sim run` or `host-sim sweep`",
+            c.fault,
+            pil.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// `host-sim pil` from its command line.
+pub fn command(cmd: &PilCommand) -> Result<()> {
+    run(&cmd.resolve()?)
+}
+
+/// `host-sim pil`.
+pub fn run(args: &PilArgs) -> Result<()> {
+    check_pil_args(args)?;
+    // The disturbances are none (checked above): the ECU gets the estimate as is.
+    let crate::scenario_options::SetUp {
+        scenario,
+        nominal: vehicle,
+        plant_car,
+        mut opts,
+        ..
+    } = crate::run::prepare(&args.run)?;
     opts.cycles_per_instruction = args.cpi;
     let pil_opts = PilOptions {
         elf: args.elf.clone(),

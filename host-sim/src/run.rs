@@ -8,44 +8,27 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::closed_loop::{self, RunResult, SimOptions};
-use crate::disturbance::{check_delay_ms, run_seed, Disturbances, DisturbedEcu, NoiseLevel};
+use crate::disturbance::{check_delay_ms, Disturbances, DisturbedEcu, NoiseLevel};
+use crate::faults::Fault;
 use crate::figures;
-use crate::road_friction::{MuPatch, RoadFriction};
-use crate::scenario::{self, Scenario};
+use crate::road_friction::MuPatch;
+use crate::scenario::Scenario;
+use crate::scenario_options::{
+    check_mu, check_obstacles_arg, check_run_length, check_track_arg, check_vehicle_arg, set_up,
+    ObstacleSpec, RunSpec, ScenarioArgs, SetUp, Setting,
+};
 use crate::vehicle::{check_mass_scale, VehicleParams};
 
 pub use crate::closed_loop::Precision;
 
-/// Arguments of `host-sim run`.
+/// `host-sim run`'s command line: the scenario options `run`, `pil` and `sweep`
+/// share ([`ScenarioArgs`], one value each here), the firmware's arithmetic and
+/// clock, and the outputs.
 #[derive(Debug, Clone, Args)]
-pub struct RunArgs {
-    /// Track: `paper` (built in) or a CSV file `# x_m,y_m,w_tr_right_m,w_tr_left_m`.
-    #[arg(long, default_value = "paper")]
-    pub track: String,
-    /// The track file is an open path (default: closed loop).
-    #[arg(long)]
-    pub open: bool,
-    /// Obstacles: `none`, `paper` (built in, on the paper track) or a CSV file `id,x_m,y_m`.
-    #[arg(long, default_value = "none")]
-    pub obstacles: String,
-    /// Vehicle TOML file (default: the built-in car, `host-sim/vehicles/default.toml`).
-    #[arg(long)]
-    pub vehicle: Option<PathBuf>,
-    /// Road friction coefficient μ, given to the plant and to the planner.
-    #[arg(long, default_value_t = 1.0)]
-    pub mu: f64,
-    /// Friction given to the planner if different from the road's (default: --mu).
-    #[arg(long)]
-    pub planner_mu: Option<f64>,
-    /// Laps to drive on a closed track.
-    #[arg(long, default_value_t = 1)]
-    pub laps: u32,
-    /// Simulated time limit, s.
-    #[arg(long, default_value_t = 600.0)]
-    pub duration: f64,
-    /// Initial speed, m/s (the paper: 15).
-    #[arg(long, default_value_t = 15.0)]
-    pub initial_speed: f64,
+pub struct RunCommand {
+    /// Track, obstacles, friction, car, conditions, fault, seed, laps.
+    #[command(flatten)]
+    pub scenario: ScenarioArgs,
     /// ECU clock, MHz (the tasks' response times, so their deadlines, depend on it;
     /// their cycle budgets do not).
     #[arg(long, default_value_t = 168.0)]
@@ -59,32 +42,91 @@ pub struct RunArgs {
     /// Output directory (created).
     #[arg(long)]
     pub out: PathBuf,
-    /// Road patches, load, noise and delay.
-    #[command(flatten)]
+}
+
+impl RunCommand {
+    /// The run's settings: one value of each scenario option, checked (`command`,
+    /// `run` or `pil`, names the command in the errors).
+    pub fn resolve(&self, command: &str) -> Result<RunArgs> {
+        let sc = &self.scenario;
+        let one = sc.one(command)?;
+        Ok(RunArgs {
+            track: one.track,
+            open: sc.open,
+            obstacles: sc.obstacles.to_string(),
+            vehicle: one.vehicle,
+            mu: one.mu,
+            planner_mu: one.mu_planner,
+            laps: sc.laps,
+            duration: sc.duration,
+            initial_speed: sc.initial_speed,
+            precision: self.precision,
+            ecu_mhz: self.ecu_mhz,
+            no_plots: self.no_plots,
+            out: self.out.clone(),
+            conditions: ConditionArgs {
+                mu_patches: sc.mu_patches.clone(),
+                mass_scale: one.mass_scale,
+                noise: one.noise,
+                delay_ms: one.delay_ms,
+                fault: one.fault,
+                seed: one.seed,
+            },
+        })
+    }
+}
+
+/// One run's settings: what the command lines of `run` and `pil` resolve to
+/// ([`RunCommand::resolve`]), or what a program builds (the PIL laps of `wcet`).
+#[derive(Debug, Clone)]
+pub struct RunArgs {
+    /// Track: `paper` (built in) or a track CSV file.
+    pub track: String,
+    /// The track file is an open path (default: closed loop).
+    pub open: bool,
+    /// Obstacles: `none`, `paper`, `random:N` or an obstacle CSV file
+    /// ([`ObstacleSpec`]).
+    pub obstacles: String,
+    /// Vehicle TOML file (`None`: the built-in car).
+    pub vehicle: Option<PathBuf>,
+    /// Road friction coefficient μ, given to the plant and to the planner.
+    pub mu: f64,
+    /// Friction given to the planner if different from the road's (`--mu-planner`).
+    pub planner_mu: Option<f64>,
+    /// Laps to drive on a closed track.
+    pub laps: u32,
+    /// Simulated time limit, s.
+    pub duration: f64,
+    /// Initial speed, m/s.
+    pub initial_speed: f64,
+    /// Precision of the firmware maths.
+    pub precision: Precision,
+    /// ECU clock, MHz.
+    pub ecu_mhz: f64,
+    /// Skip the PNG figures.
+    pub no_plots: bool,
+    /// Output directory (created).
+    pub out: PathBuf,
+    /// Road patches, load, noise, delay, fault and seed.
     pub conditions: ConditionArgs,
 }
 
-/// The drive's conditions `run` and `pil` share with `sweep` (one value each here,
-/// parsed and checked as the sweep does).
-#[derive(Debug, Clone, PartialEq, Args)]
+/// The conditions of a run beyond its track, obstacles, car and friction (the
+/// default: none of them).
+#[derive(Debug, Clone, PartialEq)]
 pub struct ConditionArgs {
-    /// A patch of road with its own friction, `START_M:LENGTH_M:MU`: from START_M
-    /// metres along the lap (the centre line's arc length from its first point),
-    /// LENGTH_M metres long, friction MU (the rest of the road has --mu). Repeatable;
-    /// wraps over laps.
-    #[arg(long = "mu-patch", value_name = "START_M:LENGTH_M:MU")]
+    /// Patches of road with their own friction (`--mu-patch`).
     pub mu_patches: Vec<MuPatch>,
-    /// Scale of the plant's mass and inertias, in (0.2, 5) (the firmware is told the
-    /// nominal car: an unknown load).
-    #[arg(long, default_value_t = 1.0)]
+    /// Scale of the plant's mass and inertias (the firmware is told the nominal car).
     pub mass_scale: f64,
-    /// Noise on the state estimate: none, low, medium, high or a multiple of the
-    /// level-1 σ (`run` only; the seed is the sweep's seed 0 for the track).
-    #[arg(long, default_value = "none")]
+    /// Noise on the state estimate.
     pub noise: NoiseLevel,
-    /// Delay of the state estimate, ms, rounded to 10 ms (`run` only).
-    #[arg(long, default_value_t = 0.0)]
+    /// Delay of the state estimate, ms.
     pub delay_ms: f64,
+    /// Fault scenario.
+    pub fault: Fault,
+    /// Seed number of the random draws (with the track's name, as a sweep's `seed`).
+    pub seed: u32,
 }
 
 impl Default for ConditionArgs {
@@ -94,45 +136,20 @@ impl Default for ConditionArgs {
             mass_scale: 1.0,
             noise: NoiseLevel(0.0),
             delay_ms: 0.0,
+            fault: Fault::None,
+            seed: 0,
         }
     }
 }
 
 impl ConditionArgs {
-    /// Checks the load, the noise level and the delay (the patches are checked
-    /// against the track by [`prepare`]).
+    /// Checks the load and the delay (the patches are checked against the track
+    /// by [`prepare`]).
     pub fn check(&self) -> Result<()> {
         check_mass_scale(self.mass_scale).map_err(|e| anyhow!(e))?;
         check_delay_ms(self.delay_ms).map_err(|e| anyhow!(e))?;
         Ok(())
     }
-
-    /// The noise and delay on the estimate of a run on `track_name` (seed 0 of
-    /// the sweep's seeds for that track).
-    pub fn disturbances(&self, track_name: &str) -> Disturbances {
-        Disturbances {
-            noise_scale: self.noise.0,
-            delay_ms: self.delay_ms,
-            seed: run_seed(track_name, 0),
-            ..Disturbances::default()
-        }
-    }
-}
-
-/// Loads the vehicle file or the built-in vehicle.
-pub fn load_vehicle(path: Option<&Path>) -> Result<VehicleParams> {
-    match path {
-        None => Ok(VehicleParams::default()),
-        Some(p) => Ok(VehicleParams::from_toml_file(p)?),
-    }
-}
-
-/// Checks a friction coefficient given on the command line.
-pub fn check_mu(name: &str, mu: f64) -> Result<()> {
-    if !(mu.is_finite() && mu > 0.0 && mu <= 2.0) {
-        bail!("{name} must be a friction coefficient in (0, 2], got {mu}");
-    }
-    Ok(())
 }
 
 /// Runs one closed-loop scenario and returns its result (no files written).
@@ -211,55 +228,63 @@ pub fn simulate_with(
     result
 }
 
-/// Checks `run`'s arguments and resolves the vehicle (the nominal car, the one the
-/// firmware is told of), the scenario (with its `--mu-patch` patches, checked
-/// against the track) and the options (shared by `run` and `pil`).
-pub fn prepare(args: &RunArgs) -> Result<(VehicleParams, Scenario, SimOptions)> {
+/// Checks a run's settings (every path before anything runs) and sets it up as a
+/// sweep's run with the same factors ([`set_up`]): the scenario (its obstacles,
+/// `random:N` ones included, and `--mu-patch` patches, checked against the track),
+/// the nominal car (the firmware is told of it) and the plant's, the options and
+/// the disturbances (noise, delay, the fault's). Shared by `run` and `pil`.
+pub fn prepare(args: &RunArgs) -> Result<SetUp> {
     check_mu("--mu", args.mu)?;
     let planner_mu = args.planner_mu.unwrap_or(args.mu);
-    check_mu("--planner-mu", planner_mu)?;
-    if args.laps == 0 {
-        bail!("--laps must be at least 1");
-    }
-    if !(args.duration.is_finite() && args.duration > 0.0) {
-        bail!(
-            "--duration must be a positive number of seconds, got {}",
-            args.duration
-        );
-    }
-    if !(args.initial_speed.is_finite() && args.initial_speed >= 0.0 && args.initial_speed < 60.0) {
-        bail!(
-            "--initial-speed must be in [0, 60) m/s, got {}",
-            args.initial_speed
-        );
-    }
+    check_mu("--mu-planner", planner_mu)?;
+    check_run_length(args.laps, args.duration, args.initial_speed)?;
     if !(args.ecu_mhz.is_finite() && args.ecu_mhz > 0.0) {
         bail!(
             "--ecu-mhz must be a positive clock frequency in MHz (e.g. 168), got {}",
             args.ecu_mhz
         );
     }
-    args.conditions.check()?;
-    let vehicle = load_vehicle(args.vehicle.as_deref())?;
-    let mut scenario = scenario::resolve(&args.track, &args.obstacles, !args.open)?;
-    RoadFriction::new(
-        args.mu,
-        &args.conditions.mu_patches,
-        &scenario.track.name,
-        scenario.track.length(),
-        scenario.track.closed,
-    )?;
-    scenario.mu_patches = args.conditions.mu_patches.clone();
-    let opts = SimOptions {
-        mu_road: args.mu,
+    let c = &args.conditions;
+    c.check()?;
+    check_track_arg(&args.track, false)?;
+    let obstacles: ObstacleSpec = args.obstacles.parse().map_err(|e: String| anyhow!(e))?;
+    check_obstacles_arg(&obstacles, std::slice::from_ref(&args.track))?;
+    if let Some(v) = &args.vehicle {
+        check_vehicle_arg(v)?;
+    }
+    let default_clock_hz = SimOptions::default().ecu_clock_hz;
+    let overrun = matches!(c.fault, Fault::Overrun(_));
+    if overrun && (args.ecu_mhz * 1e6 - default_clock_hz).abs() > 1.0 {
+        bail!(
+            "--fault {} sets the ECU clock itself: leave --ecu-mhz out",
+            c.fault
+        );
+    }
+    let spec = RunSpec {
+        index: 0,
+        track: args.track.clone(),
+        mu: args.mu,
         mu_planner: planner_mu,
-        laps: args.laps,
-        max_duration_s: args.duration,
-        initial_speed_mps: args.initial_speed,
-        ecu_clock_hz: args.ecu_mhz * 1e6,
-        ..SimOptions::default()
+        vehicle: args.vehicle.clone(),
+        mass_scale: c.mass_scale,
+        noise: c.noise.0,
+        delay_ms: c.delay_ms,
+        fault: c.fault,
+        seed: c.seed,
     };
-    Ok((vehicle, scenario, opts))
+    let setting = Setting {
+        obstacles,
+        open: args.open,
+        laps: args.laps,
+        duration_s: args.duration,
+        initial_speed_mps: args.initial_speed,
+        mu_patches: c.mu_patches.clone(),
+    };
+    let mut s = set_up(&spec, &setting)?;
+    if !overrun {
+        s.opts.ecu_clock_hz = args.ecu_mhz * 1e6;
+    }
+    Ok(s)
 }
 
 /// The one-line summary `run` and `pil` print.
@@ -308,26 +333,29 @@ pub fn friction_line(s: &crate::closed_loop::Summary) -> String {
     )
 }
 
+/// `host-sim run` from its command line.
+pub fn command(cmd: &RunCommand) -> Result<()> {
+    run(&cmd.resolve("run")?)
+}
+
 /// `host-sim run`.
 pub fn run(args: &RunArgs) -> Result<()> {
-    let (vehicle, scenario, opts) = prepare(args)?;
-    let plant_car = vehicle.with_mass_scale(args.conditions.mass_scale);
-    let d = args.conditions.disturbances(&scenario.track.name);
+    let s = prepare(args)?;
     let result = simulate_with(
-        &scenario,
-        &vehicle,
-        &plant_car,
-        &opts,
-        &d,
+        &s.scenario,
+        &s.nominal,
+        &s.plant_car,
+        &s.opts,
+        &s.disturbances,
         args.precision,
         true,
     )?;
-    write_outputs(&args.out, &scenario, &result, !args.no_plots)?;
-    let s = &result.summary;
-    println!("{}", summary_line(&scenario, s));
-    println!("{}", friction_line(s));
-    if !s.completed {
-        println!("stopped: {}", s.stop_reason);
+    write_outputs(&args.out, &s.scenario, &result, !args.no_plots)?;
+    let sum = &result.summary;
+    println!("{}", summary_line(&s.scenario, sum));
+    println!("{}", friction_line(sum));
+    if !sum.completed {
+        println!("stopped: {}", sum.stop_reason);
     }
     println!("wrote {}", args.out.display());
     Ok(())

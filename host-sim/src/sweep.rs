@@ -15,14 +15,18 @@
 //!
 //! # Factors
 //!
+//! The scenario options `run` and `pil` take too
+//! ([`crate::scenario_options::ScenarioArgs`]), lists here:
+//!
 //! - `--mass-scale k`: the plant's mass and inertias × k; the firmware is told the
 //!   nominal car (an unknown load).
 //! - `--noise`: a level name (`none` 0, `low` 1, `medium` 2, `high` 4) or a number,
 //!   multiplying [`crate::disturbance::NOISE_UNIT`] (σ of 0.05 m on X and Y, 0.005
 //!   rad on the heading, 0.05 m/s on the speed, 0.005 rad/s on the yaw rate).
 //! - `--delay-ms`: the estimate the tasks see is that old (rounded to 10 ms).
-//! - `--faults`: see [`crate::faults`].
+//! - `--fault`: see [`crate::faults`] (`--help` lists them).
 //! - `--obstacles random:N`: see [`crate::obstacle_placement`].
+//! - `--seed` (a list) or `--seeds N` (0..N).
 //! - `--mu-patch START_M:LENGTH_M:MU` (repeatable): patches of road with their own
 //!   friction, the same in every run (not a factor), checked against every track's
 //!   lap before the first run; see [`crate::road_friction`].
@@ -44,9 +48,18 @@
 //! half-width on that side. `max_edge_excess_m` is how far the body's side went
 //! past the edge (negative: the margin left).
 //!
-//! With obstacles, each run's are written to `obstacles/<index>.csv`: `host-sim run
-//! --track T --obstacles obstacles/<index>.csv --mu ...` replays a run without its
-//! noise, delay or fault.
+//! With obstacles, each run's are written to `obstacles/<index>.csv`. `host-sim run`
+//! with a run's factors (`--track T --mu … --fault … --seed S`, its `--obstacles`)
+//! sets the run up as the sweep did ([`crate::scenario_options::set_up`]) and
+//! replays it.
+//!
+//! # Exit status
+//!
+//! [`verdict`]: non-zero when a run could not run (an error row: outcome `failed`,
+//! an error, no summary), after every output is written; with `--strict` also when
+//! a run did not show its expected behaviour. Laps that ran and ended badly are
+//! measurements (`sweep.json`). A missing track, folder, obstacle or vehicle file is
+//! refused before the first run.
 //!
 //! `sweep.csv` holds every field of `summary.json` except the host's wall-time
 //! figures (`plan_host_us_p50`, `plan_host_us_max`, `sim_speed_x_realtime`), which
@@ -65,62 +78,28 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::closed_loop::{self, SimOptions, Summary};
+use crate::closed_loop::{self, Summary};
+use crate::disturbance::DisturbedEcu;
 pub use crate::disturbance::NoiseLevel;
-use crate::disturbance::{
-    check_delay_ms, run_seed, Disturbances, DisturbedEcu, Dropout, DropoutKind, LateObstacle,
-};
-use crate::faults::{classify, Fault, Outcome, RunFacts, FAULT_START_S};
-use crate::obstacle_placement::{box_at, random_obstacles, widths_at, RoadCheck};
-use crate::road_friction::{MuPatch, RoadFriction};
-use crate::run::{check_mu, load_vehicle};
+use crate::faults::{classify, Fault, Outcome, RunFacts};
+use crate::obstacle_placement::widths_at;
+use crate::road_friction::RoadFriction;
 use crate::scenario::{self, Scenario};
+use crate::scenario_options::{check_track_arg, set_up, ScenarioArgs, Setting};
+pub use crate::scenario_options::{ObstacleSpec, RunSpec};
 use crate::sweep_figures;
-use crate::vehicle::{check_mass_scale, VehicleParams};
+use crate::vehicle::VehicleParams;
 
 /// Arguments of `host-sim sweep`.
 #[derive(Debug, Clone, Args)]
 pub struct SweepArgs {
-    /// Tracks: `paper`, track CSV files, or folders (every `*.csv` in them).
-    #[arg(long, num_args = 1.., required = true)]
-    pub tracks: Vec<String>,
-    /// Obstacles: `none`, `random:N` (N per km, from the seed) or an obstacle CSV.
-    #[arg(long, default_value = "none")]
-    pub obstacles: String,
-    /// Road frictions μ, comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "1")]
-    pub mu: Vec<f64>,
-    /// Planner frictions, comma-separated (default: the road's).
-    #[arg(long, value_delimiter = ',')]
-    pub mu_planner: Vec<f64>,
-    /// Vehicle TOML files (default: the built-in car).
-    #[arg(long, num_args = 1..)]
-    pub vehicle: Vec<PathBuf>,
-    /// Scales of the plant's mass and inertias (the firmware is told the nominal car).
-    #[arg(long, value_delimiter = ',', default_value = "1")]
-    pub mass_scale: Vec<f64>,
-    /// Noise levels: none, low, medium, high or a multiple of the level-1 σ.
-    #[arg(long, value_delimiter = ',', default_value = "none")]
-    pub noise: Vec<NoiseLevel>,
-    /// Delays of the estimate, ms (rounded to 10 ms), comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "0")]
-    pub delay_ms: Vec<f64>,
-    /// Fault scenarios, comma-separated (see `host-sim sweep --help` and the README).
-    #[arg(long, value_delimiter = ',', default_value = "none")]
-    pub faults: Vec<Fault>,
-    /// A patch of road with its own friction in every run, `START_M:LENGTH_M:MU`
-    /// (metres along the lap, metres, friction; repeatable; wraps over laps).
-    #[arg(long = "mu-patch", value_name = "START_M:LENGTH_M:MU")]
-    pub mu_patches: Vec<MuPatch>,
-    /// Seeds per combination (0..N).
-    #[arg(long, default_value_t = 1)]
-    pub seeds: u32,
-    /// Laps per run.
-    #[arg(long, default_value_t = 1)]
-    pub laps: u32,
-    /// Simulated time limit per run, s.
-    #[arg(long, default_value_t = 900.0)]
-    pub duration: f64,
+    /// The scenario options `run` and `pil` take too, lists here: every
+    /// combination runs.
+    #[command(flatten)]
+    pub scenario: ScenarioArgs,
+    /// Seeds 0..N per combination (instead of --seed's list).
+    #[arg(long = "seeds", value_name = "N", conflicts_with = "seed")]
+    pub seed_count: Option<u32>,
     /// Print the runs (index and factors) and exit.
     #[arg(long)]
     pub list: bool,
@@ -139,6 +118,11 @@ pub struct SweepArgs {
     /// `all` for every run.
     #[arg(long, value_enum)]
     pub logs: Option<LogRuns>,
+    /// Also exit non-zero when a run did not show its expected behaviour
+    /// (`fault_check` fail: with no fault, any outcome but `ok`). Without it only
+    /// the runs that could not run (an error row) make the exit status non-zero.
+    #[arg(long)]
+    pub strict: bool,
     /// Output directory (created).
     #[arg(long, required_unless_present = "list")]
     pub out: Option<PathBuf>,
@@ -162,6 +146,10 @@ pub struct MergeArgs {
     /// Skip the PNG figures.
     #[arg(long)]
     pub no_plots: bool,
+    /// Also exit non-zero when a run did not show its expected behaviour (as for
+    /// `sweep --strict`).
+    #[arg(long)]
+    pub strict: bool,
     /// Output directory (created).
     #[arg(long)]
     pub out: PathBuf,
@@ -190,84 +178,7 @@ impl FromStr for Shard {
     }
 }
 
-/// The obstacles of every run.
-#[derive(Clone, Debug, PartialEq)]
-pub enum ObstacleSpec {
-    /// None.
-    None,
-    /// This many random boxes per km.
-    Random(f64),
-    /// From a file.
-    File(String),
-}
-
-impl FromStr for ObstacleSpec {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        if s == "none" {
-            return Ok(ObstacleSpec::None);
-        }
-        if let Some(n) = s.strip_prefix("random:") {
-            return match n.parse::<f64>() {
-                Ok(x) if x.is_finite() && x >= 0.0 => Ok(ObstacleSpec::Random(x)),
-                _ => Err(format!(
-                    "--obstacles random:N wants N ≥ 0 per km, got {n:?}"
-                )),
-            };
-        }
-        Ok(ObstacleSpec::File(s.to_string()))
-    }
-}
-
-/// One run of the sweep.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RunSpec {
-    /// Place in the cross product.
-    pub index: usize,
-    /// Track: `paper` or a file path.
-    pub track: String,
-    /// Road friction.
-    pub mu: f64,
-    /// Planner friction (before a `mu-high` fault).
-    pub mu_planner: f64,
-    /// Vehicle file (`None`: the built-in car).
-    pub vehicle: Option<PathBuf>,
-    /// Plant mass scale.
-    pub mass_scale: f64,
-    /// Noise level.
-    pub noise: f64,
-    /// Estimate delay, ms.
-    pub delay_ms: f64,
-    /// Fault scenario.
-    pub fault: Fault,
-    /// Seed column (0..seeds).
-    pub seed: u32,
-}
-
 impl RunSpec {
-    /// The track's name (file stem).
-    pub fn track_name(&self) -> String {
-        Path::new(&self.track)
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| self.track.clone())
-    }
-
-    /// The vehicle's name (file stem, or `default`).
-    pub fn vehicle_name(&self) -> String {
-        self.vehicle
-            .as_deref()
-            .and_then(|p| p.file_stem())
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "default".into())
-    }
-
-    /// The seed of the run's random draws: the track's name and the seed column
-    /// (the same obstacles and noise across frictions, vehicles and faults).
-    pub fn rng_seed(&self) -> u64 {
-        run_seed(&self.track_name(), self.seed)
-    }
-
     fn columns(&self) -> Vec<String> {
         vec![
             self.index.to_string(),
@@ -319,53 +230,66 @@ pub const WALL_TIME_FIELDS: [&str; 3] = [
     "sim_speed_x_realtime",
 ];
 
-/// Expands folders into their `*.csv` files (sorted); other arguments as given.
-pub fn expand_tracks(args: &[String]) -> Vec<String> {
+/// Expands folders into their `*.csv` files (sorted); other arguments as given
+/// (checked first: [`check_track_arg`]). A folder without a `*.csv` is an error.
+pub fn expand_tracks(args: &[String]) -> Result<Vec<String>> {
     let mut out = Vec::new();
     for a in args {
+        check_track_arg(a, true)?;
         let p = Path::new(a);
         if p.is_dir() {
             let mut files: Vec<String> = fs::read_dir(p)
-                .map(|rd| {
-                    rd.filter_map(|e| e.ok())
-                        .map(|e| e.path())
-                        .filter(|f| f.extension().is_some_and(|x| x == "csv"))
-                        .map(|f| f.display().to_string())
-                        .collect()
-                })
-                .unwrap_or_default();
+                .with_context(|| format!("--track {a}: cannot read the folder"))?
+                .filter_map(|e| e.ok())
+                .map(|e| e.path())
+                .filter(|f| f.extension().is_some_and(|x| x == "csv"))
+                .map(|f| f.display().to_string())
+                .collect();
+            if files.is_empty() {
+                bail!("--track {a}: no *.csv track file in this folder");
+            }
             files.sort();
             out.extend(files);
         } else {
             out.push(a.clone());
         }
     }
-    out
+    Ok(out)
+}
+
+/// The seeds of every combination: `--seeds N` (0..N) or `--seed`'s list.
+fn seeds(args: &SweepArgs) -> Vec<u32> {
+    match args.seed_count {
+        Some(n) => (0..n).collect(),
+        None => args.scenario.seed.clone(),
+    }
 }
 
 /// The cross product of `args` (module docs), in index order.
-pub fn runs(args: &SweepArgs) -> Vec<RunSpec> {
-    let tracks = expand_tracks(&args.tracks);
-    let vehicles: Vec<Option<PathBuf>> = if args.vehicle.is_empty() {
+pub fn runs(args: &SweepArgs) -> Result<Vec<RunSpec>> {
+    let sc = &args.scenario;
+    let tracks = expand_tracks(&sc.tracks)?;
+    let vehicles: Vec<Option<PathBuf>> = if sc.vehicle.is_empty() {
         vec![None]
     } else {
-        args.vehicle.iter().cloned().map(Some).collect()
+        sc.vehicle.iter().cloned().map(Some).collect()
     };
+    let seeds = seeds(args);
     let mut out = Vec::new();
     for track in &tracks {
-        for &mu in &args.mu {
-            let planners = if args.mu_planner.is_empty() {
+        for &mu in &sc.mu {
+            let planners = if sc.mu_planner.is_empty() {
                 vec![mu]
             } else {
-                args.mu_planner.clone()
+                sc.mu_planner.clone()
             };
             for &mu_planner in &planners {
                 for vehicle in &vehicles {
-                    for &mass_scale in &args.mass_scale {
-                        for noise in &args.noise {
-                            for &delay_ms in &args.delay_ms {
-                                for &fault in &args.faults {
-                                    for seed in 0..args.seeds {
+                    for &mass_scale in &sc.mass_scale {
+                        for noise in &sc.noise {
+                            for &delay_ms in &sc.delay_ms {
+                                for &fault in &sc.faults {
+                                    for &seed in &seeds {
                                         out.push(RunSpec {
                                             index: out.len(),
                                             track: track.clone(),
@@ -387,33 +311,22 @@ pub fn runs(args: &SweepArgs) -> Vec<RunSpec> {
             }
         }
     }
-    out
+    Ok(out)
 }
 
-fn check_args(args: &SweepArgs) -> Result<ObstacleSpec> {
-    for &mu in args.mu.iter().chain(&args.mu_planner) {
-        check_mu("--mu/--mu-planner", mu)?;
+/// Checks the arguments (every value and path) before any run starts.
+fn check_args(args: &SweepArgs) -> Result<()> {
+    args.scenario.check(true)?;
+    if seeds(args).is_empty() {
+        bail!("--seeds must be at least 1");
     }
-    for &k in &args.mass_scale {
-        check_mass_scale(k).map_err(|e| anyhow!(e))?;
-    }
-    for &d in &args.delay_ms {
-        check_delay_ms(d).map_err(|e| anyhow!(e))?;
-    }
-    if args.laps == 0 || args.seeds == 0 {
-        bail!("--laps and --seeds must be at least 1");
-    }
-    if !(args.duration.is_finite() && args.duration > 0.0) {
-        bail!("--duration must be a positive number of seconds");
-    }
-    args.obstacles
-        .parse::<ObstacleSpec>()
-        .map_err(|e| anyhow!(e))
+    Ok(())
 }
 
 /// Checks that the patches fit every track and road friction of `specs` before any
 /// run starts (a patch past a lap's end is the command's mistake, not a run's).
-fn check_patches(specs: &[RunSpec], patches: &[MuPatch]) -> Result<()> {
+fn check_patches(specs: &[RunSpec], setting: &Setting) -> Result<()> {
+    let patches = &setting.mu_patches;
     if patches.is_empty() {
         return Ok(());
     }
@@ -423,8 +336,8 @@ fn check_patches(specs: &[RunSpec], patches: &[MuPatch]) -> Result<()> {
             continue;
         }
         seen.push(&spec.track);
-        let track = scenario::resolve(&spec.track, "none", true)?.track;
-        RoadFriction::new(spec.mu, patches, &track.name, track.length(), true)?;
+        let track = scenario::resolve(&spec.track, "none", !setting.open)?.track;
+        RoadFriction::new(spec.mu, patches, &track.name, track.length(), track.closed)?;
     }
     Ok(())
 }
@@ -441,19 +354,13 @@ pub struct RunRow {
 /// Settings shared by every run of a sweep.
 #[derive(Clone, Debug)]
 pub struct Common {
-    /// Obstacles.
-    pub obstacles: ObstacleSpec,
-    /// Laps.
-    pub laps: u32,
-    /// Simulated time limit, s.
-    pub duration_s: f64,
+    /// Obstacles, laps, time limit, initial speed, patches.
+    pub setting: Setting,
     /// Where to write each run's obstacles as `<index>.csv` (random ones included,
     /// so `host-sim run --obstacles` can replay a run); `None`: not written.
     pub obstacle_dir: Option<PathBuf>,
     /// Where and for which runs to write the run's outputs (`<dir>/<index>/`).
     pub log_dir: Option<(PathBuf, LogRuns)>,
-    /// Patches of road with their own friction, in every run.
-    pub mu_patches: Vec<MuPatch>,
 }
 
 /// Runs one run and returns its row (an error is a row too).
@@ -482,91 +389,33 @@ fn check_cell(fault: Fault, facts: Option<&RunFacts>) -> String {
     }
 }
 
-/// The late-obstacle fault's box: 2 m × 2 m at half the lap, its centre 0.8 m off
-/// the centre line on the side the firmware finds room beside it.
-fn late_obstacle_box(scn: &Scenario, check: &RoadCheck) -> Result<crate::obstacle_file::Obstacle> {
-    let s = 0.5 * scn.track.length();
-    [-0.8, 0.8, -1.5, 1.5, 0.0]
-        .into_iter()
-        .map(|lat| box_at(&scn.track, "late_obstacle", s, lat, (2.0, 2.0)))
-        .find(|o| check.leaves_room(o))
-        .ok_or_else(|| anyhow!("no room for the late obstacle at half the lap"))
-}
-
 fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
-    let mut scn = scenario::resolve(&spec.track, "none", true)?;
-    scn.mu_patches = common.mu_patches.clone();
-    let nominal = load_vehicle(spec.vehicle.as_deref())?;
-    let plant_car = nominal.with_mass_scale(spec.mass_scale);
-    let mut opts = SimOptions {
-        mu_road: spec.mu,
-        mu_planner: spec.mu_planner,
-        laps: common.laps,
-        max_duration_s: common.duration_s,
-        ..SimOptions::default()
-    };
-    let mut d = Disturbances {
-        noise_scale: spec.noise,
-        delay_ms: spec.delay_ms,
-        seed: spec.rng_seed(),
-        ..Disturbances::default()
-    };
-    let start_us = (FAULT_START_S * 1e6) as u64;
-    match spec.fault {
-        Fault::None | Fault::LateObstacle(_) => {}
-        Fault::DropoutNan(n) | Fault::DropoutHold(n) => {
-            let kind = if matches!(spec.fault, Fault::DropoutNan(_)) {
-                DropoutKind::Nan
-            } else {
-                DropoutKind::Hold
-            };
-            d.dropout = Some(Dropout {
-                start_us,
-                periods: n,
-                kind,
-            });
-        }
-        Fault::Overrun(mhz) => opts.ecu_clock_hz = mhz * 1e6,
-        Fault::MuHigh(k) => opts.mu_planner = (spec.mu_planner * k).min(2.0),
-        Fault::SteerRate(r) => d.steer_rate_limit_radps = Some(r),
-    }
-    let check = RoadCheck::new(&scn.track, &nominal, opts.mu_planner)?;
-    scn.obstacles = match &common.obstacles {
-        ObstacleSpec::None => Vec::new(),
-        ObstacleSpec::Random(n) => random_obstacles(&scn.track, *n, spec.rng_seed(), &check),
-        ObstacleSpec::File(f) => crate::obstacle_file::load_obstacles_path(f)?,
-    };
-    if let (Some(dir), false) = (&common.obstacle_dir, scn.obstacles.is_empty()) {
+    let setup = set_up(spec, &common.setting)?;
+    let (scn, opts) = (&setup.scenario, &setup.opts);
+    if let (Some(dir), false) = (&common.obstacle_dir, setup.static_obstacles().is_empty()) {
         let p = dir.join(format!("{}.csv", spec.index));
         fs::create_dir_all(dir)
             .and_then(|_| {
                 fs::write(
                     &p,
-                    crate::obstacle_file::obstacles_to_csv_string(&scn.obstacles),
+                    crate::obstacle_file::obstacles_to_csv_string(setup.static_obstacles()),
                 )
             })
             .with_context(|| format!("cannot write {}", p.display()))?;
     }
-    if let Fault::LateObstacle(dist) = spec.fault {
-        scn.obstacles.push(late_obstacle_box(&scn, &check)?);
-        d.late_obstacle = Some(LateObstacle {
-            index: scn.obstacles.len() - 1,
-            appear_m: dist,
-        });
-    }
-    let mut ecu = DisturbedEcu::<f32>::new(&scn, &nominal, &opts, d.clone())?;
-    let res = closed_loop::run_with(&scn, &plant_car, &opts, &mut ecu, |_, _| {})?;
+    let mut ecu = DisturbedEcu::<f32>::new(scn, &setup.nominal, opts, setup.disturbances.clone())?;
+    let res = closed_loop::run_with(scn, &setup.plant_car, opts, &mut ecu, |_, _| {})?;
     let s = &res.summary;
-    let edge = edge_excess(&scn, &plant_car, &res.log);
+    let edge = edge_excess(scn, &setup.plant_car, &res.log);
     let outcome = classify(s, edge.off_road_samples > 0);
     if let Some((dir, which)) = &common.log_dir {
         if *which == LogRuns::All || outcome != Outcome::Ok {
-            crate::run::write_outputs(&dir.join(spec.index.to_string()), &scn, &res, false)?;
+            crate::run::write_outputs(&dir.join(spec.index.to_string()), scn, &res, false)?;
         }
     }
     let fault_event_s = match spec.fault {
         Fault::LateObstacle(_) => ecu.obstacle_appeared_at_us().map(|t| t as f64 * 1e-6),
-        Fault::DropoutNan(_) | Fault::DropoutHold(_) => Some(FAULT_START_S),
+        Fault::DropoutNan(_) | Fault::DropoutHold(_) => Some(crate::faults::FAULT_START_S),
         _ => None,
     };
     let facts = RunFacts {
@@ -590,7 +439,9 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
         edge.off_road_samples.to_string(),
         format!("{:.4}", edge.max_excess_m),
         format!("{:.4}", s.max_abs_ay_mps2 / (spec.mu * g)),
-        format!("{:.4}", s.max_abs_plan_ay_mps2 / (opts.mu_planner * g)),
+        s.max_abs_plan_ay_mps2
+            .map(|ay| format!("{:.4}", ay / (opts.mu_planner * g)))
+            .unwrap_or_default(),
     ];
     cells.extend(summary_values(s)?);
     Ok(cells)
@@ -700,10 +551,37 @@ pub fn write_csv(path: &Path, rows: &[Vec<String>]) -> Result<()> {
     Ok(())
 }
 
+/// The exit status of a sweep from its rows: an error when a run could not run
+/// (its row has outcome `failed`, an error and no summary), so that a script or a
+/// batch engine notices; with `strict`, also when a run that ran did not show its
+/// expected behaviour (`fault_check` fail). Laps that ran and ended badly
+/// (collision, off-road, a miss, a standstill, the time limit) are the sweep's
+/// measurements, counted in `sweep.json`; they fail the command only with `strict`.
+pub fn verdict(rows: &[Row], strict: bool) -> Result<()> {
+    let broken: Vec<&Row> = rows.iter().filter(|r| !r.ran).collect();
+    if let Some(first) = broken.first() {
+        bail!(
+            "{} of {} runs could not run (outcome `failed`, column `error` of sweep.csv); the first, run {}: {}",
+            broken.len(),
+            rows.len(),
+            first.factors["index"],
+            first.error
+        );
+    }
+    let unexpected = rows.iter().filter(|r| !r.fault_pass).count();
+    if strict && unexpected > 0 {
+        bail!(
+            "--strict: {unexpected} of {} runs did not show their expected behaviour (column `fault_check` of sweep.csv)",
+            rows.len()
+        );
+    }
+    Ok(())
+}
+
 /// `host-sim sweep`.
 pub fn run(args: &SweepArgs) -> Result<()> {
-    let obstacles = check_args(args)?;
-    let all = runs(args);
+    check_args(args)?;
+    let all = runs(args)?;
     if args.list {
         println!("{}", FACTOR_COLUMNS.join("\t"));
         for r in &all {
@@ -724,15 +602,13 @@ pub fn run(args: &SweepArgs) -> Result<()> {
             .cloned()
             .collect(),
     };
+    let setting = args.scenario.setting();
+    check_patches(&mine, &setting)?;
     let common = Common {
-        obstacle_dir: (obstacles != ObstacleSpec::None).then(|| out.join("obstacles")),
-        obstacles,
-        laps: args.laps,
-        duration_s: args.duration,
+        obstacle_dir: (setting.obstacles != ObstacleSpec::None).then(|| out.join("obstacles")),
+        setting,
         log_dir: args.logs.map(|w| (out.join("runs"), w)),
-        mu_patches: args.mu_patches.clone(),
     };
-    check_patches(&mine, &args.mu_patches)?;
     fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let wall = Instant::now();
     let rows = run_all(&mine, &common, args.jobs, true)?;
@@ -751,7 +627,7 @@ pub fn run(args: &SweepArgs) -> Result<()> {
     let text = finish(out, &records, Some(wall_s), !args.no_plots)?;
     println!("{text}");
     println!("wrote {}", out.display());
-    Ok(())
+    verdict(&parse_rows(&records), args.strict)
 }
 
 /// Runs `specs` in parallel (on `jobs` threads, default all cores), with a
@@ -828,7 +704,7 @@ pub fn merge(args: &MergeArgs) -> Result<()> {
     let text = finish(&args.out, &records, None, !args.no_plots)?;
     println!("{text}");
     println!("wrote {}", args.out.display());
-    Ok(())
+    verdict(&parse_rows(&records), args.strict)
 }
 
 /// One row of `sweep.csv` as the aggregate reads it.
@@ -844,6 +720,10 @@ pub struct Row {
     pub fault_pass: bool,
     /// Error, if any.
     pub error: String,
+    /// The run ran (its summary's cells are filled); false for a run that could
+    /// not run (a track or vehicle that cannot be loaded, a planner that refuses
+    /// the track, an error on the way): a row with outcome `failed` and its error.
+    pub ran: bool,
     /// Completed.
     pub completed: bool,
     /// Largest |lateral error|, m.
@@ -880,6 +760,7 @@ pub fn parse_rows(records: &[Vec<String>]) -> Vec<Row> {
             fault: get(r, "fault"),
             fault_pass: get(r, "fault_check") == "pass",
             error: get(r, "error"),
+            ran: !get(r, "completed").is_empty(),
             completed: get(r, "completed") == "true",
             lat_max_m: num(r, "max_abs_lateral_error_m"),
             ay_over_mu_g: num(r, "ay_over_mu_g"),
@@ -1248,6 +1129,42 @@ mod tests {
         assert_eq!((b.track.as_str(), b.mu_false_drops), ("b", 0));
         assert!(b.missed.is_empty(), "{:?}", b.missed);
         assert!(text_summary(&agg).contains("μ̂ fd"));
+    }
+
+    #[test]
+    fn a_run_that_could_not_run_fails_the_sweep_and_a_bad_outcome_only_when_strict() {
+        let h = header();
+        let record = |index: &str, completed: &str, check: &str| -> Vec<String> {
+            h.iter()
+                .map(|c| match c.as_str() {
+                    "index" => index.to_string(),
+                    "track" => "a".into(),
+                    "outcome" => if completed == "true" { "ok" } else { "failed" }.into(),
+                    "fault_check" => check.into(),
+                    "error" if completed.is_empty() => "a.csv: line 3: bad".into(),
+                    "completed" => completed.into(),
+                    _ => String::new(),
+                })
+                .collect()
+        };
+        let good = [record("0", "true", "pass"), record("1", "false", "fail")];
+        // A lap that ran and failed is a measurement; only --strict fails on it.
+        assert!(verdict(&parse_rows(&good), false).is_ok());
+        let strict = verdict(&parse_rows(&good), true)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(strict.contains("1 of 2 runs did not show"), "{strict}");
+        // A run that could not run (no summary) fails the sweep, strict or not.
+        let broken = [record("0", "true", "pass"), record("1", "", "fail")];
+        for strict in [false, true] {
+            let e = verdict(&parse_rows(&broken), strict)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(e.contains("1 of 2 runs could not run"), "{e}");
+            assert!(e.contains("run 1: a.csv: line 3: bad"), "{e}");
+        }
     }
 
     #[test]

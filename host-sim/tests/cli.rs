@@ -1,6 +1,8 @@
-//! The command line: `host-sim tire` round trip and error messages.
+//! The command line: `host-sim tire` round trip, error messages, and `run`, `pil` and
+//! `sweep` speaking one language (the same scenario options, spelt alike).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+use std::path::Path;
 use std::process::Command;
 
 use host_sim::tire::{forces, TireParams};
@@ -181,4 +183,409 @@ fn run_refuses_a_bad_load_noise_or_delay() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(err.contains(want), "{arg}: {err}");
     }
+}
+
+/// The clap definition of `run`, `pil` and `sweep` as their structs give it.
+fn commands() -> [(&'static str, clap::Command); 3] {
+    use clap::Args;
+    [
+        (
+            "run",
+            host_sim::run::RunCommand::augment_args(clap::Command::new("run")),
+        ),
+        (
+            "pil",
+            host_sim::pil::PilCommand::augment_args(clap::Command::new("pil")),
+        ),
+        (
+            "sweep",
+            host_sim::sweep::SweepArgs::augment_args(clap::Command::new("sweep")),
+        ),
+    ]
+}
+
+/// An argument's spelling and meaning as clap holds them: long name, hidden
+/// aliases, value names, defaults, help.
+fn signature(a: &clap::Arg) -> String {
+    format!(
+        "{:?} {:?} {:?} {:?} {:?} {:?}",
+        a.get_long(),
+        a.get_all_aliases(),
+        a.get_value_names(),
+        a.get_default_values(),
+        a.get_value_delimiter(),
+        a.get_help().map(ToString::to_string),
+    )
+}
+
+#[test]
+fn run_pil_and_sweep_spell_every_scenario_option_alike() {
+    use clap::Args;
+    let shared = host_sim::scenario_options::ScenarioArgs::augment_args(clap::Command::new("x"));
+    let names: Vec<&str> = shared
+        .get_arguments()
+        .filter_map(|a| a.get_long())
+        .collect();
+    for want in [
+        "track",
+        "open",
+        "obstacles",
+        "seed",
+        "mu",
+        "mu-planner",
+        "vehicle",
+        "mass-scale",
+        "noise",
+        "delay-ms",
+        "fault",
+        "mu-patch",
+        "laps",
+        "duration",
+        "initial-speed",
+    ] {
+        assert!(names.contains(&want), "--{want} is not a shared option");
+    }
+    for a in shared.get_arguments() {
+        for (cmd, c) in commands() {
+            let b = c
+                .get_arguments()
+                .find(|b| b.get_id() == a.get_id())
+                .unwrap_or_else(|| panic!("`{cmd}` lacks {:?}", a.get_long()));
+            assert_eq!(signature(a), signature(b), "`{cmd}` --{:?}", a.get_long());
+        }
+    }
+    // No command adds its own spelling of a shared option.
+    for (cmd, c) in commands() {
+        for b in c.get_arguments() {
+            if shared.get_arguments().any(|a| a.get_id() == b.get_id()) {
+                continue;
+            }
+            let long = b.get_long().unwrap_or_default();
+            for a in shared.get_arguments() {
+                let spellings: Vec<&str> = a
+                    .get_long()
+                    .into_iter()
+                    .chain(a.get_all_aliases().unwrap_or_default())
+                    .collect();
+                assert!(
+                    !spellings.contains(&long),
+                    "`{cmd}` --{long} shadows a shared option"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_same_words_parse_to_the_same_scenario_in_run_pil_and_sweep_old_spellings_included() {
+    use clap::FromArgMatches;
+    let words = [
+        "--track",
+        "paper",
+        "--obstacles",
+        "random:3",
+        "--seed",
+        "2",
+        "--mu",
+        "0.8",
+        "--mu-planner",
+        "0.7",
+        "--vehicle",
+        "car.toml",
+        "--mass-scale",
+        "1.1",
+        "--noise",
+        "low",
+        "--delay-ms",
+        "20",
+        "--fault",
+        "mu-high:1.2",
+        "--mu-patch",
+        "100:50:0.5",
+        "--laps",
+        "2",
+        "--duration",
+        "30",
+        "--initial-speed",
+        "12",
+        "--open",
+        "--out",
+        "o",
+    ];
+    let old = words.map(|w| match w {
+        "--track" => "--tracks",
+        "--mu-planner" => "--planner-mu",
+        "--fault" => "--faults",
+        w => w,
+    });
+    let mut parsed = Vec::new();
+    for w in [&words, &old] {
+        for (cmd, c) in commands() {
+            let m = c
+                .clone()
+                .try_get_matches_from(std::iter::once(cmd).chain(w.iter().copied()))
+                .unwrap_or_else(|e| panic!("`{cmd}` {w:?}: {e}"));
+            let scenario = match cmd {
+                "run" => {
+                    host_sim::run::RunCommand::from_arg_matches(&m)
+                        .unwrap()
+                        .scenario
+                }
+                "pil" => {
+                    host_sim::pil::PilCommand::from_arg_matches(&m)
+                        .unwrap()
+                        .run
+                        .scenario
+                }
+                _ => {
+                    host_sim::sweep::SweepArgs::from_arg_matches(&m)
+                        .unwrap()
+                        .scenario
+                }
+            };
+            parsed.push((cmd, scenario));
+        }
+    }
+    let first = &parsed[0].1;
+    assert_eq!(first.obstacles.to_string(), "random:3");
+    assert_eq!(first.mu_planner, vec![0.7]);
+    assert_eq!(first.faults[0].to_string(), "mu-high:1.2");
+    for (cmd, p) in &parsed {
+        assert_eq!(p, first, "`{cmd}` read the same words differently");
+    }
+}
+
+#[test]
+fn the_help_of_run_pil_and_sweep_lists_every_fault_scenario_from_the_table() {
+    for cmd in ["run", "pil", "sweep"] {
+        let o = host_sim().args([cmd, "--help"]).output().unwrap();
+        assert!(o.status.success());
+        let help = String::from_utf8_lossy(&o.stdout);
+        for k in &host_sim::faults::FAULT_KINDS {
+            assert!(
+                help.contains(&k.usage()),
+                "`{cmd} --help` lacks {}",
+                k.usage()
+            );
+            assert!(help.contains(k.expected), "`{cmd} --help`: {}", k.expected);
+            if let Some(p) = k.param {
+                assert!(
+                    help.contains(&format!(
+                        "{}: {}, default {}",
+                        p.placeholder, p.meaning, p.default
+                    )),
+                    "`{cmd} --help`: the default of {}",
+                    k.name
+                );
+            }
+        }
+    }
+}
+
+/// Runs `host-sim args`, expecting failure; its standard error.
+fn fails(args: &[&str]) -> String {
+    let o = host_sim().args(args).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!o.status.success(), "{args:?} exited 0: {err}");
+    assert!(!err.contains("panicked"), "{args:?}: {err}");
+    err
+}
+
+#[test]
+fn a_missing_path_is_refused_before_any_run_with_the_forms_accepted_and_its_cause_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let out = out.to_str().unwrap();
+    for cmd in ["run", "pil", "sweep"] {
+        let err = fails(&[cmd, "--obstacles", "/no/such.csv", "--out", out]);
+        assert!(
+            err.contains("--obstacles /no/such.csv: no such file")
+                && err.contains("random:N")
+                && err.contains("id,x_m,y_m"),
+            "{cmd}: {err}"
+        );
+        let err = fails(&[cmd, "--track", "/no/such/folder", "--out", out]);
+        assert!(
+            err.contains("--track /no/such/folder: no such file or folder")
+                && err.contains("paper"),
+            "{cmd}: {err}"
+        );
+        let err = fails(&[cmd, "--vehicle", "/no/car.toml", "--out", out]);
+        assert!(
+            err.contains("--vehicle /no/car.toml: no such file"),
+            "{cmd}: {err}"
+        );
+    }
+    assert!(
+        !Path::new(out).exists(),
+        "nothing is written when an argument is refused"
+    );
+    // A file that cannot be read names itself and its cause, once (as `main`
+    // prints an error: the chain of causes on one line).
+    let missing = dir.path().join("missing.csv");
+    for path in [missing.as_path(), dir.path()] {
+        let e = host_sim::obstacle_file::load_obstacles_path(path).unwrap_err();
+        let chain = format!("{:#}", anyhow::Error::new(e));
+        assert_eq!(chain.matches("(os error").count(), 1, "{chain}");
+        assert!(chain.contains(&path.display().to_string()), "{chain}");
+        let e = host_sim::track::Track::from_csv_path(path, true).unwrap_err();
+        let chain = format!("{:#}", anyhow::Error::new(e));
+        assert_eq!(chain.matches("(os error").count(), 1, "{chain}");
+    }
+    let e = host_sim::vehicle::VehicleParams::from_toml_file(&missing).unwrap_err();
+    let chain = format!("{:#}", anyhow::Error::new(e));
+    assert_eq!(chain.matches("(os error").count(), 1, "{chain}");
+}
+
+#[test]
+fn run_and_pil_take_one_value_of_each_option_and_pil_refuses_what_it_cannot_apply() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    for cmd in ["run", "pil"] {
+        let err = fails(&[cmd, "--mu", "1,0.5", "--out", out]);
+        assert!(
+            err.contains("--mu 1,0.5: `") && err.contains("give one value"),
+            "{err}"
+        );
+        let err = fails(&[cmd, "--track", "paper", "paper", "--out", out]);
+        assert!(err.contains("give one value"), "{err}");
+    }
+    for (args, want) in [
+        (&["--noise", "low"][..], "PIL does not apply them"),
+        (&["--delay-ms", "50"][..], "PIL does not apply them"),
+        (&["--fault", "dropout-nan"][..], "PIL cannot apply it"),
+        (&["--fault", "late-obstacle"][..], "PIL cannot apply it"),
+        (&["--fault", "overrun"][..], "PIL cannot apply it"),
+        (&["--fault", "steer-rate"][..], "PIL cannot apply it"),
+        (&["--precision", "f64"][..], "PIL runs are f32 only"),
+        (&["--ecu-mhz", "100"][..], "the ECU's own (virtual) clock"),
+    ] {
+        let err = fails(&[&["pil"][..], args, &["--out", out]].concat());
+        assert!(err.contains(want), "pil {args:?}: {err}");
+    }
+    let err = fails(&[
+        "run",
+        "--fault",
+        "overrun",
+        "--ecu-mhz",
+        "100",
+        "--out",
+        out,
+    ]);
+    assert!(err.contains("sets the ECU clock itself"), "{err}");
+}
+
+#[test]
+fn run_places_random_obstacles_from_its_seed_as_the_sweep_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let clearance = |seed: &str| -> serde_json::Value {
+        let out = dir.path().join(seed);
+        let o = host_sim()
+            .args(["run", "--obstacles", "random:3", "--seed", seed])
+            .args(["--duration", "1", "--no-plots", "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
+                .unwrap();
+        s["min_obstacle_clearance_m"].clone()
+    };
+    let a = clearance("0");
+    assert!(a.as_f64().is_some(), "no obstacle placed: {a}");
+    assert_eq!(a, clearance("0"));
+    assert_ne!(a, clearance("1"), "the seed draws other obstacles");
+}
+
+#[test]
+fn a_sweep_whose_track_is_missing_exits_non_zero_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sweep");
+    let err = fails(&[
+        "sweep",
+        "--tracks",
+        "/no/such/folder",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(err.contains("/no/such/folder"), "{err}");
+    assert!(!out.join("sweep.csv").exists());
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let err = fails(&["sweep", "--track", empty.to_str().unwrap(), "--list"]);
+    assert!(err.contains("no *.csv track file"), "{err}");
+}
+
+#[test]
+fn run_with_a_sweep_runs_factors_replays_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |s: &str| dir.path().join(s).display().to_string();
+    let factors = [
+        "--track",
+        "paper",
+        "--mu",
+        "0.8",
+        "--obstacles",
+        "random:3",
+        "--noise",
+        "low",
+        "--delay-ms",
+        "20",
+        "--mass-scale",
+        "1.2",
+        "--fault",
+        "steer-rate:0.4",
+        "--seed",
+        "1",
+        "--duration",
+        "6",
+        "--no-plots",
+    ];
+    for (cmd, out) in [("sweep", d("sweep")), ("run", d("run"))] {
+        let o = host_sim()
+            .arg(cmd)
+            .args(factors)
+            .args(["--out", &out])
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{cmd}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    let mut r = csv::Reader::from_path(dir.path().join("sweep/sweep.csv")).unwrap();
+    let head: Vec<String> = r.headers().unwrap().iter().map(String::from).collect();
+    let row: Vec<String> = r
+        .records()
+        .next()
+        .unwrap()
+        .unwrap()
+        .iter()
+        .map(String::from)
+        .collect();
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("run/summary.json")).unwrap(),
+    )
+    .unwrap();
+    let cell = |k: &str| &row[head.iter().position(|h| h == k).unwrap()];
+    assert_ne!(cell("obstacle_count"), "0");
+    assert_eq!(cell("fault"), "steer-rate:0.4");
+    let mut compared = 0;
+    for (k, v) in summary.as_object().unwrap() {
+        let Some(i) = head.iter().position(|h| h == k) else {
+            continue; // host wall time: not in sweep.csv
+        };
+        let got = match v {
+            serde_json::Value::Null => String::new(),
+            serde_json::Value::String(s) => s.clone(),
+            v => v.to_string(),
+        };
+        let same = got == row[i]
+            || matches!((got.parse::<f64>(), row[i].parse::<f64>()), (Ok(a), Ok(b)) if a == b);
+        assert!(same, "{k}: run {got}, sweep {}", row[i]);
+        compared += 1;
+    }
+    assert!(compared > 40, "{compared} fields compared");
 }

@@ -360,6 +360,74 @@ fn an_answer_acts_from_the_plant_step_it_was_sent_in_so_only_a_late_one_changes_
     assert_eq!(missed.summary.control_deadline_misses, 1);
 }
 
+/// An ECU that reports its plans' positions only, as the ECU in QEMU does: the
+/// modelled ECU, its plans' speeds and steering hidden.
+struct PositionsOnly {
+    inner: SimulatedEcu<f32>,
+    plan: firmware::plan::Plan<f32>,
+}
+
+impl Ecu<f32> for PositionsOnly {
+    fn control(
+        &mut self,
+        t_us: u64,
+        est: &StateEstimate<f32>,
+    ) -> anyhow::Result<ControlOutput<f32>> {
+        let out = self.inner.control(t_us, est)?;
+        self.plan = *self.inner.active_plan();
+        for n in self.plan.nodes.iter_mut() {
+            n.v_mps = 0.0;
+            n.delta_rad = 0.0;
+        }
+        Ok(out)
+    }
+
+    fn active_plan(&self) -> &firmware::plan::Plan<f32> {
+        &self.plan
+    }
+
+    fn set_window(&mut self, t_us: u64, w: &host_sim::route::Window) -> anyhow::Result<()> {
+        self.inner.set_window(t_us, w)
+    }
+
+    fn reports_plan_states(&self) -> bool {
+        false
+    }
+}
+
+#[test]
+fn the_plans_lateral_acceleration_is_null_where_the_ecu_does_not_report_it() {
+    let scenario = Scenario::paper(false);
+    let v = VehicleParams::default();
+    let opts = SimOptions {
+        max_duration_s: 12.0,
+        ..SimOptions::default()
+    };
+    // The modelled ECU: measured (the first bend starts at 120 m).
+    let measured = paper_at(168.0, 12.0).summary.max_abs_plan_ay_mps2;
+    assert!(measured.is_some_and(|ay| ay > 1.0), "{measured:?}");
+    let mut ecu = PositionsOnly {
+        inner: SimulatedEcu::<f32>::new(&scenario, &v, &opts).unwrap(),
+        plan: firmware::plan::Plan::zeroed(),
+    };
+    let r = closed_loop::run_with(&scenario, &v, &opts, &mut ecu, |_, _| {}).unwrap();
+    assert_eq!(r.summary.max_abs_plan_ay_mps2, None);
+    let json = serde_json::to_value(&r.summary).unwrap();
+    assert!(json["max_abs_plan_ay_mps2"].is_null(), "{json}");
+    // Its CSV cell (a column of sweep.csv) is empty, as the sweep's readers expect.
+    let mut w = csv::Writer::from_writer(Vec::new());
+    w.serialize(&r.summary).unwrap();
+    let bytes = w.into_inner().unwrap();
+    let mut rd = csv::Reader::from_reader(bytes.as_slice());
+    let k = rd
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|h| h == "max_abs_plan_ay_mps2")
+        .unwrap();
+    assert_eq!(&rd.records().next().unwrap().unwrap()[k], "");
+}
+
 #[test]
 fn the_modelled_ecu_reports_no_ecu_counts_and_the_summary_writes_null() {
     let r = paper_at(168.0, 1.0);

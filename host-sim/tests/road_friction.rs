@@ -9,7 +9,8 @@ use host_sim::plant::{Inputs, Plant, State};
 use host_sim::road_friction::MuPatch;
 use host_sim::run::{simulate, Precision};
 use host_sim::scenario::{Scenario, PAPER_HALF_WIDTH_M};
-use host_sim::sweep::{execute, header, Common, LogRuns, ObstacleSpec, RunSpec};
+use host_sim::scenario_options::Setting;
+use host_sim::sweep::{execute, header, Common, LogRuns, RunSpec};
 use host_sim::vehicle::VehicleParams;
 
 /// Speed after braking hard from 20 m/s for 1 s with the four wheels on `mu`.
@@ -167,12 +168,13 @@ fn the_sweeps_false_drop_column_follows_its_definition_on_the_runs_trace() {
         seed: 0,
     };
     let common = Common {
-        obstacles: ObstacleSpec::None,
-        laps: 1,
-        duration_s: 200.0,
+        setting: Setting {
+            duration_s: 200.0,
+            mu_patches: vec![PATCH],
+            ..Setting::default()
+        },
         obstacle_dir: None,
         log_dir: Some((dir.path().to_path_buf(), LogRuns::All)),
-        mu_patches: vec![PATCH],
     };
     let row = execute(&spec, &common);
     let cells: Vec<(String, String)> = header().into_iter().skip(10).zip(row.cells).collect();

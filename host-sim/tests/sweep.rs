@@ -1,6 +1,6 @@
 //! `host-sim sweep`: determinism (the same command, sharded or not, on any number of
-//! threads, writes the same `sweep.csv`), an erroring run as a row, and fault
-//! scenarios showing their stated behaviour.
+//! threads, writes the same `sweep.csv`), an erroring run as a row and a non-zero
+//! exit status, and fault scenarios showing their stated behaviour.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::f64::consts::PI;
@@ -8,7 +8,8 @@ use std::path::Path;
 use std::process::Command;
 
 use host_sim::faults::Fault;
-use host_sim::sweep::{execute, header, Common, ObstacleSpec, RunSpec};
+use host_sim::scenario_options::Setting;
+use host_sim::sweep::{execute, header, Common, RunSpec};
 use host_sim::track::{Track, TrackPiece};
 
 fn host_sim() -> Command {
@@ -36,13 +37,13 @@ fn write_oval(dir: &Path) -> String {
     p.display().to_string()
 }
 
-fn sweep(args: &[&str]) {
+/// Runs `host-sim sweep args`; asserts it exits with success or not, as `ok`
+/// says; returns its standard error.
+fn sweep(args: &[&str], ok: bool) -> String {
     let out = host_sim().arg("sweep").args(args).output().unwrap();
-    assert!(
-        out.status.success(),
-        "sweep {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.success(), ok, "sweep {args:?}: {err}");
+    err
 }
 
 #[test]
@@ -69,14 +70,34 @@ fn a_sweep_is_deterministic_across_threads_and_shards_and_an_error_is_a_row() {
         "--no-plots",
     ];
     let (full, s0, s1, merged) = (d("full"), d("s0"), d("s1"), d("merged"));
-    sweep(&[&common[..], &["--jobs", "2", "--out", &full]].concat());
-    sweep(&[&common[..], &["--jobs", "1", "--only", "0/2", "--out", &s0]].concat());
-    sweep(&[&common[..], &["--jobs", "1", "--only", "1/2", "--out", &s1]].concat());
-    let st = host_sim()
+    // The broken track's run could not run: each command that holds it writes its
+    // outputs and exits non-zero, naming the run; the shard without it succeeds.
+    let err = sweep(
+        &[&common[..], &["--jobs", "2", "--out", &full]].concat(),
+        false,
+    );
+    assert!(
+        err.contains("1 of 3 runs could not run") && err.contains("broken.csv"),
+        "{err}"
+    );
+    // Shard 0/2 holds runs 0 (oval) and 2 (broken), shard 1/2 run 1 (paper).
+    sweep(
+        &[&common[..], &["--jobs", "1", "--only", "0/2", "--out", &s0]].concat(),
+        false,
+    );
+    sweep(
+        &[&common[..], &["--jobs", "1", "--only", "1/2", "--out", &s1]].concat(),
+        true,
+    );
+    let o = host_sim()
         .args(["sweep-merge", &s0, &s1, "--no-plots", "--out", &merged])
-        .status()
+        .output()
         .unwrap();
-    assert!(st.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("1 of 3 runs could not run"),
+        "the merged sweep holds a run that could not run: {err}"
+    );
     let a = std::fs::read_to_string(Path::new(&full).join("sweep.csv")).unwrap();
     let b = std::fs::read_to_string(Path::new(&merged).join("sweep.csv")).unwrap();
     assert_eq!(
@@ -122,12 +143,12 @@ fn run_fault(track: &str, fault: Fault) -> Vec<(String, String)> {
         seed: 0,
     };
     let common = Common {
-        obstacles: ObstacleSpec::None,
-        laps: 1,
-        duration_s: 300.0,
+        setting: Setting {
+            duration_s: 300.0,
+            ..Setting::default()
+        },
         obstacle_dir: None,
         log_dir: None,
-        mu_patches: Vec::new(),
     };
     let row = execute(&spec, &common);
     header().into_iter().skip(10).zip(row.cells).collect()

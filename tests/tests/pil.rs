@@ -98,6 +98,8 @@ fn the_ecu_in_the_loop_drives_round_the_obstacles_within_its_deadlines() {
     assert_eq!(s.collisions, 0);
     assert!(s.max_abs_lateral_error_m < 3.0);
     assert_eq!(s.plan_failures, 0);
+    // The plan events carry positions only: the plans' a_y is not measured.
+    assert_eq!(s.max_abs_plan_ay_mps2, None);
     assert_counts_agree(&r, &ticks);
     assert_eq!(s.ecu_plan_deadline_misses, Some(0));
     assert_eq!(s.ecu_skipped_releases, Some(0));
