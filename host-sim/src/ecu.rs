@@ -29,7 +29,6 @@
 //! task is still running is skipped (see the late-plan policy in
 //! [`crate::closed_loop`]).
 
-
 use anyhow::{anyhow, Result};
 use firmware::low_level::Actuation;
 use firmware::mpc::MpcReport;
