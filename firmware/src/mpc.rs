@@ -745,6 +745,7 @@ impl<T: Real> Mpc<T> {
             plan.nodes[k + 1] = bicycle::node_from_state(&xi);
             plan.inputs[k] = u;
         }
+        // wcet-bound: HORIZON + 1
         for k in 0..=HORIZON {
             self.s_prev[k] = plan.nodes[k].s_m;
         }
@@ -1485,6 +1486,7 @@ impl<T: Real> Condensing<T> {
 /// `RᵀR` gains `Σ_rows x xᵀ`. One Householder reflection per column over the
 /// `COST_ROWS + 1` entries `[R_jj; x_·j]` (positive diagonal kept), `O(ncols²)`;
 /// `x` is zeroed.
+#[inline(never)]
 fn add_square_root_rows<T: Real>(
     r: &mut [[T; NV]; NV],
     x: &mut [[T; COST_ROWS]; NV],
@@ -1515,7 +1517,8 @@ fn add_square_root_rows<T: Real>(
         let (rk, xs) = (&mut r[k], &mut x[k + 1..n]);
         // The four rows as scalars (registers), summed in the order of the rows.
         let [v0, v1, v2, v3] = v;
-        // wcet-bound: NV
+        // Σ (n − 1 − k) over k < n ≤ NV per call (not inlined).
+        // wcet-bound: NV * (NV - 1) / 2 per call
         for (rkj, xj) in rk[k + 1..n].iter_mut().zip(xs.iter_mut()) {
             let [x0, x1, x2, x3] = *xj;
             let mut d = w0 * *rkj;
@@ -1574,6 +1577,7 @@ fn lin_row_into<T: Real>(
     let [(s0, c0), (s1, c1), (s2, c2)] = used;
     match cnt {
         1 if !extra => {
+            // wcet-bound: NV
             for j in 0..n {
                 let r = c0 * s0[j];
                 row[j] = r;
@@ -1581,6 +1585,7 @@ fn lin_row_into<T: Real>(
             }
         }
         2 if !extra => {
+            // wcet-bound: NV
             for j in 0..n {
                 let r = c0 * s0[j] + c1 * s1[j];
                 row[j] = r;
@@ -1588,6 +1593,7 @@ fn lin_row_into<T: Real>(
             }
         }
         3 if !extra => {
+            // wcet-bound: NV
             for j in 0..n {
                 let r = (c0 * s0[j] + c1 * s1[j]) + c2 * s2[j];
                 row[j] = r;
@@ -1601,6 +1607,7 @@ fn lin_row_into<T: Real>(
                     continue;
                 }
                 if let Some(srow) = sens.get(state) {
+                    // wcet-bound: NV
                     for j in 0..n {
                         row[j] += coef * srow[j];
                     }

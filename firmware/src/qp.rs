@@ -294,8 +294,8 @@ pub struct QpProblem<T, const N: usize, const M: usize> {
     pub m: usize,
     /// When true, `h` holds not `H` but an upper-triangular factor `R` with
     /// `H = RᵀR` (lower triangle ignored; the sign of a row is free). A caller that
-    /// builds its cost as a sum of squares (the MPC) can maintain `R` by Givens
-    /// rotations ([`add_square_root_row`]): `R`'s condition number is the square root
+    /// builds its cost as a sum of squares (the MPC) can maintain `R` by orthogonal
+    /// updates (Householder reflections in `mpc.rs`): `R`'s condition number is the square root
     /// of `H`'s, which keeps single precision accurate where forming `H` and
     /// factorising it would not.
     pub h_factor: bool,
@@ -786,34 +786,6 @@ fn prepare_factor<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
     Some(floored)
 }
 
-/// Adds the square `(xᵀy)²` to the cost whose Hessian factor `R` (`H = RᵀR`, upper
-/// triangle of `r`) is kept: after the call `RᵀR` gains `x xᵀ`. Givens rotations,
-/// `O(n²)`, only over the first `ncols` entries of `x` (the rest must be zero);
-/// `x` is destroyed. Each rotation takes one `hypot`.
-pub fn add_square_root_row<T: Real, const N: usize>(
-    r: &mut [[T; N]; N],
-    x: &mut [T; N],
-    ncols: usize,
-) {
-    let n = ncols.min(N);
-    for k in 0..n {
-        let xk = x[k];
-        if xk == T::ZERO {
-            continue;
-        }
-        let rkk = r[k][k];
-        let rho = rkk.hypot(xk);
-        let (c, s) = (rkk / rho, xk / rho);
-        r[k][k] = rho;
-        for j in (k + 1)..n {
-            let (a, b) = (r[k][j], x[j]);
-            r[k][j] = c * a + s * b;
-            x[j] = c * b - s * a;
-        }
-        x[k] = T::ZERO;
-    }
-}
-
 /// Cholesky `H = RᵀR` in the upper triangle (the lower triangle keeps `H`'s, never
 /// read). False if a pivot is not clearly positive.
 #[cfg(test)]
@@ -831,6 +803,7 @@ fn factor_h<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> bool {
 /// with a small diagonal `E` (a proximal term of relative size `√ε`, 3·10⁻⁴ in
 /// `f32`) in the direction that rounding left undetermined. A pivot below
 /// `−0.1·H_jj` is a Hessian that is not convex: `None`.
+#[inline(never)]
 fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
     let tiny = T::EPSILON * T::from_usize(N);
     let mut floored = 0u32;
@@ -839,7 +812,8 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
         // Column j of R: R[k][j] for k ≤ j, from H[k][j] (upper triangle).
         let mut d = h[j][j];
         let scale = d.abs();
-        // wcet-bound: NV
+        // Σ j over j < N per call (not inlined).
+        // wcet-bound: NV * (NV - 1) / 2 per call
         for k in 0..j {
             d -= h[k][j] * h[k][j];
         }
@@ -856,10 +830,12 @@ fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32>
         }
         let rjj = d.sqrt();
         h[j][j] = rjj;
-        // wcet-bound: NV
+        // Σ (N − 1 − j) over j < N per call.
+        // wcet-bound: NV * (NV - 1) / 2 per call
         for i in (j + 1)..N {
             let mut s = h[j][i];
-            // wcet-bound: NV
+            // Σ j·(N − 1 − j) over j < N ≤ N³/6 per call.
+            // wcet-bound: NV * NV * NV / 6 per call
             for k in 0..j {
                 s -= h[k][j] * h[k][i];
             }
@@ -1436,6 +1412,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 *u0 -= l * row.head;
             }
             let u = self.u.get_mut(row.start + 1..).unwrap_or(&mut []);
+            // wcet-bound: NV
             for (u, r) in u.iter_mut().zip(row.tail) {
                 *u -= l * *r;
             }

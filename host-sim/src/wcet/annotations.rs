@@ -158,6 +158,20 @@ pub fn dependency_facts() -> Vec<Annotation> {
             ASYNC_TASKS,
             "delete walks the timer list: one node per waiting task",
         ),
+        // The same loop, where the compiler puts its header (`while let ...
+        // next.as_ref()`) or its back edge (`next = next_link.next.load(..)`).
+        fact(
+            "rtic-time-2.0.1/src/linked_list.rs",
+            78,
+            ASYNC_TASKS,
+            "delete walks the timer list: one node per waiting task",
+        ),
+        fact(
+            "rtic-time-2.0.1/src/linked_list.rs",
+            89,
+            ASYNC_TASKS,
+            "delete walks the timer list: one node per waiting task",
+        ),
         fact(
             "rtic-time-2.0.1/src/linked_list.rs",
             143,

@@ -31,7 +31,7 @@ pub struct WcetArgs {
     #[arg(long, default_value_t = 2.0)]
     pub trace_seconds: f64,
     /// Use this cycles-per-instruction bound instead of tracing a PIL run (a value
-    /// from an earlier report's `cycles_per_instruction_bound`).
+    /// from an earlier report's `traced_cycles_per_instruction`).
     #[arg(long)]
     pub cpi_bound: Option<f64>,
     /// Laps of the paper track to run when no --pil folder is given, s of simulated
@@ -186,8 +186,8 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         }
     };
 
-    // The cost model refitted on every measured activation: its worst case under
-    // the iteration cap is the plan task's bound.
+    // The cost model refitted on every measured activation, kept for the
+    // simulator's timeline (an estimate, not a bound).
     let runs = run_dirs
         .iter()
         .map(|d| report::load_pil_run(d))
@@ -202,27 +202,18 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         .fold(0.0f64, f64::max);
     let model = CostModel::fit(&plans, control_max)
         .ok_or_else(|| anyhow!("too few plan activations to fit the cost model"))?;
-    let settings =
-        crate::closed_loop::vehicle_config::<f32>(&crate::vehicle::VehicleParams::default())
-            .mpc_settings();
-    let plan_bound = model.plan_bound_instructions(&settings);
-    // The control task has no loop whose count depends on the data beyond the frame
-    // decoder's (bounded by the frame size): its bound is its largest measured
-    // activation with a 20 % allowance.
-    let control_bound = 1.2 * control_max;
-    // Adopting a window: at most 320 rows (the ECU's capacity, every window of a
-    // long track is full) and the obstacles inside it; its bound is the largest
-    // measured adoption with the same 20 % allowance (more obstacles in a window
-    // than in the runs cost more: see the README).
-    let window_bound = 1.2 * model.per_window;
+    // The static analysis of the binary, checked against the traced run: the
+    // report's bounds.
+    let analysis = crate::wcet::analysis::analyse(&args.elf, &args.firmware_src, &traces)
+        .with_context(|| format!("static analysis of {}", args.elf.display()))?;
+    analysis.write(&args.out)?;
+    print_static(&analysis, &args.out);
     let inputs = ReportInputs {
         run_dirs: run_dirs.clone(),
         elf: args.elf.clone(),
         stack_levels: report::ecu_priority_levels(),
         cpi,
-        plan_bound_instructions: plan_bound,
-        control_bound_instructions: control_bound,
-        window_bound_instructions: window_bound,
+        statics: report::StaticSummary::of(&analysis),
         plan_period_cycles: firmware::tasks::PLAN_PERIOD_US as f64 * 168.0,
         plan_budget_cycles: crate::closed_loop::SimOptions::default().plan_budget_cycles,
         control_budget_cycles: crate::closed_loop::SimOptions::default().control_budget_cycles,
@@ -230,29 +221,30 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     };
     let r = report::build_report(&inputs)?;
     report::write_report(&args.out, &r)?;
-    // The static analysis of the binary: its own files beside the report while it
-    // does not yet bound every task.
-    let checked = static_analysis(args, &traces);
     if let Some(log) = made {
         // Large (tens of MB a simulated second) and fully read by now.
         let _ = fs::remove_file(log);
     }
-    checked?;
     fs::write(
         args.out.join("cost_model.json"),
         serde_json::to_string_pretty(&model)?,
     )?;
-    println!(
-        "CPI bound {:.3} ({} instructions traced); plan: observed max {:.0} instructions, bound {:.0} instructions = {:.2} M cycles (budget {:.2} M); control: observed max {:.0}, bound {:.0}",
-        r.cycles_per_instruction_bound,
-        inputs.cpi.total.instructions,
-        r.tasks.plan.observed_max_instructions,
-        r.tasks.plan.bound_instructions,
-        r.tasks.plan.bound_cycles * 1e-6,
-        r.tasks.plan.budget_cycles * 1e-6,
-        r.tasks.control.observed_max_instructions,
-        r.tasks.control.bound_instructions,
-    );
+    let bound = |t: &report::TaskTiming| {
+        let st = &t.statics;
+        format!(
+            "observed max {:.0} instructions; static bound {} instructions, {} cycles (job {} cycles, budget {:.0}); response time bound {} µs (deadline {} µs); tightness {}",
+            t.observed_max_instructions,
+            st.static_bound_instructions.map_or("none".into(), |v| v.to_string()),
+            st.static_bound_cycles.map_or("none".into(), |v| v.to_string()),
+            st.job_static_bound_cycles.map_or("none".into(), |v| v.to_string()),
+            t.budget_cycles,
+            st.response_time_bound_us.map_or("none within".into(), |v| format!("{v:.0}")),
+            st.deadline_us.map_or("?".into(), |v| format!("{v:.0}")),
+            st.tightness.map_or("–".into(), |v| format!("{v:.0}")),
+        )
+    };
+    println!("plan: {}", bound(&r.tasks.plan));
+    println!("control: {}", bound(&r.tasks.control));
     for g in &r.goals {
         println!(
             "  {} {}: {} (goal ≤ {} {})",
@@ -278,7 +270,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         }
         println!("within {} (+{:.0} %)", e.display(), args.margin * 100.0);
     }
-    Ok(())
+    analysis_errors(&analysis, &args.out)
 }
 
 /// The static analysis of the ELF (control-flow graphs, loops, IPET), written as
@@ -287,6 +279,12 @@ fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
     let analysis = crate::wcet::analysis::analyse(&args.elf, &args.firmware_src, traces)
         .with_context(|| format!("static analysis of {}", args.elf.display()))?;
     analysis.write(&args.out)?;
+    print_static(&analysis, &args.out);
+    analysis_errors(&analysis, &args.out)
+}
+
+/// A line per task of the static analysis, and its totals.
+fn print_static(analysis: &crate::wcet::analysis::StaticAnalysis, out: &std::path::Path) {
     for t in &analysis.tasks {
         println!(
             "static analysis, {}: {} functions, {} loops ({} bounded), {}",
@@ -310,9 +308,16 @@ fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
         analysis.unbounded_loops,
         analysis.unresolved_indirect_calls.len(),
         analysis.recursions.len(),
-        args.out.join("static.md").display()
+        out.join("static.md").display()
     );
-    // What the analysis cannot give a bound through is an error, not a footnote.
+}
+
+/// What the analysis cannot give a bound through is an error, not a footnote; so
+/// is a trace that contradicts it.
+fn analysis_errors(
+    analysis: &crate::wcet::analysis::StaticAnalysis,
+    out: &std::path::Path,
+) -> Result<()> {
     if analysis.unbounded_loops > 0
         || !analysis.unresolved_indirect_calls.is_empty()
         || !analysis.recursions.is_empty()
@@ -322,7 +327,7 @@ fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
             analysis.unbounded_loops,
             analysis.unresolved_indirect_calls.len(),
             analysis.recursions.len(),
-            args.out.join("static.md").display()
+            out.join("static.md").display()
         );
     }
     if !analysis.violations.is_empty() {

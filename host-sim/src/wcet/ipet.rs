@@ -16,8 +16,9 @@
 //! * `Σ back edges ≤ B · n_f` for a bound per call of the loop's function
 //!   ([`Per::Call`]: a triangular nest), and `Σ x_b ≤ B · n_root` over the blocks
 //!   of a step capped per activation ([`BlockCap::activation_group`]);
-//! * block copies and fills ([`CopySizes`]): each loop of `memcpy`, `memset`, ...
-//!   takes at most `Σ bytes · x_site` back edges over the call sites;
+//! * block copies and fills ([`CopySizes`]): the loops of `memcpy`, `memset`, ...
+//!   take together at most `Σ bytes · x_site` back edges over the call sites (each
+//!   back edge moves at least one byte, each byte is moved once);
 //! * paths that never return (a call of a panic handler, a trap) are not part of a
 //!   completing activation: their blocks get count 0.
 //!
@@ -407,9 +408,15 @@ pub fn task_bound(
                 bytes += n as f64 * v;
             }
         }
-        for back in copy_loops {
-            constraints.push(constraint!(back <= bytes.clone()));
-        }
+        // Every back edge of a copy loop moves at least one byte, and a call
+        // moves each of its bytes once (head, words and tail are disjoint; a
+        // `__aeabi_memcpy4` that hands its remainder to `memcpy` hands over only
+        // the bytes it did not move): all the family's back edges together take
+        // at most the bytes of all the calls.
+        let all = copy_loops
+            .into_iter()
+            .fold(Expression::from(0.0), |a, b| a + b);
+        constraints.push(constraint!(all <= bytes));
     }
     for (_, (bound, runs)) in group_runs {
         let bound = bound as f64;

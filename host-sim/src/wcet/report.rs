@@ -3,11 +3,12 @@
 //! It puts together what the other analyses measured or bounded:
 //!
 //! * **timing**: per task, the instructions observed on the ECU in the
-//!   processor-in-the-loop runs (`host-sim pil --out DIR`), the caller's static bound
-//!   on instructions (iteration cap × worst iteration + fixed work), and that bound
-//!   in cycles, `bound_cycles = bound_instructions × CPI bound` (the CPI bound from
-//!   [`super::cpi`]); `margin = budget_cycles / bound_cycles`, above 1 when the
-//!   bound fits the budget;
+//!   processor-in-the-loop runs (`host-sim pil --out DIR`), beside what the static
+//!   analysis of the binary derives ([`super::analysis`]: the IPET bound in
+//!   instructions and cycles of the stated processor and memory model, the
+//!   response-time bound against the deadline, the tightness against the traced
+//!   activations). The cycles per instruction of a traced run ([`super::cpi`]) are
+//!   reported as what they are, an average over the code that ran, not a bound;
 //! * **memory**: section sizes of the ECU ELF (flash and static RAM), the static
 //!   stack bound of [`super::stack`] over the RTIC application's priority levels, and
 //!   the painted-stack high-water mark the PIL runs measured;
@@ -31,6 +32,9 @@ const PIL_COMMAND: &str = "host-sim pil --out DIR";
 /// Goal: plan task, warm-started activations, observed instructions at most this
 /// (issue 8: a warm MPC step within 0.5 M instructions).
 pub const GOAL_PLAN_WARM_MAX_INSTRUCTIONS: f64 = 5.0e5;
+/// Goal: the plan task's static bound at most this many times its largest traced
+/// activation (in cycles of the same model).
+pub const GOAL_PLAN_TIGHTNESS: f64 = 3.0;
 /// Goal: control task, observed instructions at most this.
 pub const GOAL_CONTROL_MAX_INSTRUCTIONS: f64 = 2000.0;
 /// Goal: static RAM (`.data` + `.bss` + `.uninit`) at most this, in bytes (48 KiB).
@@ -374,15 +378,11 @@ pub struct ReportInputs {
     /// Priority levels for the stack bound, thread mode first; usually
     /// [`ecu_priority_levels`].
     pub stack_levels: Vec<PriorityLevel>,
-    /// The CPI bound of a traced ECU run ([`super::cpi::analyse_log`]).
+    /// The cycles per instruction of a traced ECU run ([`super::cpi::analyse_log`]):
+    /// an average over the code the trace ran, reported for information.
     pub cpi: CpiReport,
-    /// Static bound on one plan activation, in instructions.
-    pub plan_bound_instructions: f64,
-    /// Static bound on one control activation, in instructions.
-    pub control_bound_instructions: f64,
-    /// Bound on adopting a window of the road (after a plan's publication, in
-    /// the same activation), in instructions.
-    pub window_bound_instructions: f64,
+    /// What the static analysis of the ELF derived ([`StaticSummary::of`]).
+    pub statics: StaticSummary,
     /// Plan task period, in cycles (16.8e6: 100 ms at 168 MHz): a plan activation
     /// and the window it adopts must end within it, or the next release is lost.
     pub plan_period_cycles: f64,
@@ -392,6 +392,77 @@ pub struct ReportInputs {
     pub control_budget_cycles: f64,
     /// Core clock, in Hz (168e6).
     pub clock_hz: u64,
+}
+
+/// What the static analysis derived for one task (`None`: no bound).
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct StaticTiming {
+    /// IPET bound on one activation of the whole task (its interrupt handler: the
+    /// link, the job, the publication, the window), in instructions.
+    pub static_bound_instructions: Option<u64>,
+    /// The same in worst-case cycles of the processor and memory model.
+    pub static_bound_cycles: Option<u64>,
+    /// IPET bound on the task's own job (`ecu::plan_job`, `ecu::control_job`), the
+    /// part the budget limits, in cycles.
+    pub job_static_bound_cycles: Option<u64>,
+    /// Response-time bound (static C, blocking, interference), in µs; `None` when
+    /// there is none within the deadline.
+    pub response_time_bound_us: Option<f64>,
+    /// The task's deadline (its period), in µs.
+    pub deadline_us: Option<f64>,
+    /// Largest traced activation priced with the bound's block cycles, in cycles.
+    pub traced_max_cycles: Option<u64>,
+    /// `static_bound_cycles / traced_max_cycles` (dimensionless, ≥ 1 when sound).
+    pub tightness: Option<f64>,
+}
+
+/// What the static analysis of the ELF found, as the report uses it.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct StaticSummary {
+    /// The plan task (`USART1`, its job `ecu::plan_job`).
+    pub plan: StaticTiming,
+    /// The control task (`USART2`, its job `ecu::control_job`).
+    pub control: StaticTiming,
+    /// Every loop the tasks reach, with its bound and the largest trip count seen.
+    pub loops: Vec<super::analysis::LoopEntry>,
+    /// Loops without a bound.
+    pub unbounded_loops: usize,
+    /// Indirect calls without listed targets.
+    pub unresolved_indirect_calls: Vec<String>,
+    /// Call cycles.
+    pub recursions: Vec<String>,
+}
+
+impl StaticSummary {
+    /// The figures of `analysis` for the plan and control tasks (task `plan` and
+    /// section `plan_job`, task `control` and section `control_job`).
+    pub fn of(analysis: &super::analysis::StaticAnalysis) -> Self {
+        let task = |name: &str, job: &str| {
+            let t = analysis.tasks.iter().find(|t| t.name == name);
+            let j = analysis.tasks.iter().find(|t| t.name == job);
+            StaticTiming {
+                static_bound_instructions: t.and_then(|t| t.static_bound_instructions),
+                static_bound_cycles: t.and_then(|t| t.static_bound_cycles),
+                job_static_bound_cycles: j.and_then(|j| j.static_bound_cycles),
+                response_time_bound_us: t.and_then(|t| t.response_time_bound_us),
+                deadline_us: t.and_then(|t| t.deadline_us),
+                traced_max_cycles: t.and_then(|t| t.observed_max_cycles),
+                tightness: t.and_then(|t| t.tightness),
+            }
+        };
+        Self {
+            plan: task("plan", "plan_job"),
+            control: task("control", "control_job"),
+            loops: analysis.loops.clone(),
+            unbounded_loops: analysis.unbounded_loops,
+            unresolved_indirect_calls: analysis.unresolved_indirect_calls.clone(),
+            recursions: analysis
+                .recursions
+                .iter()
+                .map(|r| format!("{r:?}"))
+                .collect(),
+        }
+    }
 }
 
 /// Observed and bounded timing of one task.
@@ -410,16 +481,11 @@ pub struct TaskTiming {
     /// (`passes > 1`), in instructions; `null` if there was none.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub observed_cold_max_instructions: Option<f64>,
-    /// Static bound on one activation, in instructions (given by the caller).
-    pub bound_instructions: f64,
-    /// `bound_instructions × cycles_per_instruction_bound`, in cycles.
-    pub bound_cycles: f64,
-    /// Budget of one activation, in cycles.
+    /// What the static analysis derived.
+    #[serde(flatten)]
+    pub statics: StaticTiming,
+    /// Budget of one activation's job, in cycles.
     pub budget_cycles: f64,
-    /// `budget_cycles / bound_cycles` (dimensionless; > 1: the bound fits).
-    pub margin: f64,
-    /// `bound_cycles` at the clock, in µs.
-    pub bound_us: f64,
     /// `budget_cycles` at the clock, in µs.
     pub budget_us: f64,
 }
@@ -438,13 +504,9 @@ pub struct Tasks {
 /// The plan task's work after its publication: adopting a new window of the road.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct WindowTiming {
-    /// Most instructions of one adoption over all PIL runs, in instructions.
+    /// Most instructions of one adoption over all PIL runs, in instructions (the
+    /// adoption is part of the plan task's static bound).
     pub observed_max_instructions: f64,
-    /// Bound on one adoption, in instructions.
-    pub bound_instructions: f64,
-    /// `(plan bound + window bound) × CPI bound`, in cycles: the longest an
-    /// activation keeps the task busy.
-    pub activation_bound_cycles: f64,
     /// The plan period, in cycles.
     pub period_cycles: f64,
 }
@@ -515,12 +577,22 @@ pub struct Goal {
 pub struct WcetReport {
     /// Core clock, in Hz.
     pub clock_hz: u64,
-    /// Worst-case cycles per instruction of the traced ECU code (dimensionless).
-    pub cycles_per_instruction_bound: f64,
-    /// The assumptions behind that bound.
-    pub cpi_justification: String,
+    /// Cycles per instruction of the traced ECU code (dimensionless): the
+    /// worst-case cycles of the blocks that ran over their instructions, an
+    /// average over that trace, not a bound for other code.
+    pub traced_cycles_per_instruction: f64,
+    /// How those cycles were counted.
+    pub traced_cpi_method: String,
     /// Timing of both tasks.
     pub tasks: Tasks,
+    /// Every loop the tasks reach (function, file, line, bound, observed_max).
+    pub loops: Vec<super::analysis::LoopEntry>,
+    /// Loops without a bound (an error of the analysis).
+    pub unbounded_loops: usize,
+    /// Indirect calls without listed targets (an error of the analysis).
+    pub unresolved_indirect_calls: Vec<String>,
+    /// Call cycles (an error of the analysis).
+    pub recursions: Vec<String>,
     /// Flash, RAM, stack.
     pub memory: MemoryReport,
     /// Allocator and software-double symbols.
@@ -552,6 +624,7 @@ pub fn build_report(inputs: &ReportInputs) -> Result<WcetReport> {
         &inputs.stack_levels,
         &ecu_once(),
         &ecu_masked(),
+        &super::analysis::ecu_indirect_targets(),
     )
     .with_context(|| format!("stack bound of {}", inputs.elf.display()))?;
     assemble_report(inputs, &runs, memory, symbols, stack)
@@ -559,11 +632,6 @@ pub fn build_report(inputs: &ReportInputs) -> Result<WcetReport> {
 
 fn check_inputs(inputs: &ReportInputs, cpi: f64) -> Result<()> {
     let positive = [
-        ("plan_bound_instructions", inputs.plan_bound_instructions),
-        (
-            "control_bound_instructions",
-            inputs.control_bound_instructions,
-        ),
         ("plan_budget_cycles", inputs.plan_budget_cycles),
         ("control_budget_cycles", inputs.control_budget_cycles),
         ("the CPI report's total.cpi_bound", cpi),
@@ -596,45 +664,24 @@ pub fn assemble_report(
         bail!("no PIL run given: make one with `{PIL_COMMAND}` and pass its folder");
     }
     let clock = inputs.clock_hz as f64;
-    let timing = |bound_instructions: f64, budget_cycles: f64| {
-        let bound_cycles = bound_instructions * cpi;
-        (
-            bound_cycles,
-            budget_cycles / bound_cycles,
-            bound_cycles / clock * 1e6,
-            budget_cycles / clock * 1e6,
-        )
-    };
     let (plan_obs, control_obs) = (plan_observed(runs)?, control_observed(runs));
-    let (bc, margin, bound_us, budget_us) =
-        timing(inputs.plan_bound_instructions, inputs.plan_budget_cycles);
     let plan = TaskTiming {
         observed_max_instructions: plan_obs.max,
         observed_p50_instructions: plan_obs.p50,
         observed_warm_max_instructions: plan_obs.warm_max,
         observed_cold_max_instructions: plan_obs.cold_max,
-        bound_instructions: inputs.plan_bound_instructions,
-        bound_cycles: bc,
+        statics: inputs.statics.plan.clone(),
         budget_cycles: inputs.plan_budget_cycles,
-        margin,
-        bound_us,
-        budget_us,
+        budget_us: inputs.plan_budget_cycles / clock * 1e6,
     };
-    let (bc, margin, bound_us, budget_us) = timing(
-        inputs.control_bound_instructions,
-        inputs.control_budget_cycles,
-    );
     let control = TaskTiming {
         observed_max_instructions: control_obs.max,
         observed_p50_instructions: control_obs.p50,
         observed_warm_max_instructions: None,
         observed_cold_max_instructions: None,
-        bound_instructions: inputs.control_bound_instructions,
-        bound_cycles: bc,
+        statics: inputs.statics.control.clone(),
         budget_cycles: inputs.control_budget_cycles,
-        margin,
-        bound_us,
-        budget_us,
+        budget_us: inputs.control_budget_cycles / clock * 1e6,
     };
     let run_entries: Vec<RunEntry> = runs.iter().map(run_entry).collect();
     let high_water = runs
@@ -655,10 +702,6 @@ pub fn assemble_report(
                 .map(|a| a.window_instructions),
         )
         .unwrap_or(0.0),
-        bound_instructions: inputs.window_bound_instructions,
-        activation_bound_cycles: (inputs.plan_bound_instructions
-            + inputs.window_bound_instructions)
-            * cpi,
         period_cycles: inputs.plan_period_cycles,
     };
     let tasks = Tasks {
@@ -666,12 +709,16 @@ pub fn assemble_report(
         control,
         plan_window,
     };
-    let goals = goals(&tasks, &memory, &run_entries);
+    let goals = goals(&tasks, &memory, &run_entries, &inputs.statics);
     Ok(WcetReport {
         clock_hz: inputs.clock_hz,
-        cycles_per_instruction_bound: cpi,
-        cpi_justification: inputs.cpi.justification.clone(),
+        traced_cycles_per_instruction: cpi,
+        traced_cpi_method: inputs.cpi.justification.clone(),
         tasks,
+        loops: inputs.statics.loops.clone(),
+        unbounded_loops: inputs.statics.unbounded_loops,
+        unresolved_indirect_calls: inputs.statics.unresolved_indirect_calls.clone(),
+        recursions: inputs.statics.recursions.clone(),
         memory,
         symbols,
         runs: run_entries,
@@ -817,7 +864,12 @@ fn goal(name: &str, value: Option<f64>, goal: f64, unit: &str) -> Goal {
     }
 }
 
-fn goals(tasks: &Tasks, memory: &MemoryReport, runs: &[RunEntry]) -> Vec<Goal> {
+fn goals(
+    tasks: &Tasks,
+    memory: &MemoryReport,
+    runs: &[RunEntry],
+    statics: &StaticSummary,
+) -> Vec<Goal> {
     let misses: u64 = runs
         .iter()
         .map(|r| r.plan_deadline_misses + r.control_deadline_misses)
@@ -831,16 +883,54 @@ fn goals(tasks: &Tasks, memory: &MemoryReport, runs: &[RunEntry]) -> Vec<Goal> {
             "instructions",
         ),
         goal(
-            "plan bound within budget",
-            Some(tasks.plan.bound_cycles),
+            "plan job static bound within budget",
+            tasks.plan.statics.job_static_bound_cycles.map(|c| c as f64),
             tasks.plan.budget_cycles,
             "cycles",
         ),
         goal(
-            "plan + window bound within the period",
-            Some(tasks.plan_window.activation_bound_cycles),
-            tasks.plan_window.period_cycles,
+            "plan static bound over the traced maximum",
+            tasks.plan.statics.tightness,
+            GOAL_PLAN_TIGHTNESS,
+            "×",
+        ),
+        goal(
+            "control job static bound within budget",
+            tasks
+                .control
+                .statics
+                .job_static_bound_cycles
+                .map(|c| c as f64),
+            tasks.control.budget_cycles,
             "cycles",
+        ),
+        goal(
+            "plan response time bound within the deadline",
+            tasks.plan.statics.response_time_bound_us,
+            tasks.plan.statics.deadline_us.unwrap_or(0.0),
+            "µs",
+        ),
+        goal(
+            "control response time bound within the deadline",
+            tasks.control.statics.response_time_bound_us,
+            tasks.control.statics.deadline_us.unwrap_or(0.0),
+            "µs",
+        ),
+        goal(
+            "unbounded loops, unresolved calls, recursions",
+            Some(
+                (statics.unbounded_loops
+                    + statics.unresolved_indirect_calls.len()
+                    + statics.recursions.len()) as f64,
+            ),
+            0.0,
+            "",
+        ),
+        goal(
+            "stack bound: what it does not cover",
+            Some(memory.stack_misses.len() as f64),
+            0.0,
+            "items",
         ),
         goal(
             "control observed max",
@@ -946,17 +1036,23 @@ fn render_markdown(r: &WcetReport) -> Result<String, std::fmt::Error> {
     writeln!(s, "# Worst-case timing and memory of the ECU\n")?;
     writeln!(
         s,
-        "ELF `{}`, clock {} MHz, CPI bound {:.3} cycles/instruction.\n",
+        "ELF `{}`, clock {} MHz. Static bounds from the binary (`static.md` beside \
+         this file: control-flow graphs, loop bounds, IPET, the processor and memory \
+         model); observations from the PIL runs.\n",
         r.elf,
         num(r.clock_hz as f64 / 1e6),
-        r.cycles_per_instruction_bound
     )?;
     render_goals(&mut s, r)?;
     render_tasks(&mut s, r)?;
     render_memory(&mut s, r)?;
     render_stack(&mut s, r)?;
     render_runs(&mut s, r)?;
-    writeln!(s, "## CPI bound\n\n{}", r.cpi_justification)?;
+    writeln!(
+        s,
+        "## Cycles per instruction of the traced run\n\n{:.3} cycles/instruction over the \
+         traced code: an average for information, not a bound. {}",
+        r.traced_cycles_per_instruction, r.traced_cpi_method
+    )?;
     Ok(s)
 }
 
@@ -982,46 +1078,53 @@ fn render_goals(s: &mut String, r: &WcetReport) -> std::fmt::Result {
 fn render_tasks(s: &mut String, r: &WcetReport) -> std::fmt::Result {
     writeln!(
         s,
-        "## Tasks\n\nInstructions observed on the ECU in the PIL runs; bound = static \
-         instruction bound × CPI bound; margin = budget / bound (> 1: fits).\n"
+        "## Tasks\n\nObserved: instructions on the ECU in the PIL runs. Static: the IPET \
+         bound of the whole task and of its job (the part the budget limits), in cycles of \
+         the stated model; response time bound against the deadline; tightness = static \
+         bound / largest traced activation in the same cycles.\n"
     )?;
     writeln!(
         s,
-        "| task | observed p50 | observed max | warm max | cold max | bound (instr.) | \
-         bound (cycles) | budget (cycles) | bound (µs) | budget (µs) | margin |"
+        "| task | observed p50 | observed max | warm max | cold max | static bound (instr.) | \
+         static bound (cycles) | job bound (cycles) | budget (cycles) | response time bound (µs) | \
+         deadline (µs) | tightness |"
     )?;
-    writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+    writeln!(
+        s,
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    )?;
+    let opt_u = |v: Option<u64>| opt_num(v.map(|v| v as f64));
     for (name, t) in [("plan", &r.tasks.plan), ("control", &r.tasks.control)] {
+        let st = &t.statics;
         writeln!(
             s,
-            "| {name} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {:.2} |",
+            "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             num(t.observed_p50_instructions.round()),
             num(t.observed_max_instructions.round()),
             opt_num(t.observed_warm_max_instructions.map(f64::round)),
             opt_num(t.observed_cold_max_instructions.map(f64::round)),
-            num(t.bound_instructions.round()),
-            num(t.bound_cycles.round()),
+            opt_u(st.static_bound_instructions),
+            opt_u(st.static_bound_cycles),
+            opt_u(st.job_static_bound_cycles),
             num(t.budget_cycles.round()),
-            t.bound_us,
-            t.budget_us,
-            t.margin
+            st.response_time_bound_us
+                .map_or_else(|| "none within".to_string(), |v| format!("{v:.0}")),
+            opt_num(st.deadline_us),
+            opt_num(st.tightness),
         )?;
     }
     let w = &r.tasks.plan_window;
     writeln!(
         s,
         "\nAfter publishing, a plan activation may adopt a new window of the road: \
-         observed max {} instructions, bound {}; plan + window bound {} cycles within \
-         the {}-cycle period: {}.\n",
+         observed max {} instructions (inside the plan task's static bound and response \
+         time). Loops: {} reached, {} without a bound; unresolved indirect calls {}, \
+         recursions {}.\n",
         num(w.observed_max_instructions.round()),
-        num(w.bound_instructions.round()),
-        num(w.activation_bound_cycles.round()),
-        num(w.period_cycles.round()),
-        if w.activation_bound_cycles <= w.period_cycles {
-            "yes"
-        } else {
-            "NO"
-        }
+        r.loops.len(),
+        r.unbounded_loops,
+        r.unresolved_indirect_calls.len(),
+        r.recursions.len(),
     )
 }
 
@@ -1364,9 +1467,27 @@ active_constraints,max_validity_slack_rad";
             elf: PathBuf::from("target/ecu"),
             stack_levels: ecu_priority_levels(),
             cpi: cpi(1.5),
-            plan_bound_instructions: 4.0e6,
-            control_bound_instructions: 3000.0,
-            window_bound_instructions: 0.0,
+            statics: StaticSummary {
+                plan: StaticTiming {
+                    static_bound_instructions: Some(4_000_000),
+                    static_bound_cycles: Some(12_000_000),
+                    job_static_bound_cycles: Some(6_000_000),
+                    response_time_bound_us: Some(80_000.0),
+                    deadline_us: Some(100_000.0),
+                    traced_max_cycles: Some(3_000_000),
+                    tightness: Some(4.0),
+                },
+                control: StaticTiming {
+                    static_bound_instructions: Some(3000),
+                    static_bound_cycles: Some(9000),
+                    job_static_bound_cycles: Some(4500),
+                    response_time_bound_us: None,
+                    deadline_us: Some(10_000.0),
+                    traced_max_cycles: None,
+                    tightness: None,
+                },
+                ..Default::default()
+            },
             plan_period_cycles: 16.8e6,
             plan_budget_cycles: 8.4e6,
             control_budget_cycles: 5000.0,
@@ -1494,12 +1615,11 @@ active_constraints,max_validity_slack_rad";
         assert_eq!(plan.observed_cold_max_instructions, Some(2.0e6));
         // Median of 0.8, 1.0, 1.2, 2.0 (×1e6).
         assert_eq!(plan.observed_p50_instructions, 1.1e6);
-        assert_eq!(plan.bound_cycles, 6.0e6);
-        assert!((plan.margin - 1.4).abs() < 1e-12);
+        assert_eq!(plan.statics.job_static_bound_cycles, Some(6_000_000));
         assert!((plan.budget_us - 50_000.0).abs() < 1e-6);
         let control = &r.tasks.control;
         assert_eq!(control.observed_max_instructions, 1800.0);
-        assert_eq!(control.bound_cycles, 4500.0);
+        assert_eq!(control.statics.job_static_bound_cycles, Some(4500));
         assert!(control.observed_warm_max_instructions.is_none());
         assert_eq!(r.stack_high_water_bytes, 11620);
         assert_eq!(r.memory.static_ram_bytes, 42_000);
@@ -1519,7 +1639,16 @@ active_constraints,max_validity_slack_rad";
         );
         // The fixture's warm maximum, 1.2 M instructions, is over the 0.5 M goal.
         assert!(!goal_of(&r, "plan warm-start observed max")?.met);
-        assert!(goal_of(&r, "plan bound within budget")?.met);
+        // The job's static bound (6 M) within the budget (8.4 M); 4 × the traced
+        // maximum, over the 3 × goal; the control task's response time unbounded.
+        assert!(goal_of(&r, "plan job static bound within budget")?.met);
+        assert!(!goal_of(&r, "plan static bound over the traced maximum")?.met);
+        assert!(goal_of(&r, "control job static bound within budget")?.met);
+        assert!(goal_of(&r, "plan response time bound within the deadline")?.met);
+        let control_r = goal_of(&r, "control response time bound within the deadline")?;
+        assert_eq!((control_r.value, control_r.met), (None, false));
+        assert!(goal_of(&r, "unbounded loops, unresolved calls, recursions")?.met);
+        assert!(!goal_of(&r, "stack bound: what it does not cover")?.met);
         assert!(goal_of(&r, "control observed max")?.met);
         assert!(goal_of(&r, "static RAM")?.met);
         assert!(goal_of(&r, "stack bound")?.met);
@@ -1539,6 +1668,11 @@ active_constraints,max_validity_slack_rad";
         let err = assemble_report(&bad, &runs, memory(), ElfSymbols::default(), stack()?);
         let message = format!("{:#}", err.err().unwrap_or_else(|| anyhow::anyhow!("")));
         assert!(message.contains("cpi_bound"), "{message}");
+        let mut budget = inputs(Vec::new());
+        budget.plan_budget_cycles = f64::NAN;
+        let err = assemble_report(&budget, &runs, memory(), ElfSymbols::default(), stack()?);
+        let message = format!("{:#}", err.err().unwrap_or_else(|| anyhow::anyhow!("")));
+        assert!(message.contains("plan_budget_cycles"), "{message}");
         let none = assemble_report(
             &inputs(Vec::new()),
             &[],
@@ -1559,19 +1693,33 @@ active_constraints,max_validity_slack_rad";
         let v: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("wcet.json"))?)?;
         assert_eq!(v["clock_hz"].as_u64(), Some(168_000_000));
-        assert_eq!(v["cycles_per_instruction_bound"].as_f64(), Some(1.5));
-        assert_eq!(v["cpi_justification"].as_str(), Some("fixture CPI"));
+        assert_eq!(v["traced_cycles_per_instruction"].as_f64(), Some(1.5));
+        assert_eq!(v["traced_cpi_method"].as_str(), Some("fixture CPI"));
         for task in ["plan", "control"] {
-            for key in [
-                "observed_max_instructions",
-                "bound_instructions",
-                "bound_cycles",
-                "budget_cycles",
-                "margin",
-            ] {
+            for key in ["observed_max_instructions", "budget_cycles", "deadline_us"] {
                 assert!(v["tasks"][task][key].is_f64(), "tasks.{task}.{key}");
             }
+            for key in [
+                "static_bound_instructions",
+                "static_bound_cycles",
+                "job_static_bound_cycles",
+            ] {
+                assert!(v["tasks"][task][key].is_u64(), "tasks.{task}.{key}");
+            }
+            for key in ["response_time_bound_us", "tightness"] {
+                assert!(
+                    v["tasks"][task].get(key).is_some(),
+                    "tasks.{task}.{key} (a number or null)"
+                );
+            }
         }
+        assert!(v["tasks"]["plan"]["tightness"].is_f64());
+        assert!(v["tasks"]["control"]["response_time_bound_us"].is_null());
+        for key in ["loops", "unresolved_indirect_calls", "recursions"] {
+            assert!(v[key].is_array(), "{key}");
+        }
+        assert_eq!(v["unbounded_loops"].as_u64(), Some(0));
+        assert!(v["memory"]["stack_sound"].is_boolean());
         for key in [
             "text_bytes",
             "rodata_bytes",
@@ -1587,12 +1735,7 @@ active_constraints,max_validity_slack_rad";
         assert_eq!(v["symbols"]["allocator"].as_bool(), Some(false));
         assert_eq!(v["symbols"]["soft_double"].as_bool(), Some(false));
         assert_eq!(v["runs"].as_array().map(Vec::len), Some(2));
-        assert_eq!(v["goals"].as_array().map(Vec::len), Some(9));
-        // The fixture adopts no window: plan + window bound = the plan's.
-        assert_eq!(
-            v["tasks"]["plan_window"]["activation_bound_cycles"].as_f64(),
-            v["tasks"]["plan"]["bound_cycles"].as_f64()
-        );
+        assert_eq!(v["goals"].as_array().map(Vec::len), Some(14));
         assert!(v["goals"][0]["met"].is_boolean());
         let md = std::fs::read_to_string(out.join("wcet.md"))?;
         assert!(

@@ -90,6 +90,65 @@ pub struct Program {
 }
 
 impl Program {
+    /// Replaces the indirect calls of the functions `targets` covers (the same
+    /// rules as the timing analysis's control-flow graphs, [`super::cfg`]) by
+    /// calls of every listed target: the stack bound then follows them like
+    /// direct calls. A listed target that is no function of the disassembly
+    /// leaves the call indirect (and the bound unsound).
+    pub fn resolve_indirect(
+        &mut self,
+        targets: &super::cfg::IndirectTargets,
+        demangle: impl Fn(&str) -> String,
+    ) {
+        let demangled: Vec<String> = self.functions.iter().map(|f| demangle(&f.name)).collect();
+        for k in 0..self.functions.len() {
+            if self.functions[k].indirect.is_empty() {
+                continue;
+            }
+            let callees: Vec<&String> = targets
+                .rules
+                .iter()
+                .filter(|(caller, _)| demangled[k].starts_with(caller.as_str()))
+                .flat_map(|(_, c)| c.iter())
+                .collect();
+            if callees.is_empty() {
+                continue;
+            }
+            let hits: Vec<usize> = (0..self.functions.len())
+                .filter(|&j| {
+                    callees.iter().any(|c| {
+                        demangled[j].starts_with(c.as_str()) || self.functions[j].name == **c
+                    })
+                })
+                .collect();
+            if hits.is_empty()
+                || callees.iter().any(|c| {
+                    !hits.iter().any(|&j| {
+                        demangled[j].starts_with(c.as_str()) || self.functions[j].name == **c
+                    })
+                })
+            {
+                continue;
+            }
+            let sites = std::mem::take(&mut self.functions[k].indirect);
+            for site in sites {
+                let address = site
+                    .split(':')
+                    .next()
+                    .and_then(|a| u32::from_str_radix(a.trim().trim_start_matches("0x"), 16).ok())
+                    .unwrap_or(0);
+                for &j in &hits {
+                    let target = self.functions[j].name.clone();
+                    self.functions[k].calls.push(Call {
+                        target,
+                        address,
+                        tail: false,
+                    });
+                }
+            }
+        }
+    }
+
     /// Looks a function up by its exact (mangled) symbol or alias.
     pub fn get(&self, symbol: &str) -> Option<&Function> {
         self.names.get(symbol).and_then(|&i| self.functions.get(i))
@@ -859,22 +918,25 @@ pub fn stack_bound_once(
 /// (interrupt handlers bound to `DefaultHandler` share its address), and bounds the
 /// stack of `levels`.
 pub fn analyse_elf(elf: &Path, levels: &[PriorityLevel]) -> Result<StackReport, WcetError> {
-    analyse_elf_once(elf, levels, &[], &[])
+    analyse_elf_once(elf, levels, &[], &[], &Default::default())
 }
 
 /// [`analyse_elf`] with functions counted once and functions run only with
-/// interrupts disabled ([`stack_bound_once`]).
+/// interrupts disabled ([`stack_bound_once`]), and the indirect calls resolved by
+/// `targets` ([`Program::resolve_indirect`]).
 pub fn analyse_elf_once(
     elf: &Path,
     levels: &[PriorityLevel],
     once: &[String],
     masked: &[String],
+    targets: &super::cfg::IndirectTargets,
 ) -> Result<StackReport, WcetError> {
     let text = disassemble(elf)?;
     let mut program = parse_objdump(&text);
     for symbol in super::cpi::elf_functions(elf)? {
         program.add_alias(&symbol.name, symbol.address);
     }
+    program.resolve_indirect(targets, super::demangle);
     stack_bound_once(&program, levels, once, masked)
 }
 
