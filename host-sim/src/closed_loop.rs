@@ -294,10 +294,6 @@ pub struct Summary {
     pub plan_max_instructions: f64,
     /// Median estimated cost of a plan activation, instructions.
     pub plan_p50_instructions: f64,
-    /// The cost model's worst case for one plan activation, instructions.
-    pub plan_bound_instructions: f64,
-    /// The same in cycles (instructions × cycles per instruction).
-    pub plan_bound_cycles: f64,
     /// Plan releases whose response time exceeded the 100 ms period, skipped
     /// releases included.
     pub plan_deadline_misses: u64,
@@ -658,9 +654,6 @@ pub fn run_with<T: Real, E: Ecu<T>>(
     let lift = plant.wheel_lift();
     sum.wheel_lift_s = lift.lifted_s;
     sum.first_wheel_lift_s = lift.first_lift_s;
-    let car = vehicle_config::<T>(vehicle);
-    sum.plan_bound_instructions = opts.cost_model.plan_bound_instructions(&car.mpc_settings());
-    sum.plan_bound_cycles = sum.plan_bound_instructions * opts.cycles_per_instruction;
     host_us.sort_by(|a, b| a.total_cmp(b));
     sum.plan_host_us_p50 = host_us.get(host_us.len() / 2).copied().unwrap_or(0.0);
     sum.plan_host_us_max = host_us.last().copied().unwrap_or(0.0);

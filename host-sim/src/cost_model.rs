@@ -1,7 +1,7 @@
 //! The deterministic cost model of the two tasks on the ECU, in instructions, and
 //! its fit on activations measured on the ECU (processor in the loop).
 
-use firmware::mpc::{MpcReport, MpcSettings, NC};
+use firmware::mpc::MpcReport;
 use firmware::Real;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
@@ -104,30 +104,6 @@ impl CostModel {
     /// Estimated instructions of one control activation.
     pub fn control_instructions(&self) -> f64 {
         self.margin * self.control
-    }
-
-    /// The model's worst case for one plan activation under `settings`, up to its
-    /// publication, instructions (a window adopted after it adds
-    /// [`CostModel::per_window`] to the task's busy time): the firmware runs at most `cold_start_iterations` passes and
-    /// at most `qp_max_iter` QP iterations per activation (each adding, removing or
-    /// refactorising at most once), on at most [`NC`] rows:
-    ///
-    /// ```text
-    /// margin · (cold_start_iterations·(per_pass + NC·per_row_pass)
-    ///           + qp_max_iter·(per_iteration + per_added + per_removed + per_refactorization)
-    ///           + per_activation)
-    /// ```
-    pub fn plan_bound_instructions<T: Real>(&self, settings: &MpcSettings<T>) -> f64 {
-        let passes = f64::from(settings.cold_start_iterations.max(1));
-        let iterations = f64::from(settings.qp_max_iter);
-        self.margin
-            * (passes * (self.per_pass + NC as f64 * self.per_row_pass)
-                + iterations
-                    * (self.per_iteration
-                        + self.per_added
-                        + self.per_removed
-                        + self.per_refactorization)
-                + self.per_activation)
     }
 }
 

@@ -144,8 +144,6 @@ fn the_default_ecu_meets_every_deadline_and_reports_every_activation() {
     assert_eq!(s.plan_activations, 51);
     assert_eq!(r.plan_activations.len(), 50);
     assert!(s.plan_p50_instructions > 0.0 && s.plan_p50_instructions <= s.plan_max_instructions);
-    // The model's worst case under the MPC's caps fits the plan budget.
-    assert!(s.plan_bound_cycles <= s.plan_budget_cycles);
 }
 
 #[test]

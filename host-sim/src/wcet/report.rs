@@ -992,7 +992,7 @@ pub fn write_report(dir: &Path, r: &WcetReport) -> Result<()> {
 /// `met (12.5 % below)` or `MISSED by 3 bytes (+0.4 %)`.
 fn goal_verdict(g: &Goal) -> String {
     let Some(value) = g.value else {
-        return "MISSED: nothing measured".to_string();
+        return "**MISSED**: no value (nothing measured, or no bound within the limit)".to_string();
     };
     let relative = |d: f64| {
         if g.goal > 0.0 {
