@@ -351,8 +351,9 @@ pub struct Summary {
     pub sim_speed_x_realtime: f64,
     /// Largest distance between where the active plan put the car and where it was, m.
     pub consistency_max_m: f64,
-    /// Largest validity slack in any published plan, rad.
-    pub max_validity_slack_rad: f64,
+    /// Largest validity slack in any published plan, rad; `None` where it is not
+    /// measured (processor in the loop: the ECU does not send it).
+    pub max_validity_slack_rad: Option<f64>,
     /// Budgets used, cycles.
     pub plan_budget_cycles: f64,
     /// Budget of one control activation, cycles.
@@ -766,8 +767,10 @@ impl<'a> Meter<'a> {
             }
             if p.published {
                 sum.plan_max_qp_iterations = sum.plan_max_qp_iterations.max(p.qp_iterations);
-                sum.max_validity_slack_rad =
-                    sum.max_validity_slack_rad.max(p.max_validity_slack_rad);
+                if let Some(slack) = p.max_validity_slack_rad {
+                    sum.max_validity_slack_rad =
+                        Some(sum.max_validity_slack_rad.unwrap_or(0.0).max(slack));
+                }
             } else {
                 sum.plan_failures += 1;
             }

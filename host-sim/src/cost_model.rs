@@ -108,8 +108,9 @@ impl CostModel {
 }
 
 /// What the cost model reads of a plan activation: its measured (or modelled)
-/// instructions and its work counters (a row of `plan_activations.csv`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, serde::Deserialize)]
+/// instructions and its work counters (a view of a [`PlanActivation`], the row
+/// type of `plan_activations.csv`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct Counters {
     /// Instructions of the activation.
     pub instructions: f64,
@@ -126,7 +127,6 @@ pub struct Counters {
     /// General QP rows of the last pass.
     pub rows: u32,
     /// Instructions of adopting a window of the road after publishing (0: none).
-    #[serde(default)]
     pub window_instructions: f64,
 }
 
@@ -154,9 +154,12 @@ pub fn load_counters(path: &std::path::Path) -> anyhow::Result<Vec<Counters>> {
             path.display()
         )
     })?;
-    r.deserialize()
+    r.deserialize::<crate::ecu::PlanActivation>()
         .enumerate()
-        .map(|(i, row)| row.with_context(|| format!("{}: row {}", path.display(), i + 2)))
+        .map(|(i, row)| {
+            row.map(|a| Counters::from(&a))
+                .with_context(|| format!("{}: row {}", path.display(), i + 2))
+        })
         .collect()
 }
 

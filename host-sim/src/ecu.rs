@@ -45,8 +45,14 @@ use crate::route::{RouteFeeder, Window};
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleParams;
 
-/// One activation of the plan task, as the ECU (modelled or measured) ran it.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+/// A plan status's name, one of [`plan_status_name`]'s (an alias, so that serde's
+/// derive does not take it for a string borrowed from the input).
+pub type StatusName = &'static str;
+
+/// One activation of the plan task, as the ECU (modelled or measured) ran it: a
+/// row of `plan_activations.csv`, written by `run` and `pil` and read back by the
+/// timing report and the cost model's fit through this same type.
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct PlanActivation {
     /// 1-based count of the task's releases (skipped releases included).
     pub activation: u32,
@@ -59,8 +65,9 @@ pub struct PlanActivation {
     pub instructions: f64,
     /// `instructions` × cycles per instruction (see [`CostModel`]), ECU cycles.
     pub cycles: f64,
-    /// `"optimal"` or the failure's name.
-    pub status: &'static str,
+    /// `"optimal"` or the failure's name ([`plan_status_name`]).
+    #[serde(deserialize_with = "known_plan_status")]
+    pub status: StatusName,
     /// The plan was published (at `finish_us`).
     pub published: bool,
     /// The response time exceeded the period (100 ms).
@@ -80,12 +87,16 @@ pub struct PlanActivation {
     /// Working-set size at the end of the last pass.
     pub active_constraints: u32,
     /// After publishing, the activation adopted a new window of the road.
+    #[serde(default)]
     pub window: bool,
     /// Instructions of that adoption (not in `instructions`: it follows the
     /// publication), 0 without a window.
+    #[serde(default)]
     pub window_instructions: f64,
-    /// Largest validity slack of the plan, rad (0 if none or not optimal).
-    pub max_validity_slack_rad: f64,
+    /// Largest validity slack of the plan, rad (0 if none or not optimal); `None`
+    /// (an empty cell) where it is not measured (the ECU does not send it).
+    #[serde(default)]
+    pub max_validity_slack_rad: Option<f64>,
 }
 
 /// One task's deadline counts as the ECU itself counted them on its own clock
@@ -371,6 +382,31 @@ fn response_us(cycles: f64, control_cycles: f64, clock_hz: f64) -> f64 {
     resp_s * 1e6
 }
 
+/// The name of a plan activation's status code (`firmware::link`'s
+/// [`PlanEventFrame::status`](firmware::link::PlanEventFrame)): `"optimal"`, the
+/// error's name ([`mpc_error_name`]), or `"unknown"`.
+pub fn plan_status_name(code: u8) -> &'static str {
+    match firmware::link::mpc_error_from_code(code) {
+        None if code == firmware::link::MPC_OK => "optimal",
+        None => "unknown",
+        Some(e) => mpc_error_name(&e),
+    }
+}
+
+/// Reads a status name back as the name [`plan_status_name`] gives (refusing a
+/// name no code has).
+fn known_plan_status<'de, D: serde::Deserializer<'de>>(d: D) -> Result<&'static str, D::Error> {
+    let name = <std::borrow::Cow<'de, str> as serde::Deserialize>::deserialize(d)?;
+    (0..=u8::MAX)
+        .map(plan_status_name)
+        .find(|n| *n == name)
+        .ok_or_else(|| {
+            serde::de::Error::custom(format!(
+                "unknown plan status `{name}` (expected `optimal` or an MPC error's name)"
+            ))
+        })
+}
+
 fn activation_record<T: Real>(
     activation: u32,
     release_us: u64,
@@ -397,7 +433,7 @@ fn activation_record<T: Real>(
         active_constraints: r.active_constraints,
         window: false,
         window_instructions: 0.0,
-        max_validity_slack_rad: r.max_validity_slack_rad.to_f64(),
+        max_validity_slack_rad: Some(r.max_validity_slack_rad.to_f64()),
     }
 }
 
@@ -406,7 +442,7 @@ impl PlanActivation {
         self.status = status;
         self.published = published;
         if !published {
-            self.max_validity_slack_rad = 0.0;
+            self.max_validity_slack_rad = Some(0.0);
         }
         self
     }

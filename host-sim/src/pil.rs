@@ -636,15 +636,6 @@ pub fn setup_refusal(status: u8, detail: u16) -> String {
     }
 }
 
-/// Name of an MPC status code, as the simulator's logs write it.
-fn status_name(code: u8) -> &'static str {
-    match link::mpc_error_from_code(code) {
-        None if code == link::MPC_OK => "optimal",
-        None => "unknown",
-        Some(e) => crate::ecu::mpc_error_name(&e),
-    }
-}
-
 impl QemuEcu {
     /// The record of a plan event, instructions from the ECU's clock ticks.
     pub fn activation_of(&self, p: &PlanEventFrame) -> PlanActivation {
@@ -655,7 +646,7 @@ impl QemuEcu {
             finish_us: p.finish_us,
             instructions,
             cycles: instructions * self.opts.cycles_per_instruction,
-            status: status_name(p.status),
+            status: crate::ecu::plan_status_name(p.status),
             published: p.published,
             deadline_miss: p.finish_us > p.release_us + PLAN_PERIOD_US,
             passes: u32::from(p.passes),
@@ -671,7 +662,7 @@ impl QemuEcu {
             } else {
                 0.0
             },
-            max_validity_slack_rad: 0.0,
+            max_validity_slack_rad: None,
         }
     }
 }

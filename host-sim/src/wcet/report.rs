@@ -86,23 +86,8 @@ pub struct PilInfo {
     pub control_p50_instructions: f64,
 }
 
-/// One row of `plan_activations.csv` (the columns the report uses).
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-pub struct PlanActivation {
-    /// Activation number, from 0.
-    pub activation: u64,
-    /// Instructions the ECU executed for the activation, in instructions.
-    pub instructions: f64,
-    /// `optimal` or the name of the failure.
-    pub status: String,
-    /// Whether it finished after its deadline.
-    pub deadline_miss: bool,
-    /// QP passes: 1 for a warm start that sufficed, more when it was cold-started.
-    pub passes: u32,
-    /// Instructions of the window of the road adopted after publishing (0: none).
-    #[serde(default)]
-    pub window_instructions: f64,
-}
+/// One row of `plan_activations.csv`: the type `run` and `pil` write it with.
+pub use crate::ecu::PlanActivation;
 
 /// A processor-in-the-loop run folder, read by [`load_pil_run`].
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -165,10 +150,19 @@ fn read_plan_csv(dir: &Path) -> Result<Vec<PlanActivation>> {
     let mut rows = Vec::new();
     for (k, row) in reader.deserialize::<PlanActivation>().enumerate() {
         // Line 1 is the header.
-        let row = row.with_context(|| {
-            format!(
-                "{} line {}: expected numbers in activation/instructions/passes and \
-                 true/false in deadline_miss",
+        let row = row.map_err(|e| {
+            // Name the column the value was for.
+            let column = match e.kind() {
+                csv::ErrorKind::Deserialize { err, .. } => err
+                    .field()
+                    .and_then(|i| headers.get(i as usize))
+                    .map(|h| format!(" in column `{h}`"))
+                    .unwrap_or_default(),
+                _ => String::new(),
+            };
+            anyhow::anyhow!(
+                "{} line {}{column}: not a row of `{PIL_COMMAND}`'s plan_activations.csv \
+                 (numbers, true/false, a known status): {e}",
                 path.display(),
                 k + 2
             )
@@ -1510,7 +1504,7 @@ active_constraints,max_validity_slack_rad";
             "run-b",
             &[
                 (0.8e6, 1, false, "optimal"),
-                (2.0e6, 3, true, "max_iterations"),
+                (2.0e6, 3, true, "qp_iteration_limit"),
             ],
             1800.0,
             11620,
@@ -1533,7 +1527,7 @@ active_constraints,max_validity_slack_rad";
         let dir = write_run(
             tmp.path(),
             "run",
-            &[(5.0, 1, false, "optimal"), (7.0, 2, true, "infeasible")],
+            &[(5.0, 1, false, "optimal"), (7.0, 2, true, "qp_infeasible")],
             99.0,
             1234,
         )?;
@@ -1542,7 +1536,7 @@ active_constraints,max_validity_slack_rad";
         assert_eq!(run.plan[1].instructions, 7.0);
         assert_eq!(run.plan[1].passes, 2);
         assert!(run.plan[1].deadline_miss);
-        assert_eq!(run.plan[1].status, "infeasible");
+        assert_eq!(run.plan[1].status, "qp_infeasible");
         assert_eq!(run.summary.plan_deadline_misses, 1);
         assert_eq!(run.pil.stack_high_water_bytes, 1234);
         assert_eq!(run.pil.control_max_instructions, 99.0);
