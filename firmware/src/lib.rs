@@ -12,7 +12,6 @@
 //! | [`validity`] | the validity limit `δ_max(V)` keeping `a_y ≤ 0.5·μ·g` |
 //! | [`velocity_planner`] | local velocity planner, `V_heur` |
 //! | [`obstacles`] | obstacle manager: one forbidden parabola per obstacle |
-//! | [`qp`] | our dense active-set QP solver |
 //! | [`mpc`] | the local MPC planner (linearise, condense, solve) |
 //! | [`pid`] | PID controller |
 //! | [`longitudinal_estimator`] | online estimate of the car's effective mass and driving resistances |
@@ -28,8 +27,6 @@
 //! rad, N, N·m, kg); vehicle frame x forward, y left; yaw counter-clockwise.
 #![cfg_attr(not(test), no_std)]
 
-pub mod real;
-
 pub mod bicycle;
 pub mod deadline;
 pub mod friction;
@@ -40,7 +37,6 @@ pub mod mpc;
 pub mod obstacles;
 pub mod pid;
 pub mod plan;
-pub mod qp;
 pub mod reference_path;
 pub mod setup;
 pub mod state_estimate;
@@ -49,7 +45,8 @@ pub mod validity;
 pub mod vehicle_config;
 pub mod velocity_planner;
 
-pub use real::Real;
+/// The scalar trait, from the QP solver's crate (`qp`), which the MPC's solver uses.
+pub use qp::Real;
 
 /// Standard gravity, m/s².
 pub const G: f32 = 9.81;

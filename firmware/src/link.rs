@@ -86,9 +86,9 @@ use crate::low_level::{ControlFault, Mode};
 use crate::mpc::{MpcError, MpcReport};
 use crate::obstacles::MAX_VERTICES;
 use crate::plan::Plan;
-use crate::qp::QpStatus;
 use crate::state_estimate::StateEstimate;
 use crate::vehicle_config::VehicleConfig;
+use qp::QpStatus;
 
 /// Version of this wire format, the first byte of every raw frame.
 pub const LINK_VERSION: u8 = 3;

@@ -63,15 +63,15 @@
 use crate::bicycle::{self, BicycleGeometry};
 use crate::obstacles::{obstacle_speed_cap, Parabola, Side};
 use crate::plan::{Plan, HORIZON, PLAN_DT_S};
-use crate::qp::{
-    ldl_len, ActiveConstraint, ConstraintIndex, QpProblem, QpSolution, QpSolver, QpStatus,
-    Side as QpSide,
-};
 use crate::reference_path::{CurvatureWindow, ReferencePath};
 use crate::state_estimate::StateEstimate;
 use crate::validity::{kinematic_steering_for_radius, ValidityLimit};
 use crate::velocity_planner::{self, VelocityPlannerSettings};
 use crate::Real;
+use qp::{
+    ldl_len, ActiveConstraint, ConstraintIndex, QpProblem, QpSolution, QpSolver, QpStatus,
+    Side as QpSide,
+};
 
 pub use crate::bicycle::{NU, NX};
 /// Number of QP variables: the inputs over the horizon.
@@ -90,7 +90,7 @@ pub const WS: usize = 48;
 /// the flow fact that bounds the plan task's worst case.
 pub const QP_MAX_ITER: u32 = 90;
 /// QP refactorizations one activation may make, summed over its passes (each
-/// pass gets what is left as its [`crate::qp::QpSettings::max_refactorizations`]):
+/// pass gets what is left as its [`qp::QpSettings::max_refactorizations`]):
 /// with [`QP_MAX_ITER`], the flow fact that bounds the plan task's worst case. A
 /// refactorization rebuilds the factor of up to [`WS`] rows (about `WS³/6`
 /// multiply-adds); past the cap the pass ends as a numerical error.

@@ -546,7 +546,7 @@ fn status_codes_round_trip_and_names_are_distinct() {
     assert_eq!(mpc_status_code(&Ok::<u8, MpcError>(3)), 0);
     assert_eq!(mpc_status_name(0), "Optimal");
     assert_eq!(
-        mpc_status_code::<()>(&Err(MpcError::Qp(firmware::qp::QpStatus::Infeasible))),
+        mpc_status_code::<()>(&Err(MpcError::Qp(qp::QpStatus::Infeasible))),
         0x13
     );
     for unknown in [5u8, 0x0F, 0x19, 0xFF] {

@@ -357,7 +357,7 @@ fn warm_start_takes_fewer_qp_iterations_than_cold_start() {
             let mut fresh = Box::new(firmware::mpc::MpcQp::<f64>::new());
             fresh.settings.warm_start = false;
             *fresh.problem_mut() = *copy.unwrap();
-            assert_eq!(fresh.solve(), firmware::qp::QpStatus::Optimal);
+            assert_eq!(fresh.solve(), qp::QpStatus::Optimal);
             warm += its;
             cold += fresh.solution().iterations;
             steps += 1;
@@ -471,7 +471,7 @@ fn a_qp_that_hits_its_iteration_cap_gives_no_plan() {
         .unwrap_err();
     assert_eq!(
         err,
-        firmware::mpc::MpcError::Qp(firmware::qp::QpStatus::IterationLimit)
+        firmware::mpc::MpcError::Qp(qp::QpStatus::IterationLimit)
     );
     assert_eq!(plan, before, "the output plan is untouched");
     // The failed step's work is still counted: one pass, its one iteration, its rows.
@@ -580,8 +580,8 @@ fn warm_start_survives_rows_renumbered_by_a_new_obstacle() {
             .working_set()
             .iter()
             .filter_map(|e| match e.index {
-                firmware::qp::ConstraintIndex::Row(i) => Some(i),
-                firmware::qp::ConstraintIndex::Bound(_) => None,
+                qp::ConstraintIndex::Row(i) => Some(i),
+                qp::ConstraintIndex::Bound(_) => None,
             })
             .collect();
         v.sort();

@@ -8,7 +8,7 @@
 )]
 
 use firmware::mpc::{MpcQp, NC, NV, WS};
-use firmware::qp::ldl_len;
+use qp::ldl_len;
 
 /// The MPC's solver in f32: N = `NV` = 32 variables, M = `NC` = 80 rows, W = `WS` =
 /// 48 working-set entries.

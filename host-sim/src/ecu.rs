@@ -508,7 +508,7 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
 /// The name of an MPC failure, as written in the log and the activations.
 pub fn mpc_error_name(e: &firmware::mpc::MpcError) -> &'static str {
     use firmware::mpc::MpcError as E;
-    use firmware::qp::QpStatus as Q;
+    use qp::QpStatus as Q;
     match e {
         E::NonFiniteState => "non_finite_state",
         E::InvalidFriction => "invalid_friction",

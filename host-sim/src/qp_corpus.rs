@@ -50,7 +50,7 @@
 //! `aᵀx − s ≤ hi`, plus `s ≥ 0`. At the optimum `s = max(lo − aᵀx, aᵀx − hi, 0)`, so
 //! the standard form has the same optimal inputs and objective as the native one.
 //!
-//! `native` holds exactly what our solver was given ([`firmware::qp::QpProblem`]):
+//! `native` holds exactly what our solver was given ([`qp::QpProblem`]):
 //! `n` (32), `m` (general rows), `H` (`n×n` row-major; only the upper triangle is read,
 //! the lower one is as the MPC left it), `f`, `A` (`m×n`), `lo`, `hi` (`null` for ∓∞),
 //! `x_lo`, `x_hi` (`n`, `null` for ∓∞), `soft` (`m` weights `ρ_i`, 0 for hard rows) and
@@ -80,10 +80,10 @@ use firmware::obstacles::{Obstacle, ObstacleManager};
 use crate::closed_loop;
 use crate::vehicle::VehicleParams;
 use firmware::plan::Plan;
-use firmware::qp::{ActiveConstraint, ConstraintIndex, QpStatus, Side};
 use firmware::reference_path::ReferencePath;
 use firmware::state_estimate::StateEstimate;
 use firmware::Real;
+use qp::{ActiveConstraint, ConstraintIndex, QpStatus, Side};
 use serde::{Deserialize, Serialize};
 
 /// Number of decision variables of the MPC's QP (the inputs over the horizon).

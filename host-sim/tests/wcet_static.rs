@@ -3,6 +3,7 @@
 //! hand.
 #![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+use host_sim::wcet::annotations::SourceDir;
 use host_sim::wcet::cfg::{self, IndirectTargets, MemoryModel, Program};
 use host_sim::wcet::ipet::{self, Cost, IpetError, LoopFact, Per};
 use host_sim::wcet::{bounds, demangle, loops};
@@ -171,8 +172,7 @@ fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
         elf.is_file(),
         "{ECU_ELF} is missing: build it with `cargo ecu`"
     );
-    let a = host_sim::wcet::analysis::analyse(elf, std::path::Path::new("../firmware/src"), &[])
-        .unwrap();
+    let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
     assert!(
         a.unresolved_indirect_calls.is_empty(),
         "{:?}",
@@ -202,34 +202,52 @@ fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
     }
 }
 
-/// A copy of the firmware's sources with `edit` applied to one file (line count
-/// unchanged, so the ELF's line table still matches).
-fn edited_sources(file: &str, edit: impl Fn(&str) -> String) -> tempfile::TempDir {
+/// The firmware crates' sources in this workspace (`firmware/src`, `qp/src`).
+fn workspace_sources() -> Vec<SourceDir> {
+    SourceDir::workspace(std::path::Path::new(".."))
+}
+
+/// A copy of the firmware crates' sources (`firmware/src`, `qp/src`) with `edit`
+/// applied to one file, `file` from the workspace root (line count unchanged, so
+/// the ELF's line table still matches), and its source folders.
+fn edited_sources(
+    file: &str,
+    edit: impl Fn(&str) -> String,
+) -> (tempfile::TempDir, Vec<SourceDir>) {
     let dir = tempfile::tempdir().unwrap();
-    let src = std::path::Path::new("../firmware/src");
-    let mut stack = vec![src.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            let rel = p.strip_prefix(src).unwrap();
-            if p.is_dir() {
-                std::fs::create_dir_all(dir.path().join(rel)).unwrap();
-                stack.push(p);
-            } else {
-                let text = std::fs::read_to_string(&p).unwrap();
-                let text = if rel == std::path::Path::new(file) {
-                    let new = edit(&text);
-                    assert_ne!(new, text, "the edit changed nothing in {file}");
-                    assert_eq!(new.lines().count(), text.lines().count());
-                    new
+    let mut edited = false;
+    for from in workspace_sources() {
+        let src = from.dir.as_path();
+        let mut stack = vec![src.to_path_buf()];
+        while let Some(d) = stack.pop() {
+            for e in std::fs::read_dir(&d).unwrap().flatten() {
+                let p = e.path();
+                let rel = std::path::Path::new(from.label).join(p.strip_prefix(src).unwrap());
+                if p.is_dir() {
+                    stack.push(p);
                 } else {
-                    text
-                };
-                std::fs::write(dir.path().join(rel), text).unwrap();
+                    let text = std::fs::read_to_string(&p).unwrap();
+                    let text = if rel == std::path::Path::new(file) {
+                        let new = edit(&text);
+                        assert_ne!(new, text, "the edit changed nothing in {file}");
+                        assert_eq!(new.lines().count(), text.lines().count());
+                        edited = true;
+                        new
+                    } else {
+                        text
+                    };
+                    let to = dir.path().join(rel);
+                    if let Some(parent) = to.parent() {
+                        std::fs::create_dir_all(parent).unwrap();
+                    }
+                    std::fs::write(to, text).unwrap();
+                }
             }
         }
     }
-    dir
+    assert!(edited, "no file {file} in the firmware crates' sources");
+    let sources = SourceDir::workspace(dir.path());
+    (dir, sources)
 }
 
 #[test]
@@ -240,15 +258,14 @@ fn a_loop_whose_annotation_is_removed_is_refused() {
         elf.is_file(),
         "{ECU_ELF} is missing: build it with `cargo ecu`"
     );
-    let src = std::path::Path::new("../firmware/src");
-    let before = host_sim::wcet::analysis::analyse(elf, src, &[]).unwrap();
-    let edited = edited_sources("mpc.rs", |t| {
+    let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    let (_dir, edited) = edited_sources("firmware/src/mpc.rs", |t| {
         t.replace(
             "// wcet-bound: COLD_START_PASSES",
             "// (bound removed by a test)",
         )
     });
-    let after = host_sim::wcet::analysis::analyse(elf, edited.path(), &[]).unwrap();
+    let after = host_sim::wcet::analysis::analyse(elf, &edited, &[]).unwrap();
     assert!(
         after.unbounded_loops > before.unbounded_loops,
         "{} -> {}",
@@ -269,6 +286,38 @@ fn a_loop_whose_annotation_is_removed_is_refused() {
         .as_deref()
         .unwrap_or("")
         .contains("without a bound"));
+}
+
+/// The QP solver's annotations are read from its own crate (`qp/src`): without its
+/// iteration cap, the solver's main loop is unbounded.
+#[test]
+#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+fn a_qp_loop_whose_annotation_is_removed_is_refused() {
+    let elf = std::path::Path::new(ECU_ELF);
+    assert!(
+        elf.is_file(),
+        "{ECU_ELF} is missing: build it with `cargo ecu`"
+    );
+    let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    let unbounded_in_qp = |a: &host_sim::wcet::analysis::StaticAnalysis| {
+        a.loops
+            .iter()
+            .filter(|l| l.file == "qp/src/active_set.rs" && l.bound.is_none())
+            .count()
+    };
+    assert_eq!(unbounded_in_qp(&before), 0);
+    assert!(before.loops.iter().any(|l| l.file.starts_with("qp/src/")));
+    let (_dir, edited) = edited_sources("qp/src/active_set.rs", |t| {
+        t.replace(
+            "// wcet-bound: QP_MAX_ITER per activation",
+            "// (bound removed by a test)",
+        )
+    });
+    let after = host_sim::wcet::analysis::analyse(elf, &edited, &[]).unwrap();
+    assert!(after.unbounded_loops > before.unbounded_loops);
+    assert!(unbounded_in_qp(&after) > 0);
+    let plan = after.tasks.iter().find(|t| t.name == "plan").unwrap();
+    assert!(plan.static_bound_instructions.is_none());
 }
 
 #[test]
@@ -302,17 +351,18 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
         .status()
         .unwrap();
     assert!(status.success());
-    let src = std::path::Path::new("../firmware/src");
-    let honest = host_sim::wcet::analysis::analyse(elf, src, std::slice::from_ref(&trace)).unwrap();
+    let honest =
+        host_sim::wcet::analysis::analyse(elf, &workspace_sources(), std::slice::from_ref(&trace))
+            .unwrap();
     assert!(honest.violations.is_empty(), "{:?}", honest.violations);
     assert!(honest
         .loops
         .iter()
         .any(|l| l.observed_max.unwrap_or(0) >= 300));
-    let edited = edited_sources("reference_path.rs", |t| {
+    let (_dir, edited) = edited_sources("firmware/src/reference_path.rs", |t| {
         t.replace("// wcet-bound: ECU_PATH_ROWS", "// wcet-bound: 10")
     });
-    let wrong = host_sim::wcet::analysis::analyse(elf, edited.path(), &[trace]).unwrap();
+    let wrong = host_sim::wcet::analysis::analyse(elf, &edited, &[trace]).unwrap();
     assert!(!wrong.violations.is_empty());
     assert!(
         wrong

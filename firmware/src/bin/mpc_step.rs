@@ -24,10 +24,10 @@ use firmware::low_level::LowLevelConfig;
 use firmware::mpc::{Mpc, MpcSettings};
 use firmware::obstacles::{Obstacle, ObstacleManager, ObstacleSettings};
 use firmware::plan::Plan;
-use firmware::real::f32_math;
 use firmware::reference_path::ReferencePath;
 use firmware::state_estimate::StateEstimate;
 use firmware::tasks::ControlTask;
+use qp::real::f32_math;
 use stm32f4 as _;
 
 const PATH_CAP: usize = 256;

@@ -217,17 +217,17 @@ fn location(loader: &addr2line::Loader, address: u32) -> (String, u32) {
     let chain = frames(loader, address);
     chain
         .iter()
-        .find(|(file, _)| file.contains("/firmware/src/"))
+        .find(|(file, _)| annotations::firmware_source_path(file).is_some())
         .or(chain.first())
         .cloned()
         .unwrap_or_else(|| ("?".into(), 0))
 }
 
-/// The source path from the workspace on (`firmware/src/mpc.rs`), or the file name
-/// with its crate folder for a dependency.
+/// The source path from the workspace on (`firmware/src/mpc.rs`, `qp/src/factor.rs`),
+/// or the file name with its crate folder for a dependency.
 fn short_path(file: &str) -> String {
-    if let Some(i) = file.find("/firmware/src/") {
-        return file[i + 1..].to_string();
+    if let Some(p) = annotations::firmware_source_path(file) {
+        return p.to_string();
     }
     // A crate from the registry: from its `name-version` folder on.
     if let Some(i) = file.find("/registry/src/") {
@@ -402,8 +402,13 @@ fn frames(loader: &addr2line::Loader, address: u32) -> Vec<(String, u32)> {
     out
 }
 
-/// Runs the analysis on `elf`.
-pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<StaticAnalysis> {
+/// Runs the analysis on `elf`, with the loop annotations of `sources` (the
+/// firmware crates' source folders, [`annotations::SourceDir::workspace`]).
+pub fn analyse(
+    elf: &Path,
+    sources: &[annotations::SourceDir],
+    traces: &[PathBuf],
+) -> Result<StaticAnalysis> {
     let text = super::stack::disassemble_with_bytes(elf)?;
     let raw = cfg::parse_disassembly(&text);
     let memory = MemoryModel::STM32F405;
@@ -424,8 +429,13 @@ pub fn analyse(elf: &Path, firmware_src: &Path, traces: &[PathBuf]) -> Result<St
     }
     // Bounds: recognised from the binary, else the source's annotation at the
     // loop's line (DWARF), never the one an enclosing loop took.
-    let annotations = annotations::scan_firmware(firmware_src)
-        .map_err(|e| anyhow::anyhow!("loop annotations in {}: {e}", firmware_src.display()))?;
+    let annotations = annotations::scan_sources(sources).map_err(|e| {
+        let dirs: Vec<String> = sources
+            .iter()
+            .map(|s| s.dir.display().to_string())
+            .collect();
+        anyhow::anyhow!("loop annotations in {}: {e}", dirs.join(", "))
+    })?;
     let dependency_facts = annotations::dependency_facts();
     let by_line: BTreeMap<(String, u32), &annotations::Annotation> = annotations
         .iter()

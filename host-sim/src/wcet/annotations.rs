@@ -1,6 +1,7 @@
-//! Loop bounds written beside the loops in the firmware's source, as expressions
-//! of the firmware's own constants, matched to the binary's loops through the
-//! DWARF line table.
+//! Loop bounds written beside the loops in the firmware's source (the crates of
+//! the workspace the ECU runs: `firmware` and `qp`, [`FIRMWARE_CRATE_SOURCES`]), as
+//! expressions of the firmware's own constants, matched to the binary's loops
+//! through the DWARF line table.
 //!
 //! ```text
 //! // wcet-bound: HORIZON
@@ -369,32 +370,74 @@ pub fn parse_source(
     Ok(out)
 }
 
-/// The annotations of every `.rs` file under `firmware_src` (the firmware crate's
-/// `src`), files reported as `firmware/src/...`.
-pub fn scan_firmware(firmware_src: &Path) -> Result<Vec<Annotation>, String> {
+/// The workspace's crates whose code the ECU runs and whose sources carry loop
+/// annotations, as their source folders from the workspace root (which is also
+/// how the reports name their files: `qp/src/factor.rs`).
+pub const FIRMWARE_CRATE_SOURCES: [&str; 2] = ["firmware/src", "qp/src"];
+
+/// One crate's source folder: where it is read, and the workspace-relative
+/// folder its files are reported under (one of [`FIRMWARE_CRATE_SOURCES`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SourceDir {
+    /// The folder read (e.g. `../qp/src`, or an edited copy).
+    pub dir: PathBuf,
+    /// The folder from the workspace root the files are reported under (`qp/src`).
+    pub label: &'static str,
+}
+
+impl SourceDir {
+    /// The source folders of [`FIRMWARE_CRATE_SOURCES`] under the workspace root
+    /// `root`.
+    pub fn workspace(root: &Path) -> Vec<SourceDir> {
+        FIRMWARE_CRATE_SOURCES
+            .iter()
+            .map(|&label| SourceDir {
+                dir: root.join(label),
+                label,
+            })
+            .collect()
+    }
+}
+
+/// The workspace-relative path (`qp/src/factor.rs`) of a source file the DWARF
+/// line table names by its absolute path, if it is in one of
+/// [`FIRMWARE_CRATE_SOURCES`].
+pub fn firmware_source_path(file: &str) -> Option<&str> {
+    FIRMWARE_CRATE_SOURCES.iter().find_map(|label| {
+        let i = file.find(&format!("/{label}/"))?;
+        file.get(i + 1..)
+    })
+}
+
+/// The annotations of every `.rs` file under each folder of `sources`, files
+/// reported under its label (`firmware/src/...`, `qp/src/...`).
+pub fn scan_sources(sources: &[SourceDir]) -> Result<Vec<Annotation>, String> {
     let constants = firmware_constants();
-    let mut files: Vec<PathBuf> = Vec::new();
-    let mut dirs = vec![firmware_src.to_path_buf()];
-    while let Some(d) = dirs.pop() {
-        let entries = std::fs::read_dir(&d).map_err(|e| format!("{}: {e}", d.display()))?;
-        for e in entries.flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                dirs.push(p);
-            } else if p.extension().is_some_and(|x| x == "rs") {
-                files.push(p);
+    let mut out = Vec::new();
+    for source in sources {
+        let root = source.dir.as_path();
+        let mut files: Vec<PathBuf> = Vec::new();
+        let mut dirs = vec![root.to_path_buf()];
+        while let Some(d) = dirs.pop() {
+            let entries = std::fs::read_dir(&d).map_err(|e| format!("{}: {e}", d.display()))?;
+            for e in entries.flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    dirs.push(p);
+                } else if p.extension().is_some_and(|x| x == "rs") {
+                    files.push(p);
+                }
             }
         }
-    }
-    files.sort();
-    let mut out = Vec::new();
-    for p in files {
-        let text = std::fs::read_to_string(&p).map_err(|e| format!("{}: {e}", p.display()))?;
-        let rel = p
-            .strip_prefix(firmware_src)
-            .map(|r| format!("firmware/src/{}", r.display()))
-            .unwrap_or_else(|_| p.display().to_string());
-        out.extend(parse_source(&rel, &text, &constants)?);
+        files.sort();
+        for p in files {
+            let text = std::fs::read_to_string(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+            let rel = p
+                .strip_prefix(root)
+                .map(|r| format!("{}/{}", source.label, r.display()))
+                .unwrap_or_else(|_| p.display().to_string());
+            out.extend(parse_source(&rel, &text, &constants)?);
+        }
     }
     Ok(out)
 }
@@ -448,5 +491,27 @@ mod tests {
             (1, 48 * 47 / 2, Scope::Call)
         );
         assert_eq!((t[1].line, t[1].bound, t[1].scope), (3, 2, Scope::Runs));
+    }
+
+    #[test]
+    fn sources_of_both_crates_are_named_from_the_workspace() {
+        assert_eq!(
+            firmware_source_path("/w/qp/src/factor.rs"),
+            Some("qp/src/factor.rs")
+        );
+        assert_eq!(
+            firmware_source_path("/w/firmware/src/bin/ecu.rs"),
+            Some("firmware/src/bin/ecu.rs")
+        );
+        assert_eq!(
+            firmware_source_path("/r/registry/src/i/qp-0.1.0/src/lib.rs"),
+            None
+        );
+        // The real sources: the QP's iteration cap is read from the qp crate.
+        let a = scan_sources(&SourceDir::workspace(Path::new(".."))).unwrap_or_default();
+        assert!(a
+            .iter()
+            .any(|a| a.file.starts_with("qp/src/") && a.expression == "QP_MAX_ITER"));
+        assert!(a.iter().any(|a| a.file == "firmware/src/mpc.rs"));
     }
 }

@@ -45,10 +45,10 @@ pub struct WcetArgs {
     /// Relative growth allowed against --expected.
     #[arg(long, default_value_t = 0.05)]
     pub margin: f64,
-    /// The firmware's sources, where the loop annotations (`// wcet-bound:`) are
-    /// read.
-    #[arg(long, default_value = "firmware/src")]
-    pub firmware_src: PathBuf,
+    /// The workspace root: the loop annotations (`// wcet-bound:`) are read from
+    /// its firmware crates' sources, `firmware/src` and `qp/src`.
+    #[arg(long, default_value = ".")]
+    pub workspace: PathBuf,
     /// QEMU execution traces (`host-sim pil --trace FILE`) to check the loop bounds
     /// and the task bounds against, besides the one this command records.
     #[arg(long, num_args = 1..)]
@@ -60,6 +60,13 @@ pub struct WcetArgs {
     /// Output directory (created).
     #[arg(long)]
     pub out: PathBuf,
+}
+
+impl WcetArgs {
+    /// The firmware crates' source folders under `--workspace`.
+    fn sources(&self) -> Vec<crate::wcet::annotations::SourceDir> {
+        crate::wcet::annotations::SourceDir::workspace(&self.workspace)
+    }
 }
 
 fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -> PilArgs {
@@ -204,7 +211,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         .ok_or_else(|| anyhow!("too few plan activations to fit the cost model"))?;
     // The static analysis of the binary, checked against the traced run: the
     // report's bounds.
-    let analysis = crate::wcet::analysis::analyse(&args.elf, &args.firmware_src, &traces)
+    let analysis = crate::wcet::analysis::analyse(&args.elf, &args.sources(), &traces)
         .with_context(|| format!("static analysis of {}", args.elf.display()))?;
     analysis.write(&args.out)?;
     print_static(&analysis, &args.out);
@@ -276,7 +283,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
 /// The static analysis of the ELF (control-flow graphs, loops, IPET), written as
 /// `static.json` and `static.md`, with a line per task.
 fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
-    let analysis = crate::wcet::analysis::analyse(&args.elf, &args.firmware_src, traces)
+    let analysis = crate::wcet::analysis::analyse(&args.elf, &args.sources(), traces)
         .with_context(|| format!("static analysis of {}", args.elf.display()))?;
     analysis.write(&args.out)?;
     print_static(&analysis, &args.out);

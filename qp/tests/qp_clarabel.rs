@@ -10,7 +10,7 @@
 
 mod qp_util;
 
-use firmware::qp::{ldl_len, QpProblem, QpSolver, QpStatus};
+use qp::{ldl_len, QpProblem, QpSolver, QpStatus};
 use qp_util::{clarabel_solve, kkt_residual, objective, random_problem, Mix, Rng};
 
 const N: usize = 8;

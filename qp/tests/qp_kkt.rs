@@ -10,8 +10,8 @@
 
 mod qp_util;
 
-use firmware::qp::{ldl_len, QpProblem, QpSolver, QpStatus};
 use proptest::prelude::*;
+use qp::{ldl_len, QpProblem, QpSolver, QpStatus};
 use qp_util::{kkt_residual, random_problem, Mix, Rng};
 
 const N: usize = 6;

@@ -1,4 +1,5 @@
-//! A condensed MPC of the MPC's size (N = 32 inputs, up to 96 rows, W = 48) on a
+//! A condensed MPC shaped like the firmware's (N = 32 inputs, W = 48; up to 96 rows,
+//! more than the firmware MPC's 80) on a
 //! receding horizon: two double integrators (x, y) over 16 steps of 0.2 s tracking a
 //! lane change around an obstacle, with hard rate and speed rows, soft corridor and
 //! obstacle rows, and bounds on the inputs. Checks f32 against f64 at every step, and
@@ -13,7 +14,7 @@
 
 mod qp_util;
 
-use firmware::qp::{ldl_len, QpProblem, QpSolver, QpStatus};
+use qp::{ldl_len, QpProblem, QpSolver, QpStatus};
 use qp_util::to_f32_into;
 
 const K: usize = 16;

@@ -9,7 +9,7 @@
     clippy::needless_range_loop
 )]
 
-use firmware::qp::{QpProblem, QpSolution};
+use qp::{QpProblem, QpSolution};
 
 /// xorshift64* — deterministic, no dependency.
 pub struct Rng(pub u64);

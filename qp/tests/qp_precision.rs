@@ -10,7 +10,7 @@
 
 mod qp_util;
 
-use firmware::qp::{ldl_len, QpSolver, QpStatus};
+use qp::{ldl_len, QpSolver, QpStatus};
 use qp_util::{random_problem, to_f32, Mix, Rng};
 
 const N: usize = 10;
@@ -67,8 +67,8 @@ fn f32_agrees_with_f64() {
     println!("worst relative f32/f64 difference over 300 problems: {worst:e}");
 }
 
-/// At the MPC's sizes (N = 32, M = 96, W = 48): f32 and f64 agree and the work is
-/// reported.
+/// At the firmware MPC's N = 32 and W = 48, with M = 96 rows (the MPC has 80): f32
+/// and f64 agree and the work is reported.
 #[test]
 fn mpc_sized_problems_f32_vs_f64() {
     const N: usize = 32;
@@ -180,12 +180,12 @@ fn refactorizations_stay_within_their_cap() {
         }
         let q = to_f32(&p);
         s.settings.warm_start = false;
-        s.settings.max_refactorizations = firmware::qp::DEFAULT_MAX_REFACTORIZATIONS;
+        s.settings.max_refactorizations = qp::DEFAULT_MAX_REFACTORIZATIONS;
         *s.problem_mut() = q.clone();
         let free = s.solve();
         let used = s.solution().refactorizations;
         assert!(
-            used <= firmware::qp::DEFAULT_MAX_REFACTORIZATIONS,
+            used <= qp::DEFAULT_MAX_REFACTORIZATIONS,
             "seed {seed}: {used}"
         );
         if used == 0 {

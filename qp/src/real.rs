@@ -2,8 +2,8 @@
 //!
 //! The ECU computes in `f32` (the Cortex-M4F FPU is single precision; `f64` there
 //! is software-emulated and an order of magnitude slower). The host can run the
-//! same code in `f64` to measure what single precision costs in accuracy. Every
-//! algorithm of this crate is generic over [`Real`].
+//! same code in `f64` to measure what single precision costs in accuracy. The QP solver
+//! here and every algorithm of `firmware` are generic over [`Real`].
 //!
 //! Transcendental functions are deterministic, bit-identical on every target, and
 //! in single precision they never touch `f64`: `libm`'s `sinf`, `cosf`, `tanf`,

@@ -11,10 +11,8 @@
 
 mod qp_util;
 
-use firmware::qp::{
-    ldl_len, ActiveConstraint, ConstraintIndex, QpProblem, QpSolver, QpStatus, Side,
-};
 use proptest::prelude::*;
+use qp::{ldl_len, ActiveConstraint, ConstraintIndex, QpProblem, QpSolver, QpStatus, Side};
 use qp_util::{kkt_residual, random_problem, Mix, Rng};
 
 const N: usize = 16;

@@ -1,0 +1,420 @@
+//! The dual active-set iteration: multipliers of the working set, the step to the
+//! first blocking multiplier and its removal, the most violated constraint and its
+//! addition (with the null-space swap of a dependent one), the final refinement and
+//! the output of the solution.
+
+use crate::cholesky::solve_upper;
+use crate::factor::{AppendError, Workspace, ROW_FULL, ROW_TRANSFORMED};
+use crate::rows::{bounds_of, con_row, delta, dot_from, dot_prefix, held_bound, row_start, sign};
+use crate::settings::Tols;
+use crate::{
+    ActiveConstraint, ConstraintIndex, QpProblem, QpSettings, QpSolution, QpStatus, Real, Side,
+};
+
+impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
+    Workspace<T, N, M, W, WL>
+{
+    /// `λ*` for the current working set, into `tmp`; false if not finite.
+    pub(crate) fn solve_lam_star(&mut self, p: &QpProblem<T, N, M>) -> bool {
+        // wcet-bound: WS
+        for k in 0..self.n {
+            let e = self.ws[k];
+            let b = held_bound(p, e);
+            self.tmp[k] = -(b + con_row(p, e.index).dot(&self.v));
+        }
+        self.ldl_solve_tmp();
+        self.tmp.iter().take(self.n).all(|v| v.is_finite())
+    }
+
+    pub(crate) fn is_equality(p: &QpProblem<T, N, M>, c: ConstraintIndex) -> bool {
+        let (lo, hi) = bounds_of(p, c);
+        lo == hi
+    }
+
+    /// `u = −v − M̃_Wᵀ λ`, and `x = R⁻¹ u` into `x`.
+    pub(crate) fn primal(&mut self, p: &QpProblem<T, N, M>, x: &mut [T; N]) {
+        for (u, v) in self.u.iter_mut().zip(self.v.iter()) {
+            *u = -*v;
+        }
+        // wcet-bound: WS
+        for k in 0..self.n {
+            let l = self.lam[k];
+            if l == T::ZERO {
+                continue;
+            }
+            let row = con_row(p, self.ws[k].index);
+            if let Some(u0) = self.u.get_mut(row.start) {
+                *u0 -= l * row.head;
+            }
+            let u = self.u.get_mut(row.start + 1..).unwrap_or(&mut []);
+            // wcet-bound: NV
+            for (u, r) in u.iter_mut().zip(row.tail) {
+                *u -= l * *r;
+            }
+        }
+        solve_upper(&p.h, &self.u, x);
+    }
+
+    /// Most violated inactive constraint (beyond `tol`), given `u` and `x`. `skip` is
+    /// chosen only if no other constraint is violated (anti-cycling).
+    pub(crate) fn most_violated(
+        &self,
+        p: &QpProblem<T, N, M>,
+        x: &[T; N],
+        tol: T,
+        skip: Option<ConstraintIndex>,
+    ) -> Option<ActiveConstraint> {
+        let mut best = tol;
+        let mut cand = None;
+        let mut fallback = None;
+        let mut consider = |val: T, lo: T, hi: T, index: ConstraintIndex| {
+            let (viol, side) = if lo - val > val - hi {
+                (lo - val, Side::Lower)
+            } else {
+                (val - hi, Side::Upper)
+            };
+            if Some(index) == skip {
+                if viol > tol {
+                    fallback = Some(ActiveConstraint { index, side });
+                }
+            } else if viol > best {
+                best = viol;
+                cand = Some(ActiveConstraint { index, side });
+            }
+        };
+        // wcet-bound: NV
+        for j in 0..N {
+            if self.bound_state[j].is_none() {
+                consider(x[j], p.x_lo[j], p.x_hi[j], ConstraintIndex::Bound(j as u16));
+            }
+        }
+        // wcet-bound: NC
+        for i in 0..p.m.min(M) {
+            if self.row_state[i].is_none() {
+                // m̃_iᵀu once the row is transformed, else a_iᵀx (the same value).
+                let val = match self.row_code[i] {
+                    ROW_TRANSFORMED => dot_from(&p.a[i], &self.u, 0),
+                    ROW_FULL => dot_from(&p.a[i], x, 0),
+                    groups => dot_prefix(&p.a[i], x, 4 * groups as usize),
+                };
+                consider(val, p.lo[i], p.hi[i], ConstraintIndex::Row(i as u16));
+            }
+        }
+        cand.or(fallback)
+    }
+
+    /// Refactors from scratch (dropping dependent entries) and counts it; false,
+    /// and nothing done, once `max` refactorizations were made in this solve.
+    pub(crate) fn refactor(
+        &mut self,
+        p: &QpProblem<T, N, M>,
+        tols: Tols<T>,
+        sol: &mut QpSolution<T, N, M>,
+        max: u32,
+    ) -> bool {
+        if sol.refactorizations >= max {
+            return false;
+        }
+        let n = self.n;
+        // The MPC gives each pass what is left of the activation's
+        // QP_MAX_REFACTORIZATIONS (firmware's mpc.rs `step_inner`).
+        // wcet-bound: QP_MAX_REFACTORIZATIONS times per activation
+        let dropped = self.rebuild(p, tols, n);
+        sol.refactorizations += 1;
+        sol.removed += dropped as u32;
+        true
+    }
+
+    /// The main loop; returns the exit status (the solution is written by `output`).
+    pub(crate) fn iterate(
+        &mut self,
+        p: &mut QpProblem<T, N, M>,
+        settings: &QpSettings<T>,
+        tols: Tols<T>,
+        sol: &mut QpSolution<T, N, M>,
+    ) -> QpStatus {
+        // Anti-cycling: a constraint that left by a zero-length step (degenerate dual)
+        // is re-added only if no other constraint is violated, until the next addition.
+        let mut blocked: Option<ConstraintIndex> = None;
+        let mut checked_refactor = false;
+        loop {
+            // One back edge per iteration, counted in `sol.iterations` ≤ `settings.max_iter`,
+            // which the MPC (firmware's mpc.rs `step_inner`) sets to what is left of the activation's
+            // `qp_max_iter` (QP_MAX_ITER on the ECU) after its earlier passes.
+            // wcet-bound: QP_MAX_ITER per activation
+            if sol.iterations >= settings.max_iter {
+                return QpStatus::IterationLimit;
+            }
+            sol.iterations += 1;
+            if !self.solve_lam_star(p) {
+                if !self.refactor(p, tols, sol, settings.max_refactorizations) {
+                    return QpStatus::NumericalError;
+                }
+                if !self.solve_lam_star(p) {
+                    return QpStatus::NumericalError;
+                }
+            }
+            // Blocking multiplier on the way from λ to λ*.
+            let mut block: Option<(usize, T)> = None;
+            for k in 0..self.n {
+                let e = self.ws[k];
+                // Bounds the `for k in 0..self.n` loop (n ≤ W; back edges at the `continue`s).
+                // wcet-bound: WS
+                if Self::is_equality(p, e.index) {
+                    continue;
+                }
+                let sg = sign::<T>(e.side);
+                let ls = sg * self.tmp[k];
+                // wcet-bound: WS
+                if ls < -tols.dual {
+                    let l = (sg * self.lam[k]).max(T::ZERO);
+                    let ratio = l / (l - ls);
+                    if block.is_none_or(|(_, r)| ratio < r) {
+                        block = Some((k, ratio));
+                    }
+                }
+            }
+            if let Some((pos, alpha)) = block {
+                // wcet-bound: WS
+                for k in 0..self.n {
+                    let mut l = self.lam[k] + alpha * (self.tmp[k] - self.lam[k]);
+                    let e = self.ws[k];
+                    if !Self::is_equality(p, e.index) && sign::<T>(e.side) * l < T::ZERO {
+                        l = T::ZERO;
+                    }
+                    self.lam[k] = l;
+                }
+                blocked = if alpha > T::ZERO {
+                    None
+                } else {
+                    Some(self.ws[pos].index)
+                };
+                self.remove(pos);
+                sol.removed += 1;
+                continue;
+            }
+            for k in 0..self.n {
+                self.lam[k] = self.tmp[k];
+            }
+            self.primal(p, &mut sol.x);
+            let Some(e) = self.most_violated(p, &sol.x, tols.primal, blocked) else {
+                // Optimal if the working set itself holds; if it does not, the factor is
+                // inaccurate: refactor (which also drops dependent entries) once and go on.
+                // The check allows 10× the primal tolerance: with 40+ active
+                // constraints in f32 the factor's own rounding reaches ~10⁻³
+                // relative, which is a converged optimum, not a wrong one.
+                if self.working_set_holds(p, tols.primal * T::lit(10.0)) {
+                    self.refine(p, &mut sol.x);
+                    return QpStatus::Optimal;
+                }
+                if checked_refactor {
+                    return QpStatus::NumericalError;
+                }
+                checked_refactor = true;
+                if !self.refactor(p, tols, sol, settings.max_refactorizations) {
+                    return QpStatus::NumericalError;
+                }
+                continue;
+            };
+            blocked = None;
+            if let Err(st) = self.add(p, e, tols, sol, settings) {
+                return st;
+            }
+        }
+    }
+
+    /// Adds the violated constraint `e`. If it depends linearly on the working set,
+    /// moves `λ` along the dual null-space direction (which keeps `u` and raises the
+    /// dual cost) until a multiplier reaches zero, removes that constraint and tries
+    /// again (at most `W` times, each removal an iteration against `max_iter`: past
+    /// it, `IterationLimit`); no multiplier reaching zero means infeasible.
+    pub(crate) fn add(
+        &mut self,
+        p: &mut QpProblem<T, N, M>,
+        e: ActiveConstraint,
+        tols: Tols<T>,
+        sol: &mut QpSolution<T, N, M>,
+        settings: &QpSettings<T>,
+    ) -> Result<(), QpStatus> {
+        let max_iter = settings.max_iter;
+        self.prepare(p, e.index);
+        let p = &*p;
+        let sigma = sign::<T>(e.side);
+        // Multiplier the new constraint has accumulated over null-space steps.
+        let mut lam_e = T::ZERO;
+        let mut refactored = false;
+        // `0..=W`: W + 1 attempts. Each attempt after a removal counts as an
+        // iteration against `max_iter` (what is left of the activation's cap), the
+        // refactor-and-retry happens once per `add`: with the main loop's QP_MAX_ITER
+        // iterations, each at most one `add`, at most 2 · QP_MAX_ITER retries.
+        // wcet-bound: 2 * QP_MAX_ITER per activation
+        for _ in 0..=W {
+            match self.append(p, e, tols) {
+                Ok(()) => {
+                    self.lam[self.n - 1] = lam_e;
+                    sol.added += 1;
+                    return Ok(());
+                }
+                Err(AppendError::Full) => return Err(QpStatus::WorkingSetFull),
+                Err(AppendError::Singular) => {}
+            }
+            if !refactored && self.updates > 0 {
+                // The small pivot may be accumulated rounding: refactor and retry
+                // (once per `add`, within the solve's refactorization cap).
+                refactored = true;
+                if self.refactor(p, tols, sol, settings.max_refactorizations) {
+                    continue;
+                }
+            }
+            // Null-space direction: λ_e grows by t·σ, λ_W by t·σ·c with
+            // c = −(M_WW + D)⁻¹ M_{W,e} = −L⁻ᵀ L_new.
+            let n = self.n;
+            let s = row_start(n);
+            let mut cmax = T::ZERO;
+            // wcet-bound: WS
+            for r in (0..n).rev() {
+                let mut acc = -self.ldl[s + r];
+                for k in (r + 1)..n {
+                    // Bounds the `for k in (r + 1)..n` loop: n ≤ W.
+                    acc -= self.ldl[row_start(k) + r] * self.tmp[k]; // wcet-bound: WS
+                }
+                self.tmp[r] = acc;
+                cmax = cmax.max(acc.abs());
+            }
+            // Rates below this are rounding noise of a zero coefficient.
+            let noise = tols.noise * (T::ONE + cmax);
+            let mut block: Option<(usize, T)> = None;
+            for k in 0..n {
+                let ek = self.ws[k];
+                // Bounds the `for k in 0..n` loop (n ≤ W; back edges at the `continue`s).
+                // wcet-bound: WS
+                if Self::is_equality(p, ek.index) {
+                    continue;
+                }
+                let sg = sign::<T>(ek.side);
+                let rate = sg * sigma * self.tmp[k];
+                // wcet-bound: WS
+                if rate < -noise {
+                    let t = (sg * self.lam[k]).max(T::ZERO) / -rate;
+                    if block.is_none_or(|(_, r)| t < r) {
+                        block = Some((k, t));
+                    }
+                }
+            }
+            let Some((pos, t)) = block else {
+                // No multiplier limits the ray. With an exactly dependent row the dual
+                // is unbounded: infeasible. With a small but real pivot (nearly
+                // dependent, not at rounding level) the dual is bounded along the ray:
+                // the row is taken as independent after all, with its small pivot.
+                let rel = self.last_rel_pivot;
+                if rel.is_finite() && rel > tols.rounding {
+                    self.commit(e);
+                    self.lam[self.n - 1] = lam_e;
+                    sol.added += 1;
+                    return Ok(());
+                }
+                return Err(QpStatus::Infeasible);
+            };
+            // wcet-bound: WS
+            for k in 0..n {
+                let mut l = self.lam[k] + t * sigma * self.tmp[k];
+                let ek = self.ws[k];
+                if !Self::is_equality(p, ek.index) && sign::<T>(ek.side) * l < T::ZERO {
+                    l = T::ZERO;
+                }
+                self.lam[k] = l;
+            }
+            lam_e += t * sigma;
+            if sol.iterations >= max_iter {
+                return Err(QpStatus::IterationLimit);
+            }
+            sol.iterations += 1;
+            self.remove(pos);
+            sol.removed += 1;
+        }
+        Err(QpStatus::NumericalError)
+    }
+
+    /// One step of iterative refinement of the multipliers at the optimum: the
+    /// residuals `r_k = m̃_kᵀu − b_k − λ_k/ρ_k` of the working-set equations give
+    /// `Δλ = (M̃_W M̃_Wᵀ + D_W)⁻¹ r` with the same factor; kept (and `u`, `x`
+    /// recomputed) only if every multiplier keeps its sign.
+    pub(crate) fn refine(&mut self, p: &QpProblem<T, N, M>, x: &mut [T; N]) {
+        // wcet-bound: WS
+        for k in 0..self.n {
+            let e = self.ws[k];
+            let b = held_bound(p, e);
+            self.tmp[k] = con_row(p, e.index).dot(&self.u) - b - self.lam[k] * delta(p, e.index);
+        }
+        self.ldl_solve_tmp();
+        // wcet-bound: WS
+        for k in 0..self.n {
+            let l = self.lam[k] + self.tmp[k];
+            let e = self.ws[k];
+            if !l.is_finite() || (!Self::is_equality(p, e.index) && sign::<T>(e.side) * l < T::ZERO)
+            {
+                return;
+            }
+        }
+        for k in 0..self.n {
+            self.lam[k] += self.tmp[k];
+        }
+        self.primal(p, x);
+    }
+
+    /// Whether every working-set constraint holds at `u`: `m̃_kᵀu = b_k + λ_k/ρ_k`
+    /// within `tol` relative to `1 + |b_k + λ_k/ρ_k|`.
+    pub(crate) fn working_set_holds(&self, p: &QpProblem<T, N, M>, tol: T) -> bool {
+        // `n ≤ W` entries checked.
+        // wcet-bound: WS
+        (0..self.n).all(|k| {
+            let e = self.ws[k];
+            let b = held_bound(p, e);
+            let val = con_row(p, e.index).dot(&self.u);
+            let target = b + self.lam[k] * delta(p, e.index);
+            // Relative to the magnitudes involved: rows are formed in the working
+            // precision, so their rounding scales with them.
+            (val - target).abs() <= tol * (T::ONE + target.abs().max(val.abs()))
+        })
+    }
+
+    /// Writes `x` (unless `fresh`), multipliers and cost for the current iterate.
+    /// `fresh`: `u` and `sol.x` already belong to the current multipliers (the
+    /// optimal exit), so the primal point is not recomputed.
+    pub(crate) fn output(
+        &mut self,
+        p: &QpProblem<T, N, M>,
+        sol: &mut QpSolution<T, N, M>,
+        fresh: bool,
+    ) {
+        if !fresh {
+            self.primal(p, &mut sol.x);
+        }
+        sol.lambda_rows.fill(T::ZERO);
+        sol.lambda_bounds.fill(T::ZERO);
+        let mut soft_cost = T::ZERO;
+        // wcet-bound: WS
+        for k in 0..self.n {
+            let l = self.lam[k];
+            match self.ws[k].index {
+                ConstraintIndex::Bound(j) => {
+                    if let Some(d) = sol.lambda_bounds.get_mut(j as usize) {
+                        *d = l;
+                    }
+                }
+                ConstraintIndex::Row(i) => {
+                    if let Some(d) = sol.lambda_rows.get_mut(i as usize) {
+                        *d = l;
+                    }
+                    soft_cost += T::HALF * l * l * delta(p, self.ws[k].index);
+                }
+            }
+        }
+        let mut c = T::ZERO;
+        for (u, v) in self.u.iter().zip(self.v.iter()) {
+            c += *u * (T::HALF * *u + *v);
+        }
+        sol.objective = c + soft_cost;
+        sol.working_set_len = self.n as u16;
+    }
+}

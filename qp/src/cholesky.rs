@@ -1,0 +1,197 @@
+//! The Hessian's factor `R` (`H = RᵀR`): Cholesky factorisation, the triangular
+//! solves with `R` and `Rᵀ`, and the rows of `R⁻¹` the bounds use.
+
+use crate::rows::dot_from;
+use crate::Real;
+#[cfg(test)]
+use crate::{factor::Workspace, QpProblem};
+
+/// `h` holds an upper-triangular factor `R` (`H = RᵀR`): makes its diagonal
+/// positive (a row's sign is free) and floors a pivot below `√ε·‖R_·j‖` as
+/// [`factor_h_counted`] does. `None` for a zero or non-finite column.
+pub(crate) fn prepare_factor<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
+    let mut floored = 0u32;
+    // wcet-bound: NV
+    for j in 0..N {
+        if h[j][j] < T::ZERO {
+            // wcet-bound: NV
+            for v in h[j].iter_mut().skip(j) {
+                *v = -*v;
+            }
+        }
+        let mut col = T::ZERO;
+        // wcet-bound: NV
+        for i in 0..=j {
+            col += h[i][j] * h[i][j];
+        }
+        let norm = col.sqrt();
+        if !(norm > T::ZERO) || !norm.is_finite() {
+            return None;
+        }
+        let floor = T::EPSILON.sqrt() * norm;
+        if !(h[j][j] > floor) {
+            h[j][j] = floor;
+            floored += 1;
+        }
+    }
+    Some(floored)
+}
+
+/// Cholesky `H = RᵀR` in the upper triangle (the lower triangle keeps `H`'s, never
+/// read). False if a pivot is not clearly positive.
+#[cfg(test)]
+pub(crate) fn factor_h<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> bool {
+    factor_h_counted(h).is_some()
+}
+
+/// Cholesky `H = RᵀR` in the upper triangle, returning how many pivots were floored
+/// (see below), `None` when `H` is not positive definite.
+///
+/// A pivot that comes out below `√ε·H_jj` but above `−0.1·H_jj` is taken for
+/// rounding on a nearly singular (positive semidefinite in exact arithmetic)
+/// Hessian, as a condensed MPC Hessian in single precision can be (its eigenvalues
+/// span more than `1/ε_f32`): it is floored to `√ε·H_jj`, which factors `H + E`
+/// with a small diagonal `E` (a proximal term of relative size `√ε`, 3·10⁻⁴ in
+/// `f32`) in the direction that rounding left undetermined. A pivot below
+/// `−0.1·H_jj` is a Hessian that is not convex: `None`.
+#[inline(never)]
+pub(crate) fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> Option<u32> {
+    let tiny = T::EPSILON * T::from_usize(N);
+    let mut floored = 0u32;
+    // wcet-bound: NV
+    for j in 0..N {
+        // Column j of R: R[k][j] for k ≤ j, from H[k][j] (upper triangle).
+        let mut d = h[j][j];
+        let scale = d.abs();
+        // Σ j over j < N per call (not inlined).
+        // wcet-bound: NV * (NV - 1) / 2 per call
+        for k in 0..j {
+            d -= h[k][j] * h[k][j];
+        }
+        if !d.is_finite() || !(scale > T::ZERO) {
+            return None;
+        }
+        if !(d > tiny * scale) {
+            let floor = T::EPSILON.sqrt() * scale;
+            if d < -T::lit(0.1) * scale {
+                return None;
+            }
+            d = floor;
+            floored += 1;
+        }
+        let rjj = d.sqrt();
+        h[j][j] = rjj;
+        // Σ (N − 1 − j) over j < N per call.
+        // wcet-bound: NV * (NV - 1) / 2 per call
+        for i in (j + 1)..N {
+            let mut s = h[j][i];
+            // Σ j·(N − 1 − j) over j < N ≤ N³/6 per call.
+            // wcet-bound: NV * NV * NV / 6 per call
+            for k in 0..j {
+                s -= h[k][j] * h[k][i];
+            }
+            h[j][i] = s / rjj;
+        }
+    }
+    Some(floored)
+}
+
+/// `x ← x R⁻¹` in place for the upper-triangular `R` (upper triangle of `r`, positive
+/// diagonal): solves `Rᵀ y = x` forwards, `y_j = (x_j − Σ_{k<j} y_k R_kj) / R_jj`.
+/// The entries of `x` before `start` must be zero (they stay zero). Row `axpy`s:
+/// once `y_j` is final, its share leaves the later entries (contiguous, like the
+/// rows of `R`); zero entries skipped.
+pub(crate) fn solve_transposed<T: Real, const N: usize>(
+    r: &[[T; N]; N],
+    x: &mut [T; N],
+    start: usize,
+) {
+    // wcet-bound: NV
+    for j in start..N {
+        // Σ_{start≤k<j} y_k R_kj in four partial sums, as `dot4` groups them.
+        let mut acc = [T::ZERO; 4];
+        let mut k = start;
+        // k steps by 4 from `start` to at most j < N: at most N/4 passes, then j − k ≤ 3.
+        // wcet-bound: NV / 4
+        while k + 4 <= j {
+            for (q, a) in acc.iter_mut().enumerate() {
+                *a += x[k + q] * r[k + q][j];
+            }
+            k += 4;
+        }
+        let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+        // wcet-bound: 3
+        while k < j {
+            s += x[k] * r[k][j];
+            k += 1;
+        }
+        x[j] = (x[j] - s) / r[j][j];
+    }
+}
+
+/// `x = R⁻¹ u` for the upper-triangular `R` (upper triangle of `r`, positive
+/// diagonal), by back substitution `x_j = (u_j − Σ_{k>j} R_jk x_k) / R_jj` (each sum
+/// a contiguous dot product over row `j` of `R`).
+pub(crate) fn solve_upper<T: Real, const N: usize>(r: &[[T; N]; N], u: &[T; N], x: &mut [T; N]) {
+    // wcet-bound: NV
+    for j in (0..N).rev() {
+        let s = dot_from(&r[j], x, j + 1);
+        x[j] = (u[j] - s) / r[j][j];
+    }
+}
+
+/// Row `j` of `R⁻¹` (`e_jᵀ R⁻¹`, zero before column `j`) into `out`.
+pub(crate) fn inverse_row<T: Real, const N: usize>(r: &[[T; N]; N], j: usize, out: &mut [T; N]) {
+    out.fill(T::ZERO);
+    if let Some(o) = out.get_mut(j) {
+        *o = T::ONE;
+        solve_transposed(r, out, j);
+    }
+}
+
+/// `a_i ← a_iᵀ R⁻¹` for the used rows, `v = R⁻ᵀ f`, and every bound's row of
+/// `R⁻¹` (the solver itself transforms a row or a bound only when it enters the
+/// working set).
+#[cfg(test)]
+pub(crate) fn transform<
+    T: Real,
+    const N: usize,
+    const M: usize,
+    const W: usize,
+    const WL: usize,
+>(
+    p: &mut QpProblem<T, N, M>,
+    w: &mut Workspace<T, N, M, W, WL>,
+) {
+    for row in p.a.iter_mut().take(p.m) {
+        solve_transposed(&p.h, row, 0);
+    }
+    w.v = p.f;
+    solve_transposed(&p.h, &mut w.v, 0);
+    for j in 0..N {
+        store_inverse_row(&mut p.h, j);
+        w.bound_ready[j] = true;
+    }
+}
+
+/// Stores row `j` of `R⁻¹` (`e_jᵀ R⁻¹`: zero before column `j`, `1/R_jj` at `j`)
+/// in the lower triangle of `h`, which holds `R` in its upper triangle: the `N−1−j`
+/// entries after the diagonal go to `h[N−1−j][0..N−1−j]`, the lower part of row
+/// `N−1−j`, exactly its length (so the rows of all `N` bounds fit at once). The
+/// solve reads the upper triangle only.
+pub(crate) fn store_inverse_row<T: Real, const N: usize>(h: &mut [[T; N]; N], j: usize) {
+    if j >= N {
+        return;
+    }
+    let mut row = [T::ZERO; N];
+    inverse_row(h, j, &mut row);
+    let dst = N - 1 - j;
+    if let (Some(d), Some(src)) = (
+        h.get_mut(dst).and_then(|r| r.get_mut(..dst)),
+        row.get(j + 1..),
+    ) {
+        // WCET: fewer than N entries; on the ECU the QP is the MPC's, N = NV f32.
+        // wcet-bound: NV * 4 bytes
+        d.copy_from_slice(src);
+    }
+}

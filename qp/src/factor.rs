@@ -1,0 +1,350 @@
+//! The working set and the `LDLᵀ` factor of its matrix `M̃_W M̃_Wᵀ + D_W`: a
+//! constraint is appended (a new row of the factor) or removed (a row and column
+//! deleted, a rank-one update of the trailing block), the factor is rebuilt from
+//! scratch when rounding spoiled it, and the system is solved with it.
+
+use crate::cholesky::{solve_transposed, store_inverse_row};
+use crate::rows::{bounds_of, delta, mdot, row_start};
+use crate::settings::Tols;
+use crate::{ActiveConstraint, ConstraintIndex, QpProblem, QpSettings, Real, Side};
+
+/// Solver workspace: the working set, its factor and per-constraint flags.
+#[derive(Clone, Debug)]
+pub(crate) struct Workspace<T, const N: usize, const M: usize, const W: usize, const WL: usize> {
+    /// Working set entries `0..n`.
+    pub(crate) ws: [ActiveConstraint; W],
+    /// Entries in use, `≤ W` (`commit` refuses at `W`, `set_working_set_from` keeps at
+    /// most `W`, `rebuild` starts from 0): it bounds every loop over the working set.
+    pub(crate) n: usize,
+    /// Current (dual-feasible) multipliers of the working set (`W`).
+    pub(crate) lam: [T; W],
+    /// Scratch (`W`): right-hand side then `λ*` of the working-set system, rank-one
+    /// vectors, null-space direction.
+    pub(crate) tmp: [T; W],
+    /// Packed `LDLᵀ` of the working-set matrix: row `r` at `r(r+1)/2`, holding
+    /// `L[r][0..r]` then `D[r]`.
+    pub(crate) ldl: [T; WL],
+    /// `v = R⁻ᵀ f` (`N`).
+    pub(crate) v: [T; N],
+    /// `u = R x` (`N`).
+    pub(crate) u: [T; N],
+    /// Whether bound `j`'s row `e_jᵀ R⁻¹` is stored in this solve (`N`): `R` itself
+    /// is kept, not inverted, and a bound's row is computed when it enters the working
+    /// set, into the lower triangle of `h` (see [`store_inverse_row`]).
+    pub(crate) bound_ready: [bool; N],
+    /// Side at which each row is active (`M`).
+    pub(crate) row_state: [Option<Side>; M],
+    /// Side at which each bound is active (`N`).
+    pub(crate) bound_state: [Option<Side>; N],
+    /// Appends since the last from-scratch factorisation.
+    pub(crate) updates: u32,
+    /// Pivot of the last `append` relative to its diagonal entry.
+    pub(crate) last_rel_pivot: T,
+    /// Per row (`M`, one byte to keep the solver small): [`ROW_TRANSFORMED`] once
+    /// the row holds `a_i R⁻¹` in this solve (rows are transformed only when they
+    /// enter the working set); otherwise the length of its prefix that can be
+    /// nonzero, in groups of four entries (its last nonzero entry rounded up to the
+    /// four-sum groups of [`dot_from`](crate::rows::dot_from), so that a dot product over the prefix gives
+    /// the same result as over all `N` entries), or [`ROW_FULL`].
+    pub(crate) row_code: [u8; M],
+}
+
+/// [`Workspace::row_code`] of a row that holds `a_i R⁻¹`.
+pub(crate) const ROW_TRANSFORMED: u8 = 0xFF;
+/// [`Workspace::row_code`] of an untransformed row used over all `N` entries.
+pub(crate) const ROW_FULL: u8 = 0xFE;
+
+/// Why a constraint could not enter the working set.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum AppendError {
+    /// It depends linearly on the working set (relative pivot below the tolerance).
+    Singular,
+    /// The working set already holds `W` constraints.
+    Full,
+}
+
+impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
+    Workspace<T, N, M, W, WL>
+{
+    pub(crate) fn state_mut(&mut self, c: ConstraintIndex) -> Option<&mut Option<Side>> {
+        match c {
+            ConstraintIndex::Bound(j) => self.bound_state.get_mut(j as usize),
+            ConstraintIndex::Row(i) => self.row_state.get_mut(i as usize),
+        }
+    }
+
+    /// Whether entry `e` may be in the working set of problem `p` (in range, bound of
+    /// its side finite, not already active).
+    pub(crate) fn admissible(&self, p: &QpProblem<T, N, M>, e: ActiveConstraint) -> bool {
+        let (in_range, active) = match e.index {
+            ConstraintIndex::Bound(j) => {
+                let j = j as usize;
+                (j < N, self.bound_state.get(j).is_some_and(|s| s.is_some()))
+            }
+            ConstraintIndex::Row(i) => {
+                let i = i as usize;
+                (
+                    i < p.m && i < M,
+                    self.row_state.get(i).is_some_and(|s| s.is_some()),
+                )
+            }
+        };
+        if !in_range || active {
+            return false;
+        }
+        let (lo, hi) = bounds_of(p, e.index);
+        match e.side {
+            Side::Lower => lo.is_finite(),
+            Side::Upper => hi.is_finite(),
+        }
+    }
+
+    /// Starts a solve: clears the flags and (warm start) re-activates the given
+    /// working set with `λ = 0`, dropping inadmissible or dependent entries.
+    pub(crate) fn start(
+        &mut self,
+        p: &mut QpProblem<T, N, M>,
+        settings: &QpSettings<T>,
+        tols: Tols<T>,
+    ) {
+        let count = if settings.warm_start { self.n } else { 0 };
+        self.bound_ready.fill(false);
+        // wcet-bound: WS
+        for r in 0..count.min(W) {
+            self.prepare(p, self.ws[r].index);
+        }
+        self.rebuild(p, tols, count);
+        self.lam.fill(T::ZERO);
+    }
+
+    /// Transforms row constraint `c` to `a_iᵀ R⁻¹` in place, or computes bound `c`'s
+    /// row `e_jᵀ R⁻¹` into the lower triangle of `h` ([`store_inverse_row`]), unless
+    /// already done in this
+    /// solve. Only constraints that enter the working set are ever transformed: the
+    /// others are checked as `a_iᵀ x` or `x_j`.
+    pub(crate) fn prepare(&mut self, p: &mut QpProblem<T, N, M>, c: ConstraintIndex) {
+        let i = match c {
+            ConstraintIndex::Row(i) => i as usize,
+            ConstraintIndex::Bound(j) => {
+                let j = j as usize;
+                if let Some(ready) = self.bound_ready.get_mut(j) {
+                    if !*ready {
+                        store_inverse_row(&mut p.h, j);
+                        *ready = true;
+                    }
+                }
+                return;
+            }
+        };
+        if i >= p.m {
+            return;
+        }
+        let (Some(code), Some(row)) = (self.row_code.get_mut(i), p.a.get_mut(i)) else {
+            return;
+        };
+        if *code != ROW_TRANSFORMED {
+            solve_transposed(&p.h, row, 0);
+            *code = ROW_TRANSFORMED;
+        }
+    }
+
+    /// Rebuilds the factor from entries `ws[0..count]` (and their `lam`), dropping
+    /// inadmissible and linearly dependent entries. Returns how many were dropped.
+    #[inline(never)]
+    pub(crate) fn rebuild(&mut self, p: &QpProblem<T, N, M>, tols: Tols<T>, count: usize) -> usize {
+        self.row_state.fill(None);
+        self.bound_state.fill(None);
+        self.n = 0;
+        self.updates = 0;
+        let mut dropped = 0;
+        // wcet-bound: WS
+        for r in 0..count.min(W) {
+            let e = self.ws[r];
+            let l = self.lam[r];
+            if !self.admissible(p, e) {
+                dropped += 1;
+                continue;
+            }
+            let k = self.n;
+            match self.append(p, e, tols) {
+                Ok(()) => self.lam[k] = l,
+                Err(_) => dropped += 1,
+            }
+        }
+        self.updates = 0;
+        dropped
+    }
+
+    /// Appends constraint `e` as row `n` of the factor. On `Singular`, the row `n` of
+    /// the packed storage holds `L_new = D⁻¹L⁻¹ M_{W,e}` but `n` is unchanged.
+    #[inline(never)]
+    pub(crate) fn append(
+        &mut self,
+        p: &QpProblem<T, N, M>,
+        e: ActiveConstraint,
+        tols: Tols<T>,
+    ) -> Result<(), AppendError> {
+        let n = self.n;
+        if n >= W {
+            return Err(AppendError::Full);
+        }
+        let s = row_start(n);
+        // b_l = M_{l,e}
+        // wcet-bound: WS
+        for l in 0..n {
+            self.ldl[s + l] = mdot(p, self.ws[l].index, e.index);
+        }
+        // Forward solve with the unit lower L: y = L⁻¹ b.
+        // wcet-bound: WS
+        for l in 0..n {
+            let sl = row_start(l);
+            let mut acc = self.ldl[s + l];
+            // Σ l over l < n ≤ W (not inlined: one call, one append).
+            // wcet-bound: WS * (WS - 1) / 2 per call
+            for k in 0..l {
+                acc -= self.ldl[sl + k] * self.ldl[s + k];
+            }
+            self.ldl[s + l] = acc;
+        }
+        let diag = mdot(p, e.index, e.index) + delta(p, e.index);
+        let mut dn = diag;
+        // wcet-bound: WS
+        for l in 0..n {
+            let dl = self.ldl[row_start(l) + l];
+            let y = self.ldl[s + l];
+            let lv = y / dl;
+            self.ldl[s + l] = lv;
+            dn -= y * lv;
+        }
+        self.ldl[s + n] = dn;
+        self.last_rel_pivot = dn / diag;
+        if !(dn > tols.pivot * diag) || !dn.is_finite() {
+            return Err(AppendError::Singular);
+        }
+        self.commit(e);
+        Ok(())
+    }
+
+    /// Makes the row `n` written by `append` part of the factor.
+    pub(crate) fn commit(&mut self, e: ActiveConstraint) {
+        let n = self.n;
+        if n >= W {
+            return;
+        }
+        self.ws[n] = e;
+        if let Some(st) = self.state_mut(e.index) {
+            *st = Some(e.side);
+        }
+        self.n = n + 1;
+        self.updates += 1;
+    }
+
+    /// Removes working-set entry `p` (and its multiplier): deletes its row and column
+    /// of `LDLᵀ` and updates the trailing block by a rank-one update.
+    #[inline(never)]
+    pub(crate) fn remove(&mut self, pos: usize) {
+        let n = self.n;
+        if pos >= n {
+            return;
+        }
+        let e = self.ws[pos];
+        if let Some(st) = self.state_mut(e.index) {
+            *st = None;
+        }
+        let mut alpha = self.ldl[row_start(pos) + pos];
+        // z (new indices pos..n-1) = old column pos of L below the diagonal.
+        // `n ≤ W` (see `Workspace::n`) bounds this and every loop over the working set.
+        // wcet-bound: WS
+        for r in (pos + 1)..n {
+            self.tmp[r - 1] = self.ldl[row_start(r) + pos];
+        }
+        // Shift rows pos+1..n up by one, dropping column pos (destinations precede
+        // sources, so a forward copy is safe).
+        // wcet-bound: WS
+        for r in (pos + 1)..n {
+            let src = row_start(r);
+            let dst = row_start(r - 1);
+            let mut k = 0;
+            for c in 0..=r {
+                // Bounds the `for c in 0..=r` loop above (its back edge is here):
+                // Σ (r + 1) over r < n ≤ W per call.
+                // wcet-bound: WS * (WS + 1) / 2 per call
+                if c == pos {
+                    continue;
+                }
+                self.ldl[dst + k] = self.ldl[src + c];
+                k += 1;
+            }
+        }
+        for r in pos..(n - 1) {
+            self.ws[r] = self.ws[r + 1];
+            // Bounds the `for r in pos..(n - 1)` loop (its back edge is on this line).
+            self.lam[r] = self.lam[r + 1]; // wcet-bound: WS
+        }
+        let nn = n - 1;
+        self.n = nn;
+        // Rank-one update of the trailing block (rows/cols pos..nn) by alpha z zᵀ.
+        for j in pos..nn {
+            let pj = self.tmp[j];
+            // Bounds the `for j in pos..nn` loop (the `continue` is its back edge, and
+            // the compiler's loop that skips zero entries): j < nn < W per call.
+            // wcet-bound: WS per call
+            if pj == T::ZERO {
+                continue;
+            }
+            let dj_idx = row_start(j) + j;
+            let dj = self.ldl[dj_idx];
+            let dnew = dj + alpha * pj * pj;
+            let beta = pj * alpha / dnew;
+            alpha = dj * alpha / dnew;
+            // The j loop's back edge past an empty inner loop is here.
+            // wcet-bound: WS per call
+            self.ldl[dj_idx] = dnew;
+            // Σ (nn − j − 1) over j < nn < W per call.
+            // wcet-bound: WS * (WS - 1) / 2 per call
+            for r in (j + 1)..nn {
+                let idx = row_start(r) + j;
+                self.tmp[r] -= pj * self.ldl[idx];
+                self.ldl[idx] += beta * self.tmp[r];
+            }
+        }
+    }
+
+    /// Solves `(M_WW + D) x = tmp` in place in `tmp[0..n]`.
+    #[inline(never)]
+    pub(crate) fn ldl_solve_tmp(&mut self) {
+        let n = self.n;
+        // wcet-bound: WS
+        for r in 0..n {
+            let s = row_start(r);
+            let mut acc = self.tmp[r];
+            for k in 0..r {
+                // Bounds the `for k in 0..r` loop: Σ r over r < n ≤ W per call.
+                acc -= self.ldl[s + k] * self.tmp[k]; // wcet-bound: WS * (WS - 1) / 2 per call
+            }
+            self.tmp[r] = acc;
+        }
+        for r in 0..n {
+            self.tmp[r] /= self.ldl[row_start(r) + r];
+        }
+        // Lᵀ x = y by columns of Lᵀ (rows of the packed L, contiguous): once x_r is
+        // final, its share leaves the entries above it.
+        // wcet-bound: WS
+        for r in (1..n).rev() {
+            let xr = self.tmp[r];
+            if xr == T::ZERO {
+                continue;
+            }
+            let s = row_start(r);
+            let (t, l) = (
+                self.tmp.get_mut(..r).unwrap_or(&mut []),
+                self.ldl.get(s..s + r).unwrap_or(&[]),
+            );
+            // Σ r over 1 ≤ r < n ≤ W per call.
+            // wcet-bound: WS * (WS - 1) / 2 per call
+            for (t, &l) in t.iter_mut().zip(l) {
+                *t -= l * xr;
+            }
+        }
+    }
+}

@@ -1,0 +1,171 @@
+//! The transformed constraint rows `m̃ = R⁻ᵀ a` the working set is made of, and the
+//! dot products between them.
+
+use crate::{ActiveConstraint, ConstraintIndex, QpProblem, Real, Side};
+
+/// A transformed constraint row `m̃` from column `start` on (zero before): its entry
+/// at `start` and the entries after it.
+#[derive(Clone, Copy)]
+pub(crate) struct ConRow<'a, T> {
+    pub(crate) start: usize,
+    pub(crate) head: T,
+    pub(crate) tail: &'a [T],
+}
+
+impl<T: Real> ConRow<'_, T> {
+    /// `m̃ᵀx` (the tail in four partial sums).
+    #[inline]
+    pub(crate) fn dot<const N: usize>(&self, x: &[T; N]) -> T {
+        let xs = x.get(self.start + 1..).unwrap_or(&[]);
+        let x0 = x.get(self.start).copied().unwrap_or(T::ZERO);
+        self.head * x0 + dot4(self.tail, xs)
+    }
+
+    /// `m̃₁ᵀm̃₂`.
+    #[inline]
+    pub(crate) fn dot_row(&self, other: &Self) -> T {
+        let (lo, hi) = if self.start <= other.start {
+            (self, other)
+        } else {
+            (other, self)
+        };
+        if lo.start == hi.start {
+            return lo.head * hi.head + dot4(lo.tail, hi.tail);
+        }
+        // lo's entry at hi.start is its tail[off − 1].
+        let off = hi.start - lo.start;
+        let at = lo.tail.get(off - 1).copied().unwrap_or(T::ZERO);
+        at * hi.head + dot4(lo.tail.get(off..).unwrap_or(&[]), hi.tail)
+    }
+}
+
+#[inline]
+pub(crate) fn sign<T: Real>(side: Side) -> T {
+    match side {
+        Side::Lower => -T::ONE,
+        Side::Upper => T::ONE,
+    }
+}
+
+#[inline]
+pub(crate) fn row_start(r: usize) -> usize {
+    r * (r + 1) / 2
+}
+
+/// The transformed row of a constraint: a general row's `a_iᵀR⁻¹` in place of
+/// `a_i`, a bound's `e_jᵀR⁻¹` from the lower triangle of `h` ([`store_inverse_row`](crate::cholesky::store_inverse_row)).
+#[inline]
+pub(crate) fn con_row<T: Real, const N: usize, const M: usize>(
+    p: &QpProblem<T, N, M>,
+    c: ConstraintIndex,
+) -> ConRow<'_, T> {
+    match c {
+        ConstraintIndex::Bound(j) => {
+            let j = (j as usize).min(N - 1);
+            let dst = N - 1 - j;
+            ConRow {
+                start: j,
+                head: T::ONE / p.h[j][j],
+                tail: p.h[dst].get(..dst).unwrap_or(&[]),
+            }
+        }
+        ConstraintIndex::Row(i) => {
+            let a = &p.a[i as usize];
+            ConRow {
+                start: 0,
+                head: a[0],
+                tail: a.get(1..).unwrap_or(&[]),
+            }
+        }
+    }
+}
+
+/// `Σ a_k b_k` over two slices of equal length, in four interleaved partial sums
+/// (independent additions pipeline; one chain would wait on each addition's
+/// latency), then the remainder in order.
+#[inline]
+pub(crate) fn dot4<T: Real>(a: &[T], b: &[T]) -> T {
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    let mut acc = [T::ZERO; 4];
+    // Every caller passes slices of `[T; N]` rows (at most N entries): N/4 chunks.
+    // wcet-bound: NV / 4
+    for (x, y) in ca.zip(cb) {
+        for ((s, &p), &q) in acc.iter_mut().zip(x).zip(y) {
+            *s += p * q;
+        }
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (&p, &q) in ra.iter().zip(rb) {
+        s += p * q;
+    }
+    s
+}
+
+/// `Σ_{k ≥ start} a_k b_k` ([`dot4`]).
+#[inline]
+pub(crate) fn dot_from<T: Real, const N: usize>(a: &[T; N], b: &[T; N], start: usize) -> T {
+    dot4(a.get(start..).unwrap_or(&[]), b.get(start..).unwrap_or(&[]))
+}
+
+/// [`dot4`] from 0 over the first `len` entries only: the same result as over
+/// all `N` when the rest of `a` is zero and `len` is a multiple of 4 (or `N`), since
+/// the four partial sums then group the entries alike.
+#[inline]
+pub(crate) fn dot_prefix<T: Real, const N: usize>(a: &[T; N], b: &[T; N], len: usize) -> T {
+    dot4(a.get(..len).unwrap_or(a), b.get(..len).unwrap_or(b))
+}
+
+/// Entry of the working-set matrix `m̃_c1ᵀ m̃_c2`.
+#[inline]
+pub(crate) fn mdot<T: Real, const N: usize, const M: usize>(
+    p: &QpProblem<T, N, M>,
+    c1: ConstraintIndex,
+    c2: ConstraintIndex,
+) -> T {
+    con_row(p, c1).dot_row(&con_row(p, c2))
+}
+
+/// `1/ρ` for a soft row, else 0.
+#[inline]
+pub(crate) fn delta<T: Real, const N: usize, const M: usize>(
+    p: &QpProblem<T, N, M>,
+    c: ConstraintIndex,
+) -> T {
+    match c {
+        ConstraintIndex::Row(i) => {
+            let rho = p.soft[i as usize];
+            if rho > T::ZERO {
+                T::ONE / rho
+            } else {
+                T::ZERO
+            }
+        }
+        ConstraintIndex::Bound(_) => T::ZERO,
+    }
+}
+
+/// `(lo, hi)` of a constraint.
+#[inline]
+pub(crate) fn bounds_of<T: Real, const N: usize, const M: usize>(
+    p: &QpProblem<T, N, M>,
+    c: ConstraintIndex,
+) -> (T, T) {
+    match c {
+        ConstraintIndex::Bound(j) => (p.x_lo[j as usize], p.x_hi[j as usize]),
+        ConstraintIndex::Row(i) => (p.lo[i as usize], p.hi[i as usize]),
+    }
+}
+
+/// The bound `b` at which working-set entry `e` is held: the lower or upper bound of
+/// its constraint, by its side.
+pub(crate) fn held_bound<T: Real, const N: usize, const M: usize>(
+    p: &QpProblem<T, N, M>,
+    e: ActiveConstraint,
+) -> T {
+    let (lo, hi) = bounds_of(p, e.index);
+    match e.side {
+        Side::Lower => lo,
+        Side::Upper => hi,
+    }
+}

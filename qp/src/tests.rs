@@ -1,0 +1,205 @@
+//! Unit tests of the solver's internals: the factors, the bound rows, the
+//! working-set factor updates.
+
+#![allow(clippy::unwrap_used, clippy::panic)]
+use crate::cholesky::{factor_h, inverse_row, solve_upper, transform};
+use crate::factor::AppendError;
+use crate::rows::{con_row, mdot, row_start};
+use crate::{ldl_len, ActiveConstraint, ConstraintIndex, QpSettings, QpSolver, Side};
+
+type S = QpSolver<f64, 5, 8, 8, { ldl_len(8) }>;
+
+/// Deterministic pseudo-random numbers in [-1, 1).
+fn lcg(state: &mut u64) -> f64 {
+    *state = state
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+}
+
+fn filled(seed: u64) -> S {
+    let mut s = S::new();
+    let mut st = seed;
+    let p = s.problem_mut();
+    let mut g = [[0.0; 5]; 5];
+    for r in g.iter_mut() {
+        for v in r.iter_mut() {
+            *v = lcg(&mut st);
+        }
+    }
+    for r in 0..5 {
+        for c in 0..5 {
+            p.h[r][c] =
+                (0..5).map(|k| g[k][r] * g[k][c]).sum::<f64>() + if r == c { 0.3 } else { 0.0 };
+        }
+        p.f[r] = lcg(&mut st);
+        p.x_lo[r] = -1.0;
+        p.x_hi[r] = 1.0;
+    }
+    for i in 0..8 {
+        let mut a = [0.0; 5];
+        for v in a.iter_mut() {
+            *v = lcg(&mut st);
+        }
+        let soft = if i % 3 == 0 { 2.0 + lcg(&mut st) } else { 0.0 };
+        p.push_row(&a, -1.0, 1.0, soft);
+    }
+    s
+}
+
+#[test]
+fn cholesky_and_triangular_solves_invert_h() {
+    let mut s = filled(3);
+    let h = s.problem.h;
+    assert!(factor_h(&mut s.problem.h));
+    let r = &s.problem.h;
+    // The rows of R⁻¹ from the forward solve: H · R⁻¹ R⁻ᵀ = I.
+    let mut ri = [[0.0; 5]; 5];
+    for (j, row) in ri.iter_mut().enumerate() {
+        inverse_row(r, j, row);
+    }
+    // Back substitution: R⁻¹ e_j is column j of R⁻¹.
+    for j in 0..5 {
+        let mut e = [0.0; 5];
+        e[j] = 1.0;
+        let mut col = [0.0; 5];
+        solve_upper(r, &e, &mut col);
+        for k in 0..5 {
+            assert!((col[k] - ri[k][j]).abs() < 1e-12, "R⁻¹[{k}][{j}]");
+        }
+    }
+    for r in 0..5 {
+        for c in 0..5 {
+            let mut v = 0.0;
+            for k in 0..5 {
+                let hk = if k >= r { h[r][k] } else { h[k][r] };
+                let mut inv = 0.0;
+                for q in 0..5 {
+                    inv += ri[k][q] * ri[c][q];
+                }
+                v += hk * inv;
+            }
+            let want = if r == c { 1.0 } else { 0.0 };
+            assert!((v - want).abs() < 1e-10, "({r},{c}) = {v}");
+        }
+    }
+}
+
+/// Every bound's row of `R⁻¹`, stored in the lower triangle of `h` next to `R`,
+/// reads back as `e_jᵀ R⁻¹` (checked against `R⁻¹ e_k` by back substitution),
+/// and the rows' products are those of `R⁻¹`'s rows.
+#[test]
+fn bound_rows_in_the_lower_triangle_are_rows_of_the_inverse() {
+    let mut s = filled(5);
+    assert!(factor_h(&mut s.problem.h));
+    let r = s.problem.h;
+    // Columns of R⁻¹ from the upper triangle alone, before any row is stored.
+    let mut inv = [[0.0; 5]; 5];
+    for k in 0..5 {
+        let mut e = [0.0; 5];
+        e[k] = 1.0;
+        let mut col = [0.0; 5];
+        solve_upper(&r, &e, &mut col);
+        for j in 0..5 {
+            inv[j][k] = col[j];
+        }
+    }
+    transform(&mut s.problem, &mut s.work);
+    // R itself is untouched.
+    for j in 0..5 {
+        for k in j..5 {
+            assert_eq!(s.problem.h[j][k], r[j][k]);
+        }
+    }
+    for j in 0..5u16 {
+        let row = con_row(&s.problem, ConstraintIndex::Bound(j));
+        assert_eq!(row.start, j as usize);
+        let mut full = [0.0; 5];
+        full[row.start] = row.head;
+        full[row.start + 1..].copy_from_slice(row.tail);
+        for k in 0..5 {
+            assert!(
+                (full[k] - inv[j as usize][k]).abs() < 1e-12,
+                "R⁻¹[{j}][{k}]"
+            );
+        }
+        for i in 0..5u16 {
+            let want: f64 = (0..5)
+                .map(|k| inv[i as usize][k] * inv[j as usize][k])
+                .sum();
+            let got = mdot(
+                &s.problem,
+                ConstraintIndex::Bound(i),
+                ConstraintIndex::Bound(j),
+            );
+            assert!((got - want).abs() < 1e-12, "({i}, {j})");
+        }
+    }
+}
+
+/// Removing an entry by downdate gives the same factor as factorising the
+/// remaining working set from scratch.
+#[test]
+fn remove_matches_refactor() {
+    for seed in 0..20u64 {
+        let mut s = filled(seed);
+        assert!(factor_h(&mut s.problem.h));
+        transform(&mut s.problem, &mut s.work);
+        let tols = QpSettings::<f64>::new(10).effective();
+        let set = [
+            ConstraintIndex::Row(0),
+            ConstraintIndex::Bound(1),
+            ConstraintIndex::Row(3),
+            ConstraintIndex::Row(4),
+            ConstraintIndex::Bound(3),
+            ConstraintIndex::Row(6),
+            ConstraintIndex::Row(2),
+        ];
+        for &c in &set {
+            let e = ActiveConstraint {
+                index: c,
+                side: Side::Upper,
+            };
+            s.work.append(&s.problem, e, tols).unwrap();
+        }
+        for pos in [2usize, 0, 4] {
+            s.work.remove(pos);
+            let n = s.work.n;
+            let down = s.work.ldl;
+            let dropped = s.work.rebuild(&s.problem, tols, n);
+            assert_eq!(dropped, 0);
+            assert_eq!(s.work.n, n);
+            for k in 0..ldl_len(n) {
+                assert!(
+                    (down[k] - s.work.ldl[k]).abs() < 1e-10,
+                    "seed {seed} pos {pos} k {k}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn dependent_rows_are_refused_by_append() {
+    let mut s = filled(1);
+    let a0 = s.problem.a[0];
+    s.problem.a[1] = a0;
+    s.problem.soft[0] = 0.0;
+    s.problem.soft[1] = 0.0;
+    assert!(factor_h(&mut s.problem.h));
+    transform(&mut s.problem, &mut s.work);
+    let tols = QpSettings::<f64>::new(10).effective();
+    let e = |i| ActiveConstraint {
+        index: ConstraintIndex::Row(i),
+        side: Side::Upper,
+    };
+    assert_eq!(s.work.append(&s.problem, e(0), tols), Ok(()));
+    assert_eq!(
+        s.work.append(&s.problem, e(1), tols),
+        Err(AppendError::Singular)
+    );
+    // A soft copy is not dependent: its pivot is at least 1/ρ.
+    s.problem.soft[1] = 4.0;
+    assert_eq!(s.work.append(&s.problem, e(1), tols), Ok(()));
+    assert!((s.work.ldl[row_start(1) + 1] - 0.25).abs() < 1e-12);
+}
