@@ -44,7 +44,7 @@
 //!   being followed runs out.
 
 use crate::low_level::Actuation;
-use crate::tasks::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
+use crate::timing::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
 use crate::Real;
 
 /// Budget of one `control` activation, ECU core clock cycles (its own work,

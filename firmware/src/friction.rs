@@ -118,7 +118,7 @@
 use crate::longitudinal_estimator::{
     LongitudinalConfig, LongitudinalEstimator, LongitudinalSample,
 };
-use crate::tasks::CONTROL_PERIOD_US;
+use crate::timing::CONTROL_PERIOD_US;
 use crate::Real;
 
 /// Control periods of commanded torque the friction check keeps (160 ms at

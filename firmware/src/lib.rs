@@ -19,6 +19,7 @@
 //! | [`low_level`] | low-level control: torque dispatch, `δ = δ_ol + δ_cl` |
 //! | [`plan`], [`state_estimate`] | the two resources the tasks share |
 //! | [`tasks`] | the 100 Hz `control` and 10 Hz `plan` tasks |
+//! | [`timing`] | the ECU's clock and the tasks' periods, each written once |
 //! | [`deadline`] | the tasks' releases, response times, misses and overruns on the ECU's clock; the watchdog |
 //! | [`vehicle_config`] | the car's numbers the settings derive from |
 //! | [`link`] | frames between the ECU and the simulator (processor-in-the-loop) |
@@ -41,6 +42,7 @@ pub mod reference_path;
 pub mod setup;
 pub mod state_estimate;
 pub mod tasks;
+pub mod timing;
 pub mod validity;
 pub mod vehicle_config;
 pub mod velocity_planner;

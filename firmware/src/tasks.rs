@@ -48,13 +48,10 @@ use crate::reference_path::{PathError, ReferencePath};
 use crate::state_estimate::StateEstimate;
 use crate::Real;
 
-/// Period of the `control` task, µs.
-pub const CONTROL_PERIOD_US: u64 = 10_000;
+pub use crate::timing::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
 /// Rows of the window of the road the ECU holds (its `PlanTask`'s path capacity;
 /// the simulator sends the next window as the car moves on).
 pub const ECU_PATH_ROWS: usize = 320;
-/// Period of the `plan` task, µs.
-pub const PLAN_PERIOD_US: u64 = 100_000;
 /// Weight of the newest value in the plan task's low-pass filter of the yaw
 /// loop's share of the measured steering, per activation (dimensionless; 0.2 at
 /// 10 Hz is a time constant of about 0.5 s): [`PlanTask::initial_steering`].

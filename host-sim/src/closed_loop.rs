@@ -145,7 +145,7 @@ impl Default for SimOptions {
     fn default() -> Self {
         Self {
             plant_dt_s: 1e-3,
-            ecu_clock_hz: 168e6,
+            ecu_clock_hz: firmware::timing::ECU_CLOCK_HZ as f64,
             cycles_per_instruction: DEFAULT_CPI_BOUND,
             control_budget_cycles: 5_000.0,
             plan_budget_cycles: 15.96e6,

@@ -126,7 +126,7 @@ pub fn count_mismatches(s: &crate::closed_loop::Summary, ticks: &TickOverruns) -
 }
 
 /// ECU core clock, Hz: QEMU's SysTick counts at this rate of virtual time.
-pub const ECU_CLOCK_HZ: f64 = 168e6;
+pub const ECU_CLOCK_HZ: f64 = firmware::timing::ECU_CLOCK_HZ as f64;
 
 /// How the ECU is run.
 #[derive(Clone, Debug)]
@@ -987,7 +987,7 @@ pub fn check_pil_args(args: &PilArgs) -> Result<()> {
     if args.run.precision != closed_loop::Precision::F32 {
         bail!("--precision: the ECU computes in f32; PIL runs are f32 only");
     }
-    if (args.run.ecu_mhz - 168.0).abs() > 1e-9 {
+    if (args.run.ecu_mhz - ECU_CLOCK_HZ / 1e6).abs() > 1e-9 {
         bail!("--ecu-mhz: in PIL the ECU's own (virtual) clock times the run; use --icount-shift to change the time per instruction");
     }
     if !(1..=10).contains(&args.icount_shift) {

@@ -31,7 +31,7 @@ pub struct RunCommand {
     pub scenario: ScenarioArgs,
     /// ECU clock, MHz (the tasks' response times, so their deadlines, depend on it;
     /// their cycle budgets do not).
-    #[arg(long, default_value_t = 168.0)]
+    #[arg(long, default_value_t = f64::from(firmware::timing::ECU_CLOCK_HZ) / 1e6)]
     pub ecu_mhz: f64,
     /// Precision of the firmware maths.
     #[arg(long, value_enum, default_value_t = Precision::F32)]

@@ -76,7 +76,7 @@ use rtic_monotonics::systick::prelude::*;
 pub const PATH_CAP: usize = firmware::tasks::ECU_PATH_ROWS;
 /// Core clock, Hz (STM32F405 at 168 MHz; QEMU's SysTick counts at this rate of
 /// virtual time).
-pub const SYSCLK_HZ: u32 = 168_000_000;
+pub const SYSCLK_HZ: u32 = firmware::timing::ECU_CLOCK_HZ;
 /// Monotonic tick rate, Hz (1 ms ticks).
 const MONO_HZ: u32 = 1_000;
 /// SysTick reload: core clock ticks per monotonic tick.

@@ -153,7 +153,7 @@ fn main() -> ! {
                 hprintln!(
                     "step {} instructions={} passes={} iterations={} added={} removed={} refactorizations={} rows={}",
                     step,
-                    ticks as u64 * 1_000_000_000 / 168_000_000 / 8,
+                    ticks as u64 * 1_000_000_000 / u64::from(firmware::timing::ECU_CLOCK_HZ) / 8,
                     report.passes,
                     report.qp_iterations,
                     report.qp_added,
@@ -210,7 +210,8 @@ fn main() -> ! {
             delta_rad: xi[5],
         };
     }
-    let to_instr = |ticks: u64| ticks * 1_000_000_000 / 168_000_000 / 8;
+    let to_instr =
+        |ticks: u64| ticks * 1_000_000_000 / u64::from(firmware::timing::ECU_CLOCK_HZ) / 8;
     let mean_warm = sum_warm / (STEPS as u64 - 1);
     hprintln!(
         "mpc_step: steps={} failures={} max_qp_iterations={}",

@@ -18,7 +18,7 @@
 //! All are library functions; the `host-sim wcet` command wires them together.
 
 /// The ECU's core clock, Hz (STM32F405 at 168 MHz).
-pub const CLOCK_HZ: u32 = 168_000_000;
+pub const CLOCK_HZ: u32 = firmware::timing::ECU_CLOCK_HZ;
 
 pub mod analysis;
 pub mod annotations;
