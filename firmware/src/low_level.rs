@@ -692,7 +692,8 @@ pub fn control_with_model<T: Real>(
         // plan's steering (a car standing at the lock could not turn its wheels
         // back). `δ_cl` and its integrator are released towards 0.
         yaw_pid.forget_derivative();
-        let keep = (T::ONE - dt * T::lit(1.0 / PAUSED_YAW_RELEASE_S)).max(T::ZERO);
+        // 1/(1 + Δt/τ): in (0, 1] for any step (the implicit Euler step of the decay).
+        let keep = T::ONE / (T::ONE + dt * T::lit(1.0 / PAUSED_YAW_RELEASE_S));
         yaw_pid.integral *= keep;
         yaw_pid.last_output *= keep;
         yaw_pid.last_output

@@ -504,6 +504,8 @@ pub struct ControlTask<T> {
     stop_reason: Option<StopReason>,
     /// Time the front tyres have shown understeer ([`UNDERSTEER_RATIO`]), s.
     understeer_s: T,
+    /// `1/L` of the friction settings' wheelbase, 1/m (0 without one).
+    inv_wheelbase: T,
 }
 
 impl<T: Real> ControlTask<T> {
@@ -544,6 +546,11 @@ impl<T: Real> ControlTask<T> {
             last_fault: None,
             stop_reason: None,
             understeer_s: T::ZERO,
+            inv_wheelbase: if friction_config.wheelbase_m > T::ZERO {
+                T::ONE / friction_config.wheelbase_m
+            } else {
+                T::ZERO
+            },
         })
     }
 
@@ -577,23 +584,17 @@ impl<T: Real> ControlTask<T> {
     fn lateral_demand(&mut self, est: &StateEstimate<T>) -> T {
         let v = est.vx_mps;
         let measured = v * est.yaw_rate_radps;
-        let l = self.friction_config.wheelbase_m;
-        if l <= T::ZERO {
-            return measured;
-        }
-        // tan δ to within 1 % for |δ| ≤ 0.6 rad (no trigonometric call).
+        // tan δ to within 2 % for |δ| ≤ 0.6 rad (no trigonometric call); 0 without
+        // a wheelbase (no check).
         let d = est.delta_rad;
-        let tan_d = d + d * d * d * T::lit(1.0 / 3.0) + T::lit(2.0 / 15.0) * d * d * d * d * d;
-        let kinematic = v * v * tan_d / l;
-        let along = if kinematic < T::ZERO {
-            -measured
-        } else {
-            measured
-        };
-        let under = kinematic.abs() >= T::lit(UNDERSTEER_MIN_MPS2)
-            && along < T::lit(UNDERSTEER_RATIO) * kinematic.abs();
+        let kinematic = v * v * (d + d * d * d * T::lit(1.0 / 3.0)) * self.inv_wheelbase;
+        // `measured` in the steering's direction under the ratio of `|kinematic|`,
+        // both sides times `|kinematic|` (no branch on the sign).
+        let k2 = kinematic * kinematic;
+        let under = k2 >= T::lit(UNDERSTEER_MIN_MPS2 * UNDERSTEER_MIN_MPS2)
+            && measured * kinematic < T::lit(UNDERSTEER_RATIO) * k2;
         self.understeer_s = if under {
-            (self.understeer_s + T::lit(CONTROL_PERIOD_US as f32 * 1e-6)).min(T::ONE)
+            self.understeer_s + T::lit(CONTROL_PERIOD_US as f32 * 1e-6)
         } else {
             T::ZERO
         };
