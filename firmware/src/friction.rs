@@ -145,6 +145,11 @@ pub struct FrictionConfig<T> {
     /// wheel, which gets half the torque (the traction limit,
     /// [`crate::tasks::ControlTask::car_model`]; [`FrictionConfig::for_car`]: 0).
     pub cg_height_over_track: T,
+    /// Wheelbase `L`, m, ≥ 0: the kinematic lateral acceleration the steering asks,
+    /// `V²·tan δ/L`, against which the control task checks that the front tyres
+    /// still grip ([`crate::tasks::ControlTask::front_saturated`]); 0: no such check
+    /// ([`FrictionConfig::for_car`]: 0).
+    pub wheelbase_m: T,
     /// Height of the centre of gravity over the wheelbase, `h/L`, ≥ 0: driving at
     /// `a` moves `h/L · a/g` of the weight off the front axle.
     pub cg_height_over_wheelbase: T,
@@ -233,6 +238,7 @@ impl<T: Real> FrictionConfig<T> {
             driven_load_share,
             front_load_share: driven_load_share,
             cg_height_over_track: T::ZERO,
+            wheelbase_m: T::ZERO,
             cg_height_over_wheelbase,
             mu_nominal,
             observer_time_s: T::lit(0.4),
@@ -270,6 +276,7 @@ impl<T: Real> FrictionConfig<T> {
             && self.front_load_share < T::ONE
             && nonneg(self.cg_height_over_wheelbase)
             && nonneg(self.cg_height_over_track)
+            && nonneg(self.wheelbase_m)
             && pos(self.mu_nominal)
             && pos(self.observer_time_s)
             && pos(self.filter_time_s)

@@ -62,7 +62,11 @@
 //!   `K_P·Δt_u`). `δ_cl`'s output window is what the limits leave once `δ_ol` is
 //!   applied, so its integrator stops winding up when the total `δ` saturates.
 //!   Below [`LowLevelConfig::lateral_min_speed_mps`] the yaw cannot be steered: the
-//!   yaw PID is paused (its integrator and `δ_cl` held).
+//!   yaw PID is paused, and its `δ_cl` and integrator are released towards 0 with
+//!   the time constant [`PAUSED_YAW_RELEASE_S`], so that the steering is the plan's
+//!   (held, a `δ_cl` of −0.05 rad cancelled every 100 ms the 0.05 rad the plan
+//!   turned the wheels in that time: a car standing at its steering lock never
+//!   turned them back, and its plans waited for it, forever).
 //!
 //! # Past the end of the plan (plans stopped arriving)
 //!
@@ -102,6 +106,11 @@ use crate::pid::{self, PidConfig, PidConfigError, PidState};
 use crate::plan::{Plan, HORIZON};
 use crate::state_estimate::StateEstimate;
 use crate::Real;
+
+/// Time constant with which a paused yaw loop's output `δ_cl` and its integrator
+/// are released towards 0, s (below [`LowLevelConfig::lateral_min_speed_mps`]:
+/// module docs, *Lateral*).
+pub const PAUSED_YAW_RELEASE_S: f32 = 0.3;
 
 /// Coefficients and limits of the low-level controllers.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -679,7 +688,14 @@ pub fn control_with_model<T: Real>(
         )
         .map_err(|_| ControlFault::Numerical)?
     } else {
+        // Paused: the yaw cannot be steered, and a held `δ_cl` would cancel the
+        // plan's steering (a car standing at the lock could not turn its wheels
+        // back). `δ_cl` and its integrator are released towards 0.
         yaw_pid.forget_derivative();
+        // 1/(1 + Δt/τ): in (0, 1] for any step (the implicit Euler step of the decay).
+        let keep = T::ONE / (T::ONE + dt * T::lit(1.0 / PAUSED_YAW_RELEASE_S));
+        yaw_pid.integral *= keep;
+        yaw_pid.last_output *= keep;
         yaw_pid.last_output
     };
     let delta = (delta_ol + delta_cl).clamp(lo, hi);

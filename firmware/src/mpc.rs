@@ -15,6 +15,7 @@
 //!      |δ_k| ≤ δ_max(V_k) + δ_tol,k                                (soft, validity)
 //!      −(w_right − b) − road_tol ≤ e_y,k ≤ (w_left − b) + road_tol  (soft, road limits)
 //!      g_o(X_k, Y_k) ≥ −obs_tol   for each obstacle parabola o     (soft)
+//!      V_k ≥ 0 where the linearised V̄_k < 1 m/s                    (soft, no reversing)
 //! ```
 //!
 //! `e_x`, `e_y` are the longitudinal and lateral deviations of `(X_k, Y_k)` from the
@@ -95,6 +96,13 @@ pub const QP_MAX_ITER: u32 = 90;
 /// refactorization rebuilds the factor of up to [`WS`] rows (about `WS³/6`
 /// multiply-adds); past the cap the pass ends as a numerical error.
 pub const QP_MAX_REFACTORIZATIONS: u32 = 2;
+/// A node's row `V ≥ 0` (the car does not reverse: the plant only brakes) is
+/// added where the linearised speed is under this, m/s (only slow nodes need it,
+/// and so the rows stay within [`NC`] beside the obstacles'). Without it a car standing across the road planned three-point
+/// turns it could not drive, and stood.
+pub const SPEED_ROW_BELOW_MPS: f32 = 1.0;
+/// Soft weight of the `V ≥ 0` rows, per (m/s)² (as the obstacles' `2·q_obs`).
+pub const SPEED_ROW_WEIGHT: f32 = 2.0e5;
 /// Linearise–solve passes on a cold start ([`MpcSettings::cold_start_iterations`]
 /// of [`MpcSettings::paper`]).
 pub const COLD_START_PASSES: u8 = 3;
@@ -804,6 +812,7 @@ impl<T: Real> Mpc<T> {
             c.road_row(qp, st, &fr);
             c.validity_rows(qp, st, validity, &xbar, &u_bar, ncols);
             c.obstacle_rows(qp, st, path, obstacles, &fr, &u_bar, ncols);
+            c.speed_row(qp, &xbar, &u_bar, ncols);
         }
         c.node_first[HORIZON + 1] = qp.m as u8;
         report.rows = qp.m as u32;
@@ -878,6 +887,7 @@ impl<T: Real> Mpc<T> {
                 RowKind::Validity => v = v.max(s),
                 RowKind::Obstacle => o = o.max(s),
                 RowKind::Road => r = r.max(s),
+                RowKind::Speed => {}
             }
         }
         report.max_validity_slack_rad = v;
@@ -947,6 +957,7 @@ enum RowKind {
     Validity,
     Road,
     Obstacle,
+    Speed,
 }
 
 /// What a QP row constrains: its kind, its node (1..=HORIZON) and which of the
@@ -1379,6 +1390,25 @@ impl<T: Real> Condensing<T> {
         let rho = T::TWO * st.weights.q_road;
         let id = self.id_here(RowKind::Road, 0);
         push_row_of(qp, &mut self.row_id, row, id, lo - d, hi - d, rho);
+    }
+
+    /// The car does not reverse (soft, weight [`SPEED_ROW_WEIGHT`]): `V ≥ 0` at a
+    /// node whose linearised speed `V̄` is under [`SPEED_ROW_BELOW_MPS`] (`V` is
+    /// exactly linear in the accelerations, so the row is exact). After the obstacle
+    /// rows of the node: when the rows are full, an obstacle keeps its row.
+    fn speed_row(
+        &mut self,
+        qp: &mut MpcQpProblem<T>,
+        xbar: &[T; NX],
+        u_bar: &[[T; NU]; HORIZON],
+        ncols: usize,
+    ) {
+        if !xbar[IV].is_finite() || xbar[IV] >= T::lit(SPEED_ROW_BELOW_MPS) {
+            return;
+        }
+        let d = self.lin_row(&[(IV, T::ONE)], xbar[IV], u_bar, ncols);
+        let rho = T::lit(SPEED_ROW_WEIGHT);
+        self.push(qp, RowKind::Speed, 0, -d, T::INFINITY, rho);
     }
 
     /// Validity (soft): `±δ ≤ δ_max(V̄) + δ_max'(V̄)(V − V̄) + δ_tol`.

@@ -66,6 +66,21 @@ const PLAN_DT_US: u64 = 200_000;
 /// four times level 1 it locked the front wheels on a μ = 0.3 road without it).
 pub const TORQUE_GRIP_FRACTION: f32 = 0.9;
 
+/// The front tyres are saturated (past their peak: sliding sideways, or spinning or
+/// locked, which takes their lateral force) when the lateral acceleration
+/// measured, `V·ψ̇` in the steering's direction, is under this fraction of the
+/// kinematic one the steering asks, `V²·tan δ/L` (dimensionless;
+/// [`ControlTask::front_saturated`]).
+pub const UNDERSTEER_RATIO: f32 = 0.5;
+
+/// Smallest kinematic lateral acceleration `|V²·tan δ/L|` at which the front
+/// tyres' grip is checked, m/s² ([`UNDERSTEER_RATIO`]).
+pub const UNDERSTEER_MIN_MPS2: f32 = 2.0;
+
+/// Time the understeer must last before the front tyres are declared saturated,
+/// s ([`UNDERSTEER_RATIO`]).
+pub const UNDERSTEER_CONFIRM_S: f32 = 0.05;
+
 /// Oldest a plan may be when it is published (time since its release), µs: two
 /// periods. An older plan is dropped ([`PlanTask::publish_at`]).
 pub const MAX_PLAN_AGE_US: u64 = 2 * PLAN_PERIOD_US;
@@ -484,6 +499,10 @@ pub struct ControlTask<T> {
     pub last_fault: Option<ControlFault>,
     /// Why the car stood at the last activation (`None`: it moved).
     stop_reason: Option<StopReason>,
+    /// Time the front tyres have shown understeer ([`UNDERSTEER_RATIO`]), s.
+    understeer_s: T,
+    /// `1/L` of the friction settings' wheelbase, 1/m (0 without one).
+    inv_wheelbase: T,
 }
 
 impl<T: Real> ControlTask<T> {
@@ -523,6 +542,12 @@ impl<T: Real> ControlTask<T> {
             stats: ControlTaskStats::default(),
             last_fault: None,
             stop_reason: None,
+            understeer_s: T::ZERO,
+            inv_wheelbase: if friction_config.wheelbase_m > T::ZERO {
+                T::ONE / friction_config.wheelbase_m
+            } else {
+                T::ZERO
+            },
         })
     }
 
@@ -536,6 +561,45 @@ impl<T: Real> ControlTask<T> {
     /// when it moved: a controlled stop always has a stated reason.
     pub fn stop_reason(&self) -> Option<StopReason> {
         self.stop_reason
+    }
+
+    /// True when the front tyres were saturated at the last activation: for
+    /// [`UNDERSTEER_CONFIRM_S`] the lateral acceleration measured in the steering's
+    /// direction was under [`UNDERSTEER_RATIO`] of the kinematic `V²·tan δ/L`
+    /// (itself at least [`UNDERSTEER_MIN_MPS2`]). The torque then keeps the
+    /// friction the steering asks for ([`ControlTask::run`]).
+    pub fn front_saturated(&self) -> bool {
+        self.understeer_s >= T::lit(UNDERSTEER_CONFIRM_S)
+    }
+
+    /// The lateral acceleration the torque limits leave room for, m/s², on `est`
+    /// (updating the understeer timer): the measured `V·ψ̇`; while the front tyres
+    /// are saturated, the larger of it and the kinematic `V²·tan δ/L` the steering
+    /// asks (the tyres' lateral force is what steers the car: a wheel braked or
+    /// driven past its peak on a slippery road gives it up, and a measured `a_y`
+    /// that fell because of it would free more torque still).
+    fn lateral_demand(&mut self, est: &StateEstimate<T>) -> T {
+        let v = est.vx_mps;
+        let measured = v * est.yaw_rate_radps;
+        // tan δ to within 2 % for |δ| ≤ 0.6 rad (no trigonometric call); 0 without
+        // a wheelbase (no check).
+        let d = est.delta_rad;
+        let kinematic = v * v * (d + d * d * d * T::lit(1.0 / 3.0)) * self.inv_wheelbase;
+        // `measured` in the steering's direction under the ratio of `|kinematic|`,
+        // both sides times `|kinematic|` (no branch on the sign).
+        let k2 = kinematic * kinematic;
+        let under = k2 >= T::lit(UNDERSTEER_MIN_MPS2 * UNDERSTEER_MIN_MPS2)
+            && measured * kinematic < T::lit(UNDERSTEER_RATIO) * k2;
+        self.understeer_s = if under {
+            self.understeer_s + T::lit(CONTROL_PERIOD_US as f32 * 1e-6)
+        } else {
+            T::ZERO
+        };
+        if self.front_saturated() {
+            measured.abs().max(kinematic.abs())
+        } else {
+            measured
+        }
     }
 
     /// The friction check's settings.
@@ -616,7 +680,8 @@ impl<T: Real> ControlTask<T> {
     /// no valid plan) it returns the safe actuation and counts it.
     pub fn run(&mut self, est: &StateEstimate<T>, plan: &Plan<T>, now_us: u64) -> Actuation<T> {
         self.stats.activations = self.stats.activations.wrapping_add(1);
-        let car = self.car_model(est.vx_mps * est.yaw_rate_radps);
+        let lateral = self.lateral_demand(est);
+        let car = self.car_model(lateral);
         match low_level::control_with_model(&self.config, &mut self.state, plan, est, now_us, &car)
         {
             Ok(a) => {

@@ -93,7 +93,7 @@ impl<T: Real> VehicleConfig<T> {
     /// planned with the friction `mu_planner`: its mass, wheel radius, the front
     /// axle's static share of the weight (front-wheel drive, as
     /// [`VehicleConfig::mpc_settings`]), `h/L` and `h/t` (the track `t` the width
-    /// less 0.25 m).
+    /// less 0.25 m) and the wheelbase (the front tyres' grip check).
     pub fn friction_config(&self, mu_planner: T) -> FrictionConfig<T> {
         let mut c = FrictionConfig::for_car(
             self.mass_kg,
@@ -105,6 +105,7 @@ impl<T: Real> VehicleConfig<T> {
         // The track: the body width less a tyre (0.25 m), at least half the width.
         let track = (self.width_m - T::lit(0.25)).max(T::HALF * self.width_m);
         c.cg_height_over_track = self.cg_height_m / track;
+        c.wheelbase_m = self.wheelbase_m();
         c
     }
 

@@ -674,3 +674,28 @@ fn closed_loop_constant_radius_arc() {
         assert!(dist < 1.0, "distance {dist}");
     }
 }
+
+/// A car standing (under `lateral_min_speed_mps`) with the yaw loop's output wound
+/// to −0.05 rad: paused, that output is released towards 0, so the steering becomes
+/// the plan's. Held, it cancelled the plan's turning of the wheels at every new plan
+/// (a car standing at its steering lock never turned them back).
+#[test]
+fn a_paused_yaw_loop_releases_its_output_to_the_plans_steering() {
+    let cfg = LowLevelConfig::<f64>::default();
+    let mut st = LowLevelState::new();
+    st.yaw_pid.last_output = -0.05;
+    st.yaw_pid.integral = -0.05;
+    let mut plan = straight_plan(0, 0.0);
+    for n in plan.nodes.iter_mut() {
+        n.delta_rad = 0.3;
+    }
+    let mut a = None;
+    // 2 s: about 7 time constants of the release.
+    for k in 0..200u64 {
+        a = Some(control(&cfg, &mut st, &plan, &est(0.0, 0.0), k * 10_000).unwrap());
+    }
+    let a = a.unwrap();
+    assert!(a.delta_cl_rad.abs() < 1e-3, "δ_cl = {}", a.delta_cl_rad);
+    assert!((a.delta_rad - 0.3).abs() < 1e-3, "δ = {}", a.delta_rad);
+    assert!(st.yaw_pid.integral.abs() < 1e-3);
+}

@@ -613,3 +613,21 @@ fn warm_start_survives_rows_renumbered_by_a_new_obstacle() {
     // ... found in one iteration: the working set was carried over row for row.
     assert_eq!(again.qp_iterations, 1, "{again:?}");
 }
+
+/// A car standing near the road's left edge, turned 80° towards it: the kinematic
+/// model would reverse (a three-point turn), the car cannot (it only brakes). Every
+/// plan keeps `V ≥ 0` (the soft rows `V_k ≥ 0` at slow nodes; 5 cm/s of slack).
+#[test]
+fn a_standing_car_turned_towards_the_edge_plans_no_reversing() {
+    let s = settings::<f64>();
+    let path = straight::<f64>(200.0);
+    let obstacles = ObstacleManager::new();
+    let start = est(0.0, 2.0, 1.4, 0.0, 0.0, 0);
+    let mut lowest = f64::INFINITY;
+    for (plan, _) in drive(&s, &path, &obstacles, start, 1.0, 30) {
+        for n in &plan.nodes {
+            lowest = lowest.min(n.v_mps);
+        }
+    }
+    assert!(lowest > -0.05, "a plan reverses at {lowest} m/s");
+}

@@ -224,3 +224,68 @@ fn the_mpc_starts_from_the_last_plans_open_loop_steering() {
     planner.reset();
     assert_eq!(planner.initial_steering(&later), 0.07);
 }
+
+/// The front tyres' grip check: a car steered at 0.1 rad at 15 m/s (the kinematic
+/// `a_y` 8.5 m/s²) that turns at 4 m/s² (the steering's lateral force lost: the
+/// front wheels locked, spinning or sliding) is saturated after
+/// `UNDERSTEER_CONFIRM_S`, and the braking torque then leaves room for the lateral
+/// force the steering asks (the friction ellipse at its floor, 0.3 of the grip); a
+/// car that turns as steered is not saturated.
+#[test]
+fn understeer_saturates_the_front_and_the_brakes_leave_the_steering_its_grip() {
+    use firmware::vehicle_config::VehicleConfig;
+    let car = VehicleConfig {
+        l_f_m: 1.1,
+        l_r_m: 1.6,
+        cg_height_m: 0.55,
+        width_m: 1.85,
+        length_m: 4.5,
+        mass_kg: 1500.0,
+        wheel_radius_m: 0.31,
+        max_steer_rad: 0.6,
+    };
+    let mut plan = Plan::zeroed();
+    plan.dt_s = 0.2;
+    for (k, n) in plan.nodes.iter_mut().enumerate() {
+        // Braking hard from 15 m/s.
+        n.v_mps = (15.0 - 6.0 * 0.2 * k as f64).max(0.0);
+        n.delta_rad = 0.1;
+    }
+    for (a, n) in plan.inputs.iter_mut().zip(plan.nodes.iter()) {
+        a[0] = if n.v_mps > 0.0 { -6.0 } else { 0.0 };
+    }
+    let run = |yaw_rate: f64| {
+        let mut control = car.control_task(1.0).unwrap();
+        let mut torque = 0.0;
+        for k in 0..10u64 {
+            let e = StateEstimate {
+                stamp_us: k * CONTROL_PERIOD_US,
+                x_m: 0.0,
+                y_m: 0.0,
+                psi_rad: 0.0,
+                vx_mps: 15.0,
+                vy_mps: 0.0,
+                yaw_rate_radps: yaw_rate,
+                delta_rad: 0.1,
+            };
+            torque = control
+                .run(&e, &plan, k * CONTROL_PERIOD_US)
+                .torque_total_nm;
+        }
+        (control.front_saturated(), torque)
+    };
+    // V²·tan δ/L = 225·0.1003/2.7 = 8.4 m/s².
+    let (gripping, t_grip) = run(8.0 / 15.0);
+    let (sliding, t_slide) = run(4.0 / 15.0);
+    assert!(!gripping);
+    assert!(sliding);
+    // Braking: the torque within 0.3 of the grip while sliding (the ellipse at
+    // 8.4 m/s² of the 8.8 the grip has), less than for the car that grips at
+    // 8 m/s² (0.42 of it). Judged on the measured 4 m/s², the sliding car would
+    // brake with 0.89 of the grip, twice as hard.
+    assert!(t_grip < 0.0 && t_slide < 0.0, "{t_grip} {t_slide}");
+    assert!(
+        t_slide.abs() < 0.8 * t_grip.abs(),
+        "braking {t_slide} N·m sliding against {t_grip} N·m gripping"
+    );
+}

@@ -1,0 +1,64 @@
+//! Issue 16 end to end, on real circuits (`tests/data`): a wet patch entered in a
+//! curve (Shanghai: the car stood at its steering lock; Oschersleben: the front
+//! wheels locked under braking and it ran off the road) and a noisy, late estimate
+//! on a wet road (Budapest at μ 0.3: the car stood at its steering lock).
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use host_sim::faults::Fault;
+use host_sim::road_friction::MuPatch;
+use host_sim::scenario_options::Setting;
+use host_sim::sweep::{execute, header, Common, RunSpec};
+
+/// One lap of `track` (a file of `tests/data`) as the sweep runs it; returns the
+/// cells `outcome`, `stop_reason` and `collisions`.
+fn lap(track: &str, mu: f64, noise: f64, delay_ms: f64, patches: Vec<MuPatch>) -> [String; 3] {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(track);
+    let spec = RunSpec {
+        index: 0,
+        track: path.to_str().unwrap().into(),
+        mu,
+        mu_planner: mu,
+        vehicle: None,
+        mass_scale: 1.0,
+        noise,
+        delay_ms,
+        fault: Fault::None,
+        seed: 0,
+    };
+    let common = Common {
+        setting: Setting {
+            mu_patches: patches,
+            ..Setting::default()
+        },
+        obstacle_dir: None,
+        log_dir: None,
+    };
+    let row = execute(&spec, &common);
+    let cells: Vec<(String, String)> = header().into_iter().skip(10).zip(row.cells).collect();
+    let cell = |name: &str| cells.iter().find(|(h, _)| h == name).unwrap().1.clone();
+    assert_eq!(cell("error"), "", "{track}");
+    [cell("outcome"), cell("stop_reason"), cell("collisions")]
+}
+
+#[test]
+fn a_wet_patch_entered_in_a_curve_costs_no_lap() {
+    let patch = MuPatch {
+        start_m: 500.0,
+        length_m: 200.0,
+        mu: 0.5,
+    };
+    for track in ["Shanghai.csv", "Oschersleben.csv"] {
+        let [outcome, stop, collisions] = lap(track, 1.0, 0.0, 0.0, vec![patch]);
+        assert_eq!(outcome, "ok", "{track}: {stop}");
+        assert_eq!(collisions, "0", "{track}");
+    }
+}
+
+#[test]
+fn a_noisy_late_estimate_on_a_wet_road_drives_on() {
+    let [outcome, stop, collisions] = lap("Budapest.csv", 0.3, 4.0, 100.0, Vec::new());
+    assert_eq!(outcome, "ok", "{stop}");
+    assert_eq!(collisions, "0");
+}
