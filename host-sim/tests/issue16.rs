@@ -1,7 +1,8 @@
-//! Issue 16 end to end, on real circuits (`tests/data`): a wet patch entered in a
-//! curve (Shanghai: the car stood at its steering lock; Oschersleben: the front
-//! wheels locked under braking and it ran off the road) and a noisy, late estimate
-//! on a wet road (Budapest at μ 0.3: the car stood at its steering lock).
+//! Grip that changes and sensors that lie, end to end on real circuits
+//! (`tests/data`): a wet patch entered in a curve (Shanghai: a car standing at its
+//! steering lock must turn its wheels back; Oschersleben: front tyres at their
+//! limit must keep their lateral grip under braking) and a noisy, late estimate on
+//! a wet road (Budapest at μ 0.3: the car must not stand still on a clear road).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use host_sim::faults::Fault;

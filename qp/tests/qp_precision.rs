@@ -122,6 +122,17 @@ fn mpc_sized_problems_f32_vs_f64() {
 /// (`NumericalError`, `Infeasible`) on these adversarial problems is allowed in at most
 /// 1 of 1000 solves (observed: none in these 2000 warm-started solves; 2 in 20 000
 /// cold-started ones during development).
+/// The degenerate problem of `seed` (duplicate and combined rows, soft rows), its
+/// Hessian's diagonal raised by 1: the corpus of the degenerate f32 tests.
+fn degenerate_problem(seed: u64) -> qp::QpProblem<f64, N, M> {
+    let mut rng = Rng::new(70_000 + seed);
+    let mut p = random_problem::<N, M>(&mut rng, Mix::all(M));
+    for j in 0..N {
+        p.h[j][j] += 1.0;
+    }
+    p
+}
+
 #[test]
 fn f32_on_degenerate_problems() {
     let mut s64 = Box::new(QpSolver::<f64, N, M, W, { ldl_len(W) }>::new());
@@ -129,11 +140,7 @@ fn f32_on_degenerate_problems() {
     let mut worst = 0.0f64;
     let mut failures = 0;
     for seed in 0..2000u64 {
-        let mut rng = Rng::new(70_000 + seed);
-        let mut p = random_problem::<N, M>(&mut rng, Mix::all(M));
-        for j in 0..N {
-            p.h[j][j] += 1.0;
-        }
+        let p = degenerate_problem(seed);
         let q = to_f32(&p);
         *s64.problem_mut() = p;
         *s32.problem_mut() = q;
@@ -173,11 +180,7 @@ fn refactorizations_stay_within_their_cap() {
     let mut refactoring = 0;
     let mut denied_but_optimal = 0;
     for seed in 0..2000u64 {
-        let mut rng = Rng::new(70_000 + seed);
-        let mut p = random_problem::<N, M>(&mut rng, Mix::all(M));
-        for j in 0..N {
-            p.h[j][j] += 1.0;
-        }
+        let p = degenerate_problem(seed);
         let q = to_f32(&p);
         s.settings.warm_start = false;
         s.settings.max_refactorizations = qp::DEFAULT_MAX_REFACTORIZATIONS;

@@ -429,6 +429,32 @@ pub struct IndirectTargets {
     pub rules: Vec<(String, Vec<String>)>,
 }
 
+impl IndirectTargets {
+    /// The callees listed for `caller` (demangled) by every rule whose prefix it
+    /// starts with; `None` when no rule covers it.
+    pub fn callees_of(&self, caller: &str) -> Option<Vec<&str>> {
+        let mut covered = false;
+        let mut out = Vec::new();
+        for (prefix, callees) in &self.rules {
+            if caller.starts_with(prefix.as_str()) {
+                covered = true;
+                out.extend(callees.iter().map(String::as_str));
+            }
+        }
+        covered.then_some(out)
+    }
+
+    /// Whether a function, by its demangled name and its symbols, is the listed
+    /// callee `callee` (a demangled prefix or an exact symbol).
+    pub fn lists<'a>(
+        callee: &str,
+        demangled: &str,
+        mut symbols: impl Iterator<Item = &'a str>,
+    ) -> bool {
+        demangled.starts_with(callee) || symbols.any(|s| s == callee)
+    }
+}
+
 /// The whole program's graphs.
 #[derive(Debug, Clone)]
 pub struct Program {
@@ -632,31 +658,25 @@ pub fn build_program(
     let demangled: Vec<String> = raw.iter().map(|f| demangle(&f.name)).collect();
     // Indirect targets per caller.
     let targets_of = |caller: usize, unresolved: &mut Vec<String>, what: String| -> Vec<usize> {
-        let name = &demangled[caller];
         let mut out = Vec::new();
-        let mut covered = false;
-        for (prefix, callees) in &indirect.rules {
-            if name.starts_with(prefix.as_str()) {
-                covered = true;
-                for c in callees {
-                    let hits: Vec<usize> = (0..raw.len())
-                        .filter(|&k| {
-                            demangled[k].starts_with(c.as_str())
-                                || raw[k].name == *c
-                                || raw[k].aliases.iter().any(|a| a == c)
-                        })
-                        .collect();
-                    if hits.is_empty() {
-                        unresolved.push(format!(
-                            "{what}: listed target `{c}` is no symbol of the binary"
-                        ));
-                    }
-                    out.extend(hits);
-                }
-            }
-        }
-        if !covered {
+        let Some(callees) = indirect.callees_of(&demangled[caller]) else {
             unresolved.push(what);
+            return out;
+        };
+        for c in callees {
+            let hits: Vec<usize> = (0..raw.len())
+                .filter(|&k| {
+                    let symbols = std::iter::once(raw[k].name.as_str())
+                        .chain(raw[k].aliases.iter().map(String::as_str));
+                    IndirectTargets::lists(c, &demangled[k], symbols)
+                })
+                .collect();
+            if hits.is_empty() {
+                unresolved.push(format!(
+                    "{what}: listed target `{c}` is no symbol of the binary"
+                ));
+            }
+            out.extend(hits);
         }
         out.sort_unstable();
         out.dedup();

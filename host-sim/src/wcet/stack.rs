@@ -105,31 +105,27 @@ impl Program {
             if self.functions[k].indirect.is_empty() {
                 continue;
             }
-            let callees: Vec<&String> = targets
-                .rules
-                .iter()
-                .filter(|(caller, _)| demangled[k].starts_with(caller.as_str()))
-                .flat_map(|(_, c)| c.iter())
-                .collect();
-            if callees.is_empty() {
+            let Some(callees) = targets.callees_of(&demangled[k]) else {
+                continue;
+            };
+            // Every listed callee must be a function of the disassembly.
+            let mut hits: Vec<usize> = Vec::new();
+            let mut all_found = !callees.is_empty();
+            for c in callees {
+                let found: Vec<usize> = (0..self.functions.len())
+                    .filter(|&j| {
+                        let symbol = std::iter::once(self.functions[j].name.as_str());
+                        super::cfg::IndirectTargets::lists(c, &demangled[j], symbol)
+                    })
+                    .collect();
+                all_found &= !found.is_empty();
+                hits.extend(found);
+            }
+            if !all_found {
                 continue;
             }
-            let hits: Vec<usize> = (0..self.functions.len())
-                .filter(|&j| {
-                    callees.iter().any(|c| {
-                        demangled[j].starts_with(c.as_str()) || self.functions[j].name == **c
-                    })
-                })
-                .collect();
-            if hits.is_empty()
-                || callees.iter().any(|c| {
-                    !hits.iter().any(|&j| {
-                        demangled[j].starts_with(c.as_str()) || self.functions[j].name == **c
-                    })
-                })
-            {
-                continue;
-            }
+            hits.sort_unstable();
+            hits.dedup();
             let sites = std::mem::take(&mut self.functions[k].indirect);
             for site in sites {
                 let address = site
