@@ -851,30 +851,39 @@ impl<T: Real> Mpc<T> {
     /// pass's bounds make inadmissible or that are dependent.
     fn renumber_working_set(&mut self) {
         let c = &self.condensing;
-        let kept = self.warm_set[..self.warm_len.min(WS)]
-            .iter()
-            .filter_map(|&e| match e {
+        self.solver.clear_working_set();
+        // One pass over the kept entries, each looked up once: a plain loop (an
+        // iterator chain handed to the solver compiles to nested loops whose
+        // bounds multiply in the timing analysis).
+        // wcet-bound: WS
+        for &e in &self.warm_set[..self.warm_len.min(WS)] {
+            let renumbered = match e {
                 WarmEntry::Bound(j, side) => Some(ActiveConstraint {
                     index: ConstraintIndex::Bound(j),
                     side,
                 }),
                 WarmEntry::Row(id, side) => {
                     let node = id.node as usize;
-                    let (Some(&first), Some(&end)) =
-                        (c.node_first.get(node), c.node_first.get(node + 1))
-                    else {
-                        return None;
-                    };
-                    // A node's rows `node_first[node]..node_first[node + 1]`: row counts `qp.m` <= NC.
-                    let i =
-                        (first as usize..end as usize).find(|&i| c.row_id.get(i) == Some(&id))?; // wcet-bound: NC
-                    Some(ActiveConstraint {
-                        index: ConstraintIndex::Row(i as u16),
-                        side,
-                    })
+                    match (c.node_first.get(node), c.node_first.get(node + 1)) {
+                        (Some(&first), Some(&end)) => {
+                            // A node's rows `node_first[node]..node_first[node + 1]`: row counts `qp.m` <= NC.
+                            (first as usize..end as usize)
+                                .find(|&i| c.row_id.get(i) == Some(&id)) // wcet-bound: NC
+                                .map(|i| ActiveConstraint {
+                                    index: ConstraintIndex::Row(i as u16),
+                                    side,
+                                })
+                        }
+                        _ => None,
+                    }
                 }
-            });
-        self.solver.set_working_set_from(kept);
+            };
+            if let Some(a) = renumbered {
+                if !self.solver.push_working_set(a) {
+                    break;
+                }
+            }
+        }
     }
 
     fn slack_diagnostics(&self, report: &mut MpcReport<T>) {

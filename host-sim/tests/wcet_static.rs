@@ -200,6 +200,14 @@ fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
     for l in a.loops.iter().filter(|l| l.bound.is_some()) {
         assert!(l.line > 0, "{l:?}");
     }
+    // memory.x keeps data out of flash, so the model charges flash wait states to
+    // the constant pools alone (else it says why not).
+    let data = a
+        .assumptions
+        .iter()
+        .find(|s| s.starts_with("Data:"))
+        .unwrap();
+    assert!(data.contains("only pc-relative loads"), "{data}");
 }
 
 /// The firmware crates' sources in this workspace (`firmware/src`, `qp/src`).
@@ -692,4 +700,63 @@ fn a_cap_per_activation_counts_every_copy_of_its_line_together() {
     // Two copies of one line in one group share the cap: the body's runs are
     // counted twice against 3, 1.5 runs: 2 + 1.5 × 4 + 1 (the linear relaxation).
     assert_eq!(run(vec![cap(3), cap(3)]), 9);
+}
+
+/// A copy loop that stores 8 bytes per trip on its short path (two `str`) and 9 on
+/// its long one (and one `strb`); a conditional store (`strne`) and a store to the
+/// stack do not count.
+const COPY_LOOP: &str = "
+08000000 <copy>:
+ 8000000: f851 3b04    \tldr\tr3, [r1], #4
+ 8000004: f840 3b04    \tstr\tr3, [r0], #4
+ 8000008: 9300         \tstr\tr3, [sp]
+ 800000a: bf18         \tit\tne
+ 800000c: 6003         \tstrne\tr3, [r0]
+ 800000e: 2a04         \tcmp\tr2, #0x4
+ 8000010: d001         \tbeq\t0x8000016 <copy+0x16> @ imm = #0x2
+ 8000012: 7003         \tstrb\tr3, [r0]
+ 8000014: e7ff         \tb\t0x8000016 <copy+0x16> @ imm = #-0x2
+ 8000016: f840 3b04    \tstr\tr3, [r0], #4
+ 800001a: 3a08         \tsubs\tr2, #0x8
+ 800001c: d1f0         \tbne\t0x8000000 <copy> @ imm = #-0x20
+ 800001e: 4770         \tbx\tlr
+";
+
+#[test]
+fn a_copy_loop_trip_stores_the_bytes_of_its_shortest_path() {
+    let p = program(COPY_LOOP);
+    let f = &p.functions[p.find("copy")[0]];
+    let ls = loops::natural_loops(f).unwrap();
+    assert_eq!(ls.len(), 1);
+    assert_eq!(loops::min_stored_bytes_per_trip(f, &ls, &ls[0]), 8);
+    let bytes: Vec<u64> = f.instructions.iter().map(loops::stored_bytes).collect();
+    assert_eq!(bytes, vec![0, 4, 0, 0, 0, 0, 0, 1, 0, 4, 0, 0, 0]);
+}
+
+/// Only pc-relative loads read flash once the model knows data is not there: a
+/// load through a register costs the wait states under the default model only.
+#[test]
+fn flash_wait_states_follow_where_data_can_be() {
+    const LOADS: &str = "
+08000000 <f>:
+ 8000000: 6808         \tldr\tr0, [r1]
+ 8000002: 4a01         \tldr\tr2, [pc, #0x4]
+ 8000004: 4770         \tbx\tlr
+";
+    let raw = cfg::parse_disassembly(LOADS);
+    let anywhere = MemoryModel::STM32F405;
+    let pools = MemoryModel {
+        flash_data: cfg::FlashData::ConstantPools(Default::default()),
+        ..MemoryModel::STM32F405
+    };
+    let insns = &raw[0].instructions[..2];
+    // ldr 2 + ldr 2, one 16-byte flash line (6): 10; each flash read 5 more.
+    assert_eq!(pools.block_cycles(0x0800_0000, insns), 10 + 5);
+    assert_eq!(anywhere.block_cycles(0x0800_0000, insns), 10 + 5 + 5);
+    // A function that addresses a constant island is charged as before.
+    let listed = MemoryModel {
+        flash_data: cfg::FlashData::ConstantPools([(0x0800_0000, "f".into())].into()),
+        ..MemoryModel::STM32F405
+    };
+    assert_eq!(listed.block_cycles(0x0800_0000, insns), 10 + 5 + 5);
 }

@@ -266,41 +266,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                     continue;
                 }
             }
-            // Null-space direction: λ_e grows by t·σ, λ_W by t·σ·c with
-            // c = −(M_WW + D)⁻¹ M_{W,e} = −L⁻ᵀ L_new.
+            // The null-space step; each one is followed by a removal counted as an
+            // iteration or ends the `add`, whose own iteration pays for it.
+            // wcet-bound: QP_MAX_ITER times per activation
+            let block = self.null_space_step(p, sigma, tols.noise);
             let n = self.n;
-            let s = row_start(n);
-            let mut cmax = T::ZERO;
-            // wcet-bound: WS
-            for r in (0..n).rev() {
-                let mut acc = -self.ldl[s + r];
-                for k in (r + 1)..n {
-                    // Bounds the `for k in (r + 1)..n` loop: n ≤ W.
-                    acc -= self.ldl[row_start(k) + r] * self.tmp[k]; // wcet-bound: WS
-                }
-                self.tmp[r] = acc;
-                cmax = cmax.max(acc.abs());
-            }
-            // Rates below this are rounding noise of a zero coefficient.
-            let noise = tols.noise * (T::ONE + cmax);
-            let mut block: Option<(usize, T)> = None;
-            for k in 0..n {
-                let ek = self.ws[k];
-                // Bounds the `for k in 0..n` loop (n ≤ W; back edges at the `continue`s).
-                // wcet-bound: WS
-                if Self::is_equality(p, ek.index) {
-                    continue;
-                }
-                let sg = sign::<T>(ek.side);
-                let rate = sg * sigma * self.tmp[k];
-                // wcet-bound: WS
-                if rate < -noise {
-                    let t = (sg * self.lam[k]).max(T::ZERO) / -rate;
-                    if block.is_none_or(|(_, r)| t < r) {
-                        block = Some((k, t));
-                    }
-                }
-            }
             let Some((pos, t)) = block else {
                 // No multiplier limits the ray. With an exactly dependent row the dual
                 // is unbounded: infeasible. With a small but real pivot (nearly
@@ -333,6 +303,54 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             sol.removed += 1;
         }
         Err(QpStatus::NumericalError)
+    }
+
+    /// The dual null-space direction of a constraint `e` that depends on the
+    /// working set, into `tmp` (`λ_e` grows by `t·σ`, `λ_W` by `t·σ·c` with
+    /// `c = −(M_WW + D)⁻¹ M_{W,e} = −L⁻ᵀ L_new`), and the first multiplier it
+    /// drives to zero with its step `t`; `None` when no multiplier limits the ray.
+    /// Not inlined: its triangular solve is bounded per call.
+    #[inline(never)]
+    fn null_space_step(
+        &mut self,
+        p: &QpProblem<T, N, M>,
+        sigma: T,
+        noise_tol: T,
+    ) -> Option<(usize, T)> {
+        let n = self.n;
+        let s = row_start(n);
+        let mut cmax = T::ZERO;
+        // wcet-bound: WS
+        for r in (0..n).rev() {
+            let mut acc = -self.ldl[s + r];
+            for k in (r + 1)..n {
+                // Bounds the `for k in (r + 1)..n` loop: n ≤ W, a triangle per call.
+                acc -= self.ldl[row_start(k) + r] * self.tmp[k]; // wcet-bound: WS * (WS - 1) / 2 per call
+            }
+            self.tmp[r] = acc;
+            cmax = cmax.max(acc.abs());
+        }
+        // Rates below this are rounding noise of a zero coefficient.
+        let noise = noise_tol * (T::ONE + cmax);
+        let mut block: Option<(usize, T)> = None;
+        for k in 0..n {
+            let ek = self.ws[k];
+            // Bounds the `for k in 0..n` loop (n ≤ W; back edges at the `continue`s).
+            // wcet-bound: WS
+            if Self::is_equality(p, ek.index) {
+                continue;
+            }
+            let sg = sign::<T>(ek.side);
+            let rate = sg * sigma * self.tmp[k];
+            // wcet-bound: WS
+            if rate < -noise {
+                let t = (sg * self.lam[k]).max(T::ZERO) / -rate;
+                if block.is_none_or(|(_, r)| t < r) {
+                    block = Some((k, t));
+                }
+            }
+        }
+        block
     }
 
     /// One step of iterative refinement of the multipliers at the optimum: the

@@ -120,6 +120,21 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         k
     }
 
+    /// Appends `e` to the working set the next (warm-started) solve starts from;
+    /// false, and nothing kept, once it holds `W` entries. With
+    /// [`QpSolver::clear_working_set`], the same as [`QpSolver::set_working_set`]
+    /// one entry at a time (a caller that filters its entries needs no buffer).
+    pub fn push_working_set(&mut self, e: ActiveConstraint) -> bool {
+        match self.work.ws.get_mut(self.work.n) {
+            Some(d) => {
+                *d = e;
+                self.work.n += 1;
+                true
+            }
+            None => false,
+        }
+    }
+
     /// Empties the working set.
     pub fn clear_working_set(&mut self) {
         self.work.n = 0;

@@ -9,7 +9,7 @@
 //! A task with any of these gets no bound, and the reasons are listed.
 
 use super::cfg::Function;
-use super::cfg::{self, Exit, IndirectTargets, MemoryModel, Program};
+use super::cfg::{self, Exit, FlashData, IndirectTargets, MemoryModel, Program};
 use super::ipet::{self, Cost, LoopFact, Per};
 use super::loops::{self, reverse_post_order, Loop};
 use super::{annotations, bounds, demangle};
@@ -411,7 +411,12 @@ pub fn analyse(
 ) -> Result<StaticAnalysis> {
     let text = super::stack::disassemble_with_bytes(elf)?;
     let raw = cfg::parse_disassembly(&text);
-    let memory = MemoryModel::STM32F405;
+    let data = super::read_elf(elf)?;
+    let file = super::parse_elf(elf, &data)?;
+    let memory = MemoryModel {
+        flash_data: FlashData::classify(&file, &raw, MemoryModel::STM32F405.flash, demangle),
+        ..MemoryModel::STM32F405
+    };
     let program: Program = cfg::build_program(&raw, &ecu_indirect_targets(), &memory, demangle)?;
     let ctx = addr2line::Loader::new(elf)
         .map_err(|e| anyhow::anyhow!("DWARF line table of {}: {e}", elf.display()))?;

@@ -19,6 +19,7 @@
 //! analysis.
 
 use super::cpi::{instruction_timing, Class};
+pub use super::flash_data::FlashData;
 use super::WcetError;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
@@ -341,7 +342,7 @@ impl Function {
 /// The memory model under which the block cycles are worst cases. Every term is
 /// pessimistic (the ART accelerator's instruction and data caches are assumed to
 /// miss on every access, and fetch never overlaps execution).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct MemoryModel {
     /// Flash wait states (5 at 168 MHz and 3.3 V, RM0090 table 10).
     pub flash_wait_states: u32,
@@ -349,6 +350,9 @@ pub struct MemoryModel {
     pub flash_line_bytes: u32,
     /// `[flash_start, flash_end)`: code there is fetched through the flash.
     pub flash: (u32, u32),
+    /// Which data loads may read flash ([`FlashData::classify`] decides it for a
+    /// binary; [`FlashData::Anywhere`] assumes nothing).
+    pub flash_data: FlashData,
 }
 
 impl MemoryModel {
@@ -357,6 +361,7 @@ impl MemoryModel {
         flash_wait_states: 5,
         flash_line_bytes: 16,
         flash: (0x0800_0000, 0x0810_0000),
+        flash_data: FlashData::Anywhere(Vec::new()),
     };
 
     /// The assumptions, for the report.
@@ -378,32 +383,31 @@ impl MemoryModel {
                 self.flash_line_bytes,
                 self.flash_wait_states + 1
             ),
+            self.flash_data.describe(self.flash_wait_states),
             format!(
-                "Data: every load that is not relative to sp may read flash (literal pools, \
-                 .rodata, jump tables, constants): each costs {} wait states more (the ART's \
-                 data cache assumed to miss). Stack accesses and stores go to zero-wait SRAM.",
+                "Bus: no DMA, no other master; the core is the only user of the flash and SRAM \
+                 buses. Interrupt entry: 12 cycles (TRM, with FPU lazy stacking reserving the \
+                 frame) and {} more for the vector read from flash; exit: 12 cycles. Charged \
+                 per preemption in the response-time analysis.",
                 self.flash_wait_states
             ),
-            "Bus: no DMA, no other master; the core is the only user of the flash and SRAM \
-             buses. Interrupt entry and exit: 12 cycles each (TRM, with FPU lazy stacking \
-             reserving the frame), charged per preemption in the response-time analysis."
-                .to_string(),
         ]
     }
 
-    /// Worst-case cycles of a block's instructions.
-    pub fn block_cycles(&self, insns: &[Instruction]) -> u64 {
+    /// Worst-case cycles of a block's instructions, in the function that starts at
+    /// `function`.
+    pub fn block_cycles(&self, function: u32, insns: &[Instruction]) -> u64 {
+        let through_registers = self.flash_data.may_read_flash(function);
         let mut cycles: u64 = 0;
         for i in insns {
             let (class, c) = i.timing();
             cycles += u64::from(c);
+            let loads = matches!(class, Class::Load | Class::LoadMultiple)
+                || (class == Class::FpuLoadStore
+                    && (i.base().starts_with("vldr") || i.base().starts_with("vldm")));
+            let from_pc = class == Class::TableBranch || (loads && i.operands.contains("[pc"));
             let from_sp = i.operands.contains("[sp");
-            let loads = matches!(
-                class,
-                Class::Load | Class::LoadMultiple | Class::TableBranch
-            ) || (class == Class::FpuLoadStore
-                && (i.base().starts_with("vldr") || i.base().starts_with("vldm")));
-            if loads && !from_sp {
+            if from_pc || (loads && !from_sp && through_registers) {
                 cycles += u64::from(self.flash_wait_states);
             }
         }
@@ -886,7 +890,7 @@ pub fn build_program(
                 exit,
                 problems: unresolved,
                 instructions: insns.len() as u64,
-                cycles: memory.block_cycles(insns),
+                cycles: memory.block_cycles(f.address, insns),
             });
         }
         functions.push(Function {

@@ -17,8 +17,10 @@
 //!   ([`Per::Call`]: a triangular nest), and `Σ x_b ≤ B · n_root` over the blocks
 //!   of a step capped per activation ([`BlockCap::activation_group`]);
 //! * block copies and fills ([`CopySizes`]): the loops of `memcpy`, `memset`, ...
-//!   take together at most `Σ bytes · x_site` back edges over the call sites (each
-//!   back edge moves at least one byte, each byte is moved once);
+//!   take together `Σ k_l · back_l ≤ Σ bytes · x_site` over the call sites, where
+//!   `k_l ≥ 1` is the fewest bytes loop `l` stores outside the stack on one trip
+//!   ([`min_stored_bytes_per_trip`]: a word loop unrolled four times stores 16)
+//!   and each destination byte is written once per call;
 //! * paths that never return (a call of a panic handler, a trap) are not part of a
 //!   completing activation: their blocks get count 0.
 //!
@@ -27,7 +29,7 @@
 //! through `good_lp` (pure Rust).
 
 use super::cfg::{Exit, Program};
-use super::loops::{depth, reverse_post_order, Loop};
+use super::loops::{depth, min_stored_bytes_per_trip, reverse_post_order, Loop};
 use good_lp::{
     constraint, variable, Expression, ProblemVariables, Solution, SolverModel, Variable,
 };
@@ -366,7 +368,9 @@ pub fn task_bound(
                 .filter_map(|e| edges.get(e))
                 .fold(Expression::from(0.0), |a, &v| a + v);
             if copies.family.contains(&f) {
-                copy_loops.push(back.clone());
+                let all = loops.get(f).map_or(&[][..], |v| v.as_slice());
+                let per_trip = min_stored_bytes_per_trip(func, all, l).max(1) as f64;
+                copy_loops.push(per_trip * back.clone());
             }
             let Some(fact) = fact_of.get(&(f, k)) else {
                 continue;
@@ -408,11 +412,13 @@ pub fn task_bound(
                 bytes += n as f64 * v;
             }
         }
-        // Every back edge of a copy loop moves at least one byte, and a call
-        // moves each of its bytes once (head, words and tail are disjoint; a
-        // `__aeabi_memcpy4` that hands its remainder to `memcpy` hands over only
-        // the bytes it did not move): all the family's back edges together take
-        // at most the bytes of all the calls.
+        // Every trip around a copy loop stores at least the bytes of its
+        // shortest path (at least one byte; stores to the stack and conditional
+        // ones not counted), and a call writes each byte of its destination once
+        // (head, words and tail are disjoint; a `__aeabi_memcpy4` that hands its
+        // remainder to `memcpy` hands over only the bytes it did not move): all
+        // the family's trips, weighted by those bytes, take at most the bytes of
+        // all the calls.
         let all = copy_loops
             .into_iter()
             .fold(Expression::from(0.0), |a, b| a + b);

@@ -290,3 +290,79 @@ fn cyclic_regions(
             .collect()
     })
 }
+
+/// Bytes the stores of `insn` surely write to memory that is not the stack: 0 for
+/// a conditional store (inside an `IT` block it may not execute), a store
+/// relative to sp or the frame pointer r7, and anything that is no store.
+pub fn stored_bytes(insn: &super::cfg::Instruction) -> u64 {
+    let ops = insn.operands.as_str();
+    if ops.contains("[sp") || ops.contains("[r7") {
+        return 0;
+    }
+    let registers = || {
+        ops.split_once('{')
+            .and_then(|(_, r)| r.split_once('}'))
+            .map_or(0, |(list, _)| list.split(',').count() as u64)
+    };
+    match insn.base() {
+        "str" => 4,
+        "strh" => 2,
+        "strb" => 1,
+        "strd" => 8,
+        "stm" | "stmia" | "stmdb" => 4 * registers(),
+        "vstr" => {
+            if ops.trim_start().starts_with('d') {
+                8
+            } else {
+                4
+            }
+        }
+        _ => 0,
+    }
+}
+
+/// The fewest bytes the loop's stores write (outside the stack) on one trip from
+/// its header around to one of its back edges: the shortest path through its
+/// blocks, each block weighted by [`stored_bytes`] of its instructions, no back
+/// edge of any loop taken on the way (going around an inner loop only adds
+/// stores).
+pub fn min_stored_bytes_per_trip(f: &Function, loops: &[Loop], l: &Loop) -> u64 {
+    let weight: Vec<u64> = f
+        .blocks
+        .iter()
+        .map(|b| {
+            f.instructions
+                .get(b.first..b.end)
+                .unwrap_or(&[])
+                .iter()
+                .map(stored_bytes)
+                .sum()
+        })
+        .collect();
+    let back: BTreeSet<(usize, usize)> = loops
+        .iter()
+        .flat_map(|x| x.back_edges.iter().copied())
+        .collect();
+    let inside: BTreeSet<usize> = l.blocks.iter().copied().collect();
+    // The loop's blocks in reverse post-order: with back edges removed, an order
+    // in which every edge goes forward.
+    let order: Vec<usize> = reverse_post_order(f)
+        .into_iter()
+        .filter(|b| inside.contains(b))
+        .collect();
+    let mut best: Vec<Option<u64>> = vec![None; f.blocks.len()];
+    best[l.header] = Some(weight[l.header]);
+    let mut trip: Option<u64> = None;
+    for &b in &order {
+        let Some(here) = best[b] else { continue };
+        for &s in &f.blocks[b].successors {
+            if l.back_edges.contains(&(b, s)) {
+                trip = Some(trip.map_or(here, |t| t.min(here)));
+            } else if inside.contains(&s) && !back.contains(&(b, s)) {
+                let via = here + weight[s];
+                best[s] = Some(best[s].map_or(via, |v| v.min(via)));
+            }
+        }
+    }
+    trip.unwrap_or(0)
+}

@@ -3,6 +3,7 @@
 //! | module | concept |
 //! |---|---|
 //! | [`cfg`] | control-flow graphs from the Thumb-2 disassembly; per-block worst-case cycles under a stated memory model |
+//! | [`flash_data`] | which data loads can read flash (the ELF's sections, the ways code forms addresses) |
 //! | [`loops`] | dominators and natural loops; irreducible cycles refused |
 //! | [`graph`] | strongly connected components (recursion, irreducible cycles) |
 //! | [`bounds`] | loop bounds recognised from the binary (counted loops) |
@@ -26,6 +27,7 @@ pub mod bounds;
 pub mod cfg;
 pub mod command;
 pub mod cpi;
+pub mod flash_data;
 pub mod graph;
 pub mod ipet;
 pub mod loops;
