@@ -1505,6 +1505,8 @@ impl<T: Real> Condensing<T> {
                 (IY, sigma * fr.n[1]),
                 (IS, dg_ds - sigma * fr.kappa * fr.ex),
             ];
+            // Past the check above: at most MAX_OBSTACLE_ROWS per pass.
+            // wcet-bound: MAX_OBSTACLE_ROWS * COLD_START_PASSES times per activation
             let d = self.lin_row(&terms, g, u_bar, ncols);
             if self.push(
                 qp,

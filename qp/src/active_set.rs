@@ -243,11 +243,12 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // Multiplier the new constraint has accumulated over null-space steps.
         let mut lam_e = T::ZERO;
         let mut refactored = false;
-        // `0..=W`: W + 1 attempts. Each attempt after a removal counts as an
-        // iteration against `max_iter` (what is left of the activation's cap), the
-        // refactor-and-retry happens once per `add`: with the main loop's QP_MAX_ITER
-        // iterations, each at most one `add`, at most 2 · QP_MAX_ITER retries.
-        // wcet-bound: 2 * QP_MAX_ITER per activation
+        // `0..=W`: W + 1 attempts. The first is the main loop's iteration's (it
+        // calls `add` once); each later one follows a removal, counted as an
+        // iteration against `max_iter` (what is left of the activation's cap), or
+        // a refactorization, counted against `max_refactorizations` (likewise):
+        // QP_MAX_ITER + QP_MAX_REFACTORIZATIONS attempts in an activation.
+        // wcet-bound: QP_MAX_ITER + QP_MAX_REFACTORIZATIONS per activation
         for _ in 0..=W {
             match self.append(p, e, tols) {
                 Ok(()) => {
