@@ -53,6 +53,11 @@ pub struct WcetArgs {
     /// and the task bounds against, besides the one this command records.
     #[arg(long, num_args = 1..)]
     pub check_trace: Vec<PathBuf>,
+    /// Fail when one of these goals of the report is missed, by id (`wcet.json`'s
+    /// `goals[].id`, e.g. `control-response-time`, `stack-covered`,
+    /// `plan-job-budget`); the others are reported only.
+    #[arg(long, num_args = 1..)]
+    pub require: Vec<String>,
     /// Only the static analysis of the ELF (control-flow graphs, loops, IPET):
     /// writes `static.json` and `static.md`, runs no PIL lap.
     #[arg(long)]
@@ -255,15 +260,20 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     println!("control: {}", bound(&r.tasks.control));
     for g in &r.goals {
         println!(
-            "  {} {}: {} (goal ≤ {} {})",
+            "  {} {} ({}): {} (goal ≤ {} {})",
             if g.met { "met   " } else { "MISSED" },
             g.name,
+            g.id,
             g.value.map_or("n/a".into(), |v| format!("{v:.0}")),
             g.goal,
             g.unit
         );
     }
     println!("wrote {}", args.out.display());
+    let missed = report::missed_required(&r.goals, &args.require).map_err(|e| anyhow!(e))?;
+    if !missed.is_empty() {
+        bail!("required goals missed:\n  {}", missed.join("\n  "));
+    }
     if let Some(e) = &args.expected {
         let text = fs::read_to_string(e)
             .with_context(|| format!("cannot read the expectations {}", e.display()))?;

@@ -577,6 +577,8 @@ pub struct RunEntry {
 /// One project goal: met when `value ≤ goal`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Goal {
+    /// Short name, for `host-sim wcet --require ID`.
+    pub id: &'static str,
     /// What is measured.
     pub name: String,
     /// Its value (unit in `unit`); `null` when there was nothing to measure.
@@ -871,8 +873,41 @@ fn memory_report(
     }
 }
 
-fn goal(name: &str, value: Option<f64>, goal: f64, unit: &str) -> Goal {
+/// The goals among `required` (ids) that are missed, one line each; an error
+/// naming the ids that are no goal, with the list of goals.
+pub fn missed_required(goals: &[Goal], required: &[String]) -> Result<Vec<String>, String> {
+    let unknown: Vec<&str> = required
+        .iter()
+        .map(String::as_str)
+        .filter(|id| !goals.iter().any(|g| g.id == *id))
+        .collect();
+    if !unknown.is_empty() {
+        let ids: Vec<&str> = goals.iter().map(|g| g.id).collect();
+        return Err(format!(
+            "--require: no goal {} (the goals: {})",
+            unknown.join(", "),
+            ids.join(", ")
+        ));
+    }
+    Ok(goals
+        .iter()
+        .filter(|g| !g.met && required.iter().any(|id| id == g.id))
+        .map(|g| {
+            format!(
+                "{} ({}): {} (goal ≤ {} {})",
+                g.id,
+                g.name,
+                g.value.map_or("n/a".into(), |v| format!("{v:.0}")),
+                g.goal,
+                g.unit
+            )
+        })
+        .collect())
+}
+
+fn goal(id: &'static str, name: &str, value: Option<f64>, goal: f64, unit: &str) -> Goal {
     Goal {
+        id,
         name: name.to_string(),
         value,
         goal,
@@ -894,24 +929,28 @@ fn goals(
     let not_completed = runs.iter().filter(|r| !r.completed).count();
     vec![
         goal(
+            "plan-warm-observed",
             "plan warm-start observed max",
             tasks.plan.observed_warm_max_instructions,
             GOAL_PLAN_WARM_MAX_INSTRUCTIONS,
             "instructions",
         ),
         goal(
+            "plan-job-budget",
             "plan job static bound within budget",
             tasks.plan.statics.job_static_bound_cycles.map(|c| c as f64),
             tasks.plan.budget_cycles,
             "cycles",
         ),
         goal(
+            "plan-tightness",
             "plan static bound over the traced maximum",
             tasks.plan.statics.tightness,
             GOAL_PLAN_TIGHTNESS,
             "×",
         ),
         goal(
+            "control-job-budget",
             "control job static bound within budget",
             tasks
                 .control
@@ -922,18 +961,21 @@ fn goals(
             "cycles",
         ),
         goal(
+            "plan-response-time",
             "plan response time bound within the deadline",
             tasks.plan.statics.response_time_bound_us,
             tasks.plan.statics.deadline_us.unwrap_or(0.0),
             "µs",
         ),
         goal(
+            "control-response-time",
             "control response time bound within the deadline",
             tasks.control.statics.response_time_bound_us,
             tasks.control.statics.deadline_us.unwrap_or(0.0),
             "µs",
         ),
         goal(
+            "analysis-complete",
             "unbounded loops, unresolved calls, recursions",
             Some(
                 (statics.unbounded_loops
@@ -944,24 +986,28 @@ fn goals(
             "",
         ),
         goal(
+            "stack-covered",
             "stack bound: what it does not cover",
             Some(memory.stack_misses.len() as f64),
             0.0,
             "items",
         ),
         goal(
+            "control-observed",
             "control observed max",
             Some(tasks.control.observed_max_instructions),
             GOAL_CONTROL_MAX_INSTRUCTIONS,
             "instructions",
         ),
         goal(
+            "static-ram",
             "static RAM",
             Some(memory.static_ram_bytes as f64),
             GOAL_STATIC_RAM_BYTES,
             "bytes",
         ),
         goal(
+            "stack-bound",
             "stack bound",
             Some(memory.stack_bound_bytes as f64),
             GOAL_STACK_BOUND_BYTES,
@@ -969,17 +1015,20 @@ fn goals(
         ),
         goal(
             "flash",
+            "flash",
             Some(memory.flash_bytes as f64),
             GOAL_FLASH_BYTES,
             "bytes",
         ),
         goal(
+            "deadline-misses",
             "deadline misses over the runs",
             Some(misses as f64),
             0.0,
             "misses",
         ),
         goal(
+            "runs-completed",
             "PIL runs not completed",
             Some(not_completed as f64),
             0.0,
@@ -1863,6 +1912,26 @@ active_constraints,max_validity_slack_rad";
             path.display()
         );
         path
+    }
+
+    #[test]
+    fn required_goals_fail_only_when_missed_and_unknown_ids_are_errors() {
+        let goals = vec![
+            goal("a", "a goal", Some(1.0), 2.0, "x"),
+            goal("b", "b goal", Some(3.0), 2.0, "x"),
+            goal("c", "c goal", None, 2.0, "x"),
+        ];
+        let req = |ids: &[&str]| ids.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert!(missed_required(&goals, &req(&["a"])).unwrap().is_empty());
+        let missed = missed_required(&goals, &req(&["a", "b", "c"])).unwrap();
+        assert_eq!(missed.len(), 2, "{missed:?}");
+        assert!(missed[0].starts_with("b (b goal): 3"), "{missed:?}");
+        assert!(missed[1].contains("n/a"), "{missed:?}");
+        let err = missed_required(&goals, &req(&["a", "z"])).unwrap_err();
+        assert!(
+            err.contains("no goal z") && err.contains("a, b, c"),
+            "{err}"
+        );
     }
 
     #[test]
