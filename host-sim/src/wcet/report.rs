@@ -1915,15 +1915,16 @@ active_constraints,max_validity_slack_rad";
     }
 
     #[test]
-    fn required_goals_fail_only_when_missed_and_unknown_ids_are_errors() {
+    fn required_goals_fail_only_when_missed_and_unknown_ids_are_errors(
+    ) -> std::result::Result<(), String> {
         let goals = vec![
             goal("a", "a goal", Some(1.0), 2.0, "x"),
             goal("b", "b goal", Some(3.0), 2.0, "x"),
             goal("c", "c goal", None, 2.0, "x"),
         ];
         let req = |ids: &[&str]| ids.iter().map(|s| s.to_string()).collect::<Vec<_>>();
-        assert!(missed_required(&goals, &req(&["a"])).unwrap().is_empty());
-        let missed = missed_required(&goals, &req(&["a", "b", "c"])).unwrap();
+        assert!(missed_required(&goals, &req(&["a"]))?.is_empty());
+        let missed = missed_required(&goals, &req(&["a", "b", "c"]))?;
         assert_eq!(missed.len(), 2, "{missed:?}");
         assert!(missed[0].starts_with("b (b goal): 3"), "{missed:?}");
         assert!(missed[1].contains("n/a"), "{missed:?}");
