@@ -499,14 +499,20 @@ pub fn wrap_pi<T: Real>(x: T) -> T {
     }
 }
 
+/// A duration of `d_us` µs in seconds (saturates beyond 71 min).
+fn seconds<T: Real>(d_us: u64) -> T {
+    T::from_usize(d_us.min(u64::from(u32::MAX)) as usize) / T::lit(1.0e6)
+}
+
 /// Signed time `a − b` in seconds from two µs stamps (saturates beyond ±71 min).
 fn signed_seconds<T: Real>(a_us: u64, b_us: u64) -> T {
-    let to_t = |d: u64| T::from_usize(d.min(u64::from(u32::MAX)) as usize) / T::lit(1.0e6);
-    if a_us >= b_us {
-        to_t(a_us - b_us)
-    } else {
-        -to_t(b_us - a_us)
-    }
+    // The sign given to the count of µs before the one division by a positive
+    // constant (a sign chosen after it, the compiler divides by ±1e6 taken from
+    // a constant island in flash, which the timing analysis must then charge as
+    // flash reads for every load of the control job).
+    let magnitude = T::from_usize(a_us.abs_diff(b_us).min(u64::from(u32::MAX)) as usize);
+    let us = if a_us < b_us { -magnitude } else { magnitude };
+    us / T::lit(1.0e6)
 }
 
 /// The car the feed-forward torque is computed for:
@@ -584,7 +590,7 @@ pub fn control_with_model<T: Real>(
     // Time step of the PIDs.
     let dt = match state.last_now_us {
         Some(prev) if now_us > prev => {
-            let d = signed_seconds::<T>(now_us, prev);
+            let d = seconds::<T>(now_us - prev);
             if d <= T::lit(10.0) * cfg.period_s {
                 d
             } else {
