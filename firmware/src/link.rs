@@ -66,11 +66,11 @@
 //!
 //! Each has a `*_from_code` inverse and a `*_name` for logs.
 //!
-//! # Deviations from the first sketch of this API
+//! # Behaviour worth knowing
 //!
 //! * [`SequenceCheck::accept`] returns `Result<u32, SequenceError>`: `Ok(missed)`
-//!   with the count of skipped sequence numbers (0 in order) instead of `Ok(())`,
-//!   so a gap is accepted *and* reported.
+//!   with the count of skipped sequence numbers (0 in order), so a gap is
+//!   accepted *and* reported.
 //! * [`encode`] takes `M: Serialize + ?Sized`.
 //! * [`decode`] reports trailing bytes after the message as
 //!   [`FrameError::Malformed`], and a frame longer than [`MAX_FRAME_BYTES`] − 1

@@ -149,36 +149,23 @@ impl<T: Real> Default for MpcWeights<T> {
     /// 100; scaled by `(δ_mech/δ_max(V))²`), `q_obs = 10⁵` (paper: 100) and
     /// `q_δ̇ = 10` (paper: 0.2).
     ///
-    /// `q_y`: in closed loop on the 9-DoF plant the car understeers against the
-    /// kinematic plan at the validity limit, and with `q_y = 5` the planner accepts
-    /// the drift rather than steer beyond `δ_max` or slow down: up to 1.05 m of
-    /// lateral error on the `paper` track. With 100 it is 0.36 m (200: 0.30 m, with
-    /// `|a_y|` at 0.54·μg); the lateral reference is shifted round obstacles
-    /// ([`obstacle_offset`]), so this weight does not fight obstacle avoidance.
+    /// * `q_y`: on the 9-DoF plant the car understeers against the kinematic plan
+    ///   at the validity limit; a small weight lets the planner accept that drift
+    ///   rather than steer to `δ_max` or slow down. The lateral reference is
+    ///   shifted round obstacles ([`obstacle_offset`]), so this weight does not
+    ///   fight obstacle avoidance.
+    /// * `q_δtol`: the validity slack is in radians and small (at 15 m/s `δ_max` is
+    ///   0.055 rad); at 10⁴ a 10 % excess costs as much as 0.25 m of lateral
+    ///   deviation, so the limit binds as the paper intends. Scaled by
+    ///   `(δ_mech/δ_max(V))²` (10⁴ per rad² at low speed, ~9·10⁶ at 25 m/s) so that a
+    ///   given fraction of `δ_max` over the limit costs the same at every speed.
+    /// * `q_obs` above `q_δtol`: the planner must not buy validity with clearance.
+    /// * `q_δ̇`: a small weight lets the plan steer back and forth round the kinks
+    ///   of a measured centre line; at low speed the lateral acceleration then
+    ///   carries the term `V·β̇` of the steering rate, which the kinematic
+    ///   `V²·sin β/l_r` does not.
     ///
-    /// The validity slack is in radians and small: at 15 m/s `δ_max` is 0.055 rad,
-    /// and a slack of 0.05 rad (a lateral acceleration almost twice the limit) costs,
-    /// at `q_δtol = 100`, as little as 0.1 m of lateral deviation at `q_y = 5`. At
-    /// 10⁴ a 10 % excess costs as much as 0.25 m of deviation: the limit binds, as the
-    /// paper intends. The obstacle slack gets more, `q_obs = 10⁵`, so that the
-    /// planner does not buy validity with clearance: with the validity weight
-    /// scaled up at speed (below), 10⁴ let a plan at 12 m/s cut 5 cm into an
-    /// obstacle's parabola (`firmware/tests/mpc.rs`, the obstacle across the centre
-    /// line).
-    ///
-    /// A weight per rad² alone did not keep fast plans valid: at 25 m/s `δ_max` is
-    /// about 0.02 rad, and a slack of 0.01 rad (50 % over the limit, a kinematic
-    /// `a_y` of 0.8·μg) cost only 1. On the 17 circuits of `host-sim sweep` at
-    /// `μ = 1` the plans' nodes reached 0.8·μg; with the weight scaled by
-    /// `(δ_mech/δ_max(V))²` (10⁴ per rad² at low speed, ~9·10⁶ at 25 m/s) they
-    /// stay within 0.51·μg.
-    ///
-    /// `q_δ̇ = 10`: with 0.2 the plan steers back and forth round the kinks of a
-    /// measured centre line (5 m between points in a 10 m hairpin); at low speed
-    /// the lateral acceleration then carries the term `V·β̇` of the steering rate,
-    /// which the kinematic `V²·sin β/l_r` does not: single 10 ms samples of the
-    /// plant's `|a_y|` at 0.56–0.60·μg at `μ = 0.5` on the 17 circuits, ≤ 0.54·μg
-    /// with 10.
+    /// The runs that chose them: `docs/tuning.md`, "MPC weights".
     fn default() -> Self {
         Self {
             q_delta_rate: T::lit(10.0),
@@ -290,12 +277,10 @@ impl<T: Real> MpcSettings<T> {
                 // `0.5·μ·g` the plan sits on `δ_max` through every curve and has no
                 // steering left to correct a lateral error. At 21–25 m/s the car
                 // turns less than the kinematic model says for the same steering
-                // (the validity experiment: 10 % at 0.38·μg on an 80 m circle), so
-                // the reserve must be largest there: a fixed curvature reserve
-                // is a fixed steering reserve ([`VelocityPlannerSettings::curve_speed_mps`]).
-                // With 0.45 and no reserve the car ran up to 0.60 m off the line on
-                // the 17 circuits at μ = 1; with 0.4 and 0.002 1/m (0.3 m of error
-                // corrected over ~17 m) up to 0.41 m, laps ~4 % slower.
+                // (the validity experiment), so the reserve must be largest there:
+                // a fixed curvature reserve is a fixed steering reserve
+                // ([`VelocityPlannerSettings::curve_speed_mps`]). The runs that chose
+                // 0.4 and 0.002 1/m: `docs/tuning.md`, "Velocity planner".
                 ay_fraction: T::lit(0.4),
                 curvature_reserve_1pm: T::lit(0.002),
                 // `V_heur` is evaluated at every node, so each node already looks
@@ -306,10 +291,9 @@ impl<T: Real> MpcSettings<T> {
             },
             steering_reference: SteeringReference::PathCurvature,
             cold_start_iterations: COLD_START_PASSES,
-            // The closed-loop laps need at most 22 per activation, the harshest
-            // tests (obstacles across the road, cold starts) up to ~60 for the first
-            // pass; 90 keeps the plan task's worst case (`host-sim wcet`: 3 passes
-            // and 90 iterations at the largest working set) within its budget.
+            // The flow fact of the plan task's static bound (`host-sim wcet`); how
+            // many the laps and the harshest tests need: `docs/tuning.md`, "QP
+            // iteration cap".
             qp_max_iter: QP_MAX_ITER,
         }
     }
