@@ -130,6 +130,31 @@ mod tests {
     }
 
     #[test]
+    fn the_limit_scales_with_mu_and_the_fraction() {
+        let g = firmware_g();
+        for (mu, fraction) in [(0.5, 0.5), (0.3, 0.5), (1.0, 0.4), (0.8, 0.25)] {
+            let l = ValidityLimit {
+                mu,
+                ay_fraction: fraction,
+                ..limit()
+            };
+            let want = fraction * mu * g;
+            assert!((l.ay_limit_mps2() - want).abs() < 1e-12, "μ {mu}");
+            // At speed, δ_max holds exactly that lateral acceleration.
+            let d = l.delta_max_rad(20.0);
+            let ay = kinematic_lateral_acceleration(&l.geometry, 20.0, d);
+            assert!((ay - want).abs() < 1e-9, "μ {mu}: a_y {ay} against {want}");
+        }
+        // Less grip, less steering at the same speed.
+        let wet = ValidityLimit { mu: 0.5, ..limit() };
+        assert!(wet.delta_max_rad(15.0) < limit().delta_max_rad(15.0));
+    }
+
+    fn firmware_g() -> f64 {
+        f64::from(crate::G)
+    }
+
+    #[test]
     fn defined_at_every_speed_and_capped_by_the_mechanical_limit() {
         let l = limit();
         for v in [0.0, 0.1, 1.0, 2.0, 2.8, 3.0, -10.0, 1e6] {

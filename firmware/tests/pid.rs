@@ -388,3 +388,66 @@ mod properties {
         }
     }
 }
+
+/// One update with back-calculation, counted by hand in binary fractions (exact
+/// in f64): the integrator takes `di` plus the saturation excess over `T_t`.
+#[test]
+fn back_calculation_feeds_back_the_saturation_excess() {
+    let mut cfg = PidConfig::new(2.0, 4.0, 0.0, 0.5);
+    cfg.output_min = -1.0;
+    cfg.output_max = 1.0;
+    cfg.integral_min = -100.0;
+    cfg.integral_max = 100.0;
+    cfg.anti_windup = AntiWindup::BackCalculation {
+        tracking_time_s: 0.25,
+    };
+    let mut st = PidState::new();
+    // e = measurement − setpoint = −1: p = 2, di = −ki·e·dt = 2, u_unsat = 2
+    // (the integral before the update is 0), u_sat = 1, excess −1 over
+    // T_t = 0.25 for dt = 0.5: −2. The integral: 0 + 2 − 2 = 0.
+    let u = update(&cfg, &mut st, 1.0, 0.0, 0.5).unwrap();
+    assert_eq!(st.integral, 0.0);
+    assert_eq!(u, 1.0);
+    // Again from an integral of 0.5: u_unsat = 2.5, excess −1.5 · 2 = −3, so the
+    // integral is 0.5 + 2 − 3 = −0.5, and u = clamp(2 − 0.5) = 1.
+    st.integral = 0.5;
+    let u = update(&cfg, &mut st, 1.0, 0.0, 0.5).unwrap();
+    assert_eq!(st.integral, -0.5);
+    assert_eq!(u, 1.0);
+    // Inside the limits there is no excess: the plain integral step.
+    st.integral = -1.5;
+    let u = update(&cfg, &mut st, 1.0, 0.75, 0.5).unwrap();
+    // e = −0.25: p = 0.5, di = 0.5, u_unsat = 0.5 − 1.5 = −1 (at the limit, no
+    // excess): integral −1.0, u = 0.5 − 1.0 = −0.5.
+    assert_eq!(st.integral, -1.0);
+    assert_eq!(u, -0.5);
+}
+
+/// The preset accounts for the derivative term the controller holds: with a
+/// filtered derivative of the measurement in the state, the integral is
+/// `output − p − d`, and the output returned is the one asked for.
+#[test]
+fn preset_output_subtracts_the_proportional_and_derivative_terms() {
+    let mut cfg = PidConfig::new(2.0, 4.0, 0.5, 0.25);
+    cfg.output_min = -10.0;
+    cfg.output_max = 10.0;
+    cfg.integral_min = -10.0;
+    cfg.integral_max = 10.0;
+    let mut st = PidState::new();
+    // Two updates give the state a derivative: measurement 0 then 1 over 0.25 s,
+    // unfiltered: 4 per s.
+    update(&cfg, &mut st, 0.0, 0.0, 0.25).unwrap();
+    update(&cfg, &mut st, 0.0, 1.0, 0.25).unwrap();
+    assert_eq!(st.derivative, 4.0);
+    // p = −2·(1 − 3) = 4, d = −0.5·4 = −2: the integral for an output of 3 is
+    // 3 − 4 + 2 = 1.
+    let u = preset_output(&cfg, &mut st, 3.0, 1.0, 3.0).unwrap();
+    assert_eq!(st.integral, 1.0);
+    assert_eq!(u, 3.0);
+    assert_eq!(st.output(), 3.0);
+    // An output the integrator limits cannot reach: clamped there, and the output
+    // returned is what the state gives.
+    let u = preset_output(&cfg, &mut st, 3.0, 1.0, 20.0).unwrap();
+    assert_eq!(st.integral, 10.0);
+    assert_eq!(u, 10.0);
+}
