@@ -500,6 +500,87 @@ pub const fn frame_bytes_for_payload(payload: usize) -> usize {
 // Status codes
 // ---------------------------------------------------------------------------
 
+/// One table per enum sent as a byte: from `Type { Variant = code, .. }` come the
+/// array of every variant in code order, the code of a variant, the variant of a
+/// code and the variant's name, so that they cannot disagree. With `impl`, as
+/// associated items (`ALL`, `code`, `from_code`, `name`) of an enum of this
+/// crate; else as the named functions of a foreign one (optionally a name
+/// wrapped as `Wrapper(Variant)`).
+macro_rules! wire_codes {
+    (impl $ty:ident { $($variant:ident = $code:literal),+ $(,)? }) => {
+        impl $ty {
+            /// Every variant, in code order (for tests and tables).
+            pub const ALL: [$ty; [$($code),+].len()] = [$($ty::$variant),+];
+
+            /// The variant's wire code.
+            pub const fn code(self) -> u8 {
+                match self {
+                    $($ty::$variant => $code),+
+                }
+            }
+
+            /// The variant of a wire code; `None` for unknown codes.
+            pub const fn from_code(code: u8) -> Option<$ty> {
+                match code {
+                    $($code => Some($ty::$variant),)+
+                    _ => None,
+                }
+            }
+
+            /// The variant's name, for logs.
+            pub const fn name(self) -> &'static str {
+                match self {
+                    $($ty::$variant => stringify!($variant)),+
+                }
+            }
+        }
+    };
+    (
+        $(#[$all_doc:meta])* $all:ident, $code_fn:ident, $from_fn:ident, $name_fn:ident
+        $(, $wrapped_fn:ident($wrapper:literal))?: $ty:ident $body:tt
+    ) => {
+        wire_codes!(@fns [$(#[$all_doc])*] $all $code_fn $from_fn $name_fn $ty $body);
+        $(wire_codes!(@wrapped $wrapped_fn $wrapper $ty $body);)?
+    };
+    (
+        @fns [$($attr:tt)*] $all:ident $code_fn:ident $from_fn:ident $name_fn:ident
+        $ty:ident { $($variant:ident = $code:literal),+ $(,)? }
+    ) => {
+        $($attr)*
+        pub const $all: [$ty; [$($code),+].len()] = [$($ty::$variant),+];
+
+        #[doc = concat!("Wire code of a [`", stringify!($ty), "`] (the order of [`", stringify!($all), "`]).")]
+        pub const fn $code_fn(v: $ty) -> u8 {
+            match v {
+                $($ty::$variant => $code),+
+            }
+        }
+
+        #[doc = concat!("The [`", stringify!($ty), "`] of a code from [`", stringify!($code_fn), "`]; `None` when unknown.")]
+        pub const fn $from_fn(code: u8) -> Option<$ty> {
+            match code {
+                $($code => Some($ty::$variant),)+
+                _ => None,
+            }
+        }
+
+        #[doc = concat!("Name of a [`", stringify!($ty), "`], for logs.")]
+        pub const fn $name_fn(v: $ty) -> &'static str {
+            match v {
+                $($ty::$variant => stringify!($variant)),+
+            }
+        }
+    };
+    (@wrapped $wrapped_fn:ident $wrapper:literal $ty:ident { $($variant:ident = $code:literal),+ $(,)? }) => {
+        #[doc = concat!("Name of a [`", stringify!($ty), "`] wrapped as `", $wrapper, "(Variant)`, for logs.")]
+        pub const fn $wrapped_fn(v: $ty) -> &'static str {
+            match v {
+                $($ty::$variant => concat!($wrapper, "(", stringify!($variant), ")")),+
+            }
+        }
+    };
+}
+
 /// Why the ECU refused the set-up (the [`ReadyFrame::status`] codes, 1..=12).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SetupError {
@@ -533,78 +614,20 @@ pub enum SetupError {
     ObstacleBlocksRoad,
 }
 
-impl SetupError {
-    /// Every variant, in code order (for tests and tables).
-    pub const ALL: [SetupError; 12] = [
-        SetupError::NoConfig,
-        SetupError::InvalidConfig,
-        SetupError::PathTooLong,
-        SetupError::PathChunkOutOfRange,
-        SetupError::MissingPathRow,
-        SetupError::InvalidPathRow,
-        SetupError::PathRejected,
-        SetupError::TooManyObstacles,
-        SetupError::ObstacleOutOfRange,
-        SetupError::MissingObstacle,
-        SetupError::InvalidObstacle,
-        SetupError::ObstacleBlocksRoad,
-    ];
-
-    /// The [`ReadyFrame::status`] code, 1..=12 (0 means accepted).
-    pub const fn code(self) -> u8 {
-        match self {
-            SetupError::NoConfig => 1,
-            SetupError::InvalidConfig => 2,
-            SetupError::PathTooLong => 3,
-            SetupError::PathChunkOutOfRange => 4,
-            SetupError::MissingPathRow => 5,
-            SetupError::InvalidPathRow => 6,
-            SetupError::PathRejected => 7,
-            SetupError::TooManyObstacles => 8,
-            SetupError::ObstacleOutOfRange => 9,
-            SetupError::MissingObstacle => 10,
-            SetupError::InvalidObstacle => 11,
-            SetupError::ObstacleBlocksRoad => 12,
-        }
-    }
-
-    /// The error of a status code; `None` for 0 (accepted) and unknown codes.
-    pub const fn from_code(code: u8) -> Option<SetupError> {
-        match code {
-            1 => Some(SetupError::NoConfig),
-            2 => Some(SetupError::InvalidConfig),
-            3 => Some(SetupError::PathTooLong),
-            4 => Some(SetupError::PathChunkOutOfRange),
-            5 => Some(SetupError::MissingPathRow),
-            6 => Some(SetupError::InvalidPathRow),
-            7 => Some(SetupError::PathRejected),
-            8 => Some(SetupError::TooManyObstacles),
-            9 => Some(SetupError::ObstacleOutOfRange),
-            10 => Some(SetupError::MissingObstacle),
-            11 => Some(SetupError::InvalidObstacle),
-            12 => Some(SetupError::ObstacleBlocksRoad),
-            _ => None,
-        }
-    }
-
-    /// The variant's name, for logs.
-    pub const fn name(self) -> &'static str {
-        match self {
-            SetupError::NoConfig => "NoConfig",
-            SetupError::InvalidConfig => "InvalidConfig",
-            SetupError::PathTooLong => "PathTooLong",
-            SetupError::PathChunkOutOfRange => "PathChunkOutOfRange",
-            SetupError::MissingPathRow => "MissingPathRow",
-            SetupError::InvalidPathRow => "InvalidPathRow",
-            SetupError::PathRejected => "PathRejected",
-            SetupError::TooManyObstacles => "TooManyObstacles",
-            SetupError::ObstacleOutOfRange => "ObstacleOutOfRange",
-            SetupError::MissingObstacle => "MissingObstacle",
-            SetupError::InvalidObstacle => "InvalidObstacle",
-            SetupError::ObstacleBlocksRoad => "ObstacleBlocksRoad",
-        }
-    }
-}
+wire_codes!(impl SetupError {
+    NoConfig = 1,
+    InvalidConfig = 2,
+    PathTooLong = 3,
+    PathChunkOutOfRange = 4,
+    MissingPathRow = 5,
+    InvalidPathRow = 6,
+    PathRejected = 7,
+    TooManyObstacles = 8,
+    ObstacleOutOfRange = 9,
+    MissingObstacle = 10,
+    InvalidObstacle = 11,
+    ObstacleBlocksRoad = 12,
+});
 
 /// Name of a [`ReadyFrame::status`]: `"Accepted"` for 0, the [`SetupError`]'s
 /// name, or `"Unknown"`.
@@ -616,64 +639,21 @@ pub const fn setup_status_name(code: u8) -> &'static str {
     }
 }
 
-/// Every [`QpStatus`], in code order.
-pub const QP_STATUSES: [QpStatus; 9] = [
-    QpStatus::Optimal,
-    QpStatus::NotSolved,
-    QpStatus::IterationLimit,
-    QpStatus::Infeasible,
-    QpStatus::NotConvex,
-    QpStatus::NumericalError,
-    QpStatus::NonFiniteInput,
-    QpStatus::InvalidInput,
-    QpStatus::WorkingSetFull,
-];
-
-/// Code of a QP status, 0..=8 (`Optimal` 0, then in [`QP_STATUSES`] order).
-pub const fn qp_status_code(s: QpStatus) -> u8 {
-    match s {
-        QpStatus::Optimal => 0,
-        QpStatus::NotSolved => 1,
-        QpStatus::IterationLimit => 2,
-        QpStatus::Infeasible => 3,
-        QpStatus::NotConvex => 4,
-        QpStatus::NumericalError => 5,
-        QpStatus::NonFiniteInput => 6,
-        QpStatus::InvalidInput => 7,
-        QpStatus::WorkingSetFull => 8,
+wire_codes!(
+    /// Every [`QpStatus`], in code order (`Optimal` 0 … `WorkingSetFull` 8).
+    QP_STATUSES, qp_status_code, qp_status_from_code, qp_status_name, qp_status_wrapped_name("Qp"):
+    QpStatus {
+        Optimal = 0,
+        NotSolved = 1,
+        IterationLimit = 2,
+        Infeasible = 3,
+        NotConvex = 4,
+        NumericalError = 5,
+        NonFiniteInput = 6,
+        InvalidInput = 7,
+        WorkingSetFull = 8,
     }
-}
-
-/// The QP status of a code from [`qp_status_code`]; `None` when unknown.
-pub const fn qp_status_from_code(code: u8) -> Option<QpStatus> {
-    match code {
-        0 => Some(QpStatus::Optimal),
-        1 => Some(QpStatus::NotSolved),
-        2 => Some(QpStatus::IterationLimit),
-        3 => Some(QpStatus::Infeasible),
-        4 => Some(QpStatus::NotConvex),
-        5 => Some(QpStatus::NumericalError),
-        6 => Some(QpStatus::NonFiniteInput),
-        7 => Some(QpStatus::InvalidInput),
-        8 => Some(QpStatus::WorkingSetFull),
-        _ => None,
-    }
-}
-
-/// Name of a QP status, for logs.
-pub const fn qp_status_name(s: QpStatus) -> &'static str {
-    match s {
-        QpStatus::Optimal => "Optimal",
-        QpStatus::NotSolved => "NotSolved",
-        QpStatus::IterationLimit => "IterationLimit",
-        QpStatus::Infeasible => "Infeasible",
-        QpStatus::NotConvex => "NotConvex",
-        QpStatus::NumericalError => "NumericalError",
-        QpStatus::NonFiniteInput => "NonFiniteInput",
-        QpStatus::InvalidInput => "InvalidInput",
-        QpStatus::WorkingSetFull => "WorkingSetFull",
-    }
-}
+);
 
 /// [`PlanEventFrame::status`] of a successful MPC step.
 pub const MPC_OK: u8 = 0;
@@ -726,49 +706,26 @@ pub const fn mpc_status_name(code: u8) -> &'static str {
         Some(MpcError::InvalidFriction) => "InvalidFriction",
         Some(MpcError::InvalidSettings) => "InvalidSettings",
         Some(MpcError::NoPath) => "NoPath",
-        Some(MpcError::Qp(s)) => match s {
-            QpStatus::Optimal => "Qp(Optimal)",
-            QpStatus::NotSolved => "Qp(NotSolved)",
-            QpStatus::IterationLimit => "Qp(IterationLimit)",
-            QpStatus::Infeasible => "Qp(Infeasible)",
-            QpStatus::NotConvex => "Qp(NotConvex)",
-            QpStatus::NumericalError => "Qp(NumericalError)",
-            QpStatus::NonFiniteInput => "Qp(NonFiniteInput)",
-            QpStatus::InvalidInput => "Qp(InvalidInput)",
-            QpStatus::WorkingSetFull => "Qp(WorkingSetFull)",
-        },
+        Some(MpcError::Qp(s)) => qp_status_wrapped_name(s),
     }
 }
 
-/// [`ActuationFrame::mode`] of a mode: `Following` 0, `Extrapolating` 1,
-/// `Stopping` 2, `Safe` 3.
-pub const fn mode_code(m: Mode) -> u8 {
-    match m {
-        Mode::Following => 0,
-        Mode::Extrapolating => 1,
-        Mode::Stopping => 2,
-        Mode::Safe => 3,
+wire_codes!(
+    /// Every [`Mode`], in code order ([`ActuationFrame::mode`]: `Following` 0,
+    /// `Extrapolating` 1, `Stopping` 2, `Safe` 3).
+    MODES, mode_code, mode_from_code, mode_variant_name:
+    Mode {
+        Following = 0,
+        Extrapolating = 1,
+        Stopping = 2,
+        Safe = 3,
     }
-}
-
-/// The mode of a code from [`mode_code`]; `None` when unknown.
-pub const fn mode_from_code(code: u8) -> Option<Mode> {
-    match code {
-        0 => Some(Mode::Following),
-        1 => Some(Mode::Extrapolating),
-        2 => Some(Mode::Stopping),
-        3 => Some(Mode::Safe),
-        _ => None,
-    }
-}
+);
 
 /// Name of an [`ActuationFrame::mode`] code, or `"Unknown"`.
 pub const fn mode_name(code: u8) -> &'static str {
     match mode_from_code(code) {
-        Some(Mode::Following) => "Following",
-        Some(Mode::Extrapolating) => "Extrapolating",
-        Some(Mode::Stopping) => "Stopping",
-        Some(Mode::Safe) => "Safe",
+        Some(m) => mode_variant_name(m),
         None => "Unknown",
     }
 }

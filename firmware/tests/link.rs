@@ -545,6 +545,17 @@ fn status_codes_round_trip_and_names_are_distinct() {
     }
     assert_eq!(mpc_status_code(&Ok::<u8, MpcError>(3)), 0);
     assert_eq!(mpc_status_name(0), "Optimal");
+    // The names logs and CSV files carry (the simulator's plan_activations.csv).
+    assert_eq!(mpc_status_name(0x12), "Qp(IterationLimit)");
+    assert_eq!(mpc_status_name(4), "NoPath");
+    assert_eq!(
+        qp_status_name(qp::QpStatus::WorkingSetFull),
+        "WorkingSetFull"
+    );
+    assert_eq!(mode_name(3), "Safe");
+    assert_eq!(mode_name(4), "Unknown");
+    assert_eq!(SetupError::ObstacleBlocksRoad.name(), "ObstacleBlocksRoad");
+    assert_eq!(setup_status_name(0), "Accepted");
     assert_eq!(
         mpc_status_code::<()>(&Err(MpcError::Qp(qp::QpStatus::Infeasible))),
         0x13
