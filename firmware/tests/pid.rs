@@ -451,3 +451,109 @@ fn preset_output_subtracts_the_proportional_and_derivative_terms() {
     assert_eq!(st.integral, 10.0);
     assert_eq!(u, 10.0);
 }
+
+/// Conditional integration at exactly the limit: an output that lands on the
+/// limit (not beyond it) still integrates; one step beyond does not.
+#[test]
+fn conditional_integration_stops_only_beyond_the_limit() {
+    let mut cfg = PidConfig::new(2.0, 1.0, 0.0, 0.25);
+    cfg.output_min = -1.0;
+    cfg.output_max = 1.0;
+    cfg.integral_min = -10.0;
+    cfg.integral_max = 10.0;
+    // Upper: e = −0.25 → p = 0.5, di = −ki·e·dt = 0.0625; from 0.4375 the
+    // unsaturated output is 0.5 + 0.5 = 1.0, exactly the limit: integrates.
+    let mut st = PidState::new();
+    st.integral = 0.4375;
+    let u = update(&cfg, &mut st, 1.0, 0.75, 0.25).unwrap();
+    assert_eq!(st.integral, 0.5);
+    assert_eq!(u, 1.0);
+    // From 0.5 the same step would reach 1.0625: held.
+    update(&cfg, &mut st, 1.0, 0.75, 0.25).unwrap();
+    assert_eq!(st.integral, 0.5);
+    // Lower, mirrored.
+    let mut st = PidState::new();
+    st.integral = -0.4375;
+    let u = update(&cfg, &mut st, -1.0, -0.75, 0.25).unwrap();
+    assert_eq!(st.integral, -0.5);
+    assert_eq!(u, -1.0);
+    update(&cfg, &mut st, -1.0, -0.75, 0.25).unwrap();
+    assert_eq!(st.integral, -0.5);
+}
+
+/// Back-calculation with a derivative term: the unsaturated output includes it.
+#[test]
+fn back_calculation_counts_the_derivative_in_the_excess() {
+    let mut cfg = PidConfig::new(0.0, 0.0, 0.5, 0.5);
+    cfg.output_min = -1.0;
+    cfg.output_max = 1.0;
+    cfg.integral_min = -100.0;
+    cfg.integral_max = 100.0;
+    cfg.anti_windup = AntiWindup::BackCalculation {
+        tracking_time_s: 0.5,
+    };
+    let mut st = PidState::new();
+    update(&cfg, &mut st, 0.0, 0.0, 0.5).unwrap();
+    // The measurement falls by 4 in 0.5 s: derivative −8, d = −kd·(−8) = 4;
+    // u_unsat = 0 + 0 + 4 = 4, u_sat = 1, excess −3 · dt/T_t (1): integral −3.
+    let u = update(&cfg, &mut st, 0.0, -4.0, 0.5).unwrap();
+    assert_eq!(st.derivative, -8.0);
+    assert_eq!(st.integral, -3.0);
+    assert_eq!(u, 1.0);
+}
+
+/// A derivative that overflows while the clamped output stays finite is still a
+/// refused output, and the state is left as it was.
+#[test]
+fn an_infinite_derivative_behind_a_finite_output_is_refused() {
+    let mut cfg = PidConfig::new(0.0, 0.0, 1.0, 1.0);
+    cfg.output_min = -1.0;
+    cfg.output_max = 1.0;
+    let mut st = PidState::new();
+    update(&cfg, &mut st, 0.0, 0.0, 1.0).unwrap();
+    let before = st;
+    // (f64::MAX − 0) / 1e-300 overflows: d = −∞, the output clamps to −1.
+    assert_eq!(
+        update(&cfg, &mut st, 0.0, f64::MAX, 1e-300),
+        Err(PidError::NonFiniteOutput)
+    );
+    assert_eq!(st, before);
+}
+
+/// Each of the preset's inputs is checked on its own.
+#[test]
+fn preset_refuses_each_non_finite_input() {
+    let cfg = pi_cfg();
+    let mut st = PidState::new();
+    let before = st;
+    for (s, m, o) in [
+        (f64::NAN, 0.0, 1.0),
+        (0.0, f64::INFINITY, 1.0),
+        (0.0, 0.0, f64::NEG_INFINITY),
+    ] {
+        assert_eq!(
+            preset_output(&cfg, &mut st, s, m, o),
+            Err(PidError::NonFiniteInput),
+            "{s} {m} {o}"
+        );
+        assert_eq!(st, before);
+    }
+}
+
+/// A preset whose proportional term overflows: the integral clamps to its limit
+/// (finite), the output does not (no output limits): refused, state unchanged.
+#[test]
+fn preset_refuses_an_infinite_output_behind_a_finite_integral() {
+    let mut cfg = PidConfig::new(2.0, 1.0, 0.0, 0.01);
+    cfg.integral_min = -10.0;
+    cfg.integral_max = 10.0;
+    assert_eq!(cfg.output_max, f64::INFINITY);
+    let mut st = PidState::new();
+    let before = st;
+    // e = MAX − (−MAX) overflows: p = −∞, the integral clamps to 10, u = −∞.
+    assert_eq!(
+        preset_output(&cfg, &mut st, -f64::MAX, f64::MAX, 0.0),
+        Err(PidError::NonFiniteOutput)
+    );
+    assert_eq!(st, before);
+}
