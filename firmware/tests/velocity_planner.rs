@@ -126,3 +126,30 @@ fn curvature_reserve_slows_fast_curves_most() {
         none.curve_speed_mps(0.01, 1.0)
     );
 }
+
+/// The sliding preview of the horizon's nodes (`v_heur_at`) gives what the
+/// direct look-up (`v_heur`) gives, node after node into and out of the hairpin.
+#[test]
+fn sliding_preview_matches_the_direct_look_up() {
+    use firmware::reference_path::CurvatureWindow;
+    use firmware::velocity_planner::v_heur_at;
+    let p = track();
+    let s = VelocityPlannerSettings::default();
+    let mut window = CurvatureWindow::new();
+    let mut limited = 0;
+    for k in 0..40 {
+        let s_node = 120.0 + 4.0 * k as f64;
+        let at = p.sample_at(s_node);
+        let direct = v_heur(&s, &p, s_node, 20.0, 1.0);
+        let sliding = v_heur_at(&s, &p, &mut window, &at, s_node, 20.0, 1.0);
+        assert!(
+            (sliding - direct).abs() < 1e-6 * direct,
+            "s {s_node}: {sliding} vs {direct}"
+        );
+        if direct < 22.0 {
+            limited += 1;
+        }
+    }
+    // The hairpin is in view for part of the way (the test sees the curve).
+    assert!(limited > 5 && limited < 40, "{limited}");
+}
