@@ -77,11 +77,11 @@ use serde::Serialize;
 
 pub use crate::cost_model::CostModel;
 pub use crate::ecu::{ControlOutput, Ecu, PlanActivation, SimulatedEcu};
+use crate::model::plant::{Inputs, Plant, State};
+use crate::model::vehicle::VehicleParams;
 use crate::obstacle_file;
-use crate::plant::{Inputs, Plant, State};
 use crate::road_friction::{judge, patches_to_string, MuSample, RoadFriction};
 use crate::scenario::Scenario;
-use crate::vehicle::VehicleParams;
 
 /// Scalar the firmware computes in (the simulator can run it in either).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -783,7 +783,7 @@ impl<'a> Meter<'a> {
         &mut self,
         t_us: u64,
         st: &State,
-        out: &crate::plant::Outputs,
+        out: &crate::model::plant::Outputs,
         act: &Actuation<T>,
         plan: &Plan<T>,
         plan_status: &'static str,

@@ -46,9 +46,9 @@ use firmware::Real;
 
 use crate::closed_loop::{vehicle_config, SimOptions};
 use crate::ecu::{ControlOutput, Ecu, SimulatedEcu};
+use crate::model::vehicle::VehicleParams;
 use crate::route::Window;
 use crate::scenario::Scenario;
-use crate::vehicle::VehicleParams;
 
 /// Standard deviations of noise level 1 (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -40,10 +40,10 @@ use firmware::Real;
 use serde::Serialize;
 
 use crate::closed_loop::{vehicle_config, CostModel, SimOptions, HOST_PATH_CAP};
+use crate::model::vehicle::VehicleParams;
 use crate::obstacle_file::Obstacle;
 use crate::route::{RouteFeeder, Window};
 use crate::scenario::Scenario;
-use crate::vehicle::VehicleParams;
 
 /// A plan status's name, one of [`plan_status_name`]'s (an alias, so that serde's
 /// derive does not take it for a string borrowed from the input).

@@ -4,11 +4,8 @@
 //!
 //! | module | concept |
 //! |---|---|
-//! | [`vehicle`] | vehicle parameters, TOML vehicle files and their validation |
-//! | [`tire`] | Pacejka 2002 Magic Formula, combined slip |
-//! | [`plant`] | the 9-DoF plant, RK4 at a fixed step |
+//! | [`model`] | the vehicle model: parameters, tyres, the 9-DoF plant, tyre tables |
 //! | [`validity`] | the paper's Figure 3: `δ_a` vs `δ_th` on circles (`validity` command) |
-//! | [`tire_table`] | tyre forces for a table of slips (`tire` command) |
 //! | [`track`] | track files (racetrack-database CSV), projection, curvature |
 //! | [`obstacle_file`] | obstacle files (`id,x_m,y_m`), polygon distances, footprints |
 //! | [`road_friction`] | friction that changes along the road (`--mu-patch`); μ̂ judged against it |
@@ -37,10 +34,10 @@ pub mod disturbance;
 pub mod ecu;
 pub mod faults;
 pub mod figures;
+pub mod model;
 pub mod obstacle_file;
 pub mod obstacle_placement;
 pub mod pil;
-pub mod plant;
 pub mod plot;
 pub mod qp_corpus;
 pub mod road_friction;
@@ -50,9 +47,6 @@ pub mod scenario;
 pub mod scenario_options;
 pub mod sweep;
 pub mod sweep_figures;
-pub mod tire;
-pub mod tire_table;
 pub mod track;
 pub mod validity;
-pub mod vehicle;
 pub mod wcet;

@@ -16,7 +16,7 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Tyre forces (PAC2002 combined slip) for a CSV of slips: kappa,alpha_rad,fz_n,mu.
-    Tire(host_sim::tire_table::TireArgs),
+    Tire(host_sim::model::tire_table::TireArgs),
     /// The paper's Figure 3: steering of the 9-DoF plant vs the kinematic bicycle on
     /// circles, up to the speed where the car cannot hold them.
     Validity(host_sim::validity::ValidityArgs),
@@ -42,7 +42,7 @@ enum Command {
 
 fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
-        Command::Tire(args) => host_sim::tire_table::run(args),
+        Command::Tire(args) => host_sim::model::tire_table::run(args),
         Command::Validity(args) => host_sim::validity::run(args),
         Command::Run(args) => host_sim::run::command(args),
         Command::QpCorpus(args) => host_sim::qp_corpus::run(args),

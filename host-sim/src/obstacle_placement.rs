@@ -22,9 +22,9 @@ use firmware::reference_path::ReferencePath;
 
 use crate::closed_loop::{vehicle_config, HOST_PATH_CAP};
 use crate::disturbance::SplitMix64;
+use crate::model::vehicle::VehicleParams;
 use crate::obstacle_file::Obstacle;
 use crate::track::Track;
-use crate::vehicle::VehicleParams;
 
 /// Road kept clear of random obstacles after the start, m.
 pub const START_CLEAR_M: f64 = 150.0;

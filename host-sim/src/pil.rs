@@ -61,9 +61,9 @@ use firmware::state_estimate::StateEstimate;
 
 use crate::closed_loop::{self, SimOptions};
 use crate::ecu::{ControlOutput, Ecu, PlanActivation};
+use crate::model::vehicle::VehicleParams;
 use crate::route::{RouteFeeder, Window};
 use crate::scenario::Scenario;
-use crate::vehicle::VehicleParams;
 use firmware::deadline::{CONTROL_BUDGET_CYCLES, PLAN_BUDGET_CYCLES};
 use firmware::tasks::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
 

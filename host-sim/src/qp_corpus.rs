@@ -78,7 +78,7 @@ use firmware::mpc::{Mpc, MpcQp, MpcQpProblem, MpcQpSolution, NC, NV};
 use firmware::obstacles::{Obstacle, ObstacleManager};
 
 use crate::closed_loop;
-use crate::vehicle::VehicleParams;
+use crate::model::vehicle::VehicleParams;
 use firmware::plan::Plan;
 use firmware::reference_path::ReferencePath;
 use firmware::state_estimate::StateEstimate;

@@ -82,13 +82,13 @@ use crate::closed_loop::{self, Summary};
 use crate::disturbance::DisturbedEcu;
 pub use crate::disturbance::NoiseLevel;
 use crate::faults::{classify, Fault, Outcome, RunFacts};
+use crate::model::vehicle::VehicleParams;
 use crate::obstacle_placement::widths_at;
 use crate::road_friction::RoadFriction;
 use crate::scenario::{self, Scenario};
 use crate::scenario_options::{check_track_arg, set_up, ScenarioArgs, Setting};
 pub use crate::scenario_options::{ObstacleSpec, RunSpec};
 use crate::sweep_figures;
-use crate::vehicle::VehicleParams;
 
 /// Arguments of `host-sim sweep`.
 #[derive(Debug, Clone, Args)]

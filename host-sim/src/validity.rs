@@ -45,9 +45,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use rayon::prelude::*;
 
-use crate::plant::{Inputs, Plant, PlantError, State};
+use crate::model::plant::{Inputs, Plant, PlantError, State};
+use crate::model::vehicle::{VehicleParams, G};
 use crate::plot;
-use crate::vehicle::{VehicleParams, G};
 
 /// Relative deviations `|δ_a − δ_th|/δ_th` reported by the command.
 pub const THRESHOLDS: [f64; 3] = [0.05, 0.10, 0.20];
@@ -69,7 +69,7 @@ pub struct ValidityArgs {
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// Integration step of the plant, s.
-    #[arg(long, default_value_t = crate::plant::DEFAULT_DT_S)]
+    #[arg(long, default_value_t = crate::model::plant::DEFAULT_DT_S)]
     pub dt: f64,
 }
 
@@ -90,7 +90,7 @@ impl Default for ValidityConfig {
     fn default() -> Self {
         Self {
             mu: 1.0,
-            dt_s: crate::plant::DEFAULT_DT_S,
+            dt_s: crate::model::plant::DEFAULT_DT_S,
             v_start_mps: 2.0,
             steps_to_friction_limit: 30,
         }
@@ -169,7 +169,7 @@ pub struct RadiusSweep {
     pub stop_reason: String,
     /// The kind of failure that stopped the sweep.
     pub stop_cause: StopCause,
-    /// Wheel lifts the plant saw over the sweep (see [`crate::plant::WheelLift`]).
+    /// Wheel lifts the plant saw over the sweep (see [`crate::model::plant::WheelLift`]).
     pub wheel_lifts: u64,
 }
 

@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use host_sim::tire::{forces, TireParams};
+use host_sim::model::tire::{forces, TireParams};
 
 fn host_sim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_host-sim"))
@@ -432,7 +432,7 @@ fn a_missing_path_is_refused_before_any_run_with_the_forms_accepted_and_its_caus
         let chain = format!("{:#}", anyhow::Error::new(e));
         assert_eq!(chain.matches("(os error").count(), 1, "{chain}");
     }
-    let e = host_sim::vehicle::VehicleParams::from_toml_file(&missing).unwrap_err();
+    let e = host_sim::model::vehicle::VehicleParams::from_toml_file(&missing).unwrap_err();
     let chain = format!("{:#}", anyhow::Error::new(e));
     assert_eq!(chain.matches("(os error").count(), 1, "{chain}");
 }

@@ -9,9 +9,9 @@ use firmware::state_estimate::StateEstimate;
 use host_sim::closed_loop::{
     self, ControlOutput, CostModel, Ecu, RunResult, SimOptions, SimulatedEcu,
 };
+use host_sim::model::vehicle::VehicleParams;
 use host_sim::run::{simulate, Precision};
 use host_sim::scenario::Scenario;
-use host_sim::vehicle::VehicleParams;
 
 /// The state at the start of the paper track, at `v` m/s.
 fn start_estimate(scenario: &Scenario, v: f64, t_us: u64) -> StateEstimate<f32> {

@@ -4,9 +4,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use host_sim::closed_loop::{RunResult, SimOptions};
+use host_sim::model::vehicle::VehicleParams;
 use host_sim::run::{simulate, Precision};
 use host_sim::scenario::Scenario;
-use host_sim::vehicle::VehicleParams;
 
 const G: f64 = 9.81;
 

@@ -9,7 +9,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use crate::tire::{self, TireParams};
+use crate::model::tire::{self, TireParams};
 
 /// Parameters of the vehicle (the notations of the paper's Table I). SI units.
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize)]

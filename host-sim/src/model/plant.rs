@@ -24,7 +24,7 @@
 //! * The pitch equation subtracts the moment of the static loads, which is zero
 //!   analytically, so that a car at rest is an exact equilibrium in floating point.
 //! * Aerodynamic drag `½·ρ·C_x·S·V_x·|V_x|` (the paper's `V_x²`, opposing reversing too).
-//! * Tyre forces from [`crate::tire`], turned from the tyre frame to the vehicle frame
+//! * Tyre forces from [`crate::model::tire`], turned from the tyre frame to the vehicle frame
 //!   by the steering angle only (derived below; the paper's last equation of Section
 //!   IV is not used as printed). The right-hand wheels carry the mirror image of the
 //!   tyre (MF-Tyre's `TYRESIDE = RIGHT`), so the car is left-right symmetric and runs
@@ -127,12 +127,12 @@
 //! the brake-lock speeds); roll, pitch and yaw share one `sin_cos` each per
 //! evaluation. The rest of the time is the tyres' `atan`, `sin` and `cos` (the C
 //! library's, bit for bit reproducible on one machine; see the tyre module's *Speed
-//! and determinism*), which [`crate::tire::AtLoad::forces`] calls in rounds of
+//! and determinism*), which [`crate::model::tire::AtLoad::forces`] calls in rounds of
 //! independent calls. `PLANT_BENCH_STEPS=N cargo bench -p host-sim --bench plant`
 //! runs a fixed number of steps (for instruction counters).
 
-use crate::tire;
-use crate::vehicle::{InvalidField, VehicleParams};
+use crate::model::tire;
+use crate::model::vehicle::{InvalidField, VehicleParams};
 
 /// Index of the front-left wheel in the per-wheel arrays.
 pub const FL: usize = 0;

@@ -2,14 +2,14 @@
 //!
 //! Input CSV with header `kappa,alpha_rad,fz_n,mu`; output CSV with the same columns
 //! plus `fx_n,fy_n`, the combined-slip forces in the tyre frame (N) of
-//! [`crate::tire::forces`] for the vehicle's tyre (the left-hand, unmirrored one).
+//! [`crate::model::tire::forces`] for the vehicle's tyre (the left-hand, unmirrored one).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 
-use crate::tire::{self, TireParams};
-use crate::vehicle::VehicleParams;
+use crate::model::tire::{self, TireParams};
+use crate::model::vehicle::VehicleParams;
 
 /// Command-line arguments of `host-sim tire`.
 #[derive(Debug, Clone, clap::Args)]
