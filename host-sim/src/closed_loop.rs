@@ -31,7 +31,7 @@
 //! ([`Scenario::mu_patches`]), each wheel on the μ at its own arc length: the car's,
 //! projected at each 10 ms sample and advanced by its speed over the plant steps
 //! between samples, plus `l_f` ahead for the front wheels and `l_r` behind for the
-//! rear ones ([`crate::road_friction`]). The log's `road_mu` is the lowest of the
+//! rear ones ([`crate::world::road_friction`]). The log's `road_mu` is the lowest of the
 //! four at the sample; the summary judges the ECU's `μ̂` against it.
 //!
 //! # Deadlines and budgets
@@ -79,9 +79,9 @@ pub use crate::cost_model::CostModel;
 pub use crate::ecu::{ControlOutput, Ecu, PlanActivation, SimulatedEcu};
 use crate::model::plant::{Inputs, Plant, State};
 use crate::model::vehicle::VehicleParams;
-use crate::obstacle_file;
-use crate::road_friction::{judge, patches_to_string, MuSample, RoadFriction};
-use crate::scenario::Scenario;
+use crate::world::obstacle_file;
+use crate::world::road_friction::{judge, patches_to_string, MuSample, RoadFriction};
+use crate::world::scenario::Scenario;
 
 /// Scalar the firmware computes in (the simulator can run it in either).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -223,7 +223,7 @@ pub struct LogRow {
     /// before any slip, NaN when the ECU does not report it (processor in the loop).
     pub friction_mu: f64,
     /// The road's friction under the car: the lowest of the four wheels' (they
-    /// differ on the edge of a `--mu-patch`; see [`crate::road_friction`]).
+    /// differ on the edge of a `--mu-patch`; see [`crate::world::road_friction`]).
     pub road_mu: f64,
 }
 
@@ -328,7 +328,7 @@ pub struct Summary {
     pub road_mu_min: f64,
     /// `μ̂` fell below 0.9 × the lowest road μ under the car over the last 10 s at
     /// some sample: a false alarm of the friction check
-    /// ([`crate::road_friction::judge`]); null when the ECU does not report `μ̂`.
+    /// ([`crate::world::road_friction::judge`]); null when the ECU does not report `μ̂`.
     pub mu_false_drop: Option<bool>,
     /// When `μ̂` first fell that low, s (null if it never did).
     pub mu_false_drop_s: Option<f64>,
@@ -526,7 +526,7 @@ pub fn run_with<T: Real, E: Ecu<T>>(
     let mut last_status: &'static str = "none";
 
     // The road the ECU holds: a window, the next one sent as the car moves on.
-    let mut feeder = crate::route::RouteFeeder::new(&scenario.track)?;
+    let mut feeder = crate::world::route::RouteFeeder::new(&scenario.track)?;
     // The road's friction along the track, and where the car was at the last sample:
     // arc length (m), speed (m/s), time (µs), to place the wheels between samples.
     let road = RoadFriction::new(
@@ -678,7 +678,7 @@ struct Meter<'a> {
     s_hint: Option<f64>,
     s_prev: f64,
     progress_m: f64,
-    projector: crate::track::Projector<'a>,
+    projector: crate::world::track::Projector<'a>,
     lap_length: f64,
     target_m: f64,
     cg_offset: f64,

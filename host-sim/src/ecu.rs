@@ -41,9 +41,9 @@ use serde::Serialize;
 
 use crate::closed_loop::{vehicle_config, CostModel, SimOptions, HOST_PATH_CAP};
 use crate::model::vehicle::VehicleParams;
-use crate::obstacle_file::Obstacle;
-use crate::route::{RouteFeeder, Window};
-use crate::scenario::Scenario;
+use crate::world::obstacle_file::Obstacle;
+use crate::world::route::{RouteFeeder, Window};
+use crate::world::scenario::Scenario;
 
 /// A plan status's name, one of [`plan_status_name`]'s (an alias, so that serde's
 /// derive does not take it for a string borrowed from the input).
@@ -182,7 +182,7 @@ pub trait Ecu<T: Real> {
     /// consistency figure and plan traces).
     fn active_plan(&self) -> &Plan<T>;
 
-    /// The next window of the road ([`crate::route`]), given before the control
+    /// The next window of the road ([`crate::world::route`]), given before the control
     /// activation of the instant `t_us` (µs) it is due; the plan task adopts it after its next
     /// publication (at the end of the activation running then, or of the next).
     fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()>;

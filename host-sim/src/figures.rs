@@ -10,8 +10,8 @@ use plotters::prelude::*;
 
 use crate::closed_loop::{LogRow, RunResult};
 use crate::plot::{draw_error, register_font, FONT};
-use crate::road_friction::RoadFriction;
-use crate::scenario::Scenario;
+use crate::world::road_friction::RoadFriction;
+use crate::world::scenario::Scenario;
 
 const W: u32 = 1400;
 

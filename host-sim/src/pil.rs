@@ -62,8 +62,8 @@ use firmware::state_estimate::StateEstimate;
 use crate::closed_loop::{self, SimOptions};
 use crate::ecu::{ControlOutput, Ecu, PlanActivation};
 use crate::model::vehicle::VehicleParams;
-use crate::route::{RouteFeeder, Window};
-use crate::scenario::Scenario;
+use crate::world::route::{RouteFeeder, Window};
+use crate::world::scenario::Scenario;
 use firmware::deadline::{CONTROL_BUDGET_CYCLES, PLAN_BUDGET_CYCLES};
 use firmware::tasks::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
 
@@ -982,7 +982,7 @@ use crate::cost_model::percentile;
 /// in-process ECU's arithmetic and clock, and the disturbances applied around the
 /// in-process ECU (noise, delay, and every fault but those [`FaultKind::pil`] allows).
 ///
-/// [`FaultKind::pil`]: crate::faults::FaultKind::pil
+/// [`FaultKind::pil`]: crate::world::faults::FaultKind::pil
 pub fn check_pil_args(args: &PilArgs) -> Result<()> {
     if args.run.precision != closed_loop::Precision::F32 {
         bail!("--precision: the ECU computes in f32; PIL runs are f32 only");
@@ -1007,7 +1007,7 @@ pub fn check_pil_args(args: &PilArgs) -> Result<()> {
         bail!("--noise and --delay-ms disturb the estimate around the in-process ECU; PIL does not apply them: use `host-sim run` or `host-sim sweep`");
     }
     if !c.fault.applies_to_pil() {
-        let pil: Vec<String> = crate::faults::FAULT_KINDS
+        let pil: Vec<String> = crate::world::faults::FAULT_KINDS
             .iter()
             .filter(|k| k.pil)
             .map(|k| k.usage())

@@ -1126,7 +1126,7 @@ type ScenarioData = (Vec<[f64; 4]>, bool, Vec<Vec<[f64; 2]>>);
 
 fn scenario_data(args: &QpCorpusArgs) -> Result<ScenarioData> {
     let file_obstacles = |path: &str| -> Result<Vec<Vec<[f64; 2]>>> {
-        Ok(crate::obstacle_file::load_obstacles_path(path)?
+        Ok(crate::world::obstacle_file::load_obstacles_path(path)?
             .into_iter()
             .map(|o| o.vertices)
             .collect())
@@ -1151,7 +1151,7 @@ fn scenario_data(args: &QpCorpusArgs) -> Result<ScenarioData> {
         "`--obstacles builtin` goes with `--track builtin`; with `--track {}` use `none`, `paper` (paper track) or an obstacle file",
         args.track
     );
-    let sc = crate::scenario::resolve(&args.track, &args.obstacles, !args.open)?;
+    let sc = crate::world::scenario::resolve(&args.track, &args.obstacles, !args.open)?;
     Ok((
         sc.track.rows(),
         sc.track.closed,

@@ -8,16 +8,16 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::closed_loop::{self, RunResult, SimOptions};
-use crate::disturbance::{check_delay_ms, Disturbances, DisturbedEcu, NoiseLevel};
-use crate::faults::Fault;
 use crate::figures;
 use crate::model::vehicle::{check_mass_scale, VehicleParams};
-use crate::road_friction::MuPatch;
-use crate::scenario::Scenario;
 use crate::scenario_options::{
     check_mu, check_obstacles_arg, check_run_length, check_track_arg, check_vehicle_arg, set_up,
     ObstacleSpec, RunSpec, ScenarioArgs, SetUp, Setting,
 };
+use crate::world::disturbance::{check_delay_ms, Disturbances, DisturbedEcu, NoiseLevel};
+use crate::world::faults::Fault;
+use crate::world::road_friction::MuPatch;
+use crate::world::scenario::Scenario;
 
 pub use crate::closed_loop::Precision;
 

@@ -17,15 +17,15 @@ use anyhow::{anyhow, bail, Result};
 use clap::Args;
 
 use crate::closed_loop::SimOptions;
-use crate::disturbance::{
+use crate::model::vehicle::{check_mass_scale, VehicleParams};
+use crate::world::disturbance::{
     check_delay_ms, run_seed, Disturbances, Dropout, DropoutKind, LateObstacle, NoiseLevel,
 };
-use crate::faults::{fault_help, Fault, FAULT_START_S};
-use crate::model::vehicle::{check_mass_scale, VehicleParams};
-use crate::obstacle_file::{load_obstacles_path, Obstacle};
-use crate::obstacle_placement::{box_at, random_obstacles, RoadCheck};
-use crate::road_friction::{MuPatch, RoadFriction};
-use crate::scenario::{self, Scenario, ScenarioError};
+use crate::world::faults::{fault_help, Fault, FAULT_START_S};
+use crate::world::obstacle_file::{load_obstacles_path, Obstacle};
+use crate::world::obstacle_placement::{box_at, random_obstacles, RoadCheck};
+use crate::world::road_friction::{MuPatch, RoadFriction};
+use crate::world::scenario::{self, Scenario, ScenarioError};
 
 /// What `--track` accepts.
 pub const TRACK_FORMS: &str = "`paper` (the built-in track), a track CSV file (`# x_m,y_m,w_tr_right_m,w_tr_left_m`) or, for `sweep`, a folder of them (its `*.csv`)";

@@ -21,20 +21,20 @@
 //! - `--mass-scale k`: the plant's mass and inertias × k; the firmware is told the
 //!   nominal car (an unknown load).
 //! - `--noise`: a level name (`none` 0, `low` 1, `medium` 2, `high` 4) or a number,
-//!   multiplying [`crate::disturbance::NOISE_UNIT`] (σ of 0.05 m on X and Y, 0.005
+//!   multiplying [`crate::world::disturbance::NOISE_UNIT`] (σ of 0.05 m on X and Y, 0.005
 //!   rad on the heading, 0.05 m/s on the speed, 0.005 rad/s on the yaw rate).
 //! - `--delay-ms`: the estimate the tasks see is that old (rounded to 10 ms).
-//! - `--fault`: see [`crate::faults`] (`--help` lists them).
-//! - `--obstacles random:N`: see [`crate::obstacle_placement`].
+//! - `--fault`: see [`crate::world::faults`] (`--help` lists them).
+//! - `--obstacles random:N`: see [`crate::world::obstacle_placement`].
 //! - `--seed` (a list) or `--seeds N` (0..N).
 //! - `--mu-patch START_M:LENGTH_M:MU` (repeatable): patches of road with their own
 //!   friction, the same in every run (not a factor), checked against every track's
-//!   lap before the first run; see [`crate::road_friction`].
+//!   lap before the first run; see [`crate::world::road_friction`].
 //!
 //! # The friction check against the road
 //!
 //! Per run (summary fields, so columns of `sweep.csv`; definitions in
-//! [`crate::road_friction`]): `friction_mu_min` (the lowest `μ̂`), `road_mu_min`,
+//! [`crate::world::road_friction`]): `friction_mu_min` (the lowest `μ̂`), `road_mu_min`,
 //! `mu_false_drop` (at some 10 ms sample `μ̂ < 0.9·min` of the road μ under the car
 //! over the last 10 s) and `mu_false_drop_s` (when first), `mu_recovery_s` (the
 //! slowest return to `μ̂ ≥ 0.9·road μ` after leaving a patch of lower grip) and
@@ -43,7 +43,7 @@
 //!
 //! # Outcome and off-road
 //!
-//! [`crate::faults::Outcome`], worst first. Off-road: at some 10 ms sample the
+//! [`crate::world::faults::Outcome`], worst first. Off-road: at some 10 ms sample the
 //! centre of gravity was farther from the centre line than the road's local
 //! half-width on that side. `max_edge_excess_m` is how far the body's side went
 //! past the edge (negative: the margin left).
@@ -79,16 +79,16 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::closed_loop::{self, Summary};
-use crate::disturbance::DisturbedEcu;
-pub use crate::disturbance::NoiseLevel;
-use crate::faults::{classify, Fault, Outcome, RunFacts};
 use crate::model::vehicle::VehicleParams;
-use crate::obstacle_placement::widths_at;
-use crate::road_friction::RoadFriction;
-use crate::scenario::{self, Scenario};
 use crate::scenario_options::{check_track_arg, set_up, ScenarioArgs, Setting};
 pub use crate::scenario_options::{ObstacleSpec, RunSpec};
 use crate::sweep_figures;
+use crate::world::disturbance::DisturbedEcu;
+pub use crate::world::disturbance::NoiseLevel;
+use crate::world::faults::{classify, Fault, Outcome, RunFacts};
+use crate::world::obstacle_placement::widths_at;
+use crate::world::road_friction::RoadFriction;
+use crate::world::scenario::{self, Scenario};
 
 /// Arguments of `host-sim sweep`.
 #[derive(Debug, Clone, Args)]
@@ -398,7 +398,7 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
             .and_then(|_| {
                 fs::write(
                     &p,
-                    crate::obstacle_file::obstacles_to_csv_string(setup.static_obstacles()),
+                    crate::world::obstacle_file::obstacles_to_csv_string(setup.static_obstacles()),
                 )
             })
             .with_context(|| format!("cannot write {}", p.display()))?;
@@ -415,7 +415,7 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
     }
     let fault_event_s = match spec.fault {
         Fault::LateObstacle(_) => ecu.obstacle_appeared_at_us().map(|t| t as f64 * 1e-6),
-        Fault::DropoutNan(_) | Fault::DropoutHold(_) => Some(crate::faults::FAULT_START_S),
+        Fault::DropoutNan(_) | Fault::DropoutHold(_) => Some(crate::world::faults::FAULT_START_S),
         _ => None,
     };
     let facts = RunFacts {

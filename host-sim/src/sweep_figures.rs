@@ -8,9 +8,9 @@ use std::path::Path;
 use anyhow::Result;
 use plotters::prelude::*;
 
-use crate::faults::Outcome;
 use crate::plot::{draw_error, register_font, FONT};
 use crate::sweep::{Aggregate, Row, BOUNDS, FACTOR_COLUMNS};
+use crate::world::faults::Outcome;
 
 const W: u32 = 1400;
 const H: u32 = 700;

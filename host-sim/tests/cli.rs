@@ -361,7 +361,7 @@ fn the_help_of_run_pil_and_sweep_lists_every_fault_scenario_from_the_table() {
         let o = host_sim().args([cmd, "--help"]).output().unwrap();
         assert!(o.status.success());
         let help = String::from_utf8_lossy(&o.stdout);
-        for k in &host_sim::faults::FAULT_KINDS {
+        for k in &host_sim::world::faults::FAULT_KINDS {
             assert!(
                 help.contains(&k.usage()),
                 "`{cmd} --help` lacks {}",
@@ -424,11 +424,11 @@ fn a_missing_path_is_refused_before_any_run_with_the_forms_accepted_and_its_caus
     // prints an error: the chain of causes on one line).
     let missing = dir.path().join("missing.csv");
     for path in [missing.as_path(), dir.path()] {
-        let e = host_sim::obstacle_file::load_obstacles_path(path).unwrap_err();
+        let e = host_sim::world::obstacle_file::load_obstacles_path(path).unwrap_err();
         let chain = format!("{:#}", anyhow::Error::new(e));
         assert_eq!(chain.matches("(os error").count(), 1, "{chain}");
         assert!(chain.contains(&path.display().to_string()), "{chain}");
-        let e = host_sim::track::Track::from_csv_path(path, true).unwrap_err();
+        let e = host_sim::world::track::Track::from_csv_path(path, true).unwrap_err();
         let chain = format!("{:#}", anyhow::Error::new(e));
         assert_eq!(chain.matches("(os error").count(), 1, "{chain}");
     }

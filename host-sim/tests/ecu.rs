@@ -11,7 +11,7 @@ use host_sim::closed_loop::{
 };
 use host_sim::model::vehicle::VehicleParams;
 use host_sim::run::{simulate, Precision};
-use host_sim::scenario::Scenario;
+use host_sim::world::scenario::Scenario;
 
 /// The state at the start of the paper track, at `v` m/s.
 fn start_estimate(scenario: &Scenario, v: f64, t_us: u64) -> StateEstimate<f32> {
@@ -316,7 +316,7 @@ impl Ecu<f32> for LateAnswer {
         self.inner.active_plan()
     }
 
-    fn set_window(&mut self, t_us: u64, w: &host_sim::route::Window) -> anyhow::Result<()> {
+    fn set_window(&mut self, t_us: u64, w: &host_sim::world::route::Window) -> anyhow::Result<()> {
         self.inner.set_window(t_us, w)
     }
 }
@@ -384,7 +384,7 @@ impl Ecu<f32> for PositionsOnly {
         &self.plan
     }
 
-    fn set_window(&mut self, t_us: u64, w: &host_sim::route::Window) -> anyhow::Result<()> {
+    fn set_window(&mut self, t_us: u64, w: &host_sim::world::route::Window) -> anyhow::Result<()> {
         self.inner.set_window(t_us, w)
     }
 

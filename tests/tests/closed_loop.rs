@@ -6,7 +6,7 @@
 use host_sim::closed_loop::{RunResult, SimOptions};
 use host_sim::model::vehicle::VehicleParams;
 use host_sim::run::{simulate, Precision};
-use host_sim::scenario::Scenario;
+use host_sim::world::scenario::Scenario;
 
 const G: f64 = 9.81;
 

@@ -23,11 +23,11 @@
 
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
-use crate::obstacle_file::{
+use crate::world::obstacle_file::{
     load_obstacles_path, obstacles_to_csv_string, vehicle_footprint, Obstacle, ObstacleError,
 };
-use crate::road_friction::MuPatch;
-use crate::track::{pose_along, Track, TrackError, TrackPiece};
+use crate::world::road_friction::MuPatch;
+use crate::world::track::{pose_along, Track, TrackError, TrackPiece};
 
 /// Half-width of the `paper` track on each side of the centre line (m).
 pub const PAPER_HALF_WIDTH_M: f64 = 4.0;
@@ -263,7 +263,7 @@ pub struct Scenario {
     /// Road friction coefficient (-).
     pub mu: f64,
     /// Patches of road with their own friction (`--mu-patch`; see
-    /// [`crate::road_friction`]); none by default.
+    /// [`crate::world::road_friction`]); none by default.
     pub mu_patches: Vec<MuPatch>,
     /// Initial longitudinal speed (m/s).
     pub initial_speed_mps: f64,

@@ -47,8 +47,8 @@ use firmware::Real;
 use crate::closed_loop::{vehicle_config, SimOptions};
 use crate::ecu::{ControlOutput, Ecu, SimulatedEcu};
 use crate::model::vehicle::VehicleParams;
-use crate::route::Window;
-use crate::scenario::Scenario;
+use crate::world::route::Window;
+use crate::world::scenario::Scenario;
 
 /// Standard deviations of noise level 1 (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -224,7 +224,7 @@ struct PendingObstacle<T> {
     /// Last projection of the car on the whole track, m (a hint for the next).
     s_hint: Option<f64>,
     /// The whole track (the planner holds only a window of it).
-    track: crate::track::Track,
+    track: crate::world::track::Track,
 }
 
 /// [`SimulatedEcu`] behind the [`Disturbances`] (see the module docs).

@@ -96,7 +96,7 @@ pub enum TrackError {
     },
     /// A cell that is not a finite number.
     #[error(transparent)]
-    Value(#[from] crate::csv_value::CsvValueError),
+    Value(#[from] crate::world::csv_value::CsvValueError),
     /// A negative half-width.
     #[error("{file}: line {line}: column `{column}` is {value} m; a half-width is a distance from the centre line and must be >= 0")]
     NegativeWidth {
@@ -339,7 +339,7 @@ impl Track {
             }
             let mut v = [0.0; 4];
             for (i, slot) in v.iter_mut().enumerate().take(expected) {
-                *slot = crate::csv_value::finite_metres(
+                *slot = crate::world::csv_value::finite_metres(
                     file,
                     line,
                     COLUMN_NAMES[i],

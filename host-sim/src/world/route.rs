@@ -10,7 +10,7 @@
 
 use anyhow::{bail, Result};
 
-use crate::track::Track;
+use crate::world::track::Track;
 
 /// Rows of a window: the ECU's path capacity.
 pub const WINDOW_ROWS: usize = firmware::tasks::ECU_PATH_ROWS;

@@ -21,10 +21,10 @@ use firmware::obstacles::{Obstacle as FwObstacle, ObstacleManager, MAX_OBSTACLES
 use firmware::reference_path::ReferencePath;
 
 use crate::closed_loop::{vehicle_config, HOST_PATH_CAP};
-use crate::disturbance::SplitMix64;
 use crate::model::vehicle::VehicleParams;
-use crate::obstacle_file::Obstacle;
-use crate::track::Track;
+use crate::world::disturbance::SplitMix64;
+use crate::world::obstacle_file::Obstacle;
+use crate::world::track::Track;
 
 /// Road kept clear of random obstacles after the start, m.
 pub const START_CLEAR_M: f64 = 150.0;
@@ -159,7 +159,7 @@ mod tests {
 
     #[test]
     fn random_obstacles_are_reproducible_on_the_road_and_leave_room() -> Result<()> {
-        let track = crate::scenario::Scenario::paper(false).track;
+        let track = crate::world::scenario::Scenario::paper(false).track;
         let car = VehicleParams::default();
         let check = RoadCheck::new(&track, &car, 1.0)?;
         let a = random_obstacles(&track, 3.0, 11, &check);

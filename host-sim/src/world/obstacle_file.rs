@@ -95,7 +95,7 @@ pub enum ObstacleError {
     },
     /// A cell that is not a finite number.
     #[error(transparent)]
-    Value(#[from] crate::csv_value::CsvValueError),
+    Value(#[from] crate::world::csv_value::CsvValueError),
     /// The rows of one id are not contiguous.
     #[error("{file}: line {line}: obstacle `{id}` already ended at line {previous_line}, other obstacles came between; keep all rows of one obstacle together (or give this one another id)")]
     SplitId {
@@ -197,8 +197,10 @@ pub fn load_obstacles_reader(
                 line,
             });
         }
-        let x = crate::csv_value::finite_metres(file, line, "x_m", rec.get(1).unwrap_or(""))?;
-        let y = crate::csv_value::finite_metres(file, line, "y_m", rec.get(2).unwrap_or(""))?;
+        let x =
+            crate::world::csv_value::finite_metres(file, line, "x_m", rec.get(1).unwrap_or(""))?;
+        let y =
+            crate::world::csv_value::finite_metres(file, line, "y_m", rec.get(2).unwrap_or(""))?;
         match out.last_mut() {
             Some((o, _, last)) if o.id == head => {
                 o.vertices.push([x, y]);
