@@ -8,7 +8,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::closed_loop::{LogRow, RunResult};
+use crate::closed_loop::timeline::{LogRow, RunResult};
 use crate::plot::{draw_error, register_font, FONT};
 use crate::world::road_friction::RoadFriction;
 use crate::world::scenario::Scenario;

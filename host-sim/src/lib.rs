@@ -5,13 +5,10 @@
 //! | module | concept |
 //! |---|---|
 //! | [`model`] | the vehicle model: parameters, tyres, the 9-DoF plant, tyre tables |
-//! | [`validity`] | the paper's Figure 3: `δ_a` vs `δ_th` on circles (`validity` command) |
 //! | [`world`] | the world: tracks, obstacles, road friction, scenarios, the road's windows, disturbances, faults |
 //! | [`scenario_options`] | the scenario options `run`, `pil` and `sweep` share (one clap struct), their checks, the set-up of one run |
-//! | [`cost_model`] | the tasks' cost model on the ECU (instructions), fitted on PIL measurements |
 //! | [`pil`] | processor in the loop: the ECU application in QEMU against the plant |
-//! | [`closed_loop`] | the deterministic timeline: the plant against an ECU, budgets, deadlines |
-//! | [`ecu`] | what runs the firmware: the `Ecu` trait, the modelled ECU on the host |
+//! | [`closed_loop`] | the closed loop: the plant against an ECU on a deterministic timeline, the modelled ECU, its cost model, the summary; the validity experiment |
 //! | [`run`] | the `run` command: log, summary, figures |
 //! | [`sweep`] | the `sweep` and `sweep-merge` commands: cross products of runs, in parallel |
 //! | [`sweep_figures`] | the sweep's figures |
@@ -21,8 +18,6 @@
 //! | [`wcet`] | worst-case stack bound and cycles-per-instruction bound of the ECU binary |
 
 pub mod closed_loop;
-pub mod cost_model;
-pub mod ecu;
 pub mod figures;
 pub mod model;
 pub mod pil;
@@ -32,6 +27,5 @@ pub mod run;
 pub mod scenario_options;
 pub mod sweep;
 pub mod sweep_figures;
-pub mod validity;
 pub mod wcet;
 pub mod world;

@@ -19,7 +19,7 @@ enum Command {
     Tire(host_sim::model::tire_table::TireArgs),
     /// The paper's Figure 3: steering of the 9-DoF plant vs the kinematic bicycle on
     /// circles, up to the speed where the car cannot hold them.
-    Validity(host_sim::validity::ValidityArgs),
+    Validity(host_sim::closed_loop::validity::ValidityArgs),
     /// A closed-loop drive: the 9-DoF plant against the firmware's two tasks on a
     /// deterministic timeline; writes log.csv, summary.json and the figures.
     Run(host_sim::run::RunCommand),
@@ -43,7 +43,7 @@ enum Command {
 fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
         Command::Tire(args) => host_sim::model::tire_table::run(args),
-        Command::Validity(args) => host_sim::validity::run(args),
+        Command::Validity(args) => host_sim::closed_loop::validity::run(args),
         Command::Run(args) => host_sim::run::command(args),
         Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
         Command::Pil(args) => host_sim::pil::command(args),

@@ -39,7 +39,7 @@
 //! counts them itself ([`firmware::deadline`]) and sends its counts in the same
 //! frames; [`count_mismatches`] compares the two and `host-sim pil` fails when
 //! they differ. The plant applies each actuation from the instant the ECU sent it
-//! ([`crate::closed_loop`]).
+//! ([`crate::closed_loop::timeline`]).
 
 use std::fs::{self, File};
 use std::io::{BufWriter, Read, Write};
@@ -59,8 +59,11 @@ use firmware::obstacles::MAX_VERTICES;
 use firmware::plan::{Plan, PlanNode, PLAN_DT_S};
 use firmware::state_estimate::StateEstimate;
 
+use crate::closed_loop::ecu::{ControlOutput, Ecu, EcuCounts, EcuTaskCounts, SimulatedEcu};
+use crate::closed_loop::plan_activation::{plan_status_name, PlanActivation};
+use crate::closed_loop::summary::Summary;
+use crate::closed_loop::timeline::{self, RunResult};
 use crate::closed_loop::{self, SimOptions};
-use crate::ecu::{ControlOutput, Ecu, PlanActivation};
 use crate::model::vehicle::VehicleParams;
 use crate::world::route::{RouteFeeder, Window};
 use crate::world::scenario::Scenario;
@@ -83,7 +86,7 @@ pub fn skipped_between(release_us: u64, end_us: u64, period_us: u64) -> u32 {
 /// misses and skipped releases (counted by the driver from the frames' stamps)
 /// and the host's count of budget overruns on the ECU's clock; one line each,
 /// empty when they agree (or when there is no ECU count).
-pub fn count_mismatches(s: &crate::closed_loop::Summary, ticks: &TickOverruns) -> Vec<String> {
+pub fn count_mismatches(s: &Summary, ticks: &TickOverruns) -> Vec<String> {
     let pairs = [
         (
             "plan deadline misses",
@@ -207,11 +210,11 @@ pub struct QemuEcu {
     /// The last control release the ECU reported, µs.
     last_release_us: Option<u64>,
     /// The plan task's counts as of the last plan event.
-    plan_counts: crate::ecu::EcuTaskCounts,
+    plan_counts: EcuTaskCounts,
     /// Budget overruns on the ECU's clock, counted by the host from the ticks.
     pub tick_overruns: TickOverruns,
     /// The ECU's own counts in the last actuation frame (response times included).
-    pub ecu_counts: Option<crate::ecu::EcuCounts>,
+    pub ecu_counts: Option<EcuCounts>,
 }
 
 impl Drop for QemuEcu {
@@ -422,7 +425,7 @@ impl QemuEcu {
     ) -> Result<()> {
         // The same checks as `run` on the whole track first (their messages say
         // which obstacle blocks the road and by how much).
-        crate::ecu::SimulatedEcu::<f32>::new(scenario, vehicle, sim)?;
+        crate::closed_loop::ecu::SimulatedEcu::<f32>::new(scenario, vehicle, sim)?;
         if scenario.obstacles.len() > u8::MAX as usize {
             bail!(
                 "{} obstacles: the link carries at most 255",
@@ -646,7 +649,7 @@ impl QemuEcu {
             finish_us: p.finish_us,
             instructions,
             cycles: instructions * self.opts.cycles_per_instruction,
-            status: crate::ecu::plan_status_name(p.status),
+            status: plan_status_name(p.status),
             published: p.published,
             deadline_miss: p.finish_us > p.release_us + PLAN_PERIOD_US,
             passes: u32::from(p.passes),
@@ -696,7 +699,7 @@ impl Ecu<f32> for QemuEcu {
             None => 0,
         };
         self.last_release_us = Some(frame.release_us);
-        self.ecu_counts = Some(crate::ecu::EcuCounts {
+        self.ecu_counts = Some(EcuCounts {
             plan: self.plan_counts,
             control: frame.control.into(),
             watchdog_trips: frame.watchdog_trips.into(),
@@ -871,9 +874,9 @@ pub struct PilReport {
     /// Largest cold-start plan activation, instructions.
     pub cold_max_instructions: f64,
     /// The simulator's cost model against the measurements.
-    pub model_error: crate::cost_model::ModelError,
+    pub model_error: crate::closed_loop::cost_model::ModelError,
     /// The cost model refitted on this run's activations.
-    pub refit: Option<crate::cost_model::CostModel>,
+    pub refit: Option<crate::closed_loop::cost_model::CostModel>,
     /// Against the in-process run (f32, same inputs).
     pub comparison: Option<Comparison>,
     /// The host's count of budget overruns on the ECU's clock (from the frames'
@@ -885,7 +888,7 @@ pub struct PilReport {
     /// The ECU's own counts at the end of the run, per task: releases, misses,
     /// skipped releases, budget overruns, largest response time (µs); watchdog
     /// trips.
-    pub ecu_counts: Option<crate::ecu::EcuCounts>,
+    pub ecu_counts: Option<EcuCounts>,
     /// Wall time of the PIL run, s.
     pub wall_s: f64,
 }
@@ -975,8 +978,7 @@ pub fn compare(pil: &RunResult, host: &RunResult) -> Comparison {
     }
 }
 
-use crate::closed_loop::RunResult;
-use crate::cost_model::percentile;
+use crate::closed_loop::cost_model::percentile;
 
 /// Refuses what a PIL run cannot apply, saying why and where it applies: the
 /// in-process ECU's arithmetic and clock, and the disturbances applied around the
@@ -1054,7 +1056,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
         indicatif::ProgressStyle::with_template("{spinner} PIL: simulated {pos} s  {msg}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
     );
-    let result = closed_loop::run_with(&scenario, &plant_car, &opts, &mut ecu, |t, d| {
+    let result = timeline::run_with(&scenario, &plant_car, &opts, &mut ecu, |t, d| {
         bar.set_position(t as u64);
         bar.set_message(format!("{d:.0} m driven"));
     });
@@ -1076,7 +1078,8 @@ pub fn run(args: &PilArgs) -> Result<()> {
     crate::run::write_outputs(&args.run.out, &scenario, &result, !args.run.no_plots)?;
 
     let plans = &result.plan_activations;
-    let work: Vec<crate::cost_model::Counters> = plans.iter().map(Into::into).collect();
+    let work: Vec<crate::closed_loop::cost_model::Counters> =
+        plans.iter().map(Into::into).collect();
     let max_of = |f: &dyn Fn(&PlanActivation) -> bool| {
         plans
             .iter()
@@ -1087,8 +1090,8 @@ pub fn run(args: &PilArgs) -> Result<()> {
     let comparison = if args.no_compare {
         None
     } else {
-        let mut host_ecu = closed_loop::SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts)?;
-        let host = closed_loop::run_with(&scenario, &plant_car, &opts, &mut host_ecu, |_, _| {})?;
+        let mut host_ecu = SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts)?;
+        let host = timeline::run_with(&scenario, &plant_car, &opts, &mut host_ecu, |_, _| {})?;
         // The in-process run beside it, for a look at any divergence.
         crate::run::write_outputs(&args.run.out.join("host"), &scenario, &host, false)?;
         Some(compare(&result, &host))
@@ -1108,7 +1111,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
         warm_max_instructions: max_of(&|a| a.passes == 1),
         cold_max_instructions: max_of(&|a| a.passes > 1),
         model_error: opts.cost_model.error_on(&work),
-        refit: crate::cost_model::CostModel::fit(
+        refit: crate::closed_loop::cost_model::CostModel::fit(
             &work,
             percentile(&result.control_instructions, 1.0),
         ),

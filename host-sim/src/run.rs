@@ -5,21 +5,21 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::closed_loop::{self, RunResult, SimOptions};
+use crate::closed_loop::simulate::simulate_with;
+use crate::closed_loop::summary::Summary;
+use crate::closed_loop::timeline::RunResult;
+use crate::closed_loop::{Precision, SimOptions};
 use crate::figures;
-use crate::model::vehicle::{check_mass_scale, VehicleParams};
+use crate::model::vehicle::check_mass_scale;
 use crate::scenario_options::{
     check_mu, check_obstacles_arg, check_run_length, check_track_arg, check_vehicle_arg, set_up,
     ObstacleSpec, RunSpec, ScenarioArgs, SetUp, Setting,
 };
-use crate::world::disturbance::{check_delay_ms, Disturbances, DisturbedEcu, NoiseLevel};
+use crate::world::disturbance::{check_delay_ms, NoiseLevel};
 use crate::world::faults::Fault;
 use crate::world::road_friction::MuPatch;
 use crate::world::scenario::Scenario;
-
-pub use crate::closed_loop::Precision;
 
 /// `host-sim run`'s command line: the scenario options `run`, `pil` and `sweep`
 /// share ([`ScenarioArgs`], one value each here), the firmware's arithmetic and
@@ -152,82 +152,6 @@ impl ConditionArgs {
     }
 }
 
-/// Runs one closed-loop scenario and returns its result (no files written).
-pub fn simulate(
-    scenario: &Scenario,
-    vehicle: &VehicleParams,
-    opts: &SimOptions,
-    precision: Precision,
-    show_progress: bool,
-) -> Result<RunResult> {
-    let plain = Disturbances::default();
-    simulate_with(
-        scenario,
-        vehicle,
-        vehicle,
-        opts,
-        &plain,
-        precision,
-        show_progress,
-    )
-}
-
-/// As [`simulate`], the plant's car `plant_car` (the firmware is told of
-/// `vehicle`) and the estimate behind `d` (noise, delay).
-pub fn simulate_with(
-    scenario: &Scenario,
-    vehicle: &VehicleParams,
-    plant_car: &VehicleParams,
-    opts: &SimOptions,
-    d: &Disturbances,
-    precision: Precision,
-    show_progress: bool,
-) -> Result<RunResult> {
-    let bar = if show_progress {
-        let b = ProgressBar::new(opts.max_duration_s.ceil() as u64);
-        b.set_style(
-            ProgressStyle::with_template("{spinner} simulated {pos} s  {msg}")
-                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
-        );
-        Some(b)
-    } else {
-        None
-    };
-    let progress = |t: f64, d: f64| {
-        if let Some(b) = &bar {
-            b.set_position(t as u64);
-            b.set_message(format!("{d:.0} m driven"));
-        }
-    };
-    let result = if *d == Disturbances::default() {
-        match precision {
-            Precision::F32 => {
-                let mut ecu = closed_loop::SimulatedEcu::<f32>::new(scenario, vehicle, opts)?;
-                closed_loop::run_with(scenario, plant_car, opts, &mut ecu, progress)
-            }
-            Precision::F64 => {
-                let mut ecu = closed_loop::SimulatedEcu::<f64>::new(scenario, vehicle, opts)?;
-                closed_loop::run_with(scenario, plant_car, opts, &mut ecu, progress)
-            }
-        }
-    } else {
-        match precision {
-            Precision::F32 => {
-                let mut ecu = DisturbedEcu::<f32>::new(scenario, vehicle, opts, d.clone())?;
-                closed_loop::run_with(scenario, plant_car, opts, &mut ecu, progress)
-            }
-            Precision::F64 => {
-                let mut ecu = DisturbedEcu::<f64>::new(scenario, vehicle, opts, d.clone())?;
-                closed_loop::run_with(scenario, plant_car, opts, &mut ecu, progress)
-            }
-        }
-    };
-    if let Some(b) = &bar {
-        b.finish_and_clear();
-    }
-    result
-}
-
 /// Checks a run's settings (every path before anything runs) and sets it up as a
 /// sweep's run with the same factors ([`set_up`]): the scenario (its obstacles,
 /// `random:N` ones included, and `--mu-patch` patches, checked against the track),
@@ -288,7 +212,7 @@ pub fn prepare(args: &RunArgs) -> Result<SetUp> {
 }
 
 /// The one-line summary `run` and `pil` print.
-pub fn summary_line(scenario: &Scenario, s: &crate::closed_loop::Summary) -> String {
+pub fn summary_line(scenario: &Scenario, s: &Summary) -> String {
     format!(
         "{}: {} in {:.1} s over {:.0} m | lateral error max {:.3} m rms {:.3} m | |a_y| max {:.2} m/s² ({:.2}·μg) | collisions {} | plan failures {}/{} | deadline misses plan {} control {} | {:.0}× real time",
         scenario.track.name,
@@ -309,7 +233,7 @@ pub fn summary_line(scenario: &Scenario, s: &crate::closed_loop::Summary) -> Str
 }
 
 /// The line `run` and `pil` print on the road's friction and the firmware's `μ̂`.
-pub fn friction_line(s: &crate::closed_loop::Summary) -> String {
+pub fn friction_line(s: &Summary) -> String {
     let opt = |x: Option<f64>, unit: &str| x.map_or("-".to_string(), |v| format!("{v:.3}{unit}"));
     format!(
         "friction: road μ min {:.2}{} | μ̂ min {} | false drop {} | slowest recovery after a patch {}{}",

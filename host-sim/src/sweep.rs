@@ -78,7 +78,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::closed_loop::{self, Summary};
+use crate::closed_loop::plan_activation::PlanActivation;
+use crate::closed_loop::summary::Summary;
+use crate::closed_loop::timeline::{self, LogRow};
+use crate::closed_loop::vehicle_width_m;
 use crate::model::vehicle::VehicleParams;
 use crate::scenario_options::{check_track_arg, set_up, ScenarioArgs, Setting};
 pub use crate::scenario_options::{ObstacleSpec, RunSpec};
@@ -404,7 +407,7 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
             .with_context(|| format!("cannot write {}", p.display()))?;
     }
     let mut ecu = DisturbedEcu::<f32>::new(scn, &setup.nominal, opts, setup.disturbances.clone())?;
-    let res = closed_loop::run_with(scn, &setup.plant_car, opts, &mut ecu, |_, _| {})?;
+    let res = timeline::run_with(scn, &setup.plant_car, opts, &mut ecu, |_, _| {})?;
     let s = &res.summary;
     let edge = edge_excess(scn, &setup.plant_car, &res.log);
     let outcome = classify(s, edge.off_road_samples > 0);
@@ -449,7 +452,7 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
 
 /// The statuses of the plan activations that published nothing, with their
 /// counts (`qp_iteration_limit:3;stale:1`), in order of first appearance.
-fn failure_kinds(acts: &[crate::ecu::PlanActivation]) -> String {
+fn failure_kinds(acts: &[PlanActivation]) -> String {
     let mut kinds: Vec<(String, usize)> = Vec::new();
     for a in acts.iter().filter(|a| !a.published) {
         let name = if a.status == "optimal" {
@@ -475,10 +478,10 @@ struct Edge {
     max_excess_m: f64,
 }
 
-fn edge_excess(scn: &Scenario, car: &VehicleParams, log: &[closed_loop::LogRow]) -> Edge {
+fn edge_excess(scn: &Scenario, car: &VehicleParams, log: &[LogRow]) -> Edge {
     let arcs = scn.track.arc_lengths();
     let total = scn.track.length();
-    let half_car = 0.5 * closed_loop::vehicle_width_m(car);
+    let half_car = 0.5 * vehicle_width_m(car);
     let mut e = Edge {
         off_road_samples: 0,
         max_excess_m: f64::NEG_INFINITY,

@@ -3,10 +3,11 @@
 //! column against the definition applied to the run's own trace.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use host_sim::closed_loop::{LogRow, SimOptions};
+use host_sim::closed_loop::simulate::simulate;
+use host_sim::closed_loop::timeline::LogRow;
+use host_sim::closed_loop::{Precision, SimOptions};
 use host_sim::model::plant::{Inputs, Plant, State};
 use host_sim::model::vehicle::VehicleParams;
-use host_sim::run::{simulate, Precision};
 use host_sim::scenario_options::Setting;
 use host_sim::sweep::{execute, header, Common, LogRuns, RunSpec};
 use host_sim::world::faults::Fault;

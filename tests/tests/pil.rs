@@ -10,8 +10,9 @@
 
 use std::path::PathBuf;
 
-use host_sim::closed_loop::{run_with, RunResult, SimOptions};
-use host_sim::cost_model::{CostModel, Counters};
+use host_sim::closed_loop::cost_model::{CostModel, Counters};
+use host_sim::closed_loop::timeline::{run_with, RunResult};
+use host_sim::closed_loop::SimOptions;
 use host_sim::model::vehicle::VehicleParams;
 use host_sim::pil::{count_mismatches, PilOptions, QemuEcu, TickOverruns};
 use host_sim::world::obstacle_file::Obstacle;

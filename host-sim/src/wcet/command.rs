@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 
-use crate::cost_model::{load_counters, CostModel};
+use crate::closed_loop::cost_model::{load_counters, CostModel};
 use crate::pil::{self, PilArgs};
 use crate::run::RunArgs;
 use crate::wcet::cpi::{self, CpiReport};

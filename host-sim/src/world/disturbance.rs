@@ -44,8 +44,8 @@ use firmware::state_estimate::StateEstimate;
 use firmware::tasks::CONTROL_PERIOD_US;
 use firmware::Real;
 
+use crate::closed_loop::ecu::{ControlOutput, Ecu, SimulatedEcu};
 use crate::closed_loop::{vehicle_config, SimOptions};
-use crate::ecu::{ControlOutput, Ecu, SimulatedEcu};
 use crate::model::vehicle::VehicleParams;
 use crate::world::route::Window;
 use crate::world::scenario::Scenario;

@@ -350,7 +350,7 @@ pub struct RunFacts {
 }
 
 /// The outcome of a finished run (module docs of [`Outcome`]: worst first).
-pub fn classify(s: &crate::closed_loop::Summary, off_road: bool) -> Outcome {
+pub fn classify(s: &crate::closed_loop::summary::Summary, off_road: bool) -> Outcome {
     if s.collisions > 0 {
         Outcome::Collision
     } else if off_road || s.stop_reason.starts_with("left the road") {

@@ -2,7 +2,7 @@
 //! [`SimulatedEcu`], the firmware's two tasks run in this process on a modelled
 //! timeline.
 //!
-//! The closed-loop driver ([`crate::closed_loop::run_with`]) owns the plant, the
+//! The closed-loop driver ([`run_with`](crate::closed_loop::timeline::run_with)) owns the plant, the
 //! measurements and the log; it calls [`Ecu::control`] at every 10 ms control
 //! release with the plant's state of that instant and applies the actuation it
 //! returns. Everything else (when the `plan` task runs, how long it takes, when its
@@ -27,7 +27,7 @@
 //! [`CostModel`], failed activations included, and cycles = instructions ×
 //! [`SimOptions::cycles_per_instruction`]. A release that falls while the `plan`
 //! task is still running is skipped (see the late-plan policy in
-//! [`crate::closed_loop`]).
+//! [`crate::closed_loop::timeline`]).
 
 use anyhow::{anyhow, Result};
 use firmware::low_level::Actuation;
@@ -39,65 +39,13 @@ use firmware::tasks::{ControlTask, PlanTask, CONTROL_PERIOD_US, MAX_PLAN_AGE_US,
 use firmware::Real;
 use serde::Serialize;
 
-use crate::closed_loop::{vehicle_config, CostModel, SimOptions, HOST_PATH_CAP};
+use crate::closed_loop::cost_model::CostModel;
+use crate::closed_loop::plan_activation::{mpc_error_name, PlanActivation};
+use crate::closed_loop::{vehicle_config, SimOptions, HOST_PATH_CAP};
 use crate::model::vehicle::VehicleParams;
 use crate::world::obstacle_file::Obstacle;
 use crate::world::route::{RouteFeeder, Window};
 use crate::world::scenario::Scenario;
-
-/// A plan status's name, one of [`plan_status_name`]'s (an alias, so that serde's
-/// derive does not take it for a string borrowed from the input).
-pub type StatusName = &'static str;
-
-/// One activation of the plan task, as the ECU (modelled or measured) ran it: a
-/// row of `plan_activations.csv`, written by `run` and `pil` and read back by the
-/// timing report and the cost model's fit through this same type.
-#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
-pub struct PlanActivation {
-    /// 1-based count of the task's releases (skipped releases included).
-    pub activation: u32,
-    /// Release time, µs.
-    pub release_us: u64,
-    /// When it finished (response time = finish − release), µs.
-    pub finish_us: u64,
-    /// Instructions of the task's own execution (modelled: from the cost model;
-    /// processor in the loop: measured).
-    pub instructions: f64,
-    /// `instructions` × cycles per instruction (see [`CostModel`]), ECU cycles.
-    pub cycles: f64,
-    /// `"optimal"` or the failure's name ([`plan_status_name`]).
-    #[serde(deserialize_with = "known_plan_status")]
-    pub status: StatusName,
-    /// The plan was published (at `finish_us`).
-    pub published: bool,
-    /// The response time exceeded the period (100 ms).
-    pub deadline_miss: bool,
-    /// Linearise–condense passes.
-    pub passes: u32,
-    /// QP iterations, all passes.
-    pub qp_iterations: u32,
-    /// Constraints added to the QP's working set, all passes.
-    pub qp_added: u32,
-    /// Constraints removed from the QP's working set, all passes.
-    pub qp_removed: u32,
-    /// Factorisations of the working set from scratch, all passes.
-    pub qp_refactorizations: u32,
-    /// General QP rows of the last pass.
-    pub rows: u32,
-    /// Working-set size at the end of the last pass.
-    pub active_constraints: u32,
-    /// After publishing, the activation adopted a new window of the road.
-    #[serde(default)]
-    pub window: bool,
-    /// Instructions of that adoption (not in `instructions`: it follows the
-    /// publication), 0 without a window.
-    #[serde(default)]
-    pub window_instructions: f64,
-    /// Largest validity slack of the plan, rad (0 if none or not optimal); `None`
-    /// (an empty cell) where it is not measured (the ECU does not send it).
-    #[serde(default)]
-    pub max_validity_slack_rad: Option<f64>,
-}
 
 /// One task's deadline counts as the ECU itself counted them on its own clock
 /// (`firmware::deadline`), cumulative.
@@ -147,7 +95,7 @@ pub struct ControlOutput<T> {
     /// the ECU fell behind).
     pub release_us: u64,
     /// When the ECU sent the actuation, µs on the same timeline: the plant applies
-    /// it from the plant step containing that instant (see [`crate::closed_loop`]).
+    /// it from the plant step containing that instant (see [`crate::closed_loop::timeline`]).
     /// Its response time is `sent_us − release_us`.
     pub sent_us: u64,
     /// Control releases the ECU skipped before this one (it was still busy).
@@ -382,31 +330,6 @@ fn response_us(cycles: f64, control_cycles: f64, clock_hz: f64) -> f64 {
     resp_s * 1e6
 }
 
-/// The name of a plan activation's status code (`firmware::link`'s
-/// [`PlanEventFrame::status`](firmware::link::PlanEventFrame)): `"optimal"`, the
-/// error's name ([`mpc_error_name`]), or `"unknown"`.
-pub fn plan_status_name(code: u8) -> &'static str {
-    match firmware::link::mpc_error_from_code(code) {
-        None if code == firmware::link::MPC_OK => "optimal",
-        None => "unknown",
-        Some(e) => mpc_error_name(&e),
-    }
-}
-
-/// Reads a status name back as the name [`plan_status_name`] gives (refusing a
-/// name no code has).
-fn known_plan_status<'de, D: serde::Deserializer<'de>>(d: D) -> Result<&'static str, D::Error> {
-    let name = <std::borrow::Cow<'de, str> as serde::Deserialize>::deserialize(d)?;
-    (0..=u8::MAX)
-        .map(plan_status_name)
-        .find(|n| *n == name)
-        .ok_or_else(|| {
-            serde::de::Error::custom(format!(
-                "unknown plan status `{name}` (expected `optimal` or an MPC error's name)"
-            ))
-        })
-}
-
 fn activation_record<T: Real>(
     activation: u32,
     release_us: u64,
@@ -502,27 +425,6 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
     fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()> {
         self.pending_window = Some((w.clone(), t_us));
         Ok(())
-    }
-}
-
-/// The name of an MPC failure, as written in the log and the activations.
-pub fn mpc_error_name(e: &firmware::mpc::MpcError) -> &'static str {
-    use firmware::mpc::MpcError as E;
-    use qp::QpStatus as Q;
-    match e {
-        E::NonFiniteState => "non_finite_state",
-        E::InvalidFriction => "invalid_friction",
-        E::InvalidSettings => "invalid_settings",
-        E::NoPath => "no_path",
-        E::Qp(Q::IterationLimit) => "qp_iteration_limit",
-        E::Qp(Q::Infeasible) => "qp_infeasible",
-        E::Qp(Q::NumericalError) => "qp_numerical_error",
-        E::Qp(Q::NotConvex) => "qp_not_convex",
-        E::Qp(Q::NonFiniteInput) => "qp_non_finite_input",
-        E::Qp(Q::InvalidInput) => "qp_invalid_input",
-        E::Qp(Q::WorkingSetFull) => "qp_working_set_full",
-        E::Qp(Q::NotSolved) => "qp_not_solved",
-        E::Qp(Q::Optimal) => "optimal",
     }
 }
 

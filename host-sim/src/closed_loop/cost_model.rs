@@ -6,7 +6,7 @@ use firmware::Real;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
-use crate::ecu::PlanActivation;
+use crate::closed_loop::plan_activation::PlanActivation;
 
 /// Deterministic cost model of the two tasks, in ECU instructions.
 ///
@@ -154,7 +154,7 @@ pub fn load_counters(path: &std::path::Path) -> anyhow::Result<Vec<Counters>> {
             path.display()
         )
     })?;
-    r.deserialize::<crate::ecu::PlanActivation>()
+    r.deserialize::<PlanActivation>()
         .enumerate()
         .map(|(i, row)| {
             row.map(|a| Counters::from(&a))
