@@ -12,16 +12,14 @@
 //! | [`run`] | the `run` command: log, summary, figures |
 //! | [`sweep`] | the `sweep` and `sweep-merge` commands: cross products of runs, in parallel |
 //! | [`sweep_figures`] | the sweep's figures |
-//! | [`figures`] | the closed-loop figures (the paper's Figures 5–8, task costs) |
-//! | [`plot`] | plotting helpers (embedded font) |
+//! | [`output`] | what a run writes: its files, its figures, plotting helpers |
 //! | [`qp_corpus`] | the MPC's QPs as JSON, for solver benchmarks (`qp-corpus` command) |
 //! | [`wcet`] | worst-case stack bound and cycles-per-instruction bound of the ECU binary |
 
 pub mod closed_loop;
-pub mod figures;
 pub mod model;
+pub mod output;
 pub mod pil;
-pub mod plot;
 pub mod qp_corpus;
 pub mod run;
 pub mod scenario_options;

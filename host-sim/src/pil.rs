@@ -1075,7 +1075,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
         rejected_frames: 0,
     });
     let wall_s = wall.elapsed().as_secs_f64();
-    crate::run::write_outputs(&args.run.out, &scenario, &result, !args.run.no_plots)?;
+    crate::output::run_files::write_outputs(&args.run.out, &scenario, &result, !args.run.no_plots)?;
 
     let plans = &result.plan_activations;
     let work: Vec<crate::closed_loop::cost_model::Counters> =
@@ -1093,7 +1093,12 @@ pub fn run(args: &PilArgs) -> Result<()> {
         let mut host_ecu = SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts)?;
         let host = timeline::run_with(&scenario, &plant_car, &opts, &mut host_ecu, |_, _| {})?;
         // The in-process run beside it, for a look at any divergence.
-        crate::run::write_outputs(&args.run.out.join("host"), &scenario, &host, false)?;
+        crate::output::run_files::write_outputs(
+            &args.run.out.join("host"),
+            &scenario,
+            &host,
+            false,
+        )?;
         Some(compare(&result, &host))
     };
     let report = PilReport {

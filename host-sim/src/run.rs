@@ -1,17 +1,15 @@
 //! `host-sim run`: a closed-loop drive of a scenario, with its log, summary and figures.
 
-use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use clap::Args;
 
 use crate::closed_loop::simulate::simulate_with;
 use crate::closed_loop::summary::Summary;
-use crate::closed_loop::timeline::RunResult;
 use crate::closed_loop::{Precision, SimOptions};
-use crate::figures;
 use crate::model::vehicle::check_mass_scale;
+use crate::output::run_files::write_outputs;
 use crate::scenario_options::{
     check_mu, check_obstacles_arg, check_run_length, check_track_arg, check_vehicle_arg, set_up,
     ObstacleSpec, RunSpec, ScenarioArgs, SetUp, Setting,
@@ -282,42 +280,5 @@ pub fn run(args: &RunArgs) -> Result<()> {
         println!("stopped: {}", sum.stop_reason);
     }
     println!("wrote {}", args.out.display());
-    Ok(())
-}
-
-/// Writes `log.csv`, `plan_activations.csv` (one row per plan activation: when it
-/// ran, its cost, its work counters), `summary.json` and (optionally) the figures
-/// into `dir`.
-pub fn write_outputs(
-    dir: &Path,
-    scenario: &Scenario,
-    result: &RunResult,
-    plots: bool,
-) -> Result<()> {
-    fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create output directory {}", dir.display()))?;
-    let log_path = dir.join("log.csv");
-    let mut w = csv::Writer::from_path(&log_path)
-        .with_context(|| format!("cannot write {}", log_path.display()))?;
-    for row in &result.log {
-        w.serialize(row)?;
-    }
-    w.flush()?;
-    let act_path = dir.join("plan_activations.csv");
-    let mut w = csv::Writer::from_path(&act_path)
-        .with_context(|| format!("cannot write {}", act_path.display()))?;
-    for a in &result.plan_activations {
-        w.serialize(a)?;
-    }
-    w.flush()?;
-    let summary_path = dir.join("summary.json");
-    fs::write(
-        &summary_path,
-        serde_json::to_string_pretty(&result.summary)?,
-    )
-    .with_context(|| format!("cannot write {}", summary_path.display()))?;
-    if plots {
-        figures::draw_all(dir, scenario, result)?;
-    }
     Ok(())
 }

@@ -413,7 +413,12 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
     let outcome = classify(s, edge.off_road_samples > 0);
     if let Some((dir, which)) = &common.log_dir {
         if *which == LogRuns::All || outcome != Outcome::Ok {
-            crate::run::write_outputs(&dir.join(spec.index.to_string()), scn, &res, false)?;
+            crate::output::run_files::write_outputs(
+                &dir.join(spec.index.to_string()),
+                scn,
+                &res,
+                false,
+            )?;
         }
     }
     let fault_event_s = match spec.fault {

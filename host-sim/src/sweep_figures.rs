@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::Result;
 use plotters::prelude::*;
 
-use crate::plot::{draw_error, register_font, FONT};
+use crate::output::plot::{draw_error, register_font, FONT};
 use crate::sweep::{Aggregate, Row, BOUNDS, FACTOR_COLUMNS};
 use crate::world::faults::Outcome;
 

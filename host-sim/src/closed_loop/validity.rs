@@ -47,7 +47,7 @@ use rayon::prelude::*;
 
 use crate::model::plant::{Inputs, Plant, PlantError, State};
 use crate::model::vehicle::{VehicleParams, G};
-use crate::plot;
+use crate::output::plot;
 
 /// Relative deviations `|δ_a − δ_th|/δ_th` reported by the command.
 pub const THRESHOLDS: [f64; 3] = [0.05, 0.10, 0.20];

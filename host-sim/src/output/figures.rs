@@ -9,7 +9,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::closed_loop::timeline::{LogRow, RunResult};
-use crate::plot::{draw_error, register_font, FONT};
+use crate::output::plot::{draw_error, register_font, FONT};
 use crate::world::road_friction::RoadFriction;
 use crate::world::scenario::Scenario;
 

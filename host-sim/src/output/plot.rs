@@ -11,7 +11,7 @@ use plotters::style::FontStyle;
 /// text styles (`(FONT, 16).into_font()`).
 pub const FONT: &str = "sans-serif";
 
-static FONT_BYTES: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+static FONT_BYTES: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 static REGISTERED: OnceLock<bool> = OnceLock::new();
 
 /// Why a plot could not be drawn.
