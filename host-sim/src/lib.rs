@@ -6,10 +6,9 @@
 //! |---|---|
 //! | [`model`] | the vehicle model: parameters, tyres, the 9-DoF plant, tyre tables |
 //! | [`world`] | the world: tracks, obstacles, road friction, scenarios, the road's windows, disturbances, faults |
-//! | [`scenario_options`] | the scenario options `run`, `pil` and `sweep` share (one clap struct), their checks, the set-up of one run |
 //! | [`pil`] | processor in the loop: the ECU application in QEMU against the plant |
 //! | [`closed_loop`] | the closed loop: the plant against an ECU on a deterministic timeline, the modelled ECU, its cost model, the summary; the validity experiment |
-//! | [`run`] | the `run` command: log, summary, figures |
+//! | [`commands`] | the commands: each one's clap arguments and what it does |
 //! | [`sweep`] | the `sweep` and `sweep-merge` commands: cross products of runs, in parallel |
 //! | [`sweep_figures`] | the sweep's figures |
 //! | [`output`] | what a run writes: its files, its figures, plotting helpers |
@@ -17,12 +16,11 @@
 //! | [`wcet`] | worst-case stack bound and cycles-per-instruction bound of the ECU binary |
 
 pub mod closed_loop;
+pub mod commands;
 pub mod model;
 pub mod output;
 pub mod pil;
 pub mod qp_corpus;
-pub mod run;
-pub mod scenario_options;
 pub mod sweep;
 pub mod sweep_figures;
 pub mod wcet;

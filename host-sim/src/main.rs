@@ -22,7 +22,7 @@ enum Command {
     Validity(host_sim::closed_loop::validity::ValidityArgs),
     /// A closed-loop drive: the 9-DoF plant against the firmware's two tasks on a
     /// deterministic timeline; writes log.csv, summary.json and the figures.
-    Run(host_sim::run::RunCommand),
+    Run(host_sim::commands::run::RunCommand),
     /// Processor in the loop: the ECU application in QEMU against the plant; writes
     /// what `run` writes plus plan_activations.csv and pil.json (measured ECU costs).
     Pil(host_sim::pil::PilCommand),
@@ -44,7 +44,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
         Command::Tire(args) => host_sim::model::tire_table::run(args),
         Command::Validity(args) => host_sim::closed_loop::validity::run(args),
-        Command::Run(args) => host_sim::run::command(args),
+        Command::Run(args) => host_sim::commands::run::command(args),
         Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
         Command::Pil(args) => host_sim::pil::command(args),
         Command::Wcet(args) => host_sim::wcet::command::run(args),

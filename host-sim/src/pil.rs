@@ -743,14 +743,14 @@ impl Ecu<f32> for QemuEcu {
     }
 }
 
-/// `host-sim pil`'s command line: `run`'s ([`crate::run::RunCommand`]: the same
+/// `host-sim pil`'s command line: `run`'s ([`crate::commands::run::RunCommand`]: the same
 /// scenario options, refused where PIL cannot apply them), and how to run the ECU.
 #[derive(Debug, Clone, clap::Args)]
 pub struct PilCommand {
     /// The scenario and outputs, as for `run` (`--precision` must stay f32 and
     /// `--ecu-mhz` 168: the ECU's own clock times the run).
     #[command(flatten)]
-    pub run: crate::run::RunCommand,
+    pub run: crate::commands::run::RunCommand,
     /// How the ECU runs.
     #[command(flatten)]
     pub ecu: PilEcuArgs,
@@ -806,13 +806,13 @@ impl PilCommand {
     }
 }
 
-/// A PIL run's settings: the run's ([`crate::run::RunArgs`]) and how to run the ECU
+/// A PIL run's settings: the run's ([`crate::commands::run::RunArgs`]) and how to run the ECU
 /// ([`PilEcuArgs`] has the meanings); what `pil`'s command line resolves to, or what
 /// a program builds (`wcet`).
 #[derive(Debug, Clone)]
 pub struct PilArgs {
     /// The scenario and outputs.
-    pub run: crate::run::RunArgs,
+    pub run: crate::commands::run::RunArgs,
     /// The ECU application.
     pub elf: PathBuf,
     /// QEMU's `-icount shift`.
@@ -1032,13 +1032,13 @@ pub fn command(cmd: &PilCommand) -> Result<()> {
 pub fn run(args: &PilArgs) -> Result<()> {
     check_pil_args(args)?;
     // The disturbances are none (checked above): the ECU gets the estimate as is.
-    let crate::scenario_options::SetUp {
+    let crate::world::set_up::SetUp {
         scenario,
         nominal: vehicle,
         plant_car,
         mut opts,
         ..
-    } = crate::run::prepare(&args.run)?;
+    } = crate::commands::run::prepare(&args.run)?;
     opts.cycles_per_instruction = args.cpi;
     let pil_opts = PilOptions {
         elf: args.elf.clone(),
@@ -1131,8 +1131,8 @@ pub fn run(args: &PilArgs) -> Result<()> {
         .with_context(|| format!("cannot write {}", pil_path.display()))?;
 
     let s = &result.summary;
-    println!("{}", crate::run::summary_line(&scenario, s));
-    println!("{}", crate::run::friction_line(s));
+    println!("{}", crate::commands::run::summary_line(&scenario, s));
+    println!("{}", crate::commands::run::friction_line(s));
     if !s.completed {
         println!("stopped: {}", s.stop_reason);
     }

@@ -16,7 +16,7 @@
 //! # Factors
 //!
 //! The scenario options `run` and `pil` take too
-//! ([`crate::scenario_options::ScenarioArgs`]), lists here:
+//! ([`crate::commands::scenario_args::ScenarioArgs`]), lists here:
 //!
 //! - `--mass-scale k`: the plant's mass and inertias × k; the firmware is told the
 //!   nominal car (an unknown load).
@@ -50,7 +50,7 @@
 //!
 //! With obstacles, each run's are written to `obstacles/<index>.csv`. `host-sim run`
 //! with a run's factors (`--track T --mu … --fault … --seed S`, its `--obstacles`)
-//! sets the run up as the sweep did ([`crate::scenario_options::set_up`]) and
+//! sets the run up as the sweep did ([`crate::world::set_up::set_up`]) and
 //! replays it.
 //!
 //! # Exit status
@@ -82,9 +82,8 @@ use crate::closed_loop::plan_activation::PlanActivation;
 use crate::closed_loop::summary::Summary;
 use crate::closed_loop::timeline::{self, LogRow};
 use crate::closed_loop::vehicle_width_m;
+use crate::commands::scenario_args::{check_track_arg, ScenarioArgs};
 use crate::model::vehicle::VehicleParams;
-use crate::scenario_options::{check_track_arg, set_up, ScenarioArgs, Setting};
-pub use crate::scenario_options::{ObstacleSpec, RunSpec};
 use crate::sweep_figures;
 use crate::world::disturbance::DisturbedEcu;
 pub use crate::world::disturbance::NoiseLevel;
@@ -92,6 +91,7 @@ use crate::world::faults::{classify, Fault, Outcome, RunFacts};
 use crate::world::obstacle_placement::widths_at;
 use crate::world::road_friction::RoadFriction;
 use crate::world::scenario::{self, Scenario};
+use crate::world::set_up::{set_up, ObstacleSpec, RunSpec, Setting};
 
 /// Arguments of `host-sim sweep`.
 #[derive(Debug, Clone, Args)]

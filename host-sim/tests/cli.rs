@@ -191,7 +191,7 @@ fn commands() -> [(&'static str, clap::Command); 3] {
     [
         (
             "run",
-            host_sim::run::RunCommand::augment_args(clap::Command::new("run")),
+            host_sim::commands::run::RunCommand::augment_args(clap::Command::new("run")),
         ),
         (
             "pil",
@@ -221,7 +221,8 @@ fn signature(a: &clap::Arg) -> String {
 #[test]
 fn run_pil_and_sweep_spell_every_scenario_option_alike() {
     use clap::Args;
-    let shared = host_sim::scenario_options::ScenarioArgs::augment_args(clap::Command::new("x"));
+    let shared =
+        host_sim::commands::scenario_args::ScenarioArgs::augment_args(clap::Command::new("x"));
     let names: Vec<&str> = shared
         .get_arguments()
         .filter_map(|a| a.get_long())
@@ -327,7 +328,7 @@ fn the_same_words_parse_to_the_same_scenario_in_run_pil_and_sweep_old_spellings_
                 .unwrap_or_else(|e| panic!("`{cmd}` {w:?}: {e}"));
             let scenario = match cmd {
                 "run" => {
-                    host_sim::run::RunCommand::from_arg_matches(&m)
+                    host_sim::commands::run::RunCommand::from_arg_matches(&m)
                         .unwrap()
                         .scenario
                 }

@@ -8,11 +8,11 @@ use host_sim::closed_loop::timeline::LogRow;
 use host_sim::closed_loop::{Precision, SimOptions};
 use host_sim::model::plant::{Inputs, Plant, State};
 use host_sim::model::vehicle::VehicleParams;
-use host_sim::scenario_options::Setting;
-use host_sim::sweep::{execute, header, Common, LogRuns, RunSpec};
+use host_sim::sweep::{execute, header, Common, LogRuns};
 use host_sim::world::faults::Fault;
 use host_sim::world::road_friction::MuPatch;
 use host_sim::world::scenario::{Scenario, PAPER_HALF_WIDTH_M};
+use host_sim::world::set_up::{RunSpec, Setting};
 
 /// Speed after braking hard from 20 m/s for 1 s with the four wheels on `mu`.
 fn speed_after_braking(mu: [f64; 4]) -> f64 {

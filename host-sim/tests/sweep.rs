@@ -7,9 +7,9 @@ use std::f64::consts::PI;
 use std::path::Path;
 use std::process::Command;
 
-use host_sim::scenario_options::Setting;
-use host_sim::sweep::{execute, header, Common, RunSpec};
+use host_sim::sweep::{execute, header, Common};
 use host_sim::world::faults::Fault;
+use host_sim::world::set_up::{RunSpec, Setting};
 use host_sim::world::track::{Track, TrackPiece};
 
 fn host_sim() -> Command {

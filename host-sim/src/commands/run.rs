@@ -8,16 +8,17 @@ use clap::Args;
 use crate::closed_loop::simulate::simulate_with;
 use crate::closed_loop::summary::Summary;
 use crate::closed_loop::{Precision, SimOptions};
+use crate::commands::scenario_args::{
+    check_mu, check_obstacles_arg, check_run_length, check_track_arg, check_vehicle_arg,
+    ScenarioArgs,
+};
 use crate::model::vehicle::check_mass_scale;
 use crate::output::run_files::write_outputs;
-use crate::scenario_options::{
-    check_mu, check_obstacles_arg, check_run_length, check_track_arg, check_vehicle_arg, set_up,
-    ObstacleSpec, RunSpec, ScenarioArgs, SetUp, Setting,
-};
 use crate::world::disturbance::{check_delay_ms, NoiseLevel};
 use crate::world::faults::Fault;
 use crate::world::road_friction::MuPatch;
 use crate::world::scenario::Scenario;
+use crate::world::set_up::{set_up, ObstacleSpec, RunSpec, SetUp, Setting};
 
 /// `host-sim run`'s command line: the scenario options `run`, `pil` and `sweep`
 /// share ([`ScenarioArgs`], one value each here), the firmware's arithmetic and

@@ -1,0 +1,12 @@
+//! The commands of `host-sim`, one module each: its clap arguments and what it
+//! does with them, on top of the library's layers (`main.rs` only dispatches).
+//!
+//! | module | concept |
+//! |---|---|
+//! | [`scenario_args`] | the scenario options `run`, `pil` and `sweep` share (one clap struct) and their checks |
+//! | [`run`] | `host-sim run`: a closed-loop drive, its log, summary and figures |
+//!
+//! `host-sim wcet` is [`crate::wcet::command`].
+
+pub mod run;
+pub mod scenario_args;
