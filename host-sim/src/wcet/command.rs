@@ -12,7 +12,7 @@ use clap::Args;
 
 use crate::closed_loop::cost_model::{load_counters, CostModel};
 use crate::commands::run::RunArgs;
-use crate::pil::{self, PilArgs};
+use crate::pil::qemu::{self as pil, PilArgs};
 use crate::wcet::cpi::{self, CpiReport};
 use crate::wcet::report::{self, ReportInputs};
 
