@@ -6,7 +6,7 @@
 //! |---|---|
 //! | [`model`] | the vehicle model: parameters, tyres, the 9-DoF plant, tyre tables |
 //! | [`world`] | the world: tracks, obstacles, road friction, scenarios, the road's windows, disturbances, faults |
-//! | [`pil`] | processor in the loop: the ECU application in QEMU against the plant |
+//! | [`pil`] | processor in the loop: the ECU application in QEMU against the plant, its frames, deadlines, comparison |
 //! | [`closed_loop`] | the closed loop: the plant against an ECU on a deterministic timeline, the modelled ECU, its cost model, the summary; the validity experiment |
 //! | [`commands`] | the commands: each one's clap arguments and what it does |
 //! | [`sweep`] | the `sweep` and `sweep-merge` commands: cross products of runs, in parallel |

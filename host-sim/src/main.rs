@@ -25,7 +25,7 @@ enum Command {
     Run(host_sim::commands::run::RunCommand),
     /// Processor in the loop: the ECU application in QEMU against the plant; writes
     /// what `run` writes plus plan_activations.csv and pil.json (measured ECU costs).
-    Pil(host_sim::pil::qemu::PilCommand),
+    Pil(host_sim::commands::pil::PilCommand),
     /// The ECU's worst-case timing and memory report (wcet.md, wcet.json) from PIL
     /// laps, a QEMU trace for the cycles-per-instruction bound and the ELF.
     Wcet(host_sim::wcet::command::WcetArgs),
@@ -46,7 +46,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Validity(args) => host_sim::closed_loop::validity::run(args),
         Command::Run(args) => host_sim::commands::run::command(args),
         Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
-        Command::Pil(args) => host_sim::pil::qemu::command(args),
+        Command::Pil(args) => host_sim::commands::pil::command(args),
         Command::Wcet(args) => host_sim::wcet::command::run(args),
         Command::Sweep(args) => host_sim::sweep::run(args),
         Command::SweepMerge(args) => host_sim::sweep::merge(args),

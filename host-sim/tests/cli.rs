@@ -195,7 +195,7 @@ fn commands() -> [(&'static str, clap::Command); 3] {
         ),
         (
             "pil",
-            host_sim::pil::qemu::PilCommand::augment_args(clap::Command::new("pil")),
+            host_sim::commands::pil::PilCommand::augment_args(clap::Command::new("pil")),
         ),
         (
             "sweep",
@@ -333,7 +333,7 @@ fn the_same_words_parse_to_the_same_scenario_in_run_pil_and_sweep_old_spellings_
                         .scenario
                 }
                 "pil" => {
-                    host_sim::pil::qemu::PilCommand::from_arg_matches(&m)
+                    host_sim::commands::pil::PilCommand::from_arg_matches(&m)
                         .unwrap()
                         .run
                         .scenario

@@ -451,7 +451,7 @@ fn the_modelled_ecu_reports_no_ecu_counts_and_the_summary_writes_null() {
 
 #[test]
 fn the_host_counts_skipped_releases_from_the_end_of_an_activation() {
-    use host_sim::pil::qemu::skipped_between;
+    use host_sim::pil::deadlines::skipped_between;
     // Ends before or exactly at the next release: nothing skipped.
     assert_eq!(skipped_between(0, 40_000, 100_000), 0);
     assert_eq!(skipped_between(0, 100_000, 100_000), 0);

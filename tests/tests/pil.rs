@@ -14,7 +14,8 @@ use host_sim::closed_loop::cost_model::{CostModel, Counters};
 use host_sim::closed_loop::timeline::{run_with, RunResult};
 use host_sim::closed_loop::SimOptions;
 use host_sim::model::vehicle::VehicleParams;
-use host_sim::pil::qemu::{count_mismatches, PilOptions, QemuEcu, TickOverruns};
+use host_sim::pil::deadlines::{count_mismatches, TickOverruns};
+use host_sim::pil::qemu::{LinkCounters, PilOptions, QemuEcu};
 use host_sim::world::obstacle_file::Obstacle;
 use host_sim::world::scenario::{paper_pose_at, Scenario};
 
@@ -51,7 +52,7 @@ fn drive(
 ) -> (
     RunResult,
     firmware::link::DoneFrame,
-    host_sim::pil::qemu::LinkCounters,
+    LinkCounters,
     TickOverruns,
 ) {
     let opts = SimOptions {

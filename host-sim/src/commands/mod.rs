@@ -5,8 +5,10 @@
 //! |---|---|
 //! | [`scenario_args`] | the scenario options `run`, `pil` and `sweep` share (one clap struct) and their checks |
 //! | [`run`] | `host-sim run`: a closed-loop drive, its log, summary and figures |
+//! | [`pil`] | `host-sim pil`: the same drive with the ECU application in QEMU, `pil.json` |
 //!
 //! `host-sim wcet` is [`crate::wcet::command`].
 
+pub mod pil;
 pub mod run;
 pub mod scenario_args;

@@ -11,8 +11,8 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 
 use crate::closed_loop::cost_model::{load_counters, CostModel};
+use crate::commands::pil::{self, PilArgs};
 use crate::commands::run::RunArgs;
-use crate::pil::qemu::{self as pil, PilArgs};
 use crate::wcet::cpi::{self, CpiReport};
 use crate::wcet::report::{self, ReportInputs};
 
