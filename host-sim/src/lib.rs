@@ -9,8 +9,7 @@
 //! | [`pil`] | processor in the loop: the ECU application in QEMU against the plant, its frames, deadlines, comparison |
 //! | [`closed_loop`] | the closed loop: the plant against an ECU on a deterministic timeline, the modelled ECU, its cost model, the summary; the validity experiment |
 //! | [`commands`] | the commands: each one's clap arguments and what it does |
-//! | [`sweep`] | the `sweep` and `sweep-merge` commands: cross products of runs, in parallel |
-//! | [`sweep_figures`] | the sweep's figures |
+//! | [`sweep`] | sweeps: many closed-loop runs (their figures) |
 //! | [`output`] | what a run writes: its files, its figures, plotting helpers |
 //! | [`qp_corpus`] | the MPC's QPs as JSON, for solver benchmarks (`qp-corpus` command) |
 //! | [`wcet`] | worst-case stack bound and cycles-per-instruction bound of the ECU binary |
@@ -22,6 +21,5 @@ pub mod output;
 pub mod pil;
 pub mod qp_corpus;
 pub mod sweep;
-pub mod sweep_figures;
 pub mod wcet;
 pub mod world;

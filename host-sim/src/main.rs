@@ -35,9 +35,9 @@ enum Command {
     /// noise, delays, faults and seeds (the options of `run`, lists here), in
     /// parallel; writes sweep.csv (one row per run), sweep.json (the aggregate),
     /// figures and summary.txt. Exits non-zero when a run could not run.
-    Sweep(host_sim::sweep::SweepArgs),
+    Sweep(host_sim::commands::sweep::SweepArgs),
     /// Joins the sweep.csv of shards (`sweep --only I/N`) into one sweep's outputs.
-    SweepMerge(host_sim::sweep::MergeArgs),
+    SweepMerge(host_sim::commands::sweep::MergeArgs),
 }
 
 fn run(cli: &Cli) -> anyhow::Result<()> {
@@ -48,8 +48,8 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
         Command::Pil(args) => host_sim::commands::pil::command(args),
         Command::Wcet(args) => host_sim::wcet::command::run(args),
-        Command::Sweep(args) => host_sim::sweep::run(args),
-        Command::SweepMerge(args) => host_sim::sweep::merge(args),
+        Command::Sweep(args) => host_sim::commands::sweep::run(args),
+        Command::SweepMerge(args) => host_sim::commands::sweep::merge(args),
     }
 }
 

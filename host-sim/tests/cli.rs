@@ -199,7 +199,7 @@ fn commands() -> [(&'static str, clap::Command); 3] {
         ),
         (
             "sweep",
-            host_sim::sweep::SweepArgs::augment_args(clap::Command::new("sweep")),
+            host_sim::commands::sweep::SweepArgs::augment_args(clap::Command::new("sweep")),
         ),
     ]
 }
@@ -339,7 +339,7 @@ fn the_same_words_parse_to_the_same_scenario_in_run_pil_and_sweep_old_spellings_
                         .scenario
                 }
                 _ => {
-                    host_sim::sweep::SweepArgs::from_arg_matches(&m)
+                    host_sim::commands::sweep::SweepArgs::from_arg_matches(&m)
                         .unwrap()
                         .scenario
                 }

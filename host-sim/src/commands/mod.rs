@@ -5,6 +5,7 @@
 //! |---|---|
 //! | [`scenario_args`] | the scenario options `run`, `pil` and `sweep` share (one clap struct) and their checks |
 //! | [`run`] | `host-sim run`: a closed-loop drive, its log, summary and figures |
+//! | [`sweep`] | `host-sim sweep` and `sweep-merge`: cross products of runs, in parallel |
 //! | [`pil`] | `host-sim pil`: the same drive with the ECU application in QEMU, `pil.json` |
 //!
 //! `host-sim wcet` is [`crate::wcet::command`].
@@ -12,3 +13,4 @@
 pub mod pil;
 pub mod run;
 pub mod scenario_args;
+pub mod sweep;

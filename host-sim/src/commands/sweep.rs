@@ -84,7 +84,7 @@ use crate::closed_loop::timeline::{self, LogRow};
 use crate::closed_loop::vehicle_width_m;
 use crate::commands::scenario_args::{check_track_arg, ScenarioArgs};
 use crate::model::vehicle::VehicleParams;
-use crate::sweep_figures;
+use crate::sweep::figures;
 use crate::world::disturbance::DisturbedEcu;
 pub use crate::world::disturbance::NoiseLevel;
 use crate::world::faults::{classify, Fault, Outcome, RunFacts};
@@ -1071,7 +1071,7 @@ pub fn finish(
     fs::write(&p, serde_json::to_string_pretty(&agg)?)
         .with_context(|| format!("cannot write {}", p.display()))?;
     if plots {
-        sweep_figures::draw_all(out, &rows, &agg)?;
+        figures::draw_all(out, &rows, &agg)?;
     }
     let text = text_summary(&agg);
     fs::write(out.join("summary.txt"), &text)?;

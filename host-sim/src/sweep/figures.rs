@@ -8,8 +8,8 @@ use std::path::Path;
 use anyhow::Result;
 use plotters::prelude::*;
 
+use crate::commands::sweep::{Aggregate, Row, BOUNDS, FACTOR_COLUMNS};
 use crate::output::plot::{draw_error, register_font, FONT};
-use crate::sweep::{Aggregate, Row, BOUNDS, FACTOR_COLUMNS};
 use crate::world::faults::Outcome;
 
 const W: u32 = 1400;
@@ -62,7 +62,7 @@ pub fn draw_all(dir: &Path, rows: &[Row], agg: &Aggregate) -> Result<()> {
         "|a_y| / μg",
         agg,
         |t| t.ay_over_mu_g,
-        Some(|t: &crate::sweep::TrackMu| t.plan_ay_over_mu_g),
+        Some(|t: &crate::commands::sweep::TrackMu| t.plan_ay_over_mu_g),
         BOUNDS.ay_over_mu_g,
     )?;
     consistency(&dir.join("consistency.png"), rows)?;
@@ -141,7 +141,7 @@ fn outcome_rates(
     Ok(())
 }
 
-type Metric = fn(&crate::sweep::TrackMu) -> f64;
+type Metric = fn(&crate::commands::sweep::TrackMu) -> f64;
 
 fn per_track(
     path: &Path,

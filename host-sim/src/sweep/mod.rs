@@ -1,0 +1,3 @@
+//! Sweeps: many closed-loop runs (being split along their concepts: see the next commit).
+
+pub mod figures;
