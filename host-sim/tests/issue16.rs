@@ -5,7 +5,8 @@
 //! a wet road (Budapest at μ 0.3: the car must not stand still on a clear road).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use host_sim::commands::sweep::{execute, header, Common};
+use host_sim::sweep::execute::{execute, Common};
+use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
 use host_sim::world::road_friction::MuPatch;
 use host_sim::world::set_up::{RunSpec, Setting};

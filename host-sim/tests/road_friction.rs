@@ -6,9 +6,10 @@
 use host_sim::closed_loop::simulate::simulate;
 use host_sim::closed_loop::timeline::LogRow;
 use host_sim::closed_loop::{Precision, SimOptions};
-use host_sim::commands::sweep::{execute, header, Common, LogRuns};
 use host_sim::model::plant::{Inputs, Plant, State};
 use host_sim::model::vehicle::VehicleParams;
+use host_sim::sweep::execute::{execute, Common, LogRuns};
+use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
 use host_sim::world::road_friction::MuPatch;
 use host_sim::world::scenario::{Scenario, PAPER_HALF_WIDTH_M};

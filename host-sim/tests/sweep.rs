@@ -7,7 +7,8 @@ use std::f64::consts::PI;
 use std::path::Path;
 use std::process::Command;
 
-use host_sim::commands::sweep::{execute, header, Common};
+use host_sim::sweep::execute::{execute, Common};
+use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
 use host_sim::world::set_up::{RunSpec, Setting};
 use host_sim::world::track::{Track, TrackPiece};

@@ -8,8 +8,9 @@ use std::path::Path;
 use anyhow::Result;
 use plotters::prelude::*;
 
-use crate::commands::sweep::{Aggregate, Row, BOUNDS, FACTOR_COLUMNS};
 use crate::output::plot::{draw_error, register_font, FONT};
+use crate::sweep::aggregate::{Aggregate, TrackMu, BOUNDS};
+use crate::sweep::table::{Row, FACTOR_COLUMNS};
 use crate::world::faults::Outcome;
 
 const W: u32 = 1400;
@@ -62,7 +63,7 @@ pub fn draw_all(dir: &Path, rows: &[Row], agg: &Aggregate) -> Result<()> {
         "|a_y| / μg",
         agg,
         |t| t.ay_over_mu_g,
-        Some(|t: &crate::commands::sweep::TrackMu| t.plan_ay_over_mu_g),
+        Some(|t: &TrackMu| t.plan_ay_over_mu_g),
         BOUNDS.ay_over_mu_g,
     )?;
     consistency(&dir.join("consistency.png"), rows)?;
@@ -141,7 +142,7 @@ fn outcome_rates(
     Ok(())
 }
 
-type Metric = fn(&crate::commands::sweep::TrackMu) -> f64;
+type Metric = fn(&TrackMu) -> f64;
 
 fn per_track(
     path: &Path,
