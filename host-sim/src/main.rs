@@ -16,10 +16,10 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Tyre forces (PAC2002 combined slip) for a CSV of slips: kappa,alpha_rad,fz_n,mu.
-    Tire(host_sim::model::tire_table::TireArgs),
+    Tire(host_sim::commands::tire::TireArgs),
     /// The paper's Figure 3: steering of the 9-DoF plant vs the kinematic bicycle on
     /// circles, up to the speed where the car cannot hold them.
-    Validity(host_sim::closed_loop::validity::ValidityArgs),
+    Validity(host_sim::commands::validity::ValidityArgs),
     /// A closed-loop drive: the 9-DoF plant against the firmware's two tasks on a
     /// deterministic timeline; writes log.csv, summary.json and the figures.
     Run(host_sim::commands::run::RunCommand),
@@ -42,8 +42,8 @@ enum Command {
 
 fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
-        Command::Tire(args) => host_sim::model::tire_table::run(args),
-        Command::Validity(args) => host_sim::closed_loop::validity::run(args),
+        Command::Tire(args) => host_sim::commands::tire::run(args),
+        Command::Validity(args) => host_sim::commands::validity::run(args),
         Command::Run(args) => host_sim::commands::run::command(args),
         Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
         Command::Pil(args) => host_sim::commands::pil::command(args),

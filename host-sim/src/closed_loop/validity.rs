@@ -1,4 +1,4 @@
-//! The validity experiment of the paper's Figure 3 (`host-sim validity`).
+//! The validity experiment of the paper's Figure 3 (what `host-sim validity` runs).
 //!
 //! For each circle radius `R` and for speeds from walking pace up to the speed at
 //! which the car can no longer hold the circle, the 9-DoF plant is driven round a
@@ -36,12 +36,12 @@
 //! Radii are run in parallel (rayon); each is independent and deterministic, so the
 //! results do not depend on the number of threads.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::Context;
 use firmware::bicycle::BicycleGeometry;
 use firmware::validity::kinematic_steering_for_radius;
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 use plotters::prelude::*;
 use rayon::prelude::*;
 
@@ -51,27 +51,6 @@ use crate::output::plot;
 
 /// Relative deviations `|δ_a − δ_th|/δ_th` reported by the command.
 pub const THRESHOLDS: [f64; 3] = [0.05, 0.10, 0.20];
-
-/// Command-line arguments of `host-sim validity`.
-#[derive(Debug, Clone, clap::Args)]
-pub struct ValidityArgs {
-    /// Vehicle file (TOML, see host-sim/vehicles/default.toml); the built-in car
-    /// when omitted.
-    #[arg(long, value_name = "V.toml")]
-    pub vehicle: Option<PathBuf>,
-    /// Road friction coefficient μ (1 = dry asphalt, the tyre's reference surface).
-    #[arg(long, default_value_t = 1.0)]
-    pub mu: f64,
-    /// Circle radii, m, comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "10,20,40,80")]
-    pub radii: Vec<f64>,
-    /// Output directory (created if missing) for validity.csv and validity.png.
-    #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
-    /// Integration step of the plant, s.
-    #[arg(long, default_value_t = crate::model::plant::DEFAULT_DT_S)]
-    pub dt: f64,
-}
 
 /// Settings of the experiment.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -609,47 +588,5 @@ pub fn write_plot(path: &Path, sweeps: &[RadiusSweep], mu: f64) -> Result<(), pl
         .draw()
         .map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;
-    Ok(())
-}
-
-/// `host-sim validity`: runs the experiment, writes the CSV and the plot, prints the
-/// thresholds per radius.
-pub fn run(args: &ValidityArgs) -> anyhow::Result<()> {
-    let params = match &args.vehicle {
-        Some(p) => VehicleParams::from_toml_file(p)?,
-        None => VehicleParams::default(),
-    };
-    if args.radii.is_empty() {
-        anyhow::bail!("--radii: give at least one radius, e.g. --radii 10,20,40,80");
-    }
-    let cfg = ValidityConfig {
-        mu: args.mu,
-        dt_s: args.dt,
-        ..ValidityConfig::default()
-    };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create the output directory {}", args.out.display()))?;
-    let total = (args.radii.len() * (cfg.steps_to_friction_limit + 1)) as u64;
-    let progress = ProgressBar::new(total);
-    if let Ok(style) = ProgressStyle::with_template("{bar:40} {pos}/{len} steady states {elapsed}")
-    {
-        progress.set_style(style);
-    }
-    let sweeps = run_experiment(&params, &args.radii, &cfg, &progress)?;
-    progress.finish_and_clear();
-    let csv_path = args.out.join("validity.csv");
-    write_csv(&csv_path, &sweeps)?;
-    let png_path = args.out.join("validity.png");
-    write_plot(&png_path, &sweeps, cfg.mu)?;
-    println!(
-        "Lateral acceleration at which |delta_a - delta_th|/delta_th first exceeds 5/10/20 % \
-         (mu = {}, 0.5 mu g = {:.2} m/s2):",
-        cfg.mu,
-        0.5 * cfg.mu * G
-    );
-    for s in &sweeps {
-        println!("  {}", summary_line(s, cfg.mu));
-    }
-    println!("wrote {} and {}", csv_path.display(), png_path.display());
     Ok(())
 }

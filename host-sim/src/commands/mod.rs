@@ -4,6 +4,8 @@
 //! | module | concept |
 //! |---|---|
 //! | [`scenario_args`] | the scenario options `run`, `pil` and `sweep` share (one clap struct) and their checks |
+//! | [`tire`] | `host-sim tire`: tyre forces for a CSV of slips |
+//! | [`validity`] | `host-sim validity`: the paper's Figure 3 |
 //! | [`run`] | `host-sim run`: a closed-loop drive, its log, summary and figures |
 //! | [`sweep`] | `host-sim sweep` and `sweep-merge`: cross products of runs, in parallel |
 //! | [`pil`] | `host-sim pil`: the same drive with the ECU application in QEMU, `pil.json` |
@@ -14,3 +16,5 @@ pub mod pil;
 pub mod run;
 pub mod scenario_args;
 pub mod sweep;
+pub mod tire;
+pub mod validity;
