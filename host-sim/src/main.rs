@@ -30,7 +30,7 @@ enum Command {
     /// laps, a QEMU trace for the cycles-per-instruction bound and the ELF.
     Wcet(host_sim::wcet::command::WcetArgs),
     /// Every QP the MPC solves over a kinematic closed loop, one JSON file each (for solver benchmarks).
-    QpCorpus(host_sim::qp_corpus::QpCorpusArgs),
+    QpCorpus(host_sim::commands::qp_corpus::QpCorpusArgs),
     /// Many closed-loop runs: the cross product of tracks, frictions, vehicles, loads,
     /// noise, delays, faults and seeds (the options of `run`, lists here), in
     /// parallel; writes sweep.csv (one row per run), sweep.json (the aggregate),
@@ -45,7 +45,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Tire(args) => host_sim::commands::tire::run(args),
         Command::Validity(args) => host_sim::commands::validity::run(args),
         Command::Run(args) => host_sim::commands::run::command(args),
-        Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
+        Command::QpCorpus(args) => host_sim::commands::qp_corpus::run(args),
         Command::Pil(args) => host_sim::commands::pil::command(args),
         Command::Wcet(args) => host_sim::wcet::command::run(args),
         Command::Sweep(args) => host_sim::commands::sweep::run(args),
