@@ -5,6 +5,7 @@
 use std::path::Path;
 use std::process::Command;
 
+use host_sim::closed_loop::summary::Summary;
 use host_sim::model::tire::{forces, TireParams};
 
 fn host_sim() -> Command {
@@ -479,7 +480,7 @@ fn run_and_pil_take_one_value_of_each_option_and_pil_refuses_what_it_cannot_appl
 #[test]
 fn run_places_random_obstacles_from_its_seed_as_the_sweep_does() {
     let dir = tempfile::tempdir().unwrap();
-    let clearance = |seed: &str| -> serde_json::Value {
+    let clearance = |seed: &str| -> Option<f64> {
         let out = dir.path().join(seed);
         let o = host_sim()
             .args(["run", "--obstacles", "random:3", "--seed", seed])
@@ -488,13 +489,13 @@ fn run_places_random_obstacles_from_its_seed_as_the_sweep_does() {
             .output()
             .unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let s: serde_json::Value =
+        let s: Summary =
             serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
                 .unwrap();
-        s["min_obstacle_clearance_m"].clone()
+        s.min_obstacle_clearance_m
     };
     let a = clearance("0");
-    assert!(a.as_f64().is_some(), "no obstacle placed: {a}");
+    assert!(a.is_some(), "no obstacle placed: {a:?}");
     assert_eq!(a, clearance("0"));
     assert_ne!(a, clearance("1"), "the seed draws other obstacles");
 }
@@ -566,10 +567,11 @@ fn run_with_a_sweep_runs_factors_replays_it() {
         .iter()
         .map(String::from)
         .collect();
-    let summary: serde_json::Value = serde_json::from_str(
+    let summary: Summary = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("run/summary.json")).unwrap(),
     )
     .unwrap();
+    let summary = serde_json::to_value(&summary).unwrap();
     let cell = |k: &str| &row[head.iter().position(|h| h == k).unwrap()];
     assert_ne!(cell("obstacle_count"), "0");
     assert_eq!(cell("fault"), "steer-rate:0.4");

@@ -4,7 +4,7 @@
 use firmware::mpc::MpcReport;
 use firmware::Real;
 use nalgebra::{DMatrix, DVector};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::closed_loop::plan_activation::PlanActivation;
 
@@ -31,7 +31,7 @@ use crate::closed_loop::plan_activation::PlanActivation;
 /// the model undercounts none of those activations. The removal and
 /// refactorisation terms came out 0 (their work is in the others); the control
 /// task is its largest measured activation.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CostModel {
     /// Fixed cost of a plan activation, instructions.
     pub per_activation: f64,
@@ -202,7 +202,7 @@ fn terms(a: &Counters) -> [f64; 7] {
 }
 
 /// The model's error on measured activations.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ModelError {
     /// Activations compared.
     pub activations: usize,

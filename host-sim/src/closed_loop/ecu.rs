@@ -37,7 +37,7 @@ use firmware::plan::Plan;
 use firmware::state_estimate::StateEstimate;
 use firmware::tasks::{ControlTask, PlanTask, CONTROL_PERIOD_US, MAX_PLAN_AGE_US, PLAN_PERIOD_US};
 use firmware::Real;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::closed_loop::cost_model::CostModel;
 use crate::closed_loop::plan_activation::{mpc_error_name, PlanActivation};
@@ -49,7 +49,7 @@ use crate::world::scenario::Scenario;
 
 /// One task's deadline counts as the ECU itself counted them on its own clock
 /// (`firmware::deadline`), cumulative.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct EcuTaskCounts {
     /// Releases that ran.
     pub releases: u64,
@@ -76,7 +76,7 @@ impl From<firmware::link::TaskTimingFrame> for EcuTaskCounts {
 }
 
 /// What an ECU that watches its own deadlines reports (processor in the loop).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct EcuCounts {
     /// The `plan` task's counts (as of the last plan event received).
     pub plan: EcuTaskCounts,

@@ -2,10 +2,10 @@
 //! ([`super::timeline`]) measured over a run, written by `run` and `pil` and read
 //! back through this same type.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The run's figures of merit (`summary.json`).
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Summary {
     /// The requested laps were driven (or the end of an open track reached).
     pub completed: bool,
@@ -144,4 +144,27 @@ pub struct Summary {
     /// Times the ECU's watchdog saw no new plan for more than
     /// `firmware::deadline::PLAN_WATCHDOG_PERIODS` plan periods, null without an ECU.
     pub ecu_watchdog_trips: Option<u64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn summary_json_reads_back_as_written() -> anyhow::Result<()> {
+        let summary = Summary {
+            completed: true,
+            stop_reason: "completed".into(),
+            lap_time_s: Some(88.25),
+            max_abs_plan_ay_mps2: None,
+            mu_patches: "100:50:0.5".into(),
+            mu_false_drop: Some(false),
+            mu_unrecovered_exits: Some(0),
+            ecu_watchdog_trips: Some(3),
+            ..Summary::default()
+        };
+        let back: Summary = serde_json::from_str(&serde_json::to_string_pretty(&summary)?)?;
+        assert_eq!(back, summary);
+        Ok(())
+    }
 }

@@ -5,7 +5,7 @@ use crate::closed_loop::plan_activation::PlanActivation;
 use crate::closed_loop::timeline::RunResult;
 
 /// The first difference between the PIL trajectory and the in-process one.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Comparison {
     /// Log rows compared (10 ms each).
     pub rows_compared: usize,

@@ -68,7 +68,7 @@ pub fn count_mismatches(s: &Summary, ticks: &TickOverruns) -> Vec<String> {
 /// budget in cycles), to compare with the ECU's (the summary's
 /// `*_budget_overruns` are the host's estimate for the real part: instructions ×
 /// cycles per instruction).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct TickOverruns {
     /// Plan activations whose ticks exceeded the plan budget.
     pub plan: u64,

@@ -1,4 +1,5 @@
-//! What `host-sim pil` adds to `run`'s outputs: `pil.json`.
+//! What `host-sim pil` adds to `run`'s outputs: `pil.json`, written by `pil` and
+//! read back through this same type.
 
 use crate::closed_loop::cost_model::{CostModel, ModelError};
 use crate::closed_loop::ecu::EcuCounts;
@@ -6,7 +7,7 @@ use crate::pil::comparison::Comparison;
 use crate::pil::deadlines::TickOverruns;
 
 /// What `host-sim pil` adds to `run`'s outputs (`pil.json`).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PilReport {
     /// QEMU's `-icount shift`.
     pub icount_shift: u32,
@@ -52,4 +53,38 @@ pub struct PilReport {
     pub ecu_counts: Option<EcuCounts>,
     /// Wall time of the PIL run, s.
     pub wall_s: f64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pil_json_reads_back_as_written() -> anyhow::Result<()> {
+        let report = PilReport {
+            icount_shift: 4,
+            ns_per_instruction: 16.0,
+            elf: "target/thumbv7em-none-eabihf/release/ecu".into(),
+            stack_high_water_bytes: 6216,
+            stack_size_bytes: 80200,
+            plan_max_instructions: 994430.5,
+            refit: Some(CostModel::default()),
+            comparison: Some(Comparison {
+                rows_compared: 2001,
+                identical: false,
+                first_divergence_s: Some(12.5),
+                cause: "a different 10 ms control period".into(),
+            }),
+            tick_overruns: TickOverruns {
+                plan: 1,
+                control: 2,
+            },
+            count_mismatches: vec!["plan deadline misses: ECU 1, host 0".into()],
+            ecu_counts: Some(EcuCounts::default()),
+            ..PilReport::default()
+        };
+        let back: PilReport = serde_json::from_str(&serde_json::to_string_pretty(&report)?)?;
+        assert_eq!(back, report);
+        Ok(())
+    }
 }
