@@ -3,6 +3,7 @@
 //! column against the definition applied to the run's own trace.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+use host_sim::closed_loop::set_up::{RunSpec, Setting};
 use host_sim::closed_loop::simulate::simulate;
 use host_sim::closed_loop::timeline::LogRow;
 use host_sim::closed_loop::{Precision, SimOptions};
@@ -13,7 +14,6 @@ use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
 use host_sim::world::road_friction::MuPatch;
 use host_sim::world::scenario::{Scenario, PAPER_HALF_WIDTH_M};
-use host_sim::world::set_up::{RunSpec, Setting};
 
 /// Speed after braking hard from 20 m/s for 1 s with the four wheels on `mu`.
 fn speed_after_braking(mu: [f64; 4]) -> f64 {

@@ -7,10 +7,10 @@ use std::f64::consts::PI;
 use std::path::Path;
 use std::process::Command;
 
+use host_sim::closed_loop::set_up::{RunSpec, Setting};
 use host_sim::sweep::execute::{execute, Common};
 use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
-use host_sim::world::set_up::{RunSpec, Setting};
 use host_sim::world::track::{Track, TrackPiece};
 
 fn host_sim() -> Command {

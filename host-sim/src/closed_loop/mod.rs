@@ -7,6 +7,7 @@
 //! | [`ecu`] | what runs the firmware: the `Ecu` trait, the modelled ECU on the host |
 //! | [`plan_activation`] | one activation of the plan task (a row of `plan_activations.csv`), its status names |
 //! | [`cost_model`] | the tasks' cost model on the ECU (instructions), fitted on PIL measurements |
+//! | [`set_up`] | one run set up from its factors: scenario, cars, options, disturbances |
 //! | [`simulate`] | one closed-loop run on the modelled ECU, disturbed or not, in either precision |
 //! | [`validity`] | the paper's Figure 3: `δ_a` vs `δ_th` on circles |
 //!
@@ -24,6 +25,7 @@ use crate::model::vehicle::VehicleParams;
 pub mod cost_model;
 pub mod ecu;
 pub mod plan_activation;
+pub mod set_up;
 pub mod simulate;
 pub mod summary;
 pub mod timeline;

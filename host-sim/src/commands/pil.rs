@@ -11,6 +11,7 @@ use firmware::link::DoneFrame;
 use crate::closed_loop::cost_model::{percentile, CostModel, Counters};
 use crate::closed_loop::ecu::SimulatedEcu;
 use crate::closed_loop::plan_activation::PlanActivation;
+use crate::closed_loop::set_up::SetUp;
 use crate::closed_loop::timeline;
 use crate::closed_loop::{Precision, DEFAULT_CPI_BOUND};
 use crate::commands::run::{friction_line, prepare, summary_line, RunArgs, RunCommand};
@@ -20,7 +21,6 @@ use crate::pil::deadlines::count_mismatches;
 use crate::pil::qemu::{PilOptions, QemuEcu, ECU_CLOCK_HZ};
 use crate::pil::report::PilReport;
 use crate::world::faults::FAULT_KINDS;
-use crate::world::set_up::SetUp;
 
 /// `host-sim pil`'s command line: `run`'s ([`crate::commands::run::RunCommand`]: the same
 /// scenario options, refused where PIL cannot apply them), and how to run the ECU.

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::{anyhow, bail, Result};
 use clap::Args;
 
+use crate::closed_loop::set_up::{set_up, ObstacleSpec, RunSpec, SetUp, Setting};
 use crate::closed_loop::simulate::simulate_with;
 use crate::closed_loop::summary::Summary;
 use crate::closed_loop::{Precision, SimOptions};
@@ -18,7 +19,6 @@ use crate::world::disturbance::{check_delay_ms, NoiseLevel};
 use crate::world::faults::Fault;
 use crate::world::road_friction::MuPatch;
 use crate::world::scenario::Scenario;
-use crate::world::set_up::{set_up, ObstacleSpec, RunSpec, SetUp, Setting};
 
 /// `host-sim run`'s command line: the scenario options `run`, `pil` and `sweep`
 /// share ([`ScenarioArgs`], one value each here), the firmware's arithmetic and

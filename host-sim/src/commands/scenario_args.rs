@@ -2,7 +2,7 @@
 //! ([`ScenarioArgs`]) each command flattens, so the three speak one language, and
 //! their checks (a path that does not exist is refused, with the forms accepted,
 //! before any run starts). One choice of them sets a run up through
-//! [`set_up`](crate::world::set_up::set_up), the same for `run`, `pil` and every run
+//! [`set_up`](crate::closed_loop::set_up::set_up), the same for `run`, `pil` and every run
 //! of a sweep, so `run` with a sweep run's factors replays it.
 //!
 //! `sweep` takes lists (comma-separated; several tracks, folders and vehicles) and
@@ -15,12 +15,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Result};
 use clap::Args;
 
+use crate::closed_loop::set_up::{ObstacleSpec, Setting, OBSTACLE_FORMS};
 use crate::model::vehicle::check_mass_scale;
 use crate::world::disturbance::{check_delay_ms, NoiseLevel};
 use crate::world::faults::{fault_help, Fault};
 use crate::world::road_friction::MuPatch;
 use crate::world::scenario::ScenarioError;
-use crate::world::set_up::{ObstacleSpec, Setting, OBSTACLE_FORMS};
 
 /// What `--track` accepts.
 pub const TRACK_FORMS: &str = "`paper` (the built-in track), a track CSV file (`# x_m,y_m,w_tr_right_m,w_tr_left_m`) or, for `sweep`, a folder of them (its `*.csv`)";

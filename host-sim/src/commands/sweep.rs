@@ -11,6 +11,7 @@ use std::time::Instant;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 
+use crate::closed_loop::set_up::{ObstacleSpec, RunSpec, Setting};
 use crate::commands::scenario_args::{check_track_arg, ScenarioArgs};
 use crate::sweep::aggregate::{aggregate, text_summary};
 use crate::sweep::execute::{run_all, Common, LogRuns};
@@ -18,7 +19,6 @@ use crate::sweep::figures;
 use crate::sweep::table::{header, parse_rows, write_csv, Row, FACTOR_COLUMNS};
 use crate::world::road_friction::RoadFriction;
 use crate::world::scenario;
-use crate::world::set_up::{ObstacleSpec, RunSpec, Setting};
 
 /// Arguments of `host-sim sweep`.
 #[derive(Debug, Clone, Args)]

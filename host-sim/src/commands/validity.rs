@@ -7,10 +7,9 @@ use std::path::PathBuf;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::closed_loop::validity::{
-    run_experiment, summary_line, write_csv, write_plot, ValidityConfig,
-};
+use crate::closed_loop::validity::{run_experiment, summary_line, ValidityConfig};
 use crate::model::vehicle::{VehicleParams, G};
+use crate::output::validity_files::{write_csv, write_plot};
 
 /// Command-line arguments of `host-sim validity`.
 #[derive(Debug, Clone, clap::Args)]

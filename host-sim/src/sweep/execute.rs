@@ -10,6 +10,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 use crate::closed_loop::plan_activation::PlanActivation;
+use crate::closed_loop::set_up::{set_up, RunSpec, Setting};
 use crate::closed_loop::timeline::{self, LogRow};
 use crate::closed_loop::vehicle_width_m;
 use crate::model::vehicle::VehicleParams;
@@ -20,7 +21,6 @@ use crate::world::faults::{classify, Fault, Outcome, RunFacts, FAULT_START_S};
 use crate::world::obstacle_file::obstacles_to_csv_string;
 use crate::world::obstacle_placement::widths_at;
 use crate::world::scenario::Scenario;
-use crate::world::set_up::{set_up, RunSpec, Setting};
 
 /// Which runs of a sweep keep their logs (`--logs`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

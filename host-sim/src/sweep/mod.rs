@@ -50,7 +50,7 @@
 //!
 //! With obstacles, each run's are written to `obstacles/<index>.csv`. `host-sim run`
 //! with a run's factors (`--track T --mu … --fault … --seed S`, its `--obstacles`)
-//! sets the run up as the sweep did ([`crate::world::set_up::set_up`]) and
+//! sets the run up as the sweep did ([`crate::closed_loop::set_up::set_up`]) and
 //! replays it.
 //!
 //! # Exit status

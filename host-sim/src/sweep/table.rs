@@ -7,9 +7,9 @@ use std::path::Path;
 
 use anyhow::{anyhow, Context, Result};
 
+use crate::closed_loop::set_up::RunSpec;
 use crate::closed_loop::summary::Summary;
 use crate::world::faults::Outcome;
-use crate::world::set_up::RunSpec;
 
 /// Leading columns of `sweep.csv`: the run's factors.
 pub const FACTOR_COLUMNS: [&str; 10] = [

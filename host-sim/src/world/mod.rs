@@ -13,7 +13,6 @@
 //! | [`route`] | the windows of the road the ECU holds, sent as the car moves on |
 //! | [`disturbance`] | noise, delay, dropout, steering rate limit, late obstacle at the ECU's boundary |
 //! | [`faults`] | named fault scenarios with their expected behaviour; run outcomes |
-//! | [`set_up`] | one run set up from its factors: scenario, cars, options, disturbances |
 
 pub mod csv_value;
 pub mod disturbance;
@@ -23,5 +22,4 @@ pub mod obstacle_placement;
 pub mod road_friction;
 pub mod route;
 pub mod scenario;
-pub mod set_up;
 pub mod track;
