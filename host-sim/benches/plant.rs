@@ -13,8 +13,8 @@ use std::io::Write;
 use std::time::Instant;
 
 use criterion::{criterion_group, Criterion};
-use host_sim::plant::{Inputs, Plant, State};
-use host_sim::vehicle::VehicleParams;
+use host_sim::model::plant::{Inputs, Plant, State};
+use host_sim::model::vehicle::VehicleParams;
 
 /// A cornering, accelerating manoeuvre (all tyres in combined slip).
 fn inputs(k: usize) -> Inputs {

@@ -39,10 +39,12 @@ use std::time::{Duration, Instant};
 use criterion::{Criterion, Throughput};
 use firmware::mpc::{MpcQp, MpcQpProblem};
 use firmware::Real;
-use host_sim::qp_corpus::{
-    builtin_obstacles, builtin_track_rows, median_max, native_problems, read_corpus, record,
-    status_name, CorpusEntry, Precision, StandardQp, DEFAULT_STEPS, N_DECISION,
-};
+use host_sim::closed_loop::Precision;
+use host_sim::qp_corpus::entry::{status_name, CorpusEntry, N_DECISION};
+use host_sim::qp_corpus::files::read_corpus;
+use host_sim::qp_corpus::record::{builtin_obstacles, builtin_track_rows, record, DEFAULT_STEPS};
+use host_sim::qp_corpus::replay::{median_max, native_problems};
+use host_sim::qp_corpus::standard::StandardQp;
 
 /// OSQP's infinity.
 const OSQP_INF: f64 = 1e30;

@@ -1,9 +1,11 @@
 //! `host-sim` command line.
 //!
-//! One subcommand per job, each implemented in its own library module: add a variant
-//! to [`Command`] and a line to `main` to add one.
+//! One subcommand per job, each implemented in its own module of
+//! `host_sim::commands` (`wcet`'s is `host_sim::wcet::command`): add a variant to
+//! [`Command`] and a line to `run` to add one.
 
 use clap::{Parser, Subcommand};
+use host_sim::{commands, wcet};
 
 /// Host simulator of the consistent MPC + PID vehicle controller.
 #[derive(Debug, Parser)]
@@ -16,40 +18,40 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Tyre forces (PAC2002 combined slip) for a CSV of slips: kappa,alpha_rad,fz_n,mu.
-    Tire(host_sim::tire_table::TireArgs),
+    Tire(commands::tire::TireArgs),
     /// The paper's Figure 3: steering of the 9-DoF plant vs the kinematic bicycle on
     /// circles, up to the speed where the car cannot hold them.
-    Validity(host_sim::validity::ValidityArgs),
+    Validity(commands::validity::ValidityArgs),
     /// A closed-loop drive: the 9-DoF plant against the firmware's two tasks on a
     /// deterministic timeline; writes log.csv, summary.json and the figures.
-    Run(host_sim::run::RunCommand),
+    Run(commands::run::RunCommand),
     /// Processor in the loop: the ECU application in QEMU against the plant; writes
     /// what `run` writes plus plan_activations.csv and pil.json (measured ECU costs).
-    Pil(host_sim::pil::PilCommand),
+    Pil(commands::pil::PilCommand),
     /// The ECU's worst-case timing and memory report (wcet.md, wcet.json) from PIL
     /// laps, a QEMU trace for the cycles-per-instruction bound and the ELF.
-    Wcet(host_sim::wcet::command::WcetArgs),
+    Wcet(wcet::command::WcetArgs),
     /// Every QP the MPC solves over a kinematic closed loop, one JSON file each (for solver benchmarks).
-    QpCorpus(host_sim::qp_corpus::QpCorpusArgs),
+    QpCorpus(commands::qp_corpus::QpCorpusArgs),
     /// Many closed-loop runs: the cross product of tracks, frictions, vehicles, loads,
     /// noise, delays, faults and seeds (the options of `run`, lists here), in
     /// parallel; writes sweep.csv (one row per run), sweep.json (the aggregate),
     /// figures and summary.txt. Exits non-zero when a run could not run.
-    Sweep(host_sim::sweep::SweepArgs),
+    Sweep(commands::sweep::SweepArgs),
     /// Joins the sweep.csv of shards (`sweep --only I/N`) into one sweep's outputs.
-    SweepMerge(host_sim::sweep::MergeArgs),
+    SweepMerge(commands::sweep::MergeArgs),
 }
 
 fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
-        Command::Tire(args) => host_sim::tire_table::run(args),
-        Command::Validity(args) => host_sim::validity::run(args),
-        Command::Run(args) => host_sim::run::command(args),
-        Command::QpCorpus(args) => host_sim::qp_corpus::run(args),
-        Command::Pil(args) => host_sim::pil::command(args),
-        Command::Wcet(args) => host_sim::wcet::command::run(args),
-        Command::Sweep(args) => host_sim::sweep::run(args),
-        Command::SweepMerge(args) => host_sim::sweep::merge(args),
+        Command::Tire(args) => commands::tire::run(args),
+        Command::Validity(args) => commands::validity::run(args),
+        Command::Run(args) => commands::run::command(args),
+        Command::QpCorpus(args) => commands::qp_corpus::run(args),
+        Command::Pil(args) => commands::pil::command(args),
+        Command::Wcet(args) => wcet::command::run(args),
+        Command::Sweep(args) => commands::sweep::run(args),
+        Command::SweepMerge(args) => commands::sweep::merge(args),
     }
 }
 

@@ -5,7 +5,8 @@
 use std::path::Path;
 use std::process::Command;
 
-use host_sim::tire::{forces, TireParams};
+use host_sim::closed_loop::summary::Summary;
+use host_sim::model::tire::{forces, TireParams};
 
 fn host_sim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_host-sim"))
@@ -191,15 +192,15 @@ fn commands() -> [(&'static str, clap::Command); 3] {
     [
         (
             "run",
-            host_sim::run::RunCommand::augment_args(clap::Command::new("run")),
+            host_sim::commands::run::RunCommand::augment_args(clap::Command::new("run")),
         ),
         (
             "pil",
-            host_sim::pil::PilCommand::augment_args(clap::Command::new("pil")),
+            host_sim::commands::pil::PilCommand::augment_args(clap::Command::new("pil")),
         ),
         (
             "sweep",
-            host_sim::sweep::SweepArgs::augment_args(clap::Command::new("sweep")),
+            host_sim::commands::sweep::SweepArgs::augment_args(clap::Command::new("sweep")),
         ),
     ]
 }
@@ -221,7 +222,8 @@ fn signature(a: &clap::Arg) -> String {
 #[test]
 fn run_pil_and_sweep_spell_every_scenario_option_alike() {
     use clap::Args;
-    let shared = host_sim::scenario_options::ScenarioArgs::augment_args(clap::Command::new("x"));
+    let shared =
+        host_sim::commands::scenario_args::ScenarioArgs::augment_args(clap::Command::new("x"));
     let names: Vec<&str> = shared
         .get_arguments()
         .filter_map(|a| a.get_long())
@@ -327,18 +329,18 @@ fn the_same_words_parse_to_the_same_scenario_in_run_pil_and_sweep_old_spellings_
                 .unwrap_or_else(|e| panic!("`{cmd}` {w:?}: {e}"));
             let scenario = match cmd {
                 "run" => {
-                    host_sim::run::RunCommand::from_arg_matches(&m)
+                    host_sim::commands::run::RunCommand::from_arg_matches(&m)
                         .unwrap()
                         .scenario
                 }
                 "pil" => {
-                    host_sim::pil::PilCommand::from_arg_matches(&m)
+                    host_sim::commands::pil::PilCommand::from_arg_matches(&m)
                         .unwrap()
                         .run
                         .scenario
                 }
                 _ => {
-                    host_sim::sweep::SweepArgs::from_arg_matches(&m)
+                    host_sim::commands::sweep::SweepArgs::from_arg_matches(&m)
                         .unwrap()
                         .scenario
                 }
@@ -361,7 +363,7 @@ fn the_help_of_run_pil_and_sweep_lists_every_fault_scenario_from_the_table() {
         let o = host_sim().args([cmd, "--help"]).output().unwrap();
         assert!(o.status.success());
         let help = String::from_utf8_lossy(&o.stdout);
-        for k in &host_sim::faults::FAULT_KINDS {
+        for k in &host_sim::world::faults::FAULT_KINDS {
             assert!(
                 help.contains(&k.usage()),
                 "`{cmd} --help` lacks {}",
@@ -424,15 +426,15 @@ fn a_missing_path_is_refused_before_any_run_with_the_forms_accepted_and_its_caus
     // prints an error: the chain of causes on one line).
     let missing = dir.path().join("missing.csv");
     for path in [missing.as_path(), dir.path()] {
-        let e = host_sim::obstacle_file::load_obstacles_path(path).unwrap_err();
+        let e = host_sim::world::obstacle_file::load_obstacles_path(path).unwrap_err();
         let chain = format!("{:#}", anyhow::Error::new(e));
         assert_eq!(chain.matches("(os error").count(), 1, "{chain}");
         assert!(chain.contains(&path.display().to_string()), "{chain}");
-        let e = host_sim::track::Track::from_csv_path(path, true).unwrap_err();
+        let e = host_sim::world::track::Track::from_csv_path(path, true).unwrap_err();
         let chain = format!("{:#}", anyhow::Error::new(e));
         assert_eq!(chain.matches("(os error").count(), 1, "{chain}");
     }
-    let e = host_sim::vehicle::VehicleParams::from_toml_file(&missing).unwrap_err();
+    let e = host_sim::model::vehicle::VehicleParams::from_toml_file(&missing).unwrap_err();
     let chain = format!("{:#}", anyhow::Error::new(e));
     assert_eq!(chain.matches("(os error").count(), 1, "{chain}");
 }
@@ -478,7 +480,7 @@ fn run_and_pil_take_one_value_of_each_option_and_pil_refuses_what_it_cannot_appl
 #[test]
 fn run_places_random_obstacles_from_its_seed_as_the_sweep_does() {
     let dir = tempfile::tempdir().unwrap();
-    let clearance = |seed: &str| -> serde_json::Value {
+    let clearance = |seed: &str| -> Option<f64> {
         let out = dir.path().join(seed);
         let o = host_sim()
             .args(["run", "--obstacles", "random:3", "--seed", seed])
@@ -487,13 +489,13 @@ fn run_places_random_obstacles_from_its_seed_as_the_sweep_does() {
             .output()
             .unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let s: serde_json::Value =
+        let s: Summary =
             serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
                 .unwrap();
-        s["min_obstacle_clearance_m"].clone()
+        s.min_obstacle_clearance_m
     };
     let a = clearance("0");
-    assert!(a.as_f64().is_some(), "no obstacle placed: {a}");
+    assert!(a.is_some(), "no obstacle placed: {a:?}");
     assert_eq!(a, clearance("0"));
     assert_ne!(a, clearance("1"), "the seed draws other obstacles");
 }
@@ -565,10 +567,11 @@ fn run_with_a_sweep_runs_factors_replays_it() {
         .iter()
         .map(String::from)
         .collect();
-    let summary: serde_json::Value = serde_json::from_str(
+    let summary: Summary = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("run/summary.json")).unwrap(),
     )
     .unwrap();
+    let summary = serde_json::to_value(&summary).unwrap();
     let cell = |k: &str| &row[head.iter().position(|h| h == k).unwrap()];
     assert_ne!(cell("obstacle_count"), "0");
     assert_eq!(cell("fault"), "steer-rate:0.4");

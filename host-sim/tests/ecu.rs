@@ -6,12 +6,13 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use firmware::state_estimate::StateEstimate;
-use host_sim::closed_loop::{
-    self, ControlOutput, CostModel, Ecu, RunResult, SimOptions, SimulatedEcu,
-};
-use host_sim::run::{simulate, Precision};
-use host_sim::scenario::Scenario;
-use host_sim::vehicle::VehicleParams;
+use host_sim::closed_loop::cost_model::CostModel;
+use host_sim::closed_loop::ecu::{ControlOutput, Ecu, SimulatedEcu};
+use host_sim::closed_loop::simulate::simulate;
+use host_sim::closed_loop::timeline::{self, RunResult};
+use host_sim::closed_loop::{Precision, SimOptions};
+use host_sim::model::vehicle::VehicleParams;
+use host_sim::world::scenario::Scenario;
 
 /// The state at the start of the paper track, at `v` m/s.
 fn start_estimate(scenario: &Scenario, v: f64, t_us: u64) -> StateEstimate<f32> {
@@ -112,7 +113,7 @@ fn a_failed_activation_is_charged_from_its_own_counters() {
     assert_eq!((p.passes, p.qp_iterations), (1, 1));
     assert!(p.rows > 0);
     let m = &opts.cost_model;
-    let counted = m.plan_instructions(&host_sim::cost_model::report_of(&p.into()));
+    let counted = m.plan_instructions(&host_sim::closed_loop::cost_model::report_of(&p.into()));
     // One pass, one iteration: at least the pass and its rows.
     assert!(
         counted
@@ -154,9 +155,9 @@ fn run_is_run_with_the_simulated_ecu() {
         max_duration_s: 2.0,
         ..SimOptions::default()
     };
-    let a = closed_loop::run::<f32>(&scenario, &v, &opts, |_, _| {}).unwrap();
+    let a = timeline::run::<f32>(&scenario, &v, &opts, |_, _| {}).unwrap();
     let mut ecu = SimulatedEcu::<f32>::new(&scenario, &v, &opts).unwrap();
-    let b = closed_loop::run_with(&scenario, &v, &opts, &mut ecu, |_, _| {}).unwrap();
+    let b = timeline::run_with(&scenario, &v, &opts, &mut ecu, |_, _| {}).unwrap();
     assert_eq!(a.log, b.log);
     assert_eq!(a.plan_activations, b.plan_activations);
     assert_eq!(a.plans, b.plans);
@@ -316,7 +317,7 @@ impl Ecu<f32> for LateAnswer {
         self.inner.active_plan()
     }
 
-    fn set_window(&mut self, t_us: u64, w: &host_sim::route::Window) -> anyhow::Result<()> {
+    fn set_window(&mut self, t_us: u64, w: &host_sim::world::route::Window) -> anyhow::Result<()> {
         self.inner.set_window(t_us, w)
     }
 }
@@ -333,7 +334,7 @@ fn run_with_answer_sent(at_us: u64, delay_us: u64) -> RunResult {
         at_us,
         delay_us,
     };
-    closed_loop::run_with(&scenario, &v, &opts, &mut ecu, |_, _| {}).unwrap()
+    timeline::run_with(&scenario, &v, &opts, &mut ecu, |_, _| {}).unwrap()
 }
 
 #[test]
@@ -384,7 +385,7 @@ impl Ecu<f32> for PositionsOnly {
         &self.plan
     }
 
-    fn set_window(&mut self, t_us: u64, w: &host_sim::route::Window) -> anyhow::Result<()> {
+    fn set_window(&mut self, t_us: u64, w: &host_sim::world::route::Window) -> anyhow::Result<()> {
         self.inner.set_window(t_us, w)
     }
 
@@ -408,7 +409,7 @@ fn the_plans_lateral_acceleration_is_null_where_the_ecu_does_not_report_it() {
         inner: SimulatedEcu::<f32>::new(&scenario, &v, &opts).unwrap(),
         plan: firmware::plan::Plan::zeroed(),
     };
-    let r = closed_loop::run_with(&scenario, &v, &opts, &mut ecu, |_, _| {}).unwrap();
+    let r = timeline::run_with(&scenario, &v, &opts, &mut ecu, |_, _| {}).unwrap();
     assert_eq!(r.summary.max_abs_plan_ay_mps2, None);
     let json = serde_json::to_value(&r.summary).unwrap();
     assert!(json["max_abs_plan_ay_mps2"].is_null(), "{json}");
@@ -450,7 +451,7 @@ fn the_modelled_ecu_reports_no_ecu_counts_and_the_summary_writes_null() {
 
 #[test]
 fn the_host_counts_skipped_releases_from_the_end_of_an_activation() {
-    use host_sim::pil::skipped_between;
+    use host_sim::pil::deadlines::skipped_between;
     // Ends before or exactly at the next release: nothing skipped.
     assert_eq!(skipped_between(0, 40_000, 100_000), 0);
     assert_eq!(skipped_between(0, 100_000, 100_000), 0);

@@ -5,10 +5,11 @@
 //! a wet road (Budapest at μ 0.3: the car must not stand still on a clear road).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use host_sim::faults::Fault;
-use host_sim::road_friction::MuPatch;
-use host_sim::scenario_options::Setting;
-use host_sim::sweep::{execute, header, Common, RunSpec};
+use host_sim::closed_loop::set_up::{RunSpec, Setting};
+use host_sim::sweep::execute::{execute, Common};
+use host_sim::sweep::table::header;
+use host_sim::world::faults::Fault;
+use host_sim::world::road_friction::MuPatch;
 
 /// One lap of `track` (a file of `tests/data`) as the sweep runs it; returns the
 /// cells `outcome`, `stop_reason` and `collisions`.

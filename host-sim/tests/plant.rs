@@ -1,8 +1,8 @@
 //! The 9-DoF plant: loads, straight-line behaviour, standstill, determinism.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use host_sim::plant::{Inputs, Plant, PlantError, State, FL, FR, RL, RR};
-use host_sim::vehicle::{VehicleParams, G};
+use host_sim::model::plant::{Inputs, Plant, PlantError, State, FL, FR, RL, RR};
+use host_sim::model::vehicle::{VehicleParams, G};
 
 fn run(plant: &mut Plant, inputs: &Inputs, seconds: f64) {
     let n = (seconds / plant.dt_s()).round() as usize;

@@ -3,10 +3,10 @@
 //! rest, wheel lift).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use host_sim::plant::{Inputs, Plant, State, FL, FR, RL, RR};
-use host_sim::tire::{self, TireParams};
-use host_sim::validity::{sweep_radius, StopCause, ValidityConfig};
-use host_sim::vehicle::{VehicleParams, G};
+use host_sim::closed_loop::validity::{sweep_radius, StopCause, ValidityConfig};
+use host_sim::model::plant::{Inputs, Plant, State, FL, FR, RL, RR};
+use host_sim::model::tire::{self, TireParams};
+use host_sim::model::vehicle::{VehicleParams, G};
 use indicatif::ProgressBar;
 
 /// The light car of issue 8: 1,090 kg, 2.58 m wheelbase, centre of gravity 0.57 m

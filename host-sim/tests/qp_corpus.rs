@@ -10,11 +10,12 @@
 
 use std::sync::OnceLock;
 
-use host_sim::qp_corpus::{
-    builtin_obstacles, builtin_track_rows, median_max, native_problems, read_corpus, record,
-    replay, time_solves, write_corpus, CorpusEntry, Precision, StandardQp, DEFAULT_STEPS,
-    N_DECISION,
-};
+use host_sim::closed_loop::Precision;
+use host_sim::qp_corpus::entry::{CorpusEntry, N_DECISION};
+use host_sim::qp_corpus::files::{read_corpus, write_corpus};
+use host_sim::qp_corpus::record::{builtin_obstacles, builtin_track_rows, record, DEFAULT_STEPS};
+use host_sim::qp_corpus::replay::{median_max, native_problems, replay, time_solves};
+use host_sim::qp_corpus::standard::StandardQp;
 
 /// The built-in scenario's corpus (f64), recorded once for all tests.
 fn corpus() -> &'static [CorpusEntry] {

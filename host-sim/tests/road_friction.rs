@@ -3,15 +3,17 @@
 //! column against the definition applied to the run's own trace.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use host_sim::closed_loop::{LogRow, SimOptions};
-use host_sim::faults::Fault;
-use host_sim::plant::{Inputs, Plant, State};
-use host_sim::road_friction::MuPatch;
-use host_sim::run::{simulate, Precision};
-use host_sim::scenario::{Scenario, PAPER_HALF_WIDTH_M};
-use host_sim::scenario_options::Setting;
-use host_sim::sweep::{execute, header, Common, LogRuns, RunSpec};
-use host_sim::vehicle::VehicleParams;
+use host_sim::closed_loop::set_up::{RunSpec, Setting};
+use host_sim::closed_loop::simulate::simulate;
+use host_sim::closed_loop::timeline::LogRow;
+use host_sim::closed_loop::{Precision, SimOptions};
+use host_sim::model::plant::{Inputs, Plant, State};
+use host_sim::model::vehicle::VehicleParams;
+use host_sim::sweep::execute::{execute, Common, LogRuns};
+use host_sim::sweep::table::header;
+use host_sim::world::faults::Fault;
+use host_sim::world::road_friction::MuPatch;
+use host_sim::world::scenario::{Scenario, PAPER_HALF_WIDTH_M};
 
 /// Speed after braking hard from 20 m/s for 1 s with the four wheels on `mu`.
 fn speed_after_braking(mu: [f64; 4]) -> f64 {

@@ -2,8 +2,8 @@
 //! and behind it, on closed and open tracks, over several laps.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-use host_sim::route::{RouteFeeder, Window, AHEAD_M, BEHIND_M, WINDOW_ROWS};
-use host_sim::track::Track;
+use host_sim::world::route::{RouteFeeder, Window, AHEAD_M, BEHIND_M, WINDOW_ROWS};
+use host_sim::world::track::Track;
 
 /// A track of `n` rows round an ellipse (closed) or along a sine (open), `spacing`
 /// metres apart on average.
@@ -72,7 +72,7 @@ fn a_closed_circuit_always_has_its_road_ahead_over_two_laps() {
     let t = track(1500, 2.0, true);
     let sent = drive(&t, 2.0 * t.length());
     // About one window per 60 m driven.
-    let expected = 2.0 * t.length() / host_sim::route::ADVANCE_M;
+    let expected = 2.0 * t.length() / host_sim::world::route::ADVANCE_M;
     assert!(
         (sent as f64 - expected).abs() < 0.1 * expected + 2.0,
         "{sent} windows, ~{expected:.0} expected"

@@ -7,15 +7,15 @@
 use std::f64::consts::PI;
 use std::path::PathBuf;
 
-use host_sim::obstacle_file::{
+use host_sim::world::obstacle_file::{
     distance, intersects, load_obstacles_path, vehicle_footprint, Obstacle,
 };
-use host_sim::scenario::{
+use host_sim::world::scenario::{
     paper_obstacles, paper_obstacles_csv, paper_pieces, paper_pose_at, paper_track,
     paper_track_csv, resolve, Scenario, ScenarioError, CAR_WIDTH_M, PAPER_HALF_WIDTH_M,
     PAPER_MIN_FREE_WIDTH_M, PAPER_OBSTACLES,
 };
-use host_sim::track::{Track, TrackPiece};
+use host_sim::world::track::{Track, TrackPiece};
 
 fn manifest(rel: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(rel)

@@ -7,10 +7,11 @@ use std::f64::consts::PI;
 use std::path::Path;
 use std::process::Command;
 
-use host_sim::faults::Fault;
-use host_sim::scenario_options::Setting;
-use host_sim::sweep::{execute, header, Common, RunSpec};
-use host_sim::track::{Track, TrackPiece};
+use host_sim::closed_loop::set_up::{RunSpec, Setting};
+use host_sim::sweep::execute::{execute, Common};
+use host_sim::sweep::table::header;
+use host_sim::world::faults::Fault;
+use host_sim::world::track::{Track, TrackPiece};
 
 fn host_sim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_host-sim"))

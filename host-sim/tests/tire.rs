@@ -1,7 +1,7 @@
 //! PAC2002 tyre: pure-slip sanity and the friction ellipse of combined slip.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use host_sim::tire::{forces, pure_slip_forces, TireParams};
+use host_sim::model::tire::{forces, pure_slip_forces, TireParams};
 
 fn grid(lo: f64, hi: f64, n: usize) -> impl Iterator<Item = f64> {
     (0..=n).map(move |i| lo + (hi - lo) * i as f64 / n as f64)

@@ -3,10 +3,10 @@
 
 use std::path::PathBuf;
 
-use host_sim::obstacle_file::{
+use host_sim::world::obstacle_file::{
     distance, intersects, load_obstacles_reader, point_in_polygon, vehicle_footprint, ObstacleError,
 };
-use host_sim::track::{Track, TrackError, TrackPiece, DEFAULT_HALF_WIDTH_M};
+use host_sim::world::track::{Track, TrackError, TrackPiece, DEFAULT_HALF_WIDTH_M};
 
 fn data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -392,7 +392,7 @@ fn projection_wraps_on_a_closed_loop() {
 
 // ---------------------------------------------------------------- obstacles
 
-fn obstacles(text: &str) -> Result<Vec<host_sim::obstacle_file::Obstacle>, ObstacleError> {
+fn obstacles(text: &str) -> Result<Vec<host_sim::world::obstacle_file::Obstacle>, ObstacleError> {
     load_obstacles_reader(text.as_bytes(), "obs.csv")
 }
 

@@ -1,8 +1,8 @@
 //! The validity experiment: at walking pace the plant needs the kinematic steering.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use host_sim::validity::{run_experiment, ValidityConfig};
-use host_sim::vehicle::VehicleParams;
+use host_sim::closed_loop::validity::{run_experiment, ValidityConfig};
+use host_sim::model::vehicle::VehicleParams;
 use indicatif::ProgressBar;
 
 #[test]

@@ -1,7 +1,7 @@
 //! Vehicle files: the shipped template, and errors that name the field.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use host_sim::vehicle::{VehicleError, VehicleParams};
+use host_sim::model::vehicle::{VehicleError, VehicleParams};
 
 const TEMPLATE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/vehicles/default.toml");
 

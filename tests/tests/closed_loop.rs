@@ -3,10 +3,11 @@
 //! Deterministic: each assertion is on a simulated, bit-reproducible run.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-use host_sim::closed_loop::{RunResult, SimOptions};
-use host_sim::run::{simulate, Precision};
-use host_sim::scenario::Scenario;
-use host_sim::vehicle::VehicleParams;
+use host_sim::closed_loop::simulate::simulate;
+use host_sim::closed_loop::timeline::RunResult;
+use host_sim::closed_loop::{Precision, SimOptions};
+use host_sim::model::vehicle::VehicleParams;
+use host_sim::world::scenario::Scenario;
 
 const G: f64 = 9.81;
 

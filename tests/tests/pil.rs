@@ -10,12 +10,14 @@
 
 use std::path::PathBuf;
 
-use host_sim::closed_loop::{run_with, RunResult, SimOptions};
-use host_sim::cost_model::{CostModel, Counters};
-use host_sim::obstacle_file::Obstacle;
-use host_sim::pil::{count_mismatches, PilOptions, QemuEcu, TickOverruns};
-use host_sim::scenario::{paper_pose_at, Scenario};
-use host_sim::vehicle::VehicleParams;
+use host_sim::closed_loop::cost_model::{CostModel, Counters};
+use host_sim::closed_loop::timeline::{run_with, RunResult};
+use host_sim::closed_loop::SimOptions;
+use host_sim::model::vehicle::VehicleParams;
+use host_sim::pil::deadlines::{count_mismatches, TickOverruns};
+use host_sim::pil::qemu::{LinkCounters, PilOptions, QemuEcu};
+use host_sim::world::obstacle_file::Obstacle;
+use host_sim::world::scenario::{paper_pose_at, Scenario};
 
 fn elf() -> PathBuf {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
@@ -50,7 +52,7 @@ fn drive(
 ) -> (
     RunResult,
     firmware::link::DoneFrame,
-    host_sim::pil::LinkCounters,
+    LinkCounters,
     TickOverruns,
 ) {
     let opts = SimOptions {

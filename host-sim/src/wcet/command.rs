@@ -10,9 +10,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 
-use crate::cost_model::{load_counters, CostModel};
-use crate::pil::{self, PilArgs};
-use crate::run::RunArgs;
+use crate::closed_loop::cost_model::{load_counters, CostModel};
+use crate::commands::pil::{self, PilArgs};
+use crate::commands::run::RunArgs;
 use crate::wcet::cpi::{self, CpiReport};
 use crate::wcet::report::{self, ReportInputs};
 

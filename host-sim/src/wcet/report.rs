@@ -87,7 +87,7 @@ pub struct PilInfo {
 }
 
 /// One row of `plan_activations.csv`: the type `run` and `pil` write it with.
-pub use crate::ecu::PlanActivation;
+pub use crate::closed_loop::plan_activation::PlanActivation;
 
 /// A processor-in-the-loop run folder, read by [`load_pil_run`].
 #[derive(Debug, Clone, PartialEq, Serialize)]

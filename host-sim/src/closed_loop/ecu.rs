@@ -1,0 +1,452 @@
+//! What runs the firmware in the closed loop: the [`Ecu`] trait, and
+//! [`SimulatedEcu`], the firmware's two tasks run in this process on a modelled
+//! timeline.
+//!
+//! The closed-loop driver ([`run_with`](crate::closed_loop::timeline::run_with)) owns the plant, the
+//! measurements and the log; it calls [`Ecu::control`] at every 10 ms control
+//! release with the plant's state of that instant and applies the actuation it
+//! returns. Everything else (when the `plan` task runs, how long it takes, when its
+//! plan is published) is the ECU's business: modelled here by [`SimulatedEcu`],
+//! measured on the firmware running under an emulator by another implementation.
+//!
+//! # The modelled timeline ([`SimulatedEcu`])
+//!
+//! At each call at `t` (a multiple of 10 ms): a plan activation that has finished
+//! by `t` publishes its plan (if optimal), then `control` runs on the estimate and
+//! the current plan, its actuation sent at `t` plus its modelled cycles over the
+//! clock (control releases are never skipped in this model: a control activation
+//! longer than its period shows as a deadline miss); when `t` is a multiple of 100 ms the `plan` task is released
+//! after it (lower priority) on the same estimate. The host computes the plan at
+//! once, but the activation finishes, and publishes, at
+//!
+//! ```text
+//! finish = release + (plan cycles + cycles of the control activations that preempt it) / f_ECU
+//! ```
+//!
+//! with every activation's instructions from its own work counters through
+//! [`CostModel`], failed activations included, and cycles = instructions ×
+//! [`SimOptions::cycles_per_instruction`]. A release that falls while the `plan`
+//! task is still running is skipped (see the late-plan policy in
+//! [`crate::closed_loop::timeline`]).
+
+use anyhow::{anyhow, Result};
+use firmware::low_level::Actuation;
+use firmware::mpc::MpcReport;
+use firmware::obstacles::Obstacle as FwObstacle;
+use firmware::plan::Plan;
+use firmware::state_estimate::StateEstimate;
+use firmware::tasks::{ControlTask, PlanTask, CONTROL_PERIOD_US, MAX_PLAN_AGE_US, PLAN_PERIOD_US};
+use firmware::Real;
+use serde::{Deserialize, Serialize};
+
+use crate::closed_loop::cost_model::CostModel;
+use crate::closed_loop::plan_activation::{mpc_error_name, PlanActivation};
+use crate::closed_loop::{vehicle_config, SimOptions, HOST_PATH_CAP};
+use crate::model::vehicle::VehicleParams;
+use crate::world::obstacle_file::Obstacle;
+use crate::world::route::{RouteFeeder, Window};
+use crate::world::scenario::Scenario;
+
+/// One task's deadline counts as the ECU itself counted them on its own clock
+/// (`firmware::deadline`), cumulative.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct EcuTaskCounts {
+    /// Releases that ran.
+    pub releases: u64,
+    /// Late completions plus skipped releases.
+    pub deadline_misses: u64,
+    /// Releases skipped because the task was still busy.
+    pub skipped_releases: u64,
+    /// Activations over their cycle budget, counted in the ECU's own clock ticks.
+    pub budget_overruns: u64,
+    /// Largest response time, µs.
+    pub max_response_us: u64,
+}
+
+impl From<firmware::link::TaskTimingFrame> for EcuTaskCounts {
+    fn from(t: firmware::link::TaskTimingFrame) -> Self {
+        Self {
+            releases: t.releases.into(),
+            deadline_misses: t.deadline_misses.into(),
+            skipped_releases: t.skipped_releases.into(),
+            budget_overruns: t.budget_overruns.into(),
+            max_response_us: t.max_response_us.into(),
+        }
+    }
+}
+
+/// What an ECU that watches its own deadlines reports (processor in the loop).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct EcuCounts {
+    /// The `plan` task's counts (as of the last plan event received).
+    pub plan: EcuTaskCounts,
+    /// The `control` task's counts.
+    pub control: EcuTaskCounts,
+    /// Times the control task's watchdog saw no new plan for too long.
+    pub watchdog_trips: u64,
+}
+
+/// What one control activation produced.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ControlOutput<T> {
+    /// The actuation to hold until the next one takes effect.
+    pub actuation: Actuation<T>,
+    /// The control release this activation ran at, µs (the call's `t_us` unless
+    /// the ECU fell behind).
+    pub release_us: u64,
+    /// When the ECU sent the actuation, µs on the same timeline: the plant applies
+    /// it from the plant step containing that instant (see [`crate::closed_loop::timeline`]).
+    /// Its response time is `sent_us − release_us`.
+    pub sent_us: u64,
+    /// Control releases the ECU skipped before this one (it was still busy).
+    pub control_skipped_releases: u32,
+    /// The ECU's own deadline counts after this activation, `None` when the ECU
+    /// does not count them (the modelled ECU).
+    pub ecu_counts: Option<EcuCounts>,
+    /// Instructions of this control activation.
+    pub instructions: f64,
+    /// Its cycles (instructions × cycles per instruction), ECU cycles.
+    pub cycles: f64,
+    /// Plan activations that finished since the previous control activation, in order.
+    pub plans: Vec<PlanActivation>,
+    /// Plan releases lost since the previous call because the plan task was still
+    /// running (each a deadline miss).
+    pub skipped_releases: u32,
+    /// The control task's friction estimate `μ̂` after this activation
+    /// (`firmware::friction`; `+∞`: no slip seen), `None` when the ECU does not
+    /// report it (processor in the loop).
+    pub friction_mu: Option<f64>,
+}
+
+/// The firmware side of the closed loop.
+pub trait Ecu<T: Real> {
+    /// The control activation released at `t_us` (µs) on `est` (the plant's state
+    /// at that instant); the ECU also runs everything due by `t_us` (plan releases
+    /// at multiples of 100 ms happen right after the control activation of the same
+    /// instant, as the priorities order them).
+    fn control(&mut self, t_us: u64, est: &StateEstimate<T>) -> Result<ControlOutput<T>>;
+
+    /// The plan the control task is following after the last call (for the
+    /// consistency figure and plan traces).
+    fn active_plan(&self) -> &Plan<T>;
+
+    /// The next window of the road ([`crate::world::route`]), given before the control
+    /// activation of the instant `t_us` (µs) it is due; the plan task adopts it after its next
+    /// publication (at the end of the activation running then, or of the next).
+    fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()>;
+
+    /// Whether [`Self::active_plan`] carries each node's speed and steering (the
+    /// plan's lateral acceleration is measured from them), not only its positions.
+    fn reports_plan_states(&self) -> bool {
+        true
+    }
+}
+
+/// A plan activation computed on the host, waiting for its modelled finish.
+#[derive(Clone, Debug)]
+struct InFlight {
+    record: PlanActivation,
+}
+
+/// The firmware's two tasks in this process, on the modelled timeline (see the
+/// module docs).
+#[derive(Debug)]
+pub struct SimulatedEcu<T: Real> {
+    planner: Box<PlanTask<T, HOST_PATH_CAP>>,
+    control: ControlTask<T>,
+    shared_plan: Plan<T>,
+    cost_model: CostModel,
+    cycles_per_instruction: f64,
+    ecu_clock_hz: f64,
+    in_flight: Option<InFlight>,
+    busy_until_us: u64,
+    releases: u32,
+    /// The next window of the road and when it arrived, µs; adopted at the end of
+    /// the first plan activation that finishes after that.
+    pending_window: Option<(Window, u64)>,
+}
+
+impl<T: Real> SimulatedEcu<T> {
+    /// The tasks for `scenario`'s track and obstacles and `vehicle`'s car, timed
+    /// with `opts`' cost model and ECU clock. Fails, saying why, on a track or an
+    /// obstacle the planner refuses or a clock that is not a positive number.
+    pub fn new(scenario: &Scenario, vehicle: &VehicleParams, opts: &SimOptions) -> Result<Self> {
+        if !(opts.ecu_clock_hz.is_finite() && opts.ecu_clock_hz > 0.0) {
+            return Err(anyhow!(
+                "ECU clock must be a positive number of Hz, got {}",
+                opts.ecu_clock_hz
+            ));
+        }
+        if !(opts.cycles_per_instruction.is_finite() && opts.cycles_per_instruction > 0.0) {
+            return Err(anyhow!(
+                "cycles per instruction must be a positive number, got {}",
+                opts.cycles_per_instruction
+            ));
+        }
+        let track = &scenario.track;
+        // The planner: path, obstacles, MPC (boxed: the path is large on the host).
+        let car = vehicle_config::<T>(vehicle);
+        let mu_planner = T::from_f64(opts.mu_planner);
+        let mut planner: Box<PlanTask<T, HOST_PATH_CAP>> =
+            Box::new(PlanTask::new(car.mpc_settings(), mu_planner));
+        let rows: Vec<[T; 4]> = track.rows().iter().map(|r| r.map(T::from_f64)).collect();
+        planner
+            .path
+            .load_track(&rows, track.closed)
+            .map_err(|e| anyhow!("track {}: the planner refused it: {e:?}", track.name))?;
+        let fw_obstacles = scenario
+            .obstacles
+            .iter()
+            .enumerate()
+            .map(|(k, o)| {
+                let v: Vec<[T; 2]> = o.vertices.iter().map(|p| p.map(T::from_f64)).collect();
+                FwObstacle::from_vertices(k as u32, &v)
+                    .map_err(|e| anyhow!("obstacle {:?}: {e:?}", o.id))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        planner
+            .obstacles
+            .update(
+                &car.obstacle_settings(mu_planner),
+                &planner.path,
+                &fw_obstacles,
+            )
+            .map_err(|e| obstacle_error_message(e, &scenario.obstacles))?;
+        // Checked on the whole track above; from here the planner holds a window
+        // of the road, as the ECU does.
+        planner.set_obstacles(car.obstacle_settings(mu_planner), &fw_obstacles);
+        let first = RouteFeeder::new(track)?.first();
+        load_window(&mut planner, &first)?;
+        planner.stats = Default::default();
+        let control = car
+            .control_task(mu_planner)
+            .map_err(|e| anyhow!("low-level controller configuration: {e:?}"))?;
+        Ok(Self {
+            planner,
+            control,
+            shared_plan: Plan::zeroed(),
+            cost_model: opts.cost_model,
+            cycles_per_instruction: opts.cycles_per_instruction,
+            ecu_clock_hz: opts.ecu_clock_hz,
+            in_flight: None,
+            busy_until_us: 0,
+            releases: 0,
+            pending_window: None,
+        })
+    }
+
+    /// The plan task (its settings can be changed before the first activation,
+    /// e.g. its iteration cap).
+    pub fn plan_task_mut(&mut self) -> &mut PlanTask<T, HOST_PATH_CAP> {
+        &mut self.planner
+    }
+
+    /// The control task (its counters: safe actuations, faults).
+    pub fn control_task(&self) -> &ControlTask<T> {
+        &self.control
+    }
+
+    /// Runs the plan task released at `t_us` on `est` on the host; its record waits
+    /// in flight until its modelled finish.
+    fn release_plan(&mut self, t_us: u64, est: &StateEstimate<T>) {
+        self.planner.set_friction_limit(self.control.friction_mu());
+        let outcome = self.planner.run(est);
+        // Charged from the activation's own counters, a failed one's included.
+        let report = *self.planner.last_report();
+        let instructions = self.cost_model.plan_instructions(&report);
+        let cycles = instructions * self.cycles_per_instruction;
+        let control_cycles = self.cost_model.control_instructions() * self.cycles_per_instruction;
+        let finish_us = t_us + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
+        self.busy_until_us = finish_us;
+        // The late-plan policy: published at its finish unless older than
+        // MAX_PLAN_AGE_US by then (`PlanTask::publish_at`).
+        let fresh = finish_us - t_us <= MAX_PLAN_AGE_US;
+        let (status, published) = match &outcome {
+            Ok(_) => ("optimal", fresh),
+            Err(e) => (mpc_error_name(e), false),
+        };
+        self.in_flight = Some(InFlight {
+            record: activation_record(
+                self.releases,
+                t_us,
+                finish_us,
+                instructions,
+                cycles,
+                &report,
+            )
+            .with_outcome(status, published),
+        });
+    }
+}
+
+impl<T: Real> SimulatedEcu<T> {
+    /// At the end of the activation `record` (after its publication), as the ECU
+    /// does: adopts the pending window of the road if it arrived before then; the
+    /// task stays busy for the adoption's modelled time.
+    fn adopt_window_after(&mut self, record: &mut PlanActivation) {
+        let due = self
+            .pending_window
+            .as_ref()
+            .is_some_and(|(_, arrived_us)| *arrived_us < record.finish_us);
+        if !due {
+            return;
+        }
+        if let Some((w, _)) = self.pending_window.take() {
+            // A path the planner refuses leaves it without one: its steps then fail
+            // with `NoPath` and are reported as such.
+            let _ = load_window(&mut self.planner, &w);
+            let instructions = self.cost_model.window_instructions(true);
+            let cycles = instructions * self.cycles_per_instruction;
+            let control_cycles =
+                self.cost_model.control_instructions() * self.cycles_per_instruction;
+            self.busy_until_us = record.finish_us
+                + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
+            record.window = true;
+            record.window_instructions = instructions;
+        }
+    }
+}
+
+/// Loads a window of the road into the plan task.
+fn load_window<T: Real>(planner: &mut PlanTask<T, HOST_PATH_CAP>, w: &Window) -> Result<()> {
+    let rows: Vec<[T; 4]> = w.rows.iter().map(|r| r.map(T::from_f64)).collect();
+    planner
+        .load_window(&rows, T::from_f64(w.origin_m), w.closed)
+        .map_err(|e| anyhow!("a window of the road was refused: {e:?}"))
+}
+
+/// Response time of a plan activation of `cycles` preempted every 10 ms by a
+/// control activation of `control_cycles`, on a clock of `clock_hz`, µs.
+fn response_us(cycles: f64, control_cycles: f64, clock_hz: f64) -> f64 {
+    let mut resp_s = cycles / clock_hz;
+    for _ in 0..64 {
+        let preempting = (resp_s * 1e6 / CONTROL_PERIOD_US as f64).floor();
+        let next = (cycles + preempting * control_cycles) / clock_hz;
+        if (next - resp_s).abs() < 1e-12 {
+            break;
+        }
+        resp_s = next;
+    }
+    resp_s * 1e6
+}
+
+fn activation_record<T: Real>(
+    activation: u32,
+    release_us: u64,
+    finish_us: u64,
+    instructions: f64,
+    cycles: f64,
+    r: &MpcReport<T>,
+) -> PlanActivation {
+    PlanActivation {
+        activation,
+        release_us,
+        finish_us,
+        instructions,
+        cycles,
+        status: "optimal",
+        published: false,
+        deadline_miss: finish_us > release_us + PLAN_PERIOD_US,
+        passes: r.passes,
+        qp_iterations: r.qp_iterations,
+        qp_added: r.qp_added,
+        qp_removed: r.qp_removed,
+        qp_refactorizations: r.qp_refactorizations,
+        rows: r.rows,
+        active_constraints: r.active_constraints,
+        window: false,
+        window_instructions: 0.0,
+        max_validity_slack_rad: Some(r.max_validity_slack_rad.to_f64()),
+    }
+}
+
+impl PlanActivation {
+    fn with_outcome(mut self, status: &'static str, published: bool) -> Self {
+        self.status = status;
+        self.published = published;
+        if !published {
+            self.max_validity_slack_rad = Some(0.0);
+        }
+        self
+    }
+}
+
+impl<T: Real> Ecu<T> for SimulatedEcu<T> {
+    fn control(&mut self, t_us: u64, est: &StateEstimate<T>) -> Result<ControlOutput<T>> {
+        let mut plans = Vec::new();
+        // A plan activation that has finished by now publishes first.
+        if self
+            .in_flight
+            .as_ref()
+            .is_some_and(|f| f.record.finish_us <= t_us)
+        {
+            if let Some(mut f) = self.in_flight.take() {
+                let published = self
+                    .planner
+                    .publish_at(&mut self.shared_plan, f.record.finish_us);
+                debug_assert_eq!(published, f.record.published);
+                self.adopt_window_after(&mut f.record);
+                plans.push(f.record);
+            }
+        }
+        let actuation = self.control.run(est, &self.shared_plan, t_us);
+        let instructions = self.cost_model.control_instructions();
+        let cycles = instructions * self.cycles_per_instruction;
+        // The actuation leaves when the modelled activation ends.
+        let sent_us = t_us + (cycles / self.ecu_clock_hz * 1e6).ceil() as u64;
+        let mut skipped_releases = 0;
+        if t_us.is_multiple_of(PLAN_PERIOD_US) {
+            self.releases += 1;
+            if self.busy_until_us > t_us {
+                // Still running: this release is lost (RTIC cannot spawn a busy task).
+                skipped_releases = 1;
+            } else {
+                self.release_plan(t_us, est);
+            }
+        }
+        Ok(ControlOutput {
+            actuation,
+            release_us: t_us,
+            sent_us,
+            control_skipped_releases: 0,
+            ecu_counts: None,
+            instructions,
+            cycles,
+            plans,
+            skipped_releases,
+            friction_mu: Some(self.control.friction_mu().to_f64()),
+        })
+    }
+
+    fn active_plan(&self) -> &Plan<T> {
+        &self.shared_plan
+    }
+
+    fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()> {
+        self.pending_window = Some((w.clone(), t_us));
+        Ok(())
+    }
+}
+
+fn obstacle_error_message<T: Real>(
+    e: firmware::obstacles::ObstacleError<T>,
+    obstacles: &[Obstacle],
+) -> anyhow::Error {
+    use firmware::obstacles::ObstacleError as E;
+    match e {
+        E::RoadBlocked {
+            obstacle,
+            missing_m,
+        } => {
+            let id = obstacles
+                .get(obstacle)
+                .map(|o| o.id.as_str())
+                .unwrap_or("?");
+            anyhow!(
+                "obstacle {id:?} blocks the road: the car needs {:.2} m more free width beside it on either side; move it, make it narrower, or widen the track there",
+                missing_m.to_f64()
+            )
+        }
+        other => anyhow!("obstacles: {other:?}"),
+    }
+}

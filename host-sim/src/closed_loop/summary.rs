@@ -1,0 +1,170 @@
+//! The run's figures of merit, `summary.json`: what the closed-loop driver
+//! ([`super::timeline`]) measured over a run, written by `run` and `pil` and read
+//! back through this same type.
+
+use serde::{Deserialize, Serialize};
+
+/// The run's figures of merit (`summary.json`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// The requested laps were driven (or the end of an open track reached).
+    pub completed: bool,
+    /// Why the run stopped.
+    pub stop_reason: String,
+    /// Time of the first completed lap, s (null if none).
+    pub lap_time_s: Option<f64>,
+    /// Distance driven along the track, m.
+    pub distance_m: f64,
+    /// Simulated time, s.
+    pub duration_s: f64,
+    /// Largest |lateral offset| from the centre line, m.
+    pub max_abs_lateral_error_m: f64,
+    /// RMS lateral offset, m.
+    pub rms_lateral_error_m: f64,
+    /// Largest |a_y| of the car, m/s²: the plant's body lateral acceleration at the
+    /// centre of gravity, `ΣF_y/M_T` in the vehicle frame (tyre forces, so it
+    /// includes the body's side-slip dynamics), sampled every 10 ms.
+    pub max_abs_ay_mps2: f64,
+    /// Largest |a_y| the published plans asked for, m/s²: the kinematic bicycle's
+    /// `V²·sin β(δ)/l_r` at every node but the first of every published plan (the
+    /// quantity the validity limit keeps under `0.5·μ_planner·g`, slack aside; the
+    /// first node is the measured state, its steering the low-level controller's
+    /// `δ_ol + δ_cl`, which no plan chose). Null when the ECU reports its plans'
+    /// positions only (processor in the loop): not measured.
+    pub max_abs_plan_ay_mps2: Option<f64>,
+    /// Simulated time with at least one wheel lifted off the road (load zero), s.
+    pub wheel_lift_s: f64,
+    /// Time at which a wheel first lifted off the road, s (null if none did).
+    pub first_wheel_lift_s: Option<f64>,
+    /// Road friction of the plant.
+    pub mu: f64,
+    /// Friction given to the planner.
+    pub mu_planner: f64,
+    /// Largest |slip angle| over the four tyres, rad.
+    pub max_abs_slip_angle_rad: f64,
+    /// Largest |slip ratio| over the four tyres.
+    pub max_abs_slip_ratio: f64,
+    /// Log samples at which the vehicle footprint overlapped an obstacle.
+    pub collisions: u64,
+    /// Smallest distance from the vehicle footprint to an obstacle polygon, m (null without obstacles).
+    pub min_obstacle_clearance_m: Option<f64>,
+    /// Largest speed, m/s.
+    pub max_speed_mps: f64,
+    /// Plan activations.
+    pub plan_activations: u64,
+    /// Plan activations that published nothing (MPC not optimal or refused).
+    pub plan_failures: u64,
+    /// Largest estimated cost of a plan activation, cycles.
+    pub plan_max_cost_cycles: f64,
+    /// Largest estimated cost of a plan activation, instructions.
+    pub plan_max_instructions: f64,
+    /// Median estimated cost of a plan activation, instructions.
+    pub plan_p50_instructions: f64,
+    /// Plan releases whose response time exceeded the 100 ms period, skipped
+    /// releases included.
+    pub plan_deadline_misses: u64,
+    /// Plan releases skipped because the task was still running (the activation
+    /// before ran, window adoption included, past them).
+    pub plan_skipped_releases: u64,
+    /// Plan activations over their cycle budget (deadline met or not).
+    pub plan_budget_overruns: u64,
+    /// Largest estimated cost of a control activation, cycles.
+    pub control_max_cost_cycles: f64,
+    /// Largest estimated cost of a control activation, instructions.
+    pub control_max_instructions: f64,
+    /// Control activations whose answer was sent more than the 10 ms period after
+    /// their release, skipped control releases included.
+    pub control_deadline_misses: u64,
+    /// Control releases the ECU skipped because the task was still running.
+    pub control_skipped_releases: u64,
+    /// Control activations over their cycle budget (deadline met or not).
+    pub control_budget_overruns: u64,
+    /// Control activations.
+    pub control_activations: u64,
+    /// Control activations that applied the safe actuation.
+    pub control_safe_actuations: u64,
+    /// Lowest friction estimate `μ̂` of the control task's friction check
+    /// (`firmware::friction`: below the planner's `μ` when a slip showed the road
+    /// slipperier), null when the ECU does not report it (processor in the loop).
+    pub friction_mu_min: Option<f64>,
+    /// The patches of road with their own friction, `START:LENGTH:MU` joined by `;`
+    /// (empty without any).
+    pub mu_patches: String,
+    /// Lowest road friction under the car over the run ([`LogRow::road_mu`](super::timeline::LogRow::road_mu)).
+    pub road_mu_min: f64,
+    /// `μ̂` fell below 0.9 × the lowest road μ under the car over the last 10 s at
+    /// some sample: a false alarm of the friction check
+    /// ([`crate::world::road_friction::judge`]); null when the ECU does not report `μ̂`.
+    pub mu_false_drop: Option<bool>,
+    /// When `μ̂` first fell that low, s (null if it never did).
+    pub mu_false_drop_s: Option<f64>,
+    /// The slowest recovery after leaving a patch of lower grip: time from the exit
+    /// until `μ̂ ≥ 0.9 × road μ`, s (null without an exit that recovered, or when
+    /// the ECU does not report `μ̂`).
+    pub mu_recovery_s: Option<f64>,
+    /// Exits from a patch of lower grip after which `μ̂` did not reach 0.9 × the
+    /// road's μ before the next exit or the end of the run (null when the ECU does
+    /// not report `μ̂`).
+    pub mu_unrecovered_exits: Option<u32>,
+    /// Median host wall time of the ECU's work at a plan release (the plan
+    /// activation and the control activation before it), µs (information only).
+    pub plan_host_us_p50: f64,
+    /// Largest host wall time of the same, µs (information only).
+    pub plan_host_us_max: f64,
+    /// Largest QP iterations in one plan activation.
+    pub plan_max_qp_iterations: u32,
+    /// Simulated seconds per wall-clock second.
+    pub sim_speed_x_realtime: f64,
+    /// Largest distance between where the active plan put the car and where it was, m.
+    pub consistency_max_m: f64,
+    /// Largest validity slack in any published plan, rad; `None` where it is not
+    /// measured (processor in the loop: the ECU does not send it).
+    pub max_validity_slack_rad: Option<f64>,
+    /// Budgets used, cycles.
+    pub plan_budget_cycles: f64,
+    /// Budget of one control activation, cycles.
+    pub control_budget_cycles: f64,
+    /// The ECU's own count of `plan` deadline misses (late completions and
+    /// skipped releases, on its clock: `firmware::deadline`), null without an ECU
+    /// that counts (the in-process run).
+    pub ecu_plan_deadline_misses: Option<u64>,
+    /// The ECU's own count of skipped `plan` releases, null without an ECU.
+    pub ecu_skipped_releases: Option<u64>,
+    /// The ECU's own count of `plan` budget overruns (its own clock ticks over
+    /// the budget in cycles: at `-icount shift=4` a tick is 1/2.69 of an
+    /// instruction, so this is at least the host's count), null without an ECU.
+    pub ecu_plan_budget_overruns: Option<u64>,
+    /// The ECU's own count of `control` deadline misses, null without an ECU.
+    pub ecu_control_deadline_misses: Option<u64>,
+    /// The ECU's own count of skipped `control` releases, null without an ECU.
+    pub ecu_control_skipped_releases: Option<u64>,
+    /// The ECU's own count of `control` budget overruns (its clock's ticks), null
+    /// without an ECU.
+    pub ecu_control_budget_overruns: Option<u64>,
+    /// Times the ECU's watchdog saw no new plan for more than
+    /// `firmware::deadline::PLAN_WATCHDOG_PERIODS` plan periods, null without an ECU.
+    pub ecu_watchdog_trips: Option<u64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn summary_json_reads_back_as_written() -> anyhow::Result<()> {
+        let summary = Summary {
+            completed: true,
+            stop_reason: "completed".into(),
+            lap_time_s: Some(88.25),
+            max_abs_plan_ay_mps2: None,
+            mu_patches: "100:50:0.5".into(),
+            mu_false_drop: Some(false),
+            mu_unrecovered_exits: Some(0),
+            ecu_watchdog_trips: Some(3),
+            ..Summary::default()
+        };
+        let back: Summary = serde_json::from_str(&serde_json::to_string_pretty(&summary)?)?;
+        assert_eq!(back, summary);
+        Ok(())
+    }
+}

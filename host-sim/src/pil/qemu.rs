@@ -1,0 +1,551 @@
+//! The ECU application running in QEMU: the emulator's process, the link on three
+//! FIFOs (down, up and the route channel), the set-up, the exchange of one sensor
+//! frame for one actuation frame per control period, and [`QemuEcu`] as the closed
+//! loop's [`Ecu`].
+
+use std::fs::{self, File};
+use std::io::{BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::thread;
+use std::time::Duration;
+
+use anyhow::{anyhow, bail, Context, Result};
+use firmware::deadline::{CONTROL_BUDGET_CYCLES, PLAN_BUDGET_CYCLES};
+use firmware::link::{
+    self, ConfigFrame, DoneFrame, Down, FrameReader, ObstacleFrame, PlanEventFrame, SensorFrame,
+    Up, MAX_FRAME_BYTES,
+};
+use firmware::obstacles::MAX_VERTICES;
+use firmware::plan::Plan;
+use firmware::state_estimate::StateEstimate;
+use firmware::tasks::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
+
+use crate::closed_loop::ecu::{ControlOutput, Ecu, EcuCounts, EcuTaskCounts, SimulatedEcu};
+use crate::closed_loop::plan_activation::{plan_status_name, PlanActivation};
+use crate::closed_loop::{self, SimOptions};
+use crate::model::vehicle::VehicleParams;
+use crate::pil::deadlines::{skipped_between, TickOverruns};
+use crate::pil::frames::{actuation_of, path_chunks, plan_of, setup_refusal};
+use crate::world::route::{RouteFeeder, Window};
+use crate::world::scenario::Scenario;
+
+/// ECU core clock, Hz: QEMU's SysTick counts at this rate of virtual time.
+pub const ECU_CLOCK_HZ: f64 = firmware::timing::ECU_CLOCK_HZ as f64;
+
+/// How the ECU is run.
+#[derive(Clone, Debug)]
+pub struct PilOptions {
+    /// The ECU application (ELF for `thumbv7em-none-eabihf`).
+    pub elf: PathBuf,
+    /// QEMU executable.
+    pub qemu: PathBuf,
+    /// `-icount shift`: virtual ns per instruction = 2^shift.
+    pub icount_shift: u32,
+    /// Folder for the FIFOs, the ECU's defmt log and QEMU's messages.
+    pub work_dir: PathBuf,
+    /// Longest wall time to wait for one frame, s (a hung ECU is an error).
+    pub frame_timeout_s: f64,
+    /// Cycles per instruction that turn measured instructions into cycles (the
+    /// timing report's bound).
+    pub cycles_per_instruction: f64,
+    /// Write QEMU's execution trace (`-d in_asm,exec,nochain`) to this file, for the
+    /// cycles-per-instruction analysis (large: about 14 bytes per instruction).
+    pub trace: Option<PathBuf>,
+}
+
+impl PilOptions {
+    /// Virtual time per instruction, ns.
+    pub fn ns_per_instruction(&self) -> f64 {
+        f64::from(1u32 << self.icount_shift)
+    }
+
+    /// Instructions executed in `ticks` of the ECU's 168 MHz clock.
+    pub fn instructions(&self, ticks: u32) -> f64 {
+        f64::from(ticks) / ECU_CLOCK_HZ * 1e9 / self.ns_per_instruction()
+    }
+}
+
+/// Counters of the link, host side.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct LinkCounters {
+    /// Frames the host refused (garbled, short, wrong version, unexpected).
+    pub rejected: u64,
+    /// Actuation frames answering another sensor frame than the one sent.
+    pub stale: u64,
+}
+
+enum Incoming {
+    Frame(Box<Up>),
+    Bad,
+    Closed,
+}
+
+/// The ECU application running in QEMU, in the loop.
+pub struct QemuEcu {
+    child: Child,
+    down: BufWriter<File>,
+    up: Receiver<Incoming>,
+    opts: PilOptions,
+    seq: u32,
+    /// Counters of the link, host side.
+    pub counters: LinkCounters,
+    /// The plan the ECU's control task follows (positions only), as reported.
+    pub active: Plan<f32>,
+    /// The route channel (`ecu.route`): the next window of the road.
+    route: BufWriter<File>,
+    /// Route frames written since the last sensor frame (announced in the next).
+    route_frames: u16,
+    /// The last control release the ECU reported, µs.
+    last_release_us: Option<u64>,
+    /// The plan task's counts as of the last plan event.
+    plan_counts: EcuTaskCounts,
+    /// Budget overruns on the ECU's clock, counted by the host from the ticks.
+    pub tick_overruns: TickOverruns,
+    /// The ECU's own counts in the last actuation frame (response times included).
+    pub ecu_counts: Option<EcuCounts>,
+}
+
+impl Drop for QemuEcu {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn mkfifo(path: &Path) -> Result<()> {
+    if path.exists() {
+        fs::remove_file(path).with_context(|| format!("removing the old {}", path.display()))?;
+    }
+    let status = Command::new("mkfifo")
+        .arg(path)
+        .status()
+        .context("running mkfifo (coreutils) to create the ECU link")?;
+    if !status.success() {
+        bail!("mkfifo {} failed", path.display());
+    }
+    Ok(())
+}
+
+/// Reads frames from the up-link FIFO on a thread of its own.
+fn spawn_reader(mut file: File) -> Receiver<Incoming> {
+    let (tx, rx) = mpsc::channel();
+    thread::spawn(move || {
+        let mut reader: FrameReader<MAX_FRAME_BYTES> = FrameReader::new();
+        let mut buf = [0u8; 4096];
+        loop {
+            let n = match file.read(&mut buf) {
+                Ok(0) | Err(_) => {
+                    let _ = tx.send(Incoming::Closed);
+                    return;
+                }
+                Ok(n) => n,
+            };
+            for &b in &buf[..n] {
+                let msg = match reader.push(b) {
+                    None => continue,
+                    Some(Ok(frame)) => match link::decode::<Up>(frame) {
+                        Ok(m) => Incoming::Frame(Box::new(m)),
+                        Err(_) => Incoming::Bad,
+                    },
+                    Some(Err(_)) => Incoming::Bad,
+                };
+                if tx.send(msg).is_err() {
+                    return;
+                }
+            }
+        }
+    });
+    rx
+}
+
+impl QemuEcu {
+    /// Starts QEMU on the ECU application and sends it the car, the track and the
+    /// obstacles of `scenario`; returns once the ECU has accepted them.
+    pub fn start(
+        scenario: &Scenario,
+        vehicle: &VehicleParams,
+        sim: &SimOptions,
+        opts: &PilOptions,
+    ) -> Result<Self> {
+        if !opts.elf.exists() {
+            bail!(
+                "the ECU application {} does not exist: build it with `cargo ecu`",
+                opts.elf.display()
+            );
+        }
+        fs::create_dir_all(&opts.work_dir)
+            .with_context(|| format!("cannot create {}", opts.work_dir.display()))?;
+        let dir = fs::canonicalize(&opts.work_dir)?;
+        let down_path = dir.join("ecu.down");
+        let up_path = dir.join("ecu.up");
+        let route_path = dir.join("ecu.route");
+        mkfifo(&down_path)?;
+        mkfifo(&up_path)?;
+        mkfifo(&route_path)?;
+        // The ECU's defmt log goes to the semihosting console, QEMU's stdout.
+        let defmt_log = File::create(dir.join("ecu.defmt"))?;
+        let qemu_log = File::create(dir.join("qemu.log"))?;
+        let child = Command::new(&opts.qemu)
+            .current_dir(&dir)
+            .args(["-cpu", "cortex-m4", "-machine", "netduinoplus2"])
+            .args(["-display", "none", "-serial", "null", "-monitor", "none"])
+            .args(["-semihosting-config", "enable=on,target=native"])
+            .arg("-icount")
+            .arg(format!("shift={},sleep=off", opts.icount_shift))
+            .args(opts.trace.iter().flat_map(|t| {
+                [
+                    "-d".into(),
+                    "in_asm,exec,nochain".into(),
+                    "-D".into(),
+                    t.display().to_string(),
+                ]
+            }))
+            .arg("-kernel")
+            .arg(fs::canonicalize(&opts.elf)?)
+            .stdin(Stdio::null())
+            .stdout(defmt_log)
+            .stderr(qemu_log)
+            .spawn()
+            .with_context(|| {
+                format!(
+                    "cannot start {} (install it: apt-get install qemu-system-arm)",
+                    opts.qemu.display()
+                )
+            })?;
+        // Open the FIFOs in the ECU's order (down, up, route), on a thread: an open
+        // blocks until QEMU opens the other end.
+        let (tx, rx) = mpsc::channel();
+        {
+            let (d, u, r) = (down_path.clone(), up_path.clone(), route_path.clone());
+            thread::spawn(move || {
+                let opened = File::options().write(true).open(&d).and_then(|down| {
+                    let up = File::open(&u)?;
+                    let route = File::options().write(true).open(&r)?;
+                    Ok((down, up, route))
+                });
+                let _ = tx.send(opened);
+            });
+        }
+        let mut ecu = None;
+        let mut child = child;
+        for _ in 0..(opts.frame_timeout_s * 20.0).ceil() as u64 {
+            match rx.recv_timeout(Duration::from_millis(50)) {
+                Ok(r) => {
+                    ecu = Some(r.context("opening the ECU link FIFOs")?);
+                    break;
+                }
+                Err(RecvTimeoutError::Timeout) => {
+                    if let Some(status) = child.try_wait()? {
+                        let log = fs::read_to_string(dir.join("qemu.log")).unwrap_or_default();
+                        bail!("QEMU exited ({status}) before opening the link: {log}");
+                    }
+                }
+                Err(RecvTimeoutError::Disconnected) => bail!("the link opener stopped"),
+            }
+        }
+        let Some((down, up, route)) = ecu else {
+            let _ = child.kill();
+            bail!(
+                "the ECU did not open its link within {} s (is {} the ECU application?)",
+                opts.frame_timeout_s,
+                opts.elf.display()
+            );
+        };
+        let mut ecu = Self {
+            child,
+            down: BufWriter::new(down),
+            up: spawn_reader(up),
+            opts: opts.clone(),
+            seq: 0,
+            counters: LinkCounters::default(),
+            active: Plan::zeroed(),
+            route: BufWriter::new(route),
+            route_frames: 0,
+            last_release_us: None,
+            plan_counts: Default::default(),
+            tick_overruns: TickOverruns::default(),
+            ecu_counts: None,
+        };
+        ecu.set_up(scenario, vehicle, sim)?;
+        Ok(ecu)
+    }
+
+    fn send(&mut self, msg: &Down) -> Result<()> {
+        let mut buf = [0u8; MAX_FRAME_BYTES];
+        let n = link::encode(msg, &mut buf).map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
+        self.down
+            .write_all(&buf[..n])
+            .context("the ECU closed its link")?;
+        Ok(())
+    }
+
+    fn receive(&mut self) -> Result<Up> {
+        loop {
+            self.down.flush().context("the ECU closed its link")?;
+            match self
+                .up
+                .recv_timeout(Duration::from_secs_f64(self.opts.frame_timeout_s))
+            {
+                Ok(Incoming::Frame(m)) => return Ok(*m),
+                Ok(Incoming::Bad) => self.counters.rejected += 1,
+                Ok(Incoming::Closed) | Err(RecvTimeoutError::Disconnected) => {
+                    let defmt = self.opts.work_dir.join("ecu.defmt");
+                    bail!(
+                        "the ECU stopped (QEMU exited); its log: {} (decode with `defmt-print -e {}`), QEMU's: {}",
+                        defmt.display(),
+                        self.opts.elf.display(),
+                        self.opts.work_dir.join("qemu.log").display()
+                    )
+                }
+                Err(RecvTimeoutError::Timeout) => bail!(
+                    "no frame from the ECU within {} s of wall time: the firmware hangs",
+                    self.opts.frame_timeout_s
+                ),
+            }
+        }
+    }
+
+    fn set_up(
+        &mut self,
+        scenario: &Scenario,
+        vehicle: &VehicleParams,
+        sim: &SimOptions,
+    ) -> Result<()> {
+        // The same checks as `run` on the whole track first (their messages say
+        // which obstacle blocks the road and by how much).
+        SimulatedEcu::<f32>::new(scenario, vehicle, sim)?;
+        if scenario.obstacles.len() > u8::MAX as usize {
+            bail!(
+                "{} obstacles: the link carries at most 255",
+                scenario.obstacles.len()
+            );
+        }
+        let first = RouteFeeder::new(&scenario.track)?.first();
+        self.send(&Down::Config(ConfigFrame {
+            vehicle: closed_loop::vehicle_config::<f32>(vehicle),
+            mu_planner: sim.mu_planner as f32,
+            closed: first.closed,
+            path_rows: first.rows.len() as u16,
+            obstacles: scenario.obstacles.len() as u8,
+        }))?;
+        self.send_rows(&first.rows)?;
+        let total = scenario.obstacles.len() as u8;
+        for (k, o) in scenario.obstacles.iter().enumerate() {
+            if o.vertices.len() > MAX_VERTICES {
+                bail!(
+                    "obstacle {:?} has {} vertices: the ECU takes at most {MAX_VERTICES}",
+                    o.id,
+                    o.vertices.len()
+                );
+            }
+            let mut f = ObstacleFrame {
+                index: k as u8,
+                total,
+                id: k as u32,
+                count: o.vertices.len() as u8,
+                vertices: [[0.0; 2]; MAX_VERTICES],
+            };
+            for (dst, src) in f.vertices.iter_mut().zip(&o.vertices) {
+                *dst = src.map(|x| x as f32);
+            }
+            self.send(&Down::Obstacle(f))?;
+        }
+        self.send(&Down::Start)?;
+        loop {
+            match self.receive()? {
+                Up::Ready(r) if r.status == 0 => return Ok(()),
+                Up::Ready(r) => bail!(
+                    "the ECU refused the set-up: {}",
+                    setup_refusal(r.status, r.detail)
+                ),
+                _ => self.counters.rejected += 1,
+            }
+        }
+    }
+
+    /// Writes a frame on the route channel.
+    fn send_route(&mut self, msg: &Down) -> Result<()> {
+        let mut buf = [0u8; MAX_FRAME_BYTES];
+        let n = link::encode(msg, &mut buf).map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
+        self.route
+            .write_all(&buf[..n])
+            .context("the ECU closed its route channel")?;
+        self.route_frames = self.route_frames.saturating_add(1);
+        Ok(())
+    }
+
+    /// Sends rows of a window in `PathChunk` frames (the first starting at row 0).
+    fn send_rows(&mut self, rows: &[[f64; 4]]) -> Result<()> {
+        for f in path_chunks(rows) {
+            self.send(&f)?;
+        }
+        Ok(())
+    }
+
+    /// One control period: sends the estimate at `t_us`, returns the ECU's answer.
+    pub fn exchange(&mut self, est: &StateEstimate<f32>) -> Result<link::ActuationFrame> {
+        self.seq = self.seq.wrapping_add(1);
+        let route_frames = std::mem::take(&mut self.route_frames);
+        self.send(&Down::Sensor(SensorFrame {
+            seq: self.seq,
+            estimate: *est,
+            route_frames,
+        }))?;
+        loop {
+            match self.receive()? {
+                Up::Actuation(a) if a.seq == self.seq => {
+                    if let Some(p) = &a.plan {
+                        if p.published {
+                            self.active = plan_of(p);
+                        }
+                    }
+                    return Ok(a);
+                }
+                Up::Actuation(a) if a.fault == link::FAULT_PANIC => {
+                    bail!(
+                        "the ECU panicked (it commanded zero torque, steering held at {:.3} rad, and stopped; its line is in {})",
+                        a.delta_rad,
+                        self.opts.work_dir.join("qemu.log").display()
+                    )
+                }
+                Up::Actuation(a) if a.fault == link::FAULT_HARDFAULT => {
+                    bail!(
+                        "the ECU took a HardFault (a MemManage, BusFault or UsageFault escalated, or a HardFault proper: e.g. a stack overflow into flip-link's guard); it commanded zero torque, steering held at {:.3} rad, and stopped",
+                        a.delta_rad
+                    )
+                }
+                Up::Actuation(_) => self.counters.stale += 1,
+                _ => self.counters.rejected += 1,
+            }
+        }
+    }
+
+    /// Ends the run: the ECU reports its stack high-water mark and exits.
+    pub fn stop(mut self) -> Result<DoneFrame> {
+        self.send(&Down::Stop)?;
+        let done = loop {
+            match self.receive()? {
+                Up::Done(d) => break d,
+                _ => self.counters.rejected += 1,
+            }
+        };
+        for _ in 0..100 {
+            if self.child.try_wait()?.is_some() {
+                break;
+            }
+            thread::sleep(Duration::from_millis(20));
+        }
+        Ok(done)
+    }
+
+    /// The run's options.
+    pub fn options(&self) -> &PilOptions {
+        &self.opts
+    }
+}
+
+impl QemuEcu {
+    /// The record of a plan event, instructions from the ECU's clock ticks.
+    pub fn activation_of(&self, p: &PlanEventFrame) -> PlanActivation {
+        let instructions = self.opts.instructions(p.ticks);
+        PlanActivation {
+            activation: p.activation,
+            release_us: p.release_us,
+            finish_us: p.finish_us,
+            instructions,
+            cycles: instructions * self.opts.cycles_per_instruction,
+            status: plan_status_name(p.status),
+            published: p.published,
+            deadline_miss: p.finish_us > p.release_us + PLAN_PERIOD_US,
+            passes: u32::from(p.passes),
+            qp_iterations: u32::from(p.qp_iterations),
+            qp_added: u32::from(p.qp_added),
+            qp_removed: u32::from(p.qp_removed),
+            qp_refactorizations: u32::from(p.qp_refactorizations),
+            rows: u32::from(p.rows),
+            active_constraints: u32::from(p.active),
+            window: p.window_ticks > 0,
+            window_instructions: if p.window_ticks > 0 {
+                self.opts.instructions(p.window_ticks)
+            } else {
+                0.0
+            },
+            max_validity_slack_rad: None,
+        }
+    }
+}
+
+impl Ecu<f32> for QemuEcu {
+    fn control(&mut self, t_us: u64, est: &StateEstimate<f32>) -> Result<ControlOutput<f32>> {
+        let mut e = *est;
+        e.stamp_us = t_us;
+        let frame = self.exchange(&e)?;
+        let instructions = self.opts.instructions(frame.control_ticks);
+        let mut plans = Vec::new();
+        let mut skipped_releases = 0;
+        if let Some(p) = &frame.plan {
+            // Releases that fell while this activation ran, up to its end (its
+            // window adoption included), were skipped.
+            skipped_releases = skipped_between(p.release_us, p.end_us, PLAN_PERIOD_US);
+            if u64::from(p.ticks) > PLAN_BUDGET_CYCLES {
+                self.tick_overruns.plan += 1;
+            }
+            self.plan_counts = p.timing.into();
+            plans.push(self.activation_of(p));
+        }
+        if u64::from(frame.control_ticks) > CONTROL_BUDGET_CYCLES {
+            self.tick_overruns.control += 1;
+        }
+        // Control releases the ECU skipped: the gap to the last one it reported.
+        let control_skipped_releases = match self.last_release_us {
+            Some(last) => {
+                (frame.release_us.saturating_sub(last) / CONTROL_PERIOD_US).saturating_sub(1) as u32
+            }
+            None => 0,
+        };
+        self.last_release_us = Some(frame.release_us);
+        self.ecu_counts = Some(EcuCounts {
+            plan: self.plan_counts,
+            control: frame.control.into(),
+            watchdog_trips: frame.watchdog_trips.into(),
+        });
+        Ok(ControlOutput {
+            actuation: actuation_of(&frame),
+            release_us: frame.release_us,
+            sent_us: frame.sent_us,
+            control_skipped_releases,
+            ecu_counts: self.ecu_counts,
+            instructions,
+            cycles: instructions * self.opts.cycles_per_instruction,
+            plans,
+            skipped_releases,
+            friction_mu: None,
+        })
+    }
+
+    fn active_plan(&self) -> &Plan<f32> {
+        &self.active
+    }
+
+    fn reports_plan_states(&self) -> bool {
+        // The plan events carry the nodes' positions only (`plan_of`).
+        false
+    }
+
+    fn set_window(&mut self, _t_us: u64, w: &Window) -> Result<()> {
+        // On the route channel, announced by the next sensor frame.
+        for f in path_chunks(&w.rows) {
+            self.send_route(&f)?;
+        }
+        self.send_route(&Down::Window(link::WindowFrame {
+            rows: w.rows.len() as u16,
+            origin_m: w.origin_m as f32,
+            closed: w.closed,
+        }))?;
+        self.route
+            .flush()
+            .context("the ECU closed its route channel")
+    }
+}

@@ -1,0 +1,457 @@
+//! Disturbances between the plant and the firmware: sensor noise, a delayed state
+//! estimate, a sensor dropout, a steering actuator rate limit and an obstacle the
+//! sensors see late. [`DisturbedEcu`] wraps the modelled ECU ([`SimulatedEcu`]) and
+//! applies them at its boundary, so the closed-loop driver runs unchanged.
+//!
+//! # The estimate the tasks see, every 10 ms
+//!
+//! 1. **Noise** (measured at the instant): independent Gaussian draws added to the
+//!    true state, standard deviations `scale ×` [`NOISE_UNIT`]: position X and Y
+//!    0.05 m each, heading 0.005 rad (0.29°), longitudinal speed 0.05 m/s, yaw rate
+//!    0.005 rad/s (an RTK-GNSS/INS estimate). Lateral speed and the measured
+//!    steering angle are not disturbed.
+//! 2. **Delay**: the tasks see the (noisy) estimate measured `delay` ago, rounded
+//!    to whole control periods (10 ms), stamped with its measurement time, as an
+//!    estimator with latency would deliver it. Before that much history exists they
+//!    see the oldest estimate.
+//! 3. **Dropout**: from [`Dropout::start_us`] for [`Dropout::periods`] control
+//!    periods, either every field NaN ([`DropoutKind::Nan`]) or no update (the last
+//!    estimate delivered before the dropout, stamp and all, [`DropoutKind::Hold`]).
+//!
+//! # The actuators
+//!
+//! A steering rate limit `R` (rad/s) lets the applied angle move at most
+//! `R × 10 ms` from the previous applied angle at each control period; the plant
+//! receives the limited angle (and measures it back in the estimate), the firmware
+//! does not know of the limit.
+//!
+//! # The late obstacle
+//!
+//! An obstacle of the scenario that the planner is given only when the car (its
+//! true position, projected on the reference path) is [`LateObstacle::appear_m`]
+//! or less before it along the path; the plant and the collision check have it
+//! from the start.
+//!
+//! Every random draw comes from [`SplitMix64`] seeded by the run, so a run is
+//! reproducible bit for bit.
+
+use std::collections::VecDeque;
+
+use anyhow::{anyhow, bail, Result};
+use firmware::obstacles::Obstacle as FwObstacle;
+use firmware::plan::Plan;
+use firmware::state_estimate::StateEstimate;
+use firmware::tasks::CONTROL_PERIOD_US;
+use firmware::Real;
+
+use crate::closed_loop::ecu::{ControlOutput, Ecu, SimulatedEcu};
+use crate::closed_loop::{vehicle_config, SimOptions};
+use crate::model::vehicle::VehicleParams;
+use crate::world::route::Window;
+use crate::world::scenario::Scenario;
+
+/// Standard deviations of noise level 1 (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseSigmas {
+    /// Position X and Y, each, m.
+    pub position_m: f64,
+    /// Heading, rad.
+    pub heading_rad: f64,
+    /// Longitudinal speed, m/s.
+    pub speed_mps: f64,
+    /// Yaw rate, rad/s.
+    pub yaw_rate_radps: f64,
+}
+
+/// Noise level 1: an RTK-GNSS/INS-grade estimate.
+pub const NOISE_UNIT: NoiseSigmas = NoiseSigmas {
+    position_m: 0.05,
+    heading_rad: 0.005,
+    speed_mps: 0.05,
+    yaw_rate_radps: 0.005,
+};
+
+/// A noise level: a multiple of [`NOISE_UNIT`] (`--noise`: `none` 0, `low` 1,
+/// `medium` 2, `high` 4, or a number ≥ 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseLevel(pub f64);
+
+impl std::str::FromStr for NoiseLevel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let k = match s {
+            "none" => 0.0,
+            "low" => 1.0,
+            "medium" => 2.0,
+            "high" => 4.0,
+            _ => s.parse::<f64>().map_err(|_| {
+                format!("noise level {s:?}: none, low, medium, high or a number ≥ 0")
+            })?,
+        };
+        if !(k.is_finite() && k >= 0.0) {
+            return Err(format!("noise level {s:?} must be a number ≥ 0"));
+        }
+        Ok(NoiseLevel(k))
+    }
+}
+
+/// Checks a delay of the estimate given on the command line (`--delay-ms`), ms.
+pub fn check_delay_ms(d: f64) -> Result<(), String> {
+    if !(d.is_finite() && (0.0..=1000.0).contains(&d)) {
+        return Err(format!("--delay-ms wants delays in [0, 1000] ms, got {d}"));
+    }
+    Ok(())
+}
+
+/// The seed of a run's random draws from its track's name and a seed number (FNV-1a
+/// of the name, mixed with the number): the same noise on a track across frictions,
+/// vehicles and faults, and `run` with a sweep run's factors replays it.
+pub fn run_seed(track_name: &str, seed: u32) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in track_name.bytes() {
+        h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+    }
+    h ^ u64::from(seed).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
+/// A small, fast, reproducible pseudo-random generator (SplitMix64, Steele et al.
+/// 2014); its output depends only on the seed, on every platform.
+#[derive(Clone, Debug)]
+pub struct SplitMix64(u64);
+
+impl SplitMix64 {
+    /// A generator seeded with `seed`.
+    pub fn new(seed: u64) -> Self {
+        Self(seed)
+    }
+
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[0, 1)`.
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+
+    /// Uniform in `[lo, hi)`.
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.uniform()
+    }
+
+    /// Standard normal (Box–Muller; one draw of the pair).
+    pub fn gaussian(&mut self) -> f64 {
+        let u1 = 1.0 - self.uniform(); // (0, 1]: ln is finite
+        let u2 = self.uniform();
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+}
+
+/// How a dropout corrupts the estimate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DropoutKind {
+    /// Every field NaN.
+    Nan,
+    /// No update: the last estimate before the dropout, again.
+    Hold,
+}
+
+/// A sensor dropout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Dropout {
+    /// First control instant affected, µs.
+    pub start_us: u64,
+    /// Control periods affected.
+    pub periods: u32,
+    /// NaN or no update.
+    pub kind: DropoutKind,
+}
+
+impl Dropout {
+    fn covers(&self, t_us: u64) -> bool {
+        t_us >= self.start_us && t_us < self.start_us + u64::from(self.periods) * CONTROL_PERIOD_US
+    }
+}
+
+/// An obstacle of the scenario that the planner learns of late.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LateObstacle {
+    /// Its index in the scenario's obstacles.
+    pub index: usize,
+    /// Distance along the path before it at which the planner is given it, m.
+    pub appear_m: f64,
+}
+
+/// Everything [`DisturbedEcu`] does to the firmware's inputs and outputs.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Disturbances {
+    /// Noise level (multiplies [`NOISE_UNIT`]); 0 for none.
+    pub noise_scale: f64,
+    /// Estimate delay, ms (rounded to whole 10 ms control periods).
+    pub delay_ms: f64,
+    /// A sensor dropout, if any.
+    pub dropout: Option<Dropout>,
+    /// Steering actuator rate limit, rad/s, if any.
+    pub steer_rate_limit_radps: Option<f64>,
+    /// An obstacle seen late, if any.
+    pub late_obstacle: Option<LateObstacle>,
+    /// Seed of the noise.
+    pub seed: u64,
+}
+
+impl Disturbances {
+    /// The delay in whole control periods.
+    pub fn delay_periods(&self) -> usize {
+        (self.delay_ms * 1e3 / CONTROL_PERIOD_US as f64)
+            .round()
+            .max(0.0) as usize
+    }
+}
+
+/// The late obstacle waiting to be given to the planner.
+#[derive(Debug)]
+struct PendingObstacle<T> {
+    /// Every obstacle the planner has once it appears (the late one included).
+    all: Vec<FwObstacle<T>>,
+    /// Arc length of the late obstacle's centre on the whole track, m.
+    s_m: f64,
+    appear_m: f64,
+    /// Last projection of the car on the whole track, m (a hint for the next).
+    s_hint: Option<f64>,
+    /// The whole track (the planner holds only a window of it).
+    track: crate::world::track::Track,
+}
+
+/// [`SimulatedEcu`] behind the [`Disturbances`] (see the module docs).
+#[derive(Debug)]
+pub struct DisturbedEcu<T: Real> {
+    inner: SimulatedEcu<T>,
+    d: Disturbances,
+    rng: SplitMix64,
+    history: VecDeque<StateEstimate<T>>,
+    last_delivered: Option<StateEstimate<T>>,
+    last_delta: Option<T>,
+    pending: Option<PendingObstacle<T>>,
+    appeared_at_us: Option<u64>,
+    obstacle_settings: firmware::obstacles::ObstacleSettings<T>,
+}
+
+impl<T: Real> DisturbedEcu<T> {
+    /// The modelled ECU for `scenario` (without its late obstacle, if any) and the
+    /// car the firmware is told of (`vehicle`), behind `d`.
+    pub fn new(
+        scenario: &Scenario,
+        vehicle: &VehicleParams,
+        opts: &SimOptions,
+        d: Disturbances,
+    ) -> Result<Self> {
+        let car = vehicle_config::<T>(vehicle);
+        let obstacle_settings = car.obstacle_settings(T::from_f64(opts.mu_planner));
+        let (inner, pending) = match d.late_obstacle {
+            None => (SimulatedEcu::new(scenario, vehicle, opts)?, None),
+            Some(late) => {
+                let o = scenario
+                    .obstacles
+                    .get(late.index)
+                    .ok_or_else(|| anyhow!("late obstacle {} does not exist", late.index))?;
+                let mut early = scenario.clone();
+                early.obstacles.remove(late.index);
+                let inner = SimulatedEcu::new(&early, vehicle, opts)?;
+                let all = scenario
+                    .obstacles
+                    .iter()
+                    .enumerate()
+                    .map(|(k, o)| {
+                        let v: Vec<[T; 2]> =
+                            o.vertices.iter().map(|p| p.map(T::from_f64)).collect();
+                        FwObstacle::from_vertices(k as u32, &v)
+                            .map_err(|e| anyhow!("obstacle {:?}: {e:?}", o.id))
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                let c = centroid(&o.vertices);
+                let (s_m, _) = scenario.track.project(c, None);
+                if !s_m.is_finite() {
+                    bail!("the late obstacle is not near the track");
+                }
+                let pending = PendingObstacle {
+                    all,
+                    s_m,
+                    appear_m: late.appear_m,
+                    s_hint: None,
+                    track: scenario.track.clone(),
+                };
+                (inner, Some(pending))
+            }
+        };
+        Ok(Self {
+            inner,
+            rng: SplitMix64::new(d.seed ^ 0x6E6F_6973_6521),
+            d,
+            history: VecDeque::new(),
+            last_delivered: None,
+            last_delta: None,
+            pending,
+            appeared_at_us: None,
+            obstacle_settings,
+        })
+    }
+
+    /// When the late obstacle was given to the planner, µs (`None`: not yet, or none).
+    pub fn obstacle_appeared_at_us(&self) -> Option<u64> {
+        self.appeared_at_us
+    }
+
+    /// The estimate the tasks see at `t_us` given the true one (noise, delay, dropout).
+    fn seen(&mut self, t_us: u64, truth: &StateEstimate<T>) -> StateEstimate<T> {
+        let mut m = *truth;
+        if self.d.noise_scale > 0.0 {
+            let k = self.d.noise_scale;
+            let add = |x: T, sigma: f64, rng: &mut SplitMix64| {
+                T::from_f64(x.to_f64() + k * sigma * rng.gaussian())
+            };
+            let n = NOISE_UNIT;
+            m.x_m = add(m.x_m, n.position_m, &mut self.rng);
+            m.y_m = add(m.y_m, n.position_m, &mut self.rng);
+            m.psi_rad = add(m.psi_rad, n.heading_rad, &mut self.rng);
+            m.vx_mps = add(m.vx_mps, n.speed_mps, &mut self.rng);
+            m.yaw_rate_radps = add(m.yaw_rate_radps, n.yaw_rate_radps, &mut self.rng);
+        }
+        let keep = self.d.delay_periods() + 1;
+        self.history.push_back(m);
+        while self.history.len() > keep {
+            self.history.pop_front();
+        }
+        let delayed = self.history.front().copied().unwrap_or(m);
+        let out = match self.d.dropout {
+            Some(dr) if dr.covers(t_us) => match dr.kind {
+                DropoutKind::Nan => {
+                    let nan = T::from_f64(f64::NAN);
+                    StateEstimate {
+                        stamp_us: t_us,
+                        x_m: nan,
+                        y_m: nan,
+                        psi_rad: nan,
+                        vx_mps: nan,
+                        vy_mps: nan,
+                        yaw_rate_radps: nan,
+                        delta_rad: nan,
+                    }
+                }
+                DropoutKind::Hold => self.last_delivered.unwrap_or(delayed),
+            },
+            _ => delayed,
+        };
+        if !self.d.dropout.is_some_and(|dr| dr.covers(t_us)) {
+            self.last_delivered = Some(out);
+        }
+        out
+    }
+
+    /// Gives the late obstacle to the planner once the car is close enough.
+    fn maybe_reveal(&mut self, t_us: u64, truth: &StateEstimate<T>) -> Result<()> {
+        let Some(p) = self.pending.as_mut() else {
+            return Ok(());
+        };
+        let (s_car, _) = p
+            .track
+            .project([truth.x_m.to_f64(), truth.y_m.to_f64()], p.s_hint);
+        if !s_car.is_finite() {
+            return Ok(());
+        }
+        p.s_hint = Some(s_car);
+        let mut ahead = p.s_m - s_car;
+        if p.track.closed && ahead < 0.0 {
+            ahead += p.track.length();
+        }
+        if ahead <= p.appear_m {
+            // Known from now on (every later window of the road rebuilds it too).
+            let task = self.inner.plan_task_mut();
+            task.set_obstacles(self.obstacle_settings, &p.all);
+            if !task.rebuild_obstacles() {
+                bail!("the late obstacle: the obstacle manager refused the obstacles");
+            }
+            self.pending = None;
+            self.appeared_at_us = Some(t_us);
+        }
+        Ok(())
+    }
+
+    /// The actuation after the steering rate limit.
+    fn limit_steering(&mut self, c: &mut ControlOutput<T>, truth: &StateEstimate<T>) {
+        let Some(rate) = self.d.steer_rate_limit_radps else {
+            return;
+        };
+        let prev = self.last_delta.unwrap_or(truth.delta_rad);
+        let step = T::from_f64(rate * CONTROL_PERIOD_US as f64 * 1e-6);
+        let cmd = c.actuation.delta_rad;
+        let applied = if cmd.is_finite() {
+            cmd.clamp(prev - step, prev + step)
+        } else {
+            prev
+        };
+        c.actuation.delta_rad = applied;
+        self.last_delta = Some(applied);
+    }
+}
+
+impl<T: Real> Ecu<T> for DisturbedEcu<T> {
+    fn control(&mut self, t_us: u64, est: &StateEstimate<T>) -> Result<ControlOutput<T>> {
+        self.maybe_reveal(t_us, est)?;
+        let seen = self.seen(t_us, est);
+        let mut c = self.inner.control(t_us, &seen)?;
+        self.limit_steering(&mut c, est);
+        Ok(c)
+    }
+
+    fn active_plan(&self) -> &Plan<T> {
+        self.inner.active_plan()
+    }
+
+    fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()> {
+        self.inner.set_window(t_us, w)
+    }
+}
+
+/// Mean of a polygon's vertices, m.
+pub fn centroid(v: &[[f64; 2]]) -> [f64; 2] {
+    let n = v.len().max(1) as f64;
+    let (x, y) = v.iter().fold((0.0, 0.0), |(x, y), p| (x + p[0], y + p[1]));
+    [x / n, y / n]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn splitmix_is_reproducible_and_gaussian_has_unit_variance() {
+        let mut a = SplitMix64::new(7);
+        let mut b = SplitMix64::new(7);
+        assert_eq!(a.next_u64(), b.next_u64());
+        let n = 20_000;
+        let xs: Vec<f64> = (0..n).map(|_| a.gaussian()).collect();
+        let mean = xs.iter().sum::<f64>() / n as f64;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
+        assert!(mean.abs() < 0.03, "mean {mean}");
+        assert!((var - 1.0).abs() < 0.05, "variance {var}");
+    }
+
+    #[test]
+    fn delay_rounds_to_control_periods() {
+        let d = Disturbances {
+            delay_ms: 24.0,
+            ..Disturbances::default()
+        };
+        assert_eq!(d.delay_periods(), 2);
+        let d = Disturbances {
+            delay_ms: 0.0,
+            ..Disturbances::default()
+        };
+        assert_eq!(d.delay_periods(), 0);
+    }
+}

@@ -1,0 +1,25 @@
+//! The world the car drives in: the road, what stands on it, its friction, the
+//! scenario put together from them, the windows of the road the ECU is sent, and the
+//! conditions a run can add (disturbances at the ECU's boundary, named faults).
+//!
+//! | module | concept |
+//! |---|---|
+//! | [`track`] | track files (racetrack-database CSV), projection, curvature |
+//! | [`csv_value`] | one number read from a cell of a track or obstacle file, with errors that locate it |
+//! | [`obstacle_file`] | obstacle files (`id,x_m,y_m`), polygon distances, footprints |
+//! | [`obstacle_placement`] | boxes on any track; random obstacles from a seed |
+//! | [`road_friction`] | friction that changes along the road (`--mu-patch`); μ̂ judged against it |
+//! | [`scenario`] | the built-in `paper` scenario and `--track`/`--obstacles` resolution |
+//! | [`route`] | the windows of the road the ECU holds, sent as the car moves on |
+//! | [`disturbance`] | noise, delay, dropout, steering rate limit, late obstacle at the ECU's boundary |
+//! | [`faults`] | named fault scenarios with their expected behaviour; run outcomes |
+
+pub mod csv_value;
+pub mod disturbance;
+pub mod faults;
+pub mod obstacle_file;
+pub mod obstacle_placement;
+pub mod road_friction;
+pub mod route;
+pub mod scenario;
+pub mod track;
