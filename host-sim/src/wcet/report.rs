@@ -48,43 +48,10 @@ pub const GOAL_FLASH_BYTES: f64 = 262_144.0;
 // Processor-in-the-loop run folders
 // ---------------------------------------------------------------------------
 
-/// The keys of a PIL run's `summary.json` that the report uses.
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-pub struct PilSummary {
-    /// Whether the run reached the end of its scenario.
-    pub completed: bool,
-    /// Plan activations in the run.
-    pub plan_activations: u64,
-    /// Plan activations that finished after their 100 ms deadline.
-    pub plan_deadline_misses: u64,
-    /// Control activations that finished after their deadline.
-    pub control_deadline_misses: u64,
-    /// Most instructions of one plan activation, in instructions.
-    pub plan_max_instructions: f64,
-    /// Median instructions of a plan activation, in instructions.
-    pub plan_p50_instructions: f64,
-    /// Most instructions of one control activation, in instructions.
-    pub control_max_instructions: f64,
-}
-
-/// The keys of a PIL run's `pil.json` that the report uses (others are ignored).
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-pub struct PilInfo {
-    /// QEMU `-icount shift`: one instruction takes `2^shift` ns of virtual time.
-    pub icount_shift: u32,
-    /// Virtual nanoseconds per instruction, in ns.
-    pub ns_per_instruction: f64,
-    /// The ECU ELF that ran.
-    pub elf: String,
-    /// Deepest stack use seen by painting the stack region, in bytes.
-    pub stack_high_water_bytes: u64,
-    /// Size of the stack region, in bytes.
-    pub stack_size_bytes: u64,
-    /// Most instructions of one control activation, in instructions.
-    pub control_max_instructions: f64,
-    /// Median instructions of a control activation, in instructions.
-    pub control_p50_instructions: f64,
-}
+/// A PIL run's `summary.json`: the type `run` and `pil` write it with.
+pub use crate::closed_loop::summary::Summary;
+/// A PIL run's `pil.json`: the type `pil` writes it with.
+pub use crate::pil::report::PilReport;
 
 /// One row of `plan_activations.csv`: the type `run` and `pil` write it with.
 pub use crate::closed_loop::plan_activation::PlanActivation;
@@ -95,9 +62,9 @@ pub struct PilRun {
     /// The folder.
     pub dir: PathBuf,
     /// Its `summary.json`.
-    pub summary: PilSummary,
+    pub summary: Summary,
     /// Its `pil.json`.
-    pub pil: PilInfo,
+    pub pil: PilReport,
     /// Its `plan_activations.csv`, one entry per activation.
     pub plan: Vec<PlanActivation>,
 }
@@ -705,12 +672,12 @@ pub fn assemble_report(
     let run_entries: Vec<RunEntry> = runs.iter().map(run_entry).collect();
     let high_water = runs
         .iter()
-        .map(|r| r.pil.stack_high_water_bytes)
+        .map(|r| u64::from(r.pil.stack_high_water_bytes))
         .max()
         .unwrap_or(0);
     let stack_size = runs
         .iter()
-        .map(|r| r.pil.stack_size_bytes)
+        .map(|r| u64::from(r.pil.stack_size_bytes))
         .max()
         .unwrap_or(0);
     let memory = memory_report(&memory, &stack, high_water, stack_size);
@@ -816,7 +783,7 @@ fn run_entry(run: &PilRun) -> RunEntry {
         plan_deadline_misses: run.summary.plan_deadline_misses.max(csv_misses),
         control_deadline_misses: run.summary.control_deadline_misses,
         plan_failures: run.plan.iter().filter(|a| a.status != "optimal").count() as u64,
-        stack_high_water_bytes: run.pil.stack_high_water_bytes,
+        stack_high_water_bytes: u64::from(run.pil.stack_high_water_bytes),
         elf: run.pil.elf.clone(),
     }
 }
@@ -1456,23 +1423,35 @@ active_constraints,max_validity_slack_rad";
         }
         let misses = rows.iter().filter(|r| r.2).count();
         let max = rows.iter().map(|r| r.0).fold(0.0, f64::max);
-        let summary = serde_json::json!({
-            "completed": true, "plan_activations": rows.len(),
-            "plan_deadline_misses": misses, "control_deadline_misses": 0,
-            "plan_max_instructions": max, "plan_p50_instructions": 1.0,
-            "control_max_instructions": control_max - 10.0, "other": "ignored"
-        });
-        let pil = serde_json::json!({
-            "icount_shift": 4, "ns_per_instruction": 16.0, "elf": "target/ecu",
-            "stack_high_water_bytes": high_water, "stack_size_bytes": 43512,
-            "control_max_instructions": control_max, "control_p50_instructions": control_max / 2.0,
-            "extra": [1, 2]
-        });
+        let summary = Summary {
+            completed: true,
+            plan_activations: rows.len() as u64,
+            plan_deadline_misses: misses as u64,
+            control_deadline_misses: 0,
+            plan_max_instructions: max,
+            plan_p50_instructions: 1.0,
+            control_max_instructions: control_max - 10.0,
+            ..Summary::default()
+        };
+        let pil = PilReport {
+            icount_shift: 4,
+            ns_per_instruction: 16.0,
+            elf: "target/ecu".into(),
+            stack_high_water_bytes: u32::try_from(high_water)?,
+            stack_size_bytes: 43512,
+            control_max_instructions: control_max,
+            control_p50_instructions: control_max / 2.0,
+            ..PilReport::default()
+        };
+        let (summary, pil) = (
+            serde_json::to_string(&summary)?,
+            serde_json::to_string(&pil)?,
+        );
         let write = |file: &str, text: String| std::fs::write(dir.join(file), text);
         std::fs::create_dir_all(&dir)
             .and_then(|()| write("plan_activations.csv", csv))
-            .and_then(|()| write("summary.json", summary.to_string()))
-            .and_then(|()| write("pil.json", pil.to_string()))
+            .and_then(|()| write("summary.json", summary))
+            .and_then(|()| write("pil.json", pil))
             .with_context(|| format!("cannot write the fixture {}", dir.display()))?;
         Ok(dir)
     }
@@ -1665,7 +1644,7 @@ active_constraints,max_validity_slack_rad";
                 .unwrap_or_else(|| anyhow::anyhow!(""))
         );
         assert!(
-            message.contains("summary.json") && message.contains("plan_activations"),
+            message.contains("summary.json") && message.contains("missing field"),
             "{message}"
         );
         Ok(())
