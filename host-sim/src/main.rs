@@ -1,11 +1,11 @@
 //! `host-sim` command line.
 //!
 //! One subcommand per job, each implemented in its own module of
-//! `host_sim::commands` (`wcet`'s is `host_sim::wcet::command`): add a variant to
+//! `host_sim::commands`: add a variant to
 //! [`Command`] and a line to `run` to add one.
 
 use clap::{Parser, Subcommand};
-use host_sim::{commands, wcet};
+use host_sim::commands;
 
 /// Host simulator of the consistent MPC + PID vehicle controller.
 #[derive(Debug, Parser)]
@@ -30,7 +30,7 @@ enum Command {
     Pil(commands::pil::PilCommand),
     /// The ECU's worst-case timing and memory report (wcet.md, wcet.json) from PIL
     /// laps, a QEMU trace for the cycles-per-instruction bound and the ELF.
-    Wcet(wcet::command::WcetArgs),
+    Wcet(commands::wcet::WcetArgs),
     /// Every QP the MPC solves over a kinematic closed loop, one JSON file each (for solver benchmarks).
     QpCorpus(commands::qp_corpus::QpCorpusArgs),
     /// Many closed-loop runs: the cross product of tracks, frictions, vehicles, loads,
@@ -49,7 +49,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Run(args) => commands::run::command(args),
         Command::QpCorpus(args) => commands::qp_corpus::run(args),
         Command::Pil(args) => commands::pil::command(args),
-        Command::Wcet(args) => wcet::command::run(args),
+        Command::Wcet(args) => commands::wcet::run(args),
         Command::Sweep(args) => commands::sweep::run(args),
         Command::SweepMerge(args) => commands::sweep::merge(args),
     }

@@ -10,8 +10,7 @@
 //! | [`run`] | `host-sim run`: a closed-loop drive, its log, summary and figures |
 //! | [`sweep`] | `host-sim sweep` and `sweep-merge`: cross products of runs, in parallel |
 //! | [`pil`] | `host-sim pil`: the same drive with the ECU application in QEMU, `pil.json` |
-//!
-//! `host-sim wcet` is [`crate::wcet::command`].
+//! | [`wcet`] | `host-sim wcet`: the PIL laps, the static analysis and the timing and memory report |
 
 pub mod pil;
 pub mod qp_corpus;
@@ -20,3 +19,4 @@ pub mod scenario_args;
 pub mod sweep;
 pub mod tire;
 pub mod validity;
+pub mod wcet;

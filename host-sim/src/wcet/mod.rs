@@ -16,7 +16,7 @@
 //! | [`cpi`] | cycles-per-instruction bound from a QEMU execution trace and a Cortex-M4 timing table |
 //! | [`report`] | the timing and memory report (`wcet.json`, `wcet.md`) from PIL runs, the ELF and the two bounds; CI comparison |
 //!
-//! All are library functions; the `host-sim wcet` command wires them together.
+//! All are library functions; the `host-sim wcet` command (`commands::wcet`) wires them together.
 
 /// The ECU's core clock, Hz (STM32F405 at 168 MHz).
 pub const CLOCK_HZ: u32 = firmware::timing::ECU_CLOCK_HZ;
@@ -25,7 +25,6 @@ pub mod analysis;
 pub mod annotations;
 pub mod bounds;
 pub mod cfg;
-pub mod command;
 pub mod cpi;
 pub mod flash_data;
 pub mod graph;

@@ -87,7 +87,7 @@ fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -
             duration,
             initial_speed: 15.0,
             precision: crate::closed_loop::Precision::F32,
-            ecu_mhz: f64::from(super::CLOCK_HZ) / 1e6,
+            ecu_mhz: f64::from(crate::wcet::CLOCK_HZ) / 1e6,
             no_plots: true,
             out,
             conditions: Default::default(),
@@ -226,11 +226,12 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         stack_levels: report::ecu_priority_levels(),
         cpi,
         statics: report::StaticSummary::of(&analysis),
-        plan_period_cycles: firmware::timing::PLAN_PERIOD_US as f64 * f64::from(super::CLOCK_HZ)
+        plan_period_cycles: firmware::timing::PLAN_PERIOD_US as f64
+            * f64::from(crate::wcet::CLOCK_HZ)
             / 1e6,
         plan_budget_cycles: crate::closed_loop::SimOptions::default().plan_budget_cycles,
         control_budget_cycles: crate::closed_loop::SimOptions::default().control_budget_cycles,
-        clock_hz: u64::from(super::CLOCK_HZ),
+        clock_hz: u64::from(crate::wcet::CLOCK_HZ),
     };
     let r = report::build_report(&inputs)?;
     report::write_report(&args.out, &r)?;
