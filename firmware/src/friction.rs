@@ -70,13 +70,26 @@
 //! speed gives almost none). On a slip event
 //!
 //! ```text
-//! μ̂ = clamp(min(μ̂_before, μ_used,peak), max(μ_min, max_drop·μ̂_before), ·)
+//! μ̂ = min(μ̂_before, max(μ_used,peak, μ_shown, μ_min, max_drop·μ̂_before))
 //! ```
 //!
 //! the best `μ_used,peak` of the event counting. Too low an estimate is no safer
 //! than too high a one: the planner can then brake only at `0.8·μ̂·g`, and its
 //! `V_max` falls to `0.8·μ̂·g·T_H`; hence the peak, and the floor
 //! [`FrictionConfig::max_drop`] per event.
+//!
+//! **The grip shown**: `μ_shown` is the largest `μ_used` since the last slip
+//! event began (that event's own peak included) when `μ̂` is below
+//! `μ_nominal` (a relapse), 0 otherwise (the first event: what the tyres used
+//! before it may be another road's). A relapse lowers `μ̂` no further than the
+//! road has shown it holds since: the tyres used that much on it without
+//! slipping. Why: a relapse is measured on wheels that locked or spun again,
+//! and its last second can hold only their sliding friction, lower than the
+//! road's (a wet patch of μ 0.5 on a μ 1 road: 0.18–0.39 measured at the
+//! second event, the front wheels locked for up to 1 s before the shortfall
+//! confirmed it), so the second event took `μ̂` from 0.6 to the floor 0.4 on 7
+//! of 17 circuits, among them three where the tyres had used 0.43–0.56 g on
+//! the patch since the first event began (`docs/tuning.md`).
 //!
 //! **Recovery** (grip that comes back): the hold counts the periods without
 //! evidence of slip, that is with the demand under `min_demand_mps2` or the
@@ -330,6 +343,9 @@ pub struct FrictionEstimator<T> {
     shortfall_s: T,
     /// Largest `(μ_obs·g)²` of the last `peak_window_s`, m²/s⁴, and its age, s.
     peak: (T, T),
+    /// Largest `(μ_obs·g)²` since the last slip event began (its own peak
+    /// included), m²/s⁴: the grip the road has shown since (module docs).
+    shown: T,
     /// True while a slip event is under way.
     slipping: bool,
     /// `μ̂` before the slip event under way.
@@ -373,6 +389,7 @@ impl<T: Real> FrictionEstimator<T> {
             shortfall_mps2: T::ZERO,
             shortfall_s: T::ZERO,
             peak: (T::ZERO, T::ZERO),
+            shown: T::ZERO,
             slipping: false,
             mu_before: T::INFINITY,
             since_slip_s: T::ZERO,
@@ -526,7 +543,7 @@ impl<T: Real> FrictionEstimator<T> {
         // Predicted to now with the torque applied since the last estimate, then
         // corrected: e_j = (1 − k_o)·e_{j−1} + Δt·(a_cmd − a_meas) exactly, the
         // recursion of the first filter on a_cmd below.
-        let k_o = (dt * inv_tau_o).min(T::ONE);
+        let k_o = smaller(dt * inv_tau_o, T::ONE);
         let e = self.v_hat_mps + dt * a_cmd - v;
         self.v_hat_mps = v + (T::ONE - k_o) * e;
         let s_raw = e * inv_tau_o;
@@ -534,7 +551,7 @@ impl<T: Real> FrictionEstimator<T> {
         // a_cmd − shortfall is the measured acceleration without a lag between them.
         let [c1, c2] = self.accel_cmd_mps2;
         let c1 = c1 + k_o * (a_cmd - c1);
-        let k = (dt * inv_tau_f).min(T::ONE);
+        let k = smaller(dt * inv_tau_f, T::ONE);
         let cmd = c2 + k * (c1 - c2);
         self.accel_cmd_mps2 = [c1, cmd];
         self.shortfall_mps2 += k * (s_raw - self.shortfall_mps2);
@@ -545,8 +562,8 @@ impl<T: Real> FrictionEstimator<T> {
         let a_tyre = if cmd > T::ZERO {
             // Driving: the driven axle alone, its load lowered by the transfer.
             let share = cfg.driven_load_share
-                - cfg.cg_height_over_wheelbase * a_meas.max(T::ZERO) * T::lit(1.0 / crate::G);
-            a_meas / share.max(T::lit(0.1))
+                - cfg.cg_height_over_wheelbase * larger(a_meas, T::ZERO) * T::lit(1.0 / crate::G);
+            a_meas / larger(share, T::lit(0.1))
         } else {
             a_meas
         };
@@ -555,6 +572,9 @@ impl<T: Real> FrictionEstimator<T> {
         self.peak.1 += dt;
         if used >= self.peak.0 || self.peak.1 > cfg.peak_window_s {
             self.peak = (used, T::ZERO);
+        }
+        if used > self.shown {
+            self.shown = used;
         }
         // The threshold grows with the demand by the mass ratio's uncertainty: a
         // shortfall a car as heavy as the estimate allows would show is not slip.
@@ -574,9 +594,18 @@ impl<T: Real> FrictionEstimator<T> {
         };
         if short && self.shortfall_s >= cfg.confirm_s {
             let new_event = !self.slipping;
+            // The grip shown since the last event (not counted before the first,
+            // and once the estimate is back at the configured friction): a
+            // relapse lowers μ̂ no further than the road has shown it holds.
+            let shown = if self.mu < cfg.mu_nominal {
+                self.shown
+            } else {
+                T::ZERO
+            };
             if new_event {
                 self.slipping = true;
                 self.mu_before = self.mu;
+                self.shown = self.peak.0;
                 self.events = self.events.wrapping_add(1);
                 // A relapse (slip again after μ̂ rose): the road is still
                 // slippery; recover more patiently.
@@ -590,9 +619,14 @@ impl<T: Real> FrictionEstimator<T> {
             let g = T::lit(crate::G);
             let mu_g = self.mu * g;
             if new_event || self.peak.0 > mu_g * mu_g {
-                let obs = self.peak.0.sqrt() / g;
-                let floor = (self.mu_before * cfg.max_drop).max(cfg.mu_min);
-                let mu = self.mu_before.min(obs).max(floor);
+                let best = if shown > self.peak.0 {
+                    shown
+                } else {
+                    self.peak.0
+                };
+                let obs = best.sqrt() / g;
+                let floor = larger(self.mu_before * cfg.max_drop, cfg.mu_min);
+                let mu = smaller(self.mu_before, larger(obs, floor));
                 self.mu = if new_event { mu } else { self.mu.max(mu) };
             }
             self.since_slip_s = T::ZERO;
@@ -648,6 +682,28 @@ impl<T: Real> FrictionEstimator<T> {
                 self.patience = T::ONE;
             }
         }
+    }
+}
+
+/// The smaller of `a` and `b`, both finite (a plain comparison: [`Real::min`]'s
+/// care for NaN costs instructions the control task's budget does not have, and
+/// the values here are finite by construction).
+#[inline(always)]
+fn smaller<T: Real>(a: T, b: T) -> T {
+    if b < a {
+        b
+    } else {
+        a
+    }
+}
+
+/// The larger of `a` and `b`, both finite (as [`smaller`]).
+#[inline(always)]
+fn larger<T: Real>(a: T, b: T) -> T {
+    if b > a {
+        b
+    } else {
+        a
     }
 }
 
@@ -825,6 +881,33 @@ mod tests {
         r.drive(v, 0.0, 0.0, 0.0, 1.0);
         let rate = r.e.mu() - mu;
         assert!((rate - 0.045).abs() < 1e-3, "rate {rate}");
+    }
+
+    #[test]
+    fn a_relapse_lowers_the_estimate_no_further_than_the_grip_shown_since() {
+        let (mut r, v) = Rig::learned(1.0);
+        // Hard braking on a good road (0.61 g, no slip) shows nothing about the
+        // wet road of the first event: it lowers μ̂ to its drop (0.6·0.75).
+        let v = r.drive(v, -6.0, -6.0, 0.0, 1.0);
+        let v = r.drive(v, 0.0, 0.0, 0.0, 1.0);
+        assert_eq!(r.e.events(), 0);
+        let v = r.drive(v, -3.0, -0.1, 0.0, 0.5);
+        assert_eq!(r.e.events(), 1);
+        assert!((r.e.mu() - 0.45).abs() < 1e-6, "μ̂ = {}", r.e.mu());
+        // The car then brakes at 3.9 m/s² on that road without slip (0.40 g),
+        // cruises, and its wheels lock again, the tyres giving 1 m/s² of the 3.5
+        // asked: without the grip shown since the first event the relapse would
+        // take μ̂ to its floor (0.6 of it, at least 0.3, the lowest estimate);
+        // the road held 0.40, and so does μ̂.
+        let v = r.drive(v, -3.9, -3.9, 0.0, 2.0);
+        let v = r.drive(v, 0.0, 0.0, 0.0, 1.2);
+        let before = r.e.mu();
+        assert!((0.45..0.46).contains(&before), "μ̂ = {before}");
+        r.drive(v, -3.5, -1.0, 0.0, 0.5);
+        assert_eq!(r.e.events(), 2);
+        let mu = r.e.mu();
+        let shown = 3.9 / 9.81;
+        assert!((mu - shown).abs() < 0.01, "μ̂ = {mu}, shown {shown}");
     }
 
     #[test]
