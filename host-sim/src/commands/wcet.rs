@@ -261,13 +261,11 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     println!("control: {}", bound(&r.tasks.control));
     for g in &r.goals {
         println!(
-            "  {} {} ({}): {} (goal ≤ {} {})",
+            "  {} {} ({}): {}",
             if g.met { "met   " } else { "MISSED" },
             g.name,
             g.id,
-            g.value.map_or("n/a".into(), |v| format!("{v:.0}")),
-            g.goal,
-            g.unit
+            g.figures()
         );
     }
     println!("wrote {}", args.out.display());

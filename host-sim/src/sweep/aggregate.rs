@@ -10,7 +10,8 @@ use serde::Serialize;
 use crate::sweep::table::{Row, FACTOR_COLUMNS};
 use crate::world::faults::{Fault, Outcome};
 
-/// The bounds the benchmark checks (issue 9).
+/// The bounds the benchmark checks: lateral error, lateral acceleration over μg and
+/// plan–trajectory consistency (the README's sweep goals).
 pub const BOUNDS: Bounds = Bounds {
     lateral_error_m: 0.4,
     ay_over_mu_g: 0.55,

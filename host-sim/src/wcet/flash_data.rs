@@ -25,7 +25,8 @@
 //!   that forms a flash address with `adr` (the pointer could reach any callee).
 
 use super::cfg::RawFunction;
-use object::{Object, ObjectSection, SectionFlags, SectionKind};
+use super::stack::parse_imm;
+use object::{Object, ObjectSection, SectionKind};
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -104,10 +105,8 @@ impl FlashData {
         let reset = (file.entry() as u32) & !1;
         let mut reasons = Vec::new();
         for s in file.sections() {
-            let alloc = match s.flags() {
-                SectionFlags::Elf { sh_flags } => sh_flags & u64::from(object::elf::SHF_ALLOC) != 0,
-                _ => true,
-            };
+            // Not knowing, count it: a reason more, never a load charged less.
+            let alloc = super::allocated(s.flags()).unwrap_or(true);
             let name = s.name().unwrap_or("?");
             if !alloc || s.size() == 0 || s.kind() == SectionKind::Text || name == ".vector_table" {
                 continue;
@@ -224,13 +223,13 @@ impl FlashData {
     }
 }
 
-/// The immediate of `movw r0, #0x1234` / `movt r0, #2048`.
+/// The immediate of `movw r0, #0x1234` / `movt r0, #2048` (its second operand).
 fn immediate(operands: &str) -> Option<u32> {
-    let imm = operands.split('#').nth(1)?.trim();
-    match imm.strip_prefix("0x") {
-        Some(h) => u32::from_str_radix(h, 16).ok(),
-        None => imm.parse().ok(),
-    }
+    operands
+        .split(',')
+        .nth(1)
+        .filter(|o| o.trim_start().starts_with('#'))
+        .and_then(parse_imm)
 }
 
 #[cfg(test)]

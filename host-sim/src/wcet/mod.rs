@@ -104,6 +104,17 @@ pub fn parse_elf<'d>(elf: &Path, data: &'d [u8]) -> Result<object::File<'d>, Wce
     })
 }
 
+/// Whether an ELF section occupies memory on the target (`SHF_ALLOC`); `None` for
+/// a section of another object format, which has no such flag.
+pub fn allocated(flags: object::SectionFlags) -> Option<bool> {
+    match flags {
+        object::SectionFlags::Elf { sh_flags } => {
+            Some(sh_flags & u64::from(object::elf::SHF_ALLOC) != 0)
+        }
+        _ => None,
+    }
+}
+
 /// Demangles a Rust symbol (legacy or v0) without its hash; other symbols unchanged.
 pub fn demangle(symbol: &str) -> String {
     format!("{:#}", rustc_demangle::demangle(symbol))

@@ -255,15 +255,12 @@ const RAM_END: u64 = 0x2002_0000;
 /// (`.data`, and `.rodata_ram`: read-only data copied to SRAM at reset); zeroed
 /// and uninitialised RAM (`.bss`, `.uninit`).
 pub fn elf_memory(elf: &Path) -> Result<ElfMemory> {
-    use object::{Object, ObjectSection, SectionFlags, SectionKind};
+    use object::{Object, ObjectSection, SectionKind};
     let data = read_elf_bytes(elf)?;
     let file = parse_elf(elf, &data)?;
     let mut memory = ElfMemory::default();
     for s in file.sections() {
-        let alloc = match s.flags() {
-            SectionFlags::Elf { sh_flags } => sh_flags & u64::from(object::elf::SHF_ALLOC) != 0,
-            _ => false,
-        };
+        let alloc = super::allocated(s.flags()).unwrap_or(false);
         if !alloc || s.size() == 0 {
             continue;
         }
@@ -556,6 +553,18 @@ pub struct Goal {
     pub unit: String,
     /// `value ≤ goal`.
     pub met: bool,
+}
+
+impl Goal {
+    /// `value (goal ≤ goal unit)`, the value rounded, `n/a` when not measured.
+    pub fn figures(&self) -> String {
+        format!(
+            "{} (goal ≤ {} {})",
+            self.value.map_or("n/a".into(), |v| format!("{v:.0}")),
+            self.goal,
+            self.unit
+        )
+    }
 }
 
 /// The worst-case timing and memory report (`wcet.json`).
@@ -859,16 +868,7 @@ pub fn missed_required(goals: &[Goal], required: &[String]) -> Result<Vec<String
     Ok(goals
         .iter()
         .filter(|g| !g.met && required.iter().any(|id| id == g.id))
-        .map(|g| {
-            format!(
-                "{} ({}): {} (goal ≤ {} {})",
-                g.id,
-                g.name,
-                g.value.map_or("n/a".into(), |v| format!("{v:.0}")),
-                g.goal,
-                g.unit
-            )
-        })
+        .map(|g| format!("{} ({}): {}", g.id, g.name, g.figures()))
         .collect())
 }
 

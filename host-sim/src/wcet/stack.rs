@@ -359,7 +359,8 @@ fn register_list_bytes(operands: &str) -> Option<u32> {
     Some(bytes)
 }
 
-fn parse_imm(s: &str) -> Option<u32> {
+/// An immediate operand (`#0x10`, `#16`, `16`), unsigned.
+pub(super) fn parse_imm(s: &str) -> Option<u32> {
     let s = s.trim().trim_start_matches('#');
     match s.strip_prefix("0x") {
         Some(hex) => u32::from_str_radix(hex, 16).ok(),
