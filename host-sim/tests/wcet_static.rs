@@ -130,6 +130,59 @@ fn ipet_counts_the_worst_path_by_hand() {
     assert!(c.bound > 67);
 }
 
+/// `root` counts r4 from 16 down to 0 in a loop of one flash line that calls
+/// nothing.
+const CALL_FREE: &str = "
+08000000 <root>:
+ 8000000: 2410         \tmovs\tr4, #0x10
+ 8000002: 3c01         \tsubs\tr4, #0x1
+ 8000004: d1fd         \tbne\t0x8000002 <root+0x2> @ imm = #-0x6
+ 8000006: 4770         \tbx\tlr
+";
+
+#[test]
+fn cycles_by_hand_with_fall_throughs_calls_and_a_cached_loop() {
+    // COUNTED: the loop calls `leaf`, so it is not kept in the cache.
+    // Block 0: push 3 + movs 1 + its line 6 = 10; it falls into block 1 in the
+    // same line (-6). Block 1, 16 times: bl 4 + subs 1 + bne 4 + its line 6 + the
+    // line of bl's return address 6 = 21. Its fall-through to block 2: the bne
+    // not taken (-3) in the same line (-6). Block 2: pop {r4, pc} 6 + its line 6.
+    // `leaf`, 16 times: bx lr 4 + its line 6.
+    let p = program(COUNTED);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let facts = [LoopFact {
+        function: root,
+        loop_index: 0,
+        bound: 15,
+        per: Per::Entry,
+        group: None,
+    }];
+    let c = ipet::task_bound(&p, &ls, root, &facts, 0, &Default::default(), Cost::Cycles).unwrap();
+    assert_eq!(c.bound, 10 - 6 + 16 * 21 - 9 + 12 + 16 * 10);
+    assert!(host_sim::wcet::cache::Persistence::new(&p, &ls)
+        .regions()
+        .is_empty());
+
+    // CALL_FREE: the loop's one line is fetched once per entry.
+    // Block 0: movs 1 + line 6, falling into block 1 in the same line (-6).
+    // Block 1, 16 times: subs 1 + bne 4 (its line charged once on entry: 6).
+    // Its fall-through to block 2: not taken (-3), same line (-6). Block 2: bx lr
+    // 4 + line 6.
+    let p = program(CALL_FREE);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let regions = host_sim::wcet::cache::Persistence::new(&p, &ls);
+    assert_eq!(regions.regions().len(), 1);
+    assert_eq!(regions.regions()[0].lines, 1);
+    let facts = [LoopFact {
+        function: root,
+        ..facts[0].clone()
+    }];
+    let c = ipet::task_bound(&p, &ls, root, &facts, 0, &Default::default(), Cost::Cycles).unwrap();
+    assert_eq!(c.bound, 7 - 6 + 16 * 5 + 6 - 9 + 10);
+}
+
 #[test]
 fn a_loop_without_a_bound_is_refused() {
     let p = program(COUNTED);

@@ -262,6 +262,27 @@ pub struct Block {
     pub instructions: u64,
     /// Worst-case cycles (see [`MemoryModel`]).
     pub cycles: u64,
+    /// Of `cycles`, the fetch of the flash lines the block's bytes touch (the
+    /// lines of return addresses after calls not included); 0 outside flash.
+    pub fetch_cycles: u64,
+    /// The first and last flash line (address / line size) its bytes touch;
+    /// `None` outside flash.
+    pub lines: Option<(u64, u64)>,
+    /// The successor control falls through to (the block starting where this one
+    /// ends), when the block can fall through and that successor is not also the
+    /// target of its jump.
+    pub fall_through: Option<usize>,
+    /// Cycles of `cycles` plus the fall-through successor's `cycles` that the
+    /// fall-through edge does not spend ([`MemoryModel::fall_through_saving`]):
+    /// `(refill, line)`, the branch not taken and the line already read.
+    pub fall_through_saving: (u64, u64),
+}
+
+impl Block {
+    /// Cycles the fall-through edge saves, both terms.
+    pub fn fall_through_total(&self) -> u64 {
+        self.fall_through_saving.0 + self.fall_through_saving.1
+    }
 }
 
 /// A function's control-flow graph.
@@ -369,8 +390,9 @@ impl MemoryModel {
         vec![
             format!(
                 "Core: Cortex-M4F; per-instruction worst cases from the Cortex-M4 TRM (r0p1, \
-                 chapter 3): every branch taken with a 3-cycle pipeline refill (conditional \
-                 ones and instructions skipped by IT included), loads/stores 2 (LDRD/STRD 3), \
+                 chapter 3): every branch taken with a 3-cycle pipeline refill (instructions \
+                 skipped by IT included), except a conditional branch or return on the edge \
+                 where it falls through (1 cycle, not taken), loads/stores 2 (LDRD/STRD 3), \
                  LDM/STM/PUSH/POP 1+N (+3 loading pc), SDIV/UDIV 12, VDIV/VSQRT 14, \
                  VMLA/VFMA family 3, VMOV core<->FPU 2, VLDM/VSTM 1+N; unknown instructions 4."
             ),
@@ -378,7 +400,10 @@ impl MemoryModel {
                 "Instruction fetch: from flash with {} wait states, {}-byte lines, the ART \
                  accelerator's instruction cache and prefetch assumed to miss on every line: \
                  each line a block touches costs {} cycles, added to (not overlapped with) the \
-                 block's execution.",
+                 block's execution, and once more after each call (the return address's \
+                 line). Only a fall-through into the line the previous block ended in is \
+                 not charged again (a sequential fetch served by the flash interface's \
+                 128-bit line buffer, RM0090 3.5.2).",
                 self.flash_wait_states,
                 self.flash_line_bytes,
                 self.flash_wait_states + 1
@@ -387,9 +412,11 @@ impl MemoryModel {
             format!(
                 "Bus: no DMA, no other master; the core is the only user of the flash and SRAM \
                  buses. Interrupt entry: 12 cycles (TRM, with FPU lazy stacking reserving the \
-                 frame) and {} more for the vector read from flash; exit: 12 cycles. Charged \
-                 per preemption in the response-time analysis.",
-                self.flash_wait_states
+                 frame) and {} more for the vector read from flash; exit: 12 cycles and the \
+                 preempted code's line fetched again ({}). Charged per preemption in the \
+                 response-time analysis.",
+                self.flash_wait_states,
+                self.line_fetch_cycles()
             ),
         ]
     }
@@ -406,21 +433,91 @@ impl MemoryModel {
                 || (class == Class::FpuLoadStore
                     && (i.base().starts_with("vldr") || i.base().starts_with("vldm")));
             let from_pc = class == Class::TableBranch || (loads && i.operands.contains("[pc"));
-            let from_sp = i.operands.contains("[sp");
+            // `pop`, `vpop` and `ldm sp!` read the stack too.
+            let from_sp = i.operands.contains("[sp")
+                || i.operands.starts_with("sp")
+                || matches!(strip_condition(i.base()), "pop" | "vpop");
             if from_pc || (loads && !from_sp && through_registers) {
                 cycles += u64::from(self.flash_wait_states);
             }
         }
-        // Fetch: every flash line the block's bytes touch.
-        if let (Some(first), Some(last)) = (insns.first(), insns.last()) {
-            if (self.flash.0..self.flash.1).contains(&first.address) {
-                let line = u64::from(self.flash_line_bytes);
-                let lo = u64::from(first.address) / line;
-                let hi = (u64::from(last.address) + u64::from(last.bytes) - 1) / line;
-                cycles += (hi - lo + 1) * u64::from(self.flash_wait_states + 1);
+        // Fetch: every flash line the block's bytes touch, and after every call
+        // the line of its return address once more (the callee's fetches went
+        // elsewhere).
+        if let Some((lo, hi)) = self.block_lines(insns) {
+            {
+                let calls = insns
+                    .iter()
+                    .filter(|i| matches!(strip_condition(i.base()), "bl" | "blx"))
+                    .count() as u64;
+                cycles += (hi - lo + 1 + calls) * self.line_fetch_cycles();
             }
         }
         cycles
+    }
+
+    /// Cycles one flash line fetch costs: the wait states and the access.
+    pub fn line_fetch_cycles(&self) -> u64 {
+        u64::from(self.flash_wait_states + 1)
+    }
+
+    fn in_flash(&self, address: u32) -> bool {
+        (self.flash.0..self.flash.1).contains(&address)
+    }
+
+    fn line_of(&self, address: u32) -> u64 {
+        u64::from(address) / u64::from(self.flash_line_bytes.max(1))
+    }
+
+    /// Cycles that [`Self::block_cycles`] charges a block ending in `last` and its
+    /// fall-through successor starting with `next`, which falling through does not
+    /// spend:
+    ///
+    /// * the pipeline refill of a conditional branch or return that is not taken
+    ///   (`transfer`: the block ends in one): the TRM gives 1 cycle not taken, the
+    ///   block charged 1 + 3;
+    /// * the successor's first flash line when the block's last byte is in it: a
+    ///   sequential fetch in the line just read is served by the flash interface's
+    ///   128-bit line buffer (RM0090 §3.5.2), without a flash access. A block that
+    ///   calls pays its return line in [`Self::block_cycles`].
+    pub fn fall_through_saving(
+        &self,
+        last: Option<&Instruction>,
+        next: Option<&Instruction>,
+        transfer: bool,
+    ) -> (u64, u64) {
+        let (Some(last), Some(next)) = (last, next) else {
+            return (0, 0);
+        };
+        let refill = match last.timing().0 {
+            Class::Branch => true,
+            Class::LoadMultiple => last.pops_pc(),
+            _ => false,
+        };
+        let end = last.address + last.bytes - 1;
+        let same_line = self.in_flash(end)
+            && self.in_flash(next.address)
+            && self.line_of(end) == self.line_of(next.address);
+        (
+            if transfer && refill { 3 } else { 0 },
+            if same_line {
+                self.line_fetch_cycles()
+            } else {
+                0
+            },
+        )
+    }
+
+    /// The first and last flash line a block's instructions touch; `None` outside
+    /// flash.
+    pub fn block_lines(&self, insns: &[Instruction]) -> Option<(u64, u64)> {
+        let (first, last) = (insns.first()?, insns.last()?);
+        self.in_flash(first.address).then(|| {
+            (
+                self.line_of(first.address),
+                self.line_of(last.address + last.bytes - 1),
+            )
+        })
     }
 }
 
@@ -464,6 +561,8 @@ impl IndirectTargets {
 pub struct Program {
     /// Functions in address order.
     pub functions: Vec<Function>,
+    /// Cycles of one flash line fetch ([`MemoryModel::line_fetch_cycles`]).
+    pub line_fetch_cycles: u64,
     by_address: HashMap<u32, usize>,
 }
 
@@ -805,6 +904,9 @@ pub fn build_program(
             let mut successors = Vec::new();
             let mut exit = Exit::Internal;
             let mut falls = true;
+            // The last transfer is conditional and, not taken, falls through.
+            let mut conditional_transfer = false;
+            let mut jump_targets: Vec<usize> = Vec::new();
             let mut unresolved: Vec<String> = Vec::new();
             for x in first..end {
                 let i = &f.instructions[x];
@@ -834,6 +936,7 @@ pub fn build_program(
                     } => {
                         if let Some(&t) = index.get(target) {
                             successors.push(block_of_insn(t));
+                            jump_targets.push(block_of_insn(t));
                         } else if let Some(&c) = by_address.get(target) {
                             // A tail call of a function that never returns ends the
                             // activation as a call of it does.
@@ -847,14 +950,17 @@ pub fn build_program(
                             unresolved.push(format!("{}: jumps to no function", here()));
                         }
                         falls = *conditional;
+                        conditional_transfer = *conditional;
                     }
                     Flow::Return { conditional } => {
                         exit = Exit::Return;
                         falls = *conditional;
+                        conditional_transfer = *conditional;
                     }
                     Flow::IndirectJump { conditional } => {
                         exit = Exit::IndirectTail(targets_of(k, &mut unresolved, here()));
                         falls = *conditional;
+                        conditional_transfer = *conditional;
                     }
                     Flow::Table => {
                         let ts = p.tables.get(&x).cloned().unwrap_or_default();
@@ -875,12 +981,19 @@ pub fn build_program(
                     Flow::Straight => {}
                 }
             }
-            if falls && end < f.instructions.len() {
-                successors.push(b + 1);
+            let fall_through = (falls && end < f.instructions.len()).then_some(b + 1);
+            if let Some(s) = fall_through {
+                successors.push(s);
             }
             successors.sort_unstable();
             successors.dedup();
             let insns = &f.instructions[first..end];
+            // A jump to the next block is the same edge taken or not: no saving.
+            let fall_through = fall_through.filter(|s| !jump_targets.contains(s));
+            let fall_through_saving = fall_through.map_or((0, 0), |_| {
+                let next = f.instructions.get(end);
+                memory.fall_through_saving(insns.last(), next, conditional_transfer)
+            });
             blocks.push(Block {
                 start: insns.first().map_or(0, |i| i.address),
                 first,
@@ -891,6 +1004,12 @@ pub fn build_program(
                 problems: unresolved,
                 instructions: insns.len() as u64,
                 cycles: memory.block_cycles(f.address, insns),
+                fetch_cycles: memory
+                    .block_lines(insns)
+                    .map_or(0, |(lo, hi)| (hi - lo + 1) * memory.line_fetch_cycles()),
+                lines: memory.block_lines(insns),
+                fall_through,
+                fall_through_saving,
             });
         }
         functions.push(Function {
@@ -905,6 +1024,7 @@ pub fn build_program(
     }
     Ok(Program {
         functions,
+        line_fetch_cycles: memory.line_fetch_cycles(),
         by_address,
     })
 }

@@ -24,10 +24,18 @@
 //! * paths that never return (a call of a panic handler, a trap) are not part of a
 //!   completing activation: their blocks get count 0.
 //!
+//! In cycles, an edge that falls through to the next block costs less than the
+//! two blocks' costs by [`super::cfg::Block::fall_through_saving`] (a conditional
+//! branch not taken, a flash line already read): the objective takes it off that
+//! edge's count. A loop whose lines stay in the instruction cache
+//! ([`Persistence`]) is charged its lines once per entry, its blocks without their
+//! fetch.
+//!
 //! The counts are continuous: the linear relaxation's optimum is at least the
 //! integer optimum, so the bound stays an upper bound. Solved with `microlp`
 //! through `good_lp` (pure Rust).
 
+use super::cache::Persistence;
 use super::cfg::{Exit, Program};
 use super::loops::{depth, min_stored_bytes_per_trip, reverse_post_order, Loop};
 use good_lp::{
@@ -222,6 +230,7 @@ pub fn task_bound(
         return Err(IpetError::Unbounded(missing));
     }
 
+    let persistence = Persistence::new(program, loops);
     let mut vars = ProblemVariables::new();
     let mut constraints = Vec::new();
     let mut objective = Expression::from(0.0);
@@ -258,6 +267,13 @@ pub fn task_bound(
             let mut out = Expression::from(0.0);
             for &s in &block.successors {
                 let e = vars.add(variable().min(0.0));
+                if cost == Cost::Cycles {
+                    let saving = persistence.edge_saving(program, f, b, s) as f64;
+                    if saving > 0.0 {
+                        objective -= saving * e;
+                        fcost -= saving * e;
+                    }
+                }
                 edges.insert((b, s), e);
                 out += e;
                 *inflow.entry(s).or_insert_with(|| Expression::from(0.0)) += e;
@@ -296,7 +312,7 @@ pub fn task_bound(
             }
             let c = match cost {
                 Cost::Instructions => block.instructions,
-                Cost::Cycles => block.cycles,
+                Cost::Cycles => persistence.block_cycles(program, f, b),
             } as f64;
             objective += c * xb;
             fcost += c * xb;
@@ -325,6 +341,17 @@ pub fn task_bound(
             }
             entries
         };
+        // The lines of a loop that keeps them cached, once per entry.
+        if cost == Cost::Cycles {
+            for r in persistence.regions().iter().filter(|r| r.function == f) {
+                if let Some(l) = loops.get(f).and_then(|ls| ls.get(r.loop_index)) {
+                    let c = persistence.entry_cycles(r) as f64;
+                    let entries = entries_of(l);
+                    objective += c * entries.clone();
+                    fcost += c * entries;
+                }
+            }
+        }
         // Caps on blocks per loop entry, and the runs of the caps per activation.
         for cap in copies.caps.iter().filter(|c| c.function == f) {
             let runs = cap

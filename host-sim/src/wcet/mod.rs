@@ -4,6 +4,7 @@
 //! |---|---|
 //! | [`cfg`] | control-flow graphs from the Thumb-2 disassembly; per-block worst-case cycles under a stated memory model |
 //! | [`flash_data`] | which data loads can read flash (the ELF's sections, the ways code forms addresses) |
+//! | [`cache`] | the ART accelerator's instruction cache: loops whose lines stay cached fetch each once per entry (persistence) |
 //! | [`loops`] | dominators and natural loops; irreducible cycles refused |
 //! | [`graph`] | strongly connected components (recursion, irreducible cycles) |
 //! | [`bounds`] | loop bounds recognised from the binary (counted loops) |
@@ -24,6 +25,7 @@ pub const CLOCK_HZ: u32 = firmware::timing::ECU_CLOCK_HZ;
 pub mod analysis;
 pub mod annotations;
 pub mod bounds;
+pub mod cache;
 pub mod cfg;
 pub mod cpi;
 pub mod flash_data;

@@ -1,0 +1,149 @@
+//! The ART accelerator's instruction cache, for the cycle bounds: which loops
+//! fetch each of their flash lines once per entry instead of once per trip.
+//!
+//! RM0090 §3.5.2 (STM32F405): the instruction cache holds 64 lines of 128 bits;
+//! every line read from flash on a miss is copied into it, and once it is full the
+//! least recently used line is replaced. The ECU's `init` enables it (`FLASH_ACR`:
+//! `ICEN`, `DCEN`, 5 wait states, prefetch off).
+//!
+//! Persistence: a loop whose blocks call nothing and touch at most 64 distinct
+//! lines uses only those lines while it runs, so between two uses of one of them
+//! at most 63 others are used and an LRU cache of 64 lines still holds it. Each of
+//! its lines is then fetched from flash at most once per entry of the loop. The
+//! bound charges the loop's lines once per entry ([`Region::lines`] ×
+//! the line fetch cost) and its blocks without their fetch. A preemption may
+//! evict the lines: [`PREEMPTION_REFILL_CYCLES`] charges each preemption the
+//! refill of a whole cache.
+
+use super::cfg::Program;
+use super::loops::Loop;
+use std::collections::{BTreeSet, HashMap};
+
+/// Lines of the instruction cache.
+pub const CACHE_LINES: u64 = 64;
+
+/// Cache-related preemption delay: a preempting activation may evict every line
+/// of the preempted task's cache, which then fetches them again, at most 64
+/// lines of 6 cycles (5 wait states and the access).
+pub const PREEMPTION_REFILL_CYCLES: f64 = (CACHE_LINES * 6) as f64;
+
+/// A loop whose lines stay in the cache while it runs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Region {
+    /// Function index.
+    pub function: usize,
+    /// Loop index in that function's loops.
+    pub loop_index: usize,
+    /// The loop's header block (every entry goes to it).
+    pub header: usize,
+    /// Distinct flash lines its blocks touch (at most [`CACHE_LINES`]).
+    pub lines: u64,
+    /// Its blocks.
+    pub blocks: BTreeSet<usize>,
+}
+
+/// The persistent loops of a program: in each function, the outermost loops
+/// that call nothing and touch at most [`CACHE_LINES`] lines.
+#[derive(Debug, Clone, Default)]
+pub struct Persistence {
+    regions: Vec<Region>,
+    by_block: HashMap<(usize, usize), usize>,
+    line_cycles: u64,
+}
+
+impl Persistence {
+    /// The persistent loops of every function of `program`.
+    pub fn new(program: &Program, loops: &[Vec<Loop>]) -> Self {
+        let mut out = Persistence {
+            line_cycles: program.line_fetch_cycles,
+            ..Persistence::default()
+        };
+        for (f, ls) in loops.iter().enumerate() {
+            let Some(func) = program.functions.get(f) else {
+                continue;
+            };
+            let lines_of = |l: &Loop| -> Option<u64> {
+                let mut lines = BTreeSet::new();
+                for &b in &l.blocks {
+                    let block = func.blocks.get(b)?;
+                    if !block.calls.is_empty() {
+                        return None;
+                    }
+                    let (lo, hi) = block.lines?;
+                    lines.extend(lo..=hi);
+                }
+                let n = lines.len() as u64;
+                (!l.irreducible && n <= CACHE_LINES).then_some(n)
+            };
+            let fits: Vec<Option<u64>> = ls.iter().map(lines_of).collect();
+            for (k, l) in ls.iter().enumerate() {
+                let outermost = l
+                    .parent
+                    .is_none_or(|p| fits.get(p).copied().flatten().is_none());
+                let (Some(lines), true) = (fits[k], outermost) else {
+                    continue;
+                };
+                let r = out.regions.len();
+                for &b in &l.blocks {
+                    out.by_block.insert((f, b), r);
+                }
+                out.regions.push(Region {
+                    function: f,
+                    loop_index: k,
+                    header: l.header,
+                    lines,
+                    blocks: l.blocks.iter().copied().collect(),
+                });
+            }
+        }
+        out
+    }
+
+    /// The persistent loops.
+    pub fn regions(&self) -> &[Region] {
+        &self.regions
+    }
+
+    /// The region block `b` of function `f` is in.
+    pub fn region_of(&self, f: usize, b: usize) -> Option<&Region> {
+        self.by_block.get(&(f, b)).map(|&r| &self.regions[r])
+    }
+
+    /// Cycles a region's entry costs: each of its lines fetched once.
+    pub fn entry_cycles(&self, region: &Region) -> u64 {
+        region.lines * self.line_cycles
+    }
+
+    /// Worst-case cycles of one execution of block `b` of `f`: without its fetch
+    /// inside a persistent loop (charged per entry of the loop instead).
+    pub fn block_cycles(&self, program: &Program, f: usize, b: usize) -> u64 {
+        let block = &program.functions[f].blocks[b];
+        if self.by_block.contains_key(&(f, b)) {
+            block.cycles - block.fetch_cycles
+        } else {
+            block.cycles
+        }
+    }
+
+    /// Cycles the edge `a → b` of `f` saves on the two blocks' costs: the
+    /// fall-through's saving, without the line already read when both blocks are
+    /// in the same persistent loop (their fetch is charged per entry).
+    pub fn edge_saving(&self, program: &Program, f: usize, a: usize, b: usize) -> u64 {
+        let block = &program.functions[f].blocks[a];
+        if block.fall_through != Some(b) {
+            return 0;
+        }
+        let (refill, line) = block.fall_through_saving;
+        match (self.by_block.get(&(f, a)), self.by_block.get(&(f, b))) {
+            (Some(x), Some(y)) if x == y => refill,
+            _ => refill + line,
+        }
+    }
+
+    /// The region entered on the step `prev → b` of `f`: `b` heads a region and
+    /// `prev` (none at the function's entry) is outside it.
+    pub fn entered(&self, f: usize, prev: Option<usize>, b: usize) -> Option<&Region> {
+        let r = self.region_of(f, b)?;
+        (r.header == b && prev.is_none_or(|a| !r.blocks.contains(&a))).then_some(r)
+    }
+}
