@@ -398,12 +398,15 @@ impl MemoryModel {
             ),
             format!(
                 "Instruction fetch: from flash with {} wait states, {}-byte lines, the ART \
-                 accelerator's instruction cache and prefetch assumed to miss on every line: \
-                 each line a block touches costs {} cycles, added to (not overlapped with) the \
-                 block's execution, and once more after each call (the return address's \
-                 line). Only a fall-through into the line the previous block ended in is \
-                 not charged again (a sequential fetch served by the flash interface's \
-                 128-bit line buffer, RM0090 3.5.2).",
+                 accelerator's prefetch off and its instruction cache on (the ECU's init sets \
+                 FLASH_ACR so). Each line a block touches costs {} cycles, added to (not \
+                 overlapped with) the block's execution, and once more after each call (the \
+                 return address's line); a fall-through into the line the previous block \
+                 ended in is not charged again (the flash interface's 128-bit line buffer, \
+                 RM0090 3.5.2). The cache is counted on only in loops that call nothing and \
+                 touch at most 64 lines: its 64 lines are replaced least recently used \
+                 (RM0090 3.5.2), so such a loop fetches each line once per entry; a \
+                 preemption is charged a refill of the whole cache.",
                 self.flash_wait_states,
                 self.flash_line_bytes,
                 self.flash_wait_states + 1

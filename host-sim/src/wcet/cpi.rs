@@ -37,9 +37,11 @@ use std::path::Path;
 
 /// The assumptions under which the cycle figures are an upper bound.
 pub const JUSTIFICATION: &str = "Worst-case cycles of a Cortex-M4F at 168 MHz, 3.3 V, flash with \
-5 wait states behind the ART accelerator (instruction cache and prefetch enabled): per executed \
-translation block, max(sum of per-instruction worst cases from the Cortex-M4 TRM, 6 cycles per \
-16 bytes of code) + 5 cycles for an ART miss at the block's final jump. Per instruction: every \
+5 wait states behind the ART accelerator: per executed translation block, max(sum of \
+per-instruction worst cases from the Cortex-M4 TRM, 6 cycles per 16 bytes of code) + 5 cycles for \
+an ART miss at the block's final jump (sequential fetch overlapped with execution, as the ART's \
+prefetch would; the ECU runs with it off, so this average is an estimate, and the static bounds \
+use the memory model of `static.md` instead). Per instruction: every \
 branch taken with a 3-cycle pipeline refill (conditional ones included), loads and stores 2 \
 (LDRD/STRD 3), LDM/STM/PUSH/POP 1+N (+3 when loading pc), SDIV/UDIV 12, MLA/MLS 2, VDIV/VSQRT 14, \
 VFMA/VMLA family 3, VMOV between core and FPU 2, VLDM/VSTM/VPUSH/VPOP 1+N words, unknown \
