@@ -42,7 +42,9 @@
 //! * **CRC**: CRC-32/ISO-HDLC (the zlib/Ethernet CRC, [`crc::CRC_32_ISO_HDLC`])
 //!   of the version byte and the payload, appended little-endian.
 //! * **Framing**: consistent-overhead byte stuffing (COBS) of the whole raw frame,
-//!   so the encoded frame holds no 0x00, then one 0x00 delimiter. A receiver that
+//!   so the encoded frame holds no 0x00, then one 0x00 delimiter. [`encode`] is
+//!   postcard's `Cobs` and `CrcModifier` flavours, [`decode`] the `cobs` crate's
+//!   decoder and the `crc` crate's checksum before postcard reads the payload. A receiver that
 //!   lost sync skips to the next 0x00 ([`FrameReader`]); empty frames (two
 //!   delimiters in a row) are idle and ignored.
 //!
@@ -825,146 +827,114 @@ impl FrameError {
     }
 }
 
-/// Streaming COBS encoder into a fixed buffer (one pass, no intermediate copy).
-struct CobsEncoder<'a> {
-    /// The output buffer.
-    out: &'a mut [u8],
-    /// Index of the current block's code byte (written when the block closes).
-    code_at: usize,
-    /// Index of the next data byte.
-    pos: usize,
-}
-
-impl<'a> CobsEncoder<'a> {
-    fn new(out: &'a mut [u8]) -> Self {
-        Self {
-            out,
-            code_at: 0,
-            pos: 1,
-        }
-    }
-
-    fn put(&mut self, at: usize, byte: u8) -> Result<(), FrameError> {
-        match self.out.get_mut(at) {
-            Some(slot) => {
-                *slot = byte;
-                Ok(())
-            }
-            None => Err(FrameError::BufferTooSmall),
-        }
-    }
-
-    /// Writes the current block's code (its length + 1, at most 0xFF by
-    /// construction) and opens a new block at `pos`.
-    fn close_block(&mut self) -> Result<(), FrameError> {
-        let code = (self.pos - self.code_at) as u8;
-        self.put(self.code_at, code)?;
-        self.code_at = self.pos;
-        self.pos += 1;
-        Ok(())
-    }
-
-    fn push(&mut self, byte: u8) -> Result<(), FrameError> {
-        if byte == 0 {
-            return self.close_block();
-        }
-        self.put(self.pos, byte)?;
-        self.pos += 1;
-        if self.pos - self.code_at == 0xFF {
-            self.close_block()?;
-        }
-        Ok(())
-    }
-
-    /// Closes the last block, appends the 0x00 delimiter; the frame's length, bytes.
-    fn finish(mut self) -> Result<usize, FrameError> {
-        let code = (self.pos - self.code_at) as u8;
-        self.put(self.code_at, code)?;
-        self.put(self.pos, 0)?;
-        Ok(self.pos + 1)
-    }
-}
-
-/// postcard flavor writing the raw frame through the CRC and the COBS encoder.
-struct FrameFlavor<'a> {
-    cobs: CobsEncoder<'a>,
-    crc: crc::Digest<'static, u32>,
-}
-
-impl<'a> postcard::ser_flavors::Flavor for FrameFlavor<'a> {
-    type Output = FrameFlavor<'a>;
-
-    fn try_push(&mut self, data: u8) -> postcard::Result<()> {
-        self.crc.update(&[data]);
-        self.cobs
-            .push(data)
-            .map_err(|_| postcard::Error::SerializeBufferFull)
-    }
-
-    fn finalize(self) -> postcard::Result<Self::Output> {
-        Ok(self)
-    }
-}
-
 /// Encodes `msg` as one whole frame (see the module docs) into `out`, the 0x00
 /// delimiter included; returns the frame's length, bytes. A buffer of
-/// [`MAX_FRAME_BYTES`] holds any [`Down`] or [`Up`].
+/// [`MAX_FRAME_BYTES`] holds any [`Down`] or [`Up`]. postcard's flavours do the
+/// work in one pass: the version byte and the message through the CRC (appended
+/// little-endian) and COBS, into `out`.
 pub fn encode<M: Serialize + ?Sized>(msg: &M, out: &mut [u8]) -> Result<usize, FrameError> {
-    let mut flavor = FrameFlavor {
-        cobs: CobsEncoder::new(out),
-        crc: CRC32.digest(),
-    };
-    flavor.crc.update(&[LINK_VERSION]);
-    flavor.cobs.push(LINK_VERSION)?;
-    let flavor = postcard::serialize_with_flavor(msg, flavor).map_err(|e| match e {
-        postcard::Error::SerializeBufferFull => FrameError::BufferTooSmall,
-        _ => FrameError::Malformed,
-    })?;
-    let FrameFlavor { mut cobs, crc } = flavor;
-    for b in crc.finalize().to_le_bytes() {
-        cobs.push(b)?;
+    use postcard::ser_flavors::{crc::CrcModifier, Cobs};
+    let cobs = Cobs::try_new(FrameBuffer::new(out)).map_err(|_| FrameError::BufferTooSmall)?;
+    let flavor = CrcModifier::new(cobs, CRC32.digest());
+    // postcard writes a `u8` as its one byte: the tuple is the version byte, then
+    // the message.
+    match postcard::serialize_with_flavor(&(LINK_VERSION, msg), flavor) {
+        Ok(len) => Ok(len),
+        Err(postcard::Error::SerializeBufferFull) => Err(FrameError::BufferTooSmall),
+        Err(_) => Err(FrameError::Malformed),
     }
-    cobs.finish()
 }
 
-/// Decodes COBS in place; returns the decoded length, bytes. One pass over the
-/// bytes (a code byte opens each block; a block whose code is not 0xFF ends in a
-/// zero, written when the next block opens), so its cost is one step a byte.
+/// The output of [`encode`]: bytes pushed into a fixed buffer, a push past its end
+/// refused. postcard's `Cobs` flavour also rewrites the code byte of each block
+/// through `IndexMut`, always at an index it pushed before; an index past the end
+/// reaches a spare byte instead of panicking (postcard's `Slice` would panic,
+/// which puts the panic handler, which sends a frame, on its own path).
+struct FrameBuffer<'a> {
+    /// The frame's bytes.
+    buf: &'a mut [u8],
+    /// Bytes pushed.
+    len: usize,
+    /// What an index past the end reads and writes.
+    spare: u8,
+}
+
+impl<'a> FrameBuffer<'a> {
+    fn new(buf: &'a mut [u8]) -> Self {
+        Self {
+            buf,
+            len: 0,
+            spare: 0,
+        }
+    }
+}
+
+impl postcard::ser_flavors::Flavor for FrameBuffer<'_> {
+    /// The frame's length, bytes.
+    type Output = usize;
+
+    fn try_push(&mut self, data: u8) -> postcard::Result<()> {
+        let slot = self
+            .buf
+            .get_mut(self.len)
+            .ok_or(postcard::Error::SerializeBufferFull)?;
+        *slot = data;
+        self.len += 1;
+        Ok(())
+    }
+
+    fn finalize(self) -> postcard::Result<usize> {
+        Ok(self.len)
+    }
+}
+
+impl core::ops::Index<usize> for FrameBuffer<'_> {
+    type Output = u8;
+
+    fn index(&self, i: usize) -> &u8 {
+        self.buf.get(i).unwrap_or(&self.spare)
+    }
+}
+
+impl core::ops::IndexMut<usize> for FrameBuffer<'_> {
+    fn index_mut(&mut self, i: usize) -> &mut u8 {
+        match self.buf.get_mut(i) {
+            Some(b) => b,
+            None => &mut self.spare,
+        }
+    }
+}
+
+/// Decodes COBS in place with the `cobs` crate's decoder, one byte at a time (its
+/// step is constant: the loop is the only one); returns the decoded length, bytes.
+/// The output never overtakes the input: each byte read gives at most one byte.
 fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, FrameError> {
-    let len = buf.len();
+    let mut state = cobs::DecoderState::Idle;
     let mut write = 0;
-    // Index of the next code byte, and whether a zero goes before its block.
-    let mut next_code = 0;
-    let mut zero_before = false;
     // len < MAX_FRAME_BYTES: decode, the only caller, refuses longer frames.
     // wcet-bound: MAX_FRAME_BYTES
-    for read in 0..len {
+    for read in 0..buf.len() {
         let byte = match buf.get(read) {
             Some(&b) if b != 0 => b,
             _ => return Err(FrameError::Cobs),
         };
-        let out = if read == next_code {
-            next_code = read + usize::from(byte);
-            if next_code > len {
-                return Err(FrameError::Cobs);
+        match state.feed(byte) {
+            Ok(cobs::DecodeResult::DataContinue(out)) => {
+                match buf.get_mut(write) {
+                    Some(slot) => *slot = out,
+                    None => return Err(FrameError::Cobs),
+                }
+                write += 1;
             }
-            let zero = zero_before;
-            zero_before = byte != 0xFF;
-            if !zero {
-                continue;
-            }
-            0
-        } else {
-            byte
-        };
-        // `write < read`: the output never overtakes the input.
-        match buf.get_mut(write) {
-            Some(slot) => *slot = out,
-            None => return Err(FrameError::Cobs),
+            Ok(cobs::DecodeResult::NoData) => {}
+            Ok(cobs::DecodeResult::DataComplete) | Err(_) => return Err(FrameError::Cobs),
         }
-        write += 1;
     }
-    Ok(write)
+    // The delimiter ends the frame: complete only where the last block ends.
+    match state.feed(0) {
+        Ok(cobs::DecodeResult::DataComplete) => Ok(write),
+        _ => Err(FrameError::Cobs),
+    }
 }
 
 /// Decodes one frame: `frame` is the bytes between two delimiters (no 0x00).
