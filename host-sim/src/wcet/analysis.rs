@@ -9,7 +9,12 @@
 //! A task with any of these gets no bound, and the reasons are listed.
 
 use super::cfg::Function;
-use super::cfg::{self, Exit, FlashData, IndirectTargets, MemoryModel, Program};
+use super::cfg::{self, FlashData, MemoryModel, Program};
+pub use super::copies::copy_size_register;
+use super::copies::copy_sizes;
+pub use super::ecu_app::{
+    ecu_indirect_targets, preemptions_of, ECU_SCHEDULE, ECU_SECTIONS, ECU_TASKS,
+};
 use super::ipet::{self, Cost, LoopFact, Per};
 use super::loops::{self, reverse_post_order, Loop};
 use super::{annotations, bounds, demangle};
@@ -18,58 +23,6 @@ use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-
-/// The ECU's tasks as the RTIC application binds them: name and handler symbol.
-/// `plan` runs in the priority-1 dispatcher, `control` in the priority-2 one, the
-/// monotonic's timer queue in `SysTick`.
-pub const ECU_TASKS: [(&str, &str); 3] = [
-    ("control", "USART2"),
-    ("plan", "USART1"),
-    ("systick", "SysTick"),
-];
-
-/// The tasks' own work, bounded apart (the ECU app keeps them out of line):
-/// section name, symbol, the task it runs in, its budget in cycles (what the ECU's
-/// deadline monitor holds it to; `None`: no budget of its own).
-pub const ECU_SECTIONS: [(&str, &str, &str, Option<u64>); 3] = [
-    (
-        "control_job",
-        "ecu::control_job",
-        "control",
-        Some(firmware::deadline::CONTROL_BUDGET_CYCLES),
-    ),
-    (
-        "plan_job",
-        "ecu::plan_job",
-        "plan",
-        Some(firmware::deadline::PLAN_BUDGET_CYCLES),
-    ),
-    // The plan swap inside the `plan` lock: what blocks the control task.
-    ("publish_plan", "ecu::publish_plan", "plan", None),
-];
-
-/// The ECU's schedule: task name, priority (higher preempts), period = deadline
-/// in µs. SysTick is the monotonic's 1 kHz tick (`systick_monotonic!(Mono, 1_000)`
-/// in the ECU app), above both tasks.
-pub const ECU_SCHEDULE: [(&str, u8, u64); 3] = [
-    ("systick", 3, 1_000),
-    ("control", 2, firmware::tasks::CONTROL_PERIOD_US),
-    ("plan", 1, firmware::tasks::PLAN_PERIOD_US),
-];
-
-/// Preemptions of one activation of `task` that meets its deadline:
-/// `Σ_{higher} ⌈D / T_j⌉` over [`ECU_SCHEDULE`] (each a chance for a retry loop to
-/// retry once). Faults are not counted: they end the activation.
-pub fn preemptions_of(task: &str) -> u64 {
-    let Some(&(_, prio, deadline)) = ECU_SCHEDULE.iter().find(|t| t.0 == task) else {
-        return 0;
-    };
-    ECU_SCHEDULE
-        .iter()
-        .filter(|t| t.1 > prio)
-        .map(|t| deadline.div_ceil(t.2))
-        .sum()
-}
 
 /// Whether a loop is a load-exclusive/store-exclusive retry (an atomic
 /// read-modify-write): it retries only when the exclusive monitor was cleared,
@@ -93,26 +46,6 @@ fn is_exclusive_retry(f: &Function, l: &Loop) -> bool {
         })
     });
     !l.irreducible && l.back_edges.len() == 1 && has("ldrex") && latch_stores
-}
-
-/// Targets of the ECU binary's indirect calls: RTIC's executor calls its wakers
-/// through `core::task::RawWakerVTable` (the dispatchers, the SysTick timer queue
-/// and `delay_until`), and the executor's `waker_wake` jumps to the task's pend
-/// function (`FnOnce::call_once` closures that pend the dispatcher interrupt).
-pub fn ecu_indirect_targets() -> IndirectTargets {
-    let waker = vec!["rtic::export::executor::waker_".to_string()];
-    IndirectTargets {
-        rules: vec![
-            ("SysTick".into(), waker.clone()),
-            ("USART1".into(), waker.clone()),
-            ("USART2".into(), waker.clone()),
-            ("rtic_time::".into(), waker),
-            (
-                "rtic::export::executor::waker_wake".into(),
-                vec!["core::ops::function::FnOnce::call_once".into()],
-            ),
-        ],
-    }
 }
 
 /// A loop of the binary reachable from a task.
@@ -213,7 +146,7 @@ pub struct StaticAnalysis {
 
 /// Source location of `address`: the innermost frame in the firmware's own
 /// sources if any, else the innermost frame.
-fn location(loader: &addr2line::Loader, address: u32) -> (String, u32) {
+pub(super) fn location(loader: &addr2line::Loader, address: u32) -> (String, u32) {
     let chain = frames(loader, address);
     chain
         .iter()
@@ -225,7 +158,7 @@ fn location(loader: &addr2line::Loader, address: u32) -> (String, u32) {
 
 /// The source path from the workspace on (`firmware/src/mpc.rs`, `qp/src/factor.rs`),
 /// or the file name with its crate folder for a dependency.
-fn short_path(file: &str) -> String {
+pub(super) fn short_path(file: &str) -> String {
     if let Some(p) = annotations::firmware_source_path(file) {
         return p.to_string();
     }
@@ -239,158 +172,8 @@ fn short_path(file: &str) -> String {
     parts.into_iter().rev().collect::<Vec<_>>().join("/")
 }
 
-/// The register holding the size argument of a block copy or fill, by the
-/// function's name; `None` for other functions. The AEABI `memset`/`memclr`
-/// helpers take `(dest, n, c)`; `memcpy`, `memmove`, `memset` and the other AEABI
-/// helpers take the size third.
-pub fn copy_size_register(name: &str) -> Option<&'static str> {
-    let base = name.rsplit("::").next().unwrap_or(name);
-    if base.starts_with("__aeabi_memset") || base.starts_with("__aeabi_memclr") {
-        Some("r1")
-    } else if base.starts_with("__aeabi_memcpy")
-        || base.starts_with("__aeabi_memmove")
-        || matches!(base, "memcpy" | "memmove" | "memset")
-    {
-        Some("r2")
-    } else {
-        None
-    }
-}
-
-/// The block copies and fills of the program and their call sites with their
-/// sizes: a constant move into the size register before the call, else the
-/// `bytes` annotation at the call's source line.
-fn copy_sizes(
-    program: &Program,
-    ctx: &addr2line::Loader,
-    annotations: &[annotations::Annotation],
-) -> ipet::CopySizes {
-    let family: std::collections::BTreeSet<usize> = program
-        .functions
-        .iter()
-        .enumerate()
-        .filter(|(_, f)| copy_size_register(&f.demangled).is_some())
-        .map(|(k, _)| k)
-        .collect();
-    let by_address: BTreeMap<u32, usize> = program
-        .functions
-        .iter()
-        .enumerate()
-        .map(|(k, f)| (f.address, k))
-        .collect();
-    let bytes_at: BTreeMap<(String, u32), u64> = annotations
-        .iter()
-        .filter(|a| a.scope == annotations::Scope::Bytes)
-        .map(|a| ((a.file.clone(), a.line), a.bound))
-        .collect();
-    // The tasks' completing activations: the sites elsewhere (init, the stop and
-    // fault paths) do not matter.
-    let roots: Vec<usize> = ECU_TASKS
-        .iter()
-        .filter_map(|(_, sym)| program.find(sym).first().copied())
-        .collect();
-    let reach = program.completing_reachable(&roots);
-    let mut sites = Vec::new();
-    for &k in &reach {
-        let func = &program.functions[k];
-        if family.contains(&k) {
-            continue;
-        }
-        let preds = func.predecessors();
-        let live = func.completing();
-        for (b, block) in func.blocks.iter().enumerate() {
-            if !live[b] {
-                continue;
-            }
-            for i in block.first..block.end {
-                let ins = &func.instructions[i];
-                let Some(&callee) = ins.target.and_then(|t| by_address.get(&t)) else {
-                    continue;
-                };
-                let tail = i + 1 == block.end && block.exit == Exit::TailCall(callee);
-                if !family.contains(&callee) || !(ins.base().starts_with("bl") || tail) {
-                    continue;
-                }
-                let Some(reg) = copy_size_register(&program.functions[callee].demangled) else {
-                    continue;
-                };
-                let (file, line) = location(ctx, ins.address);
-                let key = (short_path(&file), line);
-                let bytes = bounds::constant_before(func, &preds, b, i, reg, 4)
-                    .or_else(|| bytes_at.get(&key).copied());
-                sites.push(ipet::CopySite {
-                    function: k,
-                    block: b,
-                    bytes,
-                    at: format!(
-                        "`{}` {:#x} ({}:{})",
-                        func.demangled, ins.address, key.0, key.1
-                    ),
-                });
-            }
-        }
-    }
-    // `per loop entry` and `times per activation` annotations: the blocks whose
-    // calls come from the line (in any frame of their inlining chain), grouped by
-    // the innermost loop around them (per loop entry) or by annotation (per
-    // activation, every copy of the line together).
-    let capped: BTreeMap<(String, u32), (u64, Option<usize>)> = annotations
-        .iter()
-        .enumerate()
-        .filter_map(|(k, a)| match a.scope {
-            annotations::Scope::LoopEntry => Some(((a.file.clone(), a.line), (a.bound, None))),
-            annotations::Scope::Runs => Some(((a.file.clone(), a.line), (a.bound, Some(k)))),
-            _ => None,
-        })
-        .collect();
-    let mut caps = Vec::new();
-    if !capped.is_empty() {
-        for &k in &reach {
-            let func = &program.functions[k];
-            let ls = loops::natural_loops(func).unwrap_or_default();
-            let mut groups: BTreeMap<(Option<usize>, u64, Option<usize>), Vec<usize>> =
-                BTreeMap::new();
-            for (b, block) in func.blocks.iter().enumerate() {
-                let hit = func.instructions[block.first..block.end]
-                    .iter()
-                    .filter(|i| i.base().starts_with("bl"))
-                    .flat_map(|i| frames(ctx, i.address))
-                    .find_map(|(file, line)| capped.get(&(short_path(&file), line)).copied());
-                let Some((bound, group)) = hit else {
-                    continue;
-                };
-                // The innermost loop holding the block: the smallest.
-                let inner = match group {
-                    Some(_) => None,
-                    None => ls
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, l)| l.blocks.binary_search(&b).is_ok())
-                        .min_by_key(|(_, l)| l.blocks.len())
-                        .map(|(x, _)| x),
-                };
-                groups.entry((inner, bound, group)).or_default().push(b);
-            }
-            for ((loop_index, bound, activation_group), blocks) in groups {
-                caps.push(ipet::BlockCap {
-                    function: k,
-                    blocks,
-                    loop_index,
-                    bound,
-                    activation_group,
-                });
-            }
-        }
-    }
-    ipet::CopySizes {
-        family,
-        sites,
-        caps,
-    }
-}
-
 /// Every frame of `address`'s inlining chain, innermost first.
-fn frames(loader: &addr2line::Loader, address: u32) -> Vec<(String, u32)> {
+pub(super) fn frames(loader: &addr2line::Loader, address: u32) -> Vec<(String, u32)> {
     let mut out = Vec::new();
     if let Ok(mut fr) = loader.find_frames(u64::from(address)) {
         while let Ok(Some(frame)) = fr.next() {

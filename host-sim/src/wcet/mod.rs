@@ -9,8 +9,10 @@
 //! | [`graph`] | strongly connected components (recursion, irreducible cycles) |
 //! | [`bounds`] | loop bounds recognised from the binary (counted loops) |
 //! | [`annotations`] | loop bounds written beside the loops in the firmware source (`// wcet-bound: EXPR`), matched through the DWARF line table |
+//! | [`copies`] | block copies and fills: the functions and the bytes each call site moves |
 //! | [`ipet`] | implicit path enumeration: a task's bound as a linear program (`good_lp`, `microlp`) |
 //! | [`rta`] | response-time analysis, fixed priorities with RTIC's stack resource policy |
+//! | [`ecu_app`] | what the analysis knows of the ECU application: its tasks, sections, schedule, indirect call targets |
 //! | [`analysis`] | the static analysis put together (`static.json`, `static.md`) |
 //! | [`trace_check`] | QEMU execution traces replayed against the graphs: loop trip counts per entry, activation costs with the same block costs |
 //! | [`stack`] | static stack bound: frame sizes from `llvm-objdump` prologues, call graph, preemption levels |
@@ -27,7 +29,9 @@ pub mod annotations;
 pub mod bounds;
 pub mod cache;
 pub mod cfg;
+pub mod copies;
 pub mod cpi;
+pub mod ecu_app;
 pub mod flash_data;
 pub mod graph;
 pub mod ipet;

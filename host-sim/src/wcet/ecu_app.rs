@@ -1,0 +1,77 @@
+//! What the analysis knows of the ECU application (`firmware/src/bin/ecu.rs`): its
+//! RTIC tasks and the interrupts they run in, the sections bounded apart (the
+//! jobs, the plan swap) with their budgets, the schedule, and the targets of its
+//! indirect calls. The numbers come from the firmware's own constants.
+
+use super::cfg::IndirectTargets;
+/// The ECU's tasks as the RTIC application binds them: name and handler symbol.
+/// `plan` runs in the priority-1 dispatcher, `control` in the priority-2 one, the
+/// monotonic's timer queue in `SysTick`.
+pub const ECU_TASKS: [(&str, &str); 3] = [
+    ("control", "USART2"),
+    ("plan", "USART1"),
+    ("systick", "SysTick"),
+];
+
+/// The tasks' own work, bounded apart (the ECU app keeps them out of line):
+/// section name, symbol, the task it runs in, its budget in cycles (what the ECU's
+/// deadline monitor holds it to; `None`: no budget of its own).
+pub const ECU_SECTIONS: [(&str, &str, &str, Option<u64>); 3] = [
+    (
+        "control_job",
+        "ecu::control_job",
+        "control",
+        Some(firmware::deadline::CONTROL_BUDGET_CYCLES),
+    ),
+    (
+        "plan_job",
+        "ecu::plan_job",
+        "plan",
+        Some(firmware::deadline::PLAN_BUDGET_CYCLES),
+    ),
+    // The plan swap inside the `plan` lock: what blocks the control task.
+    ("publish_plan", "ecu::publish_plan", "plan", None),
+];
+
+/// The ECU's schedule: task name, priority (higher preempts), period = deadline
+/// in µs. SysTick is the monotonic's 1 kHz tick (`systick_monotonic!(Mono, 1_000)`
+/// in the ECU app), above both tasks.
+pub const ECU_SCHEDULE: [(&str, u8, u64); 3] = [
+    ("systick", 3, 1_000),
+    ("control", 2, firmware::tasks::CONTROL_PERIOD_US),
+    ("plan", 1, firmware::tasks::PLAN_PERIOD_US),
+];
+
+/// Preemptions of one activation of `task` that meets its deadline:
+/// `Σ_{higher} ⌈D / T_j⌉` over [`ECU_SCHEDULE`] (each a chance for a retry loop to
+/// retry once). Faults are not counted: they end the activation.
+pub fn preemptions_of(task: &str) -> u64 {
+    let Some(&(_, prio, deadline)) = ECU_SCHEDULE.iter().find(|t| t.0 == task) else {
+        return 0;
+    };
+    ECU_SCHEDULE
+        .iter()
+        .filter(|t| t.1 > prio)
+        .map(|t| deadline.div_ceil(t.2))
+        .sum()
+}
+
+/// Targets of the ECU binary's indirect calls: RTIC's executor calls its wakers
+/// through `core::task::RawWakerVTable` (the dispatchers, the SysTick timer queue
+/// and `delay_until`), and the executor's `waker_wake` jumps to the task's pend
+/// function (`FnOnce::call_once` closures that pend the dispatcher interrupt).
+pub fn ecu_indirect_targets() -> IndirectTargets {
+    let waker = vec!["rtic::export::executor::waker_".to_string()];
+    IndirectTargets {
+        rules: vec![
+            ("SysTick".into(), waker.clone()),
+            ("USART1".into(), waker.clone()),
+            ("USART2".into(), waker.clone()),
+            ("rtic_time::".into(), waker),
+            (
+                "rtic::export::executor::waker_wake".into(),
+                vec!["core::ops::function::FnOnce::call_once".into()],
+            ),
+        ],
+    }
+}
