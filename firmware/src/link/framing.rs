@@ -1,0 +1,355 @@
+//! A frame on the wire (see [`super`]'s *Wire format*): [`encode`] and
+//! [`decode`] of one frame, the stream's splitting into frames ([`FrameReader`]),
+//! the sequence check and the counts of refused frames.
+
+use super::*;
+/// Why a frame was refused (each counted by the receiver, never a panic).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameError {
+    /// [`decode`] was given no bytes.
+    Empty,
+    /// More bytes than fit arrived before a delimiter ([`FrameReader`]), or a frame
+    /// longer than `MAX_FRAME_BYTES − 1` ([`decode`]).
+    TooLong,
+    /// The COBS encoding is invalid (a 0x00 inside, or a block past the end).
+    Cobs,
+    /// The decoded frame is shorter than a version byte and a CRC.
+    TooShort,
+    /// The frame is of another version of this format.
+    Version {
+        /// The version byte received.
+        got: u8,
+    },
+    /// The CRC does not match.
+    Checksum,
+    /// postcard could not decode the message, or bytes trail it.
+    Malformed,
+    /// [`encode`]'s output buffer is too small (see [`MAX_FRAME_BYTES`]).
+    BufferTooSmall,
+}
+
+impl FrameError {
+    /// The variant's name, for logs.
+    pub const fn name(self) -> &'static str {
+        match self {
+            FrameError::Empty => "Empty",
+            FrameError::TooLong => "TooLong",
+            FrameError::Cobs => "Cobs",
+            FrameError::TooShort => "TooShort",
+            FrameError::Version { .. } => "Version",
+            FrameError::Checksum => "Checksum",
+            FrameError::Malformed => "Malformed",
+            FrameError::BufferTooSmall => "BufferTooSmall",
+        }
+    }
+}
+
+/// Encodes `msg` as one whole frame (see the module docs) into `out`, the 0x00
+/// delimiter included; returns the frame's length, bytes. A buffer of
+/// [`MAX_FRAME_BYTES`] holds any [`Down`] or [`Up`]. postcard's flavours do the
+/// work in one pass: the version byte and the message through the CRC (appended
+/// little-endian) and COBS, into `out`.
+pub fn encode<M: Serialize + ?Sized>(msg: &M, out: &mut [u8]) -> Result<usize, FrameError> {
+    use postcard::ser_flavors::{crc::CrcModifier, Cobs};
+    let cobs = Cobs::try_new(FrameBuffer::new(out)).map_err(|_| FrameError::BufferTooSmall)?;
+    let flavor = CrcModifier::new(cobs, CRC32.digest());
+    // postcard writes a `u8` as its one byte: the tuple is the version byte, then
+    // the message.
+    match postcard::serialize_with_flavor(&(LINK_VERSION, msg), flavor) {
+        Ok(len) => Ok(len),
+        Err(postcard::Error::SerializeBufferFull) => Err(FrameError::BufferTooSmall),
+        Err(_) => Err(FrameError::Malformed),
+    }
+}
+
+/// The output of [`encode`]: bytes pushed into a fixed buffer, a push past its end
+/// refused. postcard's `Cobs` flavour also rewrites the code byte of each block
+/// through `IndexMut`, always at an index it pushed before; an index past the end
+/// reaches a spare byte instead of panicking (postcard's `Slice` would panic,
+/// which puts the panic handler, which sends a frame, on its own path).
+struct FrameBuffer<'a> {
+    /// The frame's bytes.
+    buf: &'a mut [u8],
+    /// Bytes pushed.
+    len: usize,
+    /// What an index past the end reads and writes.
+    spare: u8,
+}
+
+impl<'a> FrameBuffer<'a> {
+    fn new(buf: &'a mut [u8]) -> Self {
+        Self {
+            buf,
+            len: 0,
+            spare: 0,
+        }
+    }
+}
+
+impl postcard::ser_flavors::Flavor for FrameBuffer<'_> {
+    /// The frame's length, bytes.
+    type Output = usize;
+
+    fn try_push(&mut self, data: u8) -> postcard::Result<()> {
+        let slot = self
+            .buf
+            .get_mut(self.len)
+            .ok_or(postcard::Error::SerializeBufferFull)?;
+        *slot = data;
+        self.len += 1;
+        Ok(())
+    }
+
+    fn finalize(self) -> postcard::Result<usize> {
+        Ok(self.len)
+    }
+}
+
+impl core::ops::Index<usize> for FrameBuffer<'_> {
+    type Output = u8;
+
+    fn index(&self, i: usize) -> &u8 {
+        self.buf.get(i).unwrap_or(&self.spare)
+    }
+}
+
+impl core::ops::IndexMut<usize> for FrameBuffer<'_> {
+    fn index_mut(&mut self, i: usize) -> &mut u8 {
+        match self.buf.get_mut(i) {
+            Some(b) => b,
+            None => &mut self.spare,
+        }
+    }
+}
+
+/// Decodes COBS in place with the `cobs` crate's decoder, one byte at a time (its
+/// step is constant: the loop is the only one); returns the decoded length, bytes.
+/// The output never overtakes the input: each byte read gives at most one byte.
+fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, FrameError> {
+    let mut state = cobs::DecoderState::Idle;
+    let mut write = 0;
+    // len < MAX_FRAME_BYTES: decode, the only caller, refuses longer frames.
+    // wcet-bound: MAX_FRAME_BYTES
+    for read in 0..buf.len() {
+        let byte = match buf.get(read) {
+            Some(&b) if b != 0 => b,
+            _ => return Err(FrameError::Cobs),
+        };
+        match state.feed(byte) {
+            Ok(cobs::DecodeResult::DataContinue(out)) => {
+                match buf.get_mut(write) {
+                    Some(slot) => *slot = out,
+                    None => return Err(FrameError::Cobs),
+                }
+                write += 1;
+            }
+            Ok(cobs::DecodeResult::NoData) => {}
+            Ok(cobs::DecodeResult::DataComplete) | Err(_) => return Err(FrameError::Cobs),
+        }
+    }
+    // The delimiter ends the frame: complete only where the last block ends.
+    match state.feed(0) {
+        Ok(cobs::DecodeResult::DataComplete) => Ok(write),
+        _ => Err(FrameError::Cobs),
+    }
+}
+
+/// Decodes one frame: `frame` is the bytes between two delimiters (no 0x00).
+/// Undoes COBS in place (so `frame` is overwritten), then checks the length, the
+/// version, the CRC, and that postcard consumes the payload exactly.
+pub fn decode<'a, M: Deserialize<'a>>(frame: &'a mut [u8]) -> Result<M, FrameError> {
+    if frame.is_empty() {
+        return Err(FrameError::Empty);
+    }
+    if frame.len() >= MAX_FRAME_BYTES {
+        return Err(FrameError::TooLong);
+    }
+    let n = cobs_decode_in_place(frame)?;
+    let frame: &'a [u8] = frame;
+    let raw = frame.get(..n).ok_or(FrameError::Cobs)?;
+    if raw.len() < 1 + CRC_BYTES {
+        return Err(FrameError::TooShort);
+    }
+    let (body, crc) = raw
+        .split_at_checked(raw.len() - CRC_BYTES)
+        .ok_or(FrameError::TooShort)?;
+    let (&version, payload) = body.split_first().ok_or(FrameError::TooShort)?;
+    if version != LINK_VERSION {
+        return Err(FrameError::Version { got: version });
+    }
+    let crc: [u8; CRC_BYTES] = crc.try_into().map_err(|_| FrameError::TooShort)?;
+    // The CRC's loop takes at least a byte of `body` (< MAX_FRAME_BYTES) per iteration.
+    // wcet-bound: MAX_FRAME_BYTES
+    if CRC32.checksum(body) != u32::from_le_bytes(crc) {
+        return Err(FrameError::Checksum);
+    }
+    match postcard::take_from_bytes::<M>(payload) {
+        Ok((msg, [])) => Ok(msg),
+        _ => Err(FrameError::Malformed),
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Stream framing and bookkeeping
+// ---------------------------------------------------------------------------
+
+/// Splits a byte stream into frames at 0x00 delimiters with a fixed buffer of `N`
+/// bytes (use `N = MAX_FRAME_BYTES`); over-long frames are dropped (and reported
+/// as [`FrameError::TooLong`] once their delimiter arrives). Empty frames (two
+/// delimiters in a row) yield nothing.
+pub struct FrameReader<const N: usize> {
+    /// The frame being received (COBS-encoded, without the delimiter).
+    buf: [u8; N],
+    /// Bytes of `buf` in use.
+    len: usize,
+    /// The current frame overflowed `buf`; it is skipped until its delimiter.
+    overflowed: bool,
+}
+
+impl<const N: usize> FrameReader<N> {
+    /// An empty reader (a valid `const` initialiser).
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; N],
+            len: 0,
+            overflowed: false,
+        }
+    }
+
+    /// Feeds one byte; at a delimiter returns the frame's bytes (for [`decode`],
+    /// which decodes them in place) or `TooLong`; otherwise `None`.
+    pub fn push(&mut self, byte: u8) -> Option<Result<&mut [u8], FrameError>> {
+        if byte == 0 {
+            let len = core::mem::replace(&mut self.len, 0);
+            if core::mem::replace(&mut self.overflowed, false) {
+                return Some(Err(FrameError::TooLong));
+            }
+            if len == 0 {
+                return None;
+            }
+            return Some(self.buf.get_mut(..len).ok_or(FrameError::TooLong));
+        }
+        if !self.overflowed {
+            match self.buf.get_mut(self.len) {
+                Some(slot) => {
+                    *slot = byte;
+                    self.len += 1;
+                }
+                None => {
+                    self.overflowed = true;
+                    self.len = 0;
+                }
+            }
+        }
+        None
+    }
+
+    /// Bytes of the frame being received, bytes (0 while skipping an over-long one).
+    pub fn pending(&self) -> usize {
+        self.len
+    }
+
+    /// Drops the frame being received (e.g. after a link reset).
+    pub fn reset(&mut self) {
+        self.len = 0;
+        self.overflowed = false;
+    }
+}
+
+impl<const N: usize> Default for FrameReader<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Why [`SequenceCheck::accept`] refused a sequence number.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SequenceError {
+    /// `seq ≤ last`: a duplicate or an older frame.
+    Stale,
+}
+
+/// Detects stale (duplicate or older) and skipped sequence numbers. Sequence
+/// numbers do not wrap (a `u32` at 100 Hz lasts 497 days).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SequenceCheck {
+    /// The last accepted sequence number, if any.
+    last: Option<u32>,
+}
+
+impl SequenceCheck {
+    /// A check that accepts any first sequence number.
+    pub const fn new() -> Self {
+        Self { last: None }
+    }
+
+    /// Accepts `seq` when newer than the last accepted one; `Ok(missed)` counts the
+    /// sequence numbers skipped (0 in order, > 0 for a gap, which is accepted).
+    pub fn accept(&mut self, seq: u32) -> Result<u32, SequenceError> {
+        let missed = match self.last {
+            None => 0,
+            Some(last) if seq <= last => return Err(SequenceError::Stale),
+            Some(last) => seq - last - 1,
+        };
+        self.last = Some(seq);
+        Ok(missed)
+    }
+
+    /// The last accepted sequence number, if any.
+    pub const fn last(&self) -> Option<u32> {
+        self.last
+    }
+
+    /// Forgets the last sequence number (a new run accepts any first number).
+    pub fn reset(&mut self) {
+        self.last = None;
+    }
+}
+
+/// Counts of a receiver's frames (all saturating).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LinkStats {
+    /// Frames decoded, frames.
+    pub accepted: u32,
+    /// Frames refused (any [`FrameError`]), frames.
+    pub rejected: u32,
+    /// Decoded frames refused as stale (duplicate or older `seq`), frames.
+    pub stale: u32,
+    /// Gaps in the sequence (each jump counts once, whatever its size), gaps.
+    pub gaps: u32,
+    /// The last refusal, if any.
+    pub last_error: Option<FrameError>,
+}
+
+impl LinkStats {
+    /// All zero.
+    pub const fn new() -> Self {
+        Self {
+            accepted: 0,
+            rejected: 0,
+            stale: 0,
+            gaps: 0,
+            last_error: None,
+        }
+    }
+
+    /// Counts a frame's outcome ([`decode`]'s or [`FrameReader::push`]'s result).
+    pub fn record<T>(&mut self, r: &Result<T, FrameError>) {
+        match r {
+            Ok(_) => self.accepted = self.accepted.saturating_add(1),
+            Err(e) => {
+                self.rejected = self.rejected.saturating_add(1);
+                self.last_error = Some(*e);
+            }
+        }
+    }
+
+    /// Counts a [`SequenceCheck::accept`] outcome: a stale frame or a gap.
+    pub fn record_sequence(&mut self, r: &Result<u32, SequenceError>) {
+        match r {
+            Err(SequenceError::Stale) => self.stale = self.stale.saturating_add(1),
+            Ok(0) => {}
+            Ok(_) => self.gaps = self.gaps.saturating_add(1),
+        }
+    }
+}

@@ -1,0 +1,504 @@
+//! Frames between the ECU and the simulator (processor-in-the-loop).
+//!
+//! The ECU (in QEMU) and the host simulator exchange, every 10 ms control period,
+//! one [`Down::Sensor`] frame and one [`Up::Actuation`] frame, after a set-up
+//! phase (`Config`, the first window's `PathChunk`s, `Obstacle`s, `Start` →
+//! `Ready`) and before a `Stop` → `Done`. While driving, the next window of the
+//! road arrives as `PathChunk`s then a [`Down::Window`] (the ECU holds a window,
+//! not the whole circuit). Version 2 added `Window` and
+//! [`PlanEventFrame::window_ticks`]. Version 3: the ECU watches its own deadlines
+//! ([`crate::deadline`]): [`ActuationFrame`] carries its release and send
+//! instants and the control task's counts ([`TaskTimingFrame`]) and watchdog
+//! trips, [`PlanEventFrame`] its end instant and the plan task's counts;
+//! [`SensorFrame::route_frames`] announces the frames of a window of the road sent
+//! on the route channel (the plan task receives them); the fault codes
+//! [`FAULT_HARDFAULT`] and [`FAULT_DEADLINE`]. Everything here works on fixed buffers: no heap, no `alloc`,
+//! no panic; every refused frame is a [`FrameError`] value the receiver counts.
+//!
+//! # Wire format
+//!
+//! ```text
+//! raw   = [ LINK_VERSION ] ++ postcard(message) ++ crc32_le(LINK_VERSION ++ postcard(message))
+//!           1 byte           n bytes               4 bytes, little-endian
+//!
+//!         ┌─────────┬──────────────────────────────┬──────┬──────┬──────┬──────┐
+//! raw     │ version │ postcard payload (n bytes)   │ crc0 │ crc1 │ crc2 │ crc3 │
+//!         └─────────┴──────────────────────────────┴──────┴──────┴──────┴──────┘
+//!           └──────────── covered by the CRC ──────┘  crc0 = least significant
+//!
+//!         ┌──────────────────────────────────────────────────────────┬──────┐
+//! frame   │ COBS(raw): n + 5 + 1 + ⌊(n + 5) / 254⌋ bytes at most, no 0x00 │ 0x00 │
+//!         └──────────────────────────────────────────────────────────┴──────┘
+//! ```
+//!
+//! * **Payload**: [postcard] v1 encoding of a [`Down`] or [`Up`]: the enum
+//!   variant as a varint (`Down`: `Config` 0, `PathChunk` 1, `Obstacle` 2,
+//!   `Start` 3, `Sensor` 4, `Stop` 5, `Window` 6; `Up`: `Ready` 0, `Actuation` 1,
+//!   `Done` 2),
+//!   then the fields in declaration order; `f32` as 4 bytes little-endian
+//!   (NaN bits are kept), `u8`/`bool` as one byte, `u16`/`u32`/`u64` as LEB128
+//!   varints (at most 3/5/10 bytes), `Option` as a 0/1 byte then the value,
+//!   arrays as their elements back to back (no length).
+//! * **CRC**: CRC-32/ISO-HDLC (the zlib/Ethernet CRC, [`crc::CRC_32_ISO_HDLC`])
+//!   of the version byte and the payload, appended little-endian.
+//! * **Framing**: consistent-overhead byte stuffing (COBS) of the whole raw frame,
+//!   so the encoded frame holds no 0x00, then one 0x00 delimiter. [`encode`] is
+//!   postcard's `Cobs` and `CrcModifier` flavours, [`decode`] the `cobs` crate's
+//!   decoder and the `crc` crate's checksum before postcard reads the payload. A receiver that
+//!   lost sync skips to the next 0x00 ([`FrameReader`]); empty frames (two
+//!   delimiters in a row) are idle and ignored.
+//!
+//! The largest frames: [`MAX_DOWN_FRAME_BYTES`] (a `PathChunk`, 269 bytes) and
+//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 335 bytes), both
+//! including the delimiter and checked at compile time against
+//! [`MAX_FRAME_BYTES`].
+//!
+//! # Status codes (the `u8` fields)
+//!
+//! * [`ActuationFrame::mode`]: [`mode_code`] (`Following` 0, `Extrapolating` 1,
+//!   `Stopping` 2, `Safe` 3).
+//! * [`ActuationFrame::fault`]: [`fault_code`] (0 none, `NonFiniteEstimate` 1,
+//!   `NonFinitePlan` 2, `InvalidPlan` 3, `Numerical` 4).
+//! * [`PlanEventFrame::status`]: [`mpc_status_code`] (0 optimal, `NonFiniteState`
+//!   1, `InvalidFriction` 2, `InvalidSettings` 3, `NoPath` 4, `Qp(s)` 0x10 +
+//!   [`qp_status_code`]`(s)`, with `Optimal` 0, `NotSolved` 1, `IterationLimit` 2,
+//!   `Infeasible` 3, `NotConvex` 4, `NumericalError` 5, `NonFiniteInput` 6,
+//!   `InvalidInput` 7, `WorkingSetFull` 8).
+//! * [`ReadyFrame::status`]: 0 accepted, else a [`SetupError`] code.
+//!
+//! Each has a `*_from_code` inverse and a `*_name` for logs.
+//!
+//! # Behaviour worth knowing
+//!
+//! * [`SequenceCheck::accept`] returns `Result<u32, SequenceError>`: `Ok(missed)`
+//!   with the count of skipped sequence numbers (0 in order), so a gap is
+//!   accepted *and* reported.
+//! * [`encode`] takes `M: Serialize + ?Sized`.
+//! * [`decode`] reports trailing bytes after the message as
+//!   [`FrameError::Malformed`], and a frame longer than [`MAX_FRAME_BYTES`] − 1
+//!   bytes as [`FrameError::TooLong`].
+//! * [`FrameReader::push`] yields nothing for an empty frame (two delimiters in a
+//!   row: idle line or resynchronisation); [`FrameError::Empty`] is what [`decode`]
+//!   says of an empty slice.
+
+use crc::{Crc, CRC_32_ISO_HDLC};
+use serde::{Deserialize, Serialize};
+
+use crate::low_level::{ControlFault, Mode};
+use crate::mpc::{MpcError, MpcReport};
+use crate::obstacles::MAX_VERTICES;
+use crate::plan::Plan;
+use crate::state_estimate::StateEstimate;
+use crate::vehicle_config::VehicleConfig;
+use qp::QpStatus;
+
+/// Version of this wire format, the first byte of every raw frame.
+pub const LINK_VERSION: u8 = 3;
+/// The largest encoded frame, bytes, including its 0x00 delimiter.
+pub const MAX_FRAME_BYTES: usize = 512;
+/// Track rows per [`PathChunkFrame`].
+pub const PATH_CHUNK_ROWS: usize = 16;
+
+/// Frames of one window of `rows` rows of the road on the route channel: its
+/// [`PathChunkFrame`]s and its [`WindowFrame`], frames.
+pub const fn route_frames(rows: usize) -> usize {
+    rows.div_ceil(PATH_CHUNK_ROWS) + 1
+}
+/// Plan nodes in a [`PlanEventFrame`] (`HORIZON + 1`, the plan's node count).
+pub const PLAN_NODES: usize = crate::plan::HORIZON + 1;
+
+/// Bytes of the CRC at the end of a raw frame.
+const CRC_BYTES: usize = 4;
+/// The CRC of every frame (CRC-32/ISO-HDLC, table in flash: 1 KiB).
+static CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
+
+// ---------------------------------------------------------------------------
+// Messages
+// ---------------------------------------------------------------------------
+
+/// Host → ECU.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Down {
+    /// Set-up: the car, the planner's friction, the track's size.
+    Config(ConfigFrame),
+    /// Set-up: `count` track rows `[x_m, y_m, w_right_m, w_left_m]` starting at row `first`.
+    PathChunk(PathChunkFrame),
+    /// Set-up: obstacle `index` of `total`, its polygon.
+    Obstacle(ObstacleFrame),
+    /// Set-up done: the ECU loads the path and obstacles and answers `Up::Ready`;
+    /// then the timeline starts.
+    Start,
+    /// Every control period: the state estimate at `stamp_us`.
+    Sensor(SensorFrame),
+    /// End of the run: the ECU answers `Up::Done`.
+    Stop,
+    /// While driving: the `PathChunk` rows sent since the last `Window` (first row
+    /// 0) are the next window of the road; the plan task adopts it after it next
+    /// publishes (version 2).
+    Window(WindowFrame),
+}
+
+/// The next window of the reference path: the ECU holds a window of the road, not
+/// the whole circuit, so its RAM does not grow with the track.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WindowFrame {
+    /// Rows of the window (sent in `PathChunk` frames before this one), rows.
+    pub rows: u16,
+    /// Distance along the road of the window's first row, m (differences between
+    /// windows are what matter: the MPC's warm start moves by them).
+    pub origin_m: f32,
+    /// The window is the whole of a closed circuit (its last row joins its first).
+    pub closed: bool,
+}
+
+/// Set-up: what the ECU needs before the track.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ConfigFrame {
+    /// The car (SI units in each field); the ECU derives its settings from it.
+    pub vehicle: VehicleConfig<f32>,
+    /// Friction coefficient the planner assumes, dimensionless, > 0.
+    pub mu_planner: f32,
+    /// True when the first window is the whole of a closed circuit (its last row
+    /// joins its first).
+    pub closed: bool,
+    /// Rows of the first window of the road, that follow in `PathChunk` frames, rows.
+    pub path_rows: u16,
+    /// Number of obstacles that will follow in `Obstacle` frames, obstacles.
+    pub obstacles: u8,
+}
+
+/// Set-up: a chunk of the track's centre line.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PathChunkFrame {
+    /// Index of the chunk's first row in the track, row.
+    pub first: u16,
+    /// Number of valid rows in `rows` (`≤ PATH_CHUNK_ROWS`), rows.
+    pub count: u8,
+    /// Track rows `[x_m, y_m, w_right_m, w_left_m]`: centre-line point in the global
+    /// frame, m, and the road's half widths to the right and left of it, m. Rows at
+    /// and past `count` are padding (send zeros).
+    pub rows: [[f32; 4]; PATH_CHUNK_ROWS],
+}
+
+/// Set-up: one obstacle's polygon.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObstacleFrame {
+    /// Index of this obstacle, `0..total`.
+    pub index: u8,
+    /// Number of obstacles in the set-up (equals [`ConfigFrame::obstacles`]).
+    pub total: u8,
+    /// The obstacle's identifier in the scenario (dimensionless, for logs).
+    pub id: u32,
+    /// Number of valid vertices in `vertices` (`≤ MAX_VERTICES`), vertices.
+    pub count: u8,
+    /// Polygon vertices `[x_m, y_m]` in the global frame, m; entries at and past
+    /// `count` are padding.
+    pub vertices: [[f32; 2]; MAX_VERTICES],
+}
+
+/// Every control period: the state estimate.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SensorFrame {
+    /// Sequence number, dimensionless, +1 per sensor frame (the first is any value).
+    pub seq: u32,
+    /// The state estimate (its `stamp_us` is the simulated time, µs; SI units).
+    pub estimate: StateEstimate<f32>,
+    /// Frames of the road (`PathChunk`s then a `Window`) the host wrote on the
+    /// route channel since the last sensor frame, frames (version 3): the plan
+    /// task reads them after it next publishes.
+    pub route_frames: u16,
+}
+
+/// ECU → host.
+// No heap to box into: the enum is one value of its largest variant (≈ 240 bytes).
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Up {
+    /// Answer to `Down::Start`: `status` 0 when the set-up was accepted, else an
+    /// error code (see [`SetupError`]), `detail` an index (row/obstacle) or 0.
+    Ready(ReadyFrame),
+    /// Answer to every `Down::Sensor`: the actuation of that control activation,
+    /// and what the plan task did since the last one.
+    Actuation(ActuationFrame),
+    /// Answer to `Down::Stop`.
+    Done(DoneFrame),
+}
+
+/// Answer to `Down::Start`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReadyFrame {
+    /// 0 when the set-up was accepted, else a [`SetupError::code`].
+    pub status: u8,
+    /// The row or obstacle index the error concerns (see [`SetupError`]), else 0.
+    pub detail: u16,
+}
+
+/// Answer to a `Down::Sensor`: one control activation's output.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ActuationFrame {
+    /// The `seq` of the sensor frame this answers, dimensionless.
+    pub seq: u32,
+    /// Wheel torques `[FL, FR, RL, RR]`, N·m, positive driving forward.
+    pub torque_nm: [f32; 4],
+    /// Front steering angle commanded, rad (`δ = δ_ol + δ_cl`, saturated).
+    pub delta_rad: f32,
+    /// Open-loop (feed-forward) part of the steering angle, rad.
+    pub delta_ol_rad: f32,
+    /// Closed-loop (yaw PID) part of the steering angle, rad.
+    pub delta_cl_rad: f32,
+    /// Speed reference the speed PID tracked, m/s.
+    pub v_ref_mps: f32,
+    /// Controller mode, [`mode_code`] (`Following` 0, `Extrapolating` 1,
+    /// `Stopping` 2, `Safe` 3).
+    pub mode: u8,
+    /// 0 none, else [`fault_code`] of the [`ControlFault`] that forced the safe
+    /// actuation.
+    pub fault: u8,
+    /// ECU clock ticks (168 MHz) of this control activation's own work: the
+    /// estimate stored and `ControlTask::run` under the plan's lock. The link's
+    /// frame decoding and encoding (a stand-in for the vehicle's bus drivers) are
+    /// not included.
+    pub control_ticks: u32,
+    /// The control release this activation ran at, µs on the ECU's timeline
+    /// (release `k` at `k`·10 ms; version 3).
+    pub release_us: u64,
+    /// When this frame was sent, µs on the ECU's timeline (`now_us()`): the
+    /// activation's completion; the plant applies the actuation from then.
+    pub sent_us: u64,
+    /// The control task's deadline counts, this activation's completion included
+    /// (its skipped releases are counted at its end, so they show in the next
+    /// frame).
+    pub control: TaskTimingFrame,
+    /// Times the control task's watchdog saw no new plan for more than
+    /// [`crate::deadline::PLAN_WATCHDOG_PERIODS`] plan periods, trips.
+    pub watchdog_trips: u32,
+    /// The plan activation that finished since the last actuation frame, if any.
+    pub plan: Option<PlanEventFrame>,
+}
+
+/// A task's deadline counts on the ECU's clock, cumulative since `Start` (see
+/// [`crate::deadline::DeadlineCounts`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TaskTimingFrame {
+    /// Releases that ran, activations.
+    pub releases: u32,
+    /// Late completions plus skipped releases, misses.
+    pub deadline_misses: u32,
+    /// Releases skipped because the task was still busy, releases.
+    pub skipped_releases: u32,
+    /// Activations over their cycle budget, activations.
+    pub budget_overruns: u32,
+    /// Largest response time, µs.
+    pub max_response_us: u32,
+}
+
+impl From<crate::deadline::DeadlineCounts> for TaskTimingFrame {
+    fn from(c: crate::deadline::DeadlineCounts) -> Self {
+        Self {
+            releases: c.releases,
+            deadline_misses: c.deadline_misses,
+            skipped_releases: c.skipped_releases,
+            budget_overruns: c.budget_overruns,
+            max_response_us: c.max_response_us,
+        }
+    }
+}
+
+/// One finished plan activation, as the ECU saw it.
+// The derived serialize_field's loops found at this line are postcard's varint
+// bytes of one integer field: at most 10 (a u64, 64 bits in 7-bit groups).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)] // wcet-bound: 10
+pub struct PlanEventFrame {
+    /// Plan activation number since `Start`, dimensionless (0 first).
+    pub activation: u32,
+    /// Release time of the activation (the estimate's stamp it planned from), µs.
+    pub release_us: u64,
+    /// Time the activation finished (its plan published or dropped), µs, on the
+    /// same clock as `release_us`.
+    pub finish_us: u64,
+    /// Time the activation ended, µs: after the window of the road it received
+    /// and adopted after publishing (`finish_us` without one). The next release
+    /// is the first not yet past then (version 3).
+    pub end_us: u64,
+    /// The plan task's deadline counts, this activation's completion and the
+    /// releases it skipped included (version 3).
+    pub timing: TaskTimingFrame,
+    /// ECU clock ticks (168 MHz) of the plan task itself, preemption by the
+    /// control task excluded.
+    pub ticks: u32,
+    /// 0 optimal, else [`mpc_status_code`] (see the module docs for the mapping).
+    pub status: u8,
+    /// False when the plan was late (dropped) or failed.
+    pub published: bool,
+    /// MPC passes run (linearise-condense-solve), passes.
+    pub passes: u8,
+    /// QP iterations over all passes, iterations.
+    pub qp_iterations: u16,
+    /// Constraints added to the working set over all passes, constraints.
+    pub qp_added: u16,
+    /// Constraints removed from the working set over all passes, constraints.
+    pub qp_removed: u16,
+    /// Full refactorisations over all passes, refactorisations.
+    pub qp_refactorizations: u16,
+    /// Constraint rows of the last QP, rows.
+    pub rows: u16,
+    /// Active constraints at the last QP's solution, constraints.
+    pub active: u16,
+    /// Core clock ticks the activation spent adopting a new window of the road
+    /// after publishing its plan (not in `ticks`; 0: no window), ticks.
+    pub window_ticks: u32,
+    /// Planned positions `[x_m, y_m]` of the plan's nodes, global frame, m.
+    pub nodes_xy: [[f32; 2]; PLAN_NODES],
+    /// Heuristic speed `V_heur` at the first node, m/s.
+    pub v_heur0_mps: f32,
+}
+
+impl PlanEventFrame {
+    /// The record of one plan activation: when it ran (µs on the ECU's timeline),
+    /// its own execution in core clock `ticks` (preemption excluded), its outcome,
+    /// its work counters (`report`: those of the activation, failed ones included)
+    /// and the positions of the plan it computed (zero when none).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new<R>(
+        activation: u32,
+        release_us: u64,
+        finish_us: u64,
+        ticks: u32,
+        result: &Result<R, MpcError>,
+        report: &MpcReport<f32>,
+        published: bool,
+        window_ticks: u32,
+        plan: Option<&Plan<f32>>,
+    ) -> Self {
+        // `end_us` and `timing` are set by the caller once the activation ends.
+        let sat16 = |x: u32| x.min(u16::MAX as u32) as u16;
+        let mut nodes_xy = [[0.0f32; 2]; PLAN_NODES];
+        let mut v_heur0_mps = 0.0;
+        if let Some(p) = plan {
+            for (xy, n) in nodes_xy.iter_mut().zip(p.nodes.iter()) {
+                *xy = [n.x_m, n.y_m];
+            }
+            v_heur0_mps = p.v_heur_mps[0];
+        }
+        Self {
+            activation,
+            release_us,
+            finish_us,
+            end_us: finish_us,
+            timing: TaskTimingFrame::default(),
+            ticks,
+            status: mpc_status_code(result),
+            published,
+            passes: report.passes.min(u8::MAX as u32) as u8,
+            qp_iterations: sat16(report.qp_iterations),
+            qp_added: sat16(report.qp_added),
+            qp_removed: sat16(report.qp_removed),
+            qp_refactorizations: sat16(report.qp_refactorizations),
+            rows: sat16(report.rows),
+            active: sat16(report.active_constraints),
+            window_ticks,
+            nodes_xy,
+            v_heur0_mps,
+        }
+    }
+}
+
+/// Answer to `Down::Stop`: the ECU's end-of-run report.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DoneFrame {
+    /// Deepest stack use seen (painted-stack high-water mark), bytes.
+    pub stack_high_water_bytes: u32,
+    /// Size of the stack region, bytes.
+    pub stack_size_bytes: u32,
+    /// Frames the ECU refused over the run (all [`FrameError`]s), frames.
+    pub rejected_frames: u32,
+}
+
+// ---------------------------------------------------------------------------
+// Sizes, checked at compile time
+// ---------------------------------------------------------------------------
+
+/// Largest postcard varint of a `u16`, bytes.
+const U16_MAX_BYTES: usize = 3;
+/// Largest postcard varint of a `u32`, bytes.
+const U32_MAX_BYTES: usize = 5;
+/// Largest postcard varint of a `u64`, bytes.
+const U64_MAX_BYTES: usize = 10;
+/// An `f32`, bytes.
+const F32_BYTES: usize = 4;
+/// An enum discriminant below 128, bytes.
+const TAG_BYTES: usize = 1;
+
+/// Largest postcard encoding of a [`VehicleConfig<f32>`] (8 `f32`), bytes.
+const VEHICLE_MAX_BYTES: usize = 8 * F32_BYTES;
+/// Largest postcard encoding of a [`StateEstimate<f32>`], bytes.
+const ESTIMATE_MAX_BYTES: usize = U64_MAX_BYTES + 7 * F32_BYTES;
+/// Largest postcard encoding of a [`TaskTimingFrame`] (5 `u32`), bytes.
+const TIMING_MAX_BYTES: usize = 5 * U32_MAX_BYTES;
+/// Largest postcard encoding of a [`PlanEventFrame`], bytes.
+const PLAN_EVENT_MAX_BYTES: usize = U32_MAX_BYTES
+    + 3 * U64_MAX_BYTES
+    + TIMING_MAX_BYTES
+    + U32_MAX_BYTES
+    + 3
+    + 6 * U16_MAX_BYTES
+    + U32_MAX_BYTES
+    + (PLAN_NODES * 2 + 1) * F32_BYTES;
+
+/// Largest postcard encoding of a [`Down`], bytes (a `PathChunk`).
+pub const MAX_DOWN_PAYLOAD_BYTES: usize = TAG_BYTES
+    + max(
+        max(
+            VEHICLE_MAX_BYTES + F32_BYTES + 1 + U16_MAX_BYTES + 1, // Config
+            U16_MAX_BYTES + 1 + PATH_CHUNK_ROWS * 4 * F32_BYTES,   // PathChunk
+        ),
+        max(
+            3 + U32_MAX_BYTES + MAX_VERTICES * 2 * F32_BYTES, // Obstacle
+            U32_MAX_BYTES + ESTIMATE_MAX_BYTES + U16_MAX_BYTES, // Sensor
+        ),
+    );
+/// Largest postcard encoding of an [`Up`], bytes (an `Actuation` with a plan event).
+pub const MAX_UP_PAYLOAD_BYTES: usize = TAG_BYTES
+    + max(
+        max(1 + U16_MAX_BYTES, 3 * U32_MAX_BYTES), // Ready, Done
+        U32_MAX_BYTES
+            + 8 * F32_BYTES
+            + 2
+            + U32_MAX_BYTES
+            + 2 * U64_MAX_BYTES
+            + TIMING_MAX_BYTES
+            + U32_MAX_BYTES
+            + 1
+            + PLAN_EVENT_MAX_BYTES,
+    );
+/// Largest encoded [`Down`] frame, bytes, delimiter included.
+pub const MAX_DOWN_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_DOWN_PAYLOAD_BYTES);
+/// Largest encoded [`Up`] frame, bytes, delimiter included.
+pub const MAX_UP_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_UP_PAYLOAD_BYTES);
+
+const _: () = assert!(MAX_DOWN_FRAME_BYTES <= MAX_FRAME_BYTES);
+const _: () = assert!(MAX_UP_FRAME_BYTES <= MAX_FRAME_BYTES);
+const _: () = assert!(PATH_CHUNK_ROWS <= u8::MAX as usize);
+const _: () = assert!(MAX_VERTICES <= u8::MAX as usize);
+
+/// The larger of two sizes (a `const` [`Ord::max`]).
+const fn max(a: usize, b: usize) -> usize {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Largest encoded frame, bytes with the delimiter, of a postcard payload of
+/// `payload` bytes: version + payload + CRC, plus COBS's worst case of one code
+/// byte and one more per 254 bytes, plus the 0x00.
+pub const fn frame_bytes_for_payload(payload: usize) -> usize {
+    let raw = 1 + payload + CRC_BYTES;
+    raw + 1 + raw / 254 + 1
+}
+
+mod codes;
+mod framing;
+pub use codes::*;
+pub use framing::*;
