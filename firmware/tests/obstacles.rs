@@ -4,7 +4,7 @@
 use core::f64::consts::PI;
 use firmware::obstacles::{
     build_parabola, constraint_value_and_gradient, minimal_apex, obstacle_speed_cap, Obstacle,
-    ObstacleError, ObstacleManager, ObstacleSettings, Parabola, Side, MAX_OBSTACLES,
+    ObstacleError, ObstacleManager, ObstacleSettings, Parabola, Side, MAX_OBSTACLES, MAX_VERTICES,
 };
 use firmware::reference_path::ReferencePath;
 use firmware::velocity_planner::VelocityPlannerSettings;
@@ -396,4 +396,44 @@ fn speed_cap_binds_only_for_an_obstacle_on_the_outside_of_a_bend() {
     assert!(aside.is_infinite(), "{aside}");
     // Out of the preview window: no cap.
     assert!(obstacle_speed_cap(&vel, &bend, &[par], 200.0, 20.0, ay_lim, 0.2).is_infinite());
+}
+
+#[test]
+fn settings_for_a_vehicle_by_hand() {
+    // c = a_y / (2·V²).
+    assert_eq!(ObstacleSettings::<f64>::steepness_for(2.0, 10.0), 0.01);
+    // A car 2 m wide and 5 m long (not the defaults' 1.8 × 4.6), at 20 m/s on
+    // μ = 0.5: a quarter of μ·g.
+    let s = ObstacleSettings::<f64>::for_vehicle(2.0, 5.0, 0.5, 20.0);
+    assert_eq!(s.half_car_width_m, 1.0);
+    assert_eq!(s.half_car_length_m, 2.5);
+    let ay = 0.25 * 0.5 * f64::from(firmware::G);
+    assert!((s.steepness_1pm - ay / (2.0 * 20.0 * 20.0)).abs() < 1e-15);
+    // Below 5 m/s the parabola is shaped for 5 m/s.
+    let slow = ObstacleSettings::<f64>::for_vehicle(2.0, 5.0, 0.5, 1.0);
+    assert!((slow.steepness_1pm - ay / (2.0 * 5.0 * 5.0)).abs() < 1e-15);
+    // The other fields are the defaults.
+    let d = ObstacleSettings::<f64>::default();
+    assert_eq!(s.lateral_buffer_m, d.lateral_buffer_m);
+    assert_eq!(s.default_half_width_m, d.default_half_width_m);
+}
+
+#[test]
+fn an_obstacle_with_the_most_vertices_is_inside_its_parabola() {
+    // A regular polygon of MAX_VERTICES vertices, radius 1 m, 2.5 m right of the
+    // centre line, listed from its far side: the vertices that shape the parabola
+    // (nearest the centre line) come last, so each of the inflated points (two per
+    // vertex) must be kept.
+    let path = straight();
+    let s = ObstacleSettings::default();
+    let v: Vec<[f64; 2]> = (0..MAX_VERTICES)
+        .map(|k| {
+            let a = PI + 0.3 + 2.0 * PI * k as f64 / MAX_VERTICES as f64;
+            [50.0 + a.cos(), -2.5 + a.sin()]
+        })
+        .collect();
+    let o = Obstacle::from_vertices(3, &v).unwrap();
+    let par = build_parabola(&s, &path, 0, &o).unwrap();
+    assert_eq!(par.side, Side::Left);
+    check_minimal(&par, &o, &s);
 }
