@@ -199,6 +199,22 @@ fn bad_vertices_are_errors() {
         build_parabola(&bad, &path, 0, &boxed(0.0, 1.0, -3.0, -2.0)),
         Err(ObstacleError::InvalidSettings)
     );
+    // A negative or infinite length is refused too, not only a flat parabola.
+    for bad in [
+        ObstacleSettings {
+            half_car_width_m: -0.5,
+            ..s
+        },
+        ObstacleSettings {
+            lateral_buffer_m: f64::INFINITY,
+            ..s
+        },
+    ] {
+        assert_eq!(
+            build_parabola(&bad, &path, 0, &boxed(0.0, 1.0, -3.0, -2.0)),
+            Err(ObstacleError::InvalidSettings)
+        );
+    }
     let empty_path: ReferencePath<f64, 8> = ReferencePath::new();
     assert_eq!(
         build_parabola(&s, &empty_path, 0, &boxed(0.0, 1.0, -3.0, -2.0)),
@@ -412,6 +428,9 @@ fn settings_for_a_vehicle_by_hand() {
     // Below 5 m/s the parabola is shaped for 5 m/s.
     let slow = ObstacleSettings::<f64>::for_vehicle(2.0, 5.0, 0.5, 1.0);
     assert!((slow.steepness_1pm - ay / (2.0 * 5.0 * 5.0)).abs() < 1e-15);
+    // The room the car needs beside an obstacle: its margin (half width and
+    // buffer) and its half width again.
+    assert_eq!(s.required_room_m(), (1.0 + s.lateral_buffer_m) + 1.0);
     // The other fields are the defaults.
     let d = ObstacleSettings::<f64>::default();
     assert_eq!(s.lateral_buffer_m, d.lateral_buffer_m);
