@@ -456,3 +456,57 @@ fn an_obstacle_with_the_most_vertices_is_inside_its_parabola() {
     assert_eq!(par.side, Side::Left);
     check_minimal(&par, &o, &s);
 }
+
+/// A parabola in a frame turned by `angle` rad, on `side`, with round numbers.
+fn turned(angle: f64, side: Side) -> Parabola<f64> {
+    Parabola {
+        obstacle: 0,
+        id: 1,
+        s_m: 0.0,
+        origin_m: [10.0, -20.0],
+        tangent: [angle.cos(), angle.sin()],
+        side,
+        xi0_m: 3.0,
+        eta_apex_m: 1.0,
+        steepness_1pm: 0.5,
+        xi_min_m: -10.0,
+        xi_max_m: 10.0,
+        reaches_road: true,
+        outside_kappa_1pm: 0.0,
+    }
+}
+
+#[test]
+fn gradient_matches_finite_differences_in_a_turned_frame() {
+    // The straight path's frame is the global one (t = [1, 0]), where a wrong
+    // sign or product on a tangent component cannot show.
+    for side in [Side::Left, Side::Right] {
+        let par = turned(0.7, side);
+        for p in [[12.0, -18.0], [15.0, -25.0], [5.0, -19.0]] {
+            let (_, grad) = par.constraint_value_and_gradient(p);
+            let h = 1e-6;
+            let g = |q: [f64; 2]| par.constraint_value_and_gradient(q).0;
+            let gx = (g([p[0] + h, p[1]]) - g([p[0] - h, p[1]])) / (2.0 * h);
+            let gy = (g([p[0], p[1] + h]) - g([p[0], p[1] - h])) / (2.0 * h);
+            assert!(
+                (gx - grad[0]).abs() < 1e-6 && (gy - grad[1]).abs() < 1e-6,
+                "{side:?} at {p:?}: {grad:?} vs ({gx}, {gy})"
+            );
+        }
+    }
+}
+
+#[test]
+fn contains_is_strictly_inside() {
+    // In the global frame (angle 0), g = σ·(η − 1) + 0.5·(ξ − 3)² with the
+    // origin at (10, −20): the apex is (13, −19), where g = 0 exactly.
+    let par = turned(0.0, Side::Left);
+    assert_eq!(par.constraint_value_and_gradient([13.0, -19.0]).0, 0.0);
+    assert!(!par.contains([13.0, -19.0]), "the boundary is not inside");
+    assert!(par.contains([13.0, -19.5]), "below the apex is inside");
+    assert!(!par.contains([13.0, -18.0]), "above the apex is outside");
+    // On the other side the forbidden region is above the apex.
+    let right = turned(0.0, Side::Right);
+    assert!(right.contains([13.0, -18.5]));
+    assert!(!right.contains([13.0, -19.5]));
+}
