@@ -14,6 +14,7 @@
 //! | [`trace_check`] | QEMU execution traces replayed against the graphs: loop trip counts per entry, activation costs with the same block costs |
 //! | [`stack`] | static stack bound: frame sizes from `llvm-objdump` prologues, call graph, preemption levels |
 //! | [`cpi`] | cycles-per-instruction bound from a QEMU execution trace and a Cortex-M4 timing table |
+//! | [`rtic_app`] | what the analyses know of the ECU's RTIC application: priority levels, functions run once or masked |
 //! | [`report`] | the timing and memory report (`wcet.json`, `wcet.md`) from PIL runs, the ELF and the two bounds; CI comparison |
 //!
 //! All are library functions; the `host-sim wcet` command (`commands::wcet`) wires them together.
@@ -32,6 +33,7 @@ pub mod ipet;
 pub mod loops;
 pub mod report;
 pub mod rta;
+pub mod rtic_app;
 pub mod stack;
 pub mod trace_check;
 
