@@ -399,17 +399,6 @@ fn max_of(values: impl Iterator<Item = f64>) -> Option<f64> {
     values.fold(None, |m, v| Some(m.map_or(v, |m: f64| m.max(v))))
 }
 
-/// Median (mean of the two middle values for an even count); `None` if empty.
-fn median(mut values: Vec<f64>) -> Option<f64> {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    match n {
-        0 => None,
-        _ if n % 2 == 1 => values.get(n / 2).copied(),
-        _ => Some((values.get(n / 2 - 1)? + values.get(n / 2)?) / 2.0),
-    }
-}
-
 /// Plan: the CSV rows of every run, and each summary's maximum (the larger wins).
 fn plan_observed(runs: &[PilRun]) -> Result<Observed> {
     let rows = || runs.iter().flat_map(|r| r.plan.iter());
@@ -418,7 +407,8 @@ fn plan_observed(runs: &[PilRun]) -> Result<Observed> {
     let Some(max) = max_of(summary_max.into_iter().chain(csv_max)) else {
         bail!("no PIL run given: make one with `{PIL_COMMAND}` and pass its folder");
     };
-    let p50 = match median(rows().map(|a| a.instructions).collect()) {
+    let instructions: Vec<f64> = rows().map(|a| a.instructions).collect();
+    let p50 = match crate::stats::median(&instructions) {
         Some(p) => p,
         None => max_of(runs.iter().map(|r| r.summary.plan_p50_instructions)).unwrap_or(0.0),
     };
@@ -998,13 +988,6 @@ active_constraints,max_validity_slack_rad";
         assert_eq!(check_against_expected(&r, "{not json", 0.05).len(), 1);
         assert_eq!(check_against_expected(&r, &expected, -0.1).len(), 1);
         Ok(())
-    }
-
-    #[test]
-    fn median_of_odd_even_and_empty() {
-        assert_eq!(median(vec![3.0, 1.0, 2.0]), Some(2.0));
-        assert_eq!(median(vec![4.0, 1.0, 3.0, 2.0]), Some(2.5));
-        assert_eq!(median(Vec::new()), None);
     }
 
     /// The real ECU ELF (`cargo ecu`); fails when it has not been built. The
