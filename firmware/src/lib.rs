@@ -12,7 +12,7 @@
 //! | [`validity`] | the validity limit `δ_max(V)` keeping `a_y ≤ 0.5·μ·g` |
 //! | [`velocity_planner`] | local velocity planner, `V_heur` |
 //! | [`obstacles`] | obstacle manager: one forbidden parabola per obstacle |
-//! | [`mpc`] | the local MPC planner (linearise, condense, solve) |
+//! | [`mpc`] | the local MPC planner (linearise, condense, solve; warm start by row identity) |
 //! | [`pid`] | PID controller |
 //! | [`longitudinal_estimator`] | online estimate of the car's effective mass and driving resistances |
 //! | [`friction`] | online friction check: `μ̂` from what the tyres deliver |

@@ -11,7 +11,7 @@ use firmware::state_estimate::StateEstimate;
 use firmware::tasks::PlanTask;
 
 /// A window's rows, as on the ECU.
-const WINDOW: usize = 320;
+const WINDOW: usize = firmware::tasks::ECU_PATH_ROWS;
 /// The whole road.
 const WHOLE: usize = 1024;
 

@@ -14,6 +14,7 @@
 //! | [`output`] | what a run writes: its files, its figures, plotting helpers |
 //! | [`qp_corpus`] | the MPC's QPs as JSON, for solver benchmarks |
 //! | [`wcet`] | worst-case timing and memory analysis of the ECU binary |
+//! | [`stats`] | order statistics (median, percentile), each definition once |
 //! | [`commands`] | the commands: each one's clap arguments and what it does |
 
 pub mod closed_loop;
@@ -22,6 +23,7 @@ pub mod model;
 pub mod output;
 pub mod pil;
 pub mod qp_corpus;
+pub mod stats;
 pub mod sweep;
 pub mod wcet;
 pub mod world;

@@ -420,7 +420,7 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
         .loops
         .iter()
         .any(|l| l.observed_max.unwrap_or(0) >= 300));
-    let (_dir, edited) = edited_sources("firmware/src/reference_path.rs", |t| {
+    let (_dir, edited) = edited_sources("firmware/src/reference_path/loading.rs", |t| {
         t.replace("// wcet-bound: ECU_PATH_ROWS", "// wcet-bound: 10")
     });
     let wrong = host_sim::wcet::analysis::analyse(elf, &edited, &[trace]).unwrap();

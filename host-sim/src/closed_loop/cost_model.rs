@@ -163,16 +163,6 @@ pub fn load_counters(path: &std::path::Path) -> anyhow::Result<Vec<Counters>> {
         .collect()
 }
 
-/// The nearest-rank `q`-quantile of `values` (`q` in `(0, 1]`; 1 is the largest),
-/// 0 when empty.
-pub fn percentile(values: &[f64], q: f64) -> f64 {
-    let mut s = values.to_vec();
-    s.sort_by(f64::total_cmp);
-    s.get(((s.len() as f64 * q).ceil() as usize).saturating_sub(1))
-        .copied()
-        .unwrap_or(0.0)
-}
-
 /// The work counters of a recorded activation, as the MPC reported them.
 pub fn report_of(a: &Counters) -> MpcReport<f64> {
     MpcReport {
@@ -281,8 +271,8 @@ impl CostModel {
         }
         ModelError {
             activations: errs.len(),
-            max_abs_pct: percentile(&errs, 1.0),
-            p99_abs_pct: percentile(&errs, 0.99),
+            max_abs_pct: crate::stats::percentile(&errs, 1.0),
+            p99_abs_pct: crate::stats::percentile(&errs, 0.99),
             max_under_pct: under * 100.0,
         }
     }

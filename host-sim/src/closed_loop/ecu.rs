@@ -41,9 +41,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::closed_loop::cost_model::CostModel;
 use crate::closed_loop::plan_activation::{mpc_error_name, PlanActivation};
-use crate::closed_loop::{vehicle_config, SimOptions, HOST_PATH_CAP};
+use crate::closed_loop::SimOptions;
+use crate::model::vehicle::vehicle_config;
 use crate::model::vehicle::VehicleParams;
 use crate::world::obstacle_file::Obstacle;
+use crate::world::route::HOST_PATH_CAP;
 use crate::world::route::{RouteFeeder, Window};
 use crate::world::scenario::Scenario;
 

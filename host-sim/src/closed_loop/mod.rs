@@ -5,6 +5,7 @@
 //! | [`timeline`] | the driver: the plant against an [`Ecu`](ecu::Ecu), the log, budgets, deadlines, stop conditions |
 //! | [`summary`] | the run's figures of merit (`summary.json`) |
 //! | [`ecu`] | what runs the firmware: the `Ecu` trait, the modelled ECU on the host |
+//! | [`disturbed_ecu`] | the modelled ECU behind a run's disturbances (noise, delay, a fault) |
 //! | [`plan_activation`] | one activation of the plan task (a row of `plan_activations.csv`), its status names |
 //! | [`cost_model`] | the tasks' cost model on the ECU (instructions), fitted on PIL measurements |
 //! | [`set_up`] | one run set up from its factors: scenario, cars, options, disturbances |
@@ -12,17 +13,14 @@
 //! | [`validity`] | the paper's Figure 3: `δ_a` vs `δ_th` on circles |
 //!
 //! This module holds what they all share, and nothing that uses them: a run's
-//! options ([`SimOptions`]), the firmware's arithmetic ([`Precision`]), and what the
-//! firmware is told of the car ([`vehicle_config`]).
+//! options ([`SimOptions`]) and the firmware's arithmetic ([`Precision`]).
 
-use firmware::vehicle_config::VehicleConfig;
-use firmware::Real;
 use serde::Serialize;
 
 use crate::closed_loop::cost_model::CostModel;
-use crate::model::vehicle::VehicleParams;
 
 pub mod cost_model;
+pub mod disturbed_ecu;
 pub mod ecu;
 pub mod plan_activation;
 pub mod set_up;
@@ -53,9 +51,6 @@ impl Precision {
 /// Cycles-per-instruction bound of the ECU from the timing report (`host-sim
 /// wcet`): worst-case cycles of the traced instruction mix over its instructions.
 pub const DEFAULT_CPI_BOUND: f64 = 2.53;
-
-/// Point capacity of the reference path on the host (the ECU build picks its own).
-pub const HOST_PATH_CAP: usize = 4096;
 
 /// Options of a closed-loop run.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -105,29 +100,4 @@ impl Default for SimOptions {
             initial_speed_mps: 15.0,
         }
     }
-}
-
-/// What the firmware is told about the car of a vehicle file (the same numbers
-/// the ECU receives in its configuration frame).
-pub fn vehicle_config<T: Real>(v: &VehicleParams) -> VehicleConfig<T> {
-    VehicleConfig {
-        l_f_m: T::from_f64(v.lf_m),
-        l_r_m: T::from_f64(v.lr_m),
-        cg_height_m: T::from_f64(v.h_m),
-        width_m: T::from_f64(vehicle_width_m(v)),
-        length_m: T::from_f64(vehicle_length_m(v)),
-        mass_kg: T::from_f64(v.mass_kg),
-        wheel_radius_m: T::from_f64(v.r_eff_m),
-        max_steer_rad: T::from_f64(v.max_steer_rad),
-    }
-}
-
-/// Body width used for clearances: track plus a tyre width, m.
-pub fn vehicle_width_m(v: &VehicleParams) -> f64 {
-    2.0 * v.lw_m + 0.25
-}
-
-/// Body length used for clearances: wheelbase plus overhangs, m.
-pub fn vehicle_length_m(v: &VehicleParams) -> f64 {
-    v.lf_m + v.lr_m + 1.8
 }

@@ -6,11 +6,12 @@
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::closed_loop::disturbed_ecu::DisturbedEcu;
 use crate::closed_loop::ecu::SimulatedEcu;
 use crate::closed_loop::timeline::{self, RunResult};
 use crate::closed_loop::{Precision, SimOptions};
 use crate::model::vehicle::VehicleParams;
-use crate::world::disturbance::{Disturbances, DisturbedEcu};
+use crate::world::disturbance::Disturbances;
 use crate::world::scenario::Scenario;
 
 /// Runs one closed-loop scenario and returns its result (no files written).

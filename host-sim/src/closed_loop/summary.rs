@@ -4,6 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::world::faults::Outcome;
+
 /// The run's figures of merit (`summary.json`).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Summary {
@@ -144,6 +146,23 @@ pub struct Summary {
     /// Times the ECU's watchdog saw no new plan for more than
     /// `firmware::deadline::PLAN_WATCHDOG_PERIODS` plan periods, null without an ECU.
     pub ecu_watchdog_trips: Option<u64>,
+}
+
+/// The outcome of a finished run ([`Outcome`]'s docs: worst first).
+pub fn classify(s: &Summary, off_road: bool) -> Outcome {
+    if s.collisions > 0 {
+        Outcome::Collision
+    } else if off_road || s.stop_reason.starts_with("left the road") {
+        Outcome::OffRoad
+    } else if s.plan_deadline_misses + s.control_deadline_misses > 0 {
+        Outcome::DeadlineMiss
+    } else if s.completed {
+        Outcome::Ok
+    } else if s.stop_reason.starts_with("stood still") {
+        Outcome::StoppedSafely
+    } else {
+        Outcome::Failed
+    }
 }
 
 #[cfg(test)]

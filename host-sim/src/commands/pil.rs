@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use firmware::link::DoneFrame;
 
-use crate::closed_loop::cost_model::{percentile, CostModel, Counters};
+use crate::closed_loop::cost_model::{CostModel, Counters};
 use crate::closed_loop::ecu::SimulatedEcu;
 use crate::closed_loop::plan_activation::PlanActivation;
 use crate::closed_loop::set_up::SetUp;
@@ -20,6 +20,7 @@ use crate::pil::comparison::compare;
 use crate::pil::deadlines::count_mismatches;
 use crate::pil::qemu::{PilOptions, QemuEcu, ECU_CLOCK_HZ};
 use crate::pil::report::PilReport;
+use crate::stats::percentile;
 use crate::world::faults::FAULT_KINDS;
 
 /// `host-sim pil`'s command line: `run`'s ([`crate::commands::run::RunCommand`]: the same

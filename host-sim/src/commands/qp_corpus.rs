@@ -93,7 +93,7 @@ pub fn run(args: &QpCorpusArgs) -> Result<()> {
             e.solve_us_warm = Some(warm);
         }
         let (cold, warm): (Vec<f64>, Vec<f64>) = times.into_iter().unzip();
-        let pct = crate::closed_loop::cost_model::percentile;
+        let pct = crate::stats::percentile;
         println!(
             "our f64 solve() (median of {} repetitions per QP): cold p50 {:.1} µs, p99 {:.1} µs; warm p50 {:.1} µs, p99 {:.1} µs",
             args.time_reps,

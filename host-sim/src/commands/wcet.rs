@@ -202,7 +202,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     // simulator's timeline (an estimate, not a bound).
     let runs = run_dirs
         .iter()
-        .map(|d| report::load_pil_run(d))
+        .map(|d| report::pil_runs::load_pil_run(d))
         .collect::<Result<Vec<_>>>()?;
     let mut plans = Vec::new();
     for d in &run_dirs {
@@ -223,7 +223,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     let inputs = ReportInputs {
         run_dirs: run_dirs.clone(),
         elf: args.elf.clone(),
-        stack_levels: report::ecu_priority_levels(),
+        stack_levels: crate::wcet::ecu_app::ecu_priority_levels(),
         cpi,
         statics: report::StaticSummary::of(&analysis),
         plan_period_cycles: firmware::timing::PLAN_PERIOD_US as f64
@@ -234,7 +234,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         clock_hz: u64::from(crate::wcet::CLOCK_HZ),
     };
     let r = report::build_report(&inputs)?;
-    report::write_report(&args.out, &r)?;
+    report::markdown::write_report(&args.out, &r)?;
     if let Some(log) = made {
         // Large (tens of MB a simulated second) and fully read by now.
         let _ = fs::remove_file(log);
@@ -269,14 +269,14 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         );
     }
     println!("wrote {}", args.out.display());
-    let missed = report::missed_required(&r.goals, &args.require).map_err(|e| anyhow!(e))?;
+    let missed = report::goals::missed_required(&r.goals, &args.require).map_err(|e| anyhow!(e))?;
     if !missed.is_empty() {
         bail!("required goals missed:\n  {}", missed.join("\n  "));
     }
     if let Some(e) = &args.expected {
         let text = fs::read_to_string(e)
             .with_context(|| format!("cannot read the expectations {}", e.display()))?;
-        let fails = report::check_against_expected(&r, &text, args.margin);
+        let fails = report::expected::check_against_expected(&r, &text, args.margin);
         if !fails.is_empty() {
             bail!(
                 "the ECU grew past {} (+{:.0} %):\n  {}",

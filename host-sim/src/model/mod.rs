@@ -2,7 +2,7 @@
 //!
 //! | module | concept |
 //! |---|---|
-//! | [`vehicle`] | vehicle parameters, TOML vehicle files and their validation |
+//! | [`vehicle`] | vehicle parameters, TOML vehicle files and their validation; what the firmware is told of the car |
 //! | [`tire`] | Pacejka 2002 Magic Formula, combined slip |
 //! | [`tire_table`] | tyre forces for a table of slips (what the `tire` command computes) |
 //! | [`plant`] | the 9-DoF plant, RK4 at a fixed step |

@@ -7,6 +7,8 @@
 
 use std::path::Path;
 
+use firmware::vehicle_config::VehicleConfig;
+use firmware::Real;
 use serde::Deserialize;
 
 use crate::model::tire::{self, TireParams};
@@ -295,4 +297,29 @@ fn tire_fields(t: &TireParams) -> impl Iterator<Item = (String, f64)> {
     t.named_values()
         .into_iter()
         .map(|(n, v)| (format!("tyre.{n}"), v))
+}
+
+/// What the firmware is told about the car of a vehicle file (the same numbers
+/// the ECU receives in its configuration frame).
+pub fn vehicle_config<T: Real>(v: &VehicleParams) -> VehicleConfig<T> {
+    VehicleConfig {
+        l_f_m: T::from_f64(v.lf_m),
+        l_r_m: T::from_f64(v.lr_m),
+        cg_height_m: T::from_f64(v.h_m),
+        width_m: T::from_f64(vehicle_width_m(v)),
+        length_m: T::from_f64(vehicle_length_m(v)),
+        mass_kg: T::from_f64(v.mass_kg),
+        wheel_radius_m: T::from_f64(v.r_eff_m),
+        max_steer_rad: T::from_f64(v.max_steer_rad),
+    }
+}
+
+/// Body width used for clearances: track plus a tyre width, m.
+pub fn vehicle_width_m(v: &VehicleParams) -> f64 {
+    2.0 * v.lw_m + 0.25
+}
+
+/// Body length used for clearances: wheelbase plus overhangs, m.
+pub fn vehicle_length_m(v: &VehicleParams) -> f64 {
+    v.lf_m + v.lr_m + 1.8
 }

@@ -24,7 +24,7 @@ use firmware::tasks::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
 
 use crate::closed_loop::ecu::{ControlOutput, Ecu, EcuCounts, EcuTaskCounts, SimulatedEcu};
 use crate::closed_loop::plan_activation::{plan_status_name, PlanActivation};
-use crate::closed_loop::{self, SimOptions};
+use crate::closed_loop::SimOptions;
 use crate::model::vehicle::VehicleParams;
 use crate::pil::deadlines::{skipped_between, TickOverruns};
 use crate::pil::frames::{actuation_of, path_chunks, plan_of, setup_refusal};
@@ -324,7 +324,7 @@ impl QemuEcu {
         }
         let first = RouteFeeder::new(&scenario.track)?.first();
         self.send(&Down::Config(ConfigFrame {
-            vehicle: closed_loop::vehicle_config::<f32>(vehicle),
+            vehicle: crate::model::vehicle::vehicle_config::<f32>(vehicle),
             mu_planner: sim.mu_planner as f32,
             closed: first.closed,
             path_rows: first.rows.len() as u16,

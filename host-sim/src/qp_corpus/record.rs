@@ -11,7 +11,7 @@ use firmware::reference_path::ReferencePath;
 use firmware::state_estimate::StateEstimate;
 use firmware::Real;
 
-use crate::closed_loop::{self, Precision};
+use crate::closed_loop::Precision;
 use crate::model::vehicle::VehicleParams;
 use crate::qp_corpus::entry::{CorpusEntry, WarmStartEntry};
 
@@ -155,7 +155,7 @@ fn record_in<T: Real>(
     }
     // The simulator's settings for the built-in vehicle.
     let vehicle = VehicleParams::default();
-    let car = closed_loop::vehicle_config::<T>(&vehicle);
+    let car = crate::model::vehicle::vehicle_config::<T>(&vehicle);
     let settings = car.mpc_settings();
     let obstacle_settings = car.obstacle_settings(T::from_f64(MU));
     let mut manager = ObstacleManager::<T>::new();

@@ -117,7 +117,7 @@ pub fn time_solves(entries: &[CorpusEntry], reps: usize) -> Result<Vec<(f64, f64
                 black_box(run.solve());
                 *t = t0.elapsed().as_secs_f64() * 1e6;
             }
-            median(&samples)
+            crate::stats::median(&samples).unwrap_or(0.0)
         };
         let cold_us = time_from(&cold, &mut run);
         warm.set_working_set_from(e.warm_start.iter().map(|w| w.to_active()));
@@ -125,18 +125,6 @@ pub fn time_solves(entries: &[CorpusEntry], reps: usize) -> Result<Vec<(f64, f64
         out.push((cold_us, warm_us));
     }
     Ok(out)
-}
-
-/// Median of a non-empty list (the mean of the middle two for an even length); 0 for
-/// an empty one.
-fn median(v: &[f64]) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let n = s.len();
-    match (s.get((n.max(1) - 1) / 2), s.get(n / 2)) {
-        (Some(a), Some(b)) => 0.5 * (a + b),
-        _ => 0.0,
-    }
 }
 
 /// Median and maximum of a list of counts (0, 0 for an empty list).

@@ -12,7 +12,7 @@
 //! | [`copies`] | block copies and fills: the functions and the bytes each call site moves |
 //! | [`ipet`] | implicit path enumeration: a task's bound as a linear program (`good_lp`, `microlp`) |
 //! | [`rta`] | response-time analysis, fixed priorities with RTIC's stack resource policy |
-//! | [`ecu_app`] | what the analysis knows of the ECU application: its tasks, sections, schedule, indirect call targets |
+//! | [`ecu_app`] | what the analyses know of the ECU's RTIC application: tasks, sections, schedule, indirect call targets, priority levels, functions run once or masked |
 //! | [`analysis`] | the static analysis put together (`static.json`, `static.md`) |
 //! | [`trace_check`] | QEMU execution traces replayed against the graphs: loop trip counts per entry, activation costs with the same block costs |
 //! | [`stack`] | static stack bound: frame sizes from `llvm-objdump` prologues, call graph, preemption levels |

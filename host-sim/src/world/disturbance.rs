@@ -1,7 +1,7 @@
 //! Disturbances between the plant and the firmware: sensor noise, a delayed state
 //! estimate, a sensor dropout, a steering actuator rate limit and an obstacle the
-//! sensors see late. [`DisturbedEcu`] wraps the modelled ECU ([`SimulatedEcu`]) and
-//! applies them at its boundary, so the closed-loop driver runs unchanged.
+//! sensors see late, described here; the closed loop's `DisturbedEcu` wraps the modelled
+//! ECU and applies them at its boundary, so the closed-loop driver runs unchanged.
 //!
 //! # The estimate the tasks see, every 10 ms
 //!
@@ -35,20 +35,7 @@
 //! Every random draw comes from [`SplitMix64`] seeded by the run, so a run is
 //! reproducible bit for bit.
 
-use std::collections::VecDeque;
-
-use anyhow::{anyhow, bail, Result};
-use firmware::obstacles::Obstacle as FwObstacle;
-use firmware::plan::Plan;
-use firmware::state_estimate::StateEstimate;
 use firmware::tasks::CONTROL_PERIOD_US;
-use firmware::Real;
-
-use crate::closed_loop::ecu::{ControlOutput, Ecu, SimulatedEcu};
-use crate::closed_loop::{vehicle_config, SimOptions};
-use crate::model::vehicle::VehicleParams;
-use crate::world::route::Window;
-use crate::world::scenario::Scenario;
 
 /// Standard deviations of noise level 1 (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -173,7 +160,8 @@ pub struct Dropout {
 }
 
 impl Dropout {
-    fn covers(&self, t_us: u64) -> bool {
+    /// Whether the dropout is under way at `t_us`, µs.
+    pub fn covers(&self, t_us: u64) -> bool {
         t_us >= self.start_us && t_us < self.start_us + u64::from(self.periods) * CONTROL_PERIOD_US
     }
 }
@@ -187,7 +175,7 @@ pub struct LateObstacle {
     pub appear_m: f64,
 }
 
-/// Everything [`DisturbedEcu`] does to the firmware's inputs and outputs.
+/// Everything done to the firmware's inputs and outputs at the ECU's boundary.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Disturbances {
     /// Noise level (multiplies [`NOISE_UNIT`]); 0 for none.
@@ -211,217 +199,6 @@ impl Disturbances {
             .round()
             .max(0.0) as usize
     }
-}
-
-/// The late obstacle waiting to be given to the planner.
-#[derive(Debug)]
-struct PendingObstacle<T> {
-    /// Every obstacle the planner has once it appears (the late one included).
-    all: Vec<FwObstacle<T>>,
-    /// Arc length of the late obstacle's centre on the whole track, m.
-    s_m: f64,
-    appear_m: f64,
-    /// Last projection of the car on the whole track, m (a hint for the next).
-    s_hint: Option<f64>,
-    /// The whole track (the planner holds only a window of it).
-    track: crate::world::track::Track,
-}
-
-/// [`SimulatedEcu`] behind the [`Disturbances`] (see the module docs).
-#[derive(Debug)]
-pub struct DisturbedEcu<T: Real> {
-    inner: SimulatedEcu<T>,
-    d: Disturbances,
-    rng: SplitMix64,
-    history: VecDeque<StateEstimate<T>>,
-    last_delivered: Option<StateEstimate<T>>,
-    last_delta: Option<T>,
-    pending: Option<PendingObstacle<T>>,
-    appeared_at_us: Option<u64>,
-    obstacle_settings: firmware::obstacles::ObstacleSettings<T>,
-}
-
-impl<T: Real> DisturbedEcu<T> {
-    /// The modelled ECU for `scenario` (without its late obstacle, if any) and the
-    /// car the firmware is told of (`vehicle`), behind `d`.
-    pub fn new(
-        scenario: &Scenario,
-        vehicle: &VehicleParams,
-        opts: &SimOptions,
-        d: Disturbances,
-    ) -> Result<Self> {
-        let car = vehicle_config::<T>(vehicle);
-        let obstacle_settings = car.obstacle_settings(T::from_f64(opts.mu_planner));
-        let (inner, pending) = match d.late_obstacle {
-            None => (SimulatedEcu::new(scenario, vehicle, opts)?, None),
-            Some(late) => {
-                let o = scenario
-                    .obstacles
-                    .get(late.index)
-                    .ok_or_else(|| anyhow!("late obstacle {} does not exist", late.index))?;
-                let mut early = scenario.clone();
-                early.obstacles.remove(late.index);
-                let inner = SimulatedEcu::new(&early, vehicle, opts)?;
-                let all = scenario
-                    .obstacles
-                    .iter()
-                    .enumerate()
-                    .map(|(k, o)| {
-                        let v: Vec<[T; 2]> =
-                            o.vertices.iter().map(|p| p.map(T::from_f64)).collect();
-                        FwObstacle::from_vertices(k as u32, &v)
-                            .map_err(|e| anyhow!("obstacle {:?}: {e:?}", o.id))
-                    })
-                    .collect::<Result<Vec<_>>>()?;
-                let c = centroid(&o.vertices);
-                let (s_m, _) = scenario.track.project(c, None);
-                if !s_m.is_finite() {
-                    bail!("the late obstacle is not near the track");
-                }
-                let pending = PendingObstacle {
-                    all,
-                    s_m,
-                    appear_m: late.appear_m,
-                    s_hint: None,
-                    track: scenario.track.clone(),
-                };
-                (inner, Some(pending))
-            }
-        };
-        Ok(Self {
-            inner,
-            rng: SplitMix64::new(d.seed ^ 0x6E6F_6973_6521),
-            d,
-            history: VecDeque::new(),
-            last_delivered: None,
-            last_delta: None,
-            pending,
-            appeared_at_us: None,
-            obstacle_settings,
-        })
-    }
-
-    /// When the late obstacle was given to the planner, µs (`None`: not yet, or none).
-    pub fn obstacle_appeared_at_us(&self) -> Option<u64> {
-        self.appeared_at_us
-    }
-
-    /// The estimate the tasks see at `t_us` given the true one (noise, delay, dropout).
-    fn seen(&mut self, t_us: u64, truth: &StateEstimate<T>) -> StateEstimate<T> {
-        let mut m = *truth;
-        if self.d.noise_scale > 0.0 {
-            let k = self.d.noise_scale;
-            let add = |x: T, sigma: f64, rng: &mut SplitMix64| {
-                T::from_f64(x.to_f64() + k * sigma * rng.gaussian())
-            };
-            let n = NOISE_UNIT;
-            m.x_m = add(m.x_m, n.position_m, &mut self.rng);
-            m.y_m = add(m.y_m, n.position_m, &mut self.rng);
-            m.psi_rad = add(m.psi_rad, n.heading_rad, &mut self.rng);
-            m.vx_mps = add(m.vx_mps, n.speed_mps, &mut self.rng);
-            m.yaw_rate_radps = add(m.yaw_rate_radps, n.yaw_rate_radps, &mut self.rng);
-        }
-        let keep = self.d.delay_periods() + 1;
-        self.history.push_back(m);
-        while self.history.len() > keep {
-            self.history.pop_front();
-        }
-        let delayed = self.history.front().copied().unwrap_or(m);
-        let out = match self.d.dropout {
-            Some(dr) if dr.covers(t_us) => match dr.kind {
-                DropoutKind::Nan => {
-                    let nan = T::from_f64(f64::NAN);
-                    StateEstimate {
-                        stamp_us: t_us,
-                        x_m: nan,
-                        y_m: nan,
-                        psi_rad: nan,
-                        vx_mps: nan,
-                        vy_mps: nan,
-                        yaw_rate_radps: nan,
-                        delta_rad: nan,
-                    }
-                }
-                DropoutKind::Hold => self.last_delivered.unwrap_or(delayed),
-            },
-            _ => delayed,
-        };
-        if !self.d.dropout.is_some_and(|dr| dr.covers(t_us)) {
-            self.last_delivered = Some(out);
-        }
-        out
-    }
-
-    /// Gives the late obstacle to the planner once the car is close enough.
-    fn maybe_reveal(&mut self, t_us: u64, truth: &StateEstimate<T>) -> Result<()> {
-        let Some(p) = self.pending.as_mut() else {
-            return Ok(());
-        };
-        let (s_car, _) = p
-            .track
-            .project([truth.x_m.to_f64(), truth.y_m.to_f64()], p.s_hint);
-        if !s_car.is_finite() {
-            return Ok(());
-        }
-        p.s_hint = Some(s_car);
-        let mut ahead = p.s_m - s_car;
-        if p.track.closed && ahead < 0.0 {
-            ahead += p.track.length();
-        }
-        if ahead <= p.appear_m {
-            // Known from now on (every later window of the road rebuilds it too).
-            let task = self.inner.plan_task_mut();
-            task.set_obstacles(self.obstacle_settings, &p.all);
-            if !task.rebuild_obstacles() {
-                bail!("the late obstacle: the obstacle manager refused the obstacles");
-            }
-            self.pending = None;
-            self.appeared_at_us = Some(t_us);
-        }
-        Ok(())
-    }
-
-    /// The actuation after the steering rate limit.
-    fn limit_steering(&mut self, c: &mut ControlOutput<T>, truth: &StateEstimate<T>) {
-        let Some(rate) = self.d.steer_rate_limit_radps else {
-            return;
-        };
-        let prev = self.last_delta.unwrap_or(truth.delta_rad);
-        let step = T::from_f64(rate * CONTROL_PERIOD_US as f64 * 1e-6);
-        let cmd = c.actuation.delta_rad;
-        let applied = if cmd.is_finite() {
-            cmd.clamp(prev - step, prev + step)
-        } else {
-            prev
-        };
-        c.actuation.delta_rad = applied;
-        self.last_delta = Some(applied);
-    }
-}
-
-impl<T: Real> Ecu<T> for DisturbedEcu<T> {
-    fn control(&mut self, t_us: u64, est: &StateEstimate<T>) -> Result<ControlOutput<T>> {
-        self.maybe_reveal(t_us, est)?;
-        let seen = self.seen(t_us, est);
-        let mut c = self.inner.control(t_us, &seen)?;
-        self.limit_steering(&mut c, est);
-        Ok(c)
-    }
-
-    fn active_plan(&self) -> &Plan<T> {
-        self.inner.active_plan()
-    }
-
-    fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()> {
-        self.inner.set_window(t_us, w)
-    }
-}
-
-/// Mean of a polygon's vertices, m.
-pub fn centroid(v: &[[f64; 2]]) -> [f64; 2] {
-    let n = v.len().max(1) as f64;
-    let (x, y) = v.iter().fold((0.0, 0.0), |(x, y), p| (x + p[0], y + p[1]));
-    [x / n, y / n]
 }
 
 #[cfg(test)]

@@ -349,23 +349,6 @@ pub struct RunFacts {
     pub fault_event_s: Option<f64>,
 }
 
-/// The outcome of a finished run (module docs of [`Outcome`]: worst first).
-pub fn classify(s: &crate::closed_loop::summary::Summary, off_road: bool) -> Outcome {
-    if s.collisions > 0 {
-        Outcome::Collision
-    } else if off_road || s.stop_reason.starts_with("left the road") {
-        Outcome::OffRoad
-    } else if s.plan_deadline_misses + s.control_deadline_misses > 0 {
-        Outcome::DeadlineMiss
-    } else if s.completed {
-        Outcome::Ok
-    } else if s.stop_reason.starts_with("stood still") {
-        Outcome::StoppedSafely
-    } else {
-        Outcome::Failed
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -5,7 +5,7 @@
 //! | module | concept |
 //! |---|---|
 //! | [`track`] | track files (racetrack-database CSV), projection, curvature |
-//! | [`csv_value`] | one number read from a cell of a track or obstacle file, with errors that locate it |
+//! | [`csv_value`] | a track or obstacle file read line by line (optional header, `#` comments), and one number read from a cell, with errors that locate it |
 //! | [`obstacle_file`] | obstacle files (`id,x_m,y_m`), polygon distances, footprints |
 //! | [`obstacle_placement`] | boxes on any track; random obstacles from a seed |
 //! | [`road_friction`] | friction that changes along the road (`--mu-patch`); μ̂ judged against it |

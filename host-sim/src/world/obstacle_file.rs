@@ -29,6 +29,7 @@
 //!   (two non-adjacent edges crossing; its inside is ambiguous).
 //! - A file with no rows gives no obstacles.
 
+use crate::world::csv_value::{csv_lines, CsvLine};
 use std::io::Read;
 use std::path::Path;
 
@@ -143,47 +144,31 @@ pub fn load_obstacles_reader(
     name: &str,
 ) -> Result<Vec<Obstacle>, ObstacleError> {
     let file = name;
-    let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(false)
-        .flexible(true)
-        .trim(csv::Trim::All)
-        .from_reader(reader);
     // (obstacle, first line, last line)
     let mut out: Vec<(Obstacle, u64, u64)> = Vec::new();
-    let mut first = true;
-    for rec in rdr.records() {
-        let rec = rec.map_err(|cause| ObstacleError::Csv {
-            file: file.to_string(),
-            line: cause.position().map_or(0, |p| p.line()),
-            cause,
-        })?;
-        let line = rec.position().map_or(0, |p| p.line());
-        let head = rec.get(0).unwrap_or("");
-        let is_first = first;
-        first = false;
-        if is_first {
-            let x_numeric = rec.get(1).is_some_and(|x| x.parse::<f64>().is_ok());
-            if head.starts_with('#') || !x_numeric {
-                let names: Vec<String> = rec
-                    .iter()
-                    .enumerate()
-                    .map(|(i, f)| {
-                        let f = if i == 0 { f.trim_start_matches('#') } else { f };
-                        f.trim().to_ascii_lowercase()
-                    })
-                    .collect();
+    let x_numeric = |r: &csv::StringRecord| r.get(1).is_some_and(|x| x.parse::<f64>().is_ok());
+    for item in csv_lines(reader, x_numeric) {
+        let (line, rec) = match item {
+            Err((line, cause)) => {
+                return Err(ObstacleError::Csv {
+                    file: file.to_string(),
+                    line,
+                    cause,
+                })
+            }
+            Ok(CsvLine::Header { line, names, found }) => {
                 if names != ["id", "x_m", "y_m"] {
                     return Err(ObstacleError::BadHeader {
                         file: file.to_string(),
                         line,
-                        found: rec.iter().collect::<Vec<_>>().join(","),
+                        found,
                     });
                 }
                 continue;
             }
-        } else if head.starts_with('#') {
-            continue;
-        }
+            Ok(CsvLine::Row { line, record }) => (line, record),
+        };
+        let head = rec.get(0).unwrap_or("");
         if rec.len() != 3 {
             return Err(ObstacleError::WrongColumns {
                 file: file.to_string(),

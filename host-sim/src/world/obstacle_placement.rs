@@ -20,10 +20,10 @@ use anyhow::{anyhow, Result};
 use firmware::obstacles::{Obstacle as FwObstacle, ObstacleManager, MAX_OBSTACLES};
 use firmware::reference_path::ReferencePath;
 
-use crate::closed_loop::{vehicle_config, HOST_PATH_CAP};
-use crate::model::vehicle::VehicleParams;
+use crate::model::vehicle::{vehicle_config, VehicleParams};
 use crate::world::disturbance::SplitMix64;
 use crate::world::obstacle_file::Obstacle;
+use crate::world::route::HOST_PATH_CAP;
 use crate::world::track::Track;
 
 /// Road kept clear of random obstacles after the start, m.

@@ -14,6 +14,10 @@ use crate::world::track::Track;
 
 /// Rows of a window: the ECU's path capacity.
 pub const WINDOW_ROWS: usize = firmware::tasks::ECU_PATH_ROWS;
+
+/// Point capacity of a reference path on the host: the whole track for the
+/// modelled ECU and the obstacle placement (the ECU holds [`WINDOW_ROWS`]).
+pub const HOST_PATH_CAP: usize = 4096;
 /// Road kept behind the car at the start of a window, m.
 pub const BEHIND_M: f64 = 40.0;
 /// Distance the car drives into a window before the next one is sent, m.

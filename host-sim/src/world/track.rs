@@ -32,6 +32,7 @@
 //! the first and wraps into `[0, length)`. The lateral offset (m) is positive to
 //! the left of the direction of travel, like `w_left`.
 
+use crate::world::csv_value::{csv_lines, CsvLine};
 use std::io::Read;
 use std::path::Path;
 
@@ -274,53 +275,36 @@ impl Track {
     }
 
     fn parse(reader: impl Read, file: &str, closed: bool) -> Result<Track, TrackError> {
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(false)
-            .flexible(true)
-            .trim(csv::Trim::All)
-            .from_reader(reader);
         let mut columns: Option<usize> = None;
-        let mut first = true;
         let mut points = Vec::new();
         let mut w_right = Vec::new();
         let mut w_left = Vec::new();
         let mut lines: Vec<u64> = Vec::new();
-        for rec in rdr.records() {
-            let rec = rec.map_err(|cause| TrackError::Csv {
-                file: file.to_string(),
-                line: cause.position().map_or(0, |p| p.line()),
-                cause,
-            })?;
-            let line = rec.position().map_or(0, |p| p.line());
-            let head = rec.get(0).unwrap_or("");
-            if first {
-                first = false;
-                let starts_hash = head.starts_with('#');
-                let numeric = head.parse::<f64>().is_ok();
-                if starts_hash || !numeric {
-                    let names: Vec<String> = rec
-                        .iter()
-                        .enumerate()
-                        .map(|(i, f)| {
-                            let f = if i == 0 { f.trim_start_matches('#') } else { f };
-                            f.trim().to_ascii_lowercase()
-                        })
-                        .collect();
+        let x_numeric = |r: &csv::StringRecord| r.get(0).is_some_and(|x| x.parse::<f64>().is_ok());
+        for item in csv_lines(reader, x_numeric) {
+            let (line, rec) = match item {
+                Err((line, cause)) => {
+                    return Err(TrackError::Csv {
+                        file: file.to_string(),
+                        line,
+                        cause,
+                    })
+                }
+                Ok(CsvLine::Header { line, names, found }) => {
                     let ok = (names.len() == 2 || names.len() == 4)
                         && names.iter().zip(COLUMN_NAMES).all(|(n, e)| n == e);
                     if !ok {
                         return Err(TrackError::BadHeader {
                             file: file.to_string(),
                             line,
-                            found: rec.iter().collect::<Vec<_>>().join(","),
+                            found,
                         });
                     }
                     columns = Some(names.len());
                     continue;
                 }
-            } else if head.starts_with('#') {
-                continue;
-            }
+                Ok(CsvLine::Row { line, record }) => (line, record),
+            };
             let expected = match columns {
                 Some(c) => c,
                 None => {
