@@ -699,3 +699,62 @@ fn a_paused_yaw_loop_releases_its_output_to_the_plans_steering() {
     assert!((a.delta_rad - 0.3).abs() < 1e-3, "δ = {}", a.delta_rad);
     assert!(st.yaw_pid.integral.abs() < 1e-3);
 }
+
+#[test]
+fn course_offset_is_the_sideslip_beyond_the_kinematic_one_faded_in_with_speed() {
+    use firmware::low_level::{course_offset, COURSE_MAX_OFFSET_RAD, COURSE_MIN_SPEED_MPS};
+    let k = 0.5;
+    let mut e = est(20.0, 0.0);
+    // Turning left at δ^r = 0.02 rad, the body sliding outward (v_y < 0).
+    e.vy_mps = -1.0;
+    let d = 0.02;
+    let expected = -1.0 / 20.0 - k * (d + d * d * d / 3.0);
+    assert!((course_offset(k, &e, d) - expected).abs() < 1e-12);
+    // A kinematic car has none.
+    e.vy_mps = 20.0 * k * d.tan();
+    assert!(course_offset(k, &e, d).abs() < 1e-6);
+    // Bounded.
+    e.vy_mps = -10.0;
+    assert_eq!(course_offset(k, &e, d), -COURSE_MAX_OFFSET_RAD as f64);
+    // Off without the share, and under the speed; half-way faded in at 1.5 × it.
+    assert_eq!(course_offset(0.0, &e, d), 0.0);
+    let v0 = f64::from(COURSE_MIN_SPEED_MPS);
+    let mut slow = est(0.99 * v0, 0.0);
+    slow.vy_mps = -0.1;
+    assert_eq!(course_offset(k, &slow, 0.0), 0.0);
+    let mut mid = est(1.5 * v0, 0.0);
+    mid.vy_mps = -0.01 * 1.5 * v0;
+    assert!((course_offset(k, &mid, 0.0) + 0.005).abs() < 1e-9);
+    // A NaN stays a NaN (the estimate is refused downstream).
+    e.vy_mps = f64::NAN;
+    assert!(course_offset(k, &e, d).is_nan());
+}
+
+#[test]
+fn a_car_on_the_plans_heading_that_slides_sideways_steers_against_the_slide() {
+    use firmware::low_level::{control_with_model, CarModel};
+    let cfg = cfg_no_ff();
+    let plan = straight_plan(0, 20.0);
+    // Heading along the plan, the body sliding to the left at 0.05 rad.
+    let mut e = est(20.0, 0.0);
+    e.vy_mps = 1.0;
+    let mut car = CarModel::configured(&cfg);
+    // The paper's yaw loop sees no error ...
+    let mut st = LowLevelState::new();
+    let a = control_with_model(&cfg, &mut st, &plan, &e, 0, &car).unwrap();
+    assert_eq!(a.delta_cl_rad, 0.0);
+    // ... the course's turns the wheels to the right, more as the filter settles.
+    car.course_share = 0.5;
+    let mut st = LowLevelState::new();
+    let a = control_with_model(&cfg, &mut st, &plan, &e, 0, &car).unwrap();
+    assert!(a.delta_cl_rad < 0.0, "δ_cl = {}", a.delta_cl_rad);
+    let first = a.delta_cl_rad;
+    let mut last = first;
+    for k in 1..50u64 {
+        last = control_with_model(&cfg, &mut st, &plan, &e, k * 10_000, &car)
+            .unwrap()
+            .delta_cl_rad;
+    }
+    assert!(last < first, "δ_cl {first} then {last}");
+    assert!((st.course_rad - 0.05).abs() < 1e-3, "{}", st.course_rad);
+}
