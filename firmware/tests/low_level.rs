@@ -725,9 +725,6 @@ fn course_offset_is_the_sideslip_beyond_the_kinematic_one_faded_in_with_speed() 
     let mut mid = est(1.5 * v0, 0.0);
     mid.vy_mps = -0.01 * 1.5 * v0;
     assert!((course_offset(k, &mid, 0.0) + 0.005).abs() < 1e-9);
-    // A NaN stays a NaN (the estimate is refused downstream).
-    e.vy_mps = f64::NAN;
-    assert!(course_offset(k, &e, d).is_nan());
 }
 
 #[test]
@@ -750,7 +747,7 @@ fn a_car_on_the_plans_heading_that_slides_sideways_steers_against_the_slide() {
     assert!(a.delta_cl_rad < 0.0, "δ_cl = {}", a.delta_cl_rad);
     let first = a.delta_cl_rad;
     let mut last = first;
-    for k in 1..50u64 {
+    for k in 1..150u64 {
         last = control_with_model(&cfg, &mut st, &plan, &e, k * 10_000, &car)
             .unwrap()
             .delta_cl_rad;
