@@ -385,8 +385,6 @@ pub struct LowLevelState<T> {
     pub last_now_us: Option<u64>,
     /// Steering angle commanded at the last call, rad (`None` before the first).
     pub last_delta_rad: Option<T>,
-    /// The course offset given to the yaw loop, low-passed, rad ([`course_offset`]).
-    pub course_rad: T,
 }
 
 impl<T: Real> Default for LowLevelState<T> {
@@ -405,7 +403,6 @@ impl<T: Real> LowLevelState<T> {
             plans_seen: 0,
             last_now_us: None,
             last_delta_rad: None,
-            course_rad: T::ZERO,
         }
     }
 
@@ -535,14 +532,6 @@ pub struct CarModel<T> {
     /// Deceleration the brakes may be asked for at most, m/s², > 0 (+∞: none):
     /// the braking torque is limited to `m·a·r_eff` (an anti-lock limit).
     pub braking_grip_mps2: T,
-    /// `l_r/L`, dimensionless, in `[0, 1)`: the kinematic sideslip `tan β =
-    /// (l_r/L)·tan δ` against which the yaw loop measures the car's course
-    /// ([`course_offset`]); 0: the yaw loop steers the heading (the paper's).
-    pub course_share: T,
-    /// True when the front tyres are saturated (past their peak: the car turns far
-    /// less than its steering asks): the steering may then turn no further from
-    /// straight ahead than it is (more steering slides them further).
-    pub front_saturated: bool,
 }
 
 impl<T: Real> CarModel<T> {
@@ -555,52 +544,8 @@ impl<T: Real> CarModel<T> {
             drag_n_per_mps2: T::ZERO,
             traction_grip_mps2: T::INFINITY,
             braking_grip_mps2: T::INFINITY,
-            course_share: T::ZERO,
-            front_saturated: false,
         }
     }
-}
-
-/// Speed from which the yaw loop steers the car's course rather than its heading,
-/// m/s ([`course_offset`]): under it the sideslip `v_y/v_x` is a ratio of small,
-/// noisy speeds, and a car that turns kinematically has none to correct.
-pub const COURSE_MIN_SPEED_MPS: f32 = 5.0;
-
-/// Time constant of the low-pass filter on the course offset, s ([`course_offset`]).
-pub const COURSE_FILTER_S: f32 = 0.2;
-
-/// Largest course offset given to the yaw loop, rad ([`course_offset`]).
-pub const COURSE_MAX_OFFSET_RAD: f32 = 0.1;
-
-/// How far the car's course is turned from the kinematic model's at the plan's
-/// steering `delta_ref_rad` (rad), rad: `v_y/v_x − k·tan δ^r` on `est` (the
-/// tangents of the measured sideslip and of the kinematic one, `k = l_r/L` =
-/// `course_share`), within ±[`COURSE_MAX_OFFSET_RAD`]; 0 for `k = 0` or under
-/// [`COURSE_MIN_SPEED_MPS`], faded in linearly up to twice that speed. The yaw loop compares the plan's yaw with the
-/// measured one plus this offset.
-///
-/// Why: the plan's yaw is the kinematic car's, whose velocity points `β(δ)` from
-/// its heading. A real car in a bend also slips outward at its rear axle (the
-/// rear tyres' slip angle): followed in heading, it drifts outward at `V` times
-/// that angle, which the plans, re-linearised every 100 ms from a heading that
-/// looks right, correct late (the heavy car at 1.3 times its mass, 0.42 g in a
-/// 140 m bend at 24 m/s: 0.05 rad at the rear, 0.6 m wide). Compared with the
-/// plan's steering, not the measured one: the measured steering contains the yaw
-/// loop's own output, an algebraic loop that oscillated (`δ_cl` ±0.02 rad at
-/// 20 Hz in a hairpin).
-pub fn course_offset<T: Real>(course_share: T, est: &StateEstimate<T>, delta_ref_rad: T) -> T {
-    if course_share == T::ZERO || est.vx_mps < T::lit(COURSE_MIN_SPEED_MPS) {
-        return T::ZERO;
-    }
-    let d = delta_ref_rad;
-    let kinematic = course_share * (d + d * d * d * T::lit(1.0 / 3.0));
-    let lim = T::lit(COURSE_MAX_OFFSET_RAD);
-    // Faded in over as much speed again: switched on at once, the offset was a
-    // step of the yaw loop's measurement, and its kick of the steering a peak
-    // of the lateral acceleration.
-    let fade = ((est.vx_mps - T::lit(COURSE_MIN_SPEED_MPS)) * T::lit(1.0 / COURSE_MIN_SPEED_MPS))
-        .min(T::ONE);
-    (est.vy_mps / est.vx_mps - kinematic).clamp(-lim, lim) * fade
 }
 
 /// One 100 Hz step of the low-level controllers (module doc): the plan `plan`
@@ -727,22 +672,9 @@ pub fn control_with_model<T: Real>(
         let prev = prev.clamp(-lim, lim);
         lo = lo.max(prev - step);
         hi = hi.min(prev + step);
-        // Front tyres past their peak: a larger angle only slides them further
-        // (a car on a wet patch, its inside front wheel spinning, steered to the
-        // lock at 0.6 rad of slip angle and ran 5–8 m wide).
-        if car.front_saturated {
-            if prev > T::ZERO {
-                hi = hi.min(prev);
-            } else {
-                lo = lo.max(prev);
-            }
-        }
     }
     let delta_ol = now_ref.delta_rad;
-    let course = state.course_rad
-        + (course_offset(car.course_share, est, ahead_ref.delta_rad) - state.course_rad)
-            * (dt / (dt + T::lit(COURSE_FILTER_S)));
-    let psi_proj = est.psi_rad + course + est.yaw_rate_radps * plan.dt_s;
+    let psi_proj = est.psi_rad + est.yaw_rate_radps * plan.dt_s;
     let yaw_error = wrap_pi(psi_proj - ahead_ref.psi_rad);
     let mut yaw_pid = state.yaw_pid;
     let delta_cl = if v.abs() >= cfg.lateral_min_speed_mps {
@@ -776,7 +708,6 @@ pub fn control_with_model<T: Real>(
 
     state.speed_pid = speed_pid;
     state.yaw_pid = yaw_pid;
-    state.course_rad = course;
     if new_plan {
         state.plan_stamp_us = Some(plan.stamp_us);
         state.plans_seen = state.plans_seen.wrapping_add(1);

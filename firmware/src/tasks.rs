@@ -217,9 +217,8 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
     /// back hard at their bounds, and the QPs need several times the iterations
     /// of a noise-free lap, up to the cap ([`MpcSettings::qp_max_iter`]; the
     /// sweep reports the largest per run, `plan_max_qp_iterations`). The slow
-    /// part of `δ_cl` (its integral
-    /// holds the understeer in curves) is kept, so the plan starts from the
-    /// steering the car holds.
+    /// part of `δ_cl` (its integral holds the understeer in curves) is kept, so
+    /// the plan starts from the steering the car holds.
     pub fn initial_steering(&self, est: &StateEstimate<T>) -> T {
         self.initial_steering_and_feedback(est).0
     }
@@ -673,19 +672,11 @@ impl<T: Real> ControlTask<T> {
             // spun them at the start, unseen, its lightness hiding the shortfall).
             // Driving at `a` moves `(h/L)·a/g` of the weight off the driven front
             // axle: `a = G·(share − (h/L)·a/g)`, so `a = G·share/(1 + G·(h/L)/g)`
-            // with `G` that grip (the heavy car, accelerating out of fast bends,
-            // spun its inside front wheel and ran wide without it).
+            // with `G` that grip (the heavy car spun its inside front wheel
+            // accelerating out of fast bends).
             traction_grip_mps2: traction * fc.driven_load_share
                 / (T::ONE + traction * fc.cg_height_over_wheelbase * T::lit(1.0 / crate::G)),
             braking_grip_mps2: grip * axle.max(T::ZERO),
-            // With a wheelbase (the front tyres' check), the yaw loop steers
-            // the course: `l_r/L` is the front axle's static share.
-            course_share: if self.inv_wheelbase > T::ZERO {
-                fc.front_load_share
-            } else {
-                T::ZERO
-            },
-            front_saturated: self.front_saturated(),
         }
     }
 
