@@ -622,9 +622,8 @@ impl<T: Real> ControlTask<T> {
     /// 0.3; half of it while slip is flagged) ([`TORQUE_GRIP_FRACTION`] of it:
     /// of the driven axle's share for traction, as much as its inside wheel
     /// carries under the lateral load transfer, for the lightest mass the
-    /// estimate allows (`1 − u` of it), less the load its own acceleration moves
-    /// off the front axle (`h/L`); for braking, as much as the brake balance lets
-    /// each axle carry of it).
+    /// estimate allows (`1 − u` of it); for braking, as much as the brake
+    /// balance lets each axle carry of it).
     pub fn car_model(&self, lateral_mps2: T) -> CarModel<T> {
         let lon = self.friction.longitudinal();
         let m0 = self.friction_config.longitudinal.mass_kg;
@@ -654,13 +653,6 @@ impl<T: Real> ControlTask<T> {
         let axle = (front_load / front_brake.max(T::lit(0.01)))
             .min((T::ONE - front_load) / (T::ONE - front_brake).max(T::lit(0.01)))
             .min(T::ONE);
-        // The grip of the driven axle per unit of its load share: the inside
-        // wheel's, for the lightest mass the estimate allows.
-        let traction = grip
-            * (T::ONE - lon.mass_uncertainty(&fc.longitudinal))
-            * (T::ONE
-                - T::TWO * lateral_mps2.abs() * T::lit(1.0 / crate::G) * fc.cg_height_over_track)
-                .max(T::lit(0.2));
         CarModel {
             mass_kg: lon.mass_ratio() * m0,
             resistance_n: r0 * m0,
@@ -670,12 +662,15 @@ impl<T: Real> ControlTask<T> {
             // estimate allows, `m̂·(1 − u)`: a car lighter than configured has
             // less load on its driven wheels (the heavy car at 0.8 of its mass
             // spun them at the start, unseen, its lightness hiding the shortfall).
-            // Driving at `a` moves `(h/L)·a/g` of the weight off the driven front
-            // axle: `a = G·(share − (h/L)·a/g)`, so `a = G·share/(1 + G·(h/L)/g)`
-            // with `G` that grip (the heavy car spun its inside front wheel
-            // accelerating out of fast bends).
-            traction_grip_mps2: traction * fc.driven_load_share
-                / (T::ONE + traction * fc.cg_height_over_wheelbase * T::lit(1.0 / crate::G)),
+            traction_grip_mps2: grip
+                * (T::ONE - lon.mass_uncertainty(&fc.longitudinal))
+                * fc.driven_load_share
+                * (T::ONE
+                    - T::TWO
+                        * lateral_mps2.abs()
+                        * T::lit(1.0 / crate::G)
+                        * fc.cg_height_over_track)
+                    .max(T::lit(0.2)),
             braking_grip_mps2: grip * axle.max(T::ZERO),
         }
     }

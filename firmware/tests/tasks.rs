@@ -289,34 +289,3 @@ fn understeer_saturates_the_front_and_the_brakes_leave_the_steering_its_grip() {
         "braking {t_slide} N·m sliding against {t_grip} N·m gripping"
     );
 }
-
-/// The traction limit leaves out the load the car's own acceleration moves off
-/// its driven front axle: `a = G·share/(1 + G·(h/L)/g)`, `G·share` the limit of a
-/// car whose centre of gravity is on the ground.
-#[test]
-fn the_traction_limit_counts_the_load_its_acceleration_moves_off_the_front() {
-    use firmware::vehicle_config::VehicleConfig;
-    let car = |h: f64| VehicleConfig {
-        l_f_m: 1.1,
-        l_r_m: 1.6,
-        cg_height_m: h,
-        width_m: 1.85,
-        length_m: 4.5,
-        mass_kg: 1500.0,
-        wheel_radius_m: 0.31,
-        max_steer_rad: 0.6,
-    };
-    let flat = car(0.0).control_task(1.0).unwrap().car_model(0.0);
-    let tall = car(0.7).control_task(1.0).unwrap().car_model(0.0);
-    let share = 1.6 / 2.7;
-    let g_axle = flat.traction_grip_mps2 / share;
-    let expected = flat.traction_grip_mps2 / (1.0 + g_axle * (0.7 / 2.7) / 9.81);
-    assert!(
-        (tall.traction_grip_mps2 - expected).abs() < 1e-6 * expected,
-        "{} against {expected}",
-        tall.traction_grip_mps2
-    );
-    assert!(tall.traction_grip_mps2 < 0.9 * flat.traction_grip_mps2);
-    // Braking is not changed by it.
-    assert!(flat.braking_grip_mps2 > 0.0 && tall.braking_grip_mps2 > 0.0);
-}
