@@ -214,10 +214,11 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
     /// frequency under sensor noise (±0.03 rad every 10 ms at twice the level-1
     /// noise, against `δ_max(V) ≈ 0.02 rad` at 25 m/s). Started from it, the
     /// kinematic model predicts yaw rates the car does not have, the plans steer
-    /// back hard at their bounds, and the QPs need 40–90 iterations (noise-free
-    /// laps: at most 22) or reach the cap. The slow part of `δ_cl` (its integral
-    /// holds the understeer in curves) is kept, so the plan starts from the
-    /// steering the car holds.
+    /// back hard at their bounds, and the QPs need several times the iterations
+    /// of a noise-free lap, up to the cap ([`MpcSettings::qp_max_iter`]; the
+    /// sweep reports the largest per run, `plan_max_qp_iterations`). The slow
+    /// part of `δ_cl` (its integral holds the understeer in curves) is kept, so
+    /// the plan starts from the steering the car holds.
     pub fn initial_steering(&self, est: &StateEstimate<T>) -> T {
         self.initial_steering_and_feedback(est).0
     }
