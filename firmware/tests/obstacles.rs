@@ -510,3 +510,52 @@ fn contains_is_strictly_inside() {
     assert!(right.contains([13.0, -18.5]));
     assert!(!right.contains([13.0, -19.5]));
 }
+
+/// A parabola across the straight path at s = 150 m (X = 50 m), reaching the
+/// road from ξ = −10 to +10 m, on `side` with apex `eta_m`: a swerve when the
+/// apex, moved by the planner's offset buffer, is on the far side of the centre
+/// line.
+fn across(side: Side, eta_m: f64) -> Parabola<f64> {
+    Parabola {
+        s_m: 150.0,
+        origin_m: [50.0, 0.0],
+        tangent: [1.0, 0.0],
+        side,
+        xi0_m: 0.0,
+        eta_apex_m: eta_m,
+        steepness_1pm: 0.02,
+        xi_min_m: -10.0,
+        xi_max_m: 10.0,
+        outside_kappa_1pm: 0.01,
+        ..turned(0.0, side)
+    }
+}
+
+#[test]
+fn speed_cap_by_hand() {
+    let path = straight();
+    let v = VelocityPlannerSettings::<f64>::default();
+    // a_y 5 m/s² over κ = 0.01 + 2·0.02 = 0.05 1/m: 10 m/s.
+    let cap = |p: Parabola<f64>, s_node: f64, buffer: f64| {
+        obstacle_speed_cap(&v, &path, &[p], s_node, 10.0, 5.0, buffer)
+    };
+    let d = v.preview_distance_m(10.0);
+    assert!(d > 0.0 && d < 100.0);
+    let near = 150.0 - d / 2.0;
+    // Passed on the left: a swerve when η_a + buffer > 0.
+    assert_eq!(cap(across(Side::Left, 0.2), near, 0.0), 10.0);
+    assert_eq!(cap(across(Side::Left, -0.3), near, 0.5), 10.0);
+    assert_eq!(cap(across(Side::Left, -0.5), near, 0.5), f64::INFINITY);
+    assert_eq!(cap(across(Side::Left, -0.8), near, 0.5), f64::INFINITY);
+    // Passed on the right: a swerve when η_a − buffer < 0.
+    assert_eq!(cap(across(Side::Right, 0.3), near, 0.5), 10.0);
+    assert_eq!(cap(across(Side::Right, 0.5), near, 0.5), f64::INFINITY);
+    assert_eq!(cap(across(Side::Right, 0.8), near, 0.5), f64::INFINITY);
+    // Only where the preview [s, s + d] meets the parabola's [140, 160] m.
+    assert_eq!(cap(across(Side::Left, 0.2), 161.0, 0.0), f64::INFINITY);
+    assert_eq!(
+        cap(across(Side::Left, 0.2), 140.0 - d - 1.0, 0.0),
+        f64::INFINITY
+    );
+    assert_eq!(cap(across(Side::Left, 0.2), 140.0 - d + 1.0, 0.0), 10.0);
+}
