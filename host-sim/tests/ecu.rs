@@ -623,7 +623,7 @@ fn real_ecu_panic_and_fault_handlers_cannot_reach_the_panic_handler_again() {
             // It encodes the fault frame: the link's encoder is in its graph.
             assert!(parent
                 .keys()
-                .any(|f| f.starts_with("firmware::link::encode")));
+                .any(|f| f.starts_with("firmware::link::framing::encode")));
         }
         if let Some(f) = parent.keys().find(|f| **f != root.as_str() && panicky(f)) {
             let mut chain = vec![*f];
