@@ -278,13 +278,6 @@ pub struct Block {
     pub fall_through_saving: (u64, u64),
 }
 
-impl Block {
-    /// Cycles the fall-through edge saves, both terms.
-    pub fn fall_through_total(&self) -> u64 {
-        self.fall_through_saving.0 + self.fall_through_saving.1
-    }
-}
-
 /// A function's control-flow graph.
 #[derive(Debug, Clone)]
 pub struct Function {
@@ -997,6 +990,7 @@ pub fn build_program(
                 let next = f.instructions.get(end);
                 memory.fall_through_saving(insns.last(), next, conditional_transfer)
             });
+            let lines = memory.block_lines(insns);
             blocks.push(Block {
                 start: insns.first().map_or(0, |i| i.address),
                 first,
@@ -1007,10 +1001,9 @@ pub fn build_program(
                 problems: unresolved,
                 instructions: insns.len() as u64,
                 cycles: memory.block_cycles(f.address, insns),
-                fetch_cycles: memory
-                    .block_lines(insns)
+                fetch_cycles: lines
                     .map_or(0, |(lo, hi)| (hi - lo + 1) * memory.line_fetch_cycles()),
-                lines: memory.block_lines(insns),
+                lines,
                 fall_through,
                 fall_through_saving,
             });

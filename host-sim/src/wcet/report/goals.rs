@@ -5,7 +5,7 @@ use super::{MemoryReport, RunEntry, StaticSummary, Tasks};
 use serde::Serialize;
 
 /// Goal: plan task, warm-started activations, observed instructions at most this
-/// (issue 8: a warm MPC step within 0.5 M instructions).
+/// (a warm MPC step within 0.5 M instructions).
 pub const GOAL_PLAN_WARM_MAX_INSTRUCTIONS: f64 = 5.0e5;
 /// Goal: the plan task's static bound at most this many times its largest traced
 /// activation (in cycles of the same model).
