@@ -80,6 +80,7 @@ fn ipet_counts_the_worst_path_by_hand() {
         bound: 15,
         per: Per::Entry,
         group: None,
+        iterations: false,
     }];
     let b = ipet::task_bound(
         &p,
@@ -130,6 +131,78 @@ fn ipet_counts_the_worst_path_by_hand() {
     assert!(c.bound > 67);
 }
 
+/// `root` runs a rotated loop: its header (a branch inside the body) cannot leave
+/// the loop; the test that ends it is in the latch.
+const ROTATED: &str = "
+08000000 <root>:
+ 8000000: b510         \tpush\t{r4, lr}
+ 8000002: 2410         \tmovs\tr4, #0x10
+ 8000004: 2800         \tcmp\tr0, #0x0
+ 8000006: d000         \tbeq\t0x800000a <root+0xa> @ imm = #0x0
+ 8000008: 3101         \tadds\tr1, #0x1
+ 800000a: 3c01         \tsubs\tr4, #0x1
+ 800000c: d1fa         \tbne\t0x8000004 <root+0x4> @ imm = #-0xc
+ 800000e: bd10         \tpop\t{r4, pc}
+";
+
+#[test]
+fn a_bound_on_iterations_counts_the_header_of_a_rotated_loop() {
+    let p = program(ROTATED);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let f = &p.functions[root];
+    assert_eq!(ls[root].len(), 1);
+    assert!(ipet::header_starts_iterations(f, &ls[root][0]));
+    let on_back_edges = [LoopFact {
+        function: root,
+        loop_index: 0,
+        bound: 16,
+        per: Per::Entry,
+        group: None,
+        iterations: false,
+    }];
+    let bound = |facts: &[LoopFact]| {
+        ipet::task_bound(
+            &p,
+            &ls,
+            root,
+            facts,
+            0,
+            &Default::default(),
+            Cost::Instructions,
+        )
+        .unwrap()
+        .bound
+    };
+    // 16 back edges: the header and the body run 17 times.
+    // 2 (prologue) + 17 × 5 (cmp, beq, adds, subs, bne) + 1 (return).
+    assert_eq!(bound(&on_back_edges), 2 + 17 * 5 + 1);
+    // 16 iterations: the header runs 16 times, the back edge is taken 15 times.
+    let on_iterations = [LoopFact {
+        iterations: true,
+        ..on_back_edges[0].clone()
+    }];
+    assert_eq!(bound(&on_iterations), 2 + 16 * 5 + 1);
+    assert_eq!(
+        ipet::back_edges_per_entry(&on_iterations[0], f, &ls[root][0], false),
+        15
+    );
+    // Shared with a nested binary loop (one source loop), the rule is not used.
+    assert_eq!(
+        ipet::back_edges_per_entry(&on_iterations[0], f, &ls[root][0], true),
+        16
+    );
+    // A top-tested loop (the header leaves the loop) keeps one more header run:
+    // the counted loop's header is its only block, and it leaves.
+    let c = program(COUNTED);
+    let cl = all_loops(&c);
+    let croot = c.find("root")[0];
+    assert!(!ipet::header_starts_iterations(
+        &c.functions[croot],
+        &cl[croot][0]
+    ));
+}
+
 /// `root` counts r4 from 16 down to 0 in a loop of one flash line that calls
 /// nothing.
 const CALL_FREE: &str = "
@@ -157,6 +230,7 @@ fn cycles_by_hand_with_fall_throughs_calls_and_a_cached_loop() {
         bound: 15,
         per: Per::Entry,
         group: None,
+        iterations: false,
     }];
     let c = ipet::task_bound(&p, &ls, root, &facts, 0, &Default::default(), Cost::Cycles).unwrap();
     assert_eq!(c.bound, 10 - 6 + 16 * 21 - 9 + 12 + 16 * 10);
@@ -458,6 +532,7 @@ fn retry_loops_share_the_activations_retries() {
         bound: 1,
         per: Per::Preemption,
         group: None,
+        iterations: false,
     }];
     // Without preemption the store succeeds at once: 5 + 1 instructions.
     let none = ipet::task_bound(
@@ -514,6 +589,7 @@ fn block_copies_are_bounded_by_the_bytes_of_their_call_sites() {
         bound: 64,
         per: Per::Entry,
         group: None,
+        iterations: false,
     }];
     let per_entry = ipet::task_bound(
         &p,
@@ -618,6 +694,7 @@ fn a_cap_per_loop_entry_bounds_the_blocks_of_its_line() {
         bound: 15,
         per: Per::Entry,
         group: None,
+        iterations: false,
     }];
     let free = ipet::task_bound(
         &p,
@@ -687,6 +764,7 @@ fn a_bound_per_call_caps_the_inner_loop_over_all_its_entries() {
                 bound: 3,
                 per: Per::Entry,
                 group: None,
+                iterations: false,
             },
             LoopFact {
                 function: mid,
@@ -694,6 +772,7 @@ fn a_bound_per_call_caps_the_inner_loop_over_all_its_entries() {
                 bound: 6,
                 per,
                 group: None,
+                iterations: false,
             },
         ]
     };
@@ -730,6 +809,7 @@ fn a_cap_per_activation_counts_every_copy_of_its_line_together() {
         bound: 15,
         per: Per::Entry,
         group: None,
+        iterations: false,
     }];
     let cap = |bound: u64| ipet::BlockCap {
         function: root,

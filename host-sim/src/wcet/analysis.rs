@@ -236,8 +236,15 @@ pub fn analyse(
                     | annotations::Scope::Runs
             )
         })
+        .filter(|a| a.within.is_none())
         .map(|a| ((a.file.clone(), a.line), a))
         .collect();
+    // `// wcet-bound in NAME:`: for the copies of a line inlined into `NAME`.
+    let within_line: BTreeMap<(String, u32, String), &annotations::Annotation> = annotations
+        .iter()
+        .filter_map(|a| Some(((a.file.clone(), a.line, a.within.clone()?), a)))
+        .collect();
+    let mut within_used: std::collections::BTreeSet<(String, u32, String)> = Default::default();
     let copies = copy_sizes(&program, &ctx, &annotations);
     // A cap per activation that matches no call is stale (the code moved or was
     // inlined away): the bound it was meant to give would be missing.
@@ -260,6 +267,19 @@ pub fn analyse(
     let mut source_line: BTreeMap<(usize, usize), (String, u32)> = BTreeMap::new();
     for (k, ls) in all_loops.iter().enumerate() {
         let func = &program.functions[k];
+        let fname = func
+            .demangled
+            .rsplit("::")
+            .next()
+            .unwrap_or(&func.demangled)
+            .to_string();
+        // The annotation of a line for this function: its own copy's, else the line's.
+        let annotation_of = |key: &(String, u32)| -> Option<&annotations::Annotation> {
+            within_line
+                .get(&(key.0.clone(), key.1, fname.clone()))
+                .or_else(|| by_line.get(key))
+                .copied()
+        };
         let mut matched: Vec<Option<(String, u32)>> = vec![None; ls.len()];
         // Outer loops first: an inner loop does not take an annotation one of its
         // enclosing loops took (the compiler may put both back edges on one line);
@@ -300,6 +320,7 @@ pub fn analyse(
                             bound: most,
                             per: Per::Entry,
                             group: None,
+                            iterations: false,
                         });
                         origin.insert(
                             (k, x),
@@ -334,6 +355,7 @@ pub fn analyse(
                     bound: 1,
                     per: Per::Preemption,
                     group: None,
+                    iterations: false,
                 });
                 origin.insert(
                     (k, x),
@@ -350,6 +372,7 @@ pub fn analyse(
                         bound: b,
                         per: Per::Entry,
                         group: None,
+                        iterations: false,
                     });
                     origin.insert((k, x), "binary".into());
                     continue;
@@ -357,7 +380,7 @@ pub fn analyse(
             }
             let hit = keys
                 .iter()
-                .find(|key| by_line.contains_key(*key) && !taken.contains(*key))
+                .find(|key| annotation_of(key).is_some() && !taken.contains(*key))
                 .cloned()
                 .or_else(|| {
                     // A dependency's loop, inlined or not: the facts about its code
@@ -366,7 +389,7 @@ pub fn analyse(
                         .iter()
                         .flat_map(|&a| frames(&ctx, a))
                         .map(|(file, line)| (short_path(&file), line))
-                        .find(|key| by_line.contains_key(key) && !taken.contains(key))
+                        .find(|key| annotation_of(key).is_some() && !taken.contains(key))
                 });
             let Some(key) = hit else {
                 // Its only annotated lines are an enclosing loop's: one source loop
@@ -418,8 +441,15 @@ pub fn analyse(
                 continue;
             };
             matched[x] = Some(key.clone());
-            let a = by_line[&key];
-            if a.scope == annotations::Scope::Call {
+            let Some(a) = annotation_of(&key) else {
+                continue;
+            };
+            if let Some(w) = &a.within {
+                within_used.insert((a.file.clone(), a.line, w.clone()));
+            }
+            // Per call of the function that holds the loop: for an annotation of
+            // one caller's copy, that function is the caller named (this one).
+            if a.scope == annotations::Scope::Call && a.within.is_none() {
                 // Per call of the function that holds the loop: sound only if the
                 // binary function is that function, not a caller it was inlined into.
                 let inlined = candidates.iter().any(|&addr| {
@@ -454,14 +484,24 @@ pub fn analyse(
                     annotations::Scope::Preemption => Per::Preemption,
                 },
                 group: None,
+                iterations: matches!(
+                    a.scope,
+                    annotations::Scope::Entry
+                        | annotations::Scope::Call
+                        | annotations::Scope::Activation
+                ),
             });
             origin.insert(
                 (k, x),
                 format!(
-                    "{}:{}: `{}`{}",
+                    "{}:{}: `{}`{}{}",
                     a.file,
                     a.line,
                     a.expression,
+                    a.within
+                        .as_ref()
+                        .map(|w| format!(" (its copy in `{w}`)"))
+                        .unwrap_or_default(),
                     match a.scope {
                         annotations::Scope::Activation => " per activation",
                         annotations::Scope::Preemption => " per preemption",
@@ -474,6 +514,15 @@ pub fn analyse(
                 ),
             );
         }
+    }
+    // An annotation for one caller's copy that no loop took is stale: the function
+    // was renamed, or the line is no longer inlined there.
+    if let Some((file, line, w)) = within_line.keys().find(|key| !within_used.contains(*key)) {
+        anyhow::bail!(
+            "{file}:{line}: `{}{w}:` matches no loop of a function named `{w}`: \
+             the function was renamed or the line is no longer inlined into it",
+            annotations::WITHIN_MARKER
+        );
     }
     let mut loop_rows: BTreeMap<(usize, usize), LoopEntry> = BTreeMap::new();
     let mut tasks = Vec::new();
@@ -705,9 +754,20 @@ pub fn analyse(
         let entry_bounds: Vec<(usize, usize, u64)> = facts
             .iter()
             .map(|f| {
+                let shared = facts
+                    .iter()
+                    .any(|g| g.function == f.function && g.group == Some(f.loop_index));
                 let b = match f.per {
                     Per::Preemption => f.bound.max(1) * most_preemptions * 2,
-                    _ => f.bound,
+                    _ => match (
+                        program.functions.get(f.function),
+                        all_loops
+                            .get(f.function)
+                            .and_then(|ls| ls.get(f.loop_index)),
+                    ) {
+                        (Some(func), Some(l)) => ipet::back_edges_per_entry(f, func, l, shared),
+                        _ => f.bound,
+                    },
                 };
                 (f.function, f.loop_index, b)
             })

@@ -22,7 +22,10 @@
 //! activation`, over the task's whole activation: a cap that spans the loop's
 //! entries, such as the QP iterations summed over the MPC's passes); a loop of
 //! `n` iterations takes its back edge at most `n` times, so the expression is also
-//! the bound on back edges. It is made of integer literals, the names in
+//! the bound on back edges, and `n − 1` times where the compiler rotated the loop
+//! so that its header cannot leave it: every run of the header is then an
+//! iteration, and the IPET bounds the header's runs by `n`
+//! ([`super::ipet::header_starts_iterations`]). It is made of integer literals, the names in
 //! [`firmware_constants`], `+ - * /` (integer division rounding up) and
 //! parentheses. A comment alone on its line applies to the next line of code; a
 //! comment after code applies to its own line.
@@ -42,6 +45,14 @@
 //! from its line (the `bl` instructions whose inlining chain holds the line) run
 //! at most EXPR times over one activation, summed over every copy of the line
 //! the compiler made: a recovery step the code caps per activation.
+//!
+//! With `// wcet-bound in NAME: EXPR` (a loop's scopes only), the annotation holds
+//! for the copy of the line inlined into the binary function `NAME` (the last
+//! segment of its path), and the line's plain annotation for every other copy: a
+//! loop whose bound depends on its caller. `per call` then counts the calls of
+//! `NAME`. A factor rebuilt row by row appends rows to a factor of `0, 1, ...`
+//! rows, so the loops of one append, `n` iterations each, sum to `W(W − 1)/2`
+//! over the rebuild. An annotation for a copy that no loop takes is an error.
 //!
 //! With `bytes`, the annotation is not a loop's: it bounds the size of the block
 //! copies and fills (`memcpy`, `memset`, ...) called from its line, where the
@@ -98,6 +109,12 @@ pub struct Annotation {
     pub bound: u64,
     /// Per entry or per activation.
     pub scope: Scope,
+    /// `// wcet-bound in NAME:`: the annotation holds for the copy of the line
+    /// inlined into the binary function `NAME` (the last segment of its path, a
+    /// function that is not inlined) and the line's plain annotation for every
+    /// other copy: a loop whose bound depends on its caller (the rows appended one
+    /// by one when a factor is rebuilt, each a longer loop than the last).
+    pub within: Option<String>,
 }
 
 /// The firmware's constants an annotation may name, with their values (read from
@@ -151,6 +168,7 @@ pub fn dependency_facts() -> Vec<Annotation> {
         expression: format!("{bound} ({why})"),
         bound,
         scope: Scope::Entry,
+        within: None,
     };
     let mut facts = vec![
         fact(
@@ -318,6 +336,10 @@ pub fn evaluate(expr: &str, constants: &BTreeMap<&'static str, u64>) -> Result<u
 /// The marker of an annotation comment.
 pub const MARKER: &str = "// wcet-bound:";
 
+/// The marker of an annotation for one caller's copy of a line: `// wcet-bound in
+/// NAME: EXPR` ([`Annotation::within`]).
+pub const WITHIN_MARKER: &str = "// wcet-bound in ";
+
 /// Parses the annotations of one source file's text (`file` as it is reported).
 pub fn parse_source(
     file: &str,
@@ -327,10 +349,27 @@ pub fn parse_source(
     let lines: Vec<&str> = text.lines().collect();
     let mut out = Vec::new();
     for (k, line) in lines.iter().enumerate() {
-        let Some(pos) = line.find(MARKER) else {
+        let (pos, spec, within) = if let Some(pos) = line.find(MARKER) {
+            (pos, line[pos + MARKER.len()..].trim(), None)
+        } else if let Some(pos) = line.find(WITHIN_MARKER) {
+            let rest = &line[pos + WITHIN_MARKER.len()..];
+            let (name, spec) = rest.split_once(':').ok_or_else(|| {
+                format!(
+                    "{file}:{}: `{WITHIN_MARKER}NAME: EXPR` lacks its `:`",
+                    k + 1
+                )
+            })?;
+            let name = name.trim();
+            if name.is_empty() || !name.chars().all(|c| c.is_alphanumeric() || c == '_') {
+                return Err(format!(
+                    "{file}:{}: `{WITHIN_MARKER}{name}:` names no function (one identifier)",
+                    k + 1
+                ));
+            }
+            (pos, spec.trim(), Some(name.to_string()))
+        } else {
             continue;
         };
-        let spec = line[pos + MARKER.len()..].trim();
         let (expr, scope) = if let Some(e) = spec.strip_suffix("times per activation") {
             (e.trim(), Scope::Runs)
         } else if let Some(e) = spec.strip_suffix("per call") {
@@ -347,6 +386,12 @@ pub fn parse_source(
             (spec, Scope::Entry)
         };
         let bound = evaluate(expr, constants).map_err(|e| format!("{file}:{}: {e}", k + 1))?;
+        if within.is_some() && !matches!(scope, Scope::Entry | Scope::Call | Scope::Activation) {
+            return Err(format!(
+                "{file}:{}: `{WITHIN_MARKER}NAME:` bounds a loop (per entry, per call or per activation), not a call or a copy",
+                k + 1
+            ));
+        }
         let alone = line[..pos].trim().is_empty();
         let target = if alone {
             // The next line that is neither blank nor a comment.
@@ -365,6 +410,7 @@ pub fn parse_source(
             expression: expr.to_string(),
             bound,
             scope,
+            within,
         });
     }
     Ok(out)
@@ -445,6 +491,29 @@ pub fn scan_sources(sources: &[SourceDir]) -> Result<Vec<Annotation>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_annotation_for_one_callers_copy() -> Result<(), String> {
+        let c = firmware_constants();
+        let text = "fn f() {\n    // wcet-bound: WS\n    // wcet-bound in rebuild: WS * (WS - 1) / 2 per call\n    for l in 0..n {}\n}\n";
+        let t = parse_source("qp/src/factor.rs", text, &c)?;
+        assert_eq!(t.len(), 2);
+        assert_eq!((t[0].line, t[0].within.as_deref()), (4, None));
+        let ws = firmware::mpc::WS as u64;
+        assert_eq!(
+            (t[1].line, t[1].bound, t[1].scope, t[1].within.as_deref()),
+            (4, ws * (ws - 1) / 2, Scope::Call, Some("rebuild"))
+        );
+        let bad = parse_source("f.rs", "// wcet-bound in a b: 3\nfor x in y {}\n", &c);
+        assert!(bad.is_err_and(|e| e.contains("names no function")));
+        let cap = parse_source(
+            "f.rs",
+            "// wcet-bound in g: 3 times per activation\nf();\n",
+            &c,
+        );
+        assert!(cap.is_err_and(|e| e.contains("bounds a loop")));
+        Ok(())
+    }
 
     #[test]
     fn expressions() {

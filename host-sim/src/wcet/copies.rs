@@ -107,6 +107,7 @@ pub(super) fn copy_sizes(
     let capped: BTreeMap<(String, u32), (u64, Option<usize>)> = annotations
         .iter()
         .enumerate()
+        .filter(|(_, a)| a.within.is_none())
         .filter_map(|(k, a)| match a.scope {
             annotations::Scope::LoopEntry => Some(((a.file.clone(), a.line), (a.bound, None))),
             annotations::Scope::Runs => Some(((a.file.clone(), a.line), (a.bound, Some(k)))),

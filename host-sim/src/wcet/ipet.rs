@@ -36,7 +36,7 @@
 //! through `good_lp` (pure Rust).
 
 use super::cache::Persistence;
-use super::cfg::{Exit, Program};
+use super::cfg::{Exit, Function, Program};
 use super::loops::{depth, min_stored_bytes_per_trip, reverse_post_order, Loop};
 use good_lp::{
     constraint, variable, Expression, ProblemVariables, Solution, SolverModel, Variable,
@@ -74,6 +74,38 @@ pub struct LoopFact {
     /// one source loop the compiler split into nested binary loops. Their back
     /// edges together are bounded, against the other loop's entries.
     pub group: Option<usize>,
+    /// The bound counts the loop's iterations (a source annotation), not its back
+    /// edges (a bound recognised from the binary). Where every run of the header
+    /// starts an iteration ([`header_starts_iterations`]) the header then runs at
+    /// most `bound` times, so the back edges are one fewer per entry.
+    pub iterations: bool,
+}
+
+/// Whether every run of loop `l`'s header starts an iteration: the header cannot
+/// leave the loop (no successor outside it, no return or tail call), so the test
+/// that ends the loop is elsewhere (a rotated, bottom-tested loop) and a run of
+/// the header is always followed by the body. A loop of `n` iterations then runs
+/// its header `n` times per entry and takes its back edges `n − 1` times; a
+/// top-tested loop runs its header once more, to leave.
+pub fn header_starts_iterations(func: &Function, l: &Loop) -> bool {
+    func.blocks.get(l.header).is_some_and(|h| {
+        h.exit == Exit::Internal
+            && !h.successors.is_empty()
+            && h.successors
+                .iter()
+                .all(|s| l.blocks.binary_search(s).is_ok())
+    })
+}
+
+/// The most back edges per entry a fact allows: its bound, one fewer for a bound
+/// on iterations whose loop's header starts every iteration (and that no nested
+/// binary loop shares: `shared`).
+pub fn back_edges_per_entry(fact: &LoopFact, func: &Function, l: &Loop, shared: bool) -> u64 {
+    if fact.iterations && !shared && header_starts_iterations(func, l) {
+        fact.bound.saturating_sub(1)
+    } else {
+        fact.bound
+    }
 }
 
 /// Block copies and fills (`memcpy`, `memset`, ...): functions whose loops are
@@ -409,10 +441,17 @@ pub fn task_bound(
                     .or_insert_with(|| Expression::from(0.0)) += back;
                 continue;
             }
-            let back = back
-                + shared
-                    .remove(&(f, k))
-                    .unwrap_or_else(|| Expression::from(0.0));
+            let members = shared.remove(&(f, k));
+            // A bound on iterations of a loop whose header starts each of them
+            // bounds the header's runs (entries + back edges), not the back edges.
+            let runs_header =
+                fact.iterations && members.is_none() && header_starts_iterations(func, l);
+            let back = back + members.unwrap_or_else(|| Expression::from(0.0));
+            let back = if runs_header {
+                back + entries_of(l)
+            } else {
+                back
+            };
             let bound = fact.bound as f64;
             match fact.per {
                 Per::Entry => {
