@@ -679,15 +679,14 @@ impl<T: Real> Mpc<T> {
         let mut v_heur = [T::ZERO; HORIZON + 1];
         // `passes` is 1 (warm) or `cold_start_iterations.max(1)`; the ECU's settings
         // (MpcSettings::paper, via VehicleConfig::mpc_settings) set it to COLD_START_PASSES.
-        // wcet-bound: COLD_START_PASSES
-        for _ in 0..passes {
-            // The iteration cap is the activation's: this pass gets what is left.
+        // A pass, then the test for the next one (`passes ≥ 1`): every run of the
+        // loop's header is a pass, so the analysis counts COLD_START_PASSES of them
+        // (the bound is on the last test, where the compiler puts the back edge).
+        let mut pass = 0;
+        loop {
+            // The iteration cap is the activation's: this pass gets what is left
+            // (at least 1: the cap is ≥ 1, and a later pass starts only below it).
             let left = settings.qp_max_iter.saturating_sub(report.qp_iterations);
-            if left == 0 {
-                // Only after a pass (the cap is ≥ 1): its optimum stands.
-                report.refinement_failed = true;
-                break;
-            }
             self.condense(
                 settings,
                 &validity,
@@ -729,6 +728,16 @@ impl<T: Real> Mpc<T> {
             }
             for k in 0..HORIZON {
                 self.u_bar[k] = [sol.x[2 * k], sol.x[2 * k + 1]];
+            }
+            pass += 1;
+            if pass >= passes {
+                break;
+            }
+            // No iteration left for the next pass: this pass's optimum stands.
+            // wcet-bound: COLD_START_PASSES
+            if report.qp_iterations >= settings.qp_max_iter {
+                report.refinement_failed = true;
+                break;
             }
         }
         if !report.refinement_failed {

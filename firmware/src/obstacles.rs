@@ -455,6 +455,9 @@ pub fn constraint_value_and_gradient<T: Real>(parabola: &Parabola<T>, p: [T; 2])
 /// `F(ξ0) = max_j (e_j + c·(ξ_j − ξ0)²)` over the points `(ξ_j, e_j)`, exactly
 /// (candidates: the vertices of the terms and the crossings of pairs of terms).
 /// `None` for no points.
+///
+/// Not inlined: its pair loop is bounded per call (a triangle of pairs).
+#[inline(never)]
 pub fn minimal_apex<T: Real>(points: &[(T, T)], c: T) -> Option<(T, T)> {
     let f = |x0: T| {
         let mut m = -T::INFINITY;
@@ -489,7 +492,8 @@ pub fn minimal_apex<T: Real>(points: &[(T, T)], c: T) -> Option<(T, T)> {
     }
     // wcet-bound: 2 * MAX_VERTICES
     for (i, &(xi, ei)) in points.iter().enumerate() {
-        // wcet-bound: 2 * MAX_VERTICES
+        // Each pair once: n(n − 1)/2 for n ≤ 2·MAX_VERTICES points, per call.
+        // wcet-bound: 2 * MAX_VERTICES * (2 * MAX_VERTICES - 1) / 2 per call
         for &(xk, ek) in points.iter().skip(i + 1) {
             let dx = xi - xk;
             if dx != T::ZERO {

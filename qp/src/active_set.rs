@@ -156,18 +156,18 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
             // Blocking multiplier on the way from λ to λ*.
             let mut block: Option<(usize, T)> = None;
+            // wcet-bound: WS
             for k in 0..self.n {
                 let e = self.ws[k];
-                // Bounds the `for k in 0..self.n` loop (n ≤ W; back edges at the `continue`s).
-                // wcet-bound: WS
-                if Self::is_equality(p, e.index) {
-                    continue;
-                }
-                let sg = sign::<T>(e.side);
-                let ls = sg * self.tmp[k];
-                // wcet-bound: WS
+                // One back edge per entry (no `continue`): the compiler keeps one
+                // loop, bounded by `n ≤ W` above.
+                let ls = if Self::is_equality(p, e.index) {
+                    T::ZERO
+                } else {
+                    sign::<T>(e.side) * self.tmp[k]
+                };
                 if ls < -tols.dual {
-                    let l = (sg * self.lam[k]).max(T::ZERO);
+                    let l = (sign::<T>(e.side) * self.lam[k]).max(T::ZERO);
                     let ratio = l / (l - ls);
                     if block.is_none_or(|(_, r)| ratio < r) {
                         block = Some((k, ratio));
@@ -250,6 +250,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // QP_MAX_ITER + QP_MAX_REFACTORIZATIONS attempts in an activation.
         // wcet-bound: QP_MAX_ITER + QP_MAX_REFACTORIZATIONS per activation
         for _ in 0..=W {
+            // Every attempt, first or not, summed over the activation's `add`s: the
+            // first is paid by its main-loop iteration, each later one by a removal
+            // (an iteration) or a refactorization, so the attempts of all the `add`s
+            // share the activation's caps.
+            // wcet-bound: QP_MAX_ITER + QP_MAX_REFACTORIZATIONS times per activation
             match self.append(p, e, tols) {
                 Ok(()) => {
                     self.lam[self.n - 1] = lam_e;

@@ -166,7 +166,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 continue;
             }
             let k = self.n;
-            match self.append(p, e, tols) {
+            match self.append_row(p, e, tols) {
                 Ok(()) => self.lam[k] = l,
                 Err(_) => dropped += 1,
             }
@@ -184,6 +184,21 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         e: ActiveConstraint,
         tols: Tols<T>,
     ) -> Result<(), AppendError> {
+        self.append_row(p, e, tols)
+    }
+
+    /// [`Self::append`]'s work, inlined into `append` and into [`Self::rebuild`]:
+    /// its loops run `n` times (the rows already in the factor), so over one
+    /// rebuild, which appends rows one by one (`n` = 0, 1, ... below `W`), they are
+    /// bounded by sums over `n`, which the annotations for its copy in `rebuild`
+    /// state.
+    #[inline(always)]
+    fn append_row(
+        &mut self,
+        p: &QpProblem<T, N, M>,
+        e: ActiveConstraint,
+        tols: Tols<T>,
+    ) -> Result<(), AppendError> {
         let n = self.n;
         if n >= W {
             return Err(AppendError::Full);
@@ -191,16 +206,20 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let s = row_start(n);
         // b_l = M_{l,e}
         // wcet-bound: WS
+        // wcet-bound in rebuild: WS * (WS - 1) / 2 per call
         for l in 0..n {
             self.ldl[s + l] = mdot(p, self.ws[l].index, e.index);
         }
         // Forward solve with the unit lower L: y = L⁻¹ b.
         // wcet-bound: WS
+        // wcet-bound in rebuild: WS * (WS - 1) / 2 per call
         for l in 0..n {
             let sl = row_start(l);
             let mut acc = self.ldl[s + l];
-            // Σ l over l < n ≤ W (not inlined: one call, one append).
-            // wcet-bound: WS * (WS - 1) / 2 per call
+            // Σ l over l < n ≤ W per append (one call of `append`, not inlined
+            // further); Σ n(n − 1)/2 over the rows of one rebuild.
+            // wcet-bound in append: WS * (WS - 1) / 2 per call
+            // wcet-bound in rebuild: WS * (WS - 1) * (WS - 2) / 6 per call
             for k in 0..l {
                 acc -= self.ldl[sl + k] * self.ldl[s + k];
             }
@@ -209,6 +228,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let diag = mdot(p, e.index, e.index) + delta(p, e.index);
         let mut dn = diag;
         // wcet-bound: WS
+        // wcet-bound in rebuild: WS * (WS - 1) / 2 per call
         for l in 0..n {
             let dl = self.ldl[row_start(l) + l];
             let y = self.ldl[s + l];
