@@ -100,7 +100,9 @@ pub(crate) fn factor_h_counted<T: Real, const N: usize>(h: &mut [[T; N]; N]) -> 
 /// diagonal): solves `Rᵀ y = x` forwards, `y_j = (x_j − Σ_{k<j} y_k R_kj) / R_jj`.
 /// The entries of `x` before `start` must be zero (they stay zero). Row `axpy`s:
 /// once `y_j` is final, its share leaves the later entries (contiguous, like the
-/// rows of `R`); zero entries skipped.
+/// rows of `R`); zero entries skipped. Not inlined: its inner loop is bounded per
+/// call (a triangle).
+#[inline(never)]
 pub(crate) fn solve_transposed<T: Real, const N: usize>(
     r: &[[T; N]; N],
     x: &mut [T; N],
@@ -111,8 +113,9 @@ pub(crate) fn solve_transposed<T: Real, const N: usize>(
         // Σ_{start≤k<j} y_k R_kj in four partial sums, as `dot4` groups them.
         let mut acc = [T::ZERO; 4];
         let mut k = start;
-        // k steps by 4 from `start` to at most j < N: at most N/4 passes, then j − k ≤ 3.
-        // wcet-bound: NV / 4
+        // k steps by 4 from `start` to at most j < N: ⌊(j − start)/4⌋ passes, then
+        // j − k ≤ 3; over the call Σ_{j<N} j/4 = N(N − 1)/8 at most.
+        // wcet-bound: NV * (NV - 1) / 8 per call
         while k + 4 <= j {
             for (q, a) in acc.iter_mut().enumerate() {
                 *a += x[k + q] * r[k + q][j];
