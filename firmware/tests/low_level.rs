@@ -8,8 +8,8 @@
 )]
 
 use firmware::low_level::{
-    control, safe_actuation, wrap_pi, Actuation, ControlFault, LowLevelConfig, LowLevelConfigError,
-    LowLevelState, Mode,
+    control, control_with_model, safe_actuation, wrap_pi, Actuation, CarModel, ControlFault,
+    LowLevelConfig, LowLevelConfigError, LowLevelState, Mode,
 };
 use firmware::pid::{self, PidState};
 use firmware::plan::{Plan, HORIZON};
@@ -698,4 +698,480 @@ fn a_paused_yaw_loop_releases_its_output_to_the_plans_steering() {
     assert!(a.delta_cl_rad.abs() < 1e-3, "δ_cl = {}", a.delta_cl_rad);
     assert!((a.delta_rad - 0.3).abs() < 1e-3, "δ = {}", a.delta_rad);
     assert!(st.yaw_pid.integral.abs() < 1e-3);
+}
+
+// ---------------------------------------------------------------------------
+// Each rule at its edge (the mutation pass, README "Tests that notice a wrong
+// line").
+
+#[test]
+fn each_setting_out_of_its_range_is_refused_with_its_reason() {
+    use LowLevelConfigError as E;
+    type Change = fn(&mut LowLevelConfig<f64>);
+    let cases: &[(&str, Change, Result<(), E>)] = &[
+        (
+            "speed PID",
+            |c| c.speed_pid.kp = -1.0,
+            Err(E::SpeedPid(c_err())),
+        ),
+        (
+            "wheel 0",
+            |c| c.wheel_radius_m = 0.0,
+            Err(E::InvalidVehicle),
+        ),
+        (
+            "wheel ∞",
+            |c| c.wheel_radius_m = f64::INFINITY,
+            Err(E::InvalidVehicle),
+        ),
+        ("mass < 0", |c| c.mass_kg = -1500.0, Err(E::InvalidVehicle)),
+        (
+            "traction 0",
+            |c| c.max_traction_torque_nm = 0.0,
+            Err(E::InvalidTorqueLimit),
+        ),
+        (
+            "braking 0",
+            |c| c.max_braking_torque_nm = 0.0,
+            Err(E::InvalidTorqueLimit),
+        ),
+        (
+            "braking NaN",
+            |c| c.max_braking_torque_nm = f64::NAN,
+            Err(E::InvalidTorqueLimit),
+        ),
+        (
+            "safe brake < 0",
+            |c| c.safe_brake_torque_nm = -1.0,
+            Err(E::InvalidTorqueLimit),
+        ),
+        (
+            "safe brake ∞",
+            |c| c.safe_brake_torque_nm = f64::INFINITY,
+            Err(E::InvalidTorqueLimit),
+        ),
+        ("safe brake 0", |c| c.safe_brake_torque_nm = 0.0, Ok(())),
+        (
+            "front share < 0",
+            |c| c.brake_front_share = -0.1,
+            Err(E::InvalidTorqueLimit),
+        ),
+        (
+            "front share > 1",
+            |c| c.brake_front_share = 1.1,
+            Err(E::InvalidTorqueLimit),
+        ),
+        ("front share 0", |c| c.brake_front_share = 0.0, Ok(())),
+        ("front share 1", |c| c.brake_front_share = 1.0, Ok(())),
+        (
+            "steer 0",
+            |c| c.steer_limit_rad = 0.0,
+            Err(E::InvalidSteeringLimit),
+        ),
+        (
+            "steer ∞",
+            |c| c.steer_limit_rad = f64::INFINITY,
+            Err(E::InvalidSteeringLimit),
+        ),
+        (
+            "rate 0",
+            |c| c.steer_rate_limit_radps = 0.0,
+            Err(E::InvalidSteeringLimit),
+        ),
+        (
+            "rate NaN",
+            |c| c.steer_rate_limit_radps = f64::NAN,
+            Err(E::InvalidSteeringLimit),
+        ),
+        ("rate 2", |c| c.steer_rate_limit_radps = 2.0, Ok(())),
+        (
+            "stop ∞",
+            |c| c.stop_decel_mps2 = f64::INFINITY,
+            Err(E::InvalidStopDecel),
+        ),
+        ("period 0", |c| c.period_s = 0.0, Err(E::InvalidTiming)),
+        (
+            "lateral speed < 0",
+            |c| c.lateral_min_speed_mps = -0.5,
+            Err(E::InvalidTiming),
+        ),
+        (
+            "lateral speed ∞",
+            |c| c.lateral_min_speed_mps = f64::INFINITY,
+            Err(E::InvalidTiming),
+        ),
+        ("lateral speed 0", |c| c.lateral_min_speed_mps = 0.0, Ok(())),
+    ];
+    for (what, change, expected) in cases {
+        let mut c = LowLevelConfig::<f64>::default();
+        change(&mut c);
+        let got = c.validate();
+        match (got, expected) {
+            (Err(E::SpeedPid(_)), Err(E::SpeedPid(_))) => {}
+            _ => assert_eq!(got, *expected, "{what}"),
+        }
+    }
+}
+
+/// A PID configuration error to fill [`LowLevelConfigError::SpeedPid`] (the
+/// comparison above matches the variant only).
+fn c_err() -> firmware::pid::PidConfigError {
+    let mut c = LowLevelConfig::<f64>::default_speed_pid();
+    c.kp = -1.0;
+    c.validate().unwrap_err()
+}
+
+#[test]
+fn the_default_loops_have_their_documented_gains_and_windows() {
+    let s = LowLevelConfig::<f64>::default_speed_pid();
+    assert_eq!((s.kp, s.ki, s.kd), (900.0, 450.0, 45.0));
+    assert_eq!(s.derivative_filter_s, 0.05);
+    assert_eq!((s.integral_min, s.integral_max), (-3000.0, 3000.0));
+    let y = LowLevelConfig::<f64>::default_yaw_pid();
+    assert_eq!((y.kp, y.ki, y.kd), (1.0, 0.5, 0.02));
+    assert_eq!(y.derivative_filter_s, 0.05);
+    assert_eq!((y.output_min, y.output_max), (-0.3, 0.3));
+    assert_eq!((y.integral_min, y.integral_max), (-0.15, 0.15));
+}
+
+#[test]
+fn the_safe_actuation_reports_its_total_and_holds_a_steering_within_the_limit() {
+    let a = Actuation::safe(-0.1f64, 1000.0);
+    assert_eq!(a.torque_total_nm, -1000.0);
+    assert_eq!(a.wheel_torque_nm.iter().sum::<f64>(), -1000.0);
+    let cfg = LowLevelConfig::<f64>::default();
+    let mut st = LowLevelState::new();
+    st.last_delta_rad = Some(-0.2);
+    assert_eq!(safe_actuation(&cfg, &st).delta_rad, -0.2);
+    st.last_delta_rad = Some(-0.9);
+    assert_eq!(safe_actuation(&cfg, &st).delta_rad, -0.6);
+    st.last_delta_rad = Some(0.9);
+    assert_eq!(safe_actuation(&cfg, &st).delta_rad, 0.6);
+    // Reset: a fresh state.
+    st.plans_seen = 3;
+    st.reset();
+    assert_eq!(st, LowLevelState::new());
+}
+
+#[test]
+fn braking_is_shared_between_the_axles_as_configured() {
+    let mut cfg = cfg_no_ff();
+    cfg.brake_front_share = 0.7;
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &straight_plan(0, 10.0), &est(11.0, 0.0), 0).unwrap();
+    let t = a.torque_total_nm;
+    assert!(t < 0.0);
+    let [fl, fr, rl, rr] = a.wheel_torque_nm;
+    assert!((fl - 0.35 * t).abs() < 1e-9 && fl == fr, "{fl} {fr} of {t}");
+    assert!((rl - 0.15 * t).abs() < 1e-9 && rl == rr, "{rl} {rr} of {t}");
+}
+
+#[test]
+fn the_feedforward_holds_the_cars_model_and_the_torque_its_grip() {
+    let cfg = LowLevelConfig::<f64>::default();
+    let mut plan = straight_plan(0, 10.0);
+    for u in plan.inputs.iter_mut() {
+        u[0] = 1.0;
+    }
+    let car = CarModel {
+        mass_kg: 1600.0,
+        resistance_n: 200.0,
+        drag_n_per_mps2: 0.5,
+        traction_grip_mps2: f64::INFINITY,
+        braking_grip_mps2: f64::INFINITY,
+    };
+    // On the planned speed: (m·a + F₀ + c₂·V²)·r.
+    let mut st = LowLevelState::new();
+    let a = control_with_model(&cfg, &mut st, &plan, &est(10.0, 0.0), 0, &car).unwrap();
+    let expected = (1600.0 * 1.0 + 200.0 + 0.5 * 100.0) * 0.3;
+    assert!(
+        (a.torque_ff_nm - expected).abs() < 1e-9,
+        "{}",
+        a.torque_ff_nm
+    );
+    assert!((a.torque_total_nm - expected).abs() < 1e-9);
+    // A car model that is not usable: the configured car, no resistance.
+    for bad in [
+        CarModel {
+            mass_kg: 0.0,
+            ..car
+        },
+        CarModel {
+            mass_kg: -1600.0,
+            ..car
+        },
+        CarModel {
+            mass_kg: f64::NAN,
+            ..car
+        },
+        CarModel {
+            resistance_n: f64::INFINITY,
+            ..car
+        },
+        CarModel {
+            drag_n_per_mps2: f64::NAN,
+            ..car
+        },
+    ] {
+        let mut st = LowLevelState::new();
+        let a = control_with_model(&cfg, &mut st, &plan, &est(10.0, 0.0), 0, &bad).unwrap();
+        assert!(
+            (a.torque_ff_nm - 1500.0 * 0.3).abs() < 1e-9,
+            "{bad:?}: {}",
+            a.torque_ff_nm
+        );
+    }
+    // Traction within the grip: (m·a_grip + F₀ + c₂·V²)·r at most, a negative
+    // resistance (downhill) not counted.
+    let grip = CarModel {
+        traction_grip_mps2: 2.0,
+        ..car
+    };
+    let mut st = LowLevelState::new();
+    let a = control_with_model(&cfg, &mut st, &plan, &est(5.0, 0.0), 0, &grip).unwrap();
+    let t_grip = (1600.0 * 2.0 + 200.0 + 0.5 * 25.0) * 0.3;
+    assert!(
+        (a.torque_total_nm - t_grip).abs() < 1e-9,
+        "{}",
+        a.torque_total_nm
+    );
+    assert_eq!(a.wheel_torque_nm[0], a.torque_total_nm / 2.0);
+    let downhill = CarModel {
+        resistance_n: -300.0,
+        drag_n_per_mps2: 0.0,
+        ..grip
+    };
+    let mut st = LowLevelState::new();
+    let a = control_with_model(&cfg, &mut st, &plan, &est(5.0, 0.0), 0, &downhill).unwrap();
+    assert!((a.torque_total_nm - 1600.0 * 2.0 * 0.3).abs() < 1e-9);
+    // Braking within the grip: m·a_grip·r at most (the feed-forward too).
+    let abs = CarModel {
+        braking_grip_mps2: 3.0,
+        ..car
+    };
+    let mut st = LowLevelState::new();
+    let a = control_with_model(&cfg, &mut st, &plan, &est(20.0, 0.0), 0, &abs).unwrap();
+    assert!(
+        (a.torque_total_nm + 1600.0 * 3.0 * 0.3).abs() < 1e-9,
+        "{}",
+        a.torque_total_nm
+    );
+    let mut brake_plan = plan;
+    for u in brake_plan.inputs.iter_mut() {
+        u[0] = -5.0;
+    }
+    let mut st = LowLevelState::new();
+    let a = control_with_model(&cfg, &mut st, &brake_plan, &est(10.0, 0.0), 0, &abs).unwrap();
+    assert!(
+        (a.torque_ff_nm + 1600.0 * 3.0 * 0.3).abs() < 1e-9,
+        "{}",
+        a.torque_ff_nm
+    );
+}
+
+#[test]
+fn the_pid_time_step_is_the_measured_one_within_ten_periods() {
+    // The speed loop alone (no feed-forward), 1 m/s too slow; the same PID run
+    // by hand with the steps the controller should use: the first call and any
+    // step over 10 periods (or not forward) take the nominal period.
+    let cfg = cfg_no_ff();
+    let plan = straight_plan(0, 10.0);
+    let mut st = LowLevelState::new();
+    let mut ps = PidState::new();
+    for (now, dt) in [
+        (0, 0.01),
+        (20_000, 0.02),
+        (120_000, 0.1),
+        (320_000, 0.01),
+        (320_000, 0.01),
+        (300_000, 0.01),
+    ] {
+        let a = control(&cfg, &mut st, &plan, &est(9.0, 0.0), now).unwrap();
+        let u = pid::update(&cfg.speed_pid, &mut ps, 10.0, 9.0, dt).unwrap();
+        assert!(
+            (a.torque_total_nm - u).abs() < 1e-9,
+            "at {now}: {} vs {u}",
+            a.torque_total_nm
+        );
+    }
+}
+
+#[test]
+fn modes_change_at_the_plans_ends_exactly() {
+    // A plan of 16 steps of 0.25 s (exact in binary): T_H = 4 s.
+    let cfg = cfg_no_ff();
+    let mut plan = straight_plan(0, 3.0);
+    plan.dt_s = 0.25;
+    for (now, mode) in [
+        (3_750_000, Mode::Following),
+        (3_750_001, Mode::Extrapolating),
+        (4_000_000, Mode::Extrapolating),
+        (4_000_001, Mode::Stopping),
+    ] {
+        let mut st = LowLevelState::new();
+        let a = control(&cfg, &mut st, &plan, &est(3.0, 0.0), now).unwrap();
+        assert_eq!(a.mode, mode, "at {now} µs");
+    }
+    // At the plan's stamp the age is +0, not −0.
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(3.0, 0.0), 0).unwrap();
+    assert!(a.plan_age_s == 0.0 && a.plan_age_s.is_sign_positive());
+}
+
+#[test]
+fn the_controlled_stop_ends_with_no_acceleration_asked() {
+    // 3 m/s at the end of a 4 s plan, stopping at 3 m/s²: at rest 1 s later
+    // exactly; from then on the feed-forward asks nothing, and the yaw
+    // reference stays where the stop ended (ψ_N + ψ̇_N·V_N/(2·a)).
+    let cfg = LowLevelConfig::<f64>::default();
+    let mut plan = straight_plan(0, 3.0);
+    plan.dt_s = 0.25;
+    for (k, n) in plan.nodes.iter_mut().enumerate() {
+        n.psi_rad = 0.025 * k as f64;
+    }
+    let psi_n = 0.025 * HORIZON as f64;
+    let yaw_rate = 0.025 / 0.25;
+    for now in [5_000_000, 6_000_000] {
+        let mut st = LowLevelState::new();
+        let a = control(&cfg, &mut st, &plan, &est(0.0, psi_n), now).unwrap();
+        assert_eq!(a.v_ref_mps, 0.0);
+        assert_eq!(a.torque_ff_nm, 0.0, "at {now} µs");
+        let psi_end = psi_n + yaw_rate * 3.0 / (2.0 * 3.0);
+        assert!((a.psi_ref_rad - psi_end).abs() < 1e-12, "{}", a.psi_ref_rad);
+    }
+    // Half-way through the stop (0.5 s): V^r = 1.5, −3 m/s² asked, and the yaw
+    // reference one step (0.25 s) ahead, 0.75 s into the stop, has turned for
+    // ∫V^r/V_N = 0.75 − 3·0.75²/(2·3) s.
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(1.5, psi_n), 4_500_000).unwrap();
+    assert_eq!(a.v_ref_mps, 1.5);
+    assert!((a.torque_ff_nm + 1500.0 * 3.0 * 0.3).abs() < 1e-9);
+    let t_eff = 0.75 - 3.0 * 0.75 * 0.75 / (2.0 * 3.0);
+    assert!((a.psi_ref_rad - (psi_n + yaw_rate * t_eff)).abs() < 1e-12);
+}
+
+#[test]
+fn the_yaw_reference_is_interpolated_one_step_ahead() {
+    // ψ^r rising 0.1 rad per node: at t = 0.05 s the reference one step (0.2 s)
+    // ahead is at node 1.25: 0.125 rad. The car on it, yawing with it
+    // (0.5 rad/s): no error.
+    let cfg = cfg_no_ff();
+    let mut plan = straight_plan(0, 10.0);
+    for (k, n) in plan.nodes.iter_mut().enumerate() {
+        n.psi_rad = 0.1 * k as f64;
+    }
+    let mut st = LowLevelState::new();
+    let mut e = est(10.0, 0.025);
+    e.yaw_rate_radps = 0.5;
+    let a = control(&cfg, &mut st, &plan, &e, 50_000).unwrap();
+    assert!((a.psi_ref_rad - 0.125).abs() < 1e-12, "{}", a.psi_ref_rad);
+    assert!(a.yaw_error_rad.abs() < 1e-12, "{}", a.yaw_error_rad);
+}
+
+#[test]
+fn the_steering_rate_limit_holds_both_ways_from_a_command_within_the_limit() {
+    let mut cfg = cfg_no_ff();
+    cfg.steer_rate_limit_radps = 1.0;
+    let mut plan = straight_plan(0, 10.0);
+    for n in plan.nodes.iter_mut() {
+        n.delta_rad = -0.4;
+    }
+    let mut st = LowLevelState::new();
+    st.last_delta_rad = Some(0.0);
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 0).unwrap();
+    assert!((a.delta_rad + 0.01).abs() < 1e-12, "{}", a.delta_rad);
+    // A last command beyond the mechanical limit counts as the limit.
+    let mut st = LowLevelState::new();
+    st.last_delta_rad = Some(0.9);
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 0).unwrap();
+    assert!((a.delta_rad - 0.59).abs() < 1e-12, "{}", a.delta_rad);
+    assert!((a.delta_cl_rad - (0.59 + 0.4)).abs() < 1e-12);
+}
+
+#[test]
+fn a_wrapped_yaw_estimate_gives_no_derivative_kick() {
+    // The car on a plan heading 3.1 rad; its estimate wraps from 3.1 to
+    // 3.1 − 2π between two calls (the same heading): the yaw loop's output
+    // stays where it was (no error), with no derivative spike.
+    let cfg = cfg_no_ff();
+    let mut plan = straight_plan(0, 10.0);
+    for n in plan.nodes.iter_mut() {
+        n.psi_rad = 3.1;
+    }
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 3.1), 0).unwrap();
+    assert!(a.delta_cl_rad.abs() < 1e-12);
+    let wrapped = 3.1 - 2.0 * std::f64::consts::PI;
+    let a = control(&cfg, &mut st, &plan, &est(10.0, wrapped), 10_000).unwrap();
+    assert!(a.yaw_error_rad.abs() < 1e-12);
+    assert!(a.delta_cl_rad.abs() < 1e-9, "δ_cl = {}", a.delta_cl_rad);
+    // A genuine yaw step (0.05 rad) keeps its derivative: the D term acts.
+    let mut st = LowLevelState::new();
+    control(&cfg, &mut st, &plan, &est(10.0, 3.1), 0).unwrap();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 3.05), 10_000).unwrap();
+    let p_and_i = 0.05 + 0.5 * 0.05 * 0.01;
+    assert!(a.delta_cl_rad > p_and_i + 1e-3, "δ_cl = {}", a.delta_cl_rad);
+}
+
+#[test]
+fn a_paused_yaw_loop_releases_with_its_time_constant() {
+    // Below the lateral speed: δ_cl and the integrator decay by 1/(1 + Δt/τ)
+    // per call, τ = 0.3 s (the implicit Euler step).
+    let cfg = LowLevelConfig::<f64>::default();
+    let mut st = LowLevelState::new();
+    st.yaw_pid.last_output = -0.05;
+    st.yaw_pid.integral = -0.04;
+    let plan = straight_plan(0, 0.0);
+    let a = control(&cfg, &mut st, &plan, &est(0.4, 0.0), 0).unwrap();
+    let keep = 1.0 / (1.0 + 0.01 / 0.3);
+    assert!(
+        (a.delta_cl_rad + 0.05 * keep).abs() < 1e-9,
+        "{}",
+        a.delta_cl_rad
+    );
+    assert!((st.yaw_pid.integral + 0.04 * keep).abs() < 1e-9);
+    // At the lateral speed (0.5 m/s) the loop runs.
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(0.5, -0.1), 0).unwrap();
+    assert!(a.delta_cl_rad > 0.09, "{}", a.delta_cl_rad);
+}
+
+#[test]
+fn a_plan_of_large_finite_numbers_is_accepted() {
+    // Finite is all the check asks: a node and an input beyond the two the
+    // controller reads at t = 0 hold 1e200 in every number (their sum is
+    // finite, their products would not be).
+    let cfg = cfg_no_ff();
+    let mut plan = straight_plan(0, 10.0);
+    let n = &mut plan.nodes[10];
+    n.s_m = 1e200;
+    n.x_m = 1e200;
+    n.y_m = 1e200;
+    n.v_mps = 1e200;
+    n.psi_rad = 1e200;
+    n.delta_rad = 1e200;
+    plan.inputs[10] = [1e200, 1e200];
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 0).unwrap();
+    assert_eq!(a.v_ref_mps, 10.0);
+}
+
+#[test]
+fn the_measured_speed_is_the_velocitys_norm_with_the_sign_of_its_forward_part() {
+    let cfg = cfg_no_ff();
+    let plan = straight_plan(0, 10.0);
+    for (vx, vy, v) in [
+        (3.0, 4.0, 5.0),
+        (-3.0, 4.0, -5.0),
+        (0.0, 2.0, 2.0),
+        (-0.0, -2.0, 2.0),
+    ] {
+        let mut st = LowLevelState::new();
+        let e = StateEstimate {
+            vy_mps: vy,
+            ..est(vx, 0.0)
+        };
+        let a = control(&cfg, &mut st, &plan, &e, 0).unwrap();
+        assert_eq!(a.v_mps, v, "({vx}, {vy})");
+    }
 }
