@@ -97,11 +97,17 @@ pub fn header_starts_iterations(func: &Function, l: &Loop) -> bool {
     })
 }
 
-/// The most back edges per entry a fact allows: its bound, one fewer for a bound
-/// on iterations whose loop's header starts every iteration (and that no nested
-/// binary loop shares: `shared`).
+/// Whether `fact` bounds the runs of its loop's header rather than its back
+/// edges: a bound on iterations, of a loop whose header starts every iteration,
+/// that no nested binary loop shares (`shared`).
+pub fn bounds_header_runs(fact: &LoopFact, func: &Function, l: &Loop, shared: bool) -> bool {
+    fact.iterations && !shared && header_starts_iterations(func, l)
+}
+
+/// The most back edges per entry a fact allows: its bound, one fewer where it
+/// bounds the header's runs ([`bounds_header_runs`]).
 pub fn back_edges_per_entry(fact: &LoopFact, func: &Function, l: &Loop, shared: bool) -> u64 {
-    if fact.iterations && !shared && header_starts_iterations(func, l) {
+    if bounds_header_runs(fact, func, l, shared) {
         fact.bound.saturating_sub(1)
     } else {
         fact.bound
@@ -444,8 +450,7 @@ pub fn task_bound(
             let members = shared.remove(&(f, k));
             // A bound on iterations of a loop whose header starts each of them
             // bounds the header's runs (entries + back edges), not the back edges.
-            let runs_header =
-                fact.iterations && members.is_none() && header_starts_iterations(func, l);
+            let runs_header = bounds_header_runs(fact, func, l, members.is_some());
             let back = back + members.unwrap_or_else(|| Expression::from(0.0));
             let back = if runs_header {
                 back + entries_of(l)
