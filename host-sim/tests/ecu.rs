@@ -113,7 +113,7 @@ fn a_failed_activation_is_charged_from_its_own_counters() {
     assert_eq!((p.passes, p.qp_iterations), (1, 1));
     assert!(p.rows > 0);
     let m = &opts.cost_model;
-    let counted = m.plan_instructions(&host_sim::closed_loop::cost_model::report_of(&p.into()));
+    let counted = m.plan_instructions(&host_sim::closed_loop::cost_model::report_of(p));
     // One pass, one iteration: at least the pass and its rows.
     assert!(
         counted

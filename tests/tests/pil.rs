@@ -10,7 +10,7 @@
 
 use std::path::PathBuf;
 
-use host_sim::closed_loop::cost_model::{CostModel, Counters};
+use host_sim::closed_loop::cost_model::CostModel;
 use host_sim::closed_loop::timeline::{run_with, RunResult};
 use host_sim::closed_loop::SimOptions;
 use host_sim::model::vehicle::VehicleParams;
@@ -135,8 +135,7 @@ fn the_ecu_in_the_loop_drives_round_the_obstacles_within_its_deadlines() {
     // The control task's own work, measured on the ECU.
     assert!(s.control_max_instructions > 100.0 && s.control_max_instructions <= 2_000.0);
     // The cost model (fitted on PIL laps) undercounts no activation by more than 5 %.
-    let work: Vec<Counters> = r.plan_activations.iter().map(Into::into).collect();
-    let e = CostModel::default().error_on(&work);
+    let e = CostModel::default().error_on(&r.plan_activations);
     assert!(
         e.max_under_pct <= 5.0,
         "model undercounts by {} %",

@@ -58,9 +58,12 @@
 // Semihosting calls, painting the stack and the panic handler's actuator frame.
 #![allow(unsafe_code)]
 
+#[path = "support/qemu_exit.rs"]
+mod qemu_exit;
+
 use core::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 
-use cortex_m_semihosting::{debug, syscall};
+use cortex_m_semihosting::syscall;
 use defmt_semihosting as _;
 use firmware::deadline::{self, DeadlineMonitor, PlanWatchdog};
 use firmware::link::{
@@ -68,6 +71,7 @@ use firmware::link::{
 };
 use firmware::low_level::Actuation;
 use firmware::tasks::{ControlTask, PlanTask};
+use qemu_exit::exit;
 use rtic_monotonics::systick::prelude::*;
 
 /// Rows of the window of the road the ECU holds (not the whole circuit: its RAM
@@ -410,18 +414,6 @@ fn stop(link: &mut Link, ok: bool) -> ! {
         rejected_frames: rejected,
     }));
     exit(ok)
-}
-
-/// Ends the QEMU run.
-fn exit(ok: bool) -> ! {
-    debug::exit(if ok {
-        debug::EXIT_SUCCESS
-    } else {
-        debug::EXIT_FAILURE
-    });
-    loop {
-        cortex_m::asm::wfi();
-    }
 }
 
 /// Stack painting: the untouched part of the stack keeps this word.

@@ -16,9 +16,12 @@
 // Statics for the (large) planner workspace need one `unsafe` access at start-up.
 #![allow(unsafe_code)]
 
+#[path = "support/qemu_exit.rs"]
+mod qemu_exit;
+
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use cortex_m_rt::entry;
-use cortex_m_semihosting::{debug, hprintln};
+use cortex_m_semihosting::hprintln;
 use firmware::bicycle::BicycleGeometry;
 use firmware::low_level::LowLevelConfig;
 use firmware::mpc::{Mpc, MpcSettings};
@@ -27,6 +30,7 @@ use firmware::plan::Plan;
 use firmware::reference_path::ReferencePath;
 use firmware::state_estimate::StateEstimate;
 use firmware::tasks::ControlTask;
+use qemu_exit::exit;
 use qp::real::f32_math;
 use stm32f4 as _;
 
@@ -183,32 +187,14 @@ fn main() -> ! {
         ];
         for k in 0..10u64 {
             let now = est.stamp_us + k * 10_000;
-            let measured = StateEstimate {
-                stamp_us: now,
-                x_m: xi[1],
-                y_m: xi[2],
-                psi_rad: xi[4],
-                vx_mps: xi[3],
-                vy_mps: 0.0,
-                yaw_rate_radps: 0.0,
-                delta_rad: xi[5],
-            };
+            let measured = estimate_of(&xi, now);
             let c0 = SYST::get_current();
             let _ = control.run(&measured, plan, now);
             let c1 = SYST::get_current();
             control_max = control_max.max(ticks_between(c0, c1));
             xi = geometry.discretize(&xi, &plan.inputs[0], 0.01).x_next;
         }
-        est = StateEstimate {
-            stamp_us: est.stamp_us + 100_000,
-            x_m: xi[1],
-            y_m: xi[2],
-            psi_rad: xi[4],
-            vx_mps: xi[3],
-            vy_mps: 0.0,
-            yaw_rate_radps: 0.0,
-            delta_rad: xi[5],
-        };
+        est = estimate_of(&xi, est.stamp_us + 100_000);
     }
     let to_instr =
         |ticks: u64| ticks * 1_000_000_000 / u64::from(firmware::timing::ECU_CLOCK_HZ) / 8;
@@ -240,14 +226,18 @@ fn main() -> ! {
     exit(failures == 0)
 }
 
-fn exit(ok: bool) -> ! {
-    debug::exit(if ok {
-        debug::EXIT_SUCCESS
-    } else {
-        debug::EXIT_FAILURE
-    });
-    loop {
-        cortex_m::asm::wfi();
+/// The estimate a perfect sensor gives at `stamp_us` (µs) of the kinematic
+/// stand-in's state `xi` = [s, x (m), y (m), V (m/s), ψ (rad), δ (rad)].
+fn estimate_of(xi: &[f32; 6], stamp_us: u64) -> StateEstimate<f32> {
+    StateEstimate {
+        stamp_us,
+        x_m: xi[1],
+        y_m: xi[2],
+        psi_rad: xi[4],
+        vx_mps: xi[3],
+        vy_mps: 0.0,
+        yaw_rate_radps: 0.0,
+        delta_rad: xi[5],
     }
 }
 

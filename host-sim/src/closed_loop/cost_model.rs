@@ -107,64 +107,8 @@ impl CostModel {
     }
 }
 
-/// What the cost model reads of a plan activation: its measured (or modelled)
-/// instructions and its work counters (a view of a [`PlanActivation`], the row
-/// type of `plan_activations.csv`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct Counters {
-    /// Instructions of the activation.
-    pub instructions: f64,
-    /// Linearise–condense passes.
-    pub passes: u32,
-    /// QP iterations, all passes.
-    pub qp_iterations: u32,
-    /// Constraints added to the working set, all passes.
-    pub qp_added: u32,
-    /// Constraints removed from the working set, all passes.
-    pub qp_removed: u32,
-    /// Factorisations from scratch, all passes.
-    pub qp_refactorizations: u32,
-    /// General QP rows of the last pass.
-    pub rows: u32,
-    /// Instructions of adopting a window of the road after publishing (0: none).
-    pub window_instructions: f64,
-}
-
-impl From<&PlanActivation> for Counters {
-    fn from(a: &PlanActivation) -> Self {
-        Self {
-            instructions: a.instructions,
-            passes: a.passes,
-            qp_iterations: a.qp_iterations,
-            qp_added: a.qp_added,
-            qp_removed: a.qp_removed,
-            qp_refactorizations: a.qp_refactorizations,
-            rows: a.rows,
-            window_instructions: a.window_instructions,
-        }
-    }
-}
-
-/// The counters of every activation in a `plan_activations.csv`.
-pub fn load_counters(path: &std::path::Path) -> anyhow::Result<Vec<Counters>> {
-    use anyhow::Context;
-    let mut r = csv::Reader::from_path(path).with_context(|| {
-        format!(
-            "cannot read {} (written by `host-sim pil` or `run`)",
-            path.display()
-        )
-    })?;
-    r.deserialize::<PlanActivation>()
-        .enumerate()
-        .map(|(i, row)| {
-            row.map(|a| Counters::from(&a))
-                .with_context(|| format!("{}: row {}", path.display(), i + 2))
-        })
-        .collect()
-}
-
 /// The work counters of a recorded activation, as the MPC reported them.
-pub fn report_of(a: &Counters) -> MpcReport<f64> {
+pub fn report_of(a: &PlanActivation) -> MpcReport<f64> {
     MpcReport {
         passes: a.passes,
         qp_iterations: a.qp_iterations,
@@ -178,7 +122,7 @@ pub fn report_of(a: &Counters) -> MpcReport<f64> {
 
 /// The model's terms of an activation, in the order of [`CostModel::fit`]'s
 /// coefficients.
-fn terms(a: &Counters) -> [f64; 7] {
+fn terms(a: &PlanActivation) -> [f64; 7] {
     let passes = f64::from(a.passes);
     [
         1.0,
@@ -211,8 +155,8 @@ impl CostModel {
     /// with the margin set so that the model undercounts none of them; `control`
     /// is the largest measured control activation. `None` with fewer activations
     /// than terms.
-    pub fn fit(plans: &[Counters], control_max_instructions: f64) -> Option<Self> {
-        let rows: Vec<&Counters> = plans.iter().filter(|a| a.instructions > 0.0).collect();
+    pub fn fit(plans: &[PlanActivation], control_max_instructions: f64) -> Option<Self> {
+        let rows: Vec<&PlanActivation> = plans.iter().filter(|a| a.instructions > 0.0).collect();
         let mut active = [true; 7];
         let mut coef = [0.0f64; 7];
         for _ in 0..7 {
@@ -260,7 +204,7 @@ impl CostModel {
     }
 
     /// The model's error on measured activations.
-    pub fn error_on(&self, plans: &[Counters]) -> ModelError {
+    pub fn error_on(&self, plans: &[PlanActivation]) -> ModelError {
         let mut errs: Vec<f64> = Vec::new();
         let mut under = 0.0f64;
         for a in plans.iter().filter(|a| a.instructions > 0.0) {

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use firmware::link::DoneFrame;
 
-use crate::closed_loop::cost_model::{CostModel, Counters};
+use crate::closed_loop::cost_model::CostModel;
 use crate::closed_loop::ecu::SimulatedEcu;
 use crate::closed_loop::plan_activation::PlanActivation;
 use crate::closed_loop::set_up::SetUp;
@@ -209,7 +209,6 @@ pub fn run(args: &PilArgs) -> Result<()> {
     write_outputs(&args.run.out, &scenario, &result, !args.run.no_plots)?;
 
     let plans = &result.plan_activations;
-    let work: Vec<Counters> = plans.iter().map(Into::into).collect();
     let max_of = |f: &dyn Fn(&PlanActivation) -> bool| {
         plans
             .iter()
@@ -240,8 +239,8 @@ pub fn run(args: &PilArgs) -> Result<()> {
         plan_max_instructions: max_of(&|_| true),
         warm_max_instructions: max_of(&|a| a.passes == 1),
         cold_max_instructions: max_of(&|a| a.passes > 1),
-        model_error: opts.cost_model.error_on(&work),
-        refit: CostModel::fit(&work, percentile(&result.control_instructions, 1.0)),
+        model_error: opts.cost_model.error_on(plans),
+        refit: CostModel::fit(plans, percentile(&result.control_instructions, 1.0)),
         comparison,
         tick_overruns,
         count_mismatches: count_mismatches(&result.summary, &tick_overruns),

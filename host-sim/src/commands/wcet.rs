@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 
-use crate::closed_loop::cost_model::{load_counters, CostModel};
+use crate::closed_loop::cost_model::CostModel;
 use crate::commands::pil::{self, PilArgs};
 use crate::commands::run::RunArgs;
 use crate::wcet::cpi::{self, CpiReport};
@@ -204,10 +204,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         .iter()
         .map(|d| report::pil_runs::load_pil_run(d))
         .collect::<Result<Vec<_>>>()?;
-    let mut plans = Vec::new();
-    for d in &run_dirs {
-        plans.extend(load_counters(&d.join("plan_activations.csv"))?);
-    }
+    let plans: Vec<_> = runs.iter().flat_map(|r| r.plan.iter().cloned()).collect();
     let control_max = runs
         .iter()
         .map(|r| r.summary.control_max_instructions)
@@ -321,10 +318,8 @@ fn print_static(analysis: &crate::wcet::analysis::StaticAnalysis, out: &std::pat
         );
     }
     println!(
-        "static analysis: {} unbounded loop(s), {} unresolved indirect call(s), {} recursion(s); wrote {}",
-        analysis.unbounded_loops,
-        analysis.unresolved_indirect_calls.len(),
-        analysis.recursions.len(),
+        "static analysis: {}; wrote {}",
+        analysis.gaps(),
         out.join("static.md").display()
     );
 }
@@ -335,15 +330,10 @@ fn analysis_errors(
     analysis: &crate::wcet::analysis::StaticAnalysis,
     out: &std::path::Path,
 ) -> Result<()> {
-    if analysis.unbounded_loops > 0
-        || !analysis.unresolved_indirect_calls.is_empty()
-        || !analysis.recursions.is_empty()
-    {
+    if !analysis.is_complete() {
         bail!(
-            "the static analysis is incomplete: {} unbounded loop(s), {} unresolved indirect call(s), {} recursion(s) (see {})",
-            analysis.unbounded_loops,
-            analysis.unresolved_indirect_calls.len(),
-            analysis.recursions.len(),
+            "the static analysis is incomplete: {} (see {})",
+            analysis.gaps(),
             out.join("static.md").display()
         );
     }

@@ -9,7 +9,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::closed_loop::timeline::{LogRow, RunResult};
-use crate::output::plot::{draw_error, register_font, FONT};
+use crate::output::plot::{draw_error, draw_legend, register_font, FONT};
 use crate::world::road_friction::RoadFriction;
 use crate::world::scenario::Scenario;
 
@@ -349,14 +349,7 @@ fn draw_patches<'a, DB: DrawingBackend + 'a>(
             }
         }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FONT, 16))
-        .draw()
-        .map_err(|e| draw_error(path, e))?;
+    draw_legend(chart).map_err(|e| draw_error(path, e))?;
     Ok(())
 }
 
@@ -438,14 +431,7 @@ fn draw_time_series<DB: DrawingBackend>(
             }
         }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FONT, 16))
-        .draw()
-        .map_err(err)?;
+    draw_legend(&mut chart).map_err(err)?;
     Ok(())
 }
 

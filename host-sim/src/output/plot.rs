@@ -56,3 +56,23 @@ pub fn draw_error(path: &std::path::Path, e: impl std::fmt::Display) -> PlotErro
         message: e.to_string(),
     }
 }
+
+/// Draws the legend of `chart` (every labelled series), boxed in its upper right
+/// corner, the way every figure of the simulator shows it.
+pub fn draw_legend<'a, DB, CT>(
+    chart: &mut plotters::chart::ChartContext<'a, DB, CT>,
+) -> Result<(), plotters::drawing::DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: plotters::prelude::DrawingBackend + 'a,
+    CT: plotters::coord::CoordTranslate,
+{
+    use plotters::prelude::{SeriesLabelPosition, BLACK, WHITE};
+    use plotters::style::Color;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT, 16))
+        .draw()
+}

@@ -116,14 +116,7 @@ pub fn write_plot(path: &Path, sweeps: &[RadiusSweep], mu: f64) -> Result<(), pl
         .map_err(|e| err(&e))?
         .label("a_y = 0.5 mu g")
         .legend(|(x, y)| Cross::new((x + 10, y), 6, BLACK.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .label_font((plot::FONT, 15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(|e| err(&e))?;
+    plot::draw_legend(&mut chart).map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;
     Ok(())
 }

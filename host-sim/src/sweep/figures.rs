@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::Result;
 use plotters::prelude::*;
 
-use crate::output::plot::{draw_error, register_font, FONT};
+use crate::output::plot::{draw_error, draw_legend, register_font, FONT};
 use crate::sweep::aggregate::{Aggregate, TrackMu, BOUNDS};
 use crate::sweep::table::{Row, FACTOR_COLUMNS};
 use crate::world::faults::Outcome;
@@ -132,12 +132,7 @@ fn outcome_rates(
             .label(o.name())
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled()));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| draw_error(path, e))?;
+    draw_legend(&mut chart).map_err(|e| draw_error(path, e))?;
     root.present().map_err(|e| draw_error(path, e))?;
     Ok(())
 }
@@ -229,12 +224,7 @@ fn per_track(
             BLACK.stroke_width(2),
         ))
         .map_err(|e| draw_error(path, e))?;
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| draw_error(path, e))?;
+    draw_legend(&mut chart).map_err(|e| draw_error(path, e))?;
     root.present().map_err(|e| draw_error(path, e))?;
     Ok(())
 }

@@ -816,6 +816,25 @@ pub fn analyse(
 }
 
 impl StaticAnalysis {
+    /// True when every reachable loop is bounded, every indirect call resolved and
+    /// no function recursive: the analysis gave what it could.
+    pub fn is_complete(&self) -> bool {
+        self.unbounded_loops == 0
+            && self.unresolved_indirect_calls.is_empty()
+            && self.recursions.is_empty()
+    }
+
+    /// What the analysis could not bound, counted: `N unbounded loop(s), N
+    /// unresolved indirect call(s), N recursion(s)`.
+    pub fn gaps(&self) -> String {
+        format!(
+            "{} unbounded loop(s), {} unresolved indirect call(s), {} recursion(s)",
+            self.unbounded_loops,
+            self.unresolved_indirect_calls.len(),
+            self.recursions.len()
+        )
+    }
+
     /// The Markdown report.
     pub fn markdown(&self) -> String {
         let mut s = String::new();

@@ -96,14 +96,30 @@ pub struct StaticSummary {
     pub plan: StaticTiming,
     /// The control task (`USART2`, its job `ecu::control_job`).
     pub control: StaticTiming,
-    /// Every loop the tasks reach, with its bound and the largest trip count seen.
+    /// The loops and what the analysis could not bound.
+    #[serde(flatten)]
+    pub coverage: Coverage,
+}
+
+/// The loops the tasks reach and what the static analysis could not bound (in
+/// `wcet.json`, at the top level).
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Coverage {
+    /// Every loop the tasks reach (function, file, line, bound, observed_max).
     pub loops: Vec<super::analysis::LoopEntry>,
-    /// Loops without a bound.
+    /// Loops without a bound (an error of the analysis).
     pub unbounded_loops: usize,
-    /// Indirect calls without listed targets.
+    /// Indirect calls without listed targets (an error of the analysis).
     pub unresolved_indirect_calls: Vec<String>,
-    /// Call cycles.
+    /// Call cycles (an error of the analysis).
     pub recursions: Vec<String>,
+}
+
+impl Coverage {
+    /// Unbounded loops, unresolved indirect calls and recursions, together.
+    pub fn gaps(&self) -> usize {
+        self.unbounded_loops + self.unresolved_indirect_calls.len() + self.recursions.len()
+    }
 }
 
 impl StaticSummary {
@@ -126,14 +142,16 @@ impl StaticSummary {
         Self {
             plan: task("plan", "plan_job"),
             control: task("control", "control_job"),
-            loops: analysis.loops.clone(),
-            unbounded_loops: analysis.unbounded_loops,
-            unresolved_indirect_calls: analysis.unresolved_indirect_calls.clone(),
-            recursions: analysis
-                .recursions
-                .iter()
-                .map(|r| format!("{r:?}"))
-                .collect(),
+            coverage: Coverage {
+                loops: analysis.loops.clone(),
+                unbounded_loops: analysis.unbounded_loops,
+                unresolved_indirect_calls: analysis.unresolved_indirect_calls.clone(),
+                recursions: analysis
+                    .recursions
+                    .iter()
+                    .map(|r| format!("{r:?}"))
+                    .collect(),
+            },
         }
     }
 }
@@ -243,14 +261,9 @@ pub struct WcetReport {
     pub traced_cpi_method: String,
     /// Timing of both tasks.
     pub tasks: Tasks,
-    /// Every loop the tasks reach (function, file, line, bound, observed_max).
-    pub loops: Vec<super::analysis::LoopEntry>,
-    /// Loops without a bound (an error of the analysis).
-    pub unbounded_loops: usize,
-    /// Indirect calls without listed targets (an error of the analysis).
-    pub unresolved_indirect_calls: Vec<String>,
-    /// Call cycles (an error of the analysis).
-    pub recursions: Vec<String>,
+    /// The loops and what the analysis could not bound.
+    #[serde(flatten)]
+    pub coverage: Coverage,
     /// Flash, RAM, stack.
     pub memory: MemoryReport,
     /// Allocator and software-double symbols.
@@ -373,10 +386,7 @@ pub fn assemble_report(
         traced_cycles_per_instruction: cpi,
         traced_cpi_method: inputs.cpi.justification.clone(),
         tasks,
-        loops: inputs.statics.loops.clone(),
-        unbounded_loops: inputs.statics.unbounded_loops,
-        unresolved_indirect_calls: inputs.statics.unresolved_indirect_calls.clone(),
-        recursions: inputs.statics.recursions.clone(),
+        coverage: inputs.statics.coverage.clone(),
         memory,
         symbols,
         runs: run_entries,

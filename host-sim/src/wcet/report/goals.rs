@@ -144,11 +144,7 @@ pub(super) fn goals(
         goal(
             "analysis-complete",
             "unbounded loops, unresolved calls, recursions",
-            Some(
-                (statics.unbounded_loops
-                    + statics.unresolved_indirect_calls.len()
-                    + statics.recursions.len()) as f64,
-            ),
+            Some(statics.coverage.gaps() as f64),
             0.0,
             "",
         ),

@@ -153,10 +153,10 @@ fn render_tasks(s: &mut String, r: &WcetReport) -> std::fmt::Result {
          time). Loops: {} reached, {} without a bound; unresolved indirect calls {}, \
          recursions {}.\n",
         num(w.observed_max_instructions.round()),
-        r.loops.len(),
-        r.unbounded_loops,
-        r.unresolved_indirect_calls.len(),
-        r.recursions.len(),
+        r.coverage.loops.len(),
+        r.coverage.unbounded_loops,
+        r.coverage.unresolved_indirect_calls.len(),
+        r.coverage.recursions.len(),
     )
 }
 
