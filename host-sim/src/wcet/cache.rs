@@ -125,18 +125,39 @@ impl Persistence {
         }
     }
 
-    /// Cycles the edge `a → b` of `f` saves on the two blocks' costs: the
-    /// fall-through's saving, without the line already read when both blocks are
-    /// in the same persistent loop (their fetch is charged per entry).
+    /// Cycles the edge `a → b` of `f` saves on the two blocks' costs:
+    ///
+    /// * on the fall-through, its saving ([`Block::fall_through_saving`]: the
+    ///   untaken branch's refill and the line already read);
+    /// * on a taken branch whose target starts in the line the branch is in, that
+    ///   line: the branch's own line was just read, so the instruction cache holds
+    ///   it (every line read on a miss is copied into it, RM0090 §3.5.2; at most
+    ///   the next line, fetched ahead by the core, was read since, and the cache
+    ///   keeps 64 lines, least recently used replaced), and the target is served
+    ///   without a flash access. A preemption in between is charged a refill of
+    ///   the whole cache ([`PREEMPTION_REFILL_CYCLES`]).
+    ///
+    /// Between two blocks of one persistent loop no line is saved: their fetch is
+    /// charged per entry of the loop, not per block.
+    ///
+    /// [`Block::fall_through_saving`]: super::cfg::Block::fall_through_saving
     pub fn edge_saving(&self, program: &Program, f: usize, a: usize, b: usize) -> u64 {
-        let block = &program.functions[f].blocks[a];
-        if block.fall_through != Some(b) {
-            return 0;
+        let func = &program.functions[f];
+        let block = &func.blocks[a];
+        let same_loop = matches!(
+            (self.by_block.get(&(f, a)), self.by_block.get(&(f, b))),
+            (Some(x), Some(y)) if x == y
+        );
+        let line_saving = |line: u64| if same_loop { 0 } else { line };
+        if block.fall_through == Some(b) {
+            let (refill, line) = block.fall_through_saving;
+            return refill + line_saving(line);
         }
-        let (refill, line) = block.fall_through_saving;
-        match (self.by_block.get(&(f, a)), self.by_block.get(&(f, b))) {
-            (Some(x), Some(y)) if x == y => refill,
-            _ => refill + line,
+        match (block.lines, func.blocks.get(b).and_then(|t| t.lines)) {
+            (Some((_, branch_line)), Some((target_line, _))) if branch_line == target_line => {
+                line_saving(self.line_cycles)
+            }
+            _ => 0,
         }
     }
 

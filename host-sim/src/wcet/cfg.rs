@@ -396,7 +396,8 @@ impl MemoryModel {
                  overlapped with) the block's execution, and once more after each call (the \
                  return address's line); a fall-through into the line the previous block \
                  ended in is not charged again (the flash interface's 128-bit line buffer, \
-                 RM0090 3.5.2). The cache is counted on only in loops that call nothing and \
+                 RM0090 3.5.2), nor is a taken branch's target in the branch's own line \
+                 (the cache holds the line just read). The cache is counted on only in loops that call nothing and \
                  touch at most 64 lines: its 64 lines are replaced least recently used \
                  (RM0090 3.5.2), so such a loop fetches each line once per entry; a \
                  preemption is charged a refill of the whole cache.",

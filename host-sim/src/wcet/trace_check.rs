@@ -540,11 +540,12 @@ Disassembly of section .text:
         let helper = fx.program.at(0x0800_0120).ok_or("no helper")?;
         assert_eq!(blocks(plan).len(), 4);
         // Less what the fall-throughs save: into the loop (one line already
-        // read), out of it into the call (the `beq` not taken, the same line).
+        // read), out of it into the call (the `beq` not taken, the same line);
+        // and the back edge's target, in the line of its `b` (in the cache).
         let plan_cost = |n: u64| {
             let (i, c) = cost(plan, &[1, n + 1, n, 1]);
             let (hi, hc) = cost(helper, &[n]);
-            (i + hi, c + hc - 6 - 9 * n)
+            (i + hi, c + hc - 6 - 9 * n - 6 * n)
         };
         assert_eq!(blocks(plan)[0].fall_through_saving, (0, 6));
         assert_eq!(blocks(plan)[1].fall_through_saving, (3, 6));
