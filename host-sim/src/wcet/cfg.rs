@@ -20,6 +20,7 @@
 
 use super::cpi::{instruction_timing, Class};
 pub use super::flash_data::FlashData;
+pub use super::memory_model::MemoryModel;
 use super::WcetError;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
@@ -80,7 +81,7 @@ const CONDITIONS: [&str; 16] = [
 
 /// `bne` → `b`, `popeq` → `pop`, `bx` unchanged (only a two-letter condition suffix
 /// that leaves a known base is stripped).
-fn strip_condition(base: &str) -> &str {
+pub(super) fn strip_condition(base: &str) -> &str {
     if base.len() > 2 {
         let (head, tail) = base.split_at(base.len() - 2);
         if CONDITIONS.contains(&tail)
@@ -350,171 +351,6 @@ impl Function {
             }
         }
         done
-    }
-}
-
-/// The memory model under which the block cycles are worst cases. Every term is
-/// pessimistic (the ART accelerator's instruction and data caches are assumed to
-/// miss on every access, and fetch never overlaps execution).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct MemoryModel {
-    /// Flash wait states (5 at 168 MHz and 3.3 V, RM0090 table 10).
-    pub flash_wait_states: u32,
-    /// Bytes delivered by one flash access (128-bit lines).
-    pub flash_line_bytes: u32,
-    /// `[flash_start, flash_end)`: code there is fetched through the flash.
-    pub flash: (u32, u32),
-    /// Which data loads may read flash ([`FlashData::classify`] decides it for a
-    /// binary; [`FlashData::Anywhere`] assumes nothing).
-    pub flash_data: FlashData,
-}
-
-impl MemoryModel {
-    /// The STM32F405 at 168 MHz: 5 wait states, 16-byte lines, flash at 0x0800_0000.
-    pub const STM32F405: MemoryModel = MemoryModel {
-        flash_wait_states: 5,
-        flash_line_bytes: 16,
-        flash: (0x0800_0000, 0x0810_0000),
-        flash_data: FlashData::Anywhere(Vec::new()),
-    };
-
-    /// The assumptions, for the report.
-    pub fn assumptions(&self) -> Vec<String> {
-        vec![
-            format!(
-                "Core: Cortex-M4F; per-instruction worst cases from the Cortex-M4 TRM (r0p1, \
-                 chapter 3): every branch taken with a 3-cycle pipeline refill (instructions \
-                 skipped by IT included), except a conditional branch or return on the edge \
-                 where it falls through (1 cycle, not taken), loads/stores 2 (LDRD/STRD 3), \
-                 LDM/STM/PUSH/POP 1+N (+3 loading pc), SDIV/UDIV 12, VDIV/VSQRT 14, \
-                 VMLA/VFMA family 3, VMOV core<->FPU 2, VLDM/VSTM 1+N; unknown instructions 4."
-            ),
-            format!(
-                "Instruction fetch: from flash with {} wait states, {}-byte lines, the ART \
-                 accelerator's prefetch off and its instruction cache on (the ECU's init sets \
-                 FLASH_ACR so). Each line a block touches costs {} cycles, added to (not \
-                 overlapped with) the block's execution, and once more after each call (the \
-                 return address's line); a fall-through into the line the previous block \
-                 ended in is not charged again (the flash interface's 128-bit line buffer, \
-                 RM0090 3.5.2), nor is a taken branch's target in the branch's own line \
-                 (the cache holds the line just read). The cache is counted on only in loops that call nothing and \
-                 touch at most 64 lines: its 64 lines are replaced least recently used \
-                 (RM0090 3.5.2), so such a loop fetches each line once per entry; a \
-                 preemption is charged a refill of the whole cache.",
-                self.flash_wait_states,
-                self.flash_line_bytes,
-                self.flash_wait_states + 1
-            ),
-            self.flash_data.describe(self.flash_wait_states),
-            format!(
-                "Bus: no DMA, no other master; the core is the only user of the flash and SRAM \
-                 buses. Interrupt entry: 12 cycles (TRM, with FPU lazy stacking reserving the \
-                 frame) and {} more for the vector read from flash; exit: 12 cycles and the \
-                 preempted code's line fetched again ({}). Charged per preemption in the \
-                 response-time analysis.",
-                self.flash_wait_states,
-                self.line_fetch_cycles()
-            ),
-        ]
-    }
-
-    /// Worst-case cycles of a block's instructions, in the function that starts at
-    /// `function`.
-    pub fn block_cycles(&self, function: u32, insns: &[Instruction]) -> u64 {
-        let through_registers = self.flash_data.may_read_flash(function);
-        let mut cycles: u64 = 0;
-        for i in insns {
-            let (class, c) = i.timing();
-            cycles += u64::from(c);
-            let loads = matches!(class, Class::Load | Class::LoadMultiple)
-                || (class == Class::FpuLoadStore
-                    && (i.base().starts_with("vldr") || i.base().starts_with("vldm")));
-            let from_pc = class == Class::TableBranch || (loads && i.operands.contains("[pc"));
-            // `pop`, `vpop` and `ldm sp!` read the stack too.
-            let from_sp = i.operands.contains("[sp")
-                || i.operands.starts_with("sp")
-                || matches!(strip_condition(i.base()), "pop" | "vpop");
-            if from_pc || (loads && !from_sp && through_registers) {
-                cycles += u64::from(self.flash_wait_states);
-            }
-        }
-        // Fetch: every flash line the block's bytes touch, and after every call
-        // the line of its return address once more (the callee's fetches went
-        // elsewhere).
-        if let Some((lo, hi)) = self.block_lines(insns) {
-            {
-                let calls = insns
-                    .iter()
-                    .filter(|i| matches!(strip_condition(i.base()), "bl" | "blx"))
-                    .count() as u64;
-                cycles += (hi - lo + 1 + calls) * self.line_fetch_cycles();
-            }
-        }
-        cycles
-    }
-
-    /// Cycles one flash line fetch costs: the wait states and the access.
-    pub fn line_fetch_cycles(&self) -> u64 {
-        u64::from(self.flash_wait_states + 1)
-    }
-
-    fn in_flash(&self, address: u32) -> bool {
-        (self.flash.0..self.flash.1).contains(&address)
-    }
-
-    fn line_of(&self, address: u32) -> u64 {
-        u64::from(address) / u64::from(self.flash_line_bytes.max(1))
-    }
-
-    /// Cycles that [`Self::block_cycles`] charges a block ending in `last` and its
-    /// fall-through successor starting with `next`, which falling through does not
-    /// spend:
-    ///
-    /// * the pipeline refill of a conditional branch or return that is not taken
-    ///   (`transfer`: the block ends in one): the TRM gives 1 cycle not taken, the
-    ///   block charged 1 + 3;
-    /// * the successor's first flash line when the block's last byte is in it: a
-    ///   sequential fetch in the line just read is served by the flash interface's
-    ///   128-bit line buffer (RM0090 §3.5.2), without a flash access. A block that
-    ///   calls pays its return line in [`Self::block_cycles`].
-    pub fn fall_through_saving(
-        &self,
-        last: Option<&Instruction>,
-        next: Option<&Instruction>,
-        transfer: bool,
-    ) -> (u64, u64) {
-        let (Some(last), Some(next)) = (last, next) else {
-            return (0, 0);
-        };
-        let refill = match last.timing().0 {
-            Class::Branch => true,
-            Class::LoadMultiple => last.pops_pc(),
-            _ => false,
-        };
-        let end = last.address + last.bytes - 1;
-        let same_line = self.in_flash(end)
-            && self.in_flash(next.address)
-            && self.line_of(end) == self.line_of(next.address);
-        (
-            if transfer && refill { 3 } else { 0 },
-            if same_line {
-                self.line_fetch_cycles()
-            } else {
-                0
-            },
-        )
-    }
-
-    /// The first and last flash line a block's instructions touch; `None` outside
-    /// flash.
-    pub fn block_lines(&self, insns: &[Instruction]) -> Option<(u64, u64)> {
-        let (first, last) = (insns.first()?, insns.last()?);
-        self.in_flash(first.address).then(|| {
-            (
-                self.line_of(first.address),
-                self.line_of(last.address + last.bytes - 1),
-            )
-        })
     }
 }
 

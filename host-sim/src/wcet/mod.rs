@@ -2,7 +2,8 @@
 //!
 //! | module | concept |
 //! |---|---|
-//! | [`cfg`] | control-flow graphs from the Thumb-2 disassembly; per-block worst-case cycles under a stated memory model |
+//! | [`cfg`] | control-flow graphs from the Thumb-2 disassembly; per-block worst-case cycles |
+//! | [`memory_model`] | the processor and memory model the cycles are worst cases under: Cortex-M4 timing, flash lines and wait states, the ART accelerator |
 //! | [`flash_data`] | which data loads can read flash (the ELF's sections, the ways code forms addresses) |
 //! | [`cache`] | the ART accelerator's instruction cache: loops whose lines stay cached fetch each once per entry (persistence) |
 //! | [`loops`] | dominators and natural loops; irreducible cycles refused |
@@ -36,6 +37,7 @@ pub mod flash_data;
 pub mod graph;
 pub mod ipet;
 pub mod loops;
+pub mod memory_model;
 pub mod report;
 pub mod rta;
 pub mod stack;
