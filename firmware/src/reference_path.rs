@@ -89,10 +89,14 @@ pub const DEFAULT_SEARCH_BEHIND_M: f32 = 20.0;
 /// Default length of path searched ahead of the hint by [`ReferencePath::project`], m.
 pub const DEFAULT_SEARCH_AHEAD_M: f32 = 40.0;
 
+/// Rows of the window of the road the ECU holds (its `PlanTask`'s path capacity;
+/// the simulator sends the next window as the car moves on).
+pub const ECU_PATH_ROWS: usize = 320;
+
 /// Most steps of the binary search that finds a distance's segment, on a path
-/// of the ECU's window ([`crate::tasks::ECU_PATH_ROWS`] vertices, so at most as
-/// many segments): [`binary_search_steps`] of it, steps (for the WCET analysis).
-pub const ECU_PATH_SEARCH_STEPS: usize = binary_search_steps(crate::tasks::ECU_PATH_ROWS);
+/// of the ECU's window ([`ECU_PATH_ROWS`] vertices, so at most as many segments):
+/// [`binary_search_steps`] of it, steps (for the WCET analysis).
+pub const ECU_PATH_SEARCH_STEPS: usize = binary_search_steps(ECU_PATH_ROWS);
 
 /// Most steps of a binary search over `len` entries that halves `hi - lo` from
 /// `len` until it is 1: `⌈log₂ len⌉` (0 for `len ≤ 1`), steps.

@@ -49,9 +49,7 @@ use crate::state_estimate::StateEstimate;
 use crate::Real;
 
 pub use crate::timing::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
-/// Rows of the window of the road the ECU holds (its `PlanTask`'s path capacity;
-/// the simulator sends the next window as the car moves on).
-pub const ECU_PATH_ROWS: usize = 320;
+pub use crate::reference_path::ECU_PATH_ROWS;
 /// Weight of the newest value in the plan task's low-pass filter of the yaw
 /// loop's share of the measured steering, per activation (dimensionless; 0.2 at
 /// 10 Hz is a time constant of about 0.5 s): [`PlanTask::initial_steering`].
