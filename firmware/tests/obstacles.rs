@@ -785,3 +785,54 @@ fn a_parabola_longer_than_half_a_lap_overlaps_a_window_half_a_lap_behind_it() ->
     assert!(!p.overlaps_s_window(&circle, b + 0.1, b + 0.2));
     Ok(())
 }
+
+#[test]
+fn the_outside_curvature_is_the_road_s_within_the_parabola_s_range() -> Result<(), String> {
+    // Open road: a sharp left bend (κ = 0.05 1/m) on [0, 40) m, straight, a
+    // gentle left bend (0.02) on [180, 200), straight, a sharp one on
+    // [300, 330), straight to 340 m. An obstacle on the right in the gentle
+    // bend, at s = 190 m: its parabola's range (±14 m) holds that bend alone.
+    let kappa = |s: f64| match s {
+        s if s < 40.0 => 0.05,
+        s if (180.0..200.0).contains(&s) => 0.02,
+        s if (300.0..330.0).contains(&s) => 0.05,
+        _ => 0.0,
+    };
+    // Every 0.5 m: position and heading.
+    let mut fine = vec![([0.0f64, 0.0f64], 0.0f64)];
+    for k in 0..680 {
+        let (p, th) = fine[k];
+        let mid = th + 0.5 * kappa(0.5 * k as f64 + 0.25) * 0.5;
+        let next = th + kappa(0.5 * k as f64 + 0.25) * 0.5;
+        fine.push(([p[0] + 0.5 * mid.cos(), p[1] + 0.5 * mid.sin()], next));
+    }
+    let pts: Vec<[f64; 2]> = fine.iter().step_by(4).map(|(p, _)| *p).collect();
+    let mut road: ReferencePath<f64, 256> = ReferencePath::new();
+    road.load(&pts, None, false).map_err(text)?;
+    let at = |s: f64, lat: f64| {
+        let (p, th) = fine[(2.0 * s) as usize];
+        [p[0] - lat * th.sin(), p[1] + lat * th.cos()]
+    };
+    let mut o = Obstacle::from_vertices(
+        2,
+        &[
+            at(188.0, -1.5),
+            at(192.0, -1.5),
+            at(192.0, -3.0),
+            at(188.0, -3.0),
+        ],
+    )
+    .map_err(text)?;
+    o.s_hint_m = Some(190.0);
+    let p = build_parabola(&ObstacleSettings::default(), &road, 0, &o).map_err(text)?;
+    let (a, b) = p.s_range_m();
+    if !(p.side == Side::Left && 41.0 < a && a < 179.0 && 201.0 < b && b < 299.0) {
+        return Err(format!("{:?}, range [{a}, {b}]", p.side));
+    }
+    assert!(
+        (p.outside_kappa_1pm - 0.02).abs() < 0.003,
+        "{}",
+        p.outside_kappa_1pm
+    );
+    Ok(())
+}
