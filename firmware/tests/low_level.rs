@@ -1175,3 +1175,129 @@ fn the_measured_speed_is_the_velocitys_norm_with_the_sign_of_its_forward_part() 
         assert_eq!(a.v_mps, v, "({vx}, {vy})");
     }
 }
+
+#[test]
+fn the_speed_loop_brakes_within_what_the_feedforward_leaves() -> Result<(), ControlFault> {
+    // Accelerating plan (2 m/s²: T_ff = 1500·2·0.3 = 900 N·m) with the car
+    // 15 m/s too fast: the PID asks for more than the brakes give; the total is
+    // the braking limit, T_ff included (the PID's window is −4500 − 900).
+    let cfg = LowLevelConfig::<f64>::default();
+    let mut plan = straight_plan(0, 10.0);
+    for u in plan.inputs.iter_mut() {
+        *u = [2.0, 0.0];
+    }
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(25.0, 0.0), 0)?;
+    assert!((a.torque_ff_nm - 900.0).abs() < 1e-9, "{}", a.torque_ff_nm);
+    assert_eq!(a.torque_total_nm, -cfg.max_braking_torque_nm);
+    assert!((sum(&a) + cfg.max_braking_torque_nm).abs() < 1e-9);
+    Ok(())
+}
+
+#[test]
+fn the_yaw_loop_steers_within_what_the_open_loop_steering_leaves() -> Result<(), ControlFault> {
+    // The plan steers 0.5 rad; the car is yawed 1 rad left of it: the yaw loop
+    // asks for its limit, −0.3 rad (within the window −0.6 − 0.5), and the
+    // steering is 0.5 − 0.3 = 0.2 rad.
+    let cfg = LowLevelConfig::<f64>::default();
+    let mut plan = straight_plan(0, 10.0);
+    for n in plan.nodes.iter_mut() {
+        n.delta_rad = 0.5;
+    }
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 1.0), 0)?;
+    assert_eq!(a.delta_ol_rad, 0.5);
+    assert!(
+        (a.delta_cl_rad + 0.3).abs() < 1e-12,
+        "δ_cl = {}",
+        a.delta_cl_rad
+    );
+    assert!((a.delta_rad - 0.2).abs() < 1e-12, "δ = {}", a.delta_rad);
+    Ok(())
+}
+
+#[test]
+fn a_plan_of_finite_numbers_is_accepted_whatever_their_signs() -> Result<(), ControlFault> {
+    // Every number finite, two of them ±1e308 in one node (or input) beyond
+    // the ones read at t = 0: finite is all the check asks, whichever two.
+    let cfg = cfg_no_ff();
+    for field in 1..6 {
+        let mut plan = straight_plan(0, 10.0);
+        let n = &mut plan.nodes[10];
+        n.s_m = 1e308;
+        *[
+            &mut n.s_m,
+            &mut n.x_m,
+            &mut n.y_m,
+            &mut n.v_mps,
+            &mut n.psi_rad,
+            &mut n.delta_rad,
+        ][field] = -1e308;
+        let mut st = LowLevelState::new();
+        let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 0)?;
+        assert_eq!(a.v_ref_mps, 10.0, "field {field}");
+    }
+    let mut plan = straight_plan(0, 10.0);
+    plan.inputs[10] = [1e308, -1e308];
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 0)?;
+    assert_eq!(a.v_ref_mps, 10.0);
+    Ok(())
+}
+
+#[test]
+fn wrap_pi_leaves_an_angle_within_pi_unchanged_to_the_bit() {
+    // (−π, π] is its own wrap: no rounding from adding and removing 2π.
+    let pi = std::f64::consts::PI;
+    for x in [0.0, 1e-10, 1e-3, 0.1, -0.1, 0.3, 0.7, 1.1, -3.0, 3.0, pi] {
+        assert_eq!(wrap_pi(x), x, "{x}");
+    }
+}
+
+#[test]
+fn a_finite_car_model_is_used_however_large_its_numbers() -> Result<(), ControlFault> {
+    // Finite mass and resistance, far beyond any car: the feed-forward is the
+    // model's, at the torque limits (the configured car's would be 0 here, on
+    // a plan of constant speed followed at that speed).
+    let cfg = LowLevelConfig::<f64>::default();
+    let plan = straight_plan(0, 10.0);
+    for (mass_kg, resistance_n, ff) in [
+        (1e200, 1e200, cfg.max_traction_torque_nm),
+        (1e308, -1e308, -cfg.max_braking_torque_nm),
+    ] {
+        let car = CarModel {
+            mass_kg,
+            resistance_n,
+            ..CarModel::configured(&cfg)
+        };
+        let mut st = LowLevelState::new();
+        let a = control_with_model(&cfg, &mut st, &plan, &est(10.0, 0.0), 0, &car)?;
+        assert_eq!(a.torque_ff_nm, ff, "({mass_kg}, {resistance_n})");
+    }
+    Ok(())
+}
+
+#[test]
+fn a_yaw_jump_of_exactly_pi_keeps_the_derivative() -> Result<(), ControlFault> {
+    // Only a jump by more than π is taken for a wrapped estimate. The loop last
+    // saw a yaw of 0; the car now reads π, the plan's heading: no error, and
+    // the jump's derivative (0.02·(π/0.01)/6 ≈ 1 rad) steers to the loop's
+    // limit, −0.3 rad.
+    let cfg = cfg_no_ff();
+    let pi = std::f64::consts::PI;
+    let mut plan = straight_plan(0, 10.0);
+    for n in plan.nodes.iter_mut() {
+        n.psi_rad = pi;
+    }
+    let mut st = LowLevelState::new();
+    st.yaw_pid.initialised = true;
+    st.yaw_pid.prev_measurement = 0.0;
+    let a = control(&cfg, &mut st, &plan, &est(10.0, pi), 0)?;
+    assert_eq!(a.yaw_error_rad, 0.0);
+    assert!(
+        (a.delta_cl_rad + 0.3).abs() < 1e-12,
+        "δ_cl = {}",
+        a.delta_cl_rad
+    );
+    Ok(())
+}

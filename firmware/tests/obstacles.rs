@@ -559,3 +559,280 @@ fn speed_cap_by_hand() {
     );
     assert_eq!(cap(across(Side::Left, 0.2), 140.0 - d + 1.0, 0.0), 10.0);
 }
+
+/// A failure of a test step, as text (the tests below return `Result`).
+fn text<E: core::fmt::Debug>(e: E) -> String {
+    format!("{e:?}")
+}
+
+/// Settings with binary-exact lengths (`m_y` = 1 m, room needed 1.75 m,
+/// `c` = 0.25 1/m, half length 2 m) so that ties are exact.
+fn exact_settings() -> ObstacleSettings<f64> {
+    ObstacleSettings {
+        steepness_1pm: 0.25,
+        half_car_width_m: 0.75,
+        lateral_buffer_m: 0.25,
+        half_car_length_m: 2.0,
+        default_half_width_m: 3.5,
+    }
+}
+
+#[test]
+fn the_frame_starts_at_the_vertex_nearest_the_path_when_all_are_on_one_side() -> Result<(), String>
+{
+    // On `straight()` s = X + 100. The centroid of each triangle is at
+    // X = 46.67 m (s = 146.67 m).
+    let path = straight();
+    let s = ObstacleSettings::default();
+    let frame_s = |v: &[[f64; 2]]| -> Result<f64, String> {
+        let o = Obstacle::from_vertices(1, v).map_err(text)?;
+        Ok(build_parabola(&s, &path, 0, &o).map_err(text)?.s_m)
+    };
+    let centroid = 100.0 + 140.0 / 3.0;
+    for (v, want, what) in [
+        // All left (right): the nearest vertex, the first of two at 1 m.
+        ([[40.0, 1.0], [50.0, 1.0], [50.0, 3.0]], 140.0, "all left"),
+        (
+            [[40.0, -1.0], [50.0, -1.0], [50.0, -3.0]],
+            140.0,
+            "all right",
+        ),
+        // Across the centre line: the centroid's foot point.
+        ([[40.0, 1.0], [50.0, -0.5], [50.0, 3.0]], centroid, "across"),
+        (
+            [[40.0, -1.0], [50.0, 0.5], [50.0, -3.0]],
+            centroid,
+            "across",
+        ),
+        // A vertex on the centre line is on neither side.
+        (
+            [[40.0, 0.0], [50.0, 1.0], [50.0, 3.0]],
+            centroid,
+            "touching, left",
+        ),
+        (
+            [[40.0, 0.0], [50.0, -1.0], [50.0, -3.0]],
+            centroid,
+            "touching, right",
+        ),
+    ] {
+        let got = frame_s(&v)?;
+        if (got - want).abs() > 1e-9 {
+            return Err(format!("{what}: frame at s = {got}, want {want}"));
+        }
+    }
+    Ok(())
+}
+
+#[test]
+fn exactly_the_room_needed_is_not_blocked() -> Result<(), String> {
+    let path = straight();
+    let s = exact_settings();
+    assert_eq!(s.required_room_m(), 1.75);
+    // 4 − 2.25 = 1.75 m free on each side.
+    let fits = build_parabola(&s, &path, 0, &boxed(60.0, 62.0, -2.25, 2.25));
+    assert!(fits.is_ok(), "{fits:?}");
+    // 1/64 m less on the roomier side is blocked by that much.
+    let tight = build_parabola(&s, &path, 3, &boxed(60.0, 62.0, -2.265625, 2.265625));
+    assert_eq!(
+        tight.map(|p| p.side),
+        Err(ObstacleError::RoadBlocked {
+            obstacle: 3,
+            missing_m: 0.015625
+        })
+    );
+    Ok(())
+}
+
+#[test]
+fn a_region_that_only_touches_the_road_edge_does_not_reach_the_road() -> Result<(), String> {
+    // One vertex 6 m right of the centre line, passed on the left (σ = 1):
+    // points (±2, −6 + 1), apex −5 + c·2² = −4: exactly the right edge.
+    let path = straight();
+    let s = exact_settings();
+    let touching = Obstacle::from_vertices(1, &[[50.0, -6.0]]).map_err(text)?;
+    let p = build_parabola(&s, &path, 0, &touching).map_err(text)?;
+    assert_eq!((p.side, p.eta_apex_m), (Side::Left, -4.0));
+    assert!(!p.reaches_road);
+    assert!(!p.is_relevant_at_s(&path, 150.0));
+    assert_eq!(p.relevant_s_at(&path, 150.0), None);
+    // Half a metre closer: it reaches 2·sqrt(0.5/c) = 2.83 m of road.
+    let reaching = Obstacle::from_vertices(1, &[[50.0, -5.5]]).map_err(text)?;
+    let p = build_parabola(&s, &path, 0, &reaching).map_err(text)?;
+    assert!(p.reaches_road);
+    assert!((p.xi_max_m - p.xi_min_m - 2.0 * 2.0f64.sqrt()).abs() < 1e-12);
+    Ok(())
+}
+
+#[test]
+fn the_manager_takes_as_many_obstacles_as_it_holds_and_clears() -> Result<(), String> {
+    let path = straight();
+    let s = ObstacleSettings::default();
+    let full: Vec<Obstacle<f64>> = (0..MAX_OBSTACLES)
+        .map(|k| boxed(10.0 * k as f64, 10.0 * k as f64 + 1.0, -3.0, -2.0))
+        .collect();
+    let mut m = ObstacleManager::new();
+    assert_eq!(m.update(&s, &path, &full), Ok(()));
+    assert_eq!(m.parabolas().len(), MAX_OBSTACLES);
+    m.clear();
+    assert!(m.parabolas().is_empty());
+    Ok(())
+}
+
+#[test]
+fn at_a_tie_the_apex_is_the_first_candidate() {
+    // At 1e20 m, c·d² ≤ 1 is below the rounding: every candidate (the two
+    // points, their crossing at 0.5) gives the same height; the first (the
+    // first point's abscissa) is kept.
+    assert_eq!(
+        minimal_apex(&[(0.0, 1e20), (1.0, 1e20)], 1.0),
+        Some((0.0, 1e20))
+    );
+}
+
+/// `relevant_s_at` against `is_relevant_at_s` and `unwrap_s` over ±1 km of node
+/// abscissae round the parabola: (nodes where it is relevant, where it is not).
+fn relevant_s_at_agrees<const CAP: usize>(
+    p: &Parabola<f64>,
+    path: &ReferencePath<f64, CAP>,
+) -> Result<(usize, usize), String> {
+    let (mut some, mut none) = (0, 0);
+    for k in -2000..=2000 {
+        let sn = p.s_m + 0.5 * k as f64;
+        let want = if p.is_relevant_at_s(path, sn) {
+            some += 1;
+            Some(path.unwrap_s(sn, p.s_m))
+        } else {
+            none += 1;
+            None
+        };
+        let got = p.relevant_s_at(path, sn);
+        if got != want {
+            return Err(format!("at s = {sn}: {got:?}, want {want:?}"));
+        }
+    }
+    Ok((some, none))
+}
+
+#[test]
+fn relevant_s_at_is_the_unwrapped_abscissa_where_the_parabola_is_relevant() -> Result<(), String> {
+    // Circle of radius 50 m (closed, L = 314 m) and the straight open path.
+    let pts: Vec<[f64; 2]> = (0..200)
+        .map(|i| {
+            let a = 2.0 * PI * i as f64 / 200.0;
+            [50.0 * a.cos(), 50.0 * a.sin()]
+        })
+        .collect();
+    let mut circle: ReferencePath<f64, 256> = ReferencePath::new();
+    circle.load(&pts, None, true).map_err(text)?;
+    let s = ObstacleSettings::default();
+    let o = Obstacle::from_vertices(9, &[[52.0, 0.5], [53.0, 1.5], [53.0, -0.5]]).map_err(text)?;
+    let on_circle = build_parabola(&s, &circle, 0, &o).map_err(text)?;
+    let (some, none) = relevant_s_at_agrees(&on_circle, &circle)?;
+    // Relevant on each of the 7 laps the nodes cover, not everywhere.
+    assert!(some > 7 && none > some, "{some} / {none}");
+    let line = straight();
+    let on_line = build_parabola(&s, &line, 0, &boxed(48.0, 52.0, -3.0, -1.5)).map_err(text)?;
+    let (some, none) = relevant_s_at_agrees(&on_line, &line)?;
+    assert!(some > 0 && none > some, "{some} / {none}");
+    // Off the road: relevant nowhere.
+    let off = build_parabola(&s, &line, 0, &boxed(48.0, 52.0, -12.0, -10.0)).map_err(text)?;
+    assert_eq!(relevant_s_at_agrees(&off, &line)?.0, 0);
+    Ok(())
+}
+
+#[test]
+fn a_parabola_longer_than_half_a_lap_overlaps_a_window_half_a_lap_behind_it() -> Result<(), String>
+{
+    // Circle of radius 20 m (L = 125.7 m), a flat parabola (c = 0.0015 1/m)
+    // whose apex is ahead of its frame's origin (the obstacle's vertex nearest
+    // the centre line is ahead of its centroid): its range reaches more than
+    // half a lap ahead, past the point half a lap behind its origin.
+    let pts: Vec<[f64; 2]> = (0..200)
+        .map(|i| {
+            let a = 2.0 * PI * i as f64 / 200.0;
+            [20.0 * a.cos(), 20.0 * a.sin()]
+        })
+        .collect();
+    let mut circle: ReferencePath<f64, 256> = ReferencePath::new();
+    circle.load(&pts, None, true).map_err(text)?;
+    let polar = |r: f64, a: f64| [r * a.cos(), r * a.sin()];
+    let o = Obstacle::from_vertices(
+        4,
+        &[
+            polar(19.5, 0.0),
+            polar(22.0, -0.3),
+            polar(23.0, -0.3),
+            polar(22.5, -0.25),
+        ],
+    )
+    .map_err(text)?;
+    let s = ObstacleSettings {
+        steepness_1pm: 0.0015,
+        ..ObstacleSettings::default()
+    };
+    let p = build_parabola(&s, &circle, 0, &o).map_err(text)?;
+    let l = circle.length_m();
+    let (a, b) = p.s_range_m();
+    let behind = p.s_m - 0.5 * l;
+    // The window [behind + 0.25, behind + 0.5]: one lap on it is in the range,
+    // on this lap it ends before the range begins.
+    if !(p.reaches_road && b - l > behind + 0.5 && a > behind + 0.5 && b - a < l - 0.4) {
+        return Err(format!("s = {}, range [{a}, {b}], L = {l}", p.s_m));
+    }
+    assert!(p.overlaps_s_window(&circle, behind + 0.25, behind + 0.5));
+    // Between the range's end and its start one lap on it does not.
+    assert!(!p.overlaps_s_window(&circle, b + 0.1, b + 0.2));
+    Ok(())
+}
+
+#[test]
+fn the_outside_curvature_is_the_road_s_within_the_parabola_s_range() -> Result<(), String> {
+    // Open road: a sharp left bend (κ = 0.05 1/m) on [0, 40) m, straight, a
+    // gentle left bend (0.02) on [180, 200), straight, a sharp one on
+    // [300, 330), straight to 340 m. An obstacle on the right in the gentle
+    // bend, at s = 190 m: its parabola's range (±14 m) holds that bend alone.
+    let kappa = |s: f64| match s {
+        s if s < 40.0 => 0.05,
+        s if (180.0..200.0).contains(&s) => 0.02,
+        s if (300.0..330.0).contains(&s) => 0.05,
+        _ => 0.0,
+    };
+    // Every 0.5 m: position and heading.
+    let mut fine = vec![([0.0f64, 0.0f64], 0.0f64)];
+    for k in 0..680 {
+        let (p, th) = fine[k];
+        let mid = th + 0.5 * kappa(0.5 * k as f64 + 0.25) * 0.5;
+        let next = th + kappa(0.5 * k as f64 + 0.25) * 0.5;
+        fine.push(([p[0] + 0.5 * mid.cos(), p[1] + 0.5 * mid.sin()], next));
+    }
+    let pts: Vec<[f64; 2]> = fine.iter().step_by(4).map(|(p, _)| *p).collect();
+    let mut road: ReferencePath<f64, 256> = ReferencePath::new();
+    road.load(&pts, None, false).map_err(text)?;
+    let at = |s: f64, lat: f64| {
+        let (p, th) = fine[(2.0 * s) as usize];
+        [p[0] - lat * th.sin(), p[1] + lat * th.cos()]
+    };
+    let mut o = Obstacle::from_vertices(
+        2,
+        &[
+            at(188.0, -1.5),
+            at(192.0, -1.5),
+            at(192.0, -3.0),
+            at(188.0, -3.0),
+        ],
+    )
+    .map_err(text)?;
+    o.s_hint_m = Some(190.0);
+    let p = build_parabola(&ObstacleSettings::default(), &road, 0, &o).map_err(text)?;
+    let (a, b) = p.s_range_m();
+    if !(p.side == Side::Left && 41.0 < a && a < 179.0 && 201.0 < b && b < 299.0) {
+        return Err(format!("{:?}, range [{a}, {b}]", p.side));
+    }
+    assert!(
+        (p.outside_kappa_1pm - 0.02).abs() < 0.003,
+        "{}",
+        p.outside_kappa_1pm
+    );
+    Ok(())
+}
