@@ -48,8 +48,8 @@ use crate::reference_path::{PathError, ReferencePath};
 use crate::state_estimate::StateEstimate;
 use crate::Real;
 
-pub use crate::timing::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
 pub use crate::reference_path::ECU_PATH_ROWS;
+pub use crate::timing::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
 /// Weight of the newest value in the plan task's low-pass filter of the yaw
 /// loop's share of the measured steering, per activation (dimensionless; 0.2 at
 /// 10 Hz is a time constant of about 0.5 s): [`PlanTask::initial_steering`].

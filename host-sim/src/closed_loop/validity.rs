@@ -306,7 +306,7 @@ impl CircleRun {
         let e_y = px.hypot(py) - self.radius_m;
         let tangent = py.atan2(px) + core::f64::consts::FRAC_PI_2;
         let beta = s.vy_mps.atan2(s.vx_mps);
-        let e_chi = wrap(s.psi_rad + beta - tangent);
+        let e_chi = firmware::low_level::wrap_pi(s.psi_rad + beta - tangent);
         let v = s.speed_mps().max(0.5);
         let ey_dot = -v * e_chi.sin();
         let l = self.wheelbase_m;
@@ -422,17 +422,6 @@ impl CircleRun {
             StopCause::NotSteady,
             "did not settle within 30 s".to_string(),
         ))
-    }
-}
-
-/// Angle wrapped to `(−π, π]`, rad.
-fn wrap(a: f64) -> f64 {
-    let two_pi = 2.0 * core::f64::consts::PI;
-    let w = a.rem_euclid(two_pi);
-    if w > core::f64::consts::PI {
-        w - two_pi
-    } else {
-        w
     }
 }
 
