@@ -19,6 +19,20 @@ fn straight() -> ReferencePath<f64, 64> {
     p
 }
 
+/// A closed circle of radius `r` m about the origin, counter-clockwise, 200
+/// points, default widths (3.5 m).
+fn circle_path(r: f64) -> ReferencePath<f64, 256> {
+    let pts: Vec<[f64; 2]> = (0..200)
+        .map(|i| {
+            let a = 2.0 * PI * i as f64 / 200.0;
+            [r * a.cos(), r * a.sin()]
+        })
+        .collect();
+    let mut p = ReferencePath::new();
+    p.load(&pts, None, true).unwrap();
+    p
+}
+
 fn boxed(x0: f64, x1: f64, y0: f64, y1: f64) -> Obstacle<f64> {
     Obstacle::from_vertices(7, &[[x0, y0], [x1, y0], [x1, y1], [x0, y1]]).unwrap()
 }
@@ -273,14 +287,7 @@ fn relevance_window_covers_where_the_region_reaches_the_road() {
 #[test]
 fn curved_closed_path_frame_and_wrap() {
     // Circle of radius 50 m, counter-clockwise, default widths (3.5 m).
-    let pts: Vec<[f64; 2]> = (0..200)
-        .map(|i| {
-            let a = 2.0 * PI * i as f64 / 200.0;
-            [50.0 * a.cos(), 50.0 * a.sin()]
-        })
-        .collect();
-    let mut path: ReferencePath<f64, 256> = ReferencePath::new();
-    path.load(&pts, None, true).unwrap();
+    let path = circle_path(50.0);
     let s = ObstacleSettings::default();
     // Obstacle outside the circle (to the right of a left turn) at angle 1 rad.
     let a: f64 = 1.0;
@@ -357,14 +364,7 @@ fn linearised_half_plane_is_tangent_and_conservative_outside() {
 #[test]
 fn speed_cap_binds_only_for_an_obstacle_on_the_outside_of_a_bend() {
     let r = 50.0;
-    let pts: Vec<[f64; 2]> = (0..200)
-        .map(|i| {
-            let a = 2.0 * PI * i as f64 / 200.0;
-            [r * a.cos(), r * a.sin()]
-        })
-        .collect();
-    let mut bend: ReferencePath<f64, 256> = ReferencePath::new();
-    bend.load(&pts, None, true).unwrap();
+    let bend = circle_path(r);
     let v_max = 25.0;
     let s = ObstacleSettings::for_vehicle(1.8, 4.45, 1.0, v_max);
     let vel = VelocityPlannerSettings::default();
@@ -717,14 +717,7 @@ fn relevant_s_at_agrees<const CAP: usize>(
 #[test]
 fn relevant_s_at_is_the_unwrapped_abscissa_where_the_parabola_is_relevant() -> Result<(), String> {
     // Circle of radius 50 m (closed, L = 314 m) and the straight open path.
-    let pts: Vec<[f64; 2]> = (0..200)
-        .map(|i| {
-            let a = 2.0 * PI * i as f64 / 200.0;
-            [50.0 * a.cos(), 50.0 * a.sin()]
-        })
-        .collect();
-    let mut circle: ReferencePath<f64, 256> = ReferencePath::new();
-    circle.load(&pts, None, true).map_err(text)?;
+    let circle = circle_path(50.0);
     let s = ObstacleSettings::default();
     let o = Obstacle::from_vertices(9, &[[52.0, 0.5], [53.0, 1.5], [53.0, -0.5]]).map_err(text)?;
     let on_circle = build_parabola(&s, &circle, 0, &o).map_err(text)?;
@@ -748,14 +741,7 @@ fn a_parabola_longer_than_half_a_lap_overlaps_a_window_half_a_lap_behind_it() ->
     // whose apex is ahead of its frame's origin (the obstacle's vertex nearest
     // the centre line is ahead of its centroid): its range reaches more than
     // half a lap ahead, past the point half a lap behind its origin.
-    let pts: Vec<[f64; 2]> = (0..200)
-        .map(|i| {
-            let a = 2.0 * PI * i as f64 / 200.0;
-            [20.0 * a.cos(), 20.0 * a.sin()]
-        })
-        .collect();
-    let mut circle: ReferencePath<f64, 256> = ReferencePath::new();
-    circle.load(&pts, None, true).map_err(text)?;
+    let circle = circle_path(20.0);
     let polar = |r: f64, a: f64| [r * a.cos(), r * a.sin()];
     let o = Obstacle::from_vertices(
         4,
