@@ -630,6 +630,7 @@ fn block_copies_are_bounded_by_the_bytes_of_their_call_sites() {
             })
             .collect(),
         caps: Vec::new(),
+        counters: Default::default(),
     };
     let by_site = ipet::task_bound(&p, &ls, root, &facts, 0, &copies, Cost::Instructions).unwrap();
     assert_eq!(by_site.bound, 6 + 2 * 3 + 2 * 72);
@@ -834,6 +835,81 @@ fn a_cap_per_activation_counts_every_copy_of_its_line_together() {
     // Two copies of one line in one group share the cap: the body's runs are
     // counted twice against 3, 1.5 runs: 2 + 1.5 × 4 + 1 (the linear relaxation).
     assert_eq!(run(vec![cap(3), cap(3)]), 9);
+}
+
+/// Two loops of 16 iterations in `root`: the first (2 instructions) alone, the
+/// second (3 instructions) calling `leaf` (1).
+const TWO_COUNTED: &str = "
+08000000 <root>:
+ 8000000: b510         \tpush\t{r4, lr}
+ 8000002: 2410         \tmovs\tr4, #0x10
+ 8000004: 3c01         \tsubs\tr4, #0x1
+ 8000006: d1fd         \tbne\t0x8000004 <root+0x4> @ imm = #-0x6
+ 8000008: 2410         \tmovs\tr4, #0x10
+ 800000a: f000 f805    \tbl\t0x8000018 <leaf> @ imm = #0xa
+ 800000e: 3c01         \tsubs\tr4, #0x1
+ 8000010: d1fb         \tbne\t0x800000a <root+0xa> @ imm = #-0xa
+ 8000012: bd10         \tpop\t{r4, pc}
+
+08000018 <leaf>:
+ 8000018: 4770         \tbx\tlr
+";
+
+#[test]
+fn a_counter_bounds_a_loop_and_a_call_together() {
+    let p = program(TWO_COUNTED);
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let f = &p.functions[root];
+    let at = |addr: u32| {
+        ls[root]
+            .iter()
+            .position(|l| f.blocks[l.header].start == addr)
+            .unwrap()
+    };
+    let (first, second) = (at(0x8000004), at(0x800000a));
+    let call_block = f.blocks.iter().position(|b| b.start == 0x800000a).unwrap();
+    let bound = |per: Per, group: usize| {
+        let facts = [
+            LoopFact {
+                function: root,
+                loop_index: first,
+                bound: 15,
+                per,
+                group: None,
+                iterations: false,
+            },
+            LoopFact {
+                function: root,
+                loop_index: second,
+                bound: 15,
+                per: Per::Entry,
+                group: None,
+                iterations: false,
+            },
+        ];
+        let copies = ipet::CopySizes {
+            caps: vec![ipet::BlockCap {
+                function: root,
+                blocks: vec![call_block],
+                loop_index: None,
+                bound: 15,
+                activation_group: Some(group),
+            }],
+            counters: [(group, 7)].into_iter().collect(),
+            ..Default::default()
+        };
+        ipet::task_bound(&p, &ls, root, &facts, 0, &copies, Cost::Instructions)
+            .unwrap()
+            .bound
+    };
+    // Separate caps: the first loop's 15 back edges (16 runs of 2) and the call's
+    // 15 runs (of 3 + 1): 2 + 32 + 1 + 60 + 1.
+    assert_eq!(bound(Per::Activation, 3), 96);
+    // One counter (the call's group 3 counted in group 7, with the loop): 15 in
+    // all, best spent on the dearer call, the first loop's block once: 2 + 2 + 1
+    // + 60 + 1.
+    assert_eq!(bound(Per::Counted(7), 3), 66);
 }
 
 /// A copy loop that stores 8 bytes per trip on its short path (two `str`) and 9 on

@@ -141,7 +141,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             // One back edge per iteration, counted in `sol.iterations` ≤ `settings.max_iter`,
             // which the MPC (firmware's mpc.rs `step_inner`) sets to what is left of the activation's
             // `qp_max_iter` (QP_MAX_ITER on the ECU) after its earlier passes.
-            // wcet-bound: QP_MAX_ITER per activation
+            // Its iterations and `add`'s removals (below) each count one against the
+            // same cap: one counter.
+            // wcet-bound: QP_MAX_ITER per activation, counted in qp_iterations
             if sol.iterations >= settings.max_iter {
                 return QpStatus::IterationLimit;
             }
@@ -305,6 +307,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 return Err(QpStatus::IterationLimit);
             }
             sol.iterations += 1;
+            // wcet-bound: QP_MAX_ITER times per activation, counted in qp_iterations
             self.remove(pos);
             sol.removed += 1;
         }

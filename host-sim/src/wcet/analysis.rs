@@ -245,7 +245,9 @@ pub fn analyse(
         .filter_map(|a| Some(((a.file.clone(), a.line, a.within.clone()?), a)))
         .collect();
     let mut within_used: std::collections::BTreeSet<(String, u32, String)> = Default::default();
-    let copies = copy_sizes(&program, &ctx, &annotations);
+    let counter_of = annotations::counter_groups(&annotations)
+        .map_err(|e| anyhow::anyhow!("loop annotations: {e}"))?;
+    let copies = copy_sizes(&program, &ctx, &annotations, &counter_of);
     // A cap per activation that matches no call is stale (the code moved or was
     // inlined away): the bound it was meant to give would be missing.
     for (k, a) in annotations.iter().enumerate() {
@@ -480,7 +482,14 @@ pub fn analyse(
                     | annotations::Scope::LoopEntry
                     | annotations::Scope::Runs => Per::Entry,
                     annotations::Scope::Call => Per::Call,
-                    annotations::Scope::Activation => Per::Activation,
+                    annotations::Scope::Activation => match annotations
+                        .iter()
+                        .position(|b| std::ptr::eq(b, a))
+                        .filter(|_| a.counter.is_some())
+                    {
+                        Some(i) => Per::Counted(counter_of[i]),
+                        None => Per::Activation,
+                    },
                     annotations::Scope::Preemption => Per::Preemption,
                 },
                 group: None,
@@ -494,7 +503,7 @@ pub fn analyse(
             origin.insert(
                 (k, x),
                 format!(
-                    "{}:{}: `{}`{}{}",
+                    "{}:{}: `{}`{}{}{}",
                     a.file,
                     a.line,
                     a.expression,
@@ -510,7 +519,11 @@ pub fn analyse(
                         | annotations::Scope::Bytes
                         | annotations::Scope::LoopEntry
                         | annotations::Scope::Runs => "",
-                    }
+                    },
+                    a.counter
+                        .as_ref()
+                        .map(|c| format!(", counted in {c}"))
+                        .unwrap_or_default()
                 ),
             );
         }

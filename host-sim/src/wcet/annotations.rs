@@ -46,6 +46,14 @@
 //! at most EXPR times over one activation, summed over every copy of the line
 //! the compiler made: a recovery step the code caps per activation.
 //!
+//! With `, counted in NAME` after `per activation` or `times per activation`,
+//! the annotation shares its bound with every other annotation counted in
+//! `NAME` (all of them must give the same bound): the loop's iterations and the
+//! line's calls, summed over all of them, run at most EXPR times over one
+//! activation. One counter the code increments in several places (the QP's
+//! iterations: its main loop's and the removals that retry an addition) is then
+//! one constraint, not a cap per place.
+//!
 //! With `// wcet-bound in NAME: EXPR` (a loop's scopes only), the annotation holds
 //! for the copy of the line inlined into the binary function `NAME` (the last
 //! segment of its path), and the line's plain annotation for every other copy: a
@@ -115,6 +123,9 @@ pub struct Annotation {
     /// other copy: a loop whose bound depends on its caller (the rows appended one
     /// by one when a factor is rebuilt, each a longer loop than the last).
     pub within: Option<String>,
+    /// `, counted in NAME`: the counter whose one bound the annotation shares with
+    /// every other annotation counted in `NAME` (scopes per activation only).
+    pub counter: Option<String>,
 }
 
 /// The firmware's constants an annotation may name, with their values (read from
@@ -169,6 +180,7 @@ pub fn dependency_facts() -> Vec<Annotation> {
         bound,
         scope: Scope::Entry,
         within: None,
+        counter: None,
     };
     let mut facts = vec![
         fact(
@@ -370,6 +382,19 @@ pub fn parse_source(
         } else {
             continue;
         };
+        let (spec, counter) = match spec.rsplit_once(", counted in ") {
+            Some((head, name)) => {
+                let name = name.trim();
+                if name.is_empty() || !name.chars().all(|c| c.is_alphanumeric() || c == '_') {
+                    return Err(format!(
+                        "{file}:{}: `counted in {name}` names no counter (one identifier)",
+                        k + 1
+                    ));
+                }
+                (head.trim(), Some(name.to_string()))
+            }
+            None => (spec, None),
+        };
         let (expr, scope) = if let Some(e) = spec.strip_suffix("times per activation") {
             (e.trim(), Scope::Runs)
         } else if let Some(e) = spec.strip_suffix("per call") {
@@ -392,6 +417,12 @@ pub fn parse_source(
                 k + 1
             ));
         }
+        if counter.is_some() && !matches!(scope, Scope::Activation | Scope::Runs) {
+            return Err(format!(
+                "{file}:{}: `counted in NAME` shares a bound per activation: write it after `per activation` or `times per activation`",
+                k + 1
+            ));
+        }
         let alone = line[..pos].trim().is_empty();
         let target = if alone {
             // The next line that is neither blank nor a comment.
@@ -411,7 +442,32 @@ pub fn parse_source(
             bound,
             scope,
             within,
+            counter,
         });
+    }
+    Ok(out)
+}
+
+/// The counter group of each annotation (by index): for one counted in `NAME`,
+/// the index of the first annotation counted in `NAME`; for any other, its own
+/// index. Fails when two annotations of one counter give different bounds.
+pub fn counter_groups(annotations: &[Annotation]) -> Result<Vec<usize>, String> {
+    let mut first: BTreeMap<&str, usize> = BTreeMap::new();
+    let mut out = Vec::with_capacity(annotations.len());
+    for (k, a) in annotations.iter().enumerate() {
+        let Some(name) = a.counter.as_deref() else {
+            out.push(k);
+            continue;
+        };
+        let g = *first.entry(name).or_insert(k);
+        let head = &annotations[g];
+        if head.bound != a.bound {
+            return Err(format!(
+                "{}:{}: counted in `{name}` with the bound `{}` = {}, but {}:{} gives it `{}` = {}: one counter has one bound",
+                a.file, a.line, a.expression, a.bound, head.file, head.line, head.expression, head.bound
+            ));
+        }
+        out.push(g);
     }
     Ok(out)
 }
@@ -512,6 +568,46 @@ mod tests {
             &c,
         );
         assert!(cap.is_err_and(|e| e.contains("bounds a loop")));
+        Ok(())
+    }
+
+    #[test]
+    fn a_counter_shares_one_bound_per_activation() -> Result<(), String> {
+        let c = firmware_constants();
+        let text = "loop { // wcet-bound: 30 per activation, counted in iters\n}\n\
+                    // wcet-bound: 30 times per activation, counted in iters\nf();\n\
+                    // wcet-bound: 30 times per activation\ng();\n";
+        let a = parse_source("x.rs", text, &c)?;
+        assert_eq!(
+            a.iter()
+                .map(|a| (a.line, a.bound, a.scope, a.counter.as_deref()))
+                .collect::<Vec<_>>(),
+            vec![
+                (1, 30, Scope::Activation, Some("iters")),
+                (4, 30, Scope::Runs, Some("iters")),
+                (6, 30, Scope::Runs, None),
+            ]
+        );
+        // Both counted in `iters` share the group of the first; the third has its own.
+        assert_eq!(counter_groups(&a)?, vec![0, 0, 2]);
+        // One counter, two bounds: refused, naming both lines.
+        let two = parse_source(
+            "x.rs",
+            "loop { // wcet-bound: 30 per activation, counted in iters\n}\n\
+             // wcet-bound: 31 times per activation, counted in iters\nf();\n",
+            &c,
+        )?;
+        let e = counter_groups(&two).err().unwrap_or_default();
+        assert!(e.contains("x.rs:4") && e.contains("x.rs:1"), "{e}");
+        // A counter is per activation: not on a bound per entry, nor unnamed.
+        let per_entry = parse_source("x.rs", "loop { // wcet-bound: 3, counted in i\n", &c);
+        assert!(per_entry.is_err_and(|e| e.contains("per activation")));
+        let unnamed = parse_source(
+            "x.rs",
+            "loop { // wcet-bound: 3 per activation, counted in a b\n",
+            &c,
+        );
+        assert!(unnamed.is_err_and(|e| e.contains("names no counter")));
         Ok(())
     }
 

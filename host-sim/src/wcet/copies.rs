@@ -34,6 +34,7 @@ pub(super) fn copy_sizes(
     program: &Program,
     ctx: &addr2line::Loader,
     annotations: &[annotations::Annotation],
+    counter_of: &[usize],
 ) -> ipet::CopySizes {
     let family: std::collections::BTreeSet<usize> = program
         .functions
@@ -157,5 +158,11 @@ pub(super) fn copy_sizes(
         family,
         sites,
         caps,
+        counters: counter_of
+            .iter()
+            .enumerate()
+            .filter(|&(k, &g)| k != g)
+            .map(|(k, &g)| (k, g))
+            .collect(),
     }
 }

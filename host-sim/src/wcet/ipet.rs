@@ -53,6 +53,10 @@ pub enum Per {
     /// Back edges per call of the function holding the loop (the function is
     /// not inlined: checked where the fact is made).
     Call,
+    /// Back edges per activation, summed with the loops and calls of every other
+    /// annotation of the same counter (the group's index, as
+    /// [`BlockCap::activation_group`]) under one bound.
+    Counted(usize),
     /// A retry loop that retries only when an exception came in between: all such
     /// loops share one cap, the task's retries per activation (the `retries`
     /// argument of [`task_bound`]); the fact's own bound is not used.
@@ -126,6 +130,10 @@ pub struct CopySizes {
     pub sites: Vec<CopySite>,
     /// Caps on blocks per loop entry (`per loop entry` annotations).
     pub caps: Vec<BlockCap>,
+    /// The counter group of each activation group that shares its bound with
+    /// others (`counted in NAME`): their runs are summed under one bound, with
+    /// the loops of [`Per::Counted`] of the same group.
+    pub counters: std::collections::BTreeMap<usize, usize>,
 }
 
 /// A cap on blocks: they run at most `bound` times per entry of loop
@@ -398,6 +406,7 @@ pub fn task_bound(
                 .filter_map(|b| x.get(b))
                 .fold(Expression::from(0.0), |a, &v| a + v);
             if let Some(g) = cap.activation_group {
+                let g = copies.counters.get(&g).copied().unwrap_or(g);
                 let entry = group_runs
                     .entry(g)
                     .or_insert_with(|| (cap.bound, Expression::from(0.0)));
@@ -464,6 +473,13 @@ pub fn task_bound(
                 }
                 Per::Activation => {
                     constraints.push(constraint!(back <= bound * n_entry[&root]));
+                }
+                Per::Counted(g) => {
+                    let entry = group_runs
+                        .entry(g)
+                        .or_insert_with(|| (fact.bound, Expression::from(0.0)));
+                    entry.0 = entry.0.min(fact.bound);
+                    entry.1 += back;
                 }
                 Per::Call => {
                     constraints.push(constraint!(back <= bound * n_entry[&f]));
