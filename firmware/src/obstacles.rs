@@ -569,15 +569,15 @@ fn build_inner<T: Real, const CAP: usize>(
     let mut all_right = true;
     let mut best_abs = T::INFINITY;
     let mut best_s = pc.s_m;
+    // Every vertex in one scan of the rows near the centroid's projection.
+    let each: [Option<(T, T)>; MAX_VERTICES] = path.project_each(verts, Some(pc.s_m));
     // wcet-bound: MAX_VERTICES
-    for v in verts.iter() {
-        if let Some(pv) = path.project(*v, Some(pc.s_m)) {
-            all_left &= pv.lateral_m > T::ZERO;
-            all_right &= pv.lateral_m < T::ZERO;
-            if pv.lateral_m.abs() < best_abs {
-                best_abs = pv.lateral_m.abs();
-                best_s = pv.s_m;
-            }
+    for &(s_m, lateral_m) in each.iter().take(verts.len()).flatten() {
+        all_left &= lateral_m > T::ZERO;
+        all_right &= lateral_m < T::ZERO;
+        if lateral_m.abs() < best_abs {
+            best_abs = lateral_m.abs();
+            best_s = s_m;
         }
     }
     if all_left || all_right {

@@ -370,9 +370,10 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         let mut inside = 0;
         // wcet-bound: MAX_OBSTACLES
         for i in 0..self.obstacle_list.len() {
-            // The compiler makes the `continue` path below an inner loop of its own,
-            // headed here, over the same indices.
-            let o = &self.obstacle_list[i]; // wcet-bound: MAX_OBSTACLES
+            // One path back to the loop's head (no `continue`): a second one made
+            // the compiler split the loop into two nested ones over the same
+            // indices, each bounded by MAX_OBSTACLES, MAX_OBSTACLES² projections.
+            let o = &self.obstacle_list[i];
             let n = T::from_usize(o.vertices.len().max(1));
             let c = o
                 .vertices
@@ -381,11 +382,14 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
                 .fold([T::ZERO; 2], |a, v| [a[0] + v[0], a[1] + v[1]]);
             // On the polyline: an open window's end segments, extended, can pass
             // near a far part of the road and claim the obstacle for it.
-            let Some(p) = self.path.project_on_polyline([c[0] / n, c[1] / n], None) else {
-                continue;
-            };
-            let within = closed || (p.s_m > margin && p.s_m < length - margin);
-            if within && p.lateral_m.abs() < reach {
+            let hit = self
+                .path
+                .project_on_polyline([c[0] / n, c[1] / n], None)
+                .filter(|p| {
+                    let within = closed || (p.s_m > margin && p.s_m < length - margin);
+                    within && p.lateral_m.abs() < reach
+                });
+            if let Some(p) = hit {
                 self.obstacle_list[i].s_hint_m = Some(p.s_m);
                 self.obstacle_list.swap(inside, i);
                 inside += 1;

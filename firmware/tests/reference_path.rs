@@ -418,3 +418,44 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    /// `project_each` gives, bit for bit, what one `project` per point gives with
+    /// the same hint (or none, or one not finite), on the hairpin (open: the end
+    /// segments extended) and on a circle (closed: `s` unwrapped to the hint's lap),
+    /// in f32 as on the ECU; a point not finite gives `None` and leaves the others.
+    #[test]
+    fn project_each_equals_one_projection_per_point(
+        pts in proptest::collection::vec((-20.0f32..130.0, -30.0f32..30.0), 1..8),
+        hint in prop_oneof![Just(None), Just(Some(f32::NAN)), (-50.0f32..700.0).prop_map(Some)],
+        nan_at in 0usize..10,
+        closed in any::<bool>(),
+    ) {
+        let path_pts: Vec<[f32; 2]> = if closed {
+            circle(60.0, 90, true).iter().map(|p| [p[0] as f32 + 50.0, p[1] as f32]).collect()
+        } else {
+            let mut v: Vec<[f32; 2]> = (0..=100).map(|i| [i as f32, 0.0]).collect();
+            v.extend((1..20).map(|k| {
+                let a = core::f32::consts::PI * k as f32 / 20.0;
+                [100.0 + 2.0 * a.sin(), 2.0 - 2.0 * a.cos()]
+            }));
+            v.extend((0..=100).map(|i| [(100 - i) as f32, 4.0]));
+            v
+        };
+        let mut p: ReferencePath<f32, 256> = ReferencePath::new();
+        p.load(&path_pts, None, closed).unwrap();
+        let mut q: Vec<[f32; 2]> = pts.iter().map(|&(x, y)| [x, y]).collect();
+        if nan_at < q.len() {
+            q[nan_at][1] = f32::NAN;
+        }
+        let each: [Option<(f32, f32)>; 8] = p.project_each(&q, hint);
+        for (k, v) in q.iter().enumerate() {
+            let one = p.project(*v, hint).map(|r| (r.s_m.to_bits(), r.lateral_m.to_bits()));
+            prop_assert_eq!(each[k].map(|(s, l)| (s.to_bits(), l.to_bits())), one, "point {}", k);
+        }
+        prop_assert!(each[q.len()..].iter().all(Option::is_none));
+        // Points beyond K are not projected.
+        let two: [Option<(f32, f32)>; 1] = p.project_each(&q, hint);
+        prop_assert_eq!(two[0].map(|(s, _)| s.to_bits()), each[0].map(|(s, _)| s.to_bits()));
+    }
+}

@@ -28,15 +28,54 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         self.project_impl(p, s_hint_m, false)
     }
 
-    fn project_impl(&self, p: [T; 2], s_hint_m: Option<T>, extend: bool) -> Option<Projection<T>> {
+    /// [`Self::project`] of each of `points` with the one hint `s_hint_m`, keeping
+    /// what placing an obstacle needs: `(s_m, lateral_m)` (m, as in [`Projection`])
+    /// per point, `None` for a point that is not finite or on an empty path; only
+    /// the first `K` points are projected. The search window is found once for all
+    /// the points, then scanned per point: the segments a call of `project` per
+    /// point searches, in the same order and with the same arithmetic, so the same
+    /// results bit for bit, without a window search (and the heading and curvature
+    /// lookups) per point.
+    pub fn project_each<const K: usize>(
+        &self,
+        points: &[[T; 2]],
+        s_hint_m: Option<T>,
+    ) -> [Option<(T, T)>; K] {
+        let mut out = [None; K];
         let m = self.segment_count();
-        if m == 0 || !p[0].is_finite() || !p[1].is_finite() {
-            return None;
+        if m == 0 {
+            return out;
         }
+        let n = points.len().min(K);
+        let hint = s_hint_m.filter(|h| h.is_finite());
+        let (first, count) = self.search_window(hint);
+        // One scan per point (a scan of all the points per segment, unrolled by the
+        // compiler, is longer than the instruction cache holds).
+        // WCET: K = MAX_VERTICES at the one caller (`obstacles::build_inner`).
+        // wcet-bound: MAX_VERTICES
+        for k in 0..n {
+            let p = points[k];
+            // No `continue`: one path back to the loop's head keeps it one loop.
+            let found = if p[0].is_finite() && p[1].is_finite() {
+                self.closest_in(p, first, count, true)
+            } else {
+                None
+            };
+            if let Some((_, i, t)) = found {
+                let (s, lateral, _) = self.foot(p, i, t, hint);
+                out[k] = Some((s, lateral));
+            }
+        }
+        out
+    }
+
+    /// The segments a search near `hint` covers, `(first, count)`: every segment
+    /// without a hint (or when the window would cover a closed path's whole lap).
+    fn search_window(&self, hint: Option<T>) -> (usize, usize) {
+        let m = self.segment_count();
         let behind = T::lit(self.search_behind_m);
         let ahead = T::lit(self.search_ahead_m);
-        let hint = s_hint_m.filter(|h| h.is_finite());
-        let (first, count) = match hint {
+        match hint {
             Some(h) if !self.closed || behind + ahead < self.length => {
                 let (i0, ds0, _, _) = self.locate_any(h - behind);
                 let end = h + ahead;
@@ -63,29 +102,27 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 (i0, count)
             }
             _ => (0, m),
-        };
-        let mut best: Option<(T, usize, T)> = None; // (dist², segment, t)
+        }
+    }
 
+    /// The segment of the `count` from `first` (wrapping) closest to `p`, the first
+    /// of equals: `(dist², segment, t)` (m², index, m along it); `None` when
+    /// `count` is 0.
+    #[inline(always)]
+    fn closest_in(
+        &self,
+        p: [T; 2],
+        first: usize,
+        count: usize,
+        extend: bool,
+    ) -> Option<(T, usize, T)> {
+        let m = self.segment_count();
+        let mut best: Option<(T, usize, T)> = None;
         // WCET: count <= m <= CAP (= ECU_PATH_ROWS in the ECU).
         // wcet-bound: ECU_PATH_ROWS
         for step in 0..count {
             let i = (first + step) % m;
-            let a = self.xy[i];
-            let d = self.dir[i];
-            let rx = p[0] - a[0];
-            let ry = p[1] - a[1];
-            let mut t = rx * d[0] + ry * d[1];
-            let lo_open = extend && !self.closed && i == 0;
-            let hi_open = extend && !self.closed && i + 1 == m;
-            if !lo_open {
-                t = t.max(T::ZERO);
-            }
-            if !hi_open {
-                t = t.min(self.seg_len[i]);
-            }
-            let ex = rx - d[0] * t;
-            let ey = ry - d[1] * t;
-            let d2 = ex * ex + ey * ey;
+            let (d2, t) = self.segment_distance(p, i, m, extend);
             let better = match best {
                 None => true,
                 Some((bd, _, _)) => d2 < bd,
@@ -94,17 +131,58 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 best = Some((d2, i, t));
             }
         }
-        let (_, i, t) = best?;
+        best
+    }
+
+    /// The squared distance from `p` to segment `i` of the `m` segments, m², and
+    /// the distance `t` along it of the closest point, m (an open path's end
+    /// segments extended when `extend`).
+    #[inline(always)]
+    fn segment_distance(&self, p: [T; 2], i: usize, m: usize, extend: bool) -> (T, T) {
+        let a = self.xy[i];
+        let d = self.dir[i];
+        let rx = p[0] - a[0];
+        let ry = p[1] - a[1];
+        let mut t = rx * d[0] + ry * d[1];
+        let lo_open = extend && !self.closed && i == 0;
+        let hi_open = extend && !self.closed && i + 1 == m;
+        if !lo_open {
+            t = t.max(T::ZERO);
+        }
+        if !hi_open {
+            t = t.min(self.seg_len[i]);
+        }
+        let ex = rx - d[0] * t;
+        let ey = ry - d[1] * t;
+        (ex * ex + ey * ey, t)
+    }
+
+    /// The point `t` m along segment `i` as seen from `p`: its abscissa (unwrapped
+    /// to the lap of `hint`, else wrapped to `[0, L)`), m, the signed lateral
+    /// offset of `p`, m, and the foot point `[x, y]`, m.
+    #[inline(always)]
+    fn foot(&self, p: [T; 2], i: usize, t: T, hint: Option<T>) -> (T, T, [T; 2]) {
         let a = self.xy[i];
         let d = self.dir[i];
         let foot = [a[0] + d[0] * t, a[1] + d[1] * t];
         let lateral = d[0] * (p[1] - foot[1]) - d[1] * (p[0] - foot[0]);
-        let mut s = self.s[i] + t;
-        if let Some(h) = hint {
-            s = self.unwrap_s(s, h);
-        } else {
-            s = self.wrap_s(s);
+        let s = self.s[i] + t;
+        let s = match hint {
+            Some(h) => self.unwrap_s(s, h),
+            None => self.wrap_s(s),
+        };
+        (s, lateral, foot)
+    }
+
+    fn project_impl(&self, p: [T; 2], s_hint_m: Option<T>, extend: bool) -> Option<Projection<T>> {
+        let m = self.segment_count();
+        if m == 0 || !p[0].is_finite() || !p[1].is_finite() {
+            return None;
         }
+        let hint = s_hint_m.filter(|h| h.is_finite());
+        let (first, count) = self.search_window(hint);
+        let (_, i, t) = self.closest_in(p, first, count, extend)?;
+        let (s, lateral, foot) = self.foot(p, i, t, hint);
         Some(Projection {
             s_m: s,
             lateral_m: lateral,
