@@ -26,7 +26,8 @@
 //!   curvature error of about 0.04 1/m, over 4 m about 0.003 1/m); taking vertices
 //!   (never points on the chords) keeps it exact for points sampled on a circle
 //!   whatever their spacing. On a closed path the window spans at most half the
-//!   vertices each way. The two end vertices of an open path take the curvature
+//!   vertices each way, and on any path at most [`MAX_CURVATURE_WINDOW_STEPS`]
+//!   segments each way (a path denser than `h / 32`). The two end vertices of an open path take the curvature
 //!   of their neighbour. Collinear points give `κ = 0`.
 //!
 //! Between vertices, heading, curvature and widths are interpolated linearly in
@@ -78,6 +79,14 @@ use crate::Real;
 
 /// Default half-window `h` of the curvature estimate, m.
 pub const DEFAULT_CURVATURE_HALF_WINDOW_M: f32 = 3.0;
+
+/// Most segments the curvature half-window spans on each side of a vertex, a
+/// count: the window ends after `h` metres or this many segments, whichever comes
+/// first. It bounds the cost of a load (on the ECU, of the window adoption) by
+/// `2·n·MAX_CURVATURE_WINDOW_STEPS` steps rather than `2·n²` on a path of `n`
+/// points; with the default 3 m half-window it binds only where points are closer
+/// than about 0.1 m.
+pub const MAX_CURVATURE_WINDOW_STEPS: usize = 32;
 
 /// Largest |coordinate| and half-width a path accepts, m (10,000 km: any map frame).
 /// Larger finite values (up to `f32::MAX`) made the segment lengths and the arc

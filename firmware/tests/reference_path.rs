@@ -2,7 +2,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use core::f64::consts::PI;
-use firmware::reference_path::{CurvatureWindow, PathError, ReferencePath};
+use firmware::reference_path::{
+    CurvatureWindow, PathError, ReferencePath, MAX_CURVATURE_WINDOW_STEPS,
+};
 use proptest::prelude::*;
 
 fn circle(r: f64, n: usize, ccw: bool) -> Vec<[f64; 2]> {
@@ -458,4 +460,57 @@ proptest! {
         let two: [Option<(f32, f32)>; 1] = p.project_each(&q, hint);
         prop_assert_eq!(two[0].map(|(s, _)| s.to_bits()), each[0].map(|(s, _)| s.to_bits()));
     }
+}
+
+/// On a path whose points are closer than `h / MAX_CURVATURE_WINDOW_STEPS`, the
+/// curvature window ends after that many segments: on the crest of a wiggle of
+/// 2 m wavelength sampled every 2 cm, the circle is the one through the vertices
+/// 32 segments away, not those 3 m of arc away (the default half-window).
+#[test]
+fn a_dense_path_ends_the_curvature_window_after_max_steps() {
+    let d = 0.02;
+    let pts: Vec<[f64; 2]> = (0..400)
+        .map(|i| {
+            let x = i as f64 * d;
+            [x, 0.3 * (PI * x).sin()]
+        })
+        .collect();
+    let mut p: ReferencePath<f64, 512> = ReferencePath::new();
+    p.load(&pts, None, false).unwrap();
+    let kappa = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        let (u, v, w) = (
+            [b[0] - a[0], b[1] - a[1]],
+            [c[0] - b[0], c[1] - b[1]],
+            [c[0] - a[0], c[1] - a[1]],
+        );
+        let norm = |x: [f64; 2]| x[0].hypot(x[1]);
+        2.0 * (u[0] * v[1] - u[1] * v[0]) / (norm(u) * norm(v) * norm(w))
+    };
+    let seg = |k: usize| {
+        let (a, b) = (pts[k], pts[k + 1]);
+        (b[0] - a[0]).hypot(b[1] - a[1])
+    };
+    // The crest at x = 4.5 m; the vertices 3 m of arc away each way.
+    let i = 225;
+    let (mut ia, mut back) = (i, 0.0);
+    while back < 3.0 {
+        ia -= 1;
+        back += seg(ia);
+    }
+    let (mut ic, mut ahead) = (i, 0.0);
+    while ahead < 3.0 {
+        ahead += seg(ic);
+        ic += 1;
+    }
+    let steps = MAX_CURVATURE_WINDOW_STEPS;
+    assert!(i - ia > steps && ic - i > steps, "{ia} {ic}: the cap binds");
+    let capped = kappa(pts[i - steps], pts[i], pts[i + steps]);
+    let whole = kappa(pts[ia], pts[i], pts[ic]);
+    assert!((capped - whole).abs() > 0.1, "{capped} {whole}");
+    let s_i: f64 = (0..i).map(seg).sum();
+    let got = p.curvature_at(s_i + 1e-9);
+    assert!(
+        (got - capped).abs() < 1e-6,
+        "{got} vs capped {capped}, whole {whole}"
+    );
 }

@@ -7,7 +7,9 @@
 use super::*;
 
 impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
-    /// Sets the curvature half-window `h`, m (used by the next [`Self::load`]).
+    /// Sets the curvature half-window `h`, m (used by the next [`Self::load`]). On
+    /// a path so dense that `h` spans more than [`MAX_CURVATURE_WINDOW_STEPS`]
+    /// segments, the window ends after that many.
     pub fn set_curvature_half_window_m(&mut self, h_m: f32) {
         self.curvature_half_window_m = h_m;
     }
@@ -256,15 +258,16 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 self.heading[i] = T::HALF * (self.heading[i - 1] + self.heading[i]);
             }
         }
-        // Vertex curvatures: circle through the vertices about `h` before and after.
+        // Vertex curvatures: circle through the vertices about `h` before and after,
+        // at most MAX_CURVATURE_WINDOW_STEPS segments away.
         let max_steps = if closed { (n - 1) / 2 } else { n - 1 };
-        // WCET: n <= CAP (= ECU_PATH_ROWS in the ECU); the two step loops below take at
-        // most max_steps <= n - 1 steps each (the half-window in metres only stops them earlier).
+        let max_steps = max_steps.min(MAX_CURVATURE_WINDOW_STEPS);
+        // WCET: n <= CAP (= ECU_PATH_ROWS in the ECU).
         // wcet-bound: ECU_PATH_ROWS
         for i in 0..n {
             let mut ia = i;
             let mut back = T::ZERO;
-            // wcet-bound: ECU_PATH_ROWS
+            // wcet-bound: MAX_CURVATURE_WINDOW_STEPS
             for _ in 0..max_steps {
                 if back >= h || (!closed && ia == 0) {
                     break;
@@ -274,7 +277,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             }
             let mut ic = i;
             let mut ahead = T::ZERO;
-            // wcet-bound: ECU_PATH_ROWS
+            // wcet-bound: MAX_CURVATURE_WINDOW_STEPS
             for _ in 0..max_steps {
                 if ahead >= h || (!closed && ic == n - 1) {
                     break;

@@ -149,6 +149,10 @@ pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
         ),
         ("MAX_OBSTACLES", obstacles::MAX_OBSTACLES as u64),
         ("MAX_VERTICES", obstacles::MAX_VERTICES as u64),
+        (
+            "MAX_CURVATURE_WINDOW_STEPS",
+            firmware::reference_path::MAX_CURVATURE_WINDOW_STEPS as u64,
+        ),
         ("ECU_PATH_ROWS", tasks::ECU_PATH_ROWS as u64),
         ("PATH_CHUNK_ROWS", link::PATH_CHUNK_ROWS as u64),
         ("MAX_FRAME_BYTES", link::MAX_FRAME_BYTES as u64),
