@@ -27,8 +27,9 @@
 //!   (never points on the chords) keeps it exact for points sampled on a circle
 //!   whatever their spacing. On a closed path the window spans at most half the
 //!   vertices each way, and on any path at most [`MAX_CURVATURE_WINDOW_STEPS`]
-//!   segments each way (a path denser than `h / 32`). The two end vertices of an open path take the curvature
-//!   of their neighbour. Collinear points give `κ = 0`.
+//!   segments each way (a path denser than `h / 32`). The two end vertices of an
+//!   open path take the curvature of their neighbour. Collinear points give
+//!   `κ = 0`.
 //!
 //! Between vertices, heading, curvature and widths are interpolated linearly in
 //! `s`; positions lie on the polyline.

@@ -46,6 +46,15 @@ fn program(text: &str) -> Program {
     .unwrap()
 }
 
+/// The index, in `ls[function]`, of the loop headed at `addr`.
+fn loop_at(p: &Program, ls: &[Vec<loops::Loop>], function: usize, addr: u32) -> usize {
+    let f = &p.functions[function];
+    ls[function]
+        .iter()
+        .position(|l| f.blocks[l.header].start == addr)
+        .unwrap()
+}
+
 fn all_loops(p: &Program) -> Vec<Vec<loops::Loop>> {
     p.functions
         .iter()
@@ -750,13 +759,7 @@ fn a_bound_per_call_caps_the_inner_loop_over_all_its_entries() {
     let ls = all_loops(&p);
     let root = p.find("root")[0];
     let mid = p.find("mid")[0];
-    let f = &p.functions[mid];
-    let at = |addr: u32| {
-        ls[mid]
-            .iter()
-            .position(|l| f.blocks[l.header].start == addr)
-            .unwrap()
-    };
+    let at = |addr: u32| loop_at(&p, &ls, mid, addr);
     let (outer, inner) = (at(0x8000012), at(0x8000014));
     let facts = |per: Per| {
         [
@@ -861,13 +864,10 @@ fn a_counter_bounds_a_loop_and_a_call_together() {
     let ls = all_loops(&p);
     let root = p.find("root")[0];
     let f = &p.functions[root];
-    let at = |addr: u32| {
-        ls[root]
-            .iter()
-            .position(|l| f.blocks[l.header].start == addr)
-            .unwrap()
-    };
-    let (first, second) = (at(0x8000004), at(0x800000a));
+    let (first, second) = (
+        loop_at(&p, &ls, root, 0x8000004),
+        loop_at(&p, &ls, root, 0x800000a),
+    );
     let call_block = f.blocks.iter().position(|b| b.start == 0x800000a).unwrap();
     let bound = |per: Per, group: usize| {
         let facts = [

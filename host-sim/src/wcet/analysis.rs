@@ -245,9 +245,9 @@ pub fn analyse(
         .filter_map(|a| Some(((a.file.clone(), a.line, a.within.clone()?), a)))
         .collect();
     let mut within_used: std::collections::BTreeSet<(String, u32, String)> = Default::default();
-    let counter_of = annotations::counter_groups(&annotations)
+    let counter_groups = annotations::counter_groups(&annotations)
         .map_err(|e| anyhow::anyhow!("loop annotations: {e}"))?;
-    let copies = copy_sizes(&program, &ctx, &annotations, &counter_of);
+    let copies = copy_sizes(&program, &ctx, &annotations, &counter_groups);
     // A cap per activation that matches no call is stale (the code moved or was
     // inlined away): the bound it was meant to give would be missing.
     for (k, a) in annotations.iter().enumerate() {
@@ -482,14 +482,12 @@ pub fn analyse(
                     | annotations::Scope::LoopEntry
                     | annotations::Scope::Runs => Per::Entry,
                     annotations::Scope::Call => Per::Call,
-                    annotations::Scope::Activation => match annotations
-                        .iter()
-                        .position(|b| std::ptr::eq(b, a))
-                        .filter(|_| a.counter.is_some())
-                    {
-                        Some(i) => Per::Counted(counter_of[i]),
-                        None => Per::Activation,
-                    },
+                    annotations::Scope::Activation => {
+                        match a.counter.as_deref().and_then(|c| counter_groups.get(c)) {
+                            Some(&g) => Per::Counted(g),
+                            None => Per::Activation,
+                        }
+                    }
                     annotations::Scope::Preemption => Per::Preemption,
                 },
                 group: None,

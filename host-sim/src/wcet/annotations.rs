@@ -452,28 +452,24 @@ pub fn parse_source(
     Ok(out)
 }
 
-/// The counter group of each annotation (by index): for one counted in `NAME`,
-/// the index of the first annotation counted in `NAME`; for any other, its own
-/// index. Fails when two annotations of one counter give different bounds.
-pub fn counter_groups(annotations: &[Annotation]) -> Result<Vec<usize>, String> {
-    let mut first: BTreeMap<&str, usize> = BTreeMap::new();
-    let mut out = Vec::with_capacity(annotations.len());
+/// Each counter's group, by name: the index of the first annotation counted in
+/// it (every other annotation is a group of its own, its index). Fails when two
+/// annotations of one counter give different bounds.
+pub fn counter_groups(annotations: &[Annotation]) -> Result<BTreeMap<String, usize>, String> {
+    let mut first: BTreeMap<String, usize> = BTreeMap::new();
     for (k, a) in annotations.iter().enumerate() {
         let Some(name) = a.counter.as_deref() else {
-            out.push(k);
             continue;
         };
-        let g = *first.entry(name).or_insert(k);
-        let head = &annotations[g];
+        let head = &annotations[*first.entry(name.to_string()).or_insert(k)];
         if head.bound != a.bound {
             return Err(format!(
                 "{}:{}: counted in `{name}` with the bound `{}` = {}, but {}:{} gives it `{}` = {}: one counter has one bound",
                 a.file, a.line, a.expression, a.bound, head.file, head.line, head.expression, head.bound
             ));
         }
-        out.push(g);
     }
-    Ok(out)
+    Ok(first)
 }
 
 /// The workspace's crates whose code the ECU runs and whose sources carry loop
@@ -592,8 +588,12 @@ mod tests {
                 (6, 30, Scope::Runs, None),
             ]
         );
-        // Both counted in `iters` share the group of the first; the third has its own.
-        assert_eq!(counter_groups(&a)?, vec![0, 0, 2]);
+        // Both counted in `iters` share the group of the first (index 0); the
+        // third, counted in nothing, is in no counter's group.
+        assert_eq!(
+            counter_groups(&a)?,
+            BTreeMap::from([("iters".to_string(), 0)])
+        );
         // One counter, two bounds: refused, naming both lines.
         let two = parse_source(
             "x.rs",

@@ -34,7 +34,7 @@ pub(super) fn copy_sizes(
     program: &Program,
     ctx: &addr2line::Loader,
     annotations: &[annotations::Annotation],
-    counter_of: &[usize],
+    counter_groups: &BTreeMap<String, usize>,
 ) -> ipet::CopySizes {
     let family: std::collections::BTreeSet<usize> = program
         .functions
@@ -158,11 +158,11 @@ pub(super) fn copy_sizes(
         family,
         sites,
         caps,
-        counters: counter_of
+        counters: annotations
             .iter()
             .enumerate()
-            .filter(|&(k, &g)| k != g)
-            .map(|(k, &g)| (k, g))
+            .filter_map(|(k, a)| Some((k, *counter_groups.get(a.counter.as_deref()?)?)))
+            .filter(|&(k, g)| k != g)
             .collect(),
     }
 }

@@ -206,6 +206,21 @@ pub enum IpetError {
     Solver(String),
 }
 
+/// Adds `runs` to activation group `g`'s sum, whose bound is the smallest any of
+/// its members gives (`bound` for this one).
+fn add_to_group(
+    groups: &mut std::collections::BTreeMap<usize, (u64, Expression)>,
+    g: usize,
+    bound: u64,
+    runs: Expression,
+) {
+    let entry = groups
+        .entry(g)
+        .or_insert_with(|| (bound, Expression::from(0.0)));
+    entry.0 = entry.0.min(bound);
+    entry.1 += runs;
+}
+
 /// The worst-case cost of one activation of the task entered at `root`.
 pub fn task_bound(
     program: &Program,
@@ -407,11 +422,7 @@ pub fn task_bound(
                 .fold(Expression::from(0.0), |a, &v| a + v);
             if let Some(g) = cap.activation_group {
                 let g = copies.counters.get(&g).copied().unwrap_or(g);
-                let entry = group_runs
-                    .entry(g)
-                    .or_insert_with(|| (cap.bound, Expression::from(0.0)));
-                entry.0 = entry.0.min(cap.bound);
-                entry.1 += runs;
+                add_to_group(&mut group_runs, g, cap.bound, runs);
                 continue;
             }
             let per = match cap.loop_index.and_then(|k| loops.get(f)?.get(k)) {
@@ -474,13 +485,7 @@ pub fn task_bound(
                 Per::Activation => {
                     constraints.push(constraint!(back <= bound * n_entry[&root]));
                 }
-                Per::Counted(g) => {
-                    let entry = group_runs
-                        .entry(g)
-                        .or_insert_with(|| (fact.bound, Expression::from(0.0)));
-                    entry.0 = entry.0.min(fact.bound);
-                    entry.1 += back;
-                }
+                Per::Counted(g) => add_to_group(&mut group_runs, g, fact.bound, back),
                 Per::Call => {
                     constraints.push(constraint!(back <= bound * n_entry[&f]));
                 }
