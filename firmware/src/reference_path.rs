@@ -12,7 +12,8 @@
 //! Everything a query needs is precomputed by [`ReferencePath::load`]:
 //!
 //! * `s_i`, the cumulative arc length of the polyline at vertex `i`, m;
-//! * the unit direction and length of every segment;
+//! * the length of every segment (its unit direction is computed from it and the
+//!   two vertices where a query needs it, the same values bit for bit);
 //! * the heading `ψ_i` at each vertex, rad: the mean of the (unwrapped) headings
 //!   of the two segments meeting there (the segment's own heading at the ends of an
 //!   open path). Headings are unwrapped along the path, so they never jump by 2π;
@@ -224,8 +225,6 @@ pub struct ReferencePath<T, const CAP: usize> {
     heading: [T; CAP],
     /// Curvature at each vertex, 1/m.
     curvature: [T; CAP],
-    /// Unit direction of segment `i` (vertex `i` to `i + 1`).
-    dir: [[T; 2]; CAP],
     /// Length of segment `i`, m.
     seg_len: [T; CAP],
     /// Number of vertices loaded (0 when empty).
@@ -264,7 +263,6 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             s: [T::ZERO; CAP],
             heading: [T::ZERO; CAP],
             curvature: [T::ZERO; CAP],
-            dir: [[T::ZERO; 2]; CAP],
             seg_len: [T::ZERO; CAP],
             n: 0,
             closed: false,
@@ -378,6 +376,18 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         (lo, w - self.s[lo])
     }
 
+    /// Unit direction of segment `i` (vertex `i` to the next), from the vertices
+    /// and the segment's length as the load computed them: the same values a table
+    /// of them would hold, bit for bit, without its `2·CAP` values of RAM (2.5 KB
+    /// on the ECU) for two divisions a use.
+    #[inline(always)]
+    fn dir(&self, i: usize) -> [T; 2] {
+        let a = self.xy[i];
+        let b = self.xy[self.next_vertex(i)];
+        let len = self.seg_len[i];
+        [(b[0] - a[0]) / len, (b[1] - a[1]) / len]
+    }
+
     /// Index of the vertex at the end of segment `i`.
     #[inline]
     fn next_vertex(&self, i: usize) -> usize {
@@ -419,19 +429,19 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             let m = self.segment_count();
             if s_m < T::ZERO {
                 let p = self.xy[0];
-                let d = self.dir[0];
+                let d = self.dir(0);
                 return [p[0] + d[0] * s_m, p[1] + d[1] * s_m];
             }
             if s_m > self.length {
                 let p = self.xy[self.n - 1];
-                let d = self.dir[m - 1];
+                let d = self.dir(m - 1);
                 let e = s_m - self.length;
                 return [p[0] + d[0] * e, p[1] + d[1] * e];
             }
         }
         let (i, ds, _, _) = self.locate_any(s_m);
         let p = self.xy[i];
-        let d = self.dir[i];
+        let d = self.dir(i);
         [p[0] + d[0] * ds, p[1] + d[1] * ds]
     }
 
@@ -497,7 +507,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             self.position_at(s_m)
         } else {
             let p = self.xy[i];
-            let d = self.dir[i];
+            let d = self.dir(i);
             [p[0] + d[0] * ds, p[1] + d[1] * ds]
         };
         let hj = if j == 0 {

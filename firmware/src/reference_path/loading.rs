@@ -1,5 +1,5 @@
 //! Loading a reference path: the points (and widths) checked, then everything a
-//! query needs precomputed once: the arc length, the segments' directions and
+//! query needs precomputed once: the arc length, the segments'
 //! lengths, the unwrapped headings and total turning, and the vertex curvatures
 //! over the configurable half-window (the formulas are in [`super`]'s
 //! documentation).
@@ -224,7 +224,6 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             let dy = b[1] - a[1];
             let len = dx.hypot(dy);
             self.seg_len[i] = len;
-            self.dir[i] = [dx / len, dy / len];
             self.s[i] = s;
             s += len;
             let raw = dy.atan2(dx);

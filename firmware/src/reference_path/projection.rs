@@ -140,7 +140,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
     #[inline(always)]
     fn segment_distance(&self, p: [T; 2], i: usize, m: usize, extend: bool) -> (T, T) {
         let a = self.xy[i];
-        let d = self.dir[i];
+        let d = self.dir(i);
         let rx = p[0] - a[0];
         let ry = p[1] - a[1];
         let mut t = rx * d[0] + ry * d[1];
@@ -163,7 +163,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
     #[inline(always)]
     fn foot(&self, p: [T; 2], i: usize, t: T, hint: Option<T>) -> (T, T, [T; 2]) {
         let a = self.xy[i];
-        let d = self.dir[i];
+        let d = self.dir(i);
         let foot = [a[0] + d[0] * t, a[1] + d[1] * t];
         let lateral = d[0] * (p[1] - foot[1]) - d[1] * (p[0] - foot[0]);
         let s = self.s[i] + t;
