@@ -477,6 +477,9 @@ pub struct Mpc<T> {
     warm_set: [WarmEntry; WS],
     /// Entries of `warm_set` in use.
     warm_len: usize,
+    /// The last step started cold and its QP stopped at the iteration cap: the
+    /// working set it reached is kept for the next cold step to resume from.
+    resume_cold: bool,
     /// Counters of the last step, whatever its outcome.
     last_report: MpcReport<T>,
 }
@@ -500,6 +503,7 @@ impl<T: Real> Mpc<T> {
             condensing: Condensing::new(),
             warm_set: [WarmEntry::Bound(0, QpSide::Lower); WS],
             warm_len: 0,
+            resume_cold: false,
             last_report: MpcReport {
                 passes: 0,
                 qp_iterations: 0,
@@ -532,6 +536,7 @@ impl<T: Real> Mpc<T> {
     pub fn reset(&mut self) {
         self.have_prev = false;
         self.warm_len = 0;
+        self.resume_cold = false;
         self.solver.clear_working_set();
     }
 
@@ -651,9 +656,18 @@ impl<T: Real> Mpc<T> {
             shift_inputs(&self.u_prev, elapsed_s / dt, &mut self.u_bar);
         } else {
             self.u_bar = [[T::ZERO; NU]; HORIZON];
-            self.warm_len = 0;
-            self.solver.clear_working_set();
+            // A cold QP that stopped at its cap (e.g. started next to an obstacle
+            // across the path) has added the right rows, but not all of them: the
+            // next cold step, linearised about the same zero inputs, goes on from
+            // its working set instead of from nothing (else every cold step would
+            // stop at the same cap).
+            if !self.resume_cold {
+                self.warm_len = 0;
+                self.solver.clear_working_set();
+            }
         }
+        let resume_from_cap = !warm;
+        self.resume_cold = false;
         report.warm = warm;
 
         // Initial state.
@@ -716,6 +730,7 @@ impl<T: Real> Mpc<T> {
             report.active_constraints = sol.working_set_len as u32;
             if status != QpStatus::Optimal {
                 if report.passes == 1 {
+                    self.resume_cold = resume_from_cap && status == QpStatus::IterationLimit;
                     return Err(MpcError::Qp(status));
                 }
                 // A cold start's refinement pass failed: the previous pass's optimum

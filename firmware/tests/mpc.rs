@@ -551,6 +551,64 @@ fn the_qp_iteration_cap_bounds_the_whole_activation() {
     assert!(r.refinement_failed);
 }
 
+/// A cold step whose QP stops at its iteration cap keeps the working set it
+/// reached: the next cold step (no plan in between, so no warm start) goes on
+/// from it, where starting from nothing again stops at the same cap every time.
+#[test]
+fn a_capped_cold_start_resumes_from_its_working_set() {
+    let (path, obs, e) = cold_start_towards_an_obstacle();
+    let s = settings::<f64>();
+    let mut first = Vec::new();
+    let mut plan = Plan::zeroed();
+    let mut probe = Box::new(Mpc::<f64>::new());
+    probe
+        .step_observed(
+            &s,
+            &path,
+            obs.parabolas(),
+            &e,
+            1.0,
+            &mut plan,
+            |_| {},
+            |sol| first.push(sol.iterations),
+        )
+        .unwrap();
+    // A cap a third of what the first pass needs.
+    let mut capped = s;
+    capped.qp_max_iter = (first[0] / 3).max(1);
+    assert!(capped.qp_max_iter < first[0], "{first:?}");
+    let capped_err = Err(firmware::mpc::MpcError::Qp(qp::QpStatus::IterationLimit));
+
+    // Started afresh each time (`reset`): the same cap, every step.
+    let mut fresh = Box::new(Mpc::<f64>::new());
+    for _ in 0..6 {
+        fresh.reset();
+        let r = fresh.step(&capped, &path, obs.parabolas(), &e, 1.0, &mut plan);
+        assert_eq!(r.map(|_| ()), capped_err);
+    }
+
+    // Resumed: a plan within a few steps of the cap, from the same state.
+    let mut mpc = Box::new(Mpc::<f64>::new());
+    let mut failed = 0;
+    let report = loop {
+        match mpc.step(&capped, &path, obs.parabolas(), &e, 1.0, &mut plan) {
+            Ok(r) => break r,
+            Err(err) => {
+                assert_eq!(Err(err), capped_err);
+                failed += 1;
+                assert!(failed < 6, "no plan after {failed} capped cold steps");
+            }
+        }
+    };
+    println!(
+        "first pass uncapped {} iterations; cap {}: {failed} capped steps, then {report:?}",
+        first[0], capped.qp_max_iter
+    );
+    assert!(failed >= 1, "the first step was to stop at the cap");
+    assert!(!report.warm, "each step is a cold start");
+    assert!(report.max_obstacle_slack_m < 0.05, "{report:?}");
+}
+
 /// The warm start finds its constraints by what they are, not by their row
 /// index: an obstacle whose rows appear at the early nodes renumbers every later
 /// row, and the next solve still starts from the optimum's working set.
