@@ -1,7 +1,7 @@
 //! `host-sim wcet`: runs the processor-in-the-loop laps (or reads finished ones),
-//! traces a short PIL run for the cycles-per-instruction bound, refits the cost
-//! model on the measured activations, and writes the report (`wcet.md`,
-//! `wcet.json`).
+//! traces two short PIL runs (the `paper` lap's start, and a run whose QP reaches
+//! its iteration cap) to check the static analysis against, refits the cost model
+//! on the measured activations, and writes the report (`wcet.md`, `wcet.json`).
 
 use std::fs::{self, File};
 use std::io::BufReader;
@@ -26,8 +26,10 @@ pub struct WcetArgs {
     /// The ECU application (build it with `cargo ecu`).
     #[arg(long, default_value = "target/thumbv7em-none-eabihf/release/ecu")]
     pub elf: PathBuf,
-    /// Simulated seconds of the traced PIL run for the cycles-per-instruction bound
-    /// (the trace is parsed as QEMU writes it: no file).
+    /// Simulated seconds of each of the two traced PIL runs: the `paper` lap's start
+    /// (its cycles per instruction are reported) and the run towards a box ahead,
+    /// whose QP reaches its iteration cap; both traces check the loop bounds and the
+    /// task bounds.
     #[arg(long, default_value_t = 2.0)]
     pub trace_seconds: f64,
     /// Use this cycles-per-instruction bound instead of tracing a PIL run (a value
@@ -119,6 +121,49 @@ fn cpi_from_trace(args: &WcetArgs) -> Result<(CpiReport, PathBuf)> {
     Ok((report, log))
 }
 
+/// The box of the traced run at the QP's iteration cap: 2 m × 2 m, on the centre
+/// line of the `paper` track's start straight, its centre this far from the start,
+/// m. At the runs' 15 m/s it is 1.7 s ahead from the first activation: the QP
+/// reaches its iteration cap (`QP_MAX_ITER`) in the first activations, and the
+/// trace holds the activations the paper laps never make (removals, rebuilds, a
+/// full working set).
+const CAP_BOX_AHEAD_M: f64 = 25.0;
+
+/// Runs a short PIL run towards a box [`CAP_BOX_AHEAD_M`] ahead, with QEMU's
+/// execution trace written to a file, and returns the file: activations at the
+/// QP's iteration cap for the check of the loop bounds and of the tightness.
+fn cap_trace(args: &WcetArgs) -> Result<PathBuf> {
+    let dir = args.out.join("trace-cap");
+    fs::create_dir_all(&dir)?;
+    let boxes = dir.join("box_ahead.csv");
+    let (x, h) = (CAP_BOX_AHEAD_M, 1.0);
+    fs::write(
+        &boxes,
+        format!(
+            "id,x_m,y_m\nbox_ahead,{},{}\nbox_ahead,{},{}\nbox_ahead,{},{}\nbox_ahead,{},{}\n",
+            x - h,
+            -h,
+            x - h,
+            h,
+            x + h,
+            h,
+            x + h,
+            -h
+        ),
+    )?;
+    let log = dir.join("qemu-trace.log");
+    let mut a = pil_args(
+        dir.join("run"),
+        &boxes.to_string_lossy(),
+        1.0,
+        args.trace_seconds,
+        &args.elf,
+    );
+    a.trace = Some(std::path::absolute(&log)?);
+    pil::run(&a)?;
+    Ok(log)
+}
+
 /// A CPI report standing for a bound given on the command line.
 fn given_cpi(c: f64) -> CpiReport {
     CpiReport {
@@ -182,7 +227,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         args.pil.clone()
     };
     let mut traces = args.check_trace.clone();
-    let mut made: Option<PathBuf> = None;
+    let mut made: Vec<PathBuf> = Vec::new();
     let cpi = match args.cpi_bound {
         Some(c) if c.is_finite() && c >= 1.0 => given_cpi(c),
         Some(c) => bail!("--cpi-bound must be at least 1 cycle per instruction, got {c}"),
@@ -193,10 +238,17 @@ pub fn run(args: &WcetArgs) -> Result<()> {
             );
             let (report, log) = cpi_from_trace(args)?;
             traces.push(log.clone());
-            made = Some(log);
+            made.push(log);
             report
         }
     };
+    println!(
+        "PIL run with QEMU's execution trace ({} s) towards a box {CAP_BOX_AHEAD_M} m ahead: the QP at its iteration cap",
+        args.trace_seconds
+    );
+    let log = cap_trace(args)?;
+    traces.push(log.clone());
+    made.push(log);
 
     // The cost model refitted on every measured activation, kept for the
     // simulator's timeline (an estimate, not a bound).
@@ -232,7 +284,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     };
     let r = report::build_report(&inputs)?;
     report::markdown::write_report(&args.out, &r)?;
-    if let Some(log) = made {
+    for log in made {
         // Large (tens of MB a simulated second) and fully read by now.
         let _ = fs::remove_file(log);
     }
