@@ -666,7 +666,6 @@ impl<T: Real> Mpc<T> {
                 self.solver.clear_working_set();
             }
         }
-        let resume_from_cap = !warm;
         self.resume_cold = false;
         report.warm = warm;
 
@@ -730,7 +729,7 @@ impl<T: Real> Mpc<T> {
             report.active_constraints = sol.working_set_len as u32;
             if status != QpStatus::Optimal {
                 if report.passes == 1 {
-                    self.resume_cold = resume_from_cap && status == QpStatus::IterationLimit;
+                    self.resume_cold = !warm && status == QpStatus::IterationLimit;
                     return Err(MpcError::Qp(status));
                 }
                 // A cold start's refinement pass failed: the previous pass's optimum

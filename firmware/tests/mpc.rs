@@ -498,26 +498,39 @@ fn cold_start_towards_an_obstacle() -> (
     (path, obs, est(0.0, 0.0, 0.0, 15.0, 0.0, 0))
 }
 
-#[test]
-fn the_qp_iteration_cap_bounds_the_whole_activation() {
-    let (path, obs, e) = cold_start_towards_an_obstacle();
-    // Uncapped in practice: how many iterations each pass of the cold start takes.
-    let s = settings::<f64>();
+/// One cold step of a fresh MPC with settings `s` towards the obstacles: its
+/// report and the QP iterations of each of its passes.
+fn iterations_per_pass(
+    s: &MpcSettings<f64>,
+    path: &ReferencePath<f64, CAP>,
+    obs: &ObstacleManager<f64>,
+    e: &StateEstimate<f64>,
+) -> (firmware::mpc::MpcReport<f64>, Vec<u32>) {
     let mut per_pass = Vec::new();
     let mut plan = Plan::zeroed();
     let mut mpc = Box::new(Mpc::<f64>::new());
-    let free = mpc
+    let report = mpc
         .step_observed(
-            &s,
-            &path,
+            s,
+            path,
             obs.parabolas(),
-            &e,
+            e,
             1.0,
             &mut plan,
             |_| {},
             |sol| per_pass.push(sol.iterations),
         )
         .unwrap();
+    (report, per_pass)
+}
+
+#[test]
+fn the_qp_iteration_cap_bounds_the_whole_activation() {
+    let (path, obs, e) = cold_start_towards_an_obstacle();
+    // Uncapped in practice: how many iterations each pass of the cold start takes.
+    let s = settings::<f64>();
+    let (free, per_pass) = iterations_per_pass(&s, &path, &obs, &e);
+    let mut plan = Plan::zeroed();
     let total: u32 = per_pass.iter().sum();
     println!("cold start: {per_pass:?} iterations per pass, {total} in all");
     assert_eq!(per_pass.len(), s.cold_start_iterations as usize);
@@ -558,21 +571,8 @@ fn the_qp_iteration_cap_bounds_the_whole_activation() {
 fn a_capped_cold_start_resumes_from_its_working_set() {
     let (path, obs, e) = cold_start_towards_an_obstacle();
     let s = settings::<f64>();
-    let mut first = Vec::new();
+    let (_, first) = iterations_per_pass(&s, &path, &obs, &e);
     let mut plan = Plan::zeroed();
-    let mut probe = Box::new(Mpc::<f64>::new());
-    probe
-        .step_observed(
-            &s,
-            &path,
-            obs.parabolas(),
-            &e,
-            1.0,
-            &mut plan,
-            |_| {},
-            |sol| first.push(sol.iterations),
-        )
-        .unwrap();
     // A cap a third of what the first pass needs.
     let mut capped = s;
     capped.qp_max_iter = (first[0] / 3).max(1);

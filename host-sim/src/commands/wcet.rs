@@ -111,10 +111,7 @@ fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -
 fn cpi_from_trace(args: &WcetArgs) -> Result<(CpiReport, PathBuf)> {
     let dir = args.out.join("trace");
     fs::create_dir_all(&dir)?;
-    let log = dir.join("qemu-trace.log");
-    let mut a = pil_args(dir.join("run"), "paper", 1.0, args.trace_seconds, &args.elf);
-    a.trace = Some(std::path::absolute(&log)?);
-    pil::run(&a)?;
+    let log = traced_pil_run(args, &dir, "paper")?;
     let f = File::open(&log).with_context(|| format!("opening {}", log.display()))?;
     let report = cpi::analyse_log(BufReader::with_capacity(1 << 20, f), None, &[])
         .map_err(|e| anyhow!("{e}"))?;
@@ -137,24 +134,21 @@ fn cap_trace(args: &WcetArgs) -> Result<PathBuf> {
     fs::create_dir_all(&dir)?;
     let boxes = dir.join("box_ahead.csv");
     let (x, h) = (CAP_BOX_AHEAD_M, 1.0);
-    fs::write(
-        &boxes,
-        format!(
-            "id,x_m,y_m\nbox_ahead,{},{}\nbox_ahead,{},{}\nbox_ahead,{},{}\nbox_ahead,{},{}\n",
-            x - h,
-            -h,
-            x - h,
-            h,
-            x + h,
-            h,
-            x + h,
-            -h
-        ),
-    )?;
+    let mut csv = String::from("id,x_m,y_m\n");
+    for (cx, cy) in [(x - h, -h), (x - h, h), (x + h, h), (x + h, -h)] {
+        csv.push_str(&format!("box_ahead,{cx},{cy}\n"));
+    }
+    fs::write(&boxes, csv)?;
+    traced_pil_run(args, &dir, &boxes.to_string_lossy())
+}
+
+/// A PIL run of `--trace-seconds` on the `paper` track at μ 1 with `obstacles`,
+/// its output and QEMU's execution trace in `dir`; returns the trace's file.
+fn traced_pil_run(args: &WcetArgs, dir: &Path, obstacles: &str) -> Result<PathBuf> {
     let log = dir.join("qemu-trace.log");
     let mut a = pil_args(
         dir.join("run"),
-        &boxes.to_string_lossy(),
+        obstacles,
         1.0,
         args.trace_seconds,
         &args.elf,
