@@ -24,6 +24,9 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+/// How many of a task bound's largest functions the report lists.
+const TOP_FUNCTIONS: usize = 25;
+
 /// Whether a loop is a load-exclusive/store-exclusive retry (an atomic
 /// read-modify-write): it retries only when the exclusive monitor was cleared,
 /// which on a single Cortex-M core an exception entry or return does.
@@ -102,6 +105,8 @@ pub struct TaskStatic {
     pub refused: Option<String>,
     /// The bound's top contributors (function, cycles).
     pub top_functions: Vec<(String, f64)>,
+    /// The same functions' entries (calls) on that path.
+    pub top_functions_entries: Vec<(String, f64)>,
     /// Activations of the task seen in the traces.
     pub observed_activations: u64,
     /// Largest traced activation, instructions (its executed blocks' counts).
@@ -636,7 +641,7 @@ pub fn analyse(
             .map(|a| a.bound)
             .sum::<u64>();
         let preemptions = preemptions_of(owner) * per_preemption;
-        let (mut bi, mut bc, mut top) = (None, None, Vec::new());
+        let (mut bi, mut bc, mut top, mut top_entries) = (None, None, Vec::new(), Vec::new());
         if irr.is_empty() {
             match ipet::task_bound(
                 &program,
@@ -665,7 +670,12 @@ pub fn analyse(
                 ) {
                     Ok(b) => {
                         bc = Some(b.bound);
-                        top = b.by_function.into_iter().take(10).collect();
+                        top = b.by_function.into_iter().take(TOP_FUNCTIONS).collect();
+                        top_entries = b
+                            .entries_by_function
+                            .into_iter()
+                            .take(TOP_FUNCTIONS)
+                            .collect();
                     }
                     Err(e) => refused.push(e.to_string()),
                 }
@@ -683,6 +693,7 @@ pub fn analyse(
             static_bound_cycles: bc,
             refused: (!refused.is_empty()).then(|| refused.join("; ")),
             top_functions: top,
+            top_functions_entries: top_entries,
             observed_activations: 0,
             observed_max_instructions: None,
             observed_max_cycles: None,
@@ -918,6 +929,31 @@ impl StaticAnalysis {
             for i in &t.irreducible {
                 let _ = writeln!(s, "- irreducible ({}): {i}", t.name);
             }
+        }
+        let _ = writeln!(
+            s,
+            "\n## What the bounds are made of\n\nPer task or section, the functions whose \
+             blocks cost the most on the worst path the IPET found (their own blocks, \
+             callees apart), in model cycles, with how often that path enters them.\n"
+        );
+        for t in self.tasks.iter().filter(|t| !t.top_functions.is_empty()) {
+            let total = t.static_bound_cycles.unwrap_or(0).max(1) as f64;
+            let _ = writeln!(s, "### {}\n", t.name);
+            let _ = writeln!(s, "| function | cycles | share of the bound | entries |");
+            let _ = writeln!(s, "|---|---:|---:|---:|");
+            for (k, (f, c)) in t.top_functions.iter().enumerate() {
+                let entries = t
+                    .top_functions_entries
+                    .get(k)
+                    .filter(|(g, _)| g == f)
+                    .map_or("–".to_string(), |(_, n)| format!("{n:.0}"));
+                let _ = writeln!(
+                    s,
+                    "| `{f}` | {c:.0} | {:.1} % | {entries} |",
+                    100.0 * c / total
+                );
+            }
+            let _ = writeln!(s);
         }
         let _ = writeln!(s, "\n## Processor and memory model\n");
         for a in &self.assumptions {

@@ -186,6 +186,9 @@ pub struct IpetBound {
     pub bound: u64,
     /// Per function: its blocks' cost on the worst path, most first.
     pub by_function: Vec<(String, f64)>,
+    /// Per function: its entries (calls) on the worst path, in the order of
+    /// `by_function`.
+    pub entries_by_function: Vec<(String, f64)>,
     /// Variables and constraints of the linear program.
     pub variables: usize,
     /// Constraints of the linear program.
@@ -551,10 +554,20 @@ pub fn task_bound(
         .filter(|(_, v)| *v > 0.5)
         .collect();
     by_function.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let entries_by_function = by_function
+        .iter()
+        .filter_map(|(name, _)| {
+            let (f, _) = per_function
+                .iter()
+                .find(|(f, _)| program.functions[*f].demangled == *name)?;
+            Some((name.clone(), solution.value(n_entry[f])))
+        })
+        .collect();
     let _ = count;
     Ok(IpetBound {
         bound: round_up(value),
         by_function,
+        entries_by_function,
         variables,
         constraints: n_constraints,
     })
