@@ -5,7 +5,7 @@
 
 use crate::cholesky::solve_upper;
 use crate::factor::{AppendError, Workspace, ROW_FULL, ROW_TRANSFORMED};
-use crate::rows::{bounds_of, con_row, delta, dot_from, dot_prefix, held_bound, row_start, sign};
+use crate::rows::{bounds_of, con_row, delta, dot_prefix, held_bound, row_start, sign};
 use crate::settings::Tols;
 use crate::{
     ActiveConstraint, ConstraintIndex, QpProblem, QpSettings, QpSolution, QpStatus, Real, Side,
@@ -47,8 +47,18 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 *u0 -= l * row.head;
             }
             let u = self.u.get_mut(row.start + 1..).unwrap_or(&mut []);
-            // wcet-bound: NV
-            for (u, r) in u.iter_mut().zip(row.tail) {
+            // Four entries a trip (each entry's own operation, so the same
+            // result as one at a time): `u` and the tail have the same length.
+            let mut uc = u.chunks_exact_mut(4);
+            let mut rc = row.tail.chunks_exact(4);
+            // wcet-bound: NV / 4
+            for (u4, r4) in (&mut uc).zip(&mut rc) {
+                for (u, r) in u4.iter_mut().zip(r4) {
+                    *u -= l * *r;
+                }
+            }
+            // wcet-bound: 3
+            for (u, r) in uc.into_remainder().iter_mut().zip(rc.remainder()) {
                 *u -= l * *r;
             }
         }
@@ -91,12 +101,16 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // wcet-bound: NC
         for i in 0..p.m.min(M) {
             if self.row_state[i].is_none() {
-                // m̃_iᵀu once the row is transformed, else a_iᵀx (the same value).
-                let val = match self.row_code[i] {
-                    ROW_TRANSFORMED => dot_from(&p.a[i], &self.u, 0),
-                    ROW_FULL => dot_from(&p.a[i], x, 0),
-                    groups => dot_prefix(&p.a[i], x, 4 * groups as usize),
+                // m̃_iᵀu once the row is transformed, else a_iᵀx (the same value),
+                // over the row's nonzero prefix: one loop for the three cases, whose
+                // trip count is not a constant, so the compiler keeps it rolled and
+                // this loop's code small enough to stay in the flash cache.
+                let (y, len) = match self.row_code[i] {
+                    ROW_TRANSFORMED => (&self.u, N),
+                    ROW_FULL => (x, N),
+                    groups => (x, 4 * groups as usize),
                 };
+                let val = dot_prefix(&p.a[i], y, len);
                 consider(val, p.lo[i], p.hi[i], ConstraintIndex::Row(i as u16));
             }
         }
@@ -332,9 +346,15 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // wcet-bound: WS
         for r in (0..n).rev() {
             let mut acc = -self.ldl[s + r];
-            for k in (r + 1)..n {
+            // Column r of L below the diagonal: entry (k, r) is at
+            // row_start(k) + r, and row_start(k + 1) = row_start(k) + k + 1.
+            let mut at = row_start(r + 1) + r;
+            let c = self.tmp.get(r + 1..n).unwrap_or(&[]);
+            for (k, &c) in (r + 1..).zip(c) {
+                let l = self.ldl.get(at).copied().unwrap_or(T::ZERO);
+                at += k + 1;
                 // Bounds the `for k in (r + 1)..n` loop: n ≤ W, a triangle per call.
-                acc -= self.ldl[row_start(k) + r] * self.tmp[k]; // wcet-bound: WS * (WS - 1) / 2 per call
+                acc -= l * c; // wcet-bound: WS * (WS - 1) / 2 per call
             }
             self.tmp[r] = acc;
             cmax = cmax.max(acc.abs());

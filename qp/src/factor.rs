@@ -216,12 +216,18 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         for l in 0..n {
             let sl = row_start(l);
             let mut acc = self.ldl[s + l];
+            // Row l of L against y[0..l], as slices (no index checks in the
+            // loop); the same products in the same order.
+            let (row, y) = (
+                self.ldl.get(sl..sl + l).unwrap_or(&[]),
+                self.ldl.get(s..s + l).unwrap_or(&[]),
+            );
             // Σ l over l < n ≤ W per append (one call of `append`, not inlined
             // further); Σ n(n − 1)/2 over the rows of one rebuild.
             // wcet-bound in append: WS * (WS - 1) / 2 per call
             // wcet-bound in rebuild: WS * (WS - 1) * (WS - 2) / 6 per call
-            for k in 0..l {
-                acc -= self.ldl[sl + k] * self.ldl[s + k];
+            for (&a, &b) in row.iter().zip(y) {
+                acc -= a * b;
             }
             self.ldl[s + l] = acc;
         }
@@ -338,9 +344,12 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         for r in 0..n {
             let s = row_start(r);
             let mut acc = self.tmp[r];
-            for k in 0..r {
+            // Row r of the packed L against x[0..r], as slices (no index checks
+            // in the loop); the same products in the same order.
+            let l = self.ldl.get(s..s + r).unwrap_or(&[]);
+            for (&l, &x) in l.iter().zip(self.tmp.iter()) {
                 // Bounds the `for k in 0..r` loop: Σ r over r < n ≤ W per call.
-                acc -= self.ldl[s + k] * self.tmp[k]; // wcet-bound: WS * (WS - 1) / 2 per call
+                acc -= l * x; // wcet-bound: WS * (WS - 1) / 2 per call
             }
             self.tmp[r] = acc;
         }
@@ -360,9 +369,19 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.tmp.get_mut(..r).unwrap_or(&mut []),
                 self.ldl.get(s..s + r).unwrap_or(&[]),
             );
-            // Σ r over 1 ≤ r < n ≤ W per call.
-            // wcet-bound: WS * (WS - 1) / 2 per call
-            for (t, &l) in t.iter_mut().zip(l) {
+            // Four entries a trip (each entry's own operation: the same result
+            // as one at a time); `t` and `l` have the same length r.
+            let mut tc = t.chunks_exact_mut(4);
+            let mut lc = l.chunks_exact(4);
+            // Σ r/4 over 1 ≤ r < n ≤ W per call.
+            // wcet-bound: WS * (WS - 1) / 8 per call
+            for (t4, l4) in (&mut tc).zip(&mut lc) {
+                for (t, &l) in t4.iter_mut().zip(l4) {
+                    *t -= l * xr;
+                }
+            }
+            // wcet-bound: 3
+            for (t, &l) in tc.into_remainder().iter_mut().zip(lc.remainder()) {
                 *t -= l * xr;
             }
         }
