@@ -5,7 +5,7 @@
 
 use crate::cholesky::solve_upper;
 use crate::factor::{AppendError, Workspace, ROW_FULL, ROW_TRANSFORMED};
-use crate::rows::{bounds_of, con_row, delta, dot_prefix, held_bound, row_start, sign};
+use crate::rows::{bounds_of, con_row, delta, dot_prefix, held_bound, row_start, sign, sub_scaled};
 use crate::settings::Tols;
 use crate::{
     ActiveConstraint, ConstraintIndex, QpProblem, QpSettings, QpSolution, QpStatus, Real, Side,
@@ -47,20 +47,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 *u0 -= l * row.head;
             }
             let u = self.u.get_mut(row.start + 1..).unwrap_or(&mut []);
-            // Four entries a trip (each entry's own operation, so the same
-            // result as one at a time): `u` and the tail have the same length.
-            let mut uc = u.chunks_exact_mut(4);
-            let mut rc = row.tail.chunks_exact(4);
-            // wcet-bound: NV / 4
-            for (u4, r4) in (&mut uc).zip(&mut rc) {
-                for (u, r) in u4.iter_mut().zip(r4) {
-                    *u -= l * *r;
-                }
-            }
-            // wcet-bound: 3
-            for (u, r) in uc.into_remainder().iter_mut().zip(rc.remainder()) {
-                *u -= l * *r;
-            }
+            // `u` and the tail have the same length.
+            sub_scaled(u, l, row.tail);
         }
         solve_upper(&p.h, &self.u, x);
     }

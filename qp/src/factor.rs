@@ -4,7 +4,7 @@
 //! scratch when rounding spoiled it, and the system is solved with it.
 
 use crate::cholesky::{solve_transposed, store_inverse_row};
-use crate::rows::{bounds_of, delta, mdot, row_start};
+use crate::rows::{bounds_of, delta, mdot, row_start, sub_scaled};
 use crate::settings::Tols;
 use crate::{ActiveConstraint, ConstraintIndex, QpProblem, QpSettings, Real, Side};
 
@@ -369,21 +369,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.tmp.get_mut(..r).unwrap_or(&mut []),
                 self.ldl.get(s..s + r).unwrap_or(&[]),
             );
-            // Four entries a trip (each entry's own operation: the same result
-            // as one at a time); `t` and `l` have the same length r.
-            let mut tc = t.chunks_exact_mut(4);
-            let mut lc = l.chunks_exact(4);
-            // Σ r/4 over 1 ≤ r < n ≤ W per call.
-            // wcet-bound: WS * (WS - 1) / 8 per call
-            for (t4, l4) in (&mut tc).zip(&mut lc) {
-                for (t, &l) in t4.iter_mut().zip(l4) {
-                    *t -= l * xr;
-                }
-            }
-            // wcet-bound: 3
-            for (t, &l) in tc.into_remainder().iter_mut().zip(lc.remainder()) {
-                *t -= l * xr;
-            }
+            // `t` and `l` have the same length r.
+            sub_scaled(t, xr, l);
         }
     }
 }

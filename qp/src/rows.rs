@@ -103,6 +103,27 @@ pub(crate) fn dot4<T: Real>(a: &[T], b: &[T]) -> T {
     s
 }
 
+/// `y_k −= s·x_k` over two slices of equal length, four entries a trip (each
+/// entry's own operation: the same result as one at a time).
+#[inline(always)]
+pub(crate) fn sub_scaled<T: Real>(y: &mut [T], s: T, x: &[T]) {
+    let mut yc = y.chunks_exact_mut(4);
+    let mut xc = x.chunks_exact(4);
+    // `primal`: a transformed row's tail (at most N entries); `ldl_solve_tmp`: the
+    // first r entries of `tmp`, Σ r/4 over 1 ≤ r < n ≤ W per call.
+    // wcet-bound: NV / 4
+    // wcet-bound in ldl_solve_tmp: WS * (WS - 1) / 8 per call
+    for (y4, x4) in (&mut yc).zip(&mut xc) {
+        for (y, &x) in y4.iter_mut().zip(x4) {
+            *y -= s * x;
+        }
+    }
+    // wcet-bound: 3
+    for (y, &x) in yc.into_remainder().iter_mut().zip(xc.remainder()) {
+        *y -= s * x;
+    }
+}
+
 /// `Σ_{k ≥ start} a_k b_k` ([`dot4`]).
 #[inline]
 pub(crate) fn dot_from<T: Real, const N: usize>(a: &[T; N], b: &[T; N], start: usize) -> T {
