@@ -548,20 +548,19 @@ pub fn task_bound(
         .solve()
         .map_err(|e| IpetError::Solver(e.to_string()))?;
     let value = solution.eval(&objective);
-    let mut by_function: Vec<(String, f64)> = per_function
+    // Cost and entries per function, kept by index (two instances of a generic
+    // function can demangle alike).
+    let mut ranked: Vec<(usize, f64)> = per_function
         .iter()
-        .map(|(f, e)| (program.functions[*f].demangled.clone(), solution.eval(e)))
+        .map(|(f, e)| (*f, solution.eval(e)))
         .filter(|(_, v)| *v > 0.5)
         .collect();
-    by_function.sort_by(|a, b| b.1.total_cmp(&a.1));
-    let entries_by_function = by_function
+    ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let name = |f: usize| program.functions[f].demangled.clone();
+    let by_function = ranked.iter().map(|&(f, v)| (name(f), v)).collect();
+    let entries_by_function = ranked
         .iter()
-        .filter_map(|(name, _)| {
-            let (f, _) = per_function
-                .iter()
-                .find(|(f, _)| program.functions[*f].demangled == *name)?;
-            Some((name.clone(), solution.value(n_entry[f])))
-        })
+        .map(|&(f, _)| (name(f), solution.value(n_entry[&f])))
         .collect();
     let _ = count;
     Ok(IpetBound {
