@@ -14,13 +14,12 @@ use crate::{
 impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     Workspace<T, N, M, W, WL>
 {
-    /// `λ*` for the current working set, into `tmp`; false if not finite.
-    pub(crate) fn solve_lam_star(&mut self, p: &QpProblem<T, N, M>) -> bool {
+    /// `λ*` for the current working set, into `tmp` (`−d_W` solved with the
+    /// factor); false if not finite.
+    pub(crate) fn solve_lam_star(&mut self) -> bool {
         // wcet-bound: WS
         for k in 0..self.n {
-            let e = self.ws[k];
-            let b = held_bound(p, e);
-            self.tmp[k] = -(b + con_row(p, e.index).dot(&self.v));
+            self.tmp[k] = -self.dw[k];
         }
         self.ldl_solve_tmp();
         self.tmp.iter().take(self.n).all(|v| v.is_finite())
@@ -150,11 +149,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 return QpStatus::IterationLimit;
             }
             sol.iterations += 1;
-            if !self.solve_lam_star(p) {
+            if !self.solve_lam_star() {
                 if !self.refactor(p, tols, sol, settings.max_refactorizations) {
                     return QpStatus::NumericalError;
                 }
-                if !self.solve_lam_star(p) {
+                if !self.solve_lam_star() {
                     return QpStatus::NumericalError;
                 }
             }
@@ -288,7 +287,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 // the row is taken as independent after all, with its small pivot.
                 let rel = self.last_rel_pivot;
                 if rel.is_finite() && rel > tols.rounding {
-                    self.commit(e);
+                    self.commit(p, e);
                     self.lam[self.n - 1] = lam_e;
                     sol.added += 1;
                     return Ok(());

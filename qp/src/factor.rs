@@ -4,7 +4,7 @@
 //! scratch when rounding spoiled it, and the system is solved with it.
 
 use crate::cholesky::{solve_transposed, store_inverse_row};
-use crate::rows::{bounds_of, delta, mdot, row_start, sub_scaled};
+use crate::rows::{bounds_of, con_row, delta, held_bound, mdot, row_start, sub_scaled};
 use crate::settings::Tols;
 use crate::{ActiveConstraint, ConstraintIndex, QpProblem, QpSettings, Real, Side};
 
@@ -18,6 +18,11 @@ pub(crate) struct Workspace<T, const N: usize, const M: usize, const W: usize, c
     pub(crate) n: usize,
     /// Current (dual-feasible) multipliers of the working set (`W`).
     pub(crate) lam: [T; W],
+    /// `d_k = b_k + m̃_kᵀv` of each working-set entry (`W`), computed by `commit`
+    /// when the entry enters: the right-hand side `−d_W` of `λ*`'s system, constant
+    /// over a solve (`v`, the held bound and the transformed row do not change), so
+    /// each iteration reads it instead of a dot product per entry.
+    pub(crate) dw: [T; W],
     /// Scratch (`W`): right-hand side then `λ*` of the working-set system, rank-one
     /// vectors, null-space direction.
     pub(crate) tmp: [T; W],
@@ -247,17 +252,19 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         if !(dn > tols.pivot * diag) || !dn.is_finite() {
             return Err(AppendError::Singular);
         }
-        self.commit(e);
+        self.commit(p, e);
         Ok(())
     }
 
-    /// Makes the row `n` written by `append` part of the factor.
-    pub(crate) fn commit(&mut self, e: ActiveConstraint) {
+    /// Makes the row `n` written by `append` part of the factor, with its `d`
+    /// ([`Self::dw`]).
+    pub(crate) fn commit(&mut self, p: &QpProblem<T, N, M>, e: ActiveConstraint) {
         let n = self.n;
         if n >= W {
             return;
         }
         self.ws[n] = e;
+        self.dw[n] = held_bound(p, e) + con_row(p, e.index).dot(&self.v);
         if let Some(st) = self.state_mut(e.index) {
             *st = Some(e.side);
         }
@@ -304,6 +311,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         for r in pos..(n - 1) {
             self.ws[r] = self.ws[r + 1];
+            self.dw[r] = self.dw[r + 1];
             // Bounds the `for r in pos..(n - 1)` loop (its back edge is on this line).
             self.lam[r] = self.lam[r + 1]; // wcet-bound: WS
         }

@@ -55,6 +55,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 }; W],
                 n: 0,
                 lam: [T::ZERO; W],
+                dw: [T::ZERO; W],
                 tmp: [T::ZERO; W],
                 ldl: [T::ZERO; WL],
                 v: [T::ZERO; N],
