@@ -633,6 +633,7 @@ fn block_copies_are_bounded_by_the_bytes_of_their_call_sites() {
             .iter()
             .map(|&bytes| ipet::CopySite {
                 function: root,
+                callee: copy,
                 block: 0,
                 bytes,
                 at: "root".into(),
@@ -650,6 +651,80 @@ fn block_copies_are_bounded_by_the_bytes_of_their_call_sites() {
         ipet::task_bound(&p, &ls, root, &facts, 0, &unknown, Cost::Instructions),
         Err(IpetError::Unbounded(_))
     ));
+}
+
+/// `root` copies 67 bytes with a word copy (`NAME`: a loop of one word a trip,
+/// then the rest handed to `memcpy`, a loop of one byte a trip).
+const WORD_COPY: &str = "
+08000000 <root>:
+ 8000000: b510         \tpush\t{r4, lr}
+ 8000002: 2243         \tmovs\tr2, #0x43
+ 8000004: f000 f80c    \tbl\t0x8000020 <NAME> @ imm = #0x18
+ 8000008: bd10         \tpop\t{r4, pc}
+
+08000020 <NAME>:
+ 8000020: 2a03         \tcmp\tr2, #0x3
+ 8000022: d906         \tbls\t0x8000032 <NAME+0x12> @ imm = #0xc
+ 8000024: f851 3b04    \tldr\tr3, [r1], #4
+ 8000028: f840 3b04    \tstr\tr3, [r0], #4
+ 800002c: 3a04         \tsubs\tr2, #0x4
+ 800002e: 2a03         \tcmp\tr2, #0x3
+ 8000030: d8f8         \tbhi\t0x8000024 <NAME+0x4> @ imm = #-0x10
+ 8000032: f000 b805    \tb.w\t0x8000040 <memcpy> @ imm = #0xa
+
+08000040 <memcpy>:
+ 8000040: 2a00         \tcmp\tr2, #0x0
+ 8000042: d005         \tbeq\t0x8000050 <memcpy+0x10> @ imm = #0xa
+ 8000044: f811 3b01    \tldrb\tr3, [r1], #1
+ 8000048: f800 3b01    \tstrb\tr3, [r0], #1
+ 800004c: 3a01         \tsubs\tr2, #0x1
+ 800004e: d1f9         \tbne\t0x8000044 <memcpy+0x4> @ imm = #-0xe
+ 8000050: 4770         \tbx\tlr
+";
+
+/// The bound of [`WORD_COPY`] with its word copy named `name`.
+fn word_copy_bound(name: &str) -> u64 {
+    let p = program(&WORD_COPY.replace("NAME", name));
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let words = p.find(name)[0];
+    let bytes = p.find("memcpy")[0];
+    // Per entry alone: 16 words, and all 67 bytes one by one.
+    let fact = |function: usize, bound: u64| LoopFact {
+        function,
+        loop_index: 0,
+        bound,
+        per: Per::Entry,
+        group: None,
+        iterations: false,
+    };
+    let facts = [fact(words, 16), fact(bytes, 67)];
+    let copies = ipet::CopySizes {
+        family: [words, bytes].into_iter().collect(),
+        sites: vec![ipet::CopySite {
+            function: root,
+            callee: words,
+            block: 0,
+            bytes: Some(67),
+            at: "root".into(),
+        }],
+        caps: Vec::new(),
+        counters: Default::default(),
+    };
+    ipet::task_bound(&p, &ls, root, &facts, 0, &copies, Cost::Instructions)
+        .unwrap()
+        .bound
+}
+
+#[test]
+fn a_word_copy_hands_memcpy_at_most_its_remainder() {
+    // root 4, the word copy 2 + 5·(1 + w) + 1, memcpy 2 + 4·(1 + b) + 1, with w
+    // words and b bytes: 19 + 5w + 4b, and 4w + b ≤ 67 (the call's bytes).
+    // An unknown copy function handing over to memcpy: the shared budget alone
+    // lets the worst path move all 67 bytes one by one (b = 67, w = 0).
+    assert_eq!(word_copy_bound("copy_words"), 19 + 4 * 67);
+    // `__aeabi_memcpy4` hands over at most 3 bytes: b ≤ 3, then w = 16.
+    assert_eq!(word_copy_bound("__aeabi_memcpy4"), 19 + 5 * 16 + 4 * 3);
 }
 
 /// `root` returns at once, or counts `r0` down and panics: the loop is on a path

@@ -91,6 +91,7 @@ pub(super) fn copy_sizes(
                     .or_else(|| bytes_at.get(&key).copied());
                 sites.push(ipet::CopySite {
                     function: k,
+                    callee,
                     block: b,
                     bytes,
                     at: format!(

@@ -161,6 +161,8 @@ pub struct BlockCap {
 pub struct CopySite {
     /// The calling function.
     pub function: usize,
+    /// The copy or fill function it calls.
+    pub callee: usize,
     /// The calling block.
     pub block: usize,
     /// The most bytes it moves: a constant the binary sets before the call, or
@@ -312,6 +314,31 @@ pub fn task_bound(
     // Every block's count, for the copy sites; the copy functions' back edges.
     let mut x_all: HashMap<(usize, usize), Variable> = HashMap::new();
     let mut copy_loops: Vec<Expression> = Vec::new();
+    // The same, per copy function; and per copy function, the calls it gets
+    // from the family's other functions: bytes known only for the hand-over of
+    // a word copy's remainder to `memcpy` ([`REMAINDER_BYTES`]), else unknown.
+    let mut copy_loops_by_function: HashMap<usize, Expression> = HashMap::new();
+    let mut handoffs: HashMap<usize, Expression> = HashMap::new();
+    let mut unknown_handoff: std::collections::HashSet<usize> = std::collections::HashSet::new();
+    // (to, from): `from` forwards its calls to `to` unchanged.
+    let mut forwards: Vec<(usize, usize)> = Vec::new();
+    let mut family_call = |from: usize, to: usize, count: Expression| {
+        if !copies.family.contains(&from) || !copies.family.contains(&to) {
+            return;
+        }
+        let (caller, callee) = (
+            base_name(&program.functions[from].demangled),
+            base_name(&program.functions[to].demangled),
+        );
+        if is_word_copy(caller) && callee == "memcpy" {
+            *handoffs.entry(to).or_insert_with(|| Expression::from(0.0)) +=
+                REMAINDER_BYTES as f64 * count;
+        } else if is_forwarder(caller, callee) {
+            forwards.push((to, from));
+        } else {
+            unknown_handoff.insert(to);
+        }
+    };
     // Per activation group: its bound and the runs of its blocks.
     let mut group_runs: std::collections::BTreeMap<usize, (u64, Expression)> =
         std::collections::BTreeMap::new();
@@ -357,12 +384,14 @@ pub fn task_bound(
                             *calls_into
                                 .entry(*t)
                                 .or_insert_with(|| Expression::from(0.0)) += r;
+                            family_call(f, *t, r.into());
                         }
                         Exit::IndirectTail(ts) => {
                             for t in ts {
                                 *calls_into
                                     .entry(*t)
                                     .or_insert_with(|| Expression::from(0.0)) += r;
+                                family_call(f, *t, r.into());
                             }
                         }
                         _ => {}
@@ -373,6 +402,7 @@ pub fn task_bound(
             constraints.push(constraint!(xb == out));
             for &c in block.calls.iter().filter(|_| can_complete) {
                 *calls_into.entry(c).or_insert_with(|| Expression::from(0.0)) += xb;
+                family_call(f, c, xb.into());
             }
             let c = match cost {
                 Cost::Instructions => block.instructions,
@@ -459,6 +489,9 @@ pub fn task_bound(
                 let all = loops.get(f).map_or(&[][..], |v| v.as_slice());
                 let per_trip = min_stored_bytes_per_trip(func, all, l).max(1) as f64;
                 copy_loops.push(per_trip * back.clone());
+                *copy_loops_by_function
+                    .entry(f)
+                    .or_insert_with(|| Expression::from(0.0)) += per_trip * back.clone();
             }
             let Some(fact) = fact_of.get(&(f, k)) else {
                 continue;
@@ -518,6 +551,36 @@ pub fn task_bound(
             .into_iter()
             .fold(Expression::from(0.0), |a, b| a + b);
         constraints.push(constraint!(all <= bytes));
+        // And each function's own share: its loops store at most the bytes of
+        // the calls made to it, from outside the family (their sizes) and from
+        // its other functions (a word copy's remainder); a function that another
+        // copy function calls with bytes unknown has only the shared budget.
+        let sites_into = |g: usize| {
+            let mut e = Expression::from(0.0);
+            for c in sites.iter().filter(|c| c.callee == g) {
+                if let (Some(n), Some(&v)) = (c.bytes, x_all.get(&(c.function, c.block))) {
+                    e += n as f64 * v;
+                }
+            }
+            e
+        };
+        for (g, own) in copy_loops_by_function {
+            // A forwarder's own callers must all be outside the family.
+            let forwarded: Vec<usize> = forwards.iter().filter(|f| f.0 == g).map(|f| f.1).collect();
+            if unknown_handoff.contains(&g)
+                || forwarded
+                    .iter()
+                    .any(|h| unknown_handoff.contains(h) || handoffs.contains_key(h))
+            {
+                continue;
+            }
+            let mut given = handoffs.remove(&g).unwrap_or_else(|| Expression::from(0.0));
+            given += sites_into(g);
+            for h in forwarded {
+                given += sites_into(h);
+            }
+            constraints.push(constraint!(own <= given));
+        }
     }
     for (_, (bound, runs)) in group_runs {
         let bound = bound as f64;
@@ -581,4 +644,35 @@ fn round_up(value: f64) -> u64 {
     } else {
         value.ceil().max(0.0) as u64
     }
+}
+
+/// Most bytes `__aeabi_memcpy4` (and `__aeabi_memcpy8`, which is it) hands to
+/// `memcpy`: compiler_builtins' `arm.rs` copies whole words while `n ≥ 4` and
+/// passes the rest, `n < 4`, to `memcpy` (the toolchain is pinned in
+/// `rust-toolchain.toml`, so the binary's helpers are this code). Without it the
+/// family's one byte budget lets the worst path move every byte of a word copy
+/// through `memcpy`'s costliest (misaligned) loop.
+pub const REMAINDER_BYTES: u64 = 3;
+
+/// The last path segment of a demangled name.
+fn base_name(demangled: &str) -> &str {
+    demangled.rsplit("::").next().unwrap_or(demangled)
+}
+
+/// Whether the function is one of the AEABI word copies that hand their
+/// remainder to `memcpy`.
+fn is_word_copy(demangled: &str) -> bool {
+    matches!(base_name(demangled), "__aeabi_memcpy4" | "__aeabi_memcpy8")
+}
+
+/// Whether `caller` passes its arguments to `callee` unchanged:
+/// compiler_builtins' `__aeabi_memmove`, `…4` and `…8` are `memmove(dest, src,
+/// n)` (the alignment they promise is not used), so `memmove` moves the bytes of
+/// their calls.
+fn is_forwarder(caller: &str, callee: &str) -> bool {
+    callee == "memmove"
+        && matches!(
+            caller,
+            "__aeabi_memmove" | "__aeabi_memmove4" | "__aeabi_memmove8"
+        )
 }
