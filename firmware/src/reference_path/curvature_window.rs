@@ -154,38 +154,47 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
 
     /// Takes the vertices before `b` (unwrapped, m) into the window's maximum of
     /// `g(κ)`, from where the window's scan stopped; the scan stops after one lap
-    /// or at the end of an open path.
+    /// or at the end of an open path. Not inlined, and over local copies of the
+    /// window's fields (written back once): in its own frame the scan's state
+    /// stays in registers, where inlined into the MPC step every trip reloaded
+    /// and stored it through the stack; its loop calls nothing, so it keeps its
+    /// flash lines in the cache. The same steps in the same order as on `win`.
+    #[inline(never)]
     fn scan_vertices(&self, win: &mut CurvatureWindow<T>, b: T, g: impl Fn(T) -> T) {
         let segments = self.segment_count();
-        // WCET: `win.steps` grows by one each pass and the scan stops at n <= CAP
+        let (mut seg, mut pos, mut steps, mut ended) = (win.seg, win.pos, win.steps, win.ended);
+        let (mut vmax, mut vpos) = (win.vmax, win.vpos);
+        // WCET: `steps` grows by one each pass and the scan stops at n <= CAP
         // (= ECU_PATH_ROWS in the ECU); every other exit is a break.
         // wcet-bound: ECU_PATH_ROWS
-        while win.steps < self.n && !win.ended {
-            if win.seg >= self.n {
-                win.seg = 0;
+        while steps < self.n && !ended {
+            if seg >= self.n {
+                seg = 0;
             }
-            if win.seg >= segments {
-                win.ended = true;
+            if seg >= segments {
+                ended = true;
                 break;
             }
-            let next = win.pos + self.seg_len[win.seg];
+            let next = pos + self.seg_len[seg];
             if next >= b {
                 break;
             }
-            win.pos = next;
-            let v = self.next_vertex(win.seg);
+            pos = next;
+            let v = self.next_vertex(seg);
             if !self.closed && v == 0 {
-                win.ended = true;
+                ended = true;
                 break;
             }
             let kv = g(self.curvature[v]);
-            if kv >= win.vmax {
-                win.vmax = kv;
-                win.vpos = next;
+            if kv >= vmax {
+                vmax = kv;
+                vpos = next;
             }
-            win.seg += 1;
-            win.steps += 1;
+            seg += 1;
+            steps += 1;
         }
+        (win.seg, win.pos, win.steps, win.ended) = (seg, pos, steps, ended);
+        (win.vmax, win.vpos) = (vmax, vpos);
     }
 
     /// The scan of [`Self::max_abs_curvature_between`] over `[a, b]` (`a <= b`),
