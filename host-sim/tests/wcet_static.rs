@@ -727,6 +727,84 @@ fn a_word_copy_hands_memcpy_at_most_its_remainder() {
     assert_eq!(word_copy_bound("__aeabi_memcpy4"), 19 + 5 * 16 + 4 * 3);
 }
 
+/// `root` moves 8 bytes through `NAME`, which forwards to `memmove` (a loop of
+/// one byte a trip, 4 instructions), and fills 64 with `memset` (a loop of four
+/// bytes a trip, 3 instructions).
+const FORWARDER: &str = "
+08000000 <root>:
+ 8000000: b510         \tpush\t{r4, lr}
+ 8000002: 2208         \tmovs\tr2, #0x8
+ 8000004: f000 f80c    \tbl\t0x8000020 <NAME> @ imm = #0x18
+ 8000008: 2240         \tmovs\tr2, #0x40
+ 800000a: f000 f821    \tbl\t0x8000050 <memset> @ imm = #0x42
+ 800000e: bd10         \tpop\t{r4, pc}
+
+08000020 <NAME>:
+ 8000020: f000 b80e    \tb.w\t0x8000040 <memmove> @ imm = #0x1c
+
+08000040 <memmove>:
+ 8000040: f811 3b01    \tldrb\tr3, [r1], #1
+ 8000044: f800 3b01    \tstrb\tr3, [r0], #1
+ 8000048: 3a01         \tsubs\tr2, #0x1
+ 800004a: d1f9         \tbne\t0x8000040 <memmove> @ imm = #-0xe
+ 800004c: 4770         \tbx\tlr
+
+08000050 <memset>:
+ 8000050: f840 1b04    \tstr\tr1, [r0], #4
+ 8000054: 3a04         \tsubs\tr2, #0x4
+ 8000056: d1fb         \tbne\t0x8000050 <memset> @ imm = #-0xa
+ 8000058: 4770         \tbx\tlr
+";
+
+/// The bound of [`FORWARDER`] with its forwarder named `name`.
+fn forwarder_bound(name: &str) -> u64 {
+    let p = program(&FORWARDER.replace("NAME", name));
+    let ls = all_loops(&p);
+    let root = p.find("root")[0];
+    let fwd = p.find(name)[0];
+    let moves = p.find("memmove")[0];
+    let fills = p.find("memset")[0];
+    let fact = |function: usize, bound: u64| LoopFact {
+        function,
+        loop_index: 0,
+        bound,
+        per: Per::Entry,
+        group: None,
+        iterations: false,
+    };
+    // Per entry alone: all 72 bytes one by one, 16 words.
+    let facts = [fact(moves, 72), fact(fills, 16)];
+    let site = |callee: usize, bytes: u64| ipet::CopySite {
+        function: root,
+        callee,
+        block: 0,
+        bytes: Some(bytes),
+        at: "root".into(),
+    };
+    let copies = ipet::CopySizes {
+        family: [fwd, moves, fills].into_iter().collect(),
+        sites: vec![site(fwd, 8), site(fills, 64)],
+        caps: Vec::new(),
+        counters: Default::default(),
+    };
+    ipet::task_bound(&p, &ls, root, &facts, 0, &copies, Cost::Instructions)
+        .unwrap()
+        .bound
+}
+
+#[test]
+fn a_forwarded_copy_moves_only_its_callers_bytes() {
+    // root 6, the forwarder 1, memmove 4·(1 + m) + 1, memset 3·(1 + w) + 1, with m
+    // and w back edges (the last trip of each loop is its entry's, not a back
+    // edge): 16 + 4m + 3w, and m + 4w ≤ 72 (the calls' bytes).
+    // An unknown function calling memmove: the shared budget alone lets the
+    // worst path spend all 72 bytes one by one in memmove (m = 72, w = 0).
+    assert_eq!(forwarder_bound("copy_through"), 16 + 4 * 72);
+    // `__aeabi_memmove8` forwards its call unchanged: memmove moves its 8 bytes
+    // (m ≤ 8), memset its 64 (4w ≤ 64).
+    assert_eq!(forwarder_bound("__aeabi_memmove8"), 16 + 4 * 8 + 3 * 16);
+}
+
 /// `root` returns at once, or counts `r0` down and panics: the loop is on a path
 /// that never completes.
 const ENDS_IN_PANIC: &str = "

@@ -565,8 +565,10 @@ pub fn task_bound(
             e
         };
         for (g, own) in copy_loops_by_function {
-            // A forwarder's own callers must all be outside the family.
-            let forwarded: Vec<usize> = forwards.iter().filter(|f| f.0 == g).map(|f| f.1).collect();
+            // A forwarder's own callers must all be outside the family; each
+            // forwarder counts once, however many of its blocks call `g`.
+            let forwarded: std::collections::BTreeSet<usize> =
+                forwards.iter().filter(|f| f.0 == g).map(|f| f.1).collect();
             if unknown_handoff.contains(&g)
                 || forwarded
                     .iter()
