@@ -682,38 +682,60 @@ const WORD_COPY: &str = "
  8000050: 4770         \tbx\tlr
 ";
 
-/// The bound of [`WORD_COPY`] with its word copy named `name`.
-fn word_copy_bound(name: &str) -> u64 {
-    let p = program(&WORD_COPY.replace("NAME", name));
+/// The instruction bound of `root` in `text`, the block copies' family
+/// `family` (function names), each with one loop bounded per entry by `facts`
+/// (name, back edges) and called from `root`'s first block as `sites` (callee,
+/// bytes).
+fn copy_family_bound(
+    text: &str,
+    family: &[&str],
+    facts: &[(&str, u64)],
+    sites: &[(&str, u64)],
+) -> u64 {
+    let p = program(text);
     let ls = all_loops(&p);
     let root = p.find("root")[0];
-    let words = p.find(name)[0];
-    let bytes = p.find("memcpy")[0];
-    // Per entry alone: 16 words, and all 67 bytes one by one.
-    let fact = |function: usize, bound: u64| LoopFact {
-        function,
-        loop_index: 0,
-        bound,
-        per: Per::Entry,
-        group: None,
-        iterations: false,
-    };
-    let facts = [fact(words, 16), fact(bytes, 67)];
+    let at = |name: &str| p.find(name)[0];
+    let facts: Vec<LoopFact> = facts
+        .iter()
+        .map(|&(name, bound)| LoopFact {
+            function: at(name),
+            loop_index: 0,
+            bound,
+            per: Per::Entry,
+            group: None,
+            iterations: false,
+        })
+        .collect();
     let copies = ipet::CopySizes {
-        family: [words, bytes].into_iter().collect(),
-        sites: vec![ipet::CopySite {
-            function: root,
-            callee: words,
-            block: 0,
-            bytes: Some(67),
-            at: "root".into(),
-        }],
+        family: family.iter().map(|&name| at(name)).collect(),
+        sites: sites
+            .iter()
+            .map(|&(callee, bytes)| ipet::CopySite {
+                function: root,
+                callee: at(callee),
+                block: 0,
+                bytes: Some(bytes),
+                at: "root".into(),
+            })
+            .collect(),
         caps: Vec::new(),
         counters: Default::default(),
     };
     ipet::task_bound(&p, &ls, root, &facts, 0, &copies, Cost::Instructions)
         .unwrap()
         .bound
+}
+
+/// The bound of [`WORD_COPY`] with its word copy named `name`: per entry alone,
+/// 16 words and all 67 bytes one by one.
+fn word_copy_bound(name: &str) -> u64 {
+    copy_family_bound(
+        &WORD_COPY.replace("NAME", name),
+        &[name, "memcpy"],
+        &[(name, 16), ("memcpy", 67)],
+        &[(name, 67)],
+    )
 }
 
 #[test]
@@ -756,40 +778,15 @@ const FORWARDER: &str = "
  8000058: 4770         \tbx\tlr
 ";
 
-/// The bound of [`FORWARDER`] with its forwarder named `name`.
+/// The bound of [`FORWARDER`] with its forwarder named `name`: per entry alone,
+/// all 72 bytes one by one, 16 words.
 fn forwarder_bound(name: &str) -> u64 {
-    let p = program(&FORWARDER.replace("NAME", name));
-    let ls = all_loops(&p);
-    let root = p.find("root")[0];
-    let fwd = p.find(name)[0];
-    let moves = p.find("memmove")[0];
-    let fills = p.find("memset")[0];
-    let fact = |function: usize, bound: u64| LoopFact {
-        function,
-        loop_index: 0,
-        bound,
-        per: Per::Entry,
-        group: None,
-        iterations: false,
-    };
-    // Per entry alone: all 72 bytes one by one, 16 words.
-    let facts = [fact(moves, 72), fact(fills, 16)];
-    let site = |callee: usize, bytes: u64| ipet::CopySite {
-        function: root,
-        callee,
-        block: 0,
-        bytes: Some(bytes),
-        at: "root".into(),
-    };
-    let copies = ipet::CopySizes {
-        family: [fwd, moves, fills].into_iter().collect(),
-        sites: vec![site(fwd, 8), site(fills, 64)],
-        caps: Vec::new(),
-        counters: Default::default(),
-    };
-    ipet::task_bound(&p, &ls, root, &facts, 0, &copies, Cost::Instructions)
-        .unwrap()
-        .bound
+    copy_family_bound(
+        &FORWARDER.replace("NAME", name),
+        &[name, "memmove", "memset"],
+        &[("memmove", 72), ("memset", 16)],
+        &[(name, 8), ("memset", 64)],
+    )
 }
 
 #[test]

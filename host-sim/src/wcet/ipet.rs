@@ -313,11 +313,12 @@ pub fn task_bound(
     let mut any_retry = false;
     // Every block's count, for the copy sites; the copy functions' back edges.
     let mut x_all: HashMap<(usize, usize), Variable> = HashMap::new();
-    let mut copy_loops: Vec<Expression> = Vec::new();
-    // The same, per copy function; and per copy function, the calls it gets
-    // from the family's other functions: bytes known only for the hand-over of
-    // a word copy's remainder to `memcpy` ([`REMAINDER_BYTES`]), else unknown.
-    let mut copy_loops_by_function: HashMap<usize, Expression> = HashMap::new();
+    // Per copy function: its loops' back edges weighted by the bytes a trip
+    // stores; and the calls it gets from the family's other functions: bytes
+    // known only for the hand-over of a word copy's remainder to `memcpy`
+    // ([`REMAINDER_BYTES`]) or a forwarder's call, else unknown.
+    let mut copy_loops: std::collections::BTreeMap<usize, Expression> =
+        std::collections::BTreeMap::new();
     let mut handoffs: HashMap<usize, Expression> = HashMap::new();
     let mut unknown_handoff: std::collections::HashSet<usize> = std::collections::HashSet::new();
     // (to, from): `from` forwards its calls to `to` unchanged.
@@ -488,10 +489,8 @@ pub fn task_bound(
             if copies.family.contains(&f) {
                 let all = loops.get(f).map_or(&[][..], |v| v.as_slice());
                 let per_trip = min_stored_bytes_per_trip(func, all, l).max(1) as f64;
-                copy_loops.push(per_trip * back.clone());
-                *copy_loops_by_function
-                    .entry(f)
-                    .or_insert_with(|| Expression::from(0.0)) += per_trip * back.clone();
+                *copy_loops.entry(f).or_insert_with(|| Expression::from(0.0)) +=
+                    per_trip * back.clone();
             }
             let Some(fact) = fact_of.get(&(f, k)) else {
                 continue;
@@ -548,8 +547,8 @@ pub fn task_bound(
         // the family's trips, weighted by those bytes, take at most the bytes of
         // all the calls.
         let all = copy_loops
-            .into_iter()
-            .fold(Expression::from(0.0), |a, b| a + b);
+            .values()
+            .fold(Expression::from(0.0), |a, b| a + b.clone());
         constraints.push(constraint!(all <= bytes));
         // And each function's own share: its loops store at most the bytes of
         // the calls made to it, from outside the family (their sizes) and from
@@ -564,7 +563,7 @@ pub fn task_bound(
             }
             e
         };
-        for (g, own) in copy_loops_by_function {
+        for (g, own) in copy_loops {
             // A forwarder's own callers must all be outside the family; each
             // forwarder counts once, however many of its blocks call `g`.
             let forwarded: std::collections::BTreeSet<usize> =
