@@ -103,6 +103,14 @@ fn ipet_counts_the_worst_path_by_hand() {
     .unwrap();
     // 2 (prologue) + 16 × 3 (loop) + 1 (return) + 16 × 1 (leaf).
     assert_eq!(b.bound, 67);
+    // What the bound is made of, block by block: the loop's body first (16 × 3),
+    // then the leaf (16 × 1), the prologue and the return; together the bound.
+    let shares: Vec<(f64, u64)> = b.by_block.iter().map(|s| (s.count, s.cost)).collect();
+    assert_eq!(shares, [(16.0, 3), (16.0, 1), (1.0, 2), (1.0, 1)]);
+    assert_eq!(b.by_block[0].function, "root");
+    assert_eq!(b.by_block[1].function, "leaf");
+    let total: f64 = b.by_block.iter().map(|s| s.count * s.cost as f64).sum();
+    assert_eq!(total, 67.0);
     // A tighter fact gives a smaller bound: the loop fact is in the program.
     let tighter = [LoopFact {
         bound: 7,

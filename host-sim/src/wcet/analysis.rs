@@ -107,6 +107,8 @@ pub struct TaskStatic {
     pub top_functions: Vec<(String, f64)>,
     /// The same functions' entries (calls) on that path.
     pub top_functions_entries: Vec<(String, f64)>,
+    /// The bound's costliest blocks (in cycles), with their source lines.
+    pub top_blocks: Vec<TopBlock>,
     /// Activations of the task seen in the traces.
     pub observed_activations: u64,
     /// Largest traced activation, instructions (its executed blocks' counts).
@@ -147,6 +149,24 @@ pub struct StaticAnalysis {
     /// Loop bounds a trace exceeded, and traced activations above their task's
     /// bound: each an error of the analysis (a wrong annotation or recogniser).
     pub violations: Vec<String>,
+}
+
+/// One of the blocks that cost a task's bound the most.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct TopBlock {
+    /// The block's function (demangled).
+    pub function: String,
+    /// Its first instruction's address.
+    pub address: u32,
+    /// Its source file (from the workspace on) and line: the innermost frame in
+    /// the firmware's own sources.
+    pub file: String,
+    /// Line in `file`.
+    pub line: u32,
+    /// Its count on the worst path.
+    pub count: f64,
+    /// Model cycles per execution.
+    pub cycles: u64,
 }
 
 /// Source location of `address`: the innermost frame in the firmware's own
@@ -641,7 +661,8 @@ pub fn analyse(
             .map(|a| a.bound)
             .sum::<u64>();
         let preemptions = preemptions_of(owner) * per_preemption;
-        let (mut bi, mut bc, mut top, mut top_entries) = (None, None, Vec::new(), Vec::new());
+        let (mut bi, mut bc, mut top, mut top_entries, mut top_blocks) =
+            (None, None, Vec::new(), Vec::new(), Vec::new());
         if irr.is_empty() {
             match ipet::task_bound(
                 &program,
@@ -676,6 +697,21 @@ pub fn analyse(
                             .into_iter()
                             .take(TOP_FUNCTIONS)
                             .collect();
+                        top_blocks = b
+                            .by_block
+                            .into_iter()
+                            .map(|x| {
+                                let (file, line) = location(&ctx, x.address);
+                                TopBlock {
+                                    function: x.function,
+                                    address: x.address,
+                                    file: short_path(&file),
+                                    line,
+                                    count: x.count,
+                                    cycles: x.cost,
+                                }
+                            })
+                            .collect();
                     }
                     Err(e) => refused.push(e.to_string()),
                 }
@@ -694,6 +730,7 @@ pub fn analyse(
             refused: (!refused.is_empty()).then(|| refused.join("; ")),
             top_functions: top,
             top_functions_entries: top_entries,
+            top_blocks,
             observed_activations: 0,
             observed_max_instructions: None,
             observed_max_cycles: None,
@@ -954,6 +991,29 @@ impl StaticAnalysis {
                 );
             }
             let _ = writeln!(s);
+            if !t.top_blocks.is_empty() {
+                let _ = writeln!(
+                    s,
+                    "Its costliest blocks (count on that path × model cycles per \
+                     execution; a cached loop's one fetch per entry is not in them):\n"
+                );
+                let _ = writeln!(s, "| block | source | count | cycles each | total |");
+                let _ = writeln!(s, "|---|---|---:|---:|---:|");
+                for b in &t.top_blocks {
+                    let _ = writeln!(
+                        s,
+                        "| {:#x} `{}` | {}:{} | {:.0} | {} | {:.0} |",
+                        b.address,
+                        b.function,
+                        b.file,
+                        b.line,
+                        b.count,
+                        b.cycles,
+                        b.count * b.cycles as f64
+                    );
+                }
+                let _ = writeln!(s);
+            }
         }
         let _ = writeln!(s, "\n## Processor and memory model\n");
         for a in &self.assumptions {

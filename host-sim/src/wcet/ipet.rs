@@ -181,6 +181,9 @@ pub enum Cost {
     Cycles,
 }
 
+/// How many of the costliest blocks [`IpetBound::by_block`] keeps.
+pub const TOP_BLOCKS: usize = 40;
+
 /// A task's bound and what it is made of.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct IpetBound {
@@ -191,10 +194,28 @@ pub struct IpetBound {
     /// Per function: its entries (calls) on the worst path, in the order of
     /// `by_function`.
     pub entries_by_function: Vec<(String, f64)>,
+    /// Per block, the most costly first: its function, its first instruction's
+    /// address, its count on the worst path and its cost per execution (the
+    /// persistent loops' one fetch per entry and the fall-through savings are
+    /// in [`Self::by_function`], not here).
+    pub by_block: Vec<BlockShare>,
     /// Variables and constraints of the linear program.
     pub variables: usize,
     /// Constraints of the linear program.
     pub constraints: usize,
+}
+
+/// One block's share of a bound.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BlockShare {
+    /// The block's function (demangled).
+    pub function: String,
+    /// Its first instruction's address.
+    pub address: u32,
+    /// Its count on the worst path.
+    pub count: f64,
+    /// Its cost per execution (instructions or cycles, as the bound).
+    pub cost: u64,
 }
 
 /// Why no bound could be computed.
@@ -307,6 +328,8 @@ pub fn task_bound(
     // Incoming calls per function.
     let mut calls_into: HashMap<usize, Expression> = HashMap::new();
     let mut per_function: Vec<(usize, Expression)> = Vec::new();
+    // (function, block, count, cost per execution) of every costly block.
+    let mut per_block: Vec<(usize, usize, Variable, u64)> = Vec::new();
     let mut count = 0usize;
     // Retries per preemption: one constraint over all such loops.
     let mut retry_edges = Expression::from(0.0);
@@ -411,6 +434,9 @@ pub fn task_bound(
             } as f64;
             objective += c * xb;
             fcost += c * xb;
+            if c > 0.0 {
+                per_block.push((f, b, xb, c as u64));
+            }
             count += 1;
         }
         for (&b, &v) in &x {
@@ -627,10 +653,23 @@ pub fn task_bound(
         .map(|&(f, _)| (name(f), solution.value(n_entry[&f])))
         .collect();
     let _ = count;
+    let mut by_block: Vec<BlockShare> = per_block
+        .iter()
+        .map(|&(f, b, x, c)| BlockShare {
+            function: name(f),
+            address: program.functions[f].blocks[b].start,
+            count: solution.value(x),
+            cost: c,
+        })
+        .filter(|s| s.count > 0.5)
+        .collect();
+    by_block.sort_by(|a, b| (b.count * b.cost as f64).total_cmp(&(a.count * a.cost as f64)));
+    by_block.truncate(TOP_BLOCKS);
     Ok(IpetBound {
         bound: round_up(value),
         by_function,
         entries_by_function,
+        by_block,
         variables,
         constraints: n_constraints,
     })
