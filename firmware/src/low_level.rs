@@ -82,25 +82,25 @@
 //!
 //! # Faults
 //!
-//! A non-finite state estimate or plan, or a plan whose `dt_s` is not positive,
-//! returns a [`ControlFault`] and leaves the state untouched; the caller then applies
+//! A non-finite state estimate, a non-finite value of the plan read in this
+//! period (`dt_s`, the nodes and input the references are sampled from), or a
+//! plan whose `dt_s` is not positive returns a [`ControlFault`] and leaves the
+//! state untouched; the caller then applies
 //! [`safe_actuation`] (zero traction, [`LowLevelConfig::safe_brake_torque_nm`] of
-//! braking spread on the four wheels, steering held at its last command). A clock
+//! braking spread on the four wheels, steering held at its last command). The
+//! rest of the plan is not read, so not checked here: a plan published by
+//! [`crate::tasks::PlanTask`] is finite throughout ([`Plan::is_finite`], checked
+//! once where it is computed rather than by every period that reads it). A clock
 //! behind the plan's stamp (`now < stamp`) is treated as `t = 0` and shows as a
 //! negative [`Actuation::plan_age_s`].
 //!
 //! # Cost
 //!
-//! No trigonometric function at all: one `sqrt` (the speed), one `floor` (the yaw
-//! wrap), fourteen divisions (eight here, three in each PID update) and about 300
-//! other floating-point operations (about 140 of them check that the whole plan is
-//! finite, 60 are the two interpolations, 60 the two PIDs). Static count for
-//! `f32` on `thumbv7em-none-eabihf` (release, LTO): about 740 Thumb-2 instructions
-//! for `control` itself, mostly straight-line, plus two calls to
-//! [`pid::update_within`] (about 230 instructions each, a few branches taken), libm's
-//! software `sqrtf` (about 105) and `floorf` (about 35): of the order of 1,000
-//! instructions executed, 1,500 cycles with the 14-cycle `VDIV.F32`s, about 9 µs
-//! at 168 MHz. No call to `f64` or integer-division routines.
+//! No trigonometric function: one `sqrt` (the speed, `VSQRT` on the M4F), one
+//! `floor` (the yaw wrap, [`qp::real::f32_math::floor`]), a few divisions and two
+//! calls to [`pid::update_within`]; no loop, no call to `f64` or integer-division
+//! routines. Its static bound on the ECU, with the rest of the control task's job,
+//! is in `host-sim wcet`'s report (`control_job`).
 
 use crate::pid::{self, PidConfig, PidConfigError, PidState};
 use crate::plan::{Plan, HORIZON};
@@ -307,7 +307,10 @@ pub enum Mode {
 pub enum ControlFault {
     /// The state estimate contains NaN or ±∞.
     NonFiniteEstimate,
-    /// The plan contains NaN or ±∞ (in its nodes, inputs or `dt_s`).
+    /// A value of the plan read this period is NaN or ±∞: `dt_s`, or the nodes
+    /// and input the references are sampled from. (A plan published by
+    /// [`crate::tasks::PlanTask`] is finite throughout, [`Plan::is_finite`]: it is
+    /// checked once, where it is computed, not by every period that reads it.)
     NonFinitePlan,
     /// The plan's `dt_s` is not positive (e.g. [`Plan::zeroed`] before the first plan).
     InvalidPlan,
@@ -433,8 +436,9 @@ struct Sample<T> {
 }
 
 /// The plan's references at `tau_s` ≥ 0 s after its stamp (module doc: linear
-/// interpolation inside the plan, controlled stop past it). Requires `dt_s > 0`.
-fn sample<T: Real>(plan: &Plan<T>, tau_s: T, stop_decel_mps2: T) -> Sample<T> {
+/// interpolation inside the plan, controlled stop past it); `None` when a value
+/// it reads is NaN or ±∞. Requires a finite `dt_s > 0`.
+fn sample<T: Real>(plan: &Plan<T>, tau_s: T, stop_decel_mps2: T) -> Option<Sample<T>> {
     let n = T::from_usize(HORIZON);
     let x = tau_s / plan.dt_s;
     let last = &plan.nodes[HORIZON];
@@ -445,18 +449,24 @@ fn sample<T: Real>(plan: &Plan<T>, tau_s: T, stop_decel_mps2: T) -> Sample<T> {
         let a = &plan.nodes[k];
         let b = &plan.nodes[k + 1];
         let [u1, u2] = plan.inputs[k];
-        Sample {
+        // `x·0` is 0 for finite `x`, NaN otherwise: the values read, at once.
+        let read = a.v_mps + b.v_mps + a.psi_rad + b.psi_rad + a.delta_rad + u1 + u2;
+        (read * T::ZERO == T::ZERO).then(|| Sample {
             v_mps: a.v_mps + (b.v_mps - a.v_mps) * f,
             psi_rad: a.psi_rad + (b.psi_rad - a.psi_rad) * f,
             delta_rad: a.delta_rad + u2 * f * plan.dt_s,
             accel_mps2: u1,
-        }
+        })
     } else {
         let s = tau_s - n * plan.dt_s;
         let v_n = last.v_mps.max(T::ZERO);
         let a = stop_decel_mps2;
         let v = v_n - a * s;
         let prev = &plan.nodes[HORIZON - 1];
+        let read = last.v_mps + last.psi_rad + prev.psi_rad + last.delta_rad;
+        if read * T::ZERO != T::ZERO {
+            return None;
+        }
         let yaw_rate = (last.psi_rad - prev.psi_rad) / plan.dt_s;
         // ∫V^r/V_N over the stop: the time the last yaw rate acts for.
         let t_eff = if v > T::ZERO {
@@ -464,26 +474,13 @@ fn sample<T: Real>(plan: &Plan<T>, tau_s: T, stop_decel_mps2: T) -> Sample<T> {
         } else {
             v_n / (T::TWO * a)
         };
-        Sample {
+        Some(Sample {
             v_mps: v.max(T::ZERO),
             psi_rad: last.psi_rad + yaw_rate * t_eff,
             delta_rad: last.delta_rad,
             accel_mps2: if v > T::ZERO { -a } else { T::ZERO },
-        }
+        })
     }
-}
-
-/// True when every number of the plan that the controller may read is finite
-/// (`x·0` is 0 for finite `x`, NaN otherwise; one pass, no branch per value).
-fn plan_is_finite<T: Real>(plan: &Plan<T>) -> bool {
-    let mut acc = plan.dt_s * T::ZERO;
-    for n in &plan.nodes {
-        acc += (n.s_m + n.x_m + n.y_m + n.v_mps + n.psi_rad + n.delta_rad) * T::ZERO;
-    }
-    for [u1, u2] in &plan.inputs {
-        acc += (*u1 + *u2) * T::ZERO;
-    }
-    acc == T::ZERO
 }
 
 /// Angle wrapped to `(−π, π]`, rad.
@@ -580,7 +577,7 @@ pub fn control_with_model<T: Real>(
     if !est.is_finite() {
         return Err(ControlFault::NonFiniteEstimate);
     }
-    if !plan_is_finite(plan) {
+    if !plan.dt_s.is_finite() {
         return Err(ControlFault::NonFinitePlan);
     }
     if plan.dt_s <= T::ZERO {
@@ -612,8 +609,12 @@ pub fn control_with_model<T: Real>(
     };
     let new_plan = state.plan_stamp_us != Some(plan.stamp_us);
 
-    let now_ref = sample(plan, t, cfg.stop_decel_mps2);
-    let ahead_ref = sample(plan, t + plan.dt_s, cfg.stop_decel_mps2);
+    let (Some(now_ref), Some(ahead_ref)) = (
+        sample(plan, t, cfg.stop_decel_mps2),
+        sample(plan, t + plan.dt_s, cfg.stop_decel_mps2),
+    ) else {
+        return Err(ControlFault::NonFinitePlan);
+    };
 
     // Longitudinal.
     let v = {

@@ -417,6 +417,9 @@ pub enum MpcError {
     NoPath,
     /// The QP solver did not reach an optimum (its status says why).
     Qp(QpStatus),
+    /// The plan computed holds NaN or ±∞ ([`crate::plan::Plan::is_finite`]): not
+    /// published ([`crate::tasks::PlanTask::run`]).
+    NonFinitePlan,
 }
 
 /// What an MPC step did: work counters (deterministic, for the timing budget) and

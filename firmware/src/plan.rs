@@ -69,4 +69,19 @@ impl<T: Real> Plan<T> {
     pub fn duration_s(&self) -> T {
         self.dt_s * T::from_usize(HORIZON)
     }
+
+    /// True when every number the low-level control may read is finite: `dt_s`,
+    /// the nodes and the inputs (`x·0` is 0 for finite `x`, NaN otherwise; one
+    /// pass, no branch per value). [`crate::tasks::PlanTask`] publishes no plan
+    /// that fails it, so the control task checks only the values it reads.
+    pub fn is_finite(&self) -> bool {
+        let mut acc = self.dt_s * T::ZERO;
+        for n in &self.nodes {
+            acc += (n.s_m + n.x_m + n.y_m + n.v_mps + n.psi_rad + n.delta_rad) * T::ZERO;
+        }
+        for [u1, u2] in &self.inputs {
+            acc += (*u1 + *u2) * T::ZERO;
+        }
+        acc == T::ZERO
+    }
 }

@@ -255,7 +255,9 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
 
     /// One activation, released on `est` (read from the shared estimate under a
     /// short lock by the caller). Computes outside any lock; on success the plan
-    /// waits in the task's buffer for [`PlanTask::publish`].
+    /// waits in the task's buffer for [`PlanTask::publish`]. A plan that is not
+    /// finite throughout ([`Plan::is_finite`]) is a failure
+    /// ([`MpcError::NonFinitePlan`]), never published.
     pub fn run(&mut self, est: &StateEstimate<T>) -> Result<MpcReport<T>, MpcError> {
         self.run_observed(est, |_| {}, |_| {})
     }
@@ -285,7 +287,7 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             ..*est
         };
         let mu = self.planning_mu();
-        let result = self.mpc.step_observed(
+        let computed = self.mpc.step_observed(
             &self.settings,
             &self.path,
             self.obstacles.parabolas(),
@@ -295,6 +297,12 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             before,
             after,
         );
+        // Checked once here, where it is computed, not by every control period
+        // that reads it: the control task then checks only the values it reads.
+        let result = match computed {
+            Ok(_) if !self.working.is_finite() => Err(MpcError::NonFinitePlan),
+            r => r,
+        };
         self.last_error = result.err();
         match result {
             Ok(_) => {

@@ -534,6 +534,7 @@ fn status_codes_round_trip_and_names_are_distinct() {
         MpcError::InvalidFriction,
         MpcError::InvalidSettings,
         MpcError::NoPath,
+        MpcError::NonFinitePlan,
     ];
     errors.extend(QP_STATUSES.map(MpcError::Qp));
     let mut names = std::collections::HashSet::from(["Optimal"]);
@@ -560,7 +561,8 @@ fn status_codes_round_trip_and_names_are_distinct() {
         mpc_status_code::<()>(&Err(MpcError::Qp(qp::QpStatus::Infeasible))),
         0x13
     );
-    for unknown in [5u8, 0x0F, 0x19, 0xFF] {
+    assert_eq!(mpc_status_name(5), "NonFinitePlan");
+    for unknown in [6u8, 0x0F, 0x19, 0xFF] {
         assert_eq!(mpc_error_from_code(unknown), None);
         assert_eq!(mpc_status_name(unknown), "Unknown");
     }

@@ -380,33 +380,81 @@ fn nan_estimate_is_refused_and_safe_actuation_holds_steering() {
 }
 
 #[test]
-fn non_finite_or_empty_plan_is_refused() {
+fn non_finite_values_read_or_an_empty_plan_are_refused() {
     let cfg = cfg_no_ff();
-    let mut st = LowLevelState::new();
     let e = est(10.0, 0.0);
+    type Edit = fn(&mut Plan<f64>);
+    // With nodes 0.2 s apart, at 0.25 s the references are sampled between
+    // nodes 1 and 2 (input 1) and, a node ahead, between nodes 2 and 3 (input 2);
+    // at 4 s, past the 3.2 s horizon, from the last two nodes.
+    let read: [(u64, Edit); 8] = [
+        (250_000, |p| p.nodes[1].v_mps = f64::NAN),
+        (250_000, |p| p.nodes[3].psi_rad = f64::INFINITY),
+        (250_000, |p| p.nodes[2].delta_rad = f64::NAN),
+        (250_000, |p| p.inputs[1][1] = f64::NAN),
+        (250_000, |p| p.inputs[2][0] = f64::NEG_INFINITY),
+        (250_000, |p| p.dt_s = f64::NAN),
+        (4 * US, |p| p.nodes[HORIZON].v_mps = f64::NAN),
+        (4 * US, |p| p.nodes[HORIZON - 1].psi_rad = f64::INFINITY),
+    ];
+    for (k, (now, edit)) in read.into_iter().enumerate() {
+        let mut st = LowLevelState::new();
+        let mut plan = straight_plan(0, 10.0);
+        edit(&mut plan);
+        assert!(!plan.is_finite(), "case {k}");
+        assert_eq!(
+            control(&cfg, &mut st, &plan, &e, now),
+            Err(ControlFault::NonFinitePlan),
+            "case {k}"
+        );
+        assert_eq!(st, LowLevelState::new(), "case {k}: state untouched");
+    }
+    // A value not read in this period is not the control's to check: the plan
+    // task publishes only plans finite throughout (`Plan::is_finite`).
+    let mut st = LowLevelState::new();
     let mut plan = straight_plan(0, 10.0);
-    plan.nodes[HORIZON].y_m = f64::NAN;
-    assert_eq!(
-        control(&cfg, &mut st, &plan, &e, 0),
-        Err(ControlFault::NonFinitePlan)
-    );
-    let mut plan = straight_plan(0, 10.0);
-    plan.inputs[7][0] = f64::NEG_INFINITY;
-    assert_eq!(
-        control(&cfg, &mut st, &plan, &e, 0),
-        Err(ControlFault::NonFinitePlan)
-    );
-    let mut plan = straight_plan(0, 10.0);
-    plan.dt_s = f64::NAN;
-    assert_eq!(
-        control(&cfg, &mut st, &plan, &e, 0),
-        Err(ControlFault::NonFinitePlan)
-    );
+    plan.nodes[10].y_m = f64::NAN;
+    assert!(!plan.is_finite());
+    assert!(control(&cfg, &mut st, &plan, &e, 250_000).is_ok());
+    let mut st = LowLevelState::new();
     assert_eq!(
         control(&cfg, &mut st, &Plan::zeroed(), &e, 0),
         Err(ControlFault::InvalidPlan)
     );
     assert_eq!(st, LowLevelState::new());
+}
+
+#[test]
+fn a_plan_is_finite_only_when_every_node_input_and_step_is() {
+    assert!(straight_plan(0, 10.0).is_finite());
+    assert!(Plan::<f64>::zeroed().is_finite());
+    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        for k in 0..=HORIZON {
+            for field in 0..6 {
+                let mut p = straight_plan(0, 10.0);
+                let n = &mut p.nodes[k];
+                *[
+                    &mut n.s_m,
+                    &mut n.x_m,
+                    &mut n.y_m,
+                    &mut n.v_mps,
+                    &mut n.psi_rad,
+                    &mut n.delta_rad,
+                ][field] = bad;
+                assert!(!p.is_finite(), "node {k} field {field}");
+            }
+        }
+        for k in 0..HORIZON {
+            for j in 0..2 {
+                let mut p = straight_plan(0, 10.0);
+                p.inputs[k][j] = bad;
+                assert!(!p.is_finite(), "input {k}.{j}");
+            }
+        }
+        let mut p = straight_plan(0, 10.0);
+        p.dt_s = bad;
+        assert!(!p.is_finite());
+    }
 }
 
 #[test]

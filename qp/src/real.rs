@@ -11,8 +11,10 @@
 //! software (about 1,200 instructions per `sinf`, and it links `__aeabi_d*`). For
 //! `f32` those five are computed here, in `f32` only ([`f32_math`]: Cody–Waite range
 //! reduction and the Cephes single-precision minimax polynomials, within 2·10⁻⁷ of
-//! the exact value for `|x| ≤ 8192`); `sqrtf`, `atanf`, `atan2f` and `floorf` come
-//! from `libm`, which computes them in `f32`. `f64` uses `libm` throughout.
+//! the exact value for `|x| ≤ 8192`); `atanf` and `atan2f` come from `libm`, which
+//! computes them in `f32`; `floor` is `libm::floorf`'s result bit for bit from the
+//! FPU's conversion to an integer ([`f32_math::floor`]). `f64` uses `libm`
+//! throughout.
 //!
 //! The square root is IEEE 754's correctly rounded one on every target, so it is
 //! bit-identical everywhere: on the Cortex-M4F it is the FPU's `VSQRT.F32` (one
@@ -238,7 +240,7 @@ impl_real!(
     libm::atan2f,
     f32_math::asin,
     f32_math::hypot,
-    libm::floorf
+    f32_math::floor
 );
 
 /// Single-precision sine, cosine, tangent, arc sine and hypotenuse computed in
@@ -370,6 +372,21 @@ pub mod f32_math {
         }
     }
 
+    /// `⌊x⌋`, the same as `libm::floorf` for every `f32` bit for bit: a value of
+    /// magnitude 2²³ or more is an integer already (NaN and ±∞ are returned as
+    /// they are); below, the conversion to `i32` (`VCVT`, toward zero), one down
+    /// for a negative fraction, and the sign of `x` (`⌊−0⌋ = −0`, `⌊−0.5⌋ = −1`).
+    /// About a dozen instructions and one branch where `libm::floorf` takes the
+    /// bits apart in integer registers.
+    pub fn floor(x: f32) -> f32 {
+        if !(libm::fabsf(x) < 8_388_608.0) {
+            return x;
+        }
+        let t = x as i32 as f32;
+        let f = if t > x { t - 1.0 } else { t };
+        libm::copysignf(f, x)
+    }
+
     /// `sqrt(x² + y²)`, scaled so that it neither overflows nor underflows early.
     pub fn hypot(x: f32, y: f32) -> f32 {
         let (a, b) = (libm::fabsf(x), libm::fabsf(y));
@@ -474,6 +491,54 @@ mod tests {
         assert!(f32_math::asin(1.5).is_nan());
         assert_eq!(f32_math::hypot(0.0, 0.0), 0.0);
         assert_eq!(f32_math::asin(1.0), core::f32::consts::FRAC_PI_2);
+    }
+
+    #[test]
+    fn floor_is_libm_floorf_bit_for_bit() {
+        use super::f32_math;
+        let same = |x: f32| f32_math::floor(x).to_bits() == libm::floorf(x).to_bits();
+        // Every 61st bit pattern (70 M values, both signs, NaNs, subnormals), and
+        // every value around the integers and the 2²³ boundary.
+        let mut bits: u32 = 0;
+        loop {
+            let x = f32::from_bits(bits);
+            assert!(same(x), "{x:e} ({bits:#010x})");
+            match bits.checked_add(61) {
+                Some(b) => bits = b,
+                None => break,
+            }
+        }
+        for k in -20_000i32..20_000 {
+            for x in [k as f32, k as f32 * 419.0 + 0.5, k as f32 * 0.01] {
+                for y in [
+                    x,
+                    -x,
+                    f32::from_bits(x.to_bits() + 1),
+                    f32::from_bits(x.to_bits().wrapping_sub(1)),
+                ] {
+                    assert!(same(y), "{y:e}");
+                }
+            }
+        }
+        for x in [
+            8_388_607.5f32,
+            -8_388_607.5,
+            8_388_608.0,
+            -8_388_608.0,
+            0.0,
+            -0.0,
+            -0.5,
+            0.5,
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            f32::MIN,
+        ] {
+            assert!(same(x), "{x:e}");
+        }
+        assert!(f32_math::floor(f32::NAN).is_nan());
     }
 
     #[test]

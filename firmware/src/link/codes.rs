@@ -163,13 +163,15 @@ pub const MPC_OK: u8 = 0;
 pub const MPC_QP_BASE: u8 = 0x10;
 
 /// Code of an MPC error: `NonFiniteState` 1, `InvalidFriction` 2,
-/// `InvalidSettings` 3, `NoPath` 4, `Qp(s)` `0x10 + qp_status_code(s)`.
+/// `InvalidSettings` 3, `NoPath` 4, `NonFinitePlan` 5, `Qp(s)`
+/// `0x10 + qp_status_code(s)`.
 pub const fn mpc_error_code(e: MpcError) -> u8 {
     match e {
         MpcError::NonFiniteState => 1,
         MpcError::InvalidFriction => 2,
         MpcError::InvalidSettings => 3,
         MpcError::NoPath => 4,
+        MpcError::NonFinitePlan => 5,
         MpcError::Qp(s) => MPC_QP_BASE + qp_status_code(s),
     }
 }
@@ -190,6 +192,7 @@ pub const fn mpc_error_from_code(code: u8) -> Option<MpcError> {
         2 => Some(MpcError::InvalidFriction),
         3 => Some(MpcError::InvalidSettings),
         4 => Some(MpcError::NoPath),
+        5 => Some(MpcError::NonFinitePlan),
         c if c >= MPC_QP_BASE => match qp_status_from_code(c - MPC_QP_BASE) {
             Some(s) => Some(MpcError::Qp(s)),
             None => None,
@@ -208,6 +211,7 @@ pub const fn mpc_status_name(code: u8) -> &'static str {
         Some(MpcError::InvalidFriction) => "InvalidFriction",
         Some(MpcError::InvalidSettings) => "InvalidSettings",
         Some(MpcError::NoPath) => "NoPath",
+        Some(MpcError::NonFinitePlan) => "NonFinitePlan",
         Some(MpcError::Qp(s)) => qp_status_wrapped_name(s),
     }
 }

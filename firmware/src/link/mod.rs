@@ -60,7 +60,8 @@
 //! * [`ActuationFrame::fault`]: [`fault_code`] (0 none, `NonFiniteEstimate` 1,
 //!   `NonFinitePlan` 2, `InvalidPlan` 3, `Numerical` 4).
 //! * [`PlanEventFrame::status`]: [`mpc_status_code`] (0 optimal, `NonFiniteState`
-//!   1, `InvalidFriction` 2, `InvalidSettings` 3, `NoPath` 4, `Qp(s)` 0x10 +
+//!   1, `InvalidFriction` 2, `InvalidSettings` 3, `NoPath` 4, `NonFinitePlan` 5,
+//!   `Qp(s)` 0x10 +
 //!   [`qp_status_code`]`(s)`, with `Optimal` 0, `NotSolved` 1, `IterationLimit` 2,
 //!   `Infeasible` 3, `NotConvex` 4, `NumericalError` 5, `NonFiniteInput` 6,
 //!   `InvalidInput` 7, `WorkingSetFull` 8).

@@ -92,6 +92,7 @@ pub fn mpc_error_name(e: &firmware::mpc::MpcError) -> &'static str {
         E::InvalidFriction => "invalid_friction",
         E::InvalidSettings => "invalid_settings",
         E::NoPath => "no_path",
+        E::NonFinitePlan => "non_finite_plan",
         E::Qp(Q::IterationLimit) => "qp_iteration_limit",
         E::Qp(Q::Infeasible) => "qp_infeasible",
         E::Qp(Q::NumericalError) => "qp_numerical_error",
