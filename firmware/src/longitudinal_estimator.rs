@@ -394,6 +394,8 @@ impl<T: Real> LongitudinalEstimator<T> {
 
     /// One recursive-least-squares step on `φ`, `y` (module docs), forgetting the
     /// fraction `forget` (`1 − λ`, dimensionless).
+    // One caller, once per control period: inlined, no call to bound.
+    #[inline(always)]
     fn rls(&mut self, cfg: &LongitudinalConfig<T>, phi: [T; 3], y: T, forget: T) {
         let [p00, p01, p02, p11, p12, p22] = self.p;
         let [a, b, c] = phi;

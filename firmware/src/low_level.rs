@@ -438,6 +438,8 @@ struct Sample<T> {
 /// The plan's references at `tau_s` ≥ 0 s after its stamp (module doc: linear
 /// interpolation inside the plan, controlled stop past it); `None` when a value
 /// it reads is NaN or ±∞. Requires a finite `dt_s > 0`.
+// Two calls per period, inlined: each is a few interpolations.
+#[inline(always)]
 fn sample<T: Real>(plan: &Plan<T>, tau_s: T, stop_decel_mps2: T) -> Option<Sample<T>> {
     let n = T::from_usize(HORIZON);
     let x = tau_s / plan.dt_s;
@@ -449,9 +451,16 @@ fn sample<T: Real>(plan: &Plan<T>, tau_s: T, stop_decel_mps2: T) -> Option<Sampl
         let a = &plan.nodes[k];
         let b = &plan.nodes[k + 1];
         let [u1, u2] = plan.inputs[k];
-        // `x·0` is 0 for finite `x`, NaN otherwise: the values read, at once.
-        let read = a.v_mps + b.v_mps + a.psi_rad + b.psi_rad + a.delta_rad + u1 + u2;
-        (read * T::ZERO == T::ZERO).then(|| Sample {
+        // `x·0` is ±0 for a finite `x`, NaN otherwise: the values read, at once.
+        let z = T::ZERO;
+        let read = a.v_mps * z
+            + b.v_mps * z
+            + a.psi_rad * z
+            + b.psi_rad * z
+            + a.delta_rad * z
+            + u1 * z
+            + u2 * z;
+        (read == z).then(|| Sample {
             v_mps: a.v_mps + (b.v_mps - a.v_mps) * f,
             psi_rad: a.psi_rad + (b.psi_rad - a.psi_rad) * f,
             delta_rad: a.delta_rad + u2 * f * plan.dt_s,
@@ -463,8 +472,9 @@ fn sample<T: Real>(plan: &Plan<T>, tau_s: T, stop_decel_mps2: T) -> Option<Sampl
         let a = stop_decel_mps2;
         let v = v_n - a * s;
         let prev = &plan.nodes[HORIZON - 1];
-        let read = last.v_mps + last.psi_rad + prev.psi_rad + last.delta_rad;
-        if read * T::ZERO != T::ZERO {
+        let z = T::ZERO;
+        let read = last.v_mps * z + last.psi_rad * z + prev.psi_rad * z + last.delta_rad * z;
+        if read != z {
             return None;
         }
         let yaw_rate = (last.psi_rad - prev.psi_rad) / plan.dt_s;

@@ -271,6 +271,9 @@ pub fn update<T: Real>(
 /// overlap, the output is the bound of `[out_lo, out_hi]` nearest to the
 /// configuration's range.
 #[allow(clippy::too_many_arguments)]
+// Inlined into the control task's two PID updates: a call fetches these flash lines
+// again and saves registers; inlined, the callers' constants fold into it.
+#[inline(always)]
 pub fn update_within<T: Real>(
     cfg: &PidConfig<T>,
     state: &mut PidState<T>,
@@ -280,10 +283,13 @@ pub fn update_within<T: Real>(
     out_lo: T,
     out_hi: T,
 ) -> Result<T, PidError> {
-    if !(setpoint.is_finite() && measurement.is_finite()) {
+    // `x·0` is ±0 for a finite `x` and NaN otherwise: finiteness without a branch
+    // per value.
+    let z = T::ZERO;
+    if setpoint * z + measurement * z != z {
         return Err(PidError::NonFiniteInput);
     }
-    if !(dt_s.is_finite() && dt_s > T::ZERO) {
+    if !(dt_s * z == z && dt_s > z) {
         return Err(PidError::InvalidTimeStep);
     }
     if !ordered(out_lo, out_hi) {
@@ -328,7 +334,7 @@ pub fn update_within<T: Real>(
     .clamp(cfg.integral_min, cfg.integral_max);
 
     let u = (p + integral + d).clamp(lo, hi);
-    if !(u.is_finite() && integral.is_finite() && derivative.is_finite()) {
+    if u * z + integral * z + derivative * z != z {
         return Err(PidError::NonFiniteOutput);
     }
 

@@ -71,17 +71,20 @@ impl<T: Real> Plan<T> {
     }
 
     /// True when every number the low-level control may read is finite: `dt_s`,
-    /// the nodes and the inputs (`x·0` is 0 for finite `x`, NaN otherwise; one
-    /// pass, no branch per value). [`crate::tasks::PlanTask`] publishes no plan
-    /// that fails it, so the control task checks only the values it reads.
+    /// the nodes and the inputs (`x·0` is ±0 for a finite `x` and NaN otherwise,
+    /// and a sum of zeros is zero, whatever the values: one pass, no branch per
+    /// value). [`crate::tasks::PlanTask`] publishes no plan that fails it, so the
+    /// control task checks only the values it reads.
     pub fn is_finite(&self) -> bool {
-        let mut acc = self.dt_s * T::ZERO;
+        let z = T::ZERO;
+        let mut acc = self.dt_s * z;
         for n in &self.nodes {
-            acc += (n.s_m + n.x_m + n.y_m + n.v_mps + n.psi_rad + n.delta_rad) * T::ZERO;
+            acc +=
+                n.s_m * z + n.x_m * z + n.y_m * z + n.v_mps * z + n.psi_rad * z + n.delta_rad * z;
         }
         for [u1, u2] in &self.inputs {
-            acc += (*u1 + *u2) * T::ZERO;
+            acc += *u1 * z + *u2 * z;
         }
-        acc == T::ZERO
+        acc == z
     }
 }

@@ -455,6 +455,52 @@ fn a_plan_is_finite_only_when_every_node_input_and_step_is() {
         p.dt_s = bad;
         assert!(!p.is_finite());
     }
+    // Finite values whose sum would overflow are finite.
+    let mut p = straight_plan(0, 10.0);
+    p.dt_s = f64::MAX;
+    for n in p.nodes.iter_mut() {
+        (n.s_m, n.x_m, n.y_m, n.v_mps, n.psi_rad, n.delta_rad) =
+            (f64::MAX, f64::MAX, f64::MAX, f64::MAX, f64::MAX, -f64::MAX);
+    }
+    p.inputs = [[f64::MAX, f64::MAX]; HORIZON];
+    assert!(p.is_finite());
+}
+
+#[test]
+fn a_state_estimate_is_finite_only_when_every_field_is() {
+    let e = StateEstimate::<f64> {
+        x_m: f64::MAX,
+        y_m: f64::MAX,
+        psi_rad: -f64::MAX,
+        vx_mps: f64::MAX,
+        vy_mps: f64::MAX,
+        yaw_rate_radps: f64::MAX,
+        delta_rad: f64::MAX,
+        ..StateEstimate::zeroed()
+    };
+    assert!(e.is_finite(), "finite values whose sum overflows");
+    assert!(StateEstimate::<f32>::zeroed().is_finite());
+    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        for field in 0..7 {
+            let mut e = est(10.0, 0.0);
+            *[
+                &mut e.x_m,
+                &mut e.y_m,
+                &mut e.psi_rad,
+                &mut e.vx_mps,
+                &mut e.vy_mps,
+                &mut e.yaw_rate_radps,
+                &mut e.delta_rad,
+            ][field] = bad;
+            assert!(!e.is_finite(), "field {field}");
+            let mut st = LowLevelState::new();
+            assert_eq!(
+                control(&cfg_no_ff(), &mut st, &straight_plan(0, 10.0), &e, 0),
+                Err(ControlFault::NonFiniteEstimate),
+                "field {field}"
+            );
+        }
+    }
 }
 
 #[test]
