@@ -68,6 +68,7 @@ use defmt_semihosting as _;
 use firmware::deadline::{self, DeadlineMonitor, PlanWatchdog};
 use firmware::link::{
     self, ActuationFrame, Down, FrameReader, Up, MAX_DOWN_FRAME_BYTES, MAX_FRAME_BYTES,
+    MAX_UP_FRAME_BYTES,
 };
 use firmware::low_level::Actuation;
 use firmware::tasks::{ControlTask, PlanTask};
@@ -332,9 +333,11 @@ impl Link {
 
     /// Sends one frame to the host. Not inlined: its frame buffer then lives on the
     /// stack only while a frame is sent, not for the whole of the caller's activation.
+    /// The buffer holds the largest `Up` frame (`MAX_UP_FRAME_BYTES`, tested on the
+    /// largest message), not the largest of either direction.
     #[inline(never)]
     pub fn send(&mut self, msg: &Up) -> bool {
-        let mut buf = [0u8; MAX_FRAME_BYTES];
+        let mut buf = [0u8; MAX_UP_FRAME_BYTES];
         match link::encode(msg, &mut buf) {
             Ok(n) => sh_write(self.up, &buf[..n]),
             Err(_) => false,
@@ -918,7 +921,7 @@ fn safe_stop(fault: u8) -> ! {
     if fd != 0 {
         let a = Actuation::safe(delta, 0.0);
         let frame = actuation_frame(u32::MAX, &a, fault, 0);
-        let mut buf = [0u8; MAX_FRAME_BYTES];
+        let mut buf = [0u8; MAX_UP_FRAME_BYTES];
         if let Ok(n) = link::encode(&Up::Actuation(frame), &mut buf) {
             if let Some(bytes) = buf.get(..n) {
                 sh_write(fd, bytes);
