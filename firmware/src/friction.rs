@@ -133,6 +133,7 @@ use crate::longitudinal_estimator::{
 };
 use crate::timing::CONTROL_PERIOD_US;
 use crate::Real;
+use qp::real::all_finite;
 
 /// Control periods of commanded torque the friction check keeps (160 ms at
 /// 100 Hz): the oldest state estimate it can pair with the torque that moved the
@@ -471,8 +472,7 @@ impl<T: Real> FrictionEstimator<T> {
         yaw_rate_radps: T,
         torque_nm: T,
     ) -> T {
-        // `x·0` is ±0 for a finite `x` and NaN otherwise (no branch per value).
-        if v_mps * T::ZERO + yaw_rate_radps * T::ZERO != T::ZERO {
+        if !all_finite([v_mps, yaw_rate_radps]) {
             self.forget(torque_nm);
             return self.mu;
         }

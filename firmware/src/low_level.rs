@@ -106,6 +106,7 @@ use crate::pid::{self, PidConfig, PidConfigError, PidState};
 use crate::plan::{Plan, HORIZON};
 use crate::state_estimate::StateEstimate;
 use crate::Real;
+use qp::real::all_finite;
 
 /// Time constant with which a paused yaw loop's output `δ_cl` and its integrator
 /// are released towards 0, s (below [`LowLevelConfig::lateral_min_speed_mps`]:
@@ -451,16 +452,9 @@ fn sample<T: Real>(plan: &Plan<T>, tau_s: T, stop_decel_mps2: T) -> Option<Sampl
         let a = &plan.nodes[k];
         let b = &plan.nodes[k + 1];
         let [u1, u2] = plan.inputs[k];
-        // `x·0` is ±0 for a finite `x`, NaN otherwise: the values read, at once.
-        let z = T::ZERO;
-        let read = a.v_mps * z
-            + b.v_mps * z
-            + a.psi_rad * z
-            + b.psi_rad * z
-            + a.delta_rad * z
-            + u1 * z
-            + u2 * z;
-        (read == z).then(|| Sample {
+        // The values read, at once.
+        let read = [a.v_mps, b.v_mps, a.psi_rad, b.psi_rad, a.delta_rad, u1, u2];
+        all_finite(read).then(|| Sample {
             v_mps: a.v_mps + (b.v_mps - a.v_mps) * f,
             psi_rad: a.psi_rad + (b.psi_rad - a.psi_rad) * f,
             delta_rad: a.delta_rad + u2 * f * plan.dt_s,
@@ -472,9 +466,7 @@ fn sample<T: Real>(plan: &Plan<T>, tau_s: T, stop_decel_mps2: T) -> Option<Sampl
         let a = stop_decel_mps2;
         let v = v_n - a * s;
         let prev = &plan.nodes[HORIZON - 1];
-        let z = T::ZERO;
-        let read = last.v_mps * z + last.psi_rad * z + prev.psi_rad * z + last.delta_rad * z;
-        if read != z {
+        if !all_finite([last.v_mps, last.psi_rad, prev.psi_rad, last.delta_rad]) {
             return None;
         }
         let yaw_rate = (last.psi_rad - prev.psi_rad) / plan.dt_s;

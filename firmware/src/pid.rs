@@ -50,6 +50,7 @@
 //! safe state.
 
 use crate::Real;
+use qp::real::all_finite;
 
 /// How the integrator is kept from winding up while the output saturates.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -283,13 +284,11 @@ pub fn update_within<T: Real>(
     out_lo: T,
     out_hi: T,
 ) -> Result<T, PidError> {
-    // `x·0` is ±0 for a finite `x` and NaN otherwise: finiteness without a branch
-    // per value.
-    let z = T::ZERO;
-    if setpoint * z + measurement * z != z {
+    // Finiteness without a branch per value.
+    if !all_finite([setpoint, measurement]) {
         return Err(PidError::NonFiniteInput);
     }
-    if !(dt_s * z == z && dt_s > z) {
+    if !(all_finite([dt_s]) && dt_s > T::ZERO) {
         return Err(PidError::InvalidTimeStep);
     }
     if !ordered(out_lo, out_hi) {
@@ -334,7 +333,7 @@ pub fn update_within<T: Real>(
     .clamp(cfg.integral_min, cfg.integral_max);
 
     let u = (p + integral + d).clamp(lo, hi);
-    if u * z + integral * z + derivative * z != z {
+    if !all_finite([u, integral, derivative]) {
         return Err(PidError::NonFiniteOutput);
     }
 

@@ -6,6 +6,7 @@
 //! constant inputs between nodes.
 
 use crate::Real;
+use qp::real::finite_probe;
 
 /// Number of control intervals of the MPC horizon (the paper's `N_u = T_H/Δt_u + 1 = 16`).
 pub const HORIZON: usize = 16;
@@ -71,20 +72,17 @@ impl<T: Real> Plan<T> {
     }
 
     /// True when every number the low-level control may read is finite: `dt_s`,
-    /// the nodes and the inputs (`x·0` is ±0 for a finite `x` and NaN otherwise,
-    /// and a sum of zeros is zero, whatever the values: one pass, no branch per
-    /// value). [`crate::tasks::PlanTask`] publishes no plan that fails it, so the
-    /// control task checks only the values it reads.
+    /// the nodes and the inputs ([`finite_probe`]: one pass, no branch per value).
+    /// [`crate::tasks::PlanTask`] publishes no plan that fails it, so the control
+    /// task checks only the values it reads.
     pub fn is_finite(&self) -> bool {
-        let z = T::ZERO;
-        let mut acc = self.dt_s * z;
+        let mut acc = finite_probe([self.dt_s]);
         for n in &self.nodes {
-            acc +=
-                n.s_m * z + n.x_m * z + n.y_m * z + n.v_mps * z + n.psi_rad * z + n.delta_rad * z;
+            acc += finite_probe([n.s_m, n.x_m, n.y_m, n.v_mps, n.psi_rad, n.delta_rad]);
         }
-        for [u1, u2] in &self.inputs {
-            acc += *u1 * z + *u2 * z;
+        for u in &self.inputs {
+            acc += finite_probe(*u);
         }
-        acc == z
+        acc == T::ZERO
     }
 }

@@ -1,6 +1,7 @@
 //! The state estimate: what the vehicle's sensors and estimator hand to both tasks.
 
 use crate::Real;
+use qp::real::all_finite;
 
 /// Vehicle state as measured/estimated at one instant (SI units). Serde derives carry
 /// it in the simulator's sensor frame ([`crate::link::SensorFrame`]).
@@ -49,18 +50,17 @@ impl<T: Real> StateEstimate<T> {
         }
     }
 
-    /// True when every field is finite (NaN and ±∞ are refused by the tasks).
-    /// `x·0` is ±0 for a finite `x` and NaN otherwise, and a sum of zeros is zero:
-    /// one pass without a branch per field.
+    /// True when every field is finite (NaN and ±∞ are refused by the tasks;
+    /// [`all_finite`]: no branch per field).
     pub fn is_finite(&self) -> bool {
-        let z = T::ZERO;
-        let probe = self.x_m * z
-            + self.y_m * z
-            + self.psi_rad * z
-            + self.vx_mps * z
-            + self.vy_mps * z
-            + self.yaw_rate_radps * z
-            + self.delta_rad * z;
-        probe == z
+        all_finite([
+            self.x_m,
+            self.y_m,
+            self.psi_rad,
+            self.vx_mps,
+            self.vy_mps,
+            self.yaw_rate_radps,
+            self.delta_rad,
+        ])
     }
 }

@@ -12,7 +12,7 @@ use firmware::low_level::{
     LowLevelConfig, LowLevelConfigError, LowLevelState, Mode,
 };
 use firmware::pid::{self, PidState};
-use firmware::plan::{Plan, HORIZON};
+use firmware::plan::{Plan, PlanNode, HORIZON};
 use firmware::state_estimate::StateEstimate;
 
 const DT_U: f64 = 0.2;
@@ -43,6 +43,21 @@ fn cfg_no_ff() -> LowLevelConfig<f64> {
     let mut c = LowLevelConfig::default();
     c.accel_feedforward = false;
     c
+}
+
+/// Field `k` of a plan node, in the order `s, x, y, V, ψ, δ`.
+fn node_field(n: &mut PlanNode<f64>, k: usize) -> &mut f64 {
+    [
+        &mut n.s_m,
+        &mut n.x_m,
+        &mut n.y_m,
+        &mut n.v_mps,
+        &mut n.psi_rad,
+        &mut n.delta_rad,
+    ]
+    .into_iter()
+    .nth(k)
+    .expect("a node has 6 fields")
 }
 
 fn sum(a: &Actuation<f64>) -> f64 {
@@ -432,15 +447,7 @@ fn a_plan_is_finite_only_when_every_node_input_and_step_is() {
         for k in 0..=HORIZON {
             for field in 0..6 {
                 let mut p = straight_plan(0, 10.0);
-                let n = &mut p.nodes[k];
-                *[
-                    &mut n.s_m,
-                    &mut n.x_m,
-                    &mut n.y_m,
-                    &mut n.v_mps,
-                    &mut n.psi_rad,
-                    &mut n.delta_rad,
-                ][field] = bad;
+                *node_field(&mut p.nodes[k], field) = bad;
                 assert!(!p.is_finite(), "node {k} field {field}");
             }
         }
@@ -1317,16 +1324,8 @@ fn a_plan_of_finite_numbers_is_accepted_whatever_their_signs() -> Result<(), Con
     let cfg = cfg_no_ff();
     for field in 1..6 {
         let mut plan = straight_plan(0, 10.0);
-        let n = &mut plan.nodes[10];
-        n.s_m = 1e308;
-        *[
-            &mut n.s_m,
-            &mut n.x_m,
-            &mut n.y_m,
-            &mut n.v_mps,
-            &mut n.psi_rad,
-            &mut n.delta_rad,
-        ][field] = -1e308;
+        plan.nodes[10].s_m = 1e308;
+        *node_field(&mut plan.nodes[10], field) = -1e308;
         let mut st = LowLevelState::new();
         let a = control(&cfg, &mut st, &plan, &est(10.0, 0.0), 0)?;
         assert_eq!(a.v_ref_mps, 10.0, "field {field}");

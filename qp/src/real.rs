@@ -243,6 +243,29 @@ impl_real!(
     f32_math::floor
 );
 
+/// `Σ xᵢ·0`: ±0 when every value is finite, NaN otherwise (`x·0` is ±0 for a finite
+/// `x`, NaN for NaN and ±∞, and a sum of zeros is zero, so no finite values are
+/// refused by an overflowing sum). One multiplication and one addition per value,
+/// no branch; to sum over several groups, or as [`all_finite`].
+#[inline(always)]
+pub fn finite_probe<T: Real, const N: usize>(values: [T; N]) -> T {
+    let Some((&first, rest)) = values.split_first() else {
+        return T::ZERO;
+    };
+    // N − 1 trips, a constant: the compiler unrolls them (no loop is left to bound).
+    let mut acc = first * T::ZERO;
+    for &v in rest {
+        acc += v * T::ZERO;
+    }
+    acc
+}
+
+/// True when every value is finite ([`finite_probe`]: no branch per value).
+#[inline(always)]
+pub fn all_finite<T: Real, const N: usize>(values: [T; N]) -> bool {
+    finite_probe(values) == T::ZERO
+}
+
 /// Single-precision sine, cosine, tangent, arc sine and hypotenuse computed in
 /// `f32` only (no `f64` arithmetic, so no software double precision on the M4F).
 ///
@@ -491,6 +514,21 @@ mod tests {
         assert!(f32_math::asin(1.5).is_nan());
         assert_eq!(f32_math::hypot(0.0, 0.0), 0.0);
         assert_eq!(f32_math::asin(1.0), core::f32::consts::FRAC_PI_2);
+    }
+
+    #[test]
+    fn all_finite_refuses_any_nan_or_infinity_and_no_overflowing_sum() {
+        use super::{all_finite, finite_probe};
+        assert!(all_finite([f32::MAX, f32::MAX, -f32::MAX]));
+        assert!(all_finite::<f64, 0>([]));
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            for k in 0..3 {
+                let mut v = [1.0f32, -2.0, 3.0e38];
+                v[k] = bad;
+                assert!(!all_finite(v), "{v:?}");
+                assert!(finite_probe(v).is_nan());
+            }
+        }
     }
 
     #[test]
