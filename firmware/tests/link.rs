@@ -280,11 +280,11 @@ fn frame_layout_is_version_postcard_crc_cobs() {
     // The CRC is CRC-32/ISO-HDLC (check value of "123456789").
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
     assert_eq!(crc.checksum(b"123456789"), 0xCBF4_3926);
-    // Pinned bytes: `Down::Start` is version 3, tag 3, then its CRC (zlib.crc32(b"\x03\x03")
-    // = 0xF3FD1086), stuffed.
+    // Pinned bytes: `Down::Start` is version 4, tag 3, then its CRC (zlib.crc32(b"\x04\x03")
+    // = 0xBCBC8641), stuffed.
     assert_eq!(
         frame_of(&Down::Start),
-        [0x07, 0x03, 0x03, 0x86, 0x10, 0xFD, 0xF3, 0x00]
+        [0x07, 0x04, 0x03, 0x41, 0x86, 0xBC, 0xBC, 0x00]
     );
 }
 
@@ -562,7 +562,16 @@ fn status_codes_round_trip_and_names_are_distinct() {
         0x13
     );
     assert_eq!(mpc_status_name(5), "NonFinitePlan");
-    for unknown in [6u8, 0x0F, 0x19, 0xFF] {
+    // An activation that adopted a window: no MPC error, a name of its own.
+    assert_eq!(mpc_error_from_code(PLAN_WINDOW), None);
+    assert!(names.insert(mpc_status_name(PLAN_WINDOW)));
+    assert_eq!(mpc_status_name(PLAN_WINDOW), "Window");
+    let w = PlanEventFrame::window(7, 1_000, 2_000, 12_345);
+    assert_eq!(
+        (w.status, w.ticks, w.window_ticks, w.published, w.passes),
+        (PLAN_WINDOW, 12_345, 12_345, false, 0)
+    );
+    for unknown in [6u8, 0x0F, 0x19, 0x21, 0xFF] {
         assert_eq!(mpc_error_from_code(unknown), None);
         assert_eq!(mpc_status_name(unknown), "Unknown");
     }

@@ -96,6 +96,36 @@ fn plans_are_reported_when_they_finish_and_published_then() {
 }
 
 #[test]
+fn a_window_of_the_road_is_adopted_by_an_activation_of_its_own() {
+    let opts = SimOptions::default();
+    let r = paper_at(168.0, 30.0);
+    let acts = &r.plan_activations;
+    let windows: Vec<usize> = (0..acts.len()).filter(|&i| acts[i].window).collect();
+    assert!(windows.len() >= 2, "{} windows in 30 s", windows.len());
+    let adoption = opts.cost_model.window_instructions(true);
+    for &i in &windows {
+        let w = &acts[i];
+        // It adopts instead of planning: no MPC step, nothing published, not a
+        // failure; its time is the adoption's.
+        assert_eq!(w.status, "window");
+        assert!(!w.published && !w.deadline_miss);
+        assert_eq!((w.passes, w.qp_iterations), (0, 0));
+        assert_eq!(w.instructions, adoption);
+        assert_eq!(w.window_instructions, adoption);
+        // Received after the previous activation's publication; the next release
+        // plans on the new window, warm.
+        assert!(acts[i - 1].published && !acts[i - 1].window);
+        let next = &acts[i + 1];
+        assert_eq!(next.release_us, w.release_us + 100_000);
+        assert!(next.published && next.passes == 1, "{next:?}");
+    }
+    assert_eq!(r.summary.plan_failures, 0);
+    assert_eq!(r.summary.plan_deadline_misses, 0);
+    // Every other activation planned.
+    assert!(acts.iter().all(|a| a.window || a.passes >= 1));
+}
+
+#[test]
 fn a_failed_activation_is_charged_from_its_own_counters() {
     let scenario = Scenario::paper(true);
     let opts = SimOptions::default();
@@ -455,7 +485,7 @@ fn the_host_counts_skipped_releases_from_the_end_of_an_activation() {
     // Ends before or exactly at the next release: nothing skipped.
     assert_eq!(skipped_between(0, 40_000, 100_000), 0);
     assert_eq!(skipped_between(0, 100_000, 100_000), 0);
-    // Published at 90 ms but a window adopted until 130 ms: the release at 100 ms
+    // Published at 90 ms but route frames received until 130 ms: the release at 100 ms
     // fell while it ran (the ECU counts from the same end).
     assert_eq!(skipped_between(0, 130_000, 100_000), 1);
     assert_eq!(skipped_between(300_000, 500_000, 100_000), 1);

@@ -441,6 +441,36 @@ fn a_loop_whose_annotation_is_removed_is_refused() {
         .contains("without a bound"));
 }
 
+/// An activation of the plan task adopts a window of the road or plans, never
+/// both (`ecu::window_job` and `ecu::plan_job` on the two branches of one test):
+/// the task's bound is the larger job's plus what every activation does, not
+/// their sum.
+#[test]
+#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
+    let elf = std::path::Path::new(ECU_ELF);
+    assert!(
+        elf.is_file(),
+        "{ECU_ELF} is missing: build it with `cargo ecu`"
+    );
+    let cycles = |a: &host_sim::wcet::analysis::StaticAnalysis, name: &str| {
+        a.tasks
+            .iter()
+            .find(|t| t.name == name)
+            .and_then(|t| t.static_bound_cycles)
+            .unwrap()
+    };
+    let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    let (task, plan, window) = (
+        cycles(&a, "plan"),
+        cycles(&a, "plan_job"),
+        cycles(&a, "window_job"),
+    );
+    assert!(window > 1_000_000 && plan > window, "{plan} {window}");
+    assert!(task >= plan, "the task {task} < its job {plan}");
+    assert!(task < plan + window, "{task} ≥ {plan} + {window}");
+}
+
 /// The QP solver's annotations are read from its own crate (`qp/src`): without its
 /// iteration cap, the solver's main loop is unbounded.
 #[test]

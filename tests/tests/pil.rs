@@ -152,8 +152,8 @@ fn the_ecu_in_the_loop_drives_round_the_obstacles_within_its_deadlines() {
 fn an_ecu_too_slow_for_its_plans_counts_the_misses_as_the_host_does_and_keeps_the_car_safe() {
     // 2^8 = 256 ns per instruction (an ECU ~40× slower than the 168 MHz part): a
     // plan activation over ~0.39 M instructions (100 ms) finishes past its deadline
-    // on the ECU's own clock: the cold start and some warm steps, and a window of
-    // the road received and adopted after publishing runs past the next release.
+    // on the ECU's own clock: the cold start and some warm steps, and an activation
+    // that runs past the next release skips it.
     // (At 2^9 the plans fail and the car stops under control: see the README's
     // known limitations.)
     let (r, _, _, ticks) = drive(&Scenario::paper(true), 8, 12.0, "slow");

@@ -4,7 +4,7 @@
 //! | task | priority | released | does |
 //! |---|---|---|---|
 //! | `control` | 2 (high) | every 10 ms by the monotonic | reads the sensor frame, [`ControlTask::run`] on the shared plan, sends the actuator frame |
-//! | `plan` | 1 (low) | every 100 ms by the monotonic | [`PlanTask::run`] outside any lock, then [`PlanTask::publish`] (a buffer swap) inside a short lock on the shared plan; then receives and adopts a new window of the road, if one was sent |
+//! | `plan` | 1 (low) | every 100 ms by the monotonic | [`PlanTask::run`] outside any lock, then [`PlanTask::publish`] (a buffer swap) inside a short lock on the shared plan, or, when a window of the road was received, its adoption instead; then receives the frames of a new window, if one was sent |
 //!
 //! No maths here: the app calls the same library functions the simulator calls.
 //!
@@ -42,7 +42,10 @@
 //! **Route**: the next window of the road comes on a channel of its own
 //! (`ecu.route`), announced by the count in the sensor frame; the plan task
 //! receives it after it publishes (it is the planner's input), so a window never
-//! delays an actuation.
+//! delays an actuation, and the next activation adopts it instead of planning
+//! (the control task follows the last plan 100 ms longer): an activation plans
+//! or adopts, never both, so the plan task's worst case is the larger of the
+//! two, not their sum.
 //!
 //! **Panic and faults**: the panic handler and the HardFault handler (MemManage,
 //! BusFault and UsageFault are left disabled in SHCSR, so they escalate to
@@ -511,6 +514,11 @@ impl Staging {
         }
     }
 
+    /// True when a complete window waits to be adopted.
+    fn is_ready(&self) -> bool {
+        self.ready.is_some()
+    }
+
     /// Copies a complete window into the planner's path storage.
     fn take_into(&mut self, planner: &mut PlanTask<f32, PATH_CAP>) -> Option<link::WindowFrame> {
         let w = self.ready.take()?;
@@ -549,6 +557,22 @@ fn plan_job(
     planner.run(est)
 }
 
+/// The plan task's adoption of a window of the road received by an earlier
+/// activation, in place of [`plan_job`]: its rows copied into the path's storage,
+/// the path computed, the MPC's warm start moved, the obstacles' parabolas
+/// rebuilt ([`PlanTask::adopt_window`]). False when the planner refused it (then
+/// without a path); true when adopted or when no window was received. Not
+/// inlined: the timing analysis bounds it alone, against
+/// [`deadline::PLAN_BUDGET_CYCLES`].
+#[inline(never)]
+fn window_job(planner: &mut PlanTask<f32, PATH_CAP>, staging: &mut Staging) -> bool {
+    staging.take_into(planner).is_none_or(|w| {
+        planner
+            .adopt_window(w.rows as usize, w.origin_m, w.closed)
+            .is_ok()
+    })
+}
+
 /// The plan swap, inside the `plan` lock: the critical section that blocks the
 /// control task. Not inlined: the timing analysis bounds it alone.
 #[inline(never)]
@@ -558,6 +582,15 @@ fn publish_plan(
     finish_us: u64,
 ) -> bool {
     planner.publish_at(shared, finish_us)
+}
+
+/// The plan task's own core clock ticks since `t0`: the ticks elapsed less the
+/// control task's since `c0` (its [`CONTROL_TICKS`] then).
+fn own_ticks(t0: u64, c0: u32) -> u64 {
+    let c1 = CONTROL_TICKS.load(Ordering::Relaxed);
+    core_ticks()
+        .saturating_sub(t0)
+        .saturating_sub(c1.wrapping_sub(c0) as u64)
 }
 
 /// Adds the control task's ticks since `t0` (everything it did, the link's frames
@@ -798,7 +831,8 @@ mod app {
     }
 
     /// The 10 Hz plan task: [`PlanTask::run`] on the estimate at its release, then
-    /// the plan published by a swap; then a window of the road, if one was sent.
+    /// the plan published by a swap, or a received window of the road adopted
+    /// instead; then the frames of a window of the road, if one was sent.
     /// Deadline: its 100 ms period (see the deadline policy above).
     #[task(priority = 1, shared = [estimate, plan, plan_event], local = [planner, route, staging])]
     async fn plan(mut cx: plan::Context) {
@@ -810,27 +844,53 @@ mod app {
             Mono::delay_until(instant_at(monitor.release_us())).await;
             activation = activation.wrapping_add(1);
             let release_us = monitor.start();
-            let est = cx.shared.estimate.lock(|e| *e);
-            let friction_mu = f32::from_bits(FRICTION_MU_BITS.load(Ordering::Relaxed));
+            let planner = &mut *cx.local.planner;
+            // A window of the road received by an earlier activation is adopted by
+            // this one instead of planning (the control task follows the last plan
+            // meanwhile): an activation adopts or plans, never both, so the plan
+            // task's worst case is the larger of the two, not their sum.
             let t0 = core_ticks();
             let c0 = CONTROL_TICKS.load(Ordering::Relaxed);
-            let planner = &mut *cx.local.planner;
-            let result = plan_job(planner, &est, friction_mu);
-            // The record's copy of the plan, taken before the swap, outside the lock.
-            let computed = planner.pending().copied();
-            let finish_us = now_us();
-            let published = cx.shared.plan.lock(|p| publish_plan(planner, p, finish_us));
-            let c1 = CONTROL_TICKS.load(Ordering::Relaxed);
-            let t1 = core_ticks();
-            let own = t1
-                .saturating_sub(t0)
-                .saturating_sub(c1.wrapping_sub(c0) as u64);
-            monitor.complete(finish_us, own);
-            // After publishing, in the slack before the next release: the frames of
-            // a window of the road announced since, then a complete window adopted
-            // (its rows copied into the path's storage, the path computed; the next
-            // activation plans on it).
-            // At most a window's frames per activation; the rest wait for the next.
+            // One of the two jobs per activation, the window's or the plan's, on
+            // two branches of one test (the task's static bound is then the larger
+            // of the two: a job called on both paths would be charged on both).
+            let mut event = if cx.local.staging.is_ready() {
+                if !window_job(planner, cx.local.staging) {
+                    // Counted with the refused route frames (the Done frame's
+                    // `rejected_frames`); no logging in a task.
+                    ROUTE_REJECTED.fetch_add(1, Ordering::Relaxed);
+                }
+                let finish_us = now_us();
+                let own = own_ticks(t0, c0);
+                monitor.complete(finish_us, own);
+                let ticks = own.clamp(1, u32::MAX as u64) as u32;
+                PlanEventFrame::window(activation, release_us, finish_us, ticks)
+            } else {
+                let est = cx.shared.estimate.lock(|e| *e);
+                let friction_mu = f32::from_bits(FRICTION_MU_BITS.load(Ordering::Relaxed));
+                let result = plan_job(planner, &est, friction_mu);
+                // The record's copy of the plan, taken before the swap, outside the lock.
+                let computed = planner.pending().copied();
+                let finish_us = now_us();
+                let published = cx.shared.plan.lock(|p| publish_plan(planner, p, finish_us));
+                let own = own_ticks(t0, c0);
+                monitor.complete(finish_us, own);
+                PlanEventFrame::new(
+                    activation,
+                    release_us,
+                    finish_us,
+                    own.min(u32::MAX as u64) as u32,
+                    &result,
+                    planner.last_report(),
+                    published,
+                    0,
+                    computed.as_ref(),
+                )
+            };
+            // After publishing (or adopting), in the slack before the next release:
+            // the frames of a window of the road announced since, staged for the
+            // next activation to adopt. At most a window's frames per activation;
+            // the rest wait for the next.
             let frames = ROUTE_PENDING.swap(0, Ordering::Relaxed);
             if frames > ROUTE_FRAMES {
                 ROUTE_PENDING.fetch_add(frames - ROUTE_FRAMES, Ordering::Relaxed);
@@ -840,38 +900,6 @@ mod app {
                     .route
                     .receive(frames.min(ROUTE_FRAMES), cx.local.staging);
             }
-            let t2 = core_ticks();
-            let c2 = CONTROL_TICKS.load(Ordering::Relaxed);
-            let window = cx.local.staging.take_into(planner);
-            if let Some(w) = window {
-                if planner
-                    .adopt_window(w.rows as usize, w.origin_m, w.closed)
-                    .is_err()
-                {
-                    // Counted with the refused route frames (the Done frame's
-                    // `rejected_frames`); no logging in a task.
-                    ROUTE_REJECTED.fetch_add(1, Ordering::Relaxed);
-                }
-            }
-            let c3 = CONTROL_TICKS.load(Ordering::Relaxed);
-            let window_ticks = match window {
-                Some(_) => core_ticks()
-                    .saturating_sub(t2)
-                    .saturating_sub(c3.wrapping_sub(c2) as u64)
-                    .clamp(1, u32::MAX as u64) as u32,
-                None => 0,
-            };
-            let mut event = PlanEventFrame::new(
-                activation,
-                release_us,
-                finish_us,
-                own.min(u32::MAX as u64) as u32,
-                &result,
-                planner.last_report(),
-                published,
-                window_ticks,
-                computed.as_ref(),
-            );
             // The next release: the next multiple of 100 ms not yet past (releases
             // that fell while this one ran are skipped, not queued, and counted).
             let end_us = now_us();

@@ -161,6 +161,10 @@ wire_codes!(
 pub const MPC_OK: u8 = 0;
 /// Added to [`qp_status_code`] for [`MpcError::Qp`].
 pub const MPC_QP_BASE: u8 = 0x10;
+/// [`PlanEventFrame::status`] of an activation that adopted a new window of the
+/// road instead of planning (no MPC step, nothing published; the next
+/// activation plans on the window).
+pub const PLAN_WINDOW: u8 = 0x20;
 
 /// Code of an MPC error: `NonFiniteState` 1, `InvalidFriction` 2,
 /// `InvalidSettings` 3, `NoPath` 4, `NonFinitePlan` 5, `Qp(s)`
@@ -201,11 +205,12 @@ pub const fn mpc_error_from_code(code: u8) -> Option<MpcError> {
     }
 }
 
-/// Name of a [`PlanEventFrame::status`]: `"Optimal"` for 0, the error's name
-/// (`"Qp(Infeasible)"`…), or `"Unknown"`.
+/// Name of a [`PlanEventFrame::status`]: `"Optimal"` for 0, `"Window"` for
+/// [`PLAN_WINDOW`], the error's name (`"Qp(Infeasible)"`…), or `"Unknown"`.
 pub const fn mpc_status_name(code: u8) -> &'static str {
     match mpc_error_from_code(code) {
         None if code == MPC_OK => "Optimal",
+        None if code == PLAN_WINDOW => "Window",
         None => "Unknown",
         Some(MpcError::NonFiniteState) => "NonFiniteState",
         Some(MpcError::InvalidFriction) => "InvalidFriction",

@@ -12,7 +12,9 @@
 //! trips, [`PlanEventFrame`] its end instant and the plan task's counts;
 //! [`SensorFrame::route_frames`] announces the frames of a window of the road sent
 //! on the route channel (the plan task receives them); the fault codes
-//! [`FAULT_HARDFAULT`] and [`FAULT_DEADLINE`]. Everything here works on fixed buffers: no heap, no `alloc`,
+//! [`FAULT_HARDFAULT`] and [`FAULT_DEADLINE`]. Version 4: an activation adopts a
+//! new window of the road instead of planning ([`PlanEventFrame::status`]
+//! [`PLAN_WINDOW`], its time in `window_ticks`). Everything here works on fixed buffers: no heap, no `alloc`,
 //! no panic; every refused frame is a [`FrameError`] value the receiver counts.
 //!
 //! # Wire format
@@ -64,7 +66,8 @@
 //!   `Qp(s)` 0x10 +
 //!   [`qp_status_code`]`(s)`, with `Optimal` 0, `NotSolved` 1, `IterationLimit` 2,
 //!   `Infeasible` 3, `NotConvex` 4, `NumericalError` 5, `NonFiniteInput` 6,
-//!   `InvalidInput` 7, `WorkingSetFull` 8).
+//!   `InvalidInput` 7, `WorkingSetFull` 8), or [`PLAN_WINDOW`] (0x20) for an
+//!   activation that adopted a window of the road instead of planning.
 //! * [`ReadyFrame::status`]: 0 accepted, else a [`SetupError`] code.
 //!
 //! Each has a `*_from_code` inverse and a `*_name` for logs.
@@ -94,7 +97,7 @@ use crate::vehicle_config::VehicleConfig;
 use qp::QpStatus;
 
 /// Version of this wire format, the first byte of every raw frame.
-pub const LINK_VERSION: u8 = 3;
+pub const LINK_VERSION: u8 = 4;
 /// The largest encoded frame, bytes, including its 0x00 delimiter.
 pub const MAX_FRAME_BYTES: usize = 512;
 /// Track rows per [`PathChunkFrame`].
@@ -134,8 +137,9 @@ pub enum Down {
     /// End of the run: the ECU answers `Up::Done`.
     Stop,
     /// While driving: the `PathChunk` rows sent since the last `Window` (first row
-    /// 0) are the next window of the road; the plan task adopts it after it next
-    /// publishes (version 2).
+    /// 0) are the next window of the road; the plan task receives it after it next
+    /// publishes and adopts it in its next activation, instead of planning
+    /// (version 2; version 4: the adoption's own activation).
     Window(WindowFrame),
 }
 
@@ -317,9 +321,9 @@ pub struct PlanEventFrame {
     /// Time the activation finished (its plan published or dropped), µs, on the
     /// same clock as `release_us`.
     pub finish_us: u64,
-    /// Time the activation ended, µs: after the window of the road it received
-    /// and adopted after publishing (`finish_us` without one). The next release
-    /// is the first not yet past then (version 3).
+    /// Time the activation ended, µs: after the frames of a window of the road it
+    /// received after publishing or adopting. The next release is the first not
+    /// yet past then (version 3).
     pub end_us: u64,
     /// The plan task's deadline counts, this activation's completion and the
     /// releases it skipped included (version 3).
@@ -327,7 +331,8 @@ pub struct PlanEventFrame {
     /// ECU clock ticks (168 MHz) of the plan task itself, preemption by the
     /// control task excluded.
     pub ticks: u32,
-    /// 0 optimal, else [`mpc_status_code`] (see the module docs for the mapping).
+    /// 0 optimal, else [`mpc_status_code`], or [`PLAN_WINDOW`] (see the module
+    /// docs for the mapping).
     pub status: u8,
     /// False when the plan was late (dropped) or failed.
     pub published: bool,
@@ -346,7 +351,8 @@ pub struct PlanEventFrame {
     /// Active constraints at the last QP's solution, constraints.
     pub active: u16,
     /// Core clock ticks the activation spent adopting a new window of the road
-    /// after publishing its plan (not in `ticks`; 0: no window), ticks.
+    /// instead of planning (status [`PLAN_WINDOW`]; then equal to `ticks`; 0: no
+    /// window), preemption excluded, ticks.
     pub window_ticks: u32,
     /// Planned positions `[x_m, y_m]` of the plan's nodes, global frame, m.
     pub nodes_xy: [[f32; 2]; PLAN_NODES],
@@ -400,6 +406,29 @@ impl PlanEventFrame {
             window_ticks,
             nodes_xy,
             v_heur0_mps,
+        }
+    }
+}
+
+impl PlanEventFrame {
+    /// The record of an activation that adopted a new window of the road instead
+    /// of planning: status [`PLAN_WINDOW`], `ticks` and `window_ticks` its own
+    /// core clock ticks (preemption excluded), no work counters, no plan.
+    pub fn window(activation: u32, release_us: u64, finish_us: u64, ticks: u32) -> Self {
+        let none: Result<(), MpcError> = Ok(());
+        Self {
+            status: PLAN_WINDOW,
+            ..Self::new(
+                activation,
+                release_us,
+                finish_us,
+                ticks,
+                &none,
+                &MpcReport::default(),
+                false,
+                ticks,
+                None,
+            )
         }
     }
 }

@@ -14,7 +14,8 @@ use crate::closed_loop::plan_activation::PlanActivation;
 /// plan    = margin · (per_activation + passes·(per_pass + per_row_pass·rows)
 ///                     + per_iteration·iterations + per_added·added
 ///                     + per_removed·removed + per_refactorization·refactorisations)
-/// window  = per_window   (adopting a new window of the road, after publishing)
+/// window  = per_window   (an activation adopting a new window of the road
+///                         instead of planning)
 /// control = margin · control
 /// ```
 ///
@@ -50,7 +51,7 @@ pub struct CostModel {
     /// Per factorisation of the working set from scratch, instructions.
     pub per_refactorization: f64,
     /// Adopting a new window of the road (loading the path, rebuilding the
-    /// obstacles' parabolas), after the plan is published: the largest measured,
+    /// obstacles' parabolas), an activation of its own: the largest measured,
     /// instructions.
     pub per_window: f64,
     /// One control activation, instructions.
@@ -120,6 +121,12 @@ pub fn report_of(a: &PlanActivation) -> MpcReport<f64> {
     }
 }
 
+/// A measured activation that planned (not one that adopted a window of the road
+/// instead): what the plan terms describe.
+fn plans_something(a: &PlanActivation) -> bool {
+    a.instructions > 0.0 && !a.window
+}
+
 /// The model's terms of an activation, in the order of [`CostModel::fit`]'s
 /// coefficients.
 fn terms(a: &PlanActivation) -> [f64; 7] {
@@ -156,7 +163,7 @@ impl CostModel {
     /// is the largest measured control activation. `None` with fewer activations
     /// than terms.
     pub fn fit(plans: &[PlanActivation], control_max_instructions: f64) -> Option<Self> {
-        let rows: Vec<&PlanActivation> = plans.iter().filter(|a| a.instructions > 0.0).collect();
+        let rows: Vec<&PlanActivation> = plans.iter().filter(|a| plans_something(a)).collect();
         let mut active = [true; 7];
         let mut coef = [0.0f64; 7];
         for _ in 0..7 {
@@ -207,7 +214,7 @@ impl CostModel {
     pub fn error_on(&self, plans: &[PlanActivation]) -> ModelError {
         let mut errs: Vec<f64> = Vec::new();
         let mut under = 0.0f64;
-        for a in plans.iter().filter(|a| a.instructions > 0.0) {
+        for a in plans.iter().filter(|a| plans_something(a)) {
             let modelled = self.plan_instructions(&report_of(a));
             let e = (modelled - a.instructions) / a.instructions;
             under = under.max(-e);

@@ -27,7 +27,10 @@
 //! [`CostModel`], failed activations included, and cycles = instructions ×
 //! [`SimOptions::cycles_per_instruction`]. A release that falls while the `plan`
 //! task is still running is skipped (see the late-plan policy in
-//! [`crate::closed_loop::timeline`]).
+//! [`crate::closed_loop::timeline`]). A window of the road that arrived before an
+//! activation finished is adopted by the next activation instead of planning (as
+//! the ECU does: an activation plans or adopts, never both); that activation takes
+//! the cost model's window time and publishes nothing.
 
 use anyhow::{anyhow, Result};
 use firmware::low_level::Actuation;
@@ -40,7 +43,7 @@ use firmware::Real;
 use serde::{Deserialize, Serialize};
 
 use crate::closed_loop::cost_model::CostModel;
-use crate::closed_loop::plan_activation::{mpc_error_name, PlanActivation};
+use crate::closed_loop::plan_activation::{mpc_error_name, PlanActivation, WINDOW_STATUS};
 use crate::closed_loop::SimOptions;
 use crate::model::vehicle::vehicle_config;
 use crate::model::vehicle::VehicleParams;
@@ -133,8 +136,9 @@ pub trait Ecu<T: Real> {
     fn active_plan(&self) -> &Plan<T>;
 
     /// The next window of the road ([`crate::world::route`]), given before the control
-    /// activation of the instant `t_us` (µs) it is due; the plan task adopts it after its next
-    /// publication (at the end of the activation running then, or of the next).
+    /// activation of the instant `t_us` (µs) it is due; the plan task receives it after its
+    /// next publication (at the end of the activation running then, or of the next) and
+    /// adopts it in the activation after that, instead of planning.
     fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()>;
 
     /// Whether [`Self::active_plan`] carries each node's speed and steering (the
@@ -163,9 +167,12 @@ pub struct SimulatedEcu<T: Real> {
     in_flight: Option<InFlight>,
     busy_until_us: u64,
     releases: u32,
-    /// The next window of the road and when it arrived, µs; adopted at the end of
-    /// the first plan activation that finishes after that.
+    /// The next window of the road and when it arrived, µs; received (staged) at
+    /// the end of the first plan activation that finishes after that.
     pending_window: Option<(Window, u64)>,
+    /// A received window of the road: the next plan activation adopts it instead
+    /// of planning.
+    staged_window: Option<Window>,
 }
 
 impl<T: Real> SimulatedEcu<T> {
@@ -234,6 +241,7 @@ impl<T: Real> SimulatedEcu<T> {
             busy_until_us: 0,
             releases: 0,
             pending_window: None,
+            staged_window: None,
         })
     }
 
@@ -282,30 +290,42 @@ impl<T: Real> SimulatedEcu<T> {
 }
 
 impl<T: Real> SimulatedEcu<T> {
-    /// At the end of the activation `record` (after its publication), as the ECU
-    /// does: adopts the pending window of the road if it arrived before then; the
-    /// task stays busy for the adoption's modelled time.
-    fn adopt_window_after(&mut self, record: &mut PlanActivation) {
+    /// At the end of the activation `record` (after its publication or adoption),
+    /// as the ECU does: receives the pending window of the road if it arrived
+    /// before then; the next activation adopts it.
+    fn receive_window_after(&mut self, record: &PlanActivation) {
         let due = self
             .pending_window
             .as_ref()
             .is_some_and(|(_, arrived_us)| *arrived_us < record.finish_us);
-        if !due {
-            return;
+        if due {
+            self.staged_window = self.pending_window.take().map(|(w, _)| w);
         }
-        if let Some((w, _)) = self.pending_window.take() {
-            // A path the planner refuses leaves it without one: its steps then fail
-            // with `NoPath` and are reported as such.
-            let _ = load_window(&mut self.planner, &w);
-            let instructions = self.cost_model.window_instructions(true);
-            let cycles = instructions * self.cycles_per_instruction;
-            let control_cycles =
-                self.cost_model.control_instructions() * self.cycles_per_instruction;
-            self.busy_until_us = record.finish_us
-                + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
-            record.window = true;
-            record.window_instructions = instructions;
-        }
+    }
+
+    /// The activation released at `t_us` adopts the received window `w` instead of
+    /// planning; the task stays busy for the adoption's modelled time.
+    fn adopt_window(&mut self, t_us: u64, w: &Window) {
+        // A path the planner refuses leaves it without one: its steps then fail
+        // with `NoPath` and are reported as such.
+        let _ = load_window(&mut self.planner, w);
+        let instructions = self.cost_model.window_instructions(true);
+        let cycles = instructions * self.cycles_per_instruction;
+        let control_cycles = self.cost_model.control_instructions() * self.cycles_per_instruction;
+        let finish_us = t_us + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
+        self.busy_until_us = finish_us;
+        let mut record = activation_record(
+            self.releases,
+            t_us,
+            finish_us,
+            instructions,
+            cycles,
+            &MpcReport::<T>::default(),
+        )
+        .with_outcome(WINDOW_STATUS, false);
+        record.window = true;
+        record.window_instructions = instructions;
+        self.in_flight = Some(InFlight { record });
     }
 }
 
@@ -382,12 +402,12 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
             .as_ref()
             .is_some_and(|f| f.record.finish_us <= t_us)
         {
-            if let Some(mut f) = self.in_flight.take() {
+            if let Some(f) = self.in_flight.take() {
                 let published = self
                     .planner
                     .publish_at(&mut self.shared_plan, f.record.finish_us);
                 debug_assert_eq!(published, f.record.published);
-                self.adopt_window_after(&mut f.record);
+                self.receive_window_after(&f.record);
                 plans.push(f.record);
             }
         }
@@ -402,6 +422,8 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
             if self.busy_until_us > t_us {
                 // Still running: this release is lost (RTIC cannot spawn a busy task).
                 skipped_releases = 1;
+            } else if let Some(w) = self.staged_window.take() {
+                self.adopt_window(t_us, &w);
             } else {
                 self.release_plan(t_us, est);
             }

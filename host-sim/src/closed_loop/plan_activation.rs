@@ -20,11 +20,13 @@ pub struct PlanActivation {
     /// When it finished (response time = finish − release), µs.
     pub finish_us: u64,
     /// Instructions of the task's own execution (modelled: from the cost model;
-    /// processor in the loop: measured).
+    /// processor in the loop: measured): its planning, or its adoption of a
+    /// window of the road (`window`).
     pub instructions: f64,
     /// `instructions` × cycles per instruction (see [`CostModel`](super::cost_model::CostModel)), ECU cycles.
     pub cycles: f64,
-    /// `"optimal"` or the failure's name ([`plan_status_name`]).
+    /// `"optimal"`, `"window"` ([`WINDOW_STATUS`]: the activation adopted a
+    /// window instead of planning) or the failure's name ([`plan_status_name`]).
     #[serde(deserialize_with = "known_plan_status")]
     pub status: StatusName,
     /// The plan was published (at `finish_us`).
@@ -45,11 +47,11 @@ pub struct PlanActivation {
     pub rows: u32,
     /// Working-set size at the end of the last pass.
     pub active_constraints: u32,
-    /// After publishing, the activation adopted a new window of the road.
+    /// The activation adopted a new window of the road instead of planning.
     #[serde(default)]
     pub window: bool,
-    /// Instructions of that adoption (not in `instructions`: it follows the
-    /// publication), 0 without a window.
+    /// Instructions of that adoption (then equal to `instructions`), 0 without a
+    /// window.
     #[serde(default)]
     pub window_instructions: f64,
     /// Largest validity slack of the plan, rad (0 if none or not optimal); `None`
@@ -58,12 +60,18 @@ pub struct PlanActivation {
     pub max_validity_slack_rad: Option<f64>,
 }
 
+/// The status of an activation that adopted a new window of the road instead of
+/// planning (`firmware::link::PLAN_WINDOW`): it publishes nothing, and is not a
+/// failure.
+pub const WINDOW_STATUS: &str = "window";
+
 /// The name of a plan activation's status code (`firmware::link`'s
 /// [`PlanEventFrame::status`](firmware::link::PlanEventFrame)): `"optimal"`, the
 /// error's name ([`mpc_error_name`]), or `"unknown"`.
 pub fn plan_status_name(code: u8) -> &'static str {
     match firmware::link::mpc_error_from_code(code) {
         None if code == firmware::link::MPC_OK => "optimal",
+        None if code == firmware::link::PLAN_WINDOW => WINDOW_STATUS,
         None => "unknown",
         Some(e) => mpc_error_name(&e),
     }
@@ -78,7 +86,7 @@ fn known_plan_status<'de, D: serde::Deserializer<'de>>(d: D) -> Result<&'static 
         .find(|n| *n == name)
         .ok_or_else(|| {
             serde::de::Error::custom(format!(
-                "unknown plan status `{name}` (expected `optimal` or an MPC error's name)"
+                "unknown plan status `{name}` (expected `optimal`, `window` or an MPC error's name)"
             ))
         })
 }

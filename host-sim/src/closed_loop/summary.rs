@@ -66,7 +66,7 @@ pub struct Summary {
     /// releases included.
     pub plan_deadline_misses: u64,
     /// Plan releases skipped because the task was still running (the activation
-    /// before ran, window adoption included, past them).
+    /// before ran, with the route frames it received, past them).
     pub plan_skipped_releases: u64,
     /// Plan activations over their cycle budget (deadline met or not).
     pub plan_budget_overruns: u64,

@@ -530,7 +530,8 @@ impl<'a> Meter<'a> {
                     sum.max_validity_slack_rad =
                         Some(sum.max_validity_slack_rad.unwrap_or(0.0).max(slack));
                 }
-            } else {
+            } else if !p.window {
+                // An activation that adopted a window planned nothing: no failure.
                 sum.plan_failures += 1;
             }
             res.plan_activations.push(p.clone());

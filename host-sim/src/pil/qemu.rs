@@ -486,8 +486,8 @@ impl Ecu<f32> for QemuEcu {
         let mut plans = Vec::new();
         let mut skipped_releases = 0;
         if let Some(p) = &frame.plan {
-            // Releases that fell while this activation ran, up to its end (its
-            // window adoption included), were skipped.
+            // Releases that fell while this activation ran, up to its end (the
+            // route frames it received included), were skipped.
             skipped_releases = skipped_between(p.release_us, p.end_us, PLAN_PERIOD_US);
             if u64::from(p.ticks) > PLAN_BUDGET_CYCLES {
                 self.tick_overruns.plan += 1;

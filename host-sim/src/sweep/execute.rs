@@ -136,7 +136,7 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
 /// counts (`qp_iteration_limit:3;stale:1`), in order of first appearance.
 fn failure_kinds(acts: &[PlanActivation]) -> String {
     let mut kinds: Vec<(String, usize)> = Vec::new();
-    for a in acts.iter().filter(|a| !a.published) {
+    for a in acts.iter().filter(|a| !a.published && !a.window) {
         let name = if a.status == "optimal" {
             "stale".to_string()
         } else {

@@ -19,7 +19,7 @@ pub const ECU_TASKS: [(&str, &str); 3] = [
 /// The tasks' own work, bounded apart (the ECU app keeps them out of line):
 /// section name, symbol, the task it runs in, its budget in cycles (what the ECU's
 /// deadline monitor holds it to; `None`: no budget of its own).
-pub const ECU_SECTIONS: [(&str, &str, &str, Option<u64>); 3] = [
+pub const ECU_SECTIONS: [(&str, &str, &str, Option<u64>); 4] = [
     (
         "control_job",
         "ecu::control_job",
@@ -29,6 +29,13 @@ pub const ECU_SECTIONS: [(&str, &str, &str, Option<u64>); 3] = [
     (
         "plan_job",
         "ecu::plan_job",
+        "plan",
+        Some(firmware::deadline::PLAN_BUDGET_CYCLES),
+    ),
+    // An activation that adopts a window of the road instead of planning.
+    (
+        "window_job",
+        "ecu::window_job",
         "plan",
         Some(firmware::deadline::PLAN_BUDGET_CYCLES),
     ),

@@ -110,6 +110,13 @@ pub(super) fn goals(
             "cycles",
         ),
         goal(
+            "window-job-budget",
+            "window adoption static bound within the plan budget",
+            tasks.plan_window.static_bound_cycles.map(|c| c as f64),
+            tasks.plan_window.budget_cycles,
+            "cycles",
+        ),
+        goal(
             "plan-tightness",
             "plan static bound over the traced maximum",
             tasks.plan.statics.tightness,

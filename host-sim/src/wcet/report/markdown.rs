@@ -148,11 +148,14 @@ fn render_tasks(s: &mut String, r: &WcetReport) -> std::fmt::Result {
     let w = &r.tasks.plan_window;
     writeln!(
         s,
-        "\nAfter publishing, a plan activation may adopt a new window of the road: \
-         observed max {} instructions (inside the plan task's static bound and response \
-         time). Loops: {} reached, {} without a bound; unresolved indirect calls {}, \
+        "\nA plan activation adopts a new window of the road instead of planning: \
+         observed max {} instructions, static bound (`ecu::window_job`) {} cycles against the \
+         plan budget {} (the plan task's bound and response time are the larger of planning \
+         and adopting). Loops: {} reached, {} without a bound; unresolved indirect calls {}, \
          recursions {}.\n",
         num(w.observed_max_instructions.round()),
+        opt_u(w.static_bound_cycles),
+        num(w.budget_cycles.round()),
         r.coverage.loops.len(),
         r.coverage.unbounded_loops,
         r.coverage.unresolved_indirect_calls.len(),
