@@ -102,7 +102,7 @@ fn a_window_of_the_road_is_adopted_by_an_activation_of_its_own() {
     let acts = &r.plan_activations;
     let windows: Vec<usize> = (0..acts.len()).filter(|&i| acts[i].window).collect();
     assert!(windows.len() >= 2, "{} windows in 30 s", windows.len());
-    let adoption = opts.cost_model.window_instructions(true);
+    let adoption = opts.cost_model.window_instructions();
     for &i in &windows {
         let w = &acts[i];
         // It adopts instead of planning: no MPC step, nothing published, not a

@@ -309,14 +309,20 @@ fn recursion_is_refused() {
 /// The ECU application (built by `cargo ecu`; CI runs this after building it).
 const ECU_ELF: &str = "../target/thumbv7em-none-eabihf/release/ecu";
 
-#[test]
-#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
-fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
+/// [`ECU_ELF`], failing the test when it was not built.
+fn ecu_elf() -> &'static std::path::Path {
     let elf = std::path::Path::new(ECU_ELF);
     assert!(
         elf.is_file(),
         "{ECU_ELF} is missing: build it with `cargo ecu`"
     );
+    elf
+}
+
+#[test]
+#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
+    let elf = ecu_elf();
     let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
     assert!(
         a.unresolved_indirect_calls.is_empty(),
@@ -406,11 +412,7 @@ fn edited_sources(
 #[test]
 #[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_loop_whose_annotation_is_removed_is_refused() {
-    let elf = std::path::Path::new(ECU_ELF);
-    assert!(
-        elf.is_file(),
-        "{ECU_ELF} is missing: build it with `cargo ecu`"
-    );
+    let elf = ecu_elf();
     let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
     let (_dir, edited) = edited_sources("firmware/src/mpc.rs", |t| {
         t.replace(
@@ -448,11 +450,7 @@ fn a_loop_whose_annotation_is_removed_is_refused() {
 #[test]
 #[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
-    let elf = std::path::Path::new(ECU_ELF);
-    assert!(
-        elf.is_file(),
-        "{ECU_ELF} is missing: build it with `cargo ecu`"
-    );
+    let elf = ecu_elf();
     let cycles = |a: &host_sim::wcet::analysis::StaticAnalysis, name: &str| {
         a.tasks
             .iter()
@@ -476,11 +474,7 @@ fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
 #[test]
 #[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_qp_loop_whose_annotation_is_removed_is_refused() {
-    let elf = std::path::Path::new(ECU_ELF);
-    assert!(
-        elf.is_file(),
-        "{ECU_ELF} is missing: build it with `cargo ecu`"
-    );
+    let elf = ecu_elf();
     let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
     let unbounded_in_qp = |a: &host_sim::wcet::analysis::StaticAnalysis| {
         a.loops
@@ -506,11 +500,7 @@ fn a_qp_loop_whose_annotation_is_removed_is_refused() {
 #[test]
 #[ignore = "needs the ECU binary and QEMU: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
-    let elf = std::path::Path::new(ECU_ELF);
-    assert!(
-        elf.is_file(),
-        "{ECU_ELF} is missing: build it with `cargo ecu`"
-    );
+    let elf = ecu_elf();
     let out = tempfile::tempdir().unwrap();
     let trace = out.path().join("trace.log");
     // One simulated second of the paper lap: the cold start walks the whole

@@ -408,9 +408,7 @@ impl PlanEventFrame {
             v_heur0_mps,
         }
     }
-}
 
-impl PlanEventFrame {
     /// The record of an activation that adopted a new window of the road instead
     /// of planning: status [`PLAN_WINDOW`], `ticks` and `window_ticks` its own
     /// core clock ticks (preemption excluded), no work counters, no plan.

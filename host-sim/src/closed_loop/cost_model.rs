@@ -92,14 +92,9 @@ impl CostModel {
                 + self.per_refactorization * f64::from(r.qp_refactorizations))
     }
 
-    /// Estimated instructions of adopting a window of the road (0 when `adopted`
-    /// is false).
-    pub fn window_instructions(&self, adopted: bool) -> f64 {
-        if adopted {
-            self.per_window
-        } else {
-            0.0
-        }
+    /// Estimated instructions of an activation adopting a window of the road.
+    pub fn window_instructions(&self) -> f64 {
+        self.per_window
     }
 
     /// Estimated instructions of one control activation.

@@ -256,6 +256,17 @@ impl<T: Real> SimulatedEcu<T> {
         &self.control
     }
 
+    /// An activation released at `t_us` of `instructions`: its cycles and its
+    /// finish, µs (preempted by the control activations meanwhile); the task is
+    /// busy until then.
+    fn occupy(&mut self, t_us: u64, instructions: f64) -> (f64, u64) {
+        let cycles = instructions * self.cycles_per_instruction;
+        let control_cycles = self.cost_model.control_instructions() * self.cycles_per_instruction;
+        let finish_us = t_us + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
+        self.busy_until_us = finish_us;
+        (cycles, finish_us)
+    }
+
     /// Runs the plan task released at `t_us` on `est` on the host; its record waits
     /// in flight until its modelled finish.
     fn release_plan(&mut self, t_us: u64, est: &StateEstimate<T>) {
@@ -264,10 +275,7 @@ impl<T: Real> SimulatedEcu<T> {
         // Charged from the activation's own counters, a failed one's included.
         let report = *self.planner.last_report();
         let instructions = self.cost_model.plan_instructions(&report);
-        let cycles = instructions * self.cycles_per_instruction;
-        let control_cycles = self.cost_model.control_instructions() * self.cycles_per_instruction;
-        let finish_us = t_us + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
-        self.busy_until_us = finish_us;
+        let (cycles, finish_us) = self.occupy(t_us, instructions);
         // The late-plan policy: published at its finish unless older than
         // MAX_PLAN_AGE_US by then (`PlanTask::publish_at`).
         let fresh = finish_us - t_us <= MAX_PLAN_AGE_US;
@@ -309,11 +317,8 @@ impl<T: Real> SimulatedEcu<T> {
         // A path the planner refuses leaves it without one: its steps then fail
         // with `NoPath` and are reported as such.
         let _ = load_window(&mut self.planner, w);
-        let instructions = self.cost_model.window_instructions(true);
-        let cycles = instructions * self.cycles_per_instruction;
-        let control_cycles = self.cost_model.control_instructions() * self.cycles_per_instruction;
-        let finish_us = t_us + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
-        self.busy_until_us = finish_us;
+        let instructions = self.cost_model.window_instructions();
+        let (cycles, finish_us) = self.occupy(t_us, instructions);
         let mut record = activation_record(
             self.releases,
             t_us,

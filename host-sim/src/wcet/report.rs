@@ -131,13 +131,19 @@ impl StaticSummary {
     /// The figures of `analysis` for the plan and control tasks (task `plan` and
     /// section `plan_job`, task `control` and section `control_job`).
     pub fn of(analysis: &super::analysis::StaticAnalysis) -> Self {
+        let bound_cycles = |name: &str| {
+            analysis
+                .tasks
+                .iter()
+                .find(|t| t.name == name)
+                .and_then(|t| t.static_bound_cycles)
+        };
         let task = |name: &str, job: &str| {
             let t = analysis.tasks.iter().find(|t| t.name == name);
-            let j = analysis.tasks.iter().find(|t| t.name == job);
             StaticTiming {
                 static_bound_instructions: t.and_then(|t| t.static_bound_instructions),
                 static_bound_cycles: t.and_then(|t| t.static_bound_cycles),
-                job_static_bound_cycles: j.and_then(|j| j.static_bound_cycles),
+                job_static_bound_cycles: bound_cycles(job),
                 response_time_bound_us: t.and_then(|t| t.response_time_bound_us),
                 deadline_us: t.and_then(|t| t.deadline_us),
                 traced_max_cycles: t.and_then(|t| t.observed_max_cycles),
@@ -147,11 +153,7 @@ impl StaticSummary {
         Self {
             plan: task("plan", "plan_job"),
             control: task("control", "control_job"),
-            window_job_static_bound_cycles: analysis
-                .tasks
-                .iter()
-                .find(|t| t.name == "window_job")
-                .and_then(|t| t.static_bound_cycles),
+            window_job_static_bound_cycles: bound_cycles("window_job"),
             coverage: Coverage {
                 loops: analysis.loops.clone(),
                 unbounded_loops: analysis.unbounded_loops,
