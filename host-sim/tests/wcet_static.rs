@@ -1148,3 +1148,65 @@ fn flash_wait_states_follow_where_data_can_be() {
     };
     assert_eq!(listed.block_cycles(0x0800_0000, insns), 10 + 5 + 5);
 }
+
+/// A root that either calls `looper` (a loop of `subs`/`bne` capped per
+/// activation) or runs a long straight path of 40 `adds`.
+const ONE_BRANCH_LOOPS: &str = "
+08000000 <root>:
+ 8000000: b510         \tpush\t{r4, lr}
+ 8000002: 2800         \tcmp\tr0, #0x0
+ 8000004: d002         \tbeq\t0x800000c <root+0xc> @ imm = #0x4
+ 8000006: f000 f81b    \tbl\t0x8000040 <looper> @ imm = #0x36
+ 800000a: bd10         \tpop\t{r4, pc}
+ 800000c: 3101         \tadds\tr1, #0x1
+LONG
+ 8000036: bd10         \tpop\t{r4, pc}
+
+08000040 <looper>:
+ 8000040: 2410         \tmovs\tr4, #0x10
+ 8000042: 3c01         \tsubs\tr4, #0x1
+ 8000044: d1fd         \tbne\t0x8000042 <looper+0x2> @ imm = #-0x6
+ 8000046: 4770         \tbx\tlr
+";
+
+#[test]
+fn a_cap_per_activation_is_not_charged_on_the_branch_that_skips_its_loop() {
+    let long: String = (1..21u32)
+        .map(|k| format!(" {:7x}: 3101         \tadds\tr1, #0x1\n", 0x800000c + 2 * k))
+        .collect();
+    let p = program(&ONE_BRANCH_LOOPS.replace("LONG\n", &long));
+    let ls = all_loops(&p);
+    let (root, looper) = (p.find("root")[0], p.find("looper")[0]);
+    let lp = loop_at(&p, &ls, looper, 0x8000042);
+    let bound = |per: Per, cap: u64| {
+        let facts = [LoopFact {
+            function: looper,
+            loop_index: lp,
+            bound: cap,
+            per,
+            group: None,
+            iterations: false,
+        }];
+        ipet::task_bound(
+            &p,
+            &ls,
+            root,
+            &facts,
+            0,
+            &ipet::CopySizes::default(),
+            Cost::Instructions,
+        )
+        .unwrap()
+        .bound
+    };
+    // The long path: push, cmp, beq, 21 adds, pop = 25 instructions. The call with
+    // 10 back edges: push, cmp, beq, bl, movs, 11 × (subs, bne), bx, pop = 29.
+    // Before the per-entry ties the relaxation took the long path and still ran
+    // the loop's 10 capped back edges (a circulation with no entry): 45.
+    assert_eq!(bound(Per::Activation, 10), 29);
+    assert_eq!(bound(Per::Counted(3), 10), 29);
+    // Where the call is the dearer path the tie cuts nothing: 4 + 1 + 21 × 2 + 2.
+    assert_eq!(bound(Per::Activation, 20), 49);
+    // A cap below the long path's cost leaves the long path.
+    assert_eq!(bound(Per::Activation, 1), 25);
+}

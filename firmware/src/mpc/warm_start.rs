@@ -53,19 +53,20 @@ impl<T: Real> Mpc<T> {
     /// next solve's warm start.
     pub(super) fn keep_working_set(&mut self) {
         let mut n = 0;
-        // The working set is at most WS entries (the solver's array of WS); the compiler
-        // splits this loop, its parts found at the two annotated lines below: WS each.
+        // The working set is at most WS entries (the solver's array of WS). No
+        // `continue`: one path back to the loop's head keeps it one loop (a second
+        // one made the compiler split it into two nested ones).
+        // wcet-bound: WS
         for e in self.solver.working_set() {
             let entry = match e.index {
-                ConstraintIndex::Bound(j) => WarmEntry::Bound(j, e.side),
-                // wcet-bound: WS
-                ConstraintIndex::Row(i) => match self.condensing.row_id.get(i as usize) {
-                    Some(&id) => WarmEntry::Row(id, e.side),
-                    None => continue,
-                },
+                ConstraintIndex::Bound(j) => Some(WarmEntry::Bound(j, e.side)),
+                ConstraintIndex::Row(i) => self
+                    .condensing
+                    .row_id
+                    .get(i as usize)
+                    .map(|&id| WarmEntry::Row(id, e.side)),
             };
-            // wcet-bound: WS
-            if let Some(d) = self.warm_set.get_mut(n) {
+            if let (Some(entry), Some(d)) = (entry, self.warm_set.get_mut(n)) {
                 *d = entry;
                 n += 1;
             }

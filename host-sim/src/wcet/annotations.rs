@@ -219,12 +219,19 @@ pub fn dependency_facts() -> Vec<Annotation> {
             2 * ASYNC_TASKS + 1,
             "each pass pops one expired timer or re-arms once after a missed compare",
         ),
-        fact(
-            "postcard-1.2.0/src/ser/flavors.rs",
-            123,
-            firmware::link::MAX_FRAME_BYTES as u64,
-            "try_extend pushes byte by byte into the link's frame flavor, which refuses the bytes past MAX_FRAME_BYTES",
-        ),
+        // Over a whole activation, not per call: the bytes of every field go
+        // through this loop, and the control task sends one frame per activation
+        // (its actuation, or the Done frame of a stop, which never returns) into
+        // a buffer of MAX_UP_FRAME_BYTES whose flavor refuses the bytes past it.
+        Annotation {
+            scope: Scope::Activation,
+            ..fact(
+                "postcard-1.2.0/src/ser/flavors.rs",
+                123,
+                firmware::link::MAX_UP_FRAME_BYTES as u64,
+                "try_extend pushes byte by byte into the link's frame flavor, which refuses the bytes past its MAX_UP_FRAME_BYTES buffer; one frame sent per activation",
+            )
+        },
         fact(
             "crc-3.4.0/src/crc32.rs",
             150,

@@ -12,7 +12,11 @@
 //! * loop bounds: `Σ back edges ≤ B · Σ entry edges` per loop ([`Per::Entry`]), or
 //!   `Σ back edges ≤ B · n_root` for a flow fact over the whole activation
 //!   ([`Per::Activation`]): caps that span loops are linear constraints, not
-//!   products of worst cases;
+//!   products of worst cases. Such a cap also holds per entry: `Σ back edges ≤
+//!   B · n_f` for the loop's function and `≤ B · Σ entry edges` for a natural
+//!   loop (true of every execution, since a loop runs only once entered); without
+//!   them the relaxation enters a function a fraction of the activation, or not at
+//!   all round a loop's cycle, and still charges the whole cap;
 //! * `Σ back edges ≤ B · n_f` for a bound per call of the loop's function
 //!   ([`Per::Call`]: a triangular nest), and `Σ x_b ≤ B · n_root` over the blocks
 //!   of a step capped per activation ([`BlockCap::activation_group`]);
@@ -481,6 +485,10 @@ pub fn task_bound(
                 .filter_map(|b| x.get(b))
                 .fold(Expression::from(0.0), |a, &v| a + v);
             if let Some(g) = cap.activation_group {
+                // Runs only in a call of `f`: at most the cap per entry of `f`
+                // (see the loops' caps per activation below).
+                let bound = cap.bound as f64;
+                constraints.push(constraint!(runs.clone() <= bound * n_entry[&f]));
                 let g = copies.counters.get(&g).copied().unwrap_or(g);
                 add_to_group(&mut group_runs, g, cap.bound, runs);
                 continue;
@@ -539,6 +547,22 @@ pub fn task_bound(
                 back
             };
             let bound = fact.bound as f64;
+            // A cap per activation also caps each entry's share. A loop runs only
+            // in a call of its function, and a natural loop's back edges are taken
+            // only after one of its entry edges: in any execution that takes them,
+            // `back ≤ B ≤ B · n_f` and `≤ B · entries`. The relaxation, whose
+            // counts are fractions, needs both. Without them it enters the
+            // function a small fraction of the activation and still charges the
+            // whole cap (the plan task's QP iterations on the path that adopts a
+            // window), or carries flow round the loop with no entry at all. An
+            // irreducible cycle is entered at several blocks and keeps the
+            // function's tie alone.
+            if matches!(fact.per, Per::Activation | Per::Counted(_)) {
+                constraints.push(constraint!(back.clone() <= bound * n_entry[&f]));
+                if !l.irreducible {
+                    constraints.push(constraint!(back.clone() <= bound * entries_of(l)));
+                }
+            }
             match fact.per {
                 Per::Entry => {
                     constraints.push(constraint!(back <= bound * entries_of(l)));
