@@ -70,8 +70,7 @@ use cortex_m_semihosting::syscall;
 use defmt_semihosting as _;
 use firmware::deadline::{self, DeadlineMonitor, PlanWatchdog};
 use firmware::link::{
-    self, ActuationFrame, Down, FrameReader, Up, MAX_DOWN_FRAME_BYTES, MAX_FRAME_BYTES,
-    MAX_UP_FRAME_BYTES,
+    self, ActuationFrame, Down, FrameReader, Up, MAX_DOWN_FRAME_BYTES, MAX_UP_FRAME_BYTES,
 };
 use firmware::low_level::Actuation;
 use firmware::tasks::{ControlTask, PlanTask};
@@ -181,7 +180,9 @@ pub enum LinkEnd {
 pub struct Link {
     down: usize,
     up: usize,
-    reader: FrameReader<MAX_FRAME_BYTES>,
+    /// Every `Down` frame fits (`MAX_DOWN_FRAME_BYTES` is the largest); a longer
+    /// one is dropped and counted as refused.
+    reader: FrameReader<MAX_DOWN_FRAME_BYTES>,
     rx: [u8; 64],
     rx_len: usize,
     rx_pos: usize,
