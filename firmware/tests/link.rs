@@ -366,6 +366,16 @@ fn largest_frames_fit_max_frame_bytes() {
     // watchdog's trips and the plan's end (249 bytes in version 2).
     assert_eq!(MAX_UP_FRAME_BYTES, 335);
     assert_eq!(frame_of(&downs[1]).len(), MAX_DOWN_FRAME_BYTES);
+    // What the control link carries while driving: `Sensor`, `Stop`; the largest
+    // sensor frame is exactly the bound the ECU's receive loop stops at.
+    let sensor = frame_of(&downs[4]);
+    assert_eq!(sensor.len(), MAX_DRIVING_DOWN_FRAME_BYTES);
+    assert!(frame_of(&downs[5]).len() < MAX_DRIVING_DOWN_FRAME_BYTES);
+    assert_eq!(
+        postcard_bytes(&downs[4]).len(),
+        MAX_DRIVING_DOWN_PAYLOAD_BYTES
+    );
+    println!("driving frame bound: {MAX_DRIVING_DOWN_FRAME_BYTES} bytes");
 }
 
 #[test]

@@ -70,7 +70,8 @@ use cortex_m_semihosting::syscall;
 use defmt_semihosting as _;
 use firmware::deadline::{self, DeadlineMonitor, PlanWatchdog};
 use firmware::link::{
-    self, ActuationFrame, Down, FrameReader, Up, MAX_DOWN_FRAME_BYTES, MAX_UP_FRAME_BYTES,
+    self, ActuationFrame, Down, FrameReader, Up, MAX_DOWN_FRAME_BYTES,
+    MAX_DRIVING_DOWN_FRAME_BYTES, MAX_UP_FRAME_BYTES,
 };
 use firmware::low_level::Actuation;
 use firmware::tasks::{ControlTask, PlanTask};
@@ -206,8 +207,9 @@ fn sh_write(fd: usize, mut bytes: &[u8]) -> bool {
     while !bytes.is_empty() {
         let left = unsafe { syscall!(WRITE, fd, bytes.as_ptr(), bytes.len()) };
         // WCET: each pass returns or drops at least one byte (left < len), so at most
-        // bytes.len() passes: a frame (<= MAX_FRAME_BYTES) or `safe_stop`'s line (< 30 bytes).
-        // wcet-bound: MAX_FRAME_BYTES
+        // bytes.len() passes: an `Up` frame (`Link::send`'s buffer holds
+        // MAX_UP_FRAME_BYTES) or `safe_stop`'s line (< 30 bytes).
+        // wcet-bound: MAX_UP_FRAME_BYTES
         if left >= bytes.len() {
             return false;
         }
@@ -269,9 +271,10 @@ impl Link {
     }
 
     /// The sensor frame of this release: at most [`RECEIVE_FRAMES`] frames of at
-    /// most [`MAX_DOWN_FRAME_BYTES`] bytes each. The host writes one frame per
-    /// release, so more without a sensor frame is a broken link, not something to
-    /// wait out. Other frames are counted as refused.
+    /// most [`MAX_DRIVING_DOWN_FRAME_BYTES`] bytes each (a `Sensor` frame; `Stop` is
+    /// shorter). The host writes one frame per release, so more without a sensor
+    /// frame is a broken link, not something to wait out. Other frames, and bytes
+    /// that run past that length without a delimiter, are counted as refused.
     pub fn receive_sensor(&mut self) -> Result<link::SensorFrame, LinkEnd> {
         // WCET: RECEIVE_FRAMES (2; an ECU constant, not the library's).
         // wcet-bound: 2
@@ -279,8 +282,8 @@ impl Link {
             // One frame's bytes up to its delimiter; decoded after the loop, once
             // per frame.
             let mut ended = false;
-            // wcet-bound: MAX_DOWN_FRAME_BYTES
-            for _ in 0..MAX_DOWN_FRAME_BYTES {
+            // wcet-bound: MAX_DRIVING_DOWN_FRAME_BYTES
+            for _ in 0..MAX_DRIVING_DOWN_FRAME_BYTES {
                 let byte = self.next_byte().ok_or(LinkEnd::Closed)?;
                 if byte == 0 {
                     ended = true;

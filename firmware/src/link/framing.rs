@@ -129,11 +129,12 @@ fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, FrameError> {
     let mut state = cobs::DecoderState::Idle;
     let mut write = 0;
     // len < MAX_FRAME_BYTES: decode, the only caller, refuses longer frames. The
-    // ECU's tasks decode what their `FrameReader<MAX_DOWN_FRAME_BYTES>` returns (the
-    // control task's sensor frames, in its dispatcher USART2; the plan task's window,
-    // in `RouteLink::receive`), at most MAX_DOWN_FRAME_BYTES.
+    // ECU's tasks decode what their frame readers return: the control task's sensor
+    // frames, in its dispatcher USART2, at most MAX_DRIVING_DOWN_FRAME_BYTES (its
+    // `Link::receive_sensor` stops a frame there); the plan task's window, in
+    // `RouteLink::receive`, at most MAX_DOWN_FRAME_BYTES (its reader's size).
     // wcet-bound: MAX_FRAME_BYTES
-    // wcet-bound in USART2: MAX_DOWN_FRAME_BYTES
+    // wcet-bound in USART2: MAX_DRIVING_DOWN_FRAME_BYTES
     // wcet-bound in receive: MAX_DOWN_FRAME_BYTES
     for read in 0..buf.len() {
         let byte = match buf.get(read) {
@@ -183,10 +184,10 @@ pub fn decode<'a, M: Deserialize<'a>>(frame: &'a mut [u8]) -> Result<M, FrameErr
         return Err(FrameError::Version { got: version });
     }
     let crc: [u8; CRC_BYTES] = crc.try_into().map_err(|_| FrameError::TooShort)?;
-    // The CRC's loop takes at least a byte of `body` (< MAX_FRAME_BYTES, and at most
-    // MAX_DOWN_FRAME_BYTES in the ECU's tasks: see `cobs_decode_in_place`) per iteration.
+    // The CRC's loop takes at least a byte of `body` (< MAX_FRAME_BYTES, and in the
+    // ECU's tasks at most what `cobs_decode_in_place` states) per iteration.
     // wcet-bound: MAX_FRAME_BYTES
-    // wcet-bound in USART2: MAX_DOWN_FRAME_BYTES
+    // wcet-bound in USART2: MAX_DRIVING_DOWN_FRAME_BYTES
     // wcet-bound in receive: MAX_DOWN_FRAME_BYTES
     if CRC32.checksum(body) != u32::from_le_bytes(crc) {
         return Err(FrameError::Checksum);

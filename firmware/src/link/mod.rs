@@ -473,6 +473,13 @@ const PLAN_EVENT_MAX_BYTES: usize = U32_MAX_BYTES
     + U32_MAX_BYTES
     + (PLAN_NODES * 2 + 1) * F32_BYTES;
 
+/// Largest postcard encoding of a [`Down::Sensor`], bytes.
+const SENSOR_MAX_BYTES: usize = U32_MAX_BYTES + ESTIMATE_MAX_BYTES + U16_MAX_BYTES;
+
+/// Largest postcard encoding of a [`Down`] the control link carries while driving,
+/// bytes: a `Sensor` (the only other one, `Stop`, is its tag alone).
+pub const MAX_DRIVING_DOWN_PAYLOAD_BYTES: usize = TAG_BYTES + SENSOR_MAX_BYTES;
+
 /// Largest postcard encoding of a [`Down`], bytes (a `PathChunk`).
 pub const MAX_DOWN_PAYLOAD_BYTES: usize = TAG_BYTES
     + max(
@@ -482,7 +489,7 @@ pub const MAX_DOWN_PAYLOAD_BYTES: usize = TAG_BYTES
         ),
         max(
             3 + U32_MAX_BYTES + MAX_VERTICES * 2 * F32_BYTES, // Obstacle
-            U32_MAX_BYTES + ESTIMATE_MAX_BYTES + U16_MAX_BYTES, // Sensor
+            SENSOR_MAX_BYTES,                                 // Sensor
         ),
     );
 /// Largest postcard encoding of an [`Up`], bytes (an `Actuation` with a plan event).
@@ -501,10 +508,17 @@ pub const MAX_UP_PAYLOAD_BYTES: usize = TAG_BYTES
     );
 /// Largest encoded [`Down`] frame, bytes, delimiter included.
 pub const MAX_DOWN_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_DOWN_PAYLOAD_BYTES);
+/// Largest encoded frame of the control link while driving (a [`Down::Sensor`]),
+/// bytes, delimiter included: the set-up's frames (`Config`, `PathChunk`,
+/// `Obstacle`) come before the timeline starts and the road's `Window`s on the
+/// route channel, so a longer frame on the control link while driving is refused.
+pub const MAX_DRIVING_DOWN_FRAME_BYTES: usize =
+    frame_bytes_for_payload(MAX_DRIVING_DOWN_PAYLOAD_BYTES);
 /// Largest encoded [`Up`] frame, bytes, delimiter included.
 pub const MAX_UP_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_UP_PAYLOAD_BYTES);
 
 const _: () = assert!(MAX_DOWN_FRAME_BYTES <= MAX_FRAME_BYTES);
+const _: () = assert!(MAX_DRIVING_DOWN_FRAME_BYTES <= MAX_DOWN_FRAME_BYTES);
 const _: () = assert!(MAX_UP_FRAME_BYTES <= MAX_FRAME_BYTES);
 const _: () = assert!(PATH_CHUNK_ROWS <= u8::MAX as usize);
 const _: () = assert!(MAX_VERTICES <= u8::MAX as usize);

@@ -157,6 +157,11 @@ pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
         ("PATH_CHUNK_ROWS", link::PATH_CHUNK_ROWS as u64),
         ("MAX_FRAME_BYTES", link::MAX_FRAME_BYTES as u64),
         ("MAX_DOWN_FRAME_BYTES", link::MAX_DOWN_FRAME_BYTES as u64),
+        ("MAX_UP_FRAME_BYTES", link::MAX_UP_FRAME_BYTES as u64),
+        (
+            "MAX_DRIVING_DOWN_FRAME_BYTES",
+            link::MAX_DRIVING_DOWN_FRAME_BYTES as u64,
+        ),
         (
             "ROUTE_FRAMES",
             link::route_frames(tasks::ECU_PATH_ROWS) as u64,
