@@ -280,11 +280,11 @@ fn frame_layout_is_version_postcard_crc_cobs() {
     // The CRC is CRC-32/ISO-HDLC (check value of "123456789").
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
     assert_eq!(crc.checksum(b"123456789"), 0xCBF4_3926);
-    // Pinned bytes: `Down::Start` is version 4, tag 3, then its CRC (zlib.crc32(b"\x04\x03")
-    // = 0xBCBC8641), stuffed.
+    // Pinned bytes: `Down::Start` is version 5, tag 3, then its CRC (zlib.crc32(b"\x05\x03")
+    // = 0xA5A7B700, little-endian: a zero byte, which COBS stuffs), stuffed.
     assert_eq!(
         frame_of(&Down::Start),
-        [0x07, 0x04, 0x03, 0x41, 0x86, 0xBC, 0xBC, 0x00]
+        [0x03, 0x05, 0x03, 0x04, 0xB7, 0xA7, 0xA5, 0x00]
     );
 }
 

@@ -470,7 +470,7 @@ fn stack_high_water() -> (u32, u32) {
     ((top - p) as u32, (top - bottom) as u32)
 }
 
-/// The next window of the road, received by `control` row by row.
+/// The next window of the road, received by the plan task chunk by chunk.
 pub struct Staging {
     rows: [[f32; 4]; PATH_CAP],
     received: usize,
@@ -518,11 +518,6 @@ impl Staging {
         }
     }
 
-    /// True when a complete window waits to be adopted.
-    fn is_ready(&self) -> bool {
-        self.ready.is_some()
-    }
-
     /// Copies a complete window into the planner's path storage.
     fn take_into(&mut self, planner: &mut PlanTask<f32, PATH_CAP>) -> Option<link::WindowFrame> {
         let w = self.ready.take()?;
@@ -561,15 +556,22 @@ fn plan_job(
     planner.run(est)
 }
 
-/// The plan task's adoption of a window of the road received by an earlier
-/// activation, in place of [`plan_job`]: its rows copied into the path's storage,
-/// the path computed, the MPC's warm start moved, the obstacles' parabolas
-/// rebuilt ([`PlanTask::adopt_window`]). False when the planner refused it (then
-/// without a path); true when adopted or when no window was received. Not
-/// inlined: the timing analysis bounds it alone, against
-/// [`deadline::PLAN_BUDGET_CYCLES`].
+/// The plan task's adoption of a window of the road, in place of [`plan_job`]:
+/// the `frames` frames announced since the last activation read from the route
+/// channel (at most [`ROUTE_FRAMES`]), and the window they complete adopted: its
+/// rows copied into the path's storage, the path computed, the MPC's warm start
+/// moved, the obstacles' parabolas rebuilt ([`PlanTask::adopt_window`]). False
+/// when the planner refused it (then without a path); true when adopted or when
+/// the frames completed no window. Not inlined: the timing analysis bounds it
+/// alone, against [`deadline::PLAN_BUDGET_CYCLES`].
 #[inline(never)]
-fn window_job(planner: &mut PlanTask<f32, PATH_CAP>, staging: &mut Staging) -> bool {
+fn window_job(
+    route: &mut RouteLink,
+    frames: u32,
+    planner: &mut PlanTask<f32, PATH_CAP>,
+    staging: &mut Staging,
+) -> bool {
+    route.receive(frames.min(ROUTE_FRAMES), staging);
     staging.take_into(planner).is_none_or(|w| {
         planner
             .adopt_window(w.rows as usize, w.origin_m, w.closed)
@@ -849,17 +851,24 @@ mod app {
             activation = activation.wrapping_add(1);
             let release_us = monitor.start();
             let planner = &mut *cx.local.planner;
-            // A window of the road received by an earlier activation is adopted by
-            // this one instead of planning (the control task follows the last plan
-            // meanwhile): an activation adopts or plans, never both, so the plan
-            // task's worst case is the larger of the two, not their sum.
+            // The frames of the road announced since the last activation (by the
+            // control task's sensor frames: at a common release it runs first). At
+            // most a window's frames per activation; the rest wait for the next.
+            let frames = ROUTE_PENDING.swap(0, Ordering::Relaxed);
+            if frames > ROUTE_FRAMES {
+                ROUTE_PENDING.fetch_add(frames - ROUTE_FRAMES, Ordering::Relaxed);
+            }
+            // An activation with frames of the road to read receives them and adopts
+            // the window they complete instead of planning (the control task follows
+            // the last plan meanwhile): an activation adopts or plans, never both, so
+            // the plan task's worst case is the larger of the two, not their sum.
             let t0 = core_ticks();
             let c0 = CONTROL_TICKS.load(Ordering::Relaxed);
             // One of the two jobs per activation, the window's or the plan's, on
             // two branches of one test (the task's static bound is then the larger
             // of the two: a job called on both paths would be charged on both).
-            let mut event = if cx.local.staging.is_ready() {
-                if !window_job(planner, cx.local.staging) {
+            let mut event = if frames > 0 {
+                if !window_job(cx.local.route, frames, planner, cx.local.staging) {
                     // Counted with the refused route frames (the Done frame's
                     // `rejected_frames`); no logging in a task.
                     ROUTE_REJECTED.fetch_add(1, Ordering::Relaxed);
@@ -891,19 +900,6 @@ mod app {
                     computed.as_ref(),
                 )
             };
-            // After publishing (or adopting), in the slack before the next release:
-            // the frames of a window of the road announced since, staged for the
-            // next activation to adopt. At most a window's frames per activation;
-            // the rest wait for the next.
-            let frames = ROUTE_PENDING.swap(0, Ordering::Relaxed);
-            if frames > ROUTE_FRAMES {
-                ROUTE_PENDING.fetch_add(frames - ROUTE_FRAMES, Ordering::Relaxed);
-            }
-            if frames > 0 {
-                cx.local
-                    .route
-                    .receive(frames.min(ROUTE_FRAMES), cx.local.staging);
-            }
             // The next release: the next multiple of 100 ms not yet past (releases
             // that fell while this one ran are skipped, not queued, and counted).
             let end_us = now_us();

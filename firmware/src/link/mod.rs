@@ -14,7 +14,9 @@
 //! on the route channel (the plan task receives them); the fault codes
 //! [`FAULT_HARDFAULT`] and [`FAULT_DEADLINE`]. Version 4: an activation adopts a
 //! new window of the road instead of planning ([`PlanEventFrame::status`]
-//! [`PLAN_WINDOW`], its time in `window_ticks`). Everything here works on fixed buffers: no heap, no `alloc`,
+//! [`PLAN_WINDOW`], its time in `window_ticks`). Version 5: that activation also
+//! receives the window's frames (before, the activation before it did, after
+//! publishing). Everything here works on fixed buffers: no heap, no `alloc`,
 //! no panic; every refused frame is a [`FrameError`] value the receiver counts.
 //!
 //! # Wire format
@@ -97,7 +99,7 @@ use crate::vehicle_config::VehicleConfig;
 use qp::QpStatus;
 
 /// Version of this wire format, the first byte of every raw frame.
-pub const LINK_VERSION: u8 = 4;
+pub const LINK_VERSION: u8 = 5;
 /// The largest encoded frame, bytes, including its 0x00 delimiter.
 pub const MAX_FRAME_BYTES: usize = 512;
 /// Track rows per [`PathChunkFrame`].
@@ -137,9 +139,9 @@ pub enum Down {
     /// End of the run: the ECU answers `Up::Done`.
     Stop,
     /// While driving: the `PathChunk` rows sent since the last `Window` (first row
-    /// 0) are the next window of the road; the plan task receives it after it next
-    /// publishes and adopts it in its next activation, instead of planning
-    /// (version 2; version 4: the adoption's own activation).
+    /// 0) are the next window of the road; the plan task's next activation receives
+    /// it and adopts it instead of planning (version 2; version 4: the adoption's
+    /// own activation; version 5: received by that activation too).
     Window(WindowFrame),
 }
 
@@ -210,7 +212,7 @@ pub struct SensorFrame {
     pub estimate: StateEstimate<f32>,
     /// Frames of the road (`PathChunk`s then a `Window`) the host wrote on the
     /// route channel since the last sensor frame, frames (version 3): the plan
-    /// task reads them after it next publishes.
+    /// task's next activation reads them (and adopts the window they complete).
     pub route_frames: u16,
 }
 
@@ -321,9 +323,9 @@ pub struct PlanEventFrame {
     /// Time the activation finished (its plan published or dropped), µs, on the
     /// same clock as `release_us`.
     pub finish_us: u64,
-    /// Time the activation ended, µs: after the frames of a window of the road it
-    /// received after publishing or adopting. The next release is the first not
-    /// yet past then (version 3).
+    /// Time the activation ended, µs (its event recorded; since version 5 it
+    /// receives a window's frames before adopting, not after). The next release is
+    /// the first not yet past then (version 3).
     pub end_us: u64,
     /// The plan task's deadline counts, this activation's completion and the
     /// releases it skipped included (version 3).

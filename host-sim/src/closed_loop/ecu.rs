@@ -27,10 +27,10 @@
 //! [`CostModel`], failed activations included, and cycles = instructions ×
 //! [`SimOptions::cycles_per_instruction`]. A release that falls while the `plan`
 //! task is still running is skipped (see the late-plan policy in
-//! [`crate::closed_loop::timeline`]). A window of the road that arrived before an
-//! activation finished is adopted by the next activation instead of planning (as
-//! the ECU does: an activation plans or adopts, never both); that activation takes
-//! the cost model's window time and publishes nothing.
+//! [`crate::closed_loop::timeline`]). A window of the road is received and adopted
+//! by the first activation released after it arrived, instead of planning (as the
+//! ECU does: an activation plans or adopts, never both); that activation takes the
+//! cost model's window time and publishes nothing.
 
 use anyhow::{anyhow, Result};
 use firmware::low_level::Actuation;
@@ -136,9 +136,8 @@ pub trait Ecu<T: Real> {
     fn active_plan(&self) -> &Plan<T>;
 
     /// The next window of the road ([`crate::world::route`]), given before the control
-    /// activation of the instant `t_us` (µs) it is due; the plan task receives it after its
-    /// next publication (at the end of the activation running then, or of the next) and
-    /// adopts it in the activation after that, instead of planning.
+    /// activation of the instant `t_us` (µs) it is due; the plan task's first activation
+    /// released from then on (not skipped) receives and adopts it, instead of planning.
     fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()>;
 
     /// Whether [`Self::active_plan`] carries each node's speed and steering (the
@@ -167,12 +166,11 @@ pub struct SimulatedEcu<T: Real> {
     in_flight: Option<InFlight>,
     busy_until_us: u64,
     releases: u32,
-    /// The next window of the road and when it arrived, µs; received (staged) at
-    /// the end of the first plan activation that finishes after that.
-    pending_window: Option<(Window, u64)>,
-    /// A received window of the road: the next plan activation adopts it instead
-    /// of planning.
-    staged_window: Option<Window>,
+    /// The next window of the road, announced by the control activation at the
+    /// instant it arrived: the first plan release not skipped from then on (at a
+    /// common release the control task reads the announcement first) receives and
+    /// adopts it instead of planning.
+    pending_window: Option<Window>,
 }
 
 impl<T: Real> SimulatedEcu<T> {
@@ -241,7 +239,6 @@ impl<T: Real> SimulatedEcu<T> {
             busy_until_us: 0,
             releases: 0,
             pending_window: None,
-            staged_window: None,
         })
     }
 
@@ -298,21 +295,8 @@ impl<T: Real> SimulatedEcu<T> {
 }
 
 impl<T: Real> SimulatedEcu<T> {
-    /// At the end of the activation `record` (after its publication or adoption),
-    /// as the ECU does: receives the pending window of the road if it arrived
-    /// before then; the next activation adopts it.
-    fn receive_window_after(&mut self, record: &PlanActivation) {
-        let due = self
-            .pending_window
-            .as_ref()
-            .is_some_and(|(_, arrived_us)| *arrived_us < record.finish_us);
-        if due {
-            self.staged_window = self.pending_window.take().map(|(w, _)| w);
-        }
-    }
-
-    /// The activation released at `t_us` adopts the received window `w` instead of
-    /// planning; the task stays busy for the adoption's modelled time.
+    /// The activation released at `t_us` receives and adopts the window `w` instead
+    /// of planning; the task stays busy for the adoption's modelled time.
     fn adopt_window(&mut self, t_us: u64, w: &Window) {
         // A path the planner refuses leaves it without one: its steps then fail
         // with `NoPath` and are reported as such.
@@ -412,7 +396,6 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
                     .planner
                     .publish_at(&mut self.shared_plan, f.record.finish_us);
                 debug_assert_eq!(published, f.record.published);
-                self.receive_window_after(&f.record);
                 plans.push(f.record);
             }
         }
@@ -427,7 +410,7 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
             if self.busy_until_us > t_us {
                 // Still running: this release is lost (RTIC cannot spawn a busy task).
                 skipped_releases = 1;
-            } else if let Some(w) = self.staged_window.take() {
+            } else if let Some(w) = self.pending_window.take() {
                 self.adopt_window(t_us, &w);
             } else {
                 self.release_plan(t_us, est);
@@ -451,8 +434,8 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
         &self.shared_plan
     }
 
-    fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()> {
-        self.pending_window = Some((w.clone(), t_us));
+    fn set_window(&mut self, _t_us: u64, w: &Window) -> Result<()> {
+        self.pending_window = Some(w.clone());
         Ok(())
     }
 }
