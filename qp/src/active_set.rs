@@ -22,6 +22,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             self.tmp[k] = -self.dw[k];
         }
         self.ldl_solve_tmp();
+        // wcet-bound: WS
         self.tmp.iter().take(self.n).all(|v| v.is_finite())
     }
 
@@ -329,22 +330,28 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     ) -> Option<(usize, T)> {
         let n = self.n;
         let s = row_start(n);
+        // `Lᵀ c = −L_new` (L unit lower triangular) by columns of Lᵀ, i.e. by the
+        // contiguous rows of the packed L, as `ldl_solve_tmp`'s second half: once
+        // c_r is final, its share leaves the entries above it.
+        // wcet-bound: WS
+        for r in 0..n {
+            self.tmp[r] = -self.ldl[s + r];
+        }
+        // wcet-bound: WS
+        for r in (1..n).rev() {
+            let cr = self.tmp[r];
+            let sr = row_start(r);
+            let (t, l) = (
+                self.tmp.get_mut(..r).unwrap_or(&mut []),
+                self.ldl.get(sr..sr + r).unwrap_or(&[]),
+            );
+            // `t` and `l` have the same length r.
+            sub_scaled(t, cr, l);
+        }
         let mut cmax = T::ZERO;
         // wcet-bound: WS
-        for r in (0..n).rev() {
-            let mut acc = -self.ldl[s + r];
-            // Column r of L below the diagonal: entry (k, r) is at
-            // row_start(k) + r, and row_start(k + 1) = row_start(k) + k + 1.
-            let mut at = row_start(r + 1) + r;
-            let c = self.tmp.get(r + 1..n).unwrap_or(&[]);
-            for (k, &c) in (r + 1..).zip(c) {
-                let l = self.ldl.get(at).copied().unwrap_or(T::ZERO);
-                at += k + 1;
-                // Bounds the `for k in (r + 1)..n` loop: n ≤ W, a triangle per call.
-                acc -= l * c; // wcet-bound: WS * (WS - 1) / 2 per call
-            }
-            self.tmp[r] = acc;
-            cmax = cmax.max(acc.abs());
+        for r in 0..n {
+            cmax = cmax.max(self.tmp[r].abs());
         }
         // Rates below this are rounding noise of a zero coefficient.
         let noise = noise_tol * (T::ONE + cmax);
@@ -390,6 +397,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 return;
             }
         }
+        // wcet-bound: WS
         for k in 0..self.n {
             self.lam[k] += self.tmp[k];
         }

@@ -361,6 +361,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
             self.tmp[r] = acc;
         }
+        // wcet-bound: WS
         for r in 0..n {
             self.tmp[r] /= self.ldl[row_start(r) + r];
         }

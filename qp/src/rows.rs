@@ -109,10 +109,12 @@ pub(crate) fn dot4<T: Real>(a: &[T], b: &[T]) -> T {
 pub(crate) fn sub_scaled<T: Real>(y: &mut [T], s: T, x: &[T]) {
     let mut yc = y.chunks_exact_mut(4);
     let mut xc = x.chunks_exact(4);
-    // `primal`: a transformed row's tail (at most N entries); `ldl_solve_tmp`: the
-    // first r entries of `tmp`, Σ r/4 over 1 ≤ r < n ≤ W per call.
+    // `primal`: a transformed row's tail (at most N entries); `ldl_solve_tmp` and
+    // `null_space_step`: the first r entries of `tmp`, Σ r/4 over 1 ≤ r < n ≤ W per
+    // call.
     // wcet-bound: NV / 4
     // wcet-bound in ldl_solve_tmp: WS * (WS - 1) / 8 per call
+    // wcet-bound in null_space_step: WS * (WS - 1) / 8 per call
     for (y4, x4) in (&mut yc).zip(&mut xc) {
         for (y, &x) in y4.iter_mut().zip(x4) {
             *y -= s * x;
