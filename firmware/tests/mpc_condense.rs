@@ -56,12 +56,18 @@ fn stadium() -> Box<ReferencePath<f64, CAP>> {
     p
 }
 
+/// The paper's settings with three passes on a cold start, whatever the ECU's
+/// constants, and a cap no start here reaches: every pass's condensing is checked,
+/// not the caps.
 fn settings() -> MpcSettings<f64> {
     let geometry = BicycleGeometry {
         l_f_m: 1.2,
         l_r_m: 1.6,
     };
-    MpcSettings::paper(geometry, 0.6, 1.8)
+    let mut s = MpcSettings::paper(geometry, 0.6, 1.8);
+    s.cold_start_iterations = 3;
+    s.qp_max_iter = 200;
+    s
 }
 
 fn obstacles(path: &ReferencePath<f64, CAP>, s: &MpcSettings<f64>) -> ObstacleManager<f64> {

@@ -85,8 +85,11 @@ fn plans_are_reported_when_they_finish_and_published_then() {
         assert!(p.published && !p.deadline_miss);
         assert_eq!(p.cycles, p.instructions * opts.cycles_per_instruction);
     }
-    // The cold start takes its passes, the next one is warm.
-    assert_eq!(reported[0].1.passes, 3);
+    // The cold start takes its passes (the ECU's settings), the next one is warm.
+    assert_eq!(
+        reported[0].1.passes,
+        u32::from(firmware::mpc::COLD_START_PASSES)
+    );
     assert_eq!(reported[1].1.passes, 1);
     assert_eq!(ecu.active_plan().stamp_us, 100_000);
     assert!(out.iter().all(|o| o.skipped_releases == 0));

@@ -35,10 +35,11 @@ fn corpus() -> &'static [CorpusEntry] {
 #[test]
 fn the_built_in_run_records_every_step_and_all_are_optimal() {
     let c = corpus();
-    // A cold first step solves 3 QPs (Gauss–Newton passes), every later one 1.
+    // A cold first step solves COLD_START_PASSES QPs (Gauss–Newton passes), every
+    // later one 1.
     assert_eq!(
         c.len(),
-        DEFAULT_STEPS + 2,
+        DEFAULT_STEPS + usize::from(firmware::mpc::COLD_START_PASSES) - 1,
         "one QP per step plus the cold passes"
     );
     assert_eq!(c.last().unwrap().step, DEFAULT_STEPS - 1);
@@ -289,7 +290,10 @@ fn an_f32_run_records_too() {
         c.len()
     );
     assert!(c.iter().all(|e| e.precision == "f32"));
-    assert_eq!(c.len(), DEFAULT_STEPS + 2);
+    assert_eq!(
+        c.len(),
+        DEFAULT_STEPS + usize::from(firmware::mpc::COLD_START_PASSES) - 1
+    );
     assert_eq!(optimal, c.len());
     // f32 data are stored exactly: converting back gives the same f32 problem.
     let p = c[5].native.to_problem::<f32>().unwrap();

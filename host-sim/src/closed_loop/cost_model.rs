@@ -50,9 +50,11 @@ pub struct CostModel {
     pub per_removed: f64,
     /// Per factorisation of the working set from scratch, instructions.
     pub per_refactorization: f64,
-    /// Adopting a new window of the road (loading the path, rebuilding the
-    /// obstacles' parabolas), an activation of its own: the largest measured,
-    /// instructions.
+    /// Adopting a new window of the road (reading its frames from the route
+    /// channel, loading the path, rebuilding the obstacles' parabolas), an
+    /// activation of its own: the largest measured, instructions (the default:
+    /// a 320-row window, 21 frames, in a PIL run on Austin; the paper laps'
+    /// windows are smaller).
     pub per_window: f64,
     /// One control activation, instructions.
     pub control: f64,
@@ -71,7 +73,7 @@ impl Default for CostModel {
             per_added: 4_245.0,
             per_removed: 0.0,
             per_refactorization: 0.0,
-            per_window: 364_258.0,
+            per_window: 861_297.0,
             control: 1_333.0,
             margin: 1.258,
         }

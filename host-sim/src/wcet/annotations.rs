@@ -669,7 +669,11 @@ mod tests {
         .unwrap_or_default();
         assert_eq!(
             (t[0].line, t[0].bound, t[0].scope),
-            (1, 48 * 47 / 2, Scope::Call)
+            (
+                1,
+                (firmware::mpc::WS * (firmware::mpc::WS - 1) / 2) as u64,
+                Scope::Call
+            )
         );
         assert_eq!((t[1].line, t[1].bound, t[1].scope), (3, 2, Scope::Runs));
     }
