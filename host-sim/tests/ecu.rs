@@ -115,8 +115,8 @@ fn a_window_of_the_road_is_adopted_by_an_activation_of_its_own() {
         assert_eq!((w.passes, w.qp_iterations), (0, 0));
         assert_eq!(w.instructions, adoption);
         assert_eq!(w.window_instructions, adoption);
-        // Received after the previous activation's publication; the next release
-        // plans on the new window, warm.
+        // Received and adopted by the first release after it arrived (the previous
+        // activation planned); the next release plans on the new window, warm.
         assert!(acts[i - 1].published && !acts[i - 1].window);
         let next = &acts[i + 1];
         assert_eq!(next.release_us, w.release_us + 100_000);
