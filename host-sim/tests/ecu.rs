@@ -686,3 +686,42 @@ fn real_ecu_has_a_hardfault_handler_of_its_own() {
     );
     assert!(symbols.contains("ecu::safe_stop"));
 }
+
+/// A window of the road given between two plan releases is received and adopted
+/// by the next release (not one later), as the ECU does since link version 5; a
+/// window given at a release instant, before that instant's control activation,
+/// by that release itself. The other releases plan.
+#[test]
+fn a_window_is_adopted_by_the_first_plan_release_after_it_arrives() {
+    let scenario = Scenario::paper(false);
+    let opts = SimOptions::default();
+    let mut ecu = SimulatedEcu::<f32>::new(&scenario, &VehicleParams::default(), &opts).unwrap();
+    let window = host_sim::world::route::Window {
+        rows: scenario.track.rows().into_iter().take(200).collect(),
+        origin_m: 0.0,
+        closed: false,
+    };
+    let mut reported = Vec::new();
+    for k in 0..=60u64 {
+        let t = k * 10_000;
+        // One window at 150 ms (between the releases at 100 and 200 ms), one at
+        // 400 ms (a release instant).
+        if t == 150_000 || t == 400_000 {
+            ecu.set_window(t, &window).unwrap();
+        }
+        let out = ecu.control(t, &start_estimate(&scenario, 15.0, t)).unwrap();
+        reported.extend(out.plans);
+    }
+    let adopted: Vec<u64> = reported
+        .iter()
+        .filter(|p| p.window)
+        .map(|p| p.release_us)
+        .collect();
+    assert_eq!(adopted, [200_000, 400_000], "{reported:?}");
+    // Every other release planned, the one after each adoption included.
+    assert!(reported
+        .iter()
+        .filter(|p| !p.window)
+        .all(|p| p.status == "optimal" && p.passes >= 1));
+    assert_eq!(reported.len(), 6, "releases 0 to 500 ms reported by 600 ms");
+}
