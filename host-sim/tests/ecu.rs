@@ -350,8 +350,8 @@ impl Ecu<f32> for LateAnswer {
         self.inner.active_plan()
     }
 
-    fn set_window(&mut self, t_us: u64, w: &host_sim::world::route::Window) -> anyhow::Result<()> {
-        self.inner.set_window(t_us, w)
+    fn set_window(&mut self, w: &host_sim::world::route::Window) -> anyhow::Result<()> {
+        self.inner.set_window(w)
     }
 }
 
@@ -418,8 +418,8 @@ impl Ecu<f32> for PositionsOnly {
         &self.plan
     }
 
-    fn set_window(&mut self, t_us: u64, w: &host_sim::world::route::Window) -> anyhow::Result<()> {
-        self.inner.set_window(t_us, w)
+    fn set_window(&mut self, w: &host_sim::world::route::Window) -> anyhow::Result<()> {
+        self.inner.set_window(w)
     }
 
     fn reports_plan_states(&self) -> bool {
@@ -707,7 +707,7 @@ fn a_window_is_adopted_by_the_first_plan_release_after_it_arrives() {
         // One window at 150 ms (between the releases at 100 and 200 ms), one at
         // 400 ms (a release instant).
         if t == 150_000 || t == 400_000 {
-            ecu.set_window(t, &window).unwrap();
+            ecu.set_window(&window).unwrap();
         }
         let out = ecu.control(t, &start_estimate(&scenario, 15.0, t)).unwrap();
         reported.extend(out.plans);

@@ -219,8 +219,8 @@ impl<T: Real> Ecu<T> for DisturbedEcu<T> {
         self.inner.active_plan()
     }
 
-    fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()> {
-        self.inner.set_window(t_us, w)
+    fn set_window(&mut self, w: &Window) -> Result<()> {
+        self.inner.set_window(w)
     }
 }
 

@@ -136,9 +136,9 @@ pub trait Ecu<T: Real> {
     fn active_plan(&self) -> &Plan<T>;
 
     /// The next window of the road ([`crate::world::route`]), given before the control
-    /// activation of the instant `t_us` (µs) it is due; the plan task's first activation
-    /// released from then on (not skipped) receives and adopts it, instead of planning.
-    fn set_window(&mut self, t_us: u64, w: &Window) -> Result<()>;
+    /// activation of the instant it is due; the plan task's first activation released
+    /// from then on (not skipped) receives and adopts it, instead of planning.
+    fn set_window(&mut self, w: &Window) -> Result<()>;
 
     /// Whether [`Self::active_plan`] carries each node's speed and steering (the
     /// plan's lateral acceleration is measured from them), not only its positions.
@@ -434,7 +434,7 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
         &self.shared_plan
     }
 
-    fn set_window(&mut self, _t_us: u64, w: &Window) -> Result<()> {
+    fn set_window(&mut self, w: &Window) -> Result<()> {
         self.pending_window = Some(w.clone());
         Ok(())
     }

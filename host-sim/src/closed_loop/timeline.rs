@@ -313,7 +313,7 @@ pub fn run_with<T: Real, E: Ecu<T>>(
             let out = plant.outputs();
             let est = estimate::<T>(&st, out.delta_rad, t_us);
             if let Some(w) = feeder.update(s_start + meter.progress_m) {
-                ecu.set_window(t_us, &w).with_context(|| {
+                ecu.set_window(&w).with_context(|| {
                     format!("window of the road at t = {:.3} s", t_us as f64 * 1e-6)
                 })?;
             }

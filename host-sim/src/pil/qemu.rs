@@ -534,7 +534,7 @@ impl Ecu<f32> for QemuEcu {
         false
     }
 
-    fn set_window(&mut self, _t_us: u64, w: &Window) -> Result<()> {
+    fn set_window(&mut self, w: &Window) -> Result<()> {
         // On the route channel, announced by the next sensor frame.
         for f in path_chunks(&w.rows) {
             self.send_route(&f)?;
