@@ -17,13 +17,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// `λ*` for the current working set, into `tmp` (`−d_W` solved with the
     /// factor); false if not finite.
     pub(crate) fn solve_lam_star(&mut self) -> bool {
-        // wcet-bound: WS
-        for k in 0..self.n {
-            self.tmp[k] = -self.dw[k];
-        }
-        self.ldl_solve_tmp();
-        // wcet-bound: WS
-        self.tmp.iter().take(self.n).all(|v| v.is_finite())
+        self.solve_lam_star_tmp()
     }
 
     pub(crate) fn is_equality(p: &QpProblem<T, N, M>, c: ConstraintIndex) -> bool {
@@ -143,8 +137,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             // One back edge per iteration, counted in `sol.iterations` ≤ `settings.max_iter`,
             // which the MPC (firmware's mpc.rs `step_inner`) sets to what is left of the activation's
             // `qp_max_iter` (QP_MAX_ITER on the ECU) after its earlier passes.
-            // Its iterations and `add`'s removals (below) each count one against the
-            // same cap: one counter.
+            // Its iterations and `add`'s null-space steps (below) each count one
+            // against the same cap: one counter.
             // wcet-bound: QP_MAX_ITER per activation, counted in qp_iterations
             if sol.iterations >= settings.max_iter {
                 return QpStatus::IterationLimit;
@@ -230,8 +224,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// Adds the violated constraint `e`. If it depends linearly on the working set,
     /// moves `λ` along the dual null-space direction (which keeps `u` and raises the
     /// dual cost) until a multiplier reaches zero, removes that constraint and tries
-    /// again (at most `W` times, each removal an iteration against `max_iter`: past
-    /// it, `IterationLimit`); no multiplier reaching zero means infeasible.
+    /// again (at most `W` times, each null-space step an iteration against
+    /// `max_iter`: past it, `IterationLimit`); no multiplier reaching zero means
+    /// infeasible.
     pub(crate) fn add(
         &mut self,
         p: &mut QpProblem<T, N, M>,
@@ -248,8 +243,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let mut lam_e = T::ZERO;
         let mut refactored = false;
         // `0..=W`: W + 1 attempts. The first is the main loop's iteration's (it
-        // calls `add` once); each later one follows a removal, counted as an
-        // iteration against `max_iter` (what is left of the activation's cap), or
+        // calls `add` once); each later one follows a null-space step and its
+        // removal, counted as an iteration against `max_iter` (what is left of the
+        // activation's cap), or
         // a refactorization, counted against `max_refactorizations` (likewise):
         // QP_MAX_ITER + QP_MAX_REFACTORIZATIONS attempts in an activation.
         // wcet-bound: QP_MAX_ITER + QP_MAX_REFACTORIZATIONS per activation
@@ -276,9 +272,16 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                     continue;
                 }
             }
-            // The null-space step; each one is followed by a removal counted as an
-            // iteration or ends the `add`, whose own iteration pays for it.
-            // wcet-bound: QP_MAX_ITER times per activation
+            // The null-space step, an iteration of its own against `max_iter`
+            // (with the removal that follows it, or the commit that ends the
+            // `add`): the main loop's iteration that called `add` pays for the
+            // first append only, so no iteration pays for an append and a
+            // null-space step (the plan task's worst case per iteration).
+            if sol.iterations >= max_iter {
+                return Err(QpStatus::IterationLimit);
+            }
+            sol.iterations += 1;
+            // wcet-bound: QP_MAX_ITER times per activation, counted in qp_iterations
             let block = self.null_space_step(p, sigma, tols.noise);
             let n = self.n;
             let Some((pos, t)) = block else {
@@ -305,11 +308,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.lam[k] = l;
             }
             lam_e += t * sigma;
-            if sol.iterations >= max_iter {
-                return Err(QpStatus::IterationLimit);
-            }
-            sol.iterations += 1;
-            // wcet-bound: QP_MAX_ITER times per activation, counted in qp_iterations
+            // One per null-space step (the iteration counted above).
+            // wcet-bound: QP_MAX_ITER times per activation
             self.remove(pos);
             sol.removed += 1;
         }

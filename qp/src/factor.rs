@@ -23,6 +23,14 @@ pub(crate) struct Workspace<T, const N: usize, const M: usize, const W: usize, c
     /// over a solve (`v`, the held bound and the transformed row do not change), so
     /// each iteration reads it instead of a dot product per entry.
     pub(crate) dw: [T; W],
+    /// `y = L⁻¹(−d_W)` (`W`): the forward substitution of `λ*`'s system, kept with
+    /// the factor (`commit` adds an entry, `remove` redoes those below the removed
+    /// row) so that each iteration solves only `D Lᵀ λ* = y`. Each entry is
+    /// computed by the same operations in the same order as a forward
+    /// substitution from scratch, so `λ*` is the same bit for bit.
+    pub(crate) y: [T; W],
+    /// Scratch (`W`): the rank-one update's `β_j` per column, in `remove`.
+    pub(crate) beta: [T; W],
     /// Scratch (`W`): right-hand side then `λ*` of the working-set system, rank-one
     /// vectors, null-space direction.
     pub(crate) tmp: [T; W],
@@ -265,6 +273,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         self.ws[n] = e;
         self.dw[n] = held_bound(p, e) + con_row(p, e.index).dot(&self.v);
+        self.forward_entry(n);
         if let Some(st) = self.state_mut(e.index) {
             *st = Some(e.side);
         }
@@ -291,22 +300,23 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         for r in (pos + 1)..n {
             self.tmp[r - 1] = self.ldl[row_start(r) + pos];
         }
-        // Shift rows pos+1..n up by one, dropping column pos (destinations precede
-        // sources, so a forward copy is safe).
+        // Shift rows pos+1..n up by one, dropping column pos: entry k of the new
+        // row r − 1 is entry k (k < pos) or k + 1 (k ≥ pos) of the old row r
+        // (destinations precede sources, so a forward copy is safe).
         // wcet-bound: WS
         for r in (pos + 1)..n {
-            let src = row_start(r);
-            let dst = row_start(r - 1);
-            let mut k = 0;
-            for c in 0..=r {
-                // Bounds the `for c in 0..=r` loop above (its back edge is here):
-                // Σ (r + 1) over r < n ≤ W per call.
-                // wcet-bound: WS * (WS + 1) / 2 per call
-                if c == pos {
-                    continue;
-                }
-                self.ldl[dst + k] = self.ldl[src + c];
-                k += 1;
+            let (src, dst) = (row_start(r), row_start(r - 1));
+            let (lo, hi) = self.ldl.split_at_mut(src.min(WL));
+            let (Some(to), Some(from)) = (lo.get_mut(dst..dst + r), hi.get(..=r)) else {
+                break;
+            };
+            for (k, v) in to.iter_mut().enumerate() {
+                // Σ r over pos < r < n ≤ W per call.
+                // wcet-bound: WS * (WS - 1) / 2 per call
+                *v = from
+                    .get(k + usize::from(k >= pos))
+                    .copied()
+                    .unwrap_or(T::ZERO);
             }
         }
         for r in pos..(n - 1) {
@@ -317,31 +327,101 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         let nn = n - 1;
         self.n = nn;
-        // Rank-one update of the trailing block (rows/cols pos..nn) by alpha z zᵀ.
-        for j in pos..nn {
-            let pj = self.tmp[j];
-            // Bounds the `for j in pos..nn` loop (the `continue` is its back edge, and
-            // the compiler's loop that skips zero entries): j < nn < W per call.
-            // wcet-bound: WS per call
-            if pj == T::ZERO {
-                continue;
+        // Rank-one update of the trailing block (rows/cols pos..nn) by alpha z zᵀ,
+        // row by row: each column j's `p_j` (z's entry) and `β_j` are final once
+        // its own row is done, so row r takes its columns pos..r in order, each
+        // entry with the same operations in the same order as column by column.
+        // A column with `p_j = 0` changes nothing (`β_j = 0`: its entries get
+        // `−0·l` and `+0·acc`, which leave finite values as they are) and keeps its
+        // `d_j` and `α`; the loop has no branch. Then row r's entry of `y`, its row
+        // of L final.
+        // wcet-bound: WS
+        for r in pos..nn {
+            let s = row_start(r);
+            let (head, tail) = self.tmp.split_at_mut(r.min(W));
+            let Some(zr) = tail.first_mut() else {
+                break;
+            };
+            let mut acc = *zr;
+            if let (Some(l), Some(ps), Some(bs)) = (
+                self.ldl.get_mut(s + pos..s + r),
+                head.get(pos..),
+                self.beta.get(pos..r),
+            ) {
+                for ((l, &pj), &bj) in l.iter_mut().zip(ps).zip(bs) {
+                    // Σ (r − pos) over pos ≤ r < n − 1 < W per call.
+                    // wcet-bound: WS * (WS - 1) / 2 per call
+                    acc -= pj * *l;
+                    *l += bj * acc;
+                }
             }
-            let dj_idx = row_start(j) + j;
-            let dj = self.ldl[dj_idx];
-            let dnew = dj + alpha * pj * pj;
-            let beta = pj * alpha / dnew;
-            alpha = dj * alpha / dnew;
-            // The j loop's back edge past an empty inner loop is here.
-            // wcet-bound: WS per call
-            self.ldl[dj_idx] = dnew;
-            // Σ (nn − j − 1) over j < nn < W per call.
-            // wcet-bound: WS * (WS - 1) / 2 per call
-            for r in (j + 1)..nn {
-                let idx = row_start(r) + j;
-                self.tmp[r] -= pj * self.ldl[idx];
-                self.ldl[idx] += beta * self.tmp[r];
+            *zr = acc;
+            if acc != T::ZERO {
+                let d_idx = s + r;
+                let dr = self.ldl[d_idx];
+                let dnew = dr + alpha * acc * acc;
+                self.beta[r] = acc * alpha / dnew;
+                alpha = dr * alpha / dnew;
+                self.ldl[d_idx] = dnew;
+            } else {
+                self.beta[r] = T::ZERO;
             }
+            self.forward_entry_in_remove(r);
         }
+    }
+
+    /// `y[r]` from `−d_r` and the entries above it: row `r` of the forward
+    /// substitution `L y = −d_W`.
+    fn forward_entry(&mut self, r: usize) {
+        let s = row_start(r);
+        let mut acc = -self.dw[r];
+        let (l, y) = (
+            self.ldl.get(s..s + r).unwrap_or(&[]),
+            self.y.get(..r).unwrap_or(&[]),
+        );
+        // `r < n ≤ W` entries.
+        // wcet-bound: WS
+        for (&l, &y) in l.iter().zip(y) {
+            acc -= l * y;
+        }
+        if let Some(d) = self.y.get_mut(r) {
+            *d = acc;
+        }
+    }
+
+    /// [`Self::forward_entry`] for `remove`, which calls it for rows `pos..n − 1`:
+    /// its loop runs Σ r over them per call of `remove`.
+    #[inline(always)]
+    fn forward_entry_in_remove(&mut self, r: usize) {
+        let s = row_start(r);
+        let mut acc = -self.dw[r];
+        let (l, y) = (
+            self.ldl.get(s..s + r).unwrap_or(&[]),
+            self.y.get(..r).unwrap_or(&[]),
+        );
+        // Σ r over the rows r < n ≤ W one `remove` redoes.
+        // wcet-bound in remove: WS * (WS - 1) / 2 per call
+        for (&l, &y) in l.iter().zip(y) {
+            acc -= l * y;
+        }
+        if let Some(d) = self.y.get_mut(r) {
+            *d = acc;
+        }
+    }
+
+    /// `λ*` for the current working set, into `tmp`: `D Lᵀ λ* = y` (the
+    /// forward half is kept in [`Self::y`]); false if not finite. Not inlined: its
+    /// loops stay out of the QP's main loop, whose bound is matched by its lines.
+    #[inline(never)]
+    pub(crate) fn solve_lam_star_tmp(&mut self) -> bool {
+        let n = self.n;
+        // wcet-bound: WS
+        for r in 0..n {
+            self.tmp[r] = self.y[r];
+        }
+        self.ldl_back_tmp();
+        // wcet-bound: WS
+        self.tmp.iter().take(n).all(|v| v.is_finite())
     }
 
     /// Solves `(M_WW + D) x = tmp` in place in `tmp[0..n]`.
@@ -361,6 +441,14 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
             self.tmp[r] = acc;
         }
+        self.ldl_back_tmp();
+    }
+
+    /// Solves `D Lᵀ x = tmp` in place in `tmp[0..n]`: the second half of
+    /// [`Self::ldl_solve_tmp`].
+    #[inline(always)]
+    fn ldl_back_tmp(&mut self) {
+        let n = self.n;
         // wcet-bound: WS
         for r in 0..n {
             self.tmp[r] /= self.ldl[row_start(r) + r];

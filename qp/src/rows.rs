@@ -114,6 +114,7 @@ pub(crate) fn sub_scaled<T: Real>(y: &mut [T], s: T, x: &[T]) {
     // call.
     // wcet-bound: NV / 4
     // wcet-bound in ldl_solve_tmp: WS * (WS - 1) / 8 per call
+    // wcet-bound in solve_lam_star_tmp: WS * (WS - 1) / 8 per call
     // wcet-bound in null_space_step: WS * (WS - 1) / 8 per call
     for (y4, x4) in (&mut yc).zip(&mut xc) {
         for (y, &x) in y4.iter_mut().zip(x4) {

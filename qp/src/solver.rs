@@ -56,6 +56,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 n: 0,
                 lam: [T::ZERO; W],
                 dw: [T::ZERO; W],
+                y: [T::ZERO; W],
+                beta: [T::ZERO; W],
                 tmp: [T::ZERO; W],
                 ldl: [T::ZERO; WL],
                 v: [T::ZERO; N],
