@@ -445,8 +445,11 @@ fn a_loop_whose_annotation_is_removed_is_refused() {
 
 /// An activation of the plan task adopts a window of the road or plans, never
 /// both (`ecu::window_job` and `ecu::plan_job` on the two branches of one test):
-/// the task's bound is the larger job's plus what every activation does, not
-/// their sum.
+/// the task's bound is the larger job's plus what every activation does (the
+/// dispatch, the plan's publication: tens of thousands of cycles), not their sum,
+/// nor a mix of fractions of both (the IPET's entry counts are integers; with
+/// continuous ones the bound took half of each job and a whole cap per activation,
+/// 2.5 M cycles over the larger job).
 #[test]
 #[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
@@ -466,7 +469,10 @@ fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
     );
     assert!(window > 1_000_000 && plan > window, "{plan} {window}");
     assert!(task >= plan, "the task {task} < its job {plan}");
-    assert!(task < plan + window, "{task} ≥ {plan} + {window}");
+    assert!(
+        task <= plan.max(window) + 200_000,
+        "the task {task} is more than its larger job, {plan} or {window}, and 200 k"
+    );
 }
 
 /// The QP solver's annotations are read from its own crate (`qp/src`): without its
@@ -1014,8 +1020,10 @@ fn a_cap_per_activation_counts_every_copy_of_its_line_together() {
     // activation: 2 + 3 × (3 + 1) + 1.
     assert_eq!(run(vec![cap(3)]), 15);
     // Two copies of one line in one group share the cap: the body's runs are
-    // counted twice against 3, 1.5 runs: 2 + 1.5 × 4 + 1 (the linear relaxation).
-    assert_eq!(run(vec![cap(3), cap(3)]), 9);
+    // counted twice against 3, 1.5 runs in the linear relaxation; `leaf`'s entry
+    // count is an integer, so the body, which calls it once a run, runs once:
+    // 2 + 1 × 4 + 1.
+    assert_eq!(run(vec![cap(3), cap(3)]), 7);
 }
 
 /// Two loops of 16 iterations in `root`: the first (2 instructions) alone, the

@@ -35,9 +35,14 @@
 //! ([`Persistence`]) is charged its lines once per entry, its blocks without their
 //! fetch.
 //!
-//! The counts are continuous: the linear relaxation's optimum is at least the
-//! integer optimum, so the bound stays an upper bound. Solved with `microlp`
-//! through `good_lp` (pure Rust).
+//! The functions' entry counts are integers, the other counts continuous (a mixed
+//! integer program, solved by branch and bound): a relaxation that enters a
+//! function a fraction of the activation pays a fraction of its fixed work and
+//! may still charge a cap per activation in full, so with continuous entries the
+//! plan task's bound mixed half a window adoption with half a plan and exceeded
+//! both. The continuous block and edge counts are a relaxation of the integer
+//! program, whose optimum it cannot be below: the bound stays an upper bound.
+//! Solved with `microlp` through `good_lp` (pure Rust).
 
 use super::cache::Persistence;
 use super::cfg::{Exit, Function, Program};
@@ -327,7 +332,8 @@ pub fn task_bound(
     let mut objective = Expression::from(0.0);
     let mut n_entry: HashMap<usize, Variable> = HashMap::new();
     for &f in &reach {
-        n_entry.insert(f, vars.add(variable().min(0.0)));
+        // Integer: see the module's documentation.
+        n_entry.insert(f, vars.add(variable().integer().min(0.0)));
     }
     // Incoming calls per function.
     let mut calls_into: HashMap<usize, Expression> = HashMap::new();
