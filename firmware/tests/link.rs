@@ -109,6 +109,7 @@ fn plan_event(big: u64, v: f32) -> PlanEventFrame {
         status: big as u8,
         published: true,
         passes: big as u8,
+        warm: true,
         qp_iterations: big as u16,
         qp_added: big as u16,
         qp_removed: big as u16,
@@ -280,11 +281,11 @@ fn frame_layout_is_version_postcard_crc_cobs() {
     // The CRC is CRC-32/ISO-HDLC (check value of "123456789").
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
     assert_eq!(crc.checksum(b"123456789"), 0xCBF4_3926);
-    // Pinned bytes: `Down::Start` is version 5, tag 3, then its CRC (zlib.crc32(b"\x05\x03")
-    // = 0xA5A7B700, little-endian: a zero byte, which COBS stuffs), stuffed.
+    // Pinned bytes: `Down::Start` is version 6, tag 3, then its CRC (zlib.crc32(b"\x06\x03")
+    // = 0x8E8AE4C3, little-endian, no zero byte), stuffed: one COBS block of 6 bytes.
     assert_eq!(
         frame_of(&Down::Start),
-        [0x03, 0x05, 0x03, 0x04, 0xB7, 0xA7, 0xA5, 0x00]
+        [0x07, 0x06, 0x03, 0xC3, 0xE4, 0x8A, 0x8E, 0x00]
     );
 }
 
@@ -364,7 +365,7 @@ fn largest_frames_fit_max_frame_bytes() {
     assert_eq!(MAX_DOWN_FRAME_BYTES, 269);
     // Version 3: release and send instants, the two tasks' deadline counts, the
     // watchdog's trips and the plan's end (249 bytes in version 2).
-    assert_eq!(MAX_UP_FRAME_BYTES, 335);
+    assert_eq!(MAX_UP_FRAME_BYTES, 336);
     assert_eq!(frame_of(&downs[1]).len(), MAX_DOWN_FRAME_BYTES);
     // What the control link carries while driving: `Sensor`, `Stop`; the largest
     // sensor frame is exactly the bound the ECU's receive loop stops at.
@@ -741,7 +742,7 @@ fn any_timing() -> impl Strategy<Value = TaskTimingFrame> {
 fn any_plan_event() -> impl Strategy<Value = PlanEventFrame> {
     (
         any::<(u32, u64, u64, u32, u8, bool, u8)>(),
-        (any::<u64>(), any_timing()),
+        (any::<u64>(), any_timing(), any::<bool>()),
         any::<(u16, u16, u16, u16, u16, u16, u32)>(),
         prop::array::uniform17(prop::array::uniform2(any_f32())),
         any_f32(),
@@ -749,7 +750,7 @@ fn any_plan_event() -> impl Strategy<Value = PlanEventFrame> {
         .prop_map(
             |(
                 (activation, release_us, finish_us, ticks, status, published, passes),
-                (end_us, timing),
+                (end_us, timing, warm),
                 (
                     qp_iterations,
                     qp_added,
@@ -771,6 +772,7 @@ fn any_plan_event() -> impl Strategy<Value = PlanEventFrame> {
                 status,
                 published,
                 passes,
+                warm,
                 qp_iterations,
                 qp_added,
                 qp_removed,

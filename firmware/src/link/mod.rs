@@ -53,7 +53,7 @@
 //!   delimiters in a row) are idle and ignored.
 //!
 //! The largest frames: [`MAX_DOWN_FRAME_BYTES`] (a `PathChunk`, 269 bytes) and
-//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 335 bytes), both
+//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 336 bytes), both
 //! including the delimiter and checked at compile time against
 //! [`MAX_FRAME_BYTES`].
 //!
@@ -99,7 +99,7 @@ use crate::vehicle_config::VehicleConfig;
 use qp::QpStatus;
 
 /// Version of this wire format, the first byte of every raw frame.
-pub const LINK_VERSION: u8 = 5;
+pub const LINK_VERSION: u8 = 6;
 /// The largest encoded frame, bytes, including its 0x00 delimiter.
 pub const MAX_FRAME_BYTES: usize = 512;
 /// Track rows per [`PathChunkFrame`].
@@ -340,6 +340,11 @@ pub struct PlanEventFrame {
     pub published: bool,
     /// MPC passes run (linearise-condense-solve), passes.
     pub passes: u8,
+    /// Whether the MPC started from the previous plan (warm) rather than from
+    /// zero inputs (a cold start: the first plan, or after 1.6 s without one);
+    /// false for an activation that did not plan (version 6: with one pass on a
+    /// cold start, `passes` no longer tells them apart).
+    pub warm: bool,
     /// QP iterations over all passes, iterations.
     pub qp_iterations: u16,
     /// Constraints added to the working set over all passes, constraints.
@@ -399,6 +404,7 @@ impl PlanEventFrame {
             status: mpc_status_code(result),
             published,
             passes: report.passes.min(u8::MAX as u32) as u8,
+            warm: report.warm,
             qp_iterations: sat16(report.qp_iterations),
             qp_added: sat16(report.qp_added),
             qp_removed: sat16(report.qp_removed),
@@ -470,7 +476,7 @@ const PLAN_EVENT_MAX_BYTES: usize = U32_MAX_BYTES
     + 3 * U64_MAX_BYTES
     + TIMING_MAX_BYTES
     + U32_MAX_BYTES
-    + 3
+    + 4 // status, published, passes, warm: a byte each
     + 6 * U16_MAX_BYTES
     + U32_MAX_BYTES
     + (PLAN_NODES * 2 + 1) * F32_BYTES;

@@ -109,6 +109,7 @@ impl CostModel {
 pub fn report_of(a: &PlanActivation) -> MpcReport<f64> {
     MpcReport {
         passes: a.passes,
+        warm: a.warm,
         qp_iterations: a.qp_iterations,
         qp_added: a.qp_added,
         qp_removed: a.qp_removed,

@@ -359,6 +359,7 @@ fn activation_record<T: Real>(
         published: false,
         deadline_miss: finish_us > release_us + PLAN_PERIOD_US,
         passes: r.passes,
+        warm: r.warm,
         qp_iterations: r.qp_iterations,
         qp_added: r.qp_added,
         qp_removed: r.qp_removed,

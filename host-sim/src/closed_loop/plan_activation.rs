@@ -35,6 +35,11 @@ pub struct PlanActivation {
     pub deadline_miss: bool,
     /// Linearise–condense passes.
     pub passes: u32,
+    /// Whether the MPC started from the previous plan (false on a cold start,
+    /// and on an activation that adopted a window instead of planning; false in
+    /// a file written before the column existed).
+    #[serde(default)]
+    pub warm: bool,
     /// QP iterations, all passes.
     pub qp_iterations: u32,
     /// Constraints added to the QP's working set, all passes.
@@ -58,6 +63,18 @@ pub struct PlanActivation {
     /// (an empty cell) where it is not measured (the ECU does not send it).
     #[serde(default)]
     pub max_validity_slack_rad: Option<f64>,
+}
+
+impl PlanActivation {
+    /// Whether the activation planned (ran the MPC) from the previous plan.
+    pub fn plans_warm(&self) -> bool {
+        self.passes >= 1 && self.warm
+    }
+
+    /// Whether the activation planned (ran the MPC) from zero inputs: a cold start.
+    pub fn plans_cold(&self) -> bool {
+        self.passes >= 1 && !self.warm
+    }
 }
 
 /// The status of an activation that adopted a new window of the road instead of

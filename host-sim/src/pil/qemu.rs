@@ -460,6 +460,7 @@ impl QemuEcu {
             published: p.published,
             deadline_miss: p.finish_us > p.release_us + PLAN_PERIOD_US,
             passes: u32::from(p.passes),
+            warm: p.warm,
             qp_iterations: u32::from(p.qp_iterations),
             qp_added: u32::from(p.qp_added),
             qp_removed: u32::from(p.qp_removed),

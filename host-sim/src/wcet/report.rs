@@ -176,12 +176,12 @@ pub struct TaskTiming {
     /// Median instructions of an activation, in instructions (plan: over all
     /// activations of all runs; control: the largest of the runs' medians).
     pub observed_p50_instructions: f64,
-    /// Plan only: most instructions of an activation whose warm start sufficed
-    /// (`passes == 1`), in instructions; `null` if there was none.
+    /// Plan only: most instructions of an activation that planned from the
+    /// previous plan (warm), in instructions; `null` if there was none.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub observed_warm_max_instructions: Option<f64>,
-    /// Plan only: most instructions of an activation that needed a cold start
-    /// (`passes > 1`), in instructions; `null` if there was none.
+    /// Plan only: most instructions of an activation that planned from zero
+    /// inputs (a cold start), in instructions; `null` if there was none.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub observed_cold_max_instructions: Option<f64>,
     /// What the static analysis derived.
@@ -444,8 +444,8 @@ fn plan_observed(runs: &[PilRun]) -> Result<Observed> {
     Ok(Observed {
         max,
         p50,
-        warm_max: max_of(rows().filter(|a| a.passes == 1).map(|a| a.instructions)),
-        cold_max: max_of(rows().filter(|a| a.passes > 1).map(|a| a.instructions)),
+        warm_max: max_of(rows().filter(|a| a.plans_warm()).map(|a| a.instructions)),
+        cold_max: max_of(rows().filter(|a| a.plans_cold()).map(|a| a.instructions)),
     })
 }
 
@@ -548,7 +548,7 @@ mod tests {
     use std::path::Path;
 
     const HEADER: &str = "activation,release_us,finish_us,instructions,cycles,status,published,\
-deadline_miss,passes,qp_iterations,qp_added,qp_removed,qp_refactorizations,rows,\
+deadline_miss,passes,warm,qp_iterations,qp_added,qp_removed,qp_refactorizations,rows,\
 active_constraints,max_validity_slack_rad";
 
     /// One plan activation of a fixture: instructions, passes, deadline miss, status.
@@ -567,10 +567,12 @@ active_constraints,max_validity_slack_rad";
         let mut csv = format!("{HEADER}\n");
         for (k, (instructions, passes, miss, status)) in rows.iter().enumerate() {
             csv += &format!(
-                "{k},{},{},{instructions},{},{status},true,{miss},{passes},12,3,1,0,40,5,0.01\n",
+                // One pass: a warm step; more: a cold start.
+                "{k},{},{},{instructions},{},{status},true,{miss},{passes},{},12,3,1,0,40,5,0.01\n",
                 k * 100_000,
                 k * 100_000 + 5_000,
-                instructions * 1.2
+                instructions * 1.2,
+                *passes == 1
             );
         }
         let misses = rows.iter().filter(|r| r.2).count();
@@ -776,7 +778,10 @@ active_constraints,max_validity_slack_rad";
         )?;
         let path = dir.join("plan_activations.csv");
         let text = std::fs::read_to_string(&path)?;
-        std::fs::write(&path, text.replace(",false,1,12,", ",maybe,1,12,"))?;
+        std::fs::write(
+            &path,
+            text.replace(",false,1,true,12,", ",maybe,1,true,12,"),
+        )?;
         let message = format!(
             "{:#}",
             load_pil_run(&dir)
