@@ -95,18 +95,27 @@ pub const ROWS_PER_NODE: usize = 3;
 pub const MAX_OBSTACLE_ROWS: usize = 32;
 /// Capacity of general QP rows.
 pub const NC: usize = ROWS_PER_NODE * HORIZON + MAX_OBSTACLE_ROWS;
-/// Working-set capacity of the QP solver.
+/// Working-set capacity of the QP solver, rows: more than the [`NV`] variables,
+/// since soft rows (obstacles, `V ≥ 0`) may all be active (a car standing by an
+/// obstacle: 37–40 active rows, `docs/tuning.md`). With [`QP_MAX_ITER`] it sizes
+/// the plan task's static bound (its factor's work grows as `WS²` per iteration).
 pub const WS: usize = 48;
 /// QP iterations one activation may run, summed over its passes
 /// ([`MpcSettings::qp_max_iter`] of [`MpcSettings::paper`], the ECU's settings):
-/// the flow fact that bounds the plan task's worst case.
-pub const QP_MAX_ITER: u32 = 90;
+/// the flow fact that bounds the plan task's worst case. 56: with [`WS`] 48, one
+/// cold pass and one refactorization, the largest cap measured whose static
+/// response-time bound leaves 4 ms of the plan task's 100 ms period (README,
+/// *The worst-case timing and memory report*). A step stopped at the cap gives no
+/// plan (the control task follows the last one) and the next goes on from its
+/// working set.
+pub const QP_MAX_ITER: u32 = 56;
 /// QP refactorizations one activation may make, summed over its passes (each
 /// pass gets what is left as its [`qp::QpSettings::max_refactorizations`]):
 /// with [`QP_MAX_ITER`], the flow fact that bounds the plan task's worst case. A
 /// refactorization rebuilds the factor of up to [`WS`] rows (about `WS³/6`
-/// multiply-adds); past the cap the pass ends as a numerical error.
-pub const QP_MAX_REFACTORIZATIONS: u32 = 2;
+/// multiply-adds, 0.93 M model cycles at 48 rows); past the cap the pass ends as a
+/// numerical error (1 step of 384 stress runs, README).
+pub const QP_MAX_REFACTORIZATIONS: u32 = 1;
 /// A node's row `V ≥ 0` (the car does not reverse: the plant only brakes) is
 /// added where the linearised speed is under this, m/s (only slow nodes need it,
 /// and so the rows stay within [`NC`] beside the obstacles'). Without it a car standing across the road planned three-point
@@ -115,8 +124,11 @@ pub const SPEED_ROW_BELOW_MPS: f32 = 1.0;
 /// Soft weight of the `V ≥ 0` rows, per (m/s)² (as the obstacles' `2·q_obs`).
 pub const SPEED_ROW_WEIGHT: f32 = 2.0e5;
 /// Linearise–solve passes on a cold start ([`MpcSettings::cold_start_iterations`]
-/// of [`MpcSettings::paper`]).
-pub const COLD_START_PASSES: u8 = 3;
+/// of [`MpcSettings::paper`]). One: the next activation, warm, linearises about
+/// this one's plan (a real-time iteration: one Gauss–Newton step per sampling
+/// instant), and every further pass would add its worst case (a linearisation, a
+/// factor rebuilt from scratch) to the activation's.
+pub const COLD_START_PASSES: u8 = 1;
 
 /// The QP solver sized for the MPC.
 pub type MpcQp<T> = QpSolver<T, NV, NC, WS, { ldl_len(WS) }>;
