@@ -79,7 +79,7 @@ impl WcetArgs {
 fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -> PilArgs {
     PilArgs {
         run: RunArgs {
-            track: "paper".into(),
+            track: PAPER_TRACK.into(),
             open: false,
             obstacles: obstacles.into(),
             vehicle: None,
@@ -87,7 +87,7 @@ fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -
             planner_mu: None,
             laps: 1,
             duration,
-            initial_speed: 15.0,
+            initial_speed: PIL_INITIAL_SPEED_MPS,
             precision: crate::closed_loop::Precision::F32,
             ecu_mhz: f64::from(crate::wcet::CLOCK_HZ) / 1e6,
             no_plots: true,
@@ -105,13 +105,19 @@ fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -
     }
 }
 
+/// The built-in track the PIL laps and the first two traced runs drive.
+const PAPER_TRACK: &str = "paper";
+
+/// The speed the PIL runs start at, m/s.
+const PIL_INITIAL_SPEED_MPS: f64 = 15.0;
+
 /// Runs a short PIL run with QEMU's execution trace written to a file, and
 /// returns the trace's CPI bound and the file (for the static analysis' check of
 /// its loop bounds).
 fn cpi_from_trace(args: &WcetArgs) -> Result<(CpiReport, PathBuf)> {
     let dir = args.out.join("trace");
     fs::create_dir_all(&dir)?;
-    let log = traced_pil_run(args, &dir, "paper")?;
+    let log = traced_pil_run(args, &dir, PAPER_TRACK, "paper", PIL_INITIAL_SPEED_MPS)?;
     let f = File::open(&log).with_context(|| format!("opening {}", log.display()))?;
     let report = cpi::analyse_log(BufReader::with_capacity(1 << 20, f), None, &[])
         .map_err(|e| anyhow!("{e}"))?;
@@ -139,12 +145,57 @@ fn cap_trace(args: &WcetArgs) -> Result<PathBuf> {
         csv.push_str(&format!("box_ahead,{cx},{cy}\n"));
     }
     fs::write(&boxes, csv)?;
-    traced_pil_run(args, &dir, &boxes.to_string_lossy())
+    traced_pil_run(
+        args,
+        &dir,
+        PAPER_TRACK,
+        &boxes.to_string_lossy(),
+        PIL_INITIAL_SPEED_MPS,
+    )
 }
 
-/// A PIL run of `--trace-seconds` on the `paper` track at μ 1 with `obstacles`,
-/// its output and QEMU's execution trace in `dir`; returns the trace's file.
-fn traced_pil_run(args: &WcetArgs, dir: &Path, obstacles: &str) -> Result<PathBuf> {
+/// The circle of the traced run at a full working set: its radius, m, its
+/// half-widths, m, and the speed the run starts at, m/s. At 15 m/s on 22 m (a
+/// lateral acceleration of 10.2 m/s², beyond μ·g at μ 1) the validity and road
+/// rows of every node bind at once: the QP's working set reaches 40–48 rows and
+/// the iteration cap, the activations nearest the bound's worst case (which
+/// charges every iteration a working set of `WS`). The heaviest traced
+/// activation of a grid of such runs (radii 15–25 m, 12–18 m/s, half-widths
+/// 2.5–5 m: `docs/tuning.md`, *The plan task signed*).
+const FULL_SET_CIRCLE: (f64, f64, f64) = (22.0, 3.5, 15.0);
+
+/// Runs a short PIL run on [`FULL_SET_CIRCLE`], with QEMU's execution trace
+/// written to a file, and returns the file.
+fn full_set_trace(args: &WcetArgs) -> Result<PathBuf> {
+    let dir = args.out.join("trace-full-set");
+    fs::create_dir_all(&dir)?;
+    let (radius, half_width, speed) = FULL_SET_CIRCLE;
+    // Points 1.5 m apart, counter-clockwise from the origin, heading +x.
+    let n = (std::f64::consts::TAU * radius / 1.5).round() as usize;
+    let mut csv = String::from("# x_m,y_m,w_tr_right_m,w_tr_left_m\n");
+    for k in 0..n {
+        let t = std::f64::consts::TAU * k as f64 / n as f64;
+        csv.push_str(&format!(
+            "{:.4},{:.4},{half_width},{half_width}\n",
+            radius * t.sin(),
+            radius * (1.0 - t.cos())
+        ));
+    }
+    let track = dir.join("circle.csv");
+    fs::write(&track, csv)?;
+    traced_pil_run(args, &dir, &track.to_string_lossy(), "none", speed)
+}
+
+/// A PIL run of `--trace-seconds` on `track` at μ 1 with `obstacles`, starting at
+/// `speed` m/s, its output and QEMU's execution trace in `dir`; returns the
+/// trace's file.
+fn traced_pil_run(
+    args: &WcetArgs,
+    dir: &Path,
+    track: &str,
+    obstacles: &str,
+    speed: f64,
+) -> Result<PathBuf> {
     let log = dir.join("qemu-trace.log");
     let mut a = pil_args(
         dir.join("run"),
@@ -153,6 +204,8 @@ fn traced_pil_run(args: &WcetArgs, dir: &Path, obstacles: &str) -> Result<PathBu
         args.trace_seconds,
         &args.elf,
     );
+    a.run.track = track.into();
+    a.run.initial_speed = speed;
     a.trace = Some(std::path::absolute(&log)?);
     pil::run(&a)?;
     Ok(log)
@@ -241,6 +294,14 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         args.trace_seconds
     );
     let log = cap_trace(args)?;
+    traces.push(log.clone());
+    made.push(log);
+    let (radius, _, speed) = FULL_SET_CIRCLE;
+    println!(
+        "PIL run with QEMU's execution trace ({} s) at {speed} m/s on a circle of {radius} m: the QP's working set near full at its cap",
+        args.trace_seconds
+    );
+    let log = full_set_trace(args)?;
     traces.push(log.clone());
     made.push(log);
 
