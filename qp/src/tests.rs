@@ -138,7 +138,9 @@ fn bound_rows_in_the_lower_triangle_are_rows_of_the_inverse() {
 }
 
 /// Removing an entry by downdate gives the same factor as factorising the
-/// remaining working set from scratch.
+/// remaining working set from scratch, and the kept forward substitution
+/// `y = L⁻¹(−d_W)` is the one of the downdated factor, bit for bit (and the
+/// rebuilt factor's, to rounding).
 #[test]
 fn remove_matches_refactor() {
     for seed in 0..20u64 {
@@ -166,6 +168,23 @@ fn remove_matches_refactor() {
             s.work.remove(pos);
             let n = s.work.n;
             let down = s.work.ldl;
+            let y_down = s.work.y;
+            // A forward substitution from scratch on the downdated factor.
+            let mut y = [0.0; 8];
+            for r in 0..n {
+                let mut acc = -s.work.dw[r];
+                for l in 0..r {
+                    acc -= down[row_start(r) + l] * y[l];
+                }
+                y[r] = acc;
+            }
+            for r in 0..n {
+                assert_eq!(
+                    y_down[r].to_bits(),
+                    y[r].to_bits(),
+                    "seed {seed} pos {pos} r {r}"
+                );
+            }
             let dropped = s.work.rebuild(&s.problem, tols, n);
             assert_eq!(dropped, 0);
             assert_eq!(s.work.n, n);
@@ -173,6 +192,12 @@ fn remove_matches_refactor() {
                 assert!(
                     (down[k] - s.work.ldl[k]).abs() < 1e-10,
                     "seed {seed} pos {pos} k {k}"
+                );
+            }
+            for r in 0..n {
+                assert!(
+                    (y_down[r] - s.work.y[r]).abs() < 1e-9 * (1.0 + y[r].abs()),
+                    "seed {seed} pos {pos} r {r}"
                 );
             }
         }
