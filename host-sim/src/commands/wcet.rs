@@ -273,8 +273,8 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     } else {
         args.pil.clone()
     };
+    // The given traces, then the ones this command records (removed at the end).
     let mut traces = args.check_trace.clone();
-    let mut made: Vec<PathBuf> = Vec::new();
     let cpi = match args.cpi_bound {
         Some(c) if c.is_finite() && c >= 1.0 => given_cpi(c),
         Some(c) => bail!("--cpi-bound must be at least 1 cycle per instruction, got {c}"),
@@ -284,8 +284,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
                 args.trace_seconds
             );
             let (report, log) = cpi_from_trace(args)?;
-            traces.push(log.clone());
-            made.push(log);
+            traces.push(log);
             report
         }
     };
@@ -293,17 +292,13 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         "PIL run with QEMU's execution trace ({} s) towards a box {CAP_BOX_AHEAD_M} m ahead: the QP at its iteration cap",
         args.trace_seconds
     );
-    let log = cap_trace(args)?;
-    traces.push(log.clone());
-    made.push(log);
+    traces.push(cap_trace(args)?);
     let (radius, _, speed) = FULL_SET_CIRCLE;
     println!(
         "PIL run with QEMU's execution trace ({} s) at {speed} m/s on a circle of {radius} m: the QP's working set near full at its cap",
         args.trace_seconds
     );
-    let log = full_set_trace(args)?;
-    traces.push(log.clone());
-    made.push(log);
+    traces.push(full_set_trace(args)?);
 
     // The cost model refitted on every measured activation, kept for the
     // simulator's timeline (an estimate, not a bound).
@@ -339,7 +334,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     };
     let r = report::build_report(&inputs)?;
     report::markdown::write_report(&args.out, &r)?;
-    for log in made {
+    for log in traces.iter().skip(args.check_trace.len()) {
         // Large (tens of MB a simulated second) and fully read by now.
         let _ = fs::remove_file(log);
     }
