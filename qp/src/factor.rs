@@ -366,12 +366,14 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             } else {
                 self.beta[r] = T::ZERO;
             }
-            self.forward_entry_in_remove(r);
+            self.forward_entry(r);
         }
     }
 
     /// `y[r]` from `−d_r` and the entries above it: row `r` of the forward
-    /// substitution `L y = −d_W`.
+    /// substitution `L y = −d_W`. Inlined into `commit` (one row) and into
+    /// `remove` (rows `pos..n − 1`), whose copy of its loop is bounded per call.
+    #[inline(always)]
     fn forward_entry(&mut self, r: usize) {
         let s = row_start(r);
         let mut acc = -self.dw[r];
@@ -379,27 +381,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             self.ldl.get(s..s + r).unwrap_or(&[]),
             self.y.get(..r).unwrap_or(&[]),
         );
-        // `r < n ≤ W` entries.
+        // `r < n ≤ W` entries; Σ r over the rows r < n ≤ W one `remove` redoes.
         // wcet-bound: WS
-        for (&l, &y) in l.iter().zip(y) {
-            acc -= l * y;
-        }
-        if let Some(d) = self.y.get_mut(r) {
-            *d = acc;
-        }
-    }
-
-    /// [`Self::forward_entry`] for `remove`, which calls it for rows `pos..n − 1`:
-    /// its loop runs Σ r over them per call of `remove`.
-    #[inline(always)]
-    fn forward_entry_in_remove(&mut self, r: usize) {
-        let s = row_start(r);
-        let mut acc = -self.dw[r];
-        let (l, y) = (
-            self.ldl.get(s..s + r).unwrap_or(&[]),
-            self.y.get(..r).unwrap_or(&[]),
-        );
-        // Σ r over the rows r < n ≤ W one `remove` redoes.
         // wcet-bound in remove: WS * (WS - 1) / 2 per call
         for (&l, &y) in l.iter().zip(y) {
             acc -= l * y;
