@@ -692,7 +692,7 @@ impl<T: Real> FrictionEstimator<T> {
 /// care for NaN costs instructions the control task's budget does not have, and
 /// the values here are finite by construction).
 #[inline(always)]
-fn smaller<T: Real>(a: T, b: T) -> T {
+pub(crate) fn smaller<T: Real>(a: T, b: T) -> T {
     if b < a {
         b
     } else {
@@ -702,7 +702,7 @@ fn smaller<T: Real>(a: T, b: T) -> T {
 
 /// The larger of `a` and `b`, both finite (as [`smaller`]).
 #[inline(always)]
-fn larger<T: Real>(a: T, b: T) -> T {
+pub(crate) fn larger<T: Real>(a: T, b: T) -> T {
     if b > a {
         b
     } else {

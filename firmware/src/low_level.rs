@@ -102,6 +102,7 @@
 //! routines. Its static bound on the ECU, with the rest of the control task's job,
 //! is in `host-sim wcet`'s report (`control_job`).
 
+use crate::friction::{larger, smaller};
 use crate::pid::{self, PidConfig, PidConfigError, PidState};
 use crate::plan::{Plan, HORIZON};
 use crate::state_estimate::StateEstimate;
@@ -531,6 +532,10 @@ pub struct CarModel<T> {
     /// Deceleration the brakes may be asked for at most, m/s², > 0 (+∞: none):
     /// the braking torque is limited to `m·a·r_eff` (an anti-lock limit).
     pub braking_grip_mps2: T,
+    /// True when the steering may turn no further from straight ahead than the
+    /// last command (it may turn back): the front tyres slide at a large angle
+    /// ([`crate::tasks::ControlTask::steering_held`]).
+    pub hold_steering: bool,
 }
 
 impl<T: Real> CarModel<T> {
@@ -543,6 +548,7 @@ impl<T: Real> CarModel<T> {
             drag_n_per_mps2: T::ZERO,
             traction_grip_mps2: T::INFINITY,
             braking_grip_mps2: T::INFINITY,
+            hold_steering: false,
         }
     }
 }
@@ -673,8 +679,16 @@ pub fn control_with_model<T: Real>(
     if let Some(prev) = state.last_delta_rad {
         let step = cfg.steer_rate_limit_radps * dt;
         let prev = prev.clamp(-lim, lim);
-        lo = lo.max(prev - step);
-        hi = hi.min(prev + step);
+        // All finite (a validated configuration, a clamped command): plain
+        // comparisons.
+        lo = larger(lo, prev - step);
+        hi = smaller(hi, prev + step);
+        if car.hold_steering {
+            // No further from straight ahead than the last command.
+            let m = prev.abs();
+            lo = larger(lo, -m);
+            hi = smaller(hi, m);
+        }
     }
     let delta_ol = now_ref.delta_rad;
     let psi_proj = est.psi_rad + est.yaw_rate_radps * plan.dt_s;

@@ -36,7 +36,7 @@
 //! [`MpcSettings::cold_start_iterations`] linearise–condense passes and at most
 //! [`MpcSettings::qp_max_iter`] QP iterations (see [`Mpc::step_observed`]).
 
-use crate::friction::{FrictionConfig, FrictionEstimator};
+use crate::friction::{larger, smaller, FrictionConfig, FrictionEstimator};
 use crate::longitudinal_estimator::V_REF_MPS;
 use crate::low_level::{
     self, Actuation, CarModel, ControlFault, LowLevelConfig, LowLevelState, Mode,
@@ -78,6 +78,19 @@ pub const UNDERSTEER_MIN_MPS2: f32 = 2.0;
 /// Time the understeer must last before the front tyres are declared saturated,
 /// s ([`UNDERSTEER_RATIO`]).
 pub const UNDERSTEER_CONFIRM_S: f32 = 0.05;
+
+/// Front slip angle from which saturated front tyres are held at their steering
+/// angle, rad ([`ControlTask::steering_held`]). The shipped cars' tyres
+/// (`host-sim/examples/tyre_peak.rs`) peak at 0.10–0.11 rad at μ 0.3, 0.15–0.16
+/// at μ 0.5 and 0.27–0.29 at μ 1, and give at 0.1 rad 99 % of their peak at
+/// μ 0.5 and 82–85 % at μ 1; on a dry road at the planner's lateral
+/// acceleration the heavy car's front runs at about 0.05 rad.
+pub const FRONT_SLIP_HOLD_RAD: f32 = 0.1;
+
+/// Speed from which the front slip angle is checked, m/s
+/// ([`ControlTask::steering_held`]; slower, the estimate's lateral velocity
+/// divided by the speed is mostly noise).
+pub const FRONT_SLIP_MIN_SPEED_MPS: f32 = 3.0;
 
 /// Oldest a plan may be when it is published (time since its release), µs: two
 /// periods. An older plan is dropped ([`PlanTask::publish_at`]).
@@ -514,6 +527,11 @@ pub struct ControlTask<T> {
     understeer_s: T,
     /// `1/L` of the friction settings' wheelbase, 1/m (0 without one).
     inv_wheelbase: T,
+    /// True when the front tyres' slip angle, in the steering's direction, is
+    /// over [`FRONT_SLIP_HOLD_RAD`].
+    front_sliding: bool,
+    /// Distance from the centre of gravity to the front axle `l_f`, m (0: none).
+    front_axle_m: T,
 }
 
 impl<T: Real> ControlTask<T> {
@@ -559,6 +577,8 @@ impl<T: Real> ControlTask<T> {
             } else {
                 T::ZERO
             },
+            front_sliding: false,
+            front_axle_m: friction_config.wheelbase_m * (T::ONE - friction_config.front_load_share),
         })
     }
 
@@ -583,6 +603,22 @@ impl<T: Real> ControlTask<T> {
         self.understeer_s >= T::lit(UNDERSTEER_CONFIRM_S)
     }
 
+    /// True when the steering was held at the last activation: the front tyres
+    /// saturated ([`ControlTask::front_saturated`]) at a slip angle, in the
+    /// steering's direction, of at least [`FRONT_SLIP_HOLD_RAD`], from
+    /// [`FRONT_SLIP_MIN_SPEED_MPS`]. The steering then turns no further from
+    /// straight ahead ([`crate::low_level::CarModel::hold_steering`]): tyres past
+    /// their peak give no more lateral force for more angle, and a wheel sliding
+    /// at a large angle locks under the least braking torque, which takes the
+    /// lateral force it had (a wet patch taken at dry speed: the steering went to
+    /// its lock, the front wheels locked under braking, the car left the road).
+    /// Front wheels that lose their lateral force by spinning or locking at a
+    /// small slip angle are not held: they need their torque cut, and the
+    /// steering they ask.
+    pub fn steering_held(&self) -> bool {
+        self.front_saturated() && self.front_sliding
+    }
+
     /// The lateral acceleration the torque limits leave room for, m/s², on `est`
     /// (updating the understeer timer): the measured `V·ψ̇`; while the front tyres
     /// are saturated, the larger of it and the kinematic `V²·tan δ/L` the steering
@@ -601,13 +637,22 @@ impl<T: Real> ControlTask<T> {
         let k2 = kinematic * kinematic;
         let under = k2 >= T::lit(UNDERSTEER_MIN_MPS2 * UNDERSTEER_MIN_MPS2)
             && measured * kinematic < T::lit(UNDERSTEER_RATIO) * k2;
+        // The front axle's slip angle in the steering's direction,
+        // |δ| − sign(δ)·atan((v_y + l_f·ψ̇)/v_x), at least α_h: as
+        // δ·(v_y + l_f·ψ̇) ≤ v_x·|δ|·tan(|δ| − α_h) (atan increasing, v_x > 0; both
+        // sides times |δ|), tan as x + x³/3 (within 0.005 for |x| ≤ 0.5): no
+        // division, no branch on the sign.
+        let n = est.vy_mps + self.front_axle_m * est.yaw_rate_radps;
+        let x = d.abs() - T::lit(FRONT_SLIP_HOLD_RAD);
+        self.front_sliding = v >= T::lit(FRONT_SLIP_MIN_SPEED_MPS)
+            && n * d <= v * d.abs() * (x + x * x * x * T::lit(1.0 / 3.0));
         self.understeer_s = if under {
             self.understeer_s + T::lit(CONTROL_PERIOD_US as f32 * 1e-6)
         } else {
             T::ZERO
         };
         if self.front_saturated() {
-            measured.abs().max(kinematic.abs())
+            larger(measured.abs(), kinematic.abs())
         } else {
             measured
         }
@@ -633,13 +678,15 @@ impl<T: Real> ControlTask<T> {
     /// of the driven axle's share for traction, as much as its inside wheel
     /// carries under the lateral load transfer, for the lightest mass the
     /// estimate allows (`1 − u` of it); for braking, as much as the brake
-    /// balance lets each axle carry of it).
+    /// balance lets each axle carry of it). `lateral_mps2` finite (a NaN gives
+    /// NaN limits: [`ControlTask::run`] uses the model only on a finite
+    /// estimate).
     pub fn car_model(&self, lateral_mps2: T) -> CarModel<T> {
         let lon = self.friction.longitudinal();
         let m0 = self.friction_config.longitudinal.mass_kg;
         let [r0, r2] = lon.resistance_terms_mps2();
         let fc = &self.friction_config;
-        let mu = self.friction.mu().min(fc.mu_nominal);
+        let mu = smaller(self.friction.mu(), fc.mu_nominal);
         let grip = mu * T::lit(crate::G * TORQUE_GRIP_FRACTION);
         // While slip is flagged the wheels are past their peak (spinning or
         // locked: without wheel speeds, the only sign): half the grip, so that
@@ -652,7 +699,7 @@ impl<T: Real> ControlTask<T> {
         // The friction ellipse: what the lateral acceleration leaves, at least 0.3
         // of it (a car sliding sideways still brakes).
         let lat = lateral_mps2 / grip;
-        let ellipse = (T::ONE - lat * lat).max(T::lit(0.09)).sqrt();
+        let ellipse = larger(T::ONE - lat * lat, T::lit(0.09)).sqrt();
         let grip = grip * ellipse;
         // Braking at that grip, the front axle carries `l_r/L + (h/L)·a/g` of the
         // weight and gets `brake_front_share` of the torque: neither axle may be
@@ -660,9 +707,13 @@ impl<T: Real> ControlTask<T> {
         let front_load =
             fc.front_load_share + fc.cg_height_over_wheelbase * mu * T::lit(TORQUE_GRIP_FRACTION);
         let front_brake = self.config.brake_front_share;
-        let axle = (front_load / front_brake.max(T::lit(0.01)))
-            .min((T::ONE - front_load) / (T::ONE - front_brake).max(T::lit(0.01)))
-            .min(T::ONE);
+        let axle = smaller(
+            smaller(
+                front_load / larger(front_brake, T::lit(0.01)),
+                (T::ONE - front_load) / larger(T::ONE - front_brake, T::lit(0.01)),
+            ),
+            T::ONE,
+        );
         CarModel {
             mass_kg: lon.mass_ratio() * m0,
             resistance_n: r0 * m0,
@@ -675,13 +726,16 @@ impl<T: Real> ControlTask<T> {
             traction_grip_mps2: grip
                 * (T::ONE - lon.mass_uncertainty(&fc.longitudinal))
                 * fc.driven_load_share
-                * (T::ONE
-                    - T::TWO
-                        * lateral_mps2.abs()
-                        * T::lit(1.0 / crate::G)
-                        * fc.cg_height_over_track)
-                    .max(T::lit(0.2)),
-            braking_grip_mps2: grip * axle.max(T::ZERO),
+                * larger(
+                    T::ONE
+                        - T::TWO
+                            * lateral_mps2.abs()
+                            * T::lit(1.0 / crate::G)
+                            * fc.cg_height_over_track,
+                    T::lit(0.2),
+                ),
+            braking_grip_mps2: grip * larger(axle, T::ZERO),
+            hold_steering: self.steering_held(),
         }
     }
 

@@ -980,6 +980,7 @@ fn the_feedforward_holds_the_cars_model_and_the_torque_its_grip() {
         drag_n_per_mps2: 0.5,
         traction_grip_mps2: f64::INFINITY,
         braking_grip_mps2: f64::INFINITY,
+        hold_steering: false,
     };
     // On the planned speed: (m·a + F₀ + c₂·V²)·r.
     let mut st = LowLevelState::new();
@@ -1393,4 +1394,40 @@ fn a_yaw_jump_of_exactly_pi_keeps_the_derivative() -> Result<(), ControlFault> {
         a.delta_cl_rad
     );
     Ok(())
+}
+
+/// A held steering turns no further from straight ahead than the last command,
+/// on either side, and may turn back; without the hold the same plan steers
+/// further.
+#[test]
+fn a_held_steering_turns_no_further_but_may_turn_back() {
+    let cfg = LowLevelConfig::<f64>::default();
+    let held = CarModel {
+        hold_steering: true,
+        ..CarModel::configured(&cfg)
+    };
+    let free = CarModel::configured(&cfg);
+    let steer = |delta_plan: f64, last: f64, car: &CarModel<f64>| {
+        let mut plan = straight_plan(0, 10.0);
+        for n in plan.nodes.iter_mut() {
+            n.delta_rad = delta_plan;
+        }
+        let mut st = LowLevelState::new();
+        st.last_delta_rad = Some(last);
+        control_with_model(&cfg, &mut st, &plan, &est(10.0, 0.0), 0, car)
+            .unwrap()
+            .delta_rad
+    };
+    for side in [1.0, -1.0] {
+        let further = steer(0.3 * side, 0.2 * side, &held);
+        assert_eq!(further, 0.2 * side, "held at the last command");
+        assert!(
+            steer(0.3 * side, 0.2 * side, &free).abs() > 0.2,
+            "free: further"
+        );
+        let back = steer(0.05 * side, 0.2 * side, &held);
+        assert!(back.abs() < 0.2 && back * side > 0.0, "back: {back}");
+    }
+    // Straight ahead, held: either way is further, so it stays straight.
+    assert_eq!(steer(0.3, 0.0, &held), 0.0);
 }

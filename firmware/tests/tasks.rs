@@ -274,6 +274,27 @@ fn understeer_saturates_the_front_and_the_brakes_leave_the_steering_its_grip() {
         }
         (control.front_saturated(), torque)
     };
+    // Saturated at a small front slip angle (0.1 − 1.1·4/15² ≈ 0.08 rad: the
+    // wheels locked or spinning, not sliding sideways): the steering is free.
+    let mut control = car.control_task(1.0).unwrap();
+    let e = StateEstimate {
+        stamp_us: 0,
+        x_m: 0.0,
+        y_m: 0.0,
+        psi_rad: 0.0,
+        vx_mps: 15.0,
+        vy_mps: 0.0,
+        yaw_rate_radps: 4.0 / 15.0,
+        delta_rad: 0.1,
+    };
+    for k in 0..10u64 {
+        let e = StateEstimate {
+            stamp_us: k * CONTROL_PERIOD_US,
+            ..e
+        };
+        control.run(&e, &plan, k * CONTROL_PERIOD_US);
+    }
+    assert!(control.front_saturated() && !control.steering_held());
     // V²·tan δ/L = 225·0.1003/2.7 = 8.4 m/s².
     let (gripping, t_grip) = run(8.0 / 15.0);
     let (sliding, t_slide) = run(4.0 / 15.0);
@@ -288,4 +309,74 @@ fn understeer_saturates_the_front_and_the_brakes_leave_the_steering_its_grip() {
         t_slide.abs() < 0.8 * t_grip.abs(),
         "braking {t_slide} N·m sliding against {t_grip} N·m gripping"
     );
+}
+
+/// Front tyres that slide sideways at a large angle hold the steering: a car at
+/// 15 m/s steered at 0.25 rad that turns at 3 m/s² (front slip angle
+/// 0.25 − atan(1.1·0.2/15) ≈ 0.235 rad) is held, the plan's growing steering
+/// not followed; the same car with the front axle's lateral velocity 2.6 m/s
+/// (slip angle 0.25 − atan(2.82/15) ≈ 0.064 rad, under `FRONT_SLIP_HOLD_RAD`)
+/// steers towards the plan, and so does a car turning as steered; steered left
+/// or right.
+#[test]
+fn front_tyres_sliding_at_a_large_angle_hold_the_steering() {
+    use firmware::tasks::FRONT_SLIP_HOLD_RAD;
+    use firmware::vehicle_config::VehicleConfig;
+    let car = VehicleConfig {
+        l_f_m: 1.1,
+        l_r_m: 1.6,
+        cg_height_m: 0.55,
+        width_m: 1.85,
+        length_m: 4.5,
+        mass_kg: 1500.0,
+        wheel_radius_m: 0.31,
+        max_steer_rad: 0.6,
+    };
+    let run = |vy: f64, yaw_rate: f64, side: f64| {
+        // The plan steers further, 0.1 rad per node from 0.25, on the yaw the car
+        // will have (no yaw error: the steering is the plan's).
+        let mut plan = Plan::zeroed();
+        plan.dt_s = 0.2;
+        for (k, n) in plan.nodes.iter_mut().enumerate() {
+            n.v_mps = 15.0;
+            n.delta_rad = side * (0.25 + 0.1 * k as f64).min(0.55);
+            n.psi_rad = side * yaw_rate * 0.2;
+        }
+        for (u, w) in plan.inputs.iter_mut().zip(plan.nodes.windows(2)) {
+            u[1] = (w[1].delta_rad - w[0].delta_rad) / 0.2;
+        }
+        let mut control = car.control_task(1.0).unwrap();
+        let mut steering = Vec::new();
+        for k in 0..20u64 {
+            let e = StateEstimate {
+                stamp_us: k * CONTROL_PERIOD_US,
+                x_m: 0.0,
+                y_m: 0.0,
+                psi_rad: 0.0,
+                vx_mps: 15.0,
+                vy_mps: side * vy,
+                yaw_rate_radps: side * yaw_rate,
+                delta_rad: side * 0.25,
+            };
+            steering.push(side * control.run(&e, &plan, k * CONTROL_PERIOD_US).delta_rad);
+        }
+        (control.steering_held(), steering)
+    };
+    // Left and right alike (the steering's side flipped, and what it measures).
+    for side in [1.0, -1.0] {
+        let (held, s) = run(0.0, 3.0 / 15.0, side);
+        assert!(held);
+        // From the confirmation on (the 6th activation), no further than it was.
+        assert!(s[5] > s[0], "{s:?}");
+        assert!(s[6..].iter().all(|&d| d == s[5]), "{s:?}");
+        let alpha = 0.25f64 - ((2.6f64 + 1.1 * 0.2) / 15.0).atan();
+        assert!(alpha < f64::from(FRONT_SLIP_HOLD_RAD), "{alpha}");
+        let (held, s_small) = run(2.6, 3.0 / 15.0, side);
+        assert!(!held);
+        assert!(s_small[19] > s[19] + 0.05, "{s_small:?} against {s:?}");
+        // Turning as steered (V·ψ̇ = V²·tan δ/L): not saturated, not held.
+        let (held, s_grip) = run(0.0, 15.0 * 0.2553 / 2.7, side);
+        assert!(!held);
+        assert!(s_grip[19] > s[19] + 0.05);
+    }
 }
