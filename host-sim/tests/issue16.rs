@@ -1,7 +1,10 @@
 //! Grip that changes and sensors that lie, end to end on real circuits
 //! (`tests/data`): a wet patch entered in a curve (Shanghai: a car standing at its
 //! steering lock must turn its wheels back; Oschersleben: front tyres at their
-//! limit must keep their lateral grip under braking) and a noisy, late estimate on
+//! limit must keep their lateral grip under braking; BrandsHatch and
+//! MoscowRaceway: front tyres sliding at a large angle must not be steered to the
+//! lock; on each the friction estimate back at 0.9 of the configured friction
+//! within 10 s of the patch's exit) and a noisy, late estimate on
 //! a wet road (Budapest at μ 0.3: the car must not stand still on a clear road).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
@@ -12,8 +15,8 @@ use host_sim::world::faults::Fault;
 use host_sim::world::road_friction::MuPatch;
 
 /// One lap of `track` (a file of `tests/data`) as the sweep runs it; returns the
-/// cells `outcome`, `stop_reason` and `collisions`.
-fn lap(track: &str, mu: f64, noise: f64, delay_ms: f64, patches: Vec<MuPatch>) -> [String; 3] {
+/// cells `outcome`, `stop_reason`, `collisions` and `mu_recovery_s`.
+fn lap(track: &str, mu: f64, noise: f64, delay_ms: f64, patches: Vec<MuPatch>) -> [String; 4] {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data")
         .join(track);
@@ -41,7 +44,12 @@ fn lap(track: &str, mu: f64, noise: f64, delay_ms: f64, patches: Vec<MuPatch>) -
     let cells: Vec<(String, String)> = header().into_iter().skip(10).zip(row.cells).collect();
     let cell = |name: &str| cells.iter().find(|(h, _)| h == name).unwrap().1.clone();
     assert_eq!(cell("error"), "", "{track}");
-    [cell("outcome"), cell("stop_reason"), cell("collisions")]
+    [
+        cell("outcome"),
+        cell("stop_reason"),
+        cell("collisions"),
+        cell("mu_recovery_s"),
+    ]
 }
 
 #[test]
@@ -51,16 +59,31 @@ fn a_wet_patch_entered_in_a_curve_costs_no_lap() {
         length_m: 200.0,
         mu: 0.5,
     };
-    for track in ["Shanghai.csv", "Oschersleben.csv"] {
-        let [outcome, stop, collisions] = lap(track, 1.0, 0.0, 0.0, vec![patch]);
+    for track in [
+        "Shanghai.csv",
+        "Oschersleben.csv",
+        "BrandsHatch.csv",
+        "MoscowRaceway.csv",
+    ] {
+        let [outcome, stop, collisions, recovery] = lap(track, 1.0, 0.0, 0.0, vec![patch]);
         assert_eq!(outcome, "ok", "{track}: {stop}");
         assert_eq!(collisions, "0", "{track}");
+        // Empty when μ̂ never dropped on the patch.
+        let recovery: f64 = if recovery.is_empty() {
+            0.0
+        } else {
+            recovery.parse().unwrap()
+        };
+        assert!(
+            recovery <= 10.0,
+            "{track}: μ̂ back at 0.9 after {recovery} s"
+        );
     }
 }
 
 #[test]
 fn a_noisy_late_estimate_on_a_wet_road_drives_on() {
-    let [outcome, stop, collisions] = lap("Budapest.csv", 0.3, 4.0, 100.0, Vec::new());
+    let [outcome, stop, collisions, _] = lap("Budapest.csv", 0.3, 4.0, 100.0, Vec::new());
     assert_eq!(outcome, "ok", "{stop}");
     assert_eq!(collisions, "0");
 }
