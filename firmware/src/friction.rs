@@ -73,7 +73,12 @@
 //! μ̂ = min(μ̂_before, max(μ_used,peak, μ_shown, μ_min, max_drop·μ̂_before))
 //! ```
 //!
-//! the best `μ_used,peak` of the event counting. Too low an estimate is no safer
+//! the best `μ_used,peak` of the event counting. An event ends once the evidence
+//! of slip has been gone for [`FrictionConfig::event_gap_s`] (1 s): a shortfall
+//! within it continues the event (wheels that spun, braked back to the road's
+//! speed, take the brake torque first; read as a second event, 0.75 s after a
+//! spin on Spielberg's wet patch, it took `μ̂` from 0.6 to the floor 0.4 of a
+//! 0.5 road). Too low an estimate is no safer
 //! than too high a one: the planner can then brake only at `0.8·μ̂·g`, and its
 //! `V_max` falls to `0.8·μ̂·g·T_H`; hence the peak, and the floor
 //! [`FrictionConfig::max_drop`] per event.
@@ -205,6 +210,9 @@ pub struct FrictionConfig<T> {
     pub creep_per_s: T,
     /// Largest patience (module docs: each relapse doubles it), ≥ 1.
     pub patience_max: T,
+    /// Time without evidence of slip that ends a slip event, s, ≥ 0: a slip
+    /// within it continues the event (module docs).
+    pub event_gap_s: T,
     /// Evidence of slip is gone when the shortfall is under this fraction of the
     /// slip threshold, in `[0, 1]` (the hysteresis).
     pub clear_fraction: T,
@@ -235,7 +243,8 @@ impl<T: Real> FrictionConfig<T> {
     ///   0.6 m/s² (1.4× the largest measured without slip: 0.42 m/s², the 17
     ///   circuits at μ = 1 and 0.5) held for 0.05 s;
     /// * the friction used kept over 1 s (the tyre's peak before it spun or locked);
-    ///   one event lowers `μ̂` by at most 40 %;
+    ///   one event lowers `μ̂` by at most 40 %, and ends after 1 s without
+    ///   evidence of slip;
     /// * the recovery, the vigilance and the standstill rule of the module docs
     ///   (their constants stated and justified there); `μ̂ ≥ 0.4·mu_nominal`
     ///   (the configured friction is
@@ -271,6 +280,7 @@ impl<T: Real> FrictionConfig<T> {
             fast_ceiling: T::lit(0.9),
             creep_per_s: T::lit(0.002),
             patience_max: T::lit(32.0),
+            event_gap_s: T::ONE,
             clear_fraction: T::HALF,
             mu_min: T::lit(0.4) * mu_nominal,
             max_gap_s: T::lit(0.1),
@@ -313,6 +323,7 @@ impl<T: Real> FrictionConfig<T> {
             && nonneg(self.creep_per_s)
             && self.patience_max.is_finite()
             && self.patience_max >= T::ONE
+            && nonneg(self.event_gap_s)
             && nonneg(self.clear_fraction)
             && self.clear_fraction <= T::ONE
             && pos(self.mu_min)
@@ -353,7 +364,8 @@ pub struct FrictionEstimator<T> {
     slipping: bool,
     /// `μ̂` before the slip event under way.
     mu_before: T,
-    /// Time without evidence of slip since the last slip, s.
+    /// Time without evidence of slip since the last slip, s (+∞ before the
+    /// first).
     since_slip_s: T,
     /// The estimate `μ̂`.
     mu: T,
@@ -395,7 +407,7 @@ impl<T: Real> FrictionEstimator<T> {
             shown: T::ZERO,
             slipping: false,
             mu_before: T::INFINITY,
-            since_slip_s: T::ZERO,
+            since_slip_s: T::INFINITY,
             mu: T::INFINITY,
             events: 0,
             patience: T::ONE,
@@ -598,7 +610,10 @@ impl<T: Real> FrictionEstimator<T> {
             T::ZERO
         };
         if short && self.shortfall_s >= cfg.confirm_s {
-            let new_event = !self.slipping;
+            // A shortfall that returns within `event_gap_s` of the last one
+            // continues its event (the spun wheels braked back to the road's
+            // speed take the brake torque first: not a second slip).
+            let new_event = !self.slipping && self.since_slip_s >= cfg.event_gap_s;
             // The grip shown since the last event (not counted before the first,
             // and once the estimate is back at the configured friction): a
             // relapse lowers μ̂ no further than the road has shown it holds.
@@ -607,15 +622,15 @@ impl<T: Real> FrictionEstimator<T> {
             } else {
                 T::ZERO
             };
+            self.slipping = true;
             if new_event {
-                self.slipping = true;
                 self.mu_before = self.mu;
                 self.shown = self.peak.0;
                 self.events = self.events.wrapping_add(1);
                 // A relapse (slip again after μ̂ rose): the road is still
                 // slippery; recover more patiently.
                 if self.rose {
-                    self.patience = (self.patience * T::TWO).min(cfg.patience_max);
+                    self.patience = smaller(self.patience * T::TWO, cfg.patience_max);
                 }
                 self.rose = false;
             }
@@ -632,7 +647,7 @@ impl<T: Real> FrictionEstimator<T> {
                 let obs = best.sqrt() / g;
                 let floor = larger(self.mu_before * cfg.max_drop, cfg.mu_min);
                 let mu = smaller(self.mu_before, larger(obs, floor));
-                self.mu = if new_event { mu } else { self.mu.max(mu) };
+                self.mu = if new_event { mu } else { larger(self.mu, mu) };
             }
             self.since_slip_s = T::ZERO;
         } else {
@@ -672,7 +687,7 @@ impl<T: Real> FrictionEstimator<T> {
         if clear {
             self.since_slip_s += dt;
         }
-        let hold = (cfg.hold_s * self.patience).min(cfg.hold_max_s);
+        let hold = smaller(cfg.hold_s * self.patience, cfg.hold_max_s);
         if self.since_slip_s > hold && self.mu < cfg.mu_nominal {
             let rate = if self.mu < cfg.fast_ceiling * cfg.mu_nominal {
                 cfg.recovery_per_s
@@ -887,6 +902,39 @@ mod tests {
         r.drive(v, 0.0, 0.0, 0.0, 0.5);
         let rate = (r.e.mu() - mu) / 0.5;
         assert!((rate - 0.09).abs() < 2e-3, "rate {rate}");
+    }
+
+    #[test]
+    fn a_slip_within_the_event_gap_continues_the_event() {
+        let (mut r, v) = Rig::learned(1.0);
+        // Braking at 5.9 m/s² that gives 4.9: one event, μ̂ down by at most 40 %.
+        let v = r.drive(v.max(25.0), -5.9, -4.9, 0.0, 0.5);
+        assert_eq!(r.e.events(), 1);
+        let first = r.e.mu();
+        assert!((first - 0.45).abs() < 1e-6, "μ̂ = {first}");
+        // The shortfall gone (the event's flag down, the evidence gone for less
+        // than the 1 s gap), then back: the same event, μ̂ not lowered a second
+        // time.
+        let mut v = v;
+        while r.e.slipping() {
+            v = r.drive(v, 0.0, 0.0, 0.0, 0.01);
+        }
+        let v = r.drive(v, 0.0, 0.0, 0.0, 0.1);
+        assert!(r.e.since_slip_s < r.c.event_gap_s, "{}", r.e.since_slip_s);
+        let v = r.drive(v, -5.9, -4.9, 0.0, 0.5);
+        assert!(r.e.slipping());
+        assert_eq!(r.e.events(), 1);
+        assert_eq!(r.e.mu(), first);
+        // Gone for longer than the gap (under the 2 s hold: μ̂ has not risen): a
+        // new event, which lowers it again.
+        let mut v = v;
+        while r.e.since_slip_s < r.c.event_gap_s {
+            v = r.drive(v, 0.0, 0.0, 0.0, 0.01);
+        }
+        assert_eq!(r.e.mu(), first);
+        r.drive(v, -5.9, -4.9, 0.0, 0.5);
+        assert_eq!(r.e.events(), 2);
+        assert!(r.e.mu() < first, "μ̂ = {}", r.e.mu());
     }
 
     #[test]

@@ -571,8 +571,9 @@ fn at_the_fast_ceiling_the_estimate_creeps() {
     let mut c = cfg();
     c.fast_ceiling = f64::from(0.4f32);
     let mut r = Rig::with(c);
+    // (2 s apart: the second after the 1 s gap that ends the first.)
     let v = r.drive(25.0, -6.0, -1.0, 0.5);
-    let v = r.drive(v, 0.0, 0.0, 1.5);
+    let v = r.drive(v, 0.0, 0.0, 2.0);
     let v = r.drive(v, -6.0, -1.0, 0.5);
     assert_eq!(r.e.events(), 2);
     let floor = r.c.mu_min;
