@@ -1431,3 +1431,47 @@ fn a_held_steering_turns_no_further_but_may_turn_back() {
     // Straight ahead, held: either way is further, so it stays straight.
     assert_eq!(steer(0.3, 0.0, &held), 0.0);
 }
+
+proptest::proptest! {
+    /// Whatever the plan asks and the car does, a held steering's command is no
+    /// further from straight ahead than the last one, and any command stays
+    /// within the lock and the rate limit of one period.
+    #[test]
+    fn the_steering_command_keeps_its_hold_lock_and_rate(
+        last in -0.6f64..0.6,
+        delta_plan in -0.6f64..0.6,
+        rate in -2.0f64..2.0,
+        v in 0.0f64..30.0,
+        yaw_rate in -1.0f64..1.0,
+        psi in -3.0f64..3.0,
+        held: bool,
+    ) {
+        let cfg = LowLevelConfig::<f64>::default();
+        let car = CarModel {
+            hold_steering: held,
+            ..CarModel::configured(&cfg)
+        };
+        let mut plan = straight_plan(0, v);
+        for n in plan.nodes.iter_mut() {
+            n.delta_rad = delta_plan;
+        }
+        for u in plan.inputs.iter_mut() {
+            u[1] = rate;
+        }
+        let mut st = LowLevelState::new();
+        st.last_delta_rad = Some(last);
+        let e = StateEstimate {
+            yaw_rate_radps: yaw_rate,
+            ..est(v, psi)
+        };
+        let d = control_with_model(&cfg, &mut st, &plan, &e, 0, &car)
+            .unwrap()
+            .delta_rad;
+        let step = cfg.steer_rate_limit_radps * cfg.period_s;
+        proptest::prop_assert!(d.abs() <= cfg.steer_limit_rad);
+        proptest::prop_assert!((d - last).abs() <= step + 1e-12, "{d} from {last}");
+        if held {
+            proptest::prop_assert!(d.abs() <= last.abs(), "{d} held at {last}");
+        }
+    }
+}
