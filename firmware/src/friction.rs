@@ -141,7 +141,7 @@ use crate::longitudinal_estimator::{
 };
 use crate::timing::CONTROL_PERIOD_US;
 use crate::Real;
-use qp::real::all_finite;
+use qp::real::{all_finite, larger, smaller};
 
 /// Control periods of commanded torque the friction check keeps (160 ms at
 /// 100 Hz): the oldest state estimate it can pair with the torque that moved the
@@ -702,28 +702,6 @@ impl<T: Real> FrictionEstimator<T> {
                 self.patience = T::ONE;
             }
         }
-    }
-}
-
-/// The smaller of `a` and `b`, both finite (a plain comparison: [`Real::min`]'s
-/// care for NaN costs instructions the control task's budget does not have, and
-/// the values here are finite by construction).
-#[inline(always)]
-pub(crate) fn smaller<T: Real>(a: T, b: T) -> T {
-    if b < a {
-        b
-    } else {
-        a
-    }
-}
-
-/// The larger of `a` and `b`, both finite (as [`smaller`]).
-#[inline(always)]
-pub(crate) fn larger<T: Real>(a: T, b: T) -> T {
-    if b > a {
-        b
-    } else {
-        a
     }
 }
 

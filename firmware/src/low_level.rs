@@ -102,12 +102,11 @@
 //! routines. Its static bound on the ECU, with the rest of the control task's job,
 //! is in `host-sim wcet`'s report (`control_job`).
 
-use crate::friction::{larger, smaller};
 use crate::pid::{self, PidConfig, PidConfigError, PidState};
 use crate::plan::{Plan, HORIZON};
 use crate::state_estimate::StateEstimate;
 use crate::Real;
-use qp::real::all_finite;
+use qp::real::{all_finite, larger, smaller};
 
 /// Time constant with which a paused yaw loop's output `δ_cl` and its integrator
 /// are released towards 0, s (below [`LowLevelConfig::lateral_min_speed_mps`]:

@@ -36,7 +36,7 @@
 //! [`MpcSettings::cold_start_iterations`] linearise–condense passes and at most
 //! [`MpcSettings::qp_max_iter`] QP iterations (see [`Mpc::step_observed`]).
 
-use crate::friction::{larger, smaller, FrictionConfig, FrictionEstimator};
+use crate::friction::{FrictionConfig, FrictionEstimator};
 use crate::longitudinal_estimator::V_REF_MPS;
 use crate::low_level::{
     self, Actuation, CarModel, ControlFault, LowLevelConfig, LowLevelState, Mode,
@@ -47,6 +47,7 @@ use crate::plan::{Plan, HORIZON};
 use crate::reference_path::{PathError, ReferencePath};
 use crate::state_estimate::StateEstimate;
 use crate::Real;
+use qp::real::{larger, smaller};
 
 pub use crate::reference_path::ECU_PATH_ROWS;
 pub use crate::timing::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
@@ -91,6 +92,13 @@ pub const FRONT_SLIP_HOLD_RAD: f32 = 0.1;
 /// ([`ControlTask::steering_held`]; slower, the estimate's lateral velocity
 /// divided by the speed is mostly noise).
 pub const FRONT_SLIP_MIN_SPEED_MPS: f32 = 3.0;
+
+/// `tan x` as `x + x³/3`, rad → dimensionless: within 2 % for `|x| ≤ 0.6`
+/// rad, no trigonometric call (the control task's budget).
+#[inline(always)]
+fn tan_cubic<T: Real>(x: T) -> T {
+    x + x * x * x * T::lit(1.0 / 3.0)
+}
 
 /// Oldest a plan may be when it is published (time since its release), µs: two
 /// periods. An older plan is dropped ([`PlanTask::publish_at`]).
@@ -631,7 +639,7 @@ impl<T: Real> ControlTask<T> {
         // tan δ to within 2 % for |δ| ≤ 0.6 rad (no trigonometric call); 0 without
         // a wheelbase (no check).
         let d = est.delta_rad;
-        let kinematic = v * v * (d + d * d * d * T::lit(1.0 / 3.0)) * self.inv_wheelbase;
+        let kinematic = v * v * tan_cubic(d) * self.inv_wheelbase;
         // `measured` in the steering's direction under the ratio of `|kinematic|`,
         // both sides times `|kinematic|` (no branch on the sign).
         let k2 = kinematic * kinematic;
@@ -640,12 +648,12 @@ impl<T: Real> ControlTask<T> {
         // The front axle's slip angle in the steering's direction,
         // |δ| − sign(δ)·atan((v_y + l_f·ψ̇)/v_x), at least α_h: as
         // δ·(v_y + l_f·ψ̇) ≤ v_x·|δ|·tan(|δ| − α_h) (atan increasing, v_x > 0; both
-        // sides times |δ|), tan as x + x³/3 (within 0.005 for |x| ≤ 0.5): no
+        // sides times |δ|), tan as `tan_cubic` (within 0.005 for |x| ≤ 0.5): no
         // division, no branch on the sign.
         let n = est.vy_mps + self.front_axle_m * est.yaw_rate_radps;
         let x = d.abs() - T::lit(FRONT_SLIP_HOLD_RAD);
-        self.front_sliding = v >= T::lit(FRONT_SLIP_MIN_SPEED_MPS)
-            && n * d <= v * d.abs() * (x + x * x * x * T::lit(1.0 / 3.0));
+        self.front_sliding =
+            v >= T::lit(FRONT_SLIP_MIN_SPEED_MPS) && n * d <= v * d.abs() * tan_cubic(x);
         self.understeer_s = if under {
             self.understeer_s + T::lit(CONTROL_PERIOD_US as f32 * 1e-6)
         } else {

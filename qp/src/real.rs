@@ -266,6 +266,28 @@ pub fn all_finite<T: Real, const N: usize>(values: [T; N]) -> bool {
     finite_probe(values) == T::ZERO
 }
 
+/// The smaller of `a` and `b`, both finite: a plain comparison, without
+/// [`Real::min`]'s care for NaN (its two compares, flag transfers and conditional
+/// moves cost the control task's budget, which has values finite by construction).
+#[inline(always)]
+pub fn smaller<T: Real>(a: T, b: T) -> T {
+    if b < a {
+        b
+    } else {
+        a
+    }
+}
+
+/// The larger of `a` and `b`, both finite (as [`smaller`]).
+#[inline(always)]
+pub fn larger<T: Real>(a: T, b: T) -> T {
+    if b > a {
+        b
+    } else {
+        a
+    }
+}
+
 /// Single-precision sine, cosine, tangent, arc sine and hypotenuse computed in
 /// `f32` only (no `f64` arithmetic, so no software double precision on the M4F).
 ///
