@@ -40,6 +40,20 @@ impl Car {
     }
 }
 
+/// The built-in car as the firmware is told of it (the control tasks' tests).
+fn vehicle() -> firmware::vehicle_config::VehicleConfig<f64> {
+    firmware::vehicle_config::VehicleConfig {
+        l_f_m: 1.1,
+        l_r_m: 1.6,
+        cg_height_m: 0.55,
+        width_m: 1.85,
+        length_m: 4.5,
+        mass_kg: 1500.0,
+        wheel_radius_m: 0.31,
+        max_steer_rad: 0.6,
+    }
+}
+
 fn setup() -> (Box<PlanTask<f64, CAP>>, ControlTask<f64>, Car) {
     let geometry = BicycleGeometry {
         l_f_m: 1.1,
@@ -233,17 +247,7 @@ fn the_mpc_starts_from_the_last_plans_open_loop_steering() {
 /// car that turns as steered is not saturated.
 #[test]
 fn understeer_saturates_the_front_and_the_brakes_leave_the_steering_its_grip() {
-    use firmware::vehicle_config::VehicleConfig;
-    let car = VehicleConfig {
-        l_f_m: 1.1,
-        l_r_m: 1.6,
-        cg_height_m: 0.55,
-        width_m: 1.85,
-        length_m: 4.5,
-        mass_kg: 1500.0,
-        wheel_radius_m: 0.31,
-        max_steer_rad: 0.6,
-    };
+    let car = vehicle();
     let mut plan = Plan::zeroed();
     plan.dt_s = 0.2;
     for (k, n) in plan.nodes.iter_mut().enumerate() {
@@ -277,20 +281,13 @@ fn understeer_saturates_the_front_and_the_brakes_leave_the_steering_its_grip() {
     // Saturated at a small front slip angle (0.1 − 1.1·4/15² ≈ 0.08 rad: the
     // wheels locked or spinning, not sliding sideways): the steering is free.
     let mut control = car.control_task(1.0).unwrap();
-    let e = StateEstimate {
-        stamp_us: 0,
-        x_m: 0.0,
-        y_m: 0.0,
-        psi_rad: 0.0,
-        vx_mps: 15.0,
-        vy_mps: 0.0,
-        yaw_rate_radps: 4.0 / 15.0,
-        delta_rad: 0.1,
-    };
     for k in 0..10u64 {
         let e = StateEstimate {
             stamp_us: k * CONTROL_PERIOD_US,
-            ..e
+            vx_mps: 15.0,
+            yaw_rate_radps: 4.0 / 15.0,
+            delta_rad: 0.1,
+            ..StateEstimate::zeroed()
         };
         control.run(&e, &plan, k * CONTROL_PERIOD_US);
     }
@@ -321,17 +318,7 @@ fn understeer_saturates_the_front_and_the_brakes_leave_the_steering_its_grip() {
 #[test]
 fn front_tyres_sliding_at_a_large_angle_hold_the_steering() {
     use firmware::tasks::FRONT_SLIP_HOLD_RAD;
-    use firmware::vehicle_config::VehicleConfig;
-    let car = VehicleConfig {
-        l_f_m: 1.1,
-        l_r_m: 1.6,
-        cg_height_m: 0.55,
-        width_m: 1.85,
-        length_m: 4.5,
-        mass_kg: 1500.0,
-        wheel_radius_m: 0.31,
-        max_steer_rad: 0.6,
-    };
+    let car = vehicle();
     let run = |vy: f64, yaw_rate: f64, side: f64| {
         // The plan steers further, 0.1 rad per node from 0.25, on the yaw the car
         // will have (no yaw error: the steering is the plan's).
@@ -350,13 +337,11 @@ fn front_tyres_sliding_at_a_large_angle_hold_the_steering() {
         for k in 0..20u64 {
             let e = StateEstimate {
                 stamp_us: k * CONTROL_PERIOD_US,
-                x_m: 0.0,
-                y_m: 0.0,
-                psi_rad: 0.0,
                 vx_mps: 15.0,
                 vy_mps: side * vy,
                 yaw_rate_radps: side * yaw_rate,
                 delta_rad: side * 0.25,
+                ..StateEstimate::zeroed()
             };
             steering.push(side * control.run(&e, &plan, k * CONTROL_PERIOD_US).delta_rad);
         }
