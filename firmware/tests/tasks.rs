@@ -365,3 +365,32 @@ fn front_tyres_sliding_at_a_large_angle_hold_the_steering() {
         assert!(s_grip[19] > s[19] + 0.05);
     }
 }
+
+#[test]
+fn the_traction_limit_counts_the_load_the_cars_own_acceleration_takes_off_the_front() {
+    let car = vehicle();
+    let control = car.control_task(1.0).unwrap();
+    let fc = *control.friction_config();
+    // Before any sample the mass's uncertainty is its largest.
+    let u = fc.longitudinal.mass_uncertainty_max;
+    let g = f64::from(firmware::G);
+    let grip = g * f64::from(firmware::tasks::TORQUE_GRIP_FRACTION);
+    for ay in [0.0, 2.0, 4.0] {
+        let inside = grip * (1.0 - 2.0 * ay / g * fc.cg_height_over_track);
+        let ellipse = (1.0 - (ay / grip).powi(2)).sqrt();
+        let inside = inside * ellipse;
+        // Exact: `a = inside·(1 − u)·(share − (h/L)·a/g)` solved for `a`, the
+        // transfer counted at the inside wheel's grip.
+        let y = inside * fc.cg_height_over_wheelbase / g;
+        let exact = inside * (1.0 - u) * fc.driven_load_share / (1.0 + y);
+        let limit = control.car_model(ay).traction_grip_mps2;
+        assert!(limit <= exact, "a_y {ay}: {limit} over {exact}");
+        assert!(limit >= exact * (1.0 - y.powi(4)) - 1e-12, "a_y {ay}: {limit} vs {exact}");
+        // The transfer matters: on a straight 15 % below the limit without it.
+        let without = inside * (1.0 - u) * fc.driven_load_share;
+        assert!(limit < without / (1.0 + 0.9 * y), "a_y {ay}: {limit} vs {without}");
+        if ay == 0.0 {
+            assert!(limit < 0.86 * without, "{limit} vs {without}");
+        }
+    }
+}
