@@ -160,6 +160,7 @@ struct Stage<T> {
 #[inline]
 fn stage<T: Real>(
     inv_lr: T,
+    lag: T,
     x: &State<T>,
     u: &Input<T>,
     st: &SteerTerms<T>,
@@ -167,19 +168,33 @@ fn stage<T: Real>(
 ) -> Stage<T> {
     let v = x[V];
     // cos(ψ + β), sin(ψ + β) by the addition formulas: no call for β itself.
-    let c = cp * st.cos_b - sp * st.sin_b;
-    let s = sp * st.cos_b + cp * st.sin_b;
+    let c0 = cp * st.cos_b - sp * st.sin_b;
+    let s0 = sp * st.cos_b + cp * st.sin_b;
+    // The course lags the kinematic one by `−ε = lag·a_y`, `a_y = V²·sin β/l_r`
+    // ([`crate::sideslip`]): `(c, s)` is `(c0, s0)` turned by `ε`, with
+    // `sin ε ≈ ε`, `cos ε ≈ 1 − ε²/2` (|ε| ≤ 0.12 rad: error ≤ 3e-4). `lag = 0`
+    // gives `(c0, s0)` exactly.
+    let vsb = v * st.sin_b * inv_lr;
+    let eps = -lag * v * vsb;
+    let ce = T::ONE - T::HALF * eps * eps;
+    let c = c0 * ce - s0 * eps;
+    let s = s0 * ce + c0 * eps;
+    // ∂(c, s)/∂ε of those formulas, and ∂ε/∂V, ∂ε/∂δ.
+    let (dc_e, ds_e) = (-(s0 + c0 * eps), c0 - s0 * eps);
+    let de_v = -T::TWO * lag * vsb;
+    let de_d = -lag * v * v * st.cos_b * st.dbeta * inv_lr;
     Stage {
-        f: [
-            v,
-            v * c,
-            v * s,
-            u[U_ACCEL],
-            v * st.sin_b * inv_lr,
-            u[U_STEER_RATE],
+        f: [v, v * c, v * s, u[U_ACCEL], vsb, u[U_STEER_RATE]],
+        dx: [
+            c + v * dc_e * de_v,
+            -v * s,
+            -v * s * st.dbeta + v * dc_e * de_d,
         ],
-        dx: [c, -v * s, -v * s * st.dbeta],
-        dy: [s, v * c, v * c * st.dbeta],
+        dy: [
+            s + v * ds_e * de_v,
+            v * c,
+            v * c * st.dbeta + v * ds_e * de_d,
+        ],
         dpsi: [st.sin_b * inv_lr, v * st.cos_b * st.dbeta * inv_lr],
     }
 }
@@ -279,7 +294,7 @@ impl<T: Real> BicycleGeometry<T> {
     pub fn dynamics(&self, x: &State<T>, u: &Input<T>) -> State<T> {
         let k = self.l_r_m / self.wheelbase_m();
         let st = SteerTerms::new(k, x[DELTA]);
-        stage(T::ONE / self.l_r_m, x, u, &st, x[PSI].sin_cos()).f
+        stage(T::ONE / self.l_r_m, T::ZERO, x, u, &st, x[PSI].sin_cos()).f
     }
 
     /// One classical RK4 step of length `dt_s` (s) of [`Self::dynamics`] with the
@@ -310,6 +325,21 @@ impl<T: Real> BicycleGeometry<T> {
         u: &Input<T>,
         dt_s: T,
         tan_delta: T,
+    ) -> Discretization<T> {
+        self.discretize_lagged(x, u, dt_s, tan_delta, T::ZERO)
+    }
+
+    /// [`Self::discretize_with_tan`] of the model whose course lags the kinematic
+    /// one by `lag·a_y` (`lag` in rad per m/s², `a_y = V²·sin β/l_r`): the sideslip
+    /// a real car's rear tyres add in a bend ([`crate::sideslip`]). `lag = 0`: the
+    /// paper's model, bit for bit.
+    pub fn discretize_lagged(
+        &self,
+        x: &State<T>,
+        u: &Input<T>,
+        dt_s: T,
+        tan_delta: T,
+        lag: T,
     ) -> Discretization<T> {
         let k = self.l_r_m / self.wheelbase_m();
         let inv_lr = T::ONE / self.l_r_m;
@@ -346,11 +376,12 @@ impl<T: Real> BicycleGeometry<T> {
             m
         };
 
-        let g1 = stage(inv_lr, x, u, &st1, sc1);
+        let g1 = stage(inv_lr, lag, x, u, &st1, sc1);
         let dk1 = stage_derivative(&g1, &ident);
         let x2 = advance(x, &g1.f, h2);
         let g2 = stage(
             inv_lr,
+            lag,
             &x2,
             u,
             &st23,
@@ -360,6 +391,7 @@ impl<T: Real> BicycleGeometry<T> {
         let x3 = advance(x, &g2.f, h2);
         let g3 = stage(
             inv_lr,
+            lag,
             &x3,
             u,
             &st23,
@@ -369,6 +401,7 @@ impl<T: Real> BicycleGeometry<T> {
         let x4 = advance(x, &g3.f, dt_s);
         let g4 = stage(
             inv_lr,
+            lag,
             &x4,
             u,
             &st4,
@@ -407,6 +440,12 @@ impl<T: Real> BicycleGeometry<T> {
     /// Jacobians (same transcendental calls, about a tenth of the arithmetic): for
     /// a rollout that needs no sensitivities (the plan under the optimal inputs).
     pub fn step(&self, x: &State<T>, u: &Input<T>, dt_s: T) -> State<T> {
+        self.step_lagged(x, u, dt_s, T::ZERO)
+    }
+
+    /// [`Self::step`] of the lagged model ([`Self::discretize_lagged`]), bit for bit
+    /// its `x_next`.
+    pub fn step_lagged(&self, x: &State<T>, u: &Input<T>, dt_s: T, lag: T) -> State<T> {
         let k = self.l_r_m / self.wheelbase_m();
         let inv_lr = T::ONE / self.l_r_m;
         let h2 = dt_s * T::HALF;
@@ -424,16 +463,16 @@ impl<T: Real> BicycleGeometry<T> {
             }
             y
         };
-        let f1 = stage(inv_lr, x, u, &st1, sc1).f;
+        let f1 = stage(inv_lr, lag, x, u, &st1, sc1).f;
         let x2 = advance(&f1, h2);
         let sc2 = sin_cos_of_sum(sc1, x[PSI], x2[PSI] - x[PSI]);
-        let f2 = stage(inv_lr, &x2, u, &st23, sc2).f;
+        let f2 = stage(inv_lr, lag, &x2, u, &st23, sc2).f;
         let x3 = advance(&f2, h2);
         let sc3 = sin_cos_of_sum(sc1, x[PSI], x3[PSI] - x[PSI]);
-        let f3 = stage(inv_lr, &x3, u, &st23, sc3).f;
+        let f3 = stage(inv_lr, lag, &x3, u, &st23, sc3).f;
         let x4 = advance(&f3, dt_s);
         let sc4 = sin_cos_of_sum(sc1, x[PSI], x4[PSI] - x[PSI]);
-        let f4 = stage(inv_lr, &x4, u, &st4, sc4).f;
+        let f4 = stage(inv_lr, lag, &x4, u, &st4, sc4).f;
         let w = dt_s / T::lit(6.0);
         let mut out = *x;
         for i in 0..NX {

@@ -9,6 +9,7 @@
 //! |---|---|
 //! | [`reference_path`] | centre line: arc length, projection, heading, curvature |
 //! | [`bicycle`] | kinematic bicycle model, its discretisation and Jacobians |
+//! | [`sideslip`] | online estimate of how far a real car's course lags the kinematic bicycle's in a bend |
 //! | [`validity`] | the validity limit `δ_max(V)` keeping `a_y ≤ 0.5·μ·g` |
 //! | [`velocity_planner`] | local velocity planner, `V_heur` |
 //! | [`obstacles`] | obstacle manager: one forbidden parabola per obstacle |
@@ -40,6 +41,7 @@ pub mod pid;
 pub mod plan;
 pub mod reference_path;
 pub mod setup;
+pub mod sideslip;
 pub mod state_estimate;
 pub mod tasks;
 pub mod timing;

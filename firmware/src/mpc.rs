@@ -76,6 +76,7 @@ use crate::bicycle::{self, BicycleGeometry};
 use crate::obstacles::{obstacle_speed_cap, Parabola, Side};
 use crate::plan::{Plan, HORIZON, PLAN_DT_S};
 use crate::reference_path::{CurvatureWindow, ReferencePath};
+use crate::sideslip::SideslipConfig;
 use crate::state_estimate::StateEstimate;
 use crate::validity::{kinematic_steering_for_radius, ValidityLimit};
 use crate::velocity_planner::{self, VelocityPlannerSettings};
@@ -269,6 +270,9 @@ pub struct MpcSettings<T> {
     pub velocity: VelocityPlannerSettings<T>,
     /// Steering reference of the steering cost.
     pub steering_reference: SteeringReference,
+    /// The sideslip lag's estimate ([`crate::sideslip`]): the plan task learns it,
+    /// the model uses at most its `lag_max` ([`Mpc::set_sideslip_lag`]).
+    pub sideslip: SideslipConfig<T>,
     /// Linearise–solve passes on a cold start (no previous solution), ≥ 1.
     pub cold_start_iterations: u8,
     /// QP iterations allowed in one activation, summed over its passes, ≥ 1 (with
@@ -313,6 +317,7 @@ impl<T: Real> MpcSettings<T> {
                 ..VelocityPlannerSettings::default()
             },
             steering_reference: SteeringReference::PathCurvature,
+            sideslip: SideslipConfig::for_car(geometry.l_r_m / geometry.wheelbase_m()),
             cold_start_iterations: COLD_START_PASSES,
             // The flow fact of the plan task's static bound (`host-sim wcet`); how
             // many the laps and the harshest tests need: `docs/tuning.md`, "QP
@@ -360,6 +365,14 @@ impl<T: Real> MpcSettings<T> {
                 horizon_s: z,
             },
             steering_reference: SteeringReference::PathCurvature,
+            sideslip: SideslipConfig {
+                rear_share: z,
+                forgetting: z,
+                prior_weight: z,
+                min_speed_mps: z,
+                min_lateral_mps2: z,
+                lag_max: z,
+            },
             cold_start_iterations: 0,
             qp_max_iter: 0,
         }
@@ -406,6 +419,7 @@ impl<T: Real> MpcSettings<T> {
             && self.geometry.l_f_m > T::ZERO
             && self.geometry.l_r_m.is_finite()
             && self.geometry.l_r_m > T::ZERO
+            && self.sideslip.is_valid()
             && self.cold_start_iterations >= 1
             && self.qp_max_iter >= 1;
         if ok {
@@ -468,6 +482,8 @@ pub struct MpcReport<T> {
     pub max_obstacle_slack_m: T,
     /// Largest road-limit slack in the solution, m.
     pub max_road_slack_m: T,
+    /// Sideslip lag the model planned with, rad per m/s² ([`Mpc::set_sideslip_lag`]).
+    pub sideslip_lag: T,
 }
 
 /// The MPC's workspace: the QP solver, the previous solution for the warm start,
@@ -497,6 +513,8 @@ pub struct Mpc<T> {
     resume_cold: bool,
     /// Counters of the last step, whatever its outcome.
     last_report: MpcReport<T>,
+    /// The sideslip lag of the model, rad per m/s² ([`Mpc::set_sideslip_lag`]).
+    sideslip_lag: T,
 }
 
 impl<T: Real> Default for Mpc<T> {
@@ -534,7 +552,9 @@ impl<T: Real> Mpc<T> {
                 max_validity_slack_rad: T::ZERO,
                 max_obstacle_slack_m: T::ZERO,
                 max_road_slack_m: T::ZERO,
+                sideslip_lag: T::ZERO,
             },
+            sideslip_lag: T::ZERO,
         }
     }
 
@@ -545,6 +565,19 @@ impl<T: Real> Mpc<T> {
         for s in self.s_prev.iter_mut() {
             *s -= delta_m;
         }
+    }
+
+    /// The sideslip lag `λ` of the model the next steps plan with, rad per m/s²
+    /// ([`crate::sideslip`]; [`crate::tasks::PlanTask`] sets its estimate before
+    /// each step): the course lags the kinematic bicycle's by `λ·a_y`. At most
+    /// [`MpcSettings::sideslip`]'s `lag_max` is used; 0, a negative value or NaN
+    /// is the paper's kinematic model (the default).
+    pub fn set_sideslip_lag(&mut self, lag_rad_per_mps2: T) {
+        self.sideslip_lag = if lag_rad_per_mps2 > T::ZERO {
+            lag_rad_per_mps2
+        } else {
+            T::ZERO
+        };
     }
 
     /// Forgets the previous solution: the next step starts cold.
@@ -699,6 +732,9 @@ impl<T: Real> Mpc<T> {
                 .clamp(-settings.delta_mech_max_rad, settings.delta_mech_max_rad),
         ];
 
+        // The model's sideslip lag, within the settings' bound.
+        self.condensing.lag = qp::real::smaller(self.sideslip_lag, settings.sideslip.lag_max);
+        report.sideslip_lag = self.condensing.lag;
         let passes = if warm {
             1
         } else {
@@ -782,7 +818,9 @@ impl<T: Real> Mpc<T> {
         // wcet-bound: HORIZON
         for k in 0..HORIZON {
             let u = self.u_bar[k];
-            xi = settings.geometry.step(&xi, &u, dt);
+            xi = settings
+                .geometry
+                .step_lagged(&xi, &u, dt, self.condensing.lag);
             plan.nodes[k + 1] = bicycle::node_from_state(&xi);
             plan.inputs[k] = u;
         }

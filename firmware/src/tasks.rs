@@ -45,6 +45,7 @@ use crate::mpc::{Mpc, MpcError, MpcReport, MpcSettings};
 use crate::obstacles::{Obstacle, ObstacleManager, ObstacleSettings, MAX_OBSTACLES};
 use crate::plan::{Plan, HORIZON};
 use crate::reference_path::{PathError, ReferencePath};
+use crate::sideslip::SideslipLag;
 use crate::state_estimate::StateEstimate;
 use crate::Real;
 use qp::real::{larger, smaller};
@@ -156,6 +157,8 @@ pub struct PlanTask<T, const CAP: usize> {
     /// The yaw loop's share of the measured steering, low-passed, rad: see
     /// [`PlanTask::initial_steering`].
     steer_feedback_rad: T,
+    /// The sideslip lag's estimate ([`crate::sideslip`]), the MPC's model's.
+    sideslip: SideslipLag<T>,
     /// Counters.
     pub stats: PlanTaskStats,
     /// Why the last activation published nothing (`None` after a success).
@@ -176,6 +179,7 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             ready: false,
             last_steering: None,
             steer_feedback_rad: T::ZERO,
+            sideslip: SideslipLag::new(),
             stats: PlanTaskStats {
                 activations: 0,
                 published: 0,
@@ -212,7 +216,14 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         self.mpc.last_report()
     }
 
-    /// Forgets the MPC's previous solution: the next activation starts cold.
+    /// The sideslip lag `λ` the plans use, rad per m/s² ([`crate::sideslip`]): 0
+    /// until the car has cornered.
+    pub fn sideslip_lag(&self) -> T {
+        self.sideslip.lag(&self.settings.sideslip)
+    }
+
+    /// Forgets the MPC's previous solution: the next activation starts cold (the
+    /// sideslip lag, a property of the car, is kept).
     pub fn reset(&mut self) {
         self.mpc.reset();
         self.last_steering = None;
@@ -308,6 +319,13 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             ..*est
         };
         let mu = self.planning_mu();
+        // The sideslip lag learns while the road grips as configured (a road found
+        // slipperier, `μ̂ < μ`, makes a sliding car, not the linear tyre it models);
+        // from the steering the MPC starts from (the yaw loop's fast share left out).
+        let cfg = &self.settings.sideslip;
+        self.sideslip
+            .update(cfg, est, self.friction_limit < self.mu);
+        self.mpc.set_sideslip_lag(self.sideslip.lag(cfg));
         let computed = self.mpc.step_observed(
             &self.settings,
             &self.path,

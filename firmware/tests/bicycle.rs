@@ -5,6 +5,7 @@ use firmware::bicycle::{
     discretize, node_from_state, state_from_node, BicycleGeometry, Discretization, DELTA, NU, NX,
     PSI, S, V, X, Y,
 };
+use firmware::Real;
 use proptest::prelude::*;
 
 fn geom() -> BicycleGeometry<f64> {
@@ -267,4 +268,105 @@ fn step_is_discretize_without_jacobians_bit_for_bit() {
         let s32 = g32.step(&x32, &u32_, dt as f32);
         assert_eq!(s32, g32.discretize(&x32, &u32_, dt as f32).x_next);
     }
+}
+
+/// Central finite differences of the lagged map ([`BicycleGeometry::step_lagged`]).
+fn assert_lagged_jacobians_match(x: [f64; 6], u: [f64; 2], dt: f64, lag: f64) {
+    let g = geom();
+    let an = g.discretize_lagged(&x, &u, dt, Real::tan(x[DELTA]), lag);
+    let h = 1e-6;
+    let col = |p: [f64; 6], m: [f64; 6]| -> [f64; 6] {
+        std::array::from_fn(|i| (p[i] - m[i]) / (2.0 * h))
+    };
+    for j in 0..NX + NU {
+        let (p, m) = if j < NX {
+            let (mut xp, mut xm) = (x, x);
+            xp[j] += h;
+            xm[j] -= h;
+            (
+                g.step_lagged(&xp, &u, dt, lag),
+                g.step_lagged(&xm, &u, dt, lag),
+            )
+        } else {
+            let (mut up, mut um) = (u, u);
+            up[j - NX] += h;
+            um[j - NX] -= h;
+            (
+                g.step_lagged(&x, &up, dt, lag),
+                g.step_lagged(&x, &um, dt, lag),
+            )
+        };
+        for (i, num) in col(p, m).into_iter().enumerate() {
+            let an_ij = if j < NX { an.a[i][j] } else { an.b[i][j - NX] };
+            assert!(
+                (an_ij - num).abs() < 1e-6 * (1.0 + num.abs()),
+                "lag {lag}: d{i}/d{j}: {an_ij} vs {num} at x={x:?} u={u:?}"
+            );
+        }
+    }
+}
+
+proptest! {
+    #[test]
+    fn lagged_jacobians_match_finite_differences_anywhere(
+        v in 0.0f64..35.0, psi in -7.0f64..7.0, delta in -0.5f64..0.5,
+        a in -8.0f64..6.0, r in -0.5f64..0.5, lag in 0.0f64..0.03,
+    ) {
+        assert_lagged_jacobians_match([3.0, 10.0, -2.0, v, psi, delta], [a, r], 0.1, lag);
+    }
+}
+
+#[test]
+fn a_zero_lag_is_the_kinematic_model_bit_for_bit_and_step_is_its_state() {
+    let g = BicycleGeometry {
+        l_f_m: 1.2f32,
+        l_r_m: 1.6,
+    };
+    for i in 0..100 {
+        let t = i as f32;
+        let x = [
+            t,
+            3.0 * (0.3 * t).sin(),
+            0.1 * t,
+            0.5 + 0.3 * t,
+            (0.7 * t).sin() * 4.0,
+            0.5 * (1.3 * t).cos(),
+        ];
+        let u = [6.0 * (0.9 * t).cos(), 0.5 * (0.4 * t).sin()];
+        let plain = g.discretize(&x, &u, 0.1);
+        assert_eq!(
+            g.discretize_lagged(&x, &u, 0.1, Real::tan(x[DELTA]), 0.0),
+            plain
+        );
+        assert_eq!(g.step_lagged(&x, &u, 0.1, 0.0), plain.x_next);
+        let lag = 0.02 * (0.5 + 0.5 * (0.2 * t).sin());
+        assert_eq!(
+            g.step_lagged(&x, &u, 0.1, lag),
+            g.discretize_lagged(&x, &u, 0.1, Real::tan(x[DELTA]), lag)
+                .x_next
+        );
+    }
+}
+
+#[test]
+fn the_lagged_course_turns_out_of_the_bend_by_lag_times_lateral_acceleration() {
+    let g = geom();
+    // A left bend at 20 m/s, steering held: the heading turns as the kinematic
+    // car's, the course lags it by λ·a_y.
+    let (v, delta, lag) = (20.0, 0.04, 0.015);
+    let x = [0.0, 0.0, 0.0, v, 0.0, delta];
+    let kin = g.step_lagged(&x, &[0.0, 0.0], 0.01, 0.0);
+    let lagged = g.step_lagged(&x, &[0.0, 0.0], 0.01, lag);
+    assert_eq!(kin[PSI], lagged[PSI]);
+    let beta = g.beta_rad(delta);
+    let ay = v * v * beta.sin() / g.l_r_m;
+    let course = |s: [f64; 6]| s[Y].atan2(s[X]);
+    let turn = course(lagged) - course(kin);
+    assert!(
+        (turn + lag * ay).abs() < 1e-2 * lag * ay,
+        "course turned {turn}, expected {}",
+        -lag * ay
+    );
+    // And the speed along it is the same.
+    assert!((lagged[X].hypot(lagged[Y]) - kin[X].hypot(kin[Y])).abs() < 1e-5);
 }

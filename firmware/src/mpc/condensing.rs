@@ -121,6 +121,8 @@ pub(super) struct Condensing<T> {
     pub(super) obstacle_rows: usize,
     /// Obstacle rows that found no room.
     pub(super) dropped: u32,
+    /// Sideslip lag of the model, rad per m/s² ([`crate::sideslip`]).
+    pub(super) lag: T,
 }
 
 /// The acceleration bounds of one pass, m/s² (`a_hi` before the friction ellipse),
@@ -247,6 +249,7 @@ impl<T: Real> Condensing<T> {
             node_first: [0; HORIZON + 2],
             obstacle_rows: 0,
             dropped: 0,
+            lag: T::ZERO,
         }
     }
 
@@ -275,7 +278,7 @@ impl<T: Real> Condensing<T> {
         k: usize,
         dt: T,
     ) -> [T; NX] {
-        let lin = geometry.discretize_with_tan(xbar, u, dt, tan_delta);
+        let lin = geometry.discretize_lagged(xbar, u, dt, tan_delta, self.lag);
         let used = NU * k;
         let (a, b) = self.sens.split_at_mut(1);
         let (old, new) = if self.cur == 0 {
