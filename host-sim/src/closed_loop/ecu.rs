@@ -121,6 +121,10 @@ pub struct ControlOutput<T> {
     /// (`firmware::friction`; `+∞`: no slip seen), `None` when the ECU does not
     /// report it (processor in the loop).
     pub friction_mu: Option<f64>,
+    /// The plan task's sideslip lag `λ` after this activation, rad per m/s²
+    /// (`firmware::sideslip`), `None` when the ECU does not report it (processor
+    /// in the loop).
+    pub sideslip_lag: Option<f64>,
 }
 
 /// The firmware side of the closed loop.
@@ -428,6 +432,7 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
             plans,
             skipped_releases,
             friction_mu: Some(self.control.friction_mu().to_f64()),
+            sideslip_lag: Some(self.planner.sideslip_lag().to_f64()),
         })
     }
 

@@ -89,6 +89,10 @@ pub struct Summary {
     /// (`firmware::friction`: below the planner's `μ` when a slip showed the road
     /// slipperier), null when the ECU does not report it (processor in the loop).
     pub friction_mu_min: Option<f64>,
+    /// The plan task's sideslip lag `λ` at the end of the run, rad per m/s²
+    /// (`firmware::sideslip`: the plans' course lags the kinematic bicycle's by
+    /// `λ·a_y`), null when the ECU does not report it (processor in the loop).
+    pub sideslip_lag: Option<f64>,
     /// The patches of road with their own friction, `START:LENGTH:MU` joined by `;`
     /// (empty without any).
     pub mu_patches: String,

@@ -151,6 +151,10 @@ pub struct LogRow {
     /// The road's friction under the car: the lowest of the four wheels' (they
     /// differ on the edge of a `--mu-patch`; see [`crate::world::road_friction`]).
     pub road_mu: f64,
+    /// The plan task's sideslip lag `λ` (`firmware::sideslip`), rad per m/s²: the
+    /// plans' course lags the kinematic bicycle's by `λ·a_y`; NaN when the ECU does
+    /// not report it (processor in the loop).
+    pub sideslip_lag_rad_per_mps2: f64,
 }
 
 /// A published plan's positions (for the trajectory figure).
@@ -363,6 +367,10 @@ pub fn run_with<T: Real, E: Ecu<T>>(
                     let low = meter.sum.friction_mu_min.map_or(mu, |m: f64| m.min(mu));
                     meter.sum.friction_mu_min = Some(low);
                 }
+            }
+            if let Some(lag) = c.sideslip_lag {
+                row.sideslip_lag_rad_per_mps2 = lag;
+                meter.sum.sideslip_lag = Some(lag);
             }
             res.log.push(row);
             if let Some(reason) = meter.stop_reason(t_us, &st, &row) {
@@ -613,6 +621,7 @@ impl<'a> Meter<'a> {
             control_mode: mode_name(act.mode),
             friction_mu: f64::NAN,
             road_mu: f64::NAN,
+            sideslip_lag_rad_per_mps2: f64::NAN,
         }
     }
 

@@ -231,11 +231,12 @@ pub fn summary_line(scenario: &Scenario, s: &Summary) -> String {
     )
 }
 
-/// The line `run` and `pil` print on the road's friction and the firmware's `μ̂`.
+/// The line `run` and `pil` print on the road's friction, the firmware's `μ̂` and
+/// the plans' sideslip lag `λ`.
 pub fn friction_line(s: &Summary) -> String {
     let opt = |x: Option<f64>, unit: &str| x.map_or("-".to_string(), |v| format!("{v:.3}{unit}"));
     format!(
-        "friction: road μ min {:.2}{} | μ̂ min {} | false drop {} | slowest recovery after a patch {}{}",
+        "friction: road μ min {:.2}{} | μ̂ min {} | false drop {} | slowest recovery after a patch {}{} | sideslip lag {}",
         s.road_mu_min,
         if s.mu_patches.is_empty() {
             String::new()
@@ -253,6 +254,7 @@ pub fn friction_line(s: &Summary) -> String {
             Some(n) if n > 0 => format!(" ({n} exits not recovered)"),
             _ => String::new(),
         },
+        opt(s.sideslip_lag.map(|l| l * 1e3), " mrad per m/s²"),
     )
 }
 

@@ -523,6 +523,7 @@ impl Ecu<f32> for QemuEcu {
             plans,
             skipped_releases,
             friction_mu: None,
+            sideslip_lag: None,
         })
     }
 
