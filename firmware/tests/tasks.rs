@@ -385,10 +385,16 @@ fn the_traction_limit_counts_the_load_the_cars_own_acceleration_takes_off_the_fr
         let exact = inside * (1.0 - u) * fc.driven_load_share / (1.0 + y);
         let limit = control.car_model(ay).traction_grip_mps2;
         assert!(limit <= exact, "a_y {ay}: {limit} over {exact}");
-        assert!(limit >= exact * (1.0 - y.powi(4)) - 1e-12, "a_y {ay}: {limit} vs {exact}");
+        assert!(
+            limit >= exact * (1.0 - y.powi(4)) - 1e-12,
+            "a_y {ay}: {limit} vs {exact}"
+        );
         // The transfer matters: on a straight 15 % below the limit without it.
         let without = inside * (1.0 - u) * fc.driven_load_share;
-        assert!(limit < without / (1.0 + 0.9 * y), "a_y {ay}: {limit} vs {without}");
+        assert!(
+            limit < without / (1.0 + 0.9 * y),
+            "a_y {ay}: {limit} vs {without}"
+        );
         if ay == 0.0 {
             assert!(limit < 0.86 * without, "{limit} vs {without}");
         }
