@@ -122,7 +122,8 @@ impl<T: Real> SideslipLag<T> {
         let counts = !slipping
             && vx >= cfg.min_speed_mps
             && ay.abs() >= cfg.min_lateral_mps2
-            && (ay + b).is_finite();
+            && ay.is_finite()
+            && b.is_finite();
         if !counts {
             return false;
         }

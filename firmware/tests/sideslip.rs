@@ -95,6 +95,9 @@ fn slow_straight_sliding_or_broken_samples_do_not_count() {
     let mut nan = cornering(25.0, 4.0, 0.02, 0.02, 0.0);
     nan.vy_mps = f32::NAN;
     assert!(!e.update(&c, &nan, false));
+    let mut inf = cornering(25.0, 4.0, 0.02, 0.02, 0.0);
+    inf.delta_rad = f32::INFINITY;
+    assert!(!e.update(&c, &inf, false));
     assert!(!e.update(&c, &StateEstimate::zeroed(), false));
     assert_eq!(e.samples(), 0);
     assert_eq!(e.lag(&c), 0.0);
@@ -138,6 +141,17 @@ fn shipped_settings_are_valid_and_bad_ones_are_not() {
     let mut b = cfg();
     b.rear_share = -0.1;
     assert!(!b.is_valid());
+    // The bounds that exclude their end: no forgetting factor 0, no speed 0.
+    let mut b = cfg();
+    b.forgetting = 0.0;
+    assert!(!b.is_valid());
+    let mut b = cfg();
+    b.min_speed_mps = 0.0;
+    assert!(!b.is_valid());
+    // And the ones that include it.
+    let mut b = cfg();
+    (b.forgetting, b.lag_max, b.min_lateral_mps2, b.rear_share) = (1.0, 0.0, 0.0, 1.0);
+    assert!(b.is_valid());
 }
 
 proptest! {
