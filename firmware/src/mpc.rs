@@ -317,7 +317,7 @@ impl<T: Real> MpcSettings<T> {
                 ..VelocityPlannerSettings::default()
             },
             steering_reference: SteeringReference::PathCurvature,
-            sideslip: SideslipConfig::for_car(geometry.l_r_m / geometry.wheelbase_m()),
+            sideslip: SideslipConfig::shipped(),
             cold_start_iterations: COLD_START_PASSES,
             // The flow fact of the plan task's static bound (`host-sim wcet`); how
             // many the laps and the harshest tests need: `docs/tuning.md`, "QP
@@ -366,7 +366,6 @@ impl<T: Real> MpcSettings<T> {
             },
             steering_reference: SteeringReference::PathCurvature,
             sideslip: SideslipConfig {
-                rear_share: z,
                 forgetting: z,
                 prior_weight: z,
                 min_speed_mps: z,
@@ -482,8 +481,6 @@ pub struct MpcReport<T> {
     pub max_obstacle_slack_m: T,
     /// Largest road-limit slack in the solution, m.
     pub max_road_slack_m: T,
-    /// Sideslip lag the model planned with, rad per m/s² ([`Mpc::set_sideslip_lag`]).
-    pub sideslip_lag: T,
 }
 
 /// The MPC's workspace: the QP solver, the previous solution for the warm start,
@@ -552,7 +549,6 @@ impl<T: Real> Mpc<T> {
                 max_validity_slack_rad: T::ZERO,
                 max_obstacle_slack_m: T::ZERO,
                 max_road_slack_m: T::ZERO,
-                sideslip_lag: T::ZERO,
             },
             sideslip_lag: T::ZERO,
         }
@@ -734,7 +730,6 @@ impl<T: Real> Mpc<T> {
 
         // The model's sideslip lag, within the settings' bound.
         self.condensing.lag = qp::real::smaller(self.sideslip_lag, settings.sideslip.lag_max);
-        report.sideslip_lag = self.condensing.lag;
         let passes = if warm {
             1
         } else {

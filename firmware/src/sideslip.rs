@@ -12,8 +12,8 @@
 //!
 //! The firmware knows neither `m` nor `C_r` well (a load, other tyres), so it
 //! measures `λ`: each sample is the measured sideslip `v_y/v_x` less the kinematic
-//! `k·tan δ` (`k = l_r/L`), against the measured `a_y = V·ψ̇`; `λ` is their
-//! least-squares slope through the origin with exponential forgetting,
+//! `k·tan δ` (`k = l_r/L`, the MPC's geometry), against the measured `a_y = V·ψ̇`;
+//! `λ` is their least-squares slope through the origin with exponential forgetting,
 //!
 //! ```text
 //! S_aa ← ρ·S_aa + a_y²        S_ab ← ρ·S_ab − a_y·(v_y/v_x − k·tan δ)
@@ -29,15 +29,13 @@
 //! (`host-sim/vehicles/heavy.toml` 30 % over its mass: 0.012 rad per m/s² on
 //! MexicoCity; the default car 0.009, the light one 0.008).
 
+use crate::bicycle::BicycleGeometry;
 use crate::state_estimate::StateEstimate;
 use crate::Real;
 
 /// Settings of the sideslip-lag estimate (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SideslipConfig<T> {
-    /// `k = l_r/(l_f + l_r)`, dimensionless, in `[0, 1]`: the kinematic sideslip
-    /// is `k·tan δ`.
-    pub rear_share: T,
     /// Forgetting factor `ρ` per sample, in `(0, 1]` (0.98 at 10 Hz: a memory of
     /// about 5 s).
     pub forgetting: T,
@@ -52,12 +50,11 @@ pub struct SideslipConfig<T> {
 }
 
 impl<T: Real> SideslipConfig<T> {
-    /// The shipped settings for a car of rear share `k = l_r/L`: `ρ` 0.98 (10 Hz),
-    /// a prior of 10 samples at 2 m/s², samples from 10 m/s and 1.5 m/s², `λ` at
-    /// most 0.03 rad per m/s² (0.12 rad at 4 m/s²).
-    pub fn for_car(rear_share: T) -> Self {
+    /// The shipped settings: `ρ` 0.98 (10 Hz), a prior of 10 samples at 2 m/s²,
+    /// samples from 10 m/s and 1.5 m/s², `λ` at most 0.03 rad per m/s² (0.12 rad
+    /// at 4 m/s²).
+    pub fn shipped() -> Self {
         Self {
-            rear_share,
             forgetting: T::lit(0.98),
             prior_weight: T::lit(40.0),
             min_speed_mps: T::lit(10.0),
@@ -69,10 +66,7 @@ impl<T: Real> SideslipConfig<T> {
     /// True when every field is finite and in its range.
     pub fn is_valid(&self) -> bool {
         let f = |x: T| x.is_finite();
-        f(self.rear_share)
-            && self.rear_share >= T::ZERO
-            && self.rear_share <= T::ONE
-            && f(self.forgetting)
+        f(self.forgetting)
             && self.forgetting > T::ZERO
             && self.forgetting <= T::ONE
             && f(self.prior_weight)
@@ -93,7 +87,7 @@ pub struct SideslipLag<T> {
     s_aa: T,
     /// `S_ab`, rad·m/s².
     s_ab: T,
-    /// Samples that counted (wrapping).
+    /// Samples that counted (saturating).
     samples: u32,
 }
 
@@ -107,18 +101,20 @@ impl<T: Real> SideslipLag<T> {
         }
     }
 
-    /// One sample of the estimate `est` (module docs); `slipping`: the friction
-    /// check flags a slip. Returns true when it counted. A non-finite estimate does
-    /// not count.
+    /// One sample of the estimate `est` of a car of `geometry` (module docs);
+    /// `slipping`: the friction check flags a slip. Returns true when it counted.
+    /// A non-finite estimate (or geometry) does not count.
     pub fn update(
         &mut self,
         cfg: &SideslipConfig<T>,
+        geometry: &BicycleGeometry<T>,
         est: &StateEstimate<T>,
         slipping: bool,
     ) -> bool {
         let vx = est.vx_mps;
         let ay = vx * est.yaw_rate_radps;
-        let b = est.vy_mps / vx - cfg.rear_share * est.delta_rad.tan();
+        let k = geometry.l_r_m / geometry.wheelbase_m();
+        let b = est.vy_mps / vx - k * est.delta_rad.tan();
         let counts = !slipping
             && vx >= cfg.min_speed_mps
             && ay.abs() >= cfg.min_lateral_mps2
@@ -132,7 +128,7 @@ impl<T: Real> SideslipLag<T> {
         }
         self.s_aa = cfg.forgetting * self.s_aa + ay * ay;
         self.s_ab = cfg.forgetting * self.s_ab - ay * b;
-        self.samples = self.samples.wrapping_add(1);
+        self.samples = self.samples.saturating_add(1);
         true
     }
 
@@ -144,7 +140,7 @@ impl<T: Real> SideslipLag<T> {
         (self.s_ab / self.s_aa).clamp(T::ZERO, cfg.lag_max)
     }
 
-    /// Samples that counted so far (wrapping).
+    /// Samples that counted so far (saturating).
     pub fn samples(&self) -> u32 {
         self.samples
     }

@@ -323,8 +323,12 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         // slipperier, `μ̂ < μ`, makes a sliding car, not the linear tyre it models);
         // from the steering the MPC starts from (the yaw loop's fast share left out).
         let cfg = &self.settings.sideslip;
-        self.sideslip
-            .update(cfg, est, self.friction_limit < self.mu);
+        self.sideslip.update(
+            cfg,
+            &self.settings.geometry,
+            est,
+            self.friction_limit < self.mu,
+        );
         self.mpc.set_sideslip_lag(self.sideslip.lag(cfg));
         let computed = self.mpc.step_observed(
             &self.settings,

@@ -8,10 +8,15 @@ use firmware::state_estimate::StateEstimate;
 use firmware::tasks::PlanTask;
 use proptest::prelude::*;
 
-const K: f32 = 0.55;
+/// The car: `k = l_r/L = 0.55`.
+const G: BicycleGeometry<f32> = BicycleGeometry {
+    l_f_m: 1.215,
+    l_r_m: 1.485,
+};
+const K: f32 = 1.485 / 2.7;
 
 fn cfg() -> SideslipConfig<f32> {
-    SideslipConfig::for_car(K)
+    SideslipConfig::shipped()
 }
 
 /// A car at `v` (m/s) turning with lateral acceleration `ay` (m/s²) at steering
@@ -44,7 +49,7 @@ fn it_learns_a_known_lag_from_bends_both_ways() {
     assert_eq!(e.lag(&c), 0.0);
     for i in 0..200 {
         let ay = if i % 20 < 10 { 4.0 } else { -3.0 };
-        assert!(e.update(&c, &cornering(22.0, ay, ay * 0.01, 0.012, 0.0), false));
+        assert!(e.update(&c, &G, &cornering(22.0, ay, ay * 0.01, 0.012, 0.0), false));
     }
     assert!((e.lag(&c) - 0.012).abs() < 2e-4, "lag {}", e.lag(&c));
     assert_eq!(e.samples(), 200);
@@ -57,11 +62,11 @@ fn it_follows_a_change_of_load_within_its_memory() {
     let c = cfg();
     let mut e = SideslipLag::new();
     for _ in 0..300 {
-        e.update(&c, &cornering(20.0, 3.5, 0.03, 0.006, 0.0), false);
+        e.update(&c, &G, &cornering(20.0, 3.5, 0.03, 0.006, 0.0), false);
     }
     assert!((e.lag(&c) - 0.006).abs() < 2e-4);
     for _ in 0..100 {
-        e.update(&c, &cornering(20.0, 3.5, 0.03, 0.014, 0.0), false);
+        e.update(&c, &G, &cornering(20.0, 3.5, 0.03, 0.014, 0.0), false);
     }
     assert!((e.lag(&c) - 0.014).abs() < 0.002, "lag {}", e.lag(&c));
 }
@@ -76,7 +81,12 @@ fn noise_averages_out() {
     let mut worst: f32 = 0.0;
     for i in 0..600 {
         let ay = 2.0 + 2.5 * (1.0 + r.next());
-        e.update(&c, &cornering(20.0, ay, 0.02, 0.01, 0.02 * r.next()), false);
+        e.update(
+            &c,
+            &G,
+            &cornering(20.0, ay, 0.02, 0.01, 0.02 * r.next()),
+            false,
+        );
         if i >= 100 {
             worst = worst.max((e.lag(&c) - 0.01).abs());
         }
@@ -89,20 +99,28 @@ fn slow_straight_sliding_or_broken_samples_do_not_count() {
     let c = cfg();
     let mut e = SideslipLag::new();
     // Too slow, too little lateral acceleration, a slip flagged, NaN, a car at rest.
-    assert!(!e.update(&c, &cornering(8.0, 4.0, 0.05, 0.02, 0.0), false));
-    assert!(!e.update(&c, &cornering(25.0, 1.0, 0.01, 0.02, 0.0), false));
-    assert!(!e.update(&c, &cornering(25.0, 4.0, 0.02, 0.02, 0.0), true));
+    assert!(!e.update(&c, &G, &cornering(8.0, 4.0, 0.05, 0.02, 0.0), false));
+    assert!(!e.update(&c, &G, &cornering(25.0, 1.0, 0.01, 0.02, 0.0), false));
+    assert!(!e.update(&c, &G, &cornering(25.0, 4.0, 0.02, 0.02, 0.0), true));
     let mut nan = cornering(25.0, 4.0, 0.02, 0.02, 0.0);
     nan.vy_mps = f32::NAN;
-    assert!(!e.update(&c, &nan, false));
+    assert!(!e.update(&c, &G, &nan, false));
     let mut inf = cornering(25.0, 4.0, 0.02, 0.02, 0.0);
     inf.delta_rad = f32::INFINITY;
-    assert!(!e.update(&c, &inf, false));
-    assert!(!e.update(&c, &StateEstimate::zeroed(), false));
+    assert!(!e.update(&c, &G, &inf, false));
+    assert!(!e.update(&c, &G, &StateEstimate::zeroed(), false));
+    // Nor a sample of a car with no rear axle's distance (a geometry the MPC
+    // refuses: `k` NaN).
+    let nan_geometry = BicycleGeometry {
+        l_f_m: 0.0,
+        l_r_m: 0.0,
+    };
+    let sample = cornering(25.0, 4.0, 0.02, 0.02, 0.0);
+    assert!(!e.update(&c, &nan_geometry, &sample, false));
     assert_eq!(e.samples(), 0);
     assert_eq!(e.lag(&c), 0.0);
     // One counted sample moves it from the prior by that sample's weight only.
-    assert!(e.update(&c, &cornering(25.0, 4.0, 0.02, 0.02, 0.0), false));
+    assert!(e.update(&c, &G, &cornering(25.0, 4.0, 0.02, 0.02, 0.0), false));
     let one = e.lag(&c);
     assert!(
         one > 0.0 && one < 0.02 * 16.0 / (16.0 + 0.98 * 40.0) + 1e-6,
@@ -116,12 +134,12 @@ fn an_oversteering_or_sliding_car_is_held_inside_the_bounds() {
     let mut e = SideslipLag::new();
     // The course ahead of the kinematic one (negative lag): the kinematic model.
     for _ in 0..100 {
-        e.update(&c, &cornering(20.0, 4.0, 0.03, -0.01, 0.0), false);
+        e.update(&c, &G, &cornering(20.0, 4.0, 0.03, -0.01, 0.0), false);
     }
     assert_eq!(e.lag(&c), 0.0);
     // A rear sliding far out: at most lag_max.
     for _ in 0..100 {
-        e.update(&c, &cornering(20.0, 4.0, 0.03, 0.2, 0.0), false);
+        e.update(&c, &G, &cornering(20.0, 4.0, 0.03, 0.2, 0.0), false);
     }
     assert_eq!(e.lag(&c), c.lag_max);
 }
@@ -138,9 +156,6 @@ fn shipped_settings_are_valid_and_bad_ones_are_not() {
     let mut b = cfg();
     b.prior_weight = 0.0;
     assert!(!b.is_valid());
-    let mut b = cfg();
-    b.rear_share = -0.1;
-    assert!(!b.is_valid());
     // The bounds that exclude their end: no forgetting factor 0, no speed 0.
     let mut b = cfg();
     b.forgetting = 0.0;
@@ -150,7 +165,7 @@ fn shipped_settings_are_valid_and_bad_ones_are_not() {
     assert!(!b.is_valid());
     // And the ones that include it.
     let mut b = cfg();
-    (b.forgetting, b.lag_max, b.min_lateral_mps2, b.rear_share) = (1.0, 0.0, 0.0, 1.0);
+    (b.forgetting, b.lag_max, b.min_lateral_mps2) = (1.0, 0.0, 0.0);
     assert!(b.is_valid());
 }
 
@@ -170,7 +185,7 @@ proptest! {
                 delta_rad: d,
                 ..StateEstimate::zeroed()
             };
-            e.update(&c, &est, slip);
+            e.update(&c, &G, &est, slip);
             let l = e.lag(&c);
             prop_assert!(l.is_finite() && (0.0..=c.lag_max).contains(&l), "lag {l}");
         }
