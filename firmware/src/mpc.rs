@@ -465,7 +465,8 @@ pub struct MpcReport<T> {
     pub rows: u32,
     /// Obstacle rows of the last pass.
     pub obstacle_rows: u32,
-    /// Obstacle rows that did not fit in [`MAX_OBSTACLE_ROWS`] (farthest nodes dropped).
+    /// Obstacle rows that did not fit in [`MAX_OBSTACLE_ROWS`] or in the QP (farthest
+    /// nodes dropped).
     pub obstacle_rows_dropped: u32,
     /// Working-set size at the optimum.
     pub active_constraints: u32,

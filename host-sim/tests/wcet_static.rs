@@ -911,6 +911,7 @@ fn a_cap_per_loop_entry_bounds_the_blocks_of_its_line() {
             loop_index: Some(0),
             bound: 1,
             activation_group: None,
+            annotation: None,
         }],
         ..Default::default()
     };
@@ -1006,6 +1007,7 @@ fn a_cap_per_activation_counts_every_copy_of_its_line_together() {
         loop_index: None,
         bound,
         activation_group: Some(7),
+        annotation: None,
     };
     let run = |caps: Vec<ipet::BlockCap>| {
         let copies = ipet::CopySizes {
@@ -1081,6 +1083,7 @@ fn a_counter_bounds_a_loop_and_a_call_together() {
                 loop_index: None,
                 bound: 15,
                 activation_group: Some(group),
+                annotation: None,
             }],
             counters: [(group, 7)].into_iter().collect(),
             ..Default::default()

@@ -783,12 +783,13 @@ mod app {
         loop {
             // WCET: a poll resumes in this loop, so the binary has a cycle with two entry
             // blocks (irreducible): the loop's head (the first poll) and the delay's
-            // resumption. A job crosses two of its edges into them: its end into the head,
-            // the head into the delay, which suspends: the job ended with `next_release(now)`,
-            // the first release not yet past. The bound is per job; a poll that finds its
-            // release already past runs that release's job too, which the response-time
-            // analysis counts as a release of its own (and the trace check flags).
-            // wcet-bound: 2 per activation
+            // resumption. Its back edges are the edges into them from inside: a job
+            // crosses two, its end into the head and the head into the delay, which
+            // suspends (the job ended with `next_release(now)`, the first release not
+            // yet past, and the response-time analysis keeps a job within its period, so
+            // one job per poll). The first poll enters at the head and crosses one more,
+            // the head into the delay of release 0, which is already due: 3.
+            // wcet-bound: 3 per activation
             Mono::delay_until(instant_at(monitor.release_us())).await;
             let release_us = monitor.start();
             let t0 = core_ticks();
@@ -845,8 +846,8 @@ mod app {
         let mut monitor = DeadlineMonitor::plan();
         let mut activation: u32 = 0;
         loop {
-            // WCET: as in `control`: two edges into the cycle's entry blocks per job.
-            // wcet-bound: 2 per activation
+            // WCET: as in `control`: two back edges per job, one more in the first poll.
+            // wcet-bound: 3 per activation
             Mono::delay_until(instant_at(monitor.release_us())).await;
             activation = activation.wrapping_add(1);
             let release_us = monitor.start();

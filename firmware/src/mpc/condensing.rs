@@ -119,6 +119,9 @@ pub(super) struct Condensing<T> {
     pub(super) node_first: [u8; HORIZON + 2],
     /// Obstacle rows pushed in this pass.
     pub(super) obstacle_rows: usize,
+    /// Obstacle rows linearised in this pass, pushed or refused by a full QP: what
+    /// [`MAX_OBSTACLE_ROWS`] caps (a refused row has cost its linearisation too).
+    pub(super) obstacle_linearisations: usize,
     /// Obstacle rows that found no room.
     pub(super) dropped: u32,
     /// Sideslip lag of the model, rad per m/s² ([`crate::sideslip`]).
@@ -248,6 +251,7 @@ impl<T: Real> Condensing<T> {
             node: 0,
             node_first: [0; HORIZON + 2],
             obstacle_rows: 0,
+            obstacle_linearisations: 0,
             dropped: 0,
             lag: T::ZERO,
         }
@@ -263,6 +267,7 @@ impl<T: Real> Condensing<T> {
         }
         self.cur = 0;
         self.obstacle_rows = 0;
+        self.obstacle_linearisations = 0;
         self.dropped = 0;
     }
 
@@ -584,10 +589,11 @@ impl<T: Real> Condensing<T> {
             let Some(s) = o.relevant_s_at(path, fr.s) else {
                 continue;
             };
-            if self.obstacle_rows >= MAX_OBSTACLE_ROWS {
+            if self.obstacle_linearisations >= MAX_OBSTACLE_ROWS {
                 self.dropped += 1;
                 continue;
             }
+            self.obstacle_linearisations += 1;
             let sigma = o.sigma();
             let dxi = s - o.s_m - o.xi0_m;
             let g = sigma * (fr.ey - o.eta_apex_m) + o.steepness_1pm * dxi * dxi;
@@ -598,7 +604,8 @@ impl<T: Real> Condensing<T> {
                 (IY, sigma * fr.n[1]),
                 (IS, dg_ds - sigma * fr.kappa * fr.ex),
             ];
-            // Past the check above: at most MAX_OBSTACLE_ROWS per pass.
+            // Past the check above, which counts every linearisation (pushed or
+            // refused): at most MAX_OBSTACLE_ROWS per pass.
             // wcet-bound: MAX_OBSTACLE_ROWS * COLD_START_PASSES times per activation
             let d = self.lin_row(&terms, g, u_bar, ncols);
             if self.push(
@@ -610,6 +617,9 @@ impl<T: Real> Condensing<T> {
                 T::TWO * st.weights.q_obs,
             ) {
                 self.obstacle_rows += 1;
+            } else {
+                // No room in the QP: dropped like a row past the cap.
+                self.dropped += 1;
             }
         }
     }

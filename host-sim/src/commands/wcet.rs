@@ -60,6 +60,12 @@ pub struct WcetArgs {
     /// `plan-job-budget`); the others are reported only.
     #[arg(long, num_args = 1..)]
     pub require: Vec<String>,
+    /// Keep the QEMU execution traces this command records (`OUT/trace*/qemu-trace.log`,
+    /// tens of MB a simulated second) instead of removing them at the end: pass
+    /// them to a later `--static-only --check-trace` to re-check an analysis
+    /// without running QEMU again.
+    #[arg(long)]
+    pub keep_traces: bool,
     /// Only the static analysis of the ELF (control-flow graphs, loops, IPET):
     /// writes `static.json` and `static.md`, runs no PIL lap.
     #[arg(long)]
@@ -335,7 +341,11 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     };
     let r = report::build_report(&inputs)?;
     report::markdown::write_report(&args.out, &r)?;
-    for log in traces.iter().skip(args.check_trace.len()) {
+    for log in traces
+        .iter()
+        .skip(args.check_trace.len())
+        .filter(|_| !args.keep_traces)
+    {
         // Large (tens of MB a simulated second) and fully read by now.
         let _ = fs::remove_file(log);
     }

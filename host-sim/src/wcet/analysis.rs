@@ -149,6 +149,9 @@ pub struct StaticAnalysis {
     /// Loop bounds a trace exceeded, and traced activations above their task's
     /// bound: each an error of the analysis (a wrong annotation or recogniser).
     pub violations: Vec<String>,
+    /// The bounds over more than one loop entry (per activation, per call, the
+    /// counters, the capped lines, the retries), each checked on the traces.
+    pub flow_facts: Vec<super::flow_facts::FlowFact>,
 }
 
 /// One of the blocks that cost a task's bound the most.
@@ -560,6 +563,27 @@ pub fn analyse(
             annotations::WITHIN_MARKER
         );
     }
+    // Retries per activation: each preemption can make the exclusive retry loop
+    // it interrupts retry once, and each `per preemption` annotation's loop
+    // retry its bound's times (one exception can do both).
+    let per_preemption: u64 = 1 + annotations
+        .iter()
+        .filter(|a| a.scope == annotations::Scope::Preemption)
+        .map(|a| a.bound)
+        .sum::<u64>();
+    let retries: Vec<(String, u64)> = ECU_TASKS
+        .iter()
+        .map(|(n, _)| (n.to_string(), preemptions_of(n) * per_preemption))
+        .collect();
+    let mut flow_facts = super::flow_facts::flow_facts(
+        &program,
+        &all_loops,
+        &facts,
+        &copies,
+        &annotations,
+        &origin,
+        &retries,
+    );
     let mut loop_rows: BTreeMap<(usize, usize), LoopEntry> = BTreeMap::new();
     let mut tasks = Vec::new();
     let mut unresolved = Vec::new();
@@ -652,14 +676,6 @@ pub fn analyse(
         if !irr.is_empty() {
             refused.push(format!("{} irreducible cycle(s)", irr.len()));
         }
-        // Retries per activation: each preemption can make the exclusive retry loop
-        // it interrupts retry once, and each `per preemption` annotation's loop
-        // retry its bound's times (one exception can do both).
-        let per_preemption: u64 = 1 + annotations
-            .iter()
-            .filter(|a| a.scope == annotations::Scope::Preemption)
-            .map(|a| a.bound)
-            .sum::<u64>();
         let preemptions = preemptions_of(owner) * per_preemption;
         let (mut bi, mut bc, mut top, mut top_entries, mut top_blocks) =
             (None, None, Vec::new(), Vec::new(), Vec::new());
@@ -788,16 +804,43 @@ pub fn analyse(
         .iter()
         .filter_map(|(n, sym)| program.find(sym).first().map(|&r| (n.to_string(), r)))
         .collect();
+    let counters: Vec<super::trace_check::CounterSpec> =
+        flow_facts.iter().map(|f| f.counter.clone()).collect();
+    let sections: Vec<(String, usize)> = ECU_SECTIONS
+        .iter()
+        .filter_map(|(n, sym, _, _)| program.find(sym).first().map(|&f| (n.to_string(), f)))
+        .collect();
     for trace in traces {
         let file = std::fs::File::open(trace)
             .with_context(|| format!("opening the QEMU trace {}", trace.display()))?;
-        let check = super::trace_check::check_trace_with_handlers(
+        let check = super::trace_check::replay_trace(
             std::io::BufReader::with_capacity(1 << 20, file),
             &program,
             &all_loops,
             &roots,
             &handlers,
+            &counters,
+            &sections,
         )?;
+        violations.extend(super::flow_facts::observe(
+            &mut flow_facts,
+            &check,
+            &trace.display().to_string(),
+        ));
+        for sec in &check.sections {
+            if let Some(t) = tasks.iter_mut().find(|t| t.name == sec.name) {
+                t.observed_activations += sec.calls;
+                if sec.calls > 0 {
+                    t.observed_max_instructions = Some(
+                        t.observed_max_instructions
+                            .unwrap_or(0)
+                            .max(sec.max_instructions),
+                    );
+                    t.observed_max_cycles =
+                        Some(t.observed_max_cycles.unwrap_or(0).max(sec.max_cycles));
+                }
+            }
+        }
         for o in &check.loops {
             if let Some(row) = loop_rows.get_mut(&(o.function, o.loop_index)) {
                 row.observed_max = Some(row.observed_max.unwrap_or(0).max(o.max_back_edges));
@@ -864,6 +907,7 @@ pub fn analyse(
     Ok(StaticAnalysis {
         traces: traces.iter().map(|t| t.display().to_string()).collect(),
         violations,
+        flow_facts,
         elf: elf.display().to_string(),
         assumptions: memory.assumptions(),
         unbounded_loops: loops.iter().filter(|l| l.bound.is_none()).count(),

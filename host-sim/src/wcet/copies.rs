@@ -106,13 +106,13 @@ pub(super) fn copy_sizes(
     // calls come from the line (in any frame of their inlining chain), grouped by
     // the innermost loop around them (per loop entry) or by annotation (per
     // activation, every copy of the line together).
-    let capped: BTreeMap<(String, u32), (u64, Option<usize>)> = annotations
+    let capped: BTreeMap<(String, u32), (u64, Option<usize>, usize)> = annotations
         .iter()
         .enumerate()
         .filter(|(_, a)| a.within.is_none())
         .filter_map(|(k, a)| match a.scope {
-            annotations::Scope::LoopEntry => Some(((a.file.clone(), a.line), (a.bound, None))),
-            annotations::Scope::Runs => Some(((a.file.clone(), a.line), (a.bound, Some(k)))),
+            annotations::Scope::LoopEntry => Some(((a.file.clone(), a.line), (a.bound, None, k))),
+            annotations::Scope::Runs => Some(((a.file.clone(), a.line), (a.bound, Some(k), k))),
             _ => None,
         })
         .collect();
@@ -121,7 +121,7 @@ pub(super) fn copy_sizes(
         for &k in &reach {
             let func = &program.functions[k];
             let ls = loops::natural_loops(func).unwrap_or_default();
-            let mut groups: BTreeMap<(Option<usize>, u64, Option<usize>), Vec<usize>> =
+            let mut groups: BTreeMap<(Option<usize>, u64, Option<usize>, usize), Vec<usize>> =
                 BTreeMap::new();
             for (b, block) in func.blocks.iter().enumerate() {
                 let hit = func.instructions[block.first..block.end]
@@ -129,7 +129,7 @@ pub(super) fn copy_sizes(
                     .filter(|i| i.base().starts_with("bl"))
                     .flat_map(|i| frames(ctx, i.address))
                     .find_map(|(file, line)| capped.get(&(short_path(&file), line)).copied());
-                let Some((bound, group)) = hit else {
+                let Some((bound, group, annotation)) = hit else {
                     continue;
                 };
                 // The innermost loop holding the block: the smallest.
@@ -142,15 +142,19 @@ pub(super) fn copy_sizes(
                         .min_by_key(|(_, l)| l.blocks.len())
                         .map(|(x, _)| x),
                 };
-                groups.entry((inner, bound, group)).or_default().push(b);
+                groups
+                    .entry((inner, bound, group, annotation))
+                    .or_default()
+                    .push(b);
             }
-            for ((loop_index, bound, activation_group), blocks) in groups {
+            for ((loop_index, bound, activation_group, annotation), blocks) in groups {
                 caps.push(ipet::BlockCap {
                     function: k,
                     blocks,
                     loop_index,
                     bound,
                     activation_group,
+                    annotation: Some(annotation),
                 });
             }
         }

@@ -111,10 +111,12 @@ pub fn header_starts_iterations(func: &Function, l: &Loop) -> bool {
 }
 
 /// Whether `fact` bounds the runs of its loop's header rather than its back
-/// edges: a bound on iterations, of a loop whose header starts every iteration,
-/// that no nested binary loop shares (`shared`).
+/// edges: a bound on iterations, of a natural loop whose header starts every
+/// iteration, that no nested binary loop shares (`shared`). An irreducible
+/// cycle's bound counts its back edges: it is entered at blocks other than its
+/// header too, so its header's runs are not its iterations.
 pub fn bounds_header_runs(fact: &LoopFact, func: &Function, l: &Loop, shared: bool) -> bool {
-    fact.iterations && !shared && header_starts_iterations(func, l)
+    fact.iterations && !shared && !l.irreducible && header_starts_iterations(func, l)
 }
 
 /// The most back edges per entry a fact allows: its bound, one fewer where it
@@ -163,6 +165,9 @@ pub struct BlockCap {
     /// The caps counted together per activation (an index shared by the caps of
     /// one annotation); `None` for a cap per loop entry.
     pub activation_group: Option<usize>,
+    /// The annotation that makes the cap (its index in the scanned annotations),
+    /// for the report; `None` for a cap made by hand.
+    pub annotation: Option<usize>,
 }
 
 /// One call of a copy or fill function.
@@ -554,20 +559,19 @@ pub fn task_bound(
             };
             let bound = fact.bound as f64;
             // A cap per activation also caps each entry's share. A loop runs only
-            // in a call of its function, and a natural loop's back edges are taken
-            // only after one of its entry edges: in any execution that takes them,
-            // `back ≤ B ≤ B · n_f` and `≤ B · entries`. The relaxation, whose
+            // in a call of its function, and its back edges are taken only after
+            // one of its entry edges (an irreducible cycle's too: its entry edges
+            // are every edge into it from outside): in any execution that takes
+            // them, `back ≤ B ≤ B · n_f` and `≤ B · entries`. The relaxation, whose
             // counts are fractions, needs both. Without them it enters the
             // function a small fraction of the activation and still charges the
             // whole cap (the plan task's QP iterations on the path that adopts a
-            // window), or carries flow round the loop with no entry at all. An
-            // irreducible cycle is entered at several blocks and keeps the
-            // function's tie alone.
+            // window), or carries flow round the cycle with no entry at all (a
+            // circulation: the async tasks' cycle ran a job that way, without the
+            // entry path of a real poll).
             if matches!(fact.per, Per::Activation | Per::Counted(_)) {
                 constraints.push(constraint!(back.clone() <= bound * n_entry[&f]));
-                if !l.irreducible {
-                    constraints.push(constraint!(back.clone() <= bound * entries_of(l)));
-                }
+                constraints.push(constraint!(back.clone() <= bound * entries_of(l)));
             }
             match fact.per {
                 Per::Entry => {

@@ -11,6 +11,7 @@
 //! | [`bounds`] | loop bounds recognised from the binary (counted loops) |
 //! | [`annotations`] | loop bounds written beside the loops in the firmware source (`// wcet-bound: EXPR`), matched through the DWARF line table |
 //! | [`copies`] | block copies and fills: the functions and the bytes each call site moves |
+//! | [`flow_facts`] | the bounds over more than one loop entry (per activation, per call, counters, capped lines, retries), each with what it counts, checked on the traces |
 //! | [`ipet`] | implicit path enumeration: a task's bound as a linear program (`good_lp`, `microlp`) |
 //! | [`rta`] | response-time analysis, fixed priorities with RTIC's stack resource policy |
 //! | [`ecu_app`] | what the analyses know of the ECU's RTIC application: tasks, sections, schedule, indirect call targets, priority levels, functions run once or masked |
@@ -34,6 +35,7 @@ pub mod copies;
 pub mod cpi;
 pub mod ecu_app;
 pub mod flash_data;
+pub mod flow_facts;
 pub mod graph;
 pub mod ipet;
 pub mod loops;

@@ -130,12 +130,87 @@ pub struct RootObservation {
     pub incomplete: u64,
 }
 
+/// What a flow-fact counter's count is per: the quantity a fact caps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum CounterScope {
+    /// One activation of a root (a task), nested exceptions excluded.
+    Activation,
+    /// One call of the function (its index), tail calls from it ending it.
+    Call(usize),
+    /// One entry of a loop `(function, loop index)`.
+    LoopEntry(usize, usize),
+}
+
+/// A counter the replay keeps for a flow fact: every entry of one of `blocks`
+/// and every traversal of one of `edges` adds one, per `scope`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct CounterSpec {
+    /// What the count is per.
+    pub scope: CounterScope,
+    /// Blocks `(function, block)` whose entries count.
+    pub blocks: Vec<(usize, usize)>,
+    /// Edges `(function, from block, to block)` whose traversals count; `from` =
+    /// `usize::MAX` is the function's entry (a call or tail call into block 0).
+    pub edges: Vec<(usize, usize, usize)>,
+}
+
+/// What a counter counted.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+pub struct CounterObservation {
+    /// Scopes that ended with a count (activations, calls or loop entries); an
+    /// activation counts only if the counter moved in it.
+    pub scopes: u64,
+    /// Largest count in one scope.
+    pub max: u64,
+    /// Sum over the scopes.
+    pub total: u64,
+    /// Per task (counters per activation): `(task, largest count)`.
+    pub by_root: Vec<(String, u64)>,
+}
+
+/// The calls of a section (a job bounded apart, a function called from a task).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+pub struct SectionObservation {
+    /// Section name, as given.
+    pub name: String,
+    /// Its function index.
+    pub function: usize,
+    /// Complete calls seen (call to return).
+    pub calls: u64,
+    /// Largest call, instructions (its blocks' and its callees', nested
+    /// exceptions excluded).
+    pub max_instructions: u64,
+    /// Largest call, static worst-case cycles of the same blocks.
+    pub max_cycles: u64,
+}
+
+/// An indirect call or jump seen in the trace.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct IndirectObservation {
+    /// Address of the `blx rN` / `bx rN` (or other register branch).
+    pub site: u32,
+    /// The function holding it (index; `usize::MAX` if none).
+    pub from: usize,
+    /// The function it went to (index).
+    pub target: usize,
+    /// Its demangled name.
+    pub target_name: String,
+    /// Times taken.
+    pub count: u64,
+}
+
 /// The replay of a trace.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct TraceCheck {
     /// Every loop executed at least once (entered or iterated), by function then
     /// loop index.
     pub loops: Vec<LoopObservation>,
+    /// The flow-fact counters given to the replay, in their order.
+    pub counters: Vec<CounterObservation>,
+    /// The sections given to the replay, in their order.
+    pub sections: Vec<SectionObservation>,
+    /// Indirect calls and jumps taken, by site then target.
+    pub indirect_calls: Vec<IndirectObservation>,
     /// Per root, in the order given.
     pub roots: Vec<RootObservation>,
     /// Activations of exception handlers that are not roots (faults), by name.
@@ -269,7 +344,21 @@ pub fn check_trace_with_handlers<R: BufRead>(
     roots: &[(String, usize)],
     handlers: &[usize],
 ) -> Result<TraceCheck, WcetError> {
-    let mut replay = Replay::new(program, loops, roots, handlers);
+    replay_trace(log, program, loops, roots, handlers, &[], &[])
+}
+
+/// [`check_trace_with_handlers`] that also keeps the flow-fact `counters` and
+/// measures the calls of the `sections` `(name, function)`.
+pub fn replay_trace<R: BufRead>(
+    log: R,
+    program: &Program,
+    loops: &[Vec<Loop>],
+    roots: &[(String, usize)],
+    handlers: &[usize],
+    counters: &[CounterSpec],
+    sections: &[(String, usize)],
+) -> Result<TraceCheck, WcetError> {
+    let mut replay = Replay::new(program, loops, roots, handlers, counters, sections);
     let mut stream = TbStream::new(log);
     while let Some(event) = stream.next_event(|a| replay.resolve(a))? {
         match event {
@@ -586,6 +675,71 @@ Disassembly of section .text:
         // Every replayed instruction was in a block counted once.
         let all: u64 = check.roots.iter().map(|r| r.total_instructions).sum();
         assert_eq!(check.instructions, all + 6 * 2);
+        Ok(())
+    }
+
+    #[test]
+    fn counters_per_activation_call_and_loop_entry_and_sections(
+    ) -> Result<(), Box<dyn std::error::Error>> {
+        let fx = fixture()?;
+        let log = synthetic_log();
+        let (plan, systick) = (fx.roots[0].1, fx.roots[2].1);
+        let helper = fx.program.at(0x0800_0120).ok_or("no helper")?;
+        let counters = vec![
+            // The plan loop's back edge (block 2 → header 1), per activation.
+            CounterSpec {
+                scope: CounterScope::Activation,
+                blocks: vec![],
+                edges: vec![(plan, 2, 1)],
+            },
+            // The same per call of USART1 (its activation's frame).
+            CounterSpec {
+                scope: CounterScope::Call(plan),
+                blocks: vec![],
+                edges: vec![(plan, 2, 1)],
+            },
+            // The loop body's block per entry of the loop.
+            CounterSpec {
+                scope: CounterScope::LoopEntry(plan, 0),
+                blocks: vec![(plan, 2)],
+                edges: vec![],
+            },
+            // helper's entry per activation, whoever runs it: called by plan,
+            // tail-called by SysTick.
+            CounterSpec {
+                scope: CounterScope::Activation,
+                blocks: vec![],
+                edges: vec![(helper, usize::MAX, 0)],
+            },
+        ];
+        let sections = vec![("helper".to_string(), helper)];
+        let handlers: Vec<usize> = Vec::new();
+        let check = replay_trace(
+            log.as_bytes(),
+            &fx.program,
+            &fx.loops,
+            &fx.roots,
+            &handlers,
+            &counters,
+            &sections,
+        )?;
+        let c = &check.counters;
+        assert_eq!((c[0].scopes, c[0].max, c[0].total), (3, 7, 4 + 7 + 5));
+        assert_eq!(c[0].by_root, vec![("plan".to_string(), 7)]);
+        assert_eq!((c[1].scopes, c[1].max), (3, 7));
+        // Top-tested: the body runs once per trip, 4, 7 and 5 per entry.
+        assert_eq!((c[2].scopes, c[2].max, c[2].total), (3, 7, 16));
+        assert_eq!(
+            c[3].by_root,
+            vec![("plan".to_string(), 7), ("systick".to_string(), 1)]
+        );
+        let s = &check.sections[0];
+        // Called 16 times (SysTick's tail call is no call); one `bx lr` each.
+        assert_eq!((s.calls, s.max_instructions), (16, 1));
+        assert_eq!(s.max_cycles, fx.program.functions[helper].blocks[0].cycles);
+        let _ = systick;
+        // No indirect call in the synthetic program.
+        assert!(check.indirect_calls.is_empty());
         Ok(())
     }
 

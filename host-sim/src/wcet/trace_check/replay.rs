@@ -4,7 +4,10 @@
 //! in [`super`]'s documentation).
 
 use super::tb_stream::Resolved;
-use super::{LoopObservation, RootObservation, TraceCheck, LARGEST_KEPT, MAX_EXAMPLES};
+use super::{
+    CounterObservation, CounterScope, CounterSpec, IndirectObservation, LoopObservation,
+    RootObservation, SectionObservation, TraceCheck, LARGEST_KEPT, MAX_EXAMPLES,
+};
 use crate::wcet::cache::Persistence;
 use crate::wcet::cfg::{Instruction, Program};
 use crate::wcet::loops::Loop;
@@ -82,6 +85,27 @@ struct Frame {
     return_to: Option<u32>,
     /// Loops of the function entered and not left: (loop index, back edges so far).
     active: Vec<(usize, u64)>,
+    /// Counters per call of this frame's function: (counter, count so far).
+    per_call: Vec<(usize, u64)>,
+    /// Counters per entry of a loop of this frame: (loop, counter, count so far).
+    per_loop_entry: Vec<(usize, usize, u64)>,
+    /// A section (a job bounded apart) this frame is a call of: (section index,
+    /// the context's instructions and cycles when it was called).
+    section: Option<(usize, u64, u64)>,
+}
+
+impl Frame {
+    fn new(function: usize, return_to: Option<u32>) -> Self {
+        Frame {
+            function,
+            block: None,
+            return_to,
+            active: Vec::new(),
+            per_call: Vec::new(),
+            per_loop_entry: Vec::new(),
+            section: None,
+        }
+    }
 }
 
 /// Who an execution context is, for the loop statistics.
@@ -102,6 +126,8 @@ struct Context {
     cycles: u64,
     executed: u64,
     preempted: bool,
+    /// Counters per activation: (counter, count so far).
+    per_activation: Vec<(usize, u64)>,
 }
 
 impl Context {
@@ -114,7 +140,16 @@ impl Context {
             cycles: 0,
             executed: 0,
             preempted: false,
+            per_activation: Vec::new(),
         }
+    }
+}
+
+/// Adds one to `counter` in a list of (counter, count).
+fn bump(list: &mut Vec<(usize, u64)>, counter: usize) {
+    match list.iter_mut().find(|(c, _)| *c == counter) {
+        Some((_, n)) => *n += 1,
+        None => list.push((counter, 1)),
     }
 }
 
@@ -145,6 +180,17 @@ pub(super) struct Replay<'a> {
     stack: Vec<Context>,
     loop_stats: BTreeMap<(usize, usize), LoopStats>,
     root_stats: Vec<RootObservation>,
+    /// The counters' specifications, and what each counts on: block entries and
+    /// edge traversals `(function, from, to)` (`from` = `usize::MAX`: the
+    /// function's entry), each to the counters it adds to.
+    counters: &'a [CounterSpec],
+    counter_blocks: HashMap<(usize, usize), Vec<usize>>,
+    counter_edges: HashMap<(usize, usize, usize), Vec<usize>>,
+    counter_obs: Vec<CounterObservation>,
+    /// Section entry address → section index.
+    section_at: HashMap<u32, usize>,
+    section_stats: Vec<SectionObservation>,
+    indirect: BTreeMap<(u32, usize), u64>,
     other: BTreeMap<usize, u64>,
     tb_executions: u64,
     instructions: u64,
@@ -161,7 +207,36 @@ impl<'a> Replay<'a> {
         loops: &'a [Vec<Loop>],
         roots: &'a [(String, usize)],
         handlers: &[usize],
+        counters: &'a [CounterSpec],
+        sections: &[(String, usize)],
     ) -> Self {
+        let mut counter_blocks: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
+        let mut counter_edges: HashMap<(usize, usize, usize), Vec<usize>> = HashMap::new();
+        for (k, c) in counters.iter().enumerate() {
+            for &b in &c.blocks {
+                counter_blocks.entry(b).or_default().push(k);
+            }
+            for &e in &c.edges {
+                counter_edges.entry(e).or_default().push(k);
+            }
+        }
+        let counter_obs = counters
+            .iter()
+            .map(|_| CounterObservation::default())
+            .collect();
+        let section_at: HashMap<u32, usize> = sections
+            .iter()
+            .enumerate()
+            .filter_map(|(k, (_, f))| Some((program.functions.get(*f)?.address, k)))
+            .collect();
+        let section_stats = sections
+            .iter()
+            .map(|(name, f)| SectionObservation {
+                name: name.clone(),
+                function: *f,
+                ..SectionObservation::default()
+            })
+            .collect();
         let mut index = HashMap::new();
         for (f, func) in program.functions.iter().enumerate() {
             for (k, i) in func.instructions.iter().enumerate() {
@@ -213,6 +288,13 @@ impl<'a> Replay<'a> {
             stack: vec![Context::new(Owner::Thread)],
             loop_stats: BTreeMap::new(),
             root_stats,
+            counters,
+            counter_blocks,
+            counter_edges,
+            counter_obs,
+            section_at,
+            section_stats,
+            indirect: BTreeMap::new(),
             other: BTreeMap::new(),
             tb_executions: 0,
             instructions: 0,
@@ -291,14 +373,78 @@ impl<'a> Replay<'a> {
         }
     }
 
+    /// Records one scope's count of `counter` (an activation, a call, a loop
+    /// entry; `root`: the task whose activation it was).
+    fn fold(&mut self, counter: usize, count: u64, root: Option<usize>) {
+        let name = root.and_then(|r| self.roots.get(r)).map(|r| r.0.clone());
+        let Some(o) = self.counter_obs.get_mut(counter) else {
+            return;
+        };
+        o.scopes += 1;
+        o.total += count;
+        o.max = o.max.max(count);
+        if let Some(name) = name {
+            match o.by_root.iter_mut().find(|(n, _)| *n == name) {
+                Some((_, m)) => *m = (*m).max(count),
+                None => o.by_root.push((name, count)),
+            }
+        }
+    }
+
+    /// A frame's scopes end (its function returned, was replaced by a tail call,
+    /// or the context was lost): its counters per call and per loop entry are
+    /// recorded, and its section's call when `ends_section`.
+    fn end_frame_scopes(&mut self, mut frame: Frame, ends_section: bool) -> Frame {
+        for (counter, n) in std::mem::take(&mut frame.per_call) {
+            self.fold(counter, n, None);
+        }
+        for (_, counter, n) in std::mem::take(&mut frame.per_loop_entry) {
+            self.fold(counter, n, None);
+        }
+        if ends_section {
+            if let Some((k, i0, c0)) = frame.section.take() {
+                let (i1, c1) = self
+                    .stack
+                    .last()
+                    .map_or((i0, c0), |c| (c.instructions, c.cycles));
+                if let Some(s) = self.section_stats.get_mut(k) {
+                    s.calls += 1;
+                    s.max_instructions = s.max_instructions.max(i1.saturating_sub(i0));
+                    s.max_cycles = s.max_cycles.max(c1.saturating_sub(c0));
+                }
+            }
+        }
+        frame
+    }
+
     /// Pops the top context (an exception return) and records its activation.
     fn pop_context(&mut self) {
         if self.stack.len() <= 1 {
             return;
         }
+        let Some(mut c) = self.stack.pop() else {
+            return;
+        };
+        // Frames left open (an exception return from a nested call cannot happen:
+        // the handler's own frame returns) end their scopes with the activation.
+        let open = std::mem::take(&mut c.frames);
+        let activation = std::mem::take(&mut c.per_activation);
+        self.stack.push(c);
+        for fr in open.into_iter().rev() {
+            self.end_frame_scopes(fr, true);
+        }
         let Some(c) = self.stack.pop() else {
             return;
         };
+        let root = match c.owner {
+            Owner::Root(r) => Some(r),
+            _ => None,
+        };
+        if root.is_some() {
+            for (counter, n) in activation {
+                self.fold(counter, n, root);
+            }
+        }
         match c.owner {
             Owner::Root(r) => {
                 if let Some(s) = self.root_stats.get_mut(r) {
@@ -357,6 +503,7 @@ impl<'a> Replay<'a> {
                 break;
             };
             let (kind, _) = self.kind_of(last);
+            let last_address = self.instruction(last).map_or(0, |i| i.address);
             let fall = self
                 .instruction(last)
                 .map_or(0, |i| i.address.wrapping_add(i.bytes));
@@ -371,13 +518,14 @@ impl<'a> Replay<'a> {
                     let address = r.address;
                     self.note(|| format!("call from {from} to {address:#010x}, no function entry"));
                 }
+                let section = self.section_at.get(&r.address).copied();
                 if let Some(c) = self.stack.last_mut() {
-                    c.frames.push(Frame {
-                        function: f,
-                        block: None,
-                        return_to: Some(fall),
-                        active: Vec::new(),
-                    });
+                    let mut frame = Frame::new(f, Some(fall));
+                    frame.section = section.map(|k| (k, c.instructions, c.cycles));
+                    c.frames.push(frame);
+                }
+                if self.instruction(last).is_some_and(|i| i.target.is_none()) {
+                    *self.indirect.entry((last_address, f)).or_insert(0) += 1;
                 }
                 break;
             }
@@ -396,6 +544,7 @@ impl<'a> Replay<'a> {
                     break;
                 }
                 let popped = self.stack.last_mut().and_then(|c| c.frames.pop());
+                let popped = popped.map(|p| self.end_frame_scopes(p, true));
                 let back_in = self
                     .stack
                     .last()
@@ -423,11 +572,19 @@ impl<'a> Replay<'a> {
                 break;
             }
             if self.program.at(r.address) == Some(f) {
-                // Tail call: the callee takes the frame's place.
-                if let Some(fr) = self.stack.last_mut().and_then(|c| c.frames.last_mut()) {
+                // Tail call: the callee takes the frame's place (a section's call
+                // goes on in it).
+                if self.instruction(last).is_some_and(|i| i.target.is_none()) {
+                    *self.indirect.entry((last_address, f)).or_insert(0) += 1;
+                }
+                if let Some(fr) = self.stack.last_mut().and_then(|c| c.frames.pop()) {
+                    let mut fr = self.end_frame_scopes(fr, false);
                     fr.function = f;
                     fr.block = None;
                     fr.active.clear();
+                    if let Some(c) = self.stack.last_mut() {
+                        c.frames.push(fr);
+                    }
                 }
                 break;
             }
@@ -465,19 +622,20 @@ impl<'a> Replay<'a> {
         let Some(c) = self.stack.last_mut() else {
             return;
         };
-        match c.frames.last_mut() {
+        match c.frames.last() {
             Some(fr) if fr.function == f => {}
-            Some(fr) => {
-                fr.function = f;
-                fr.block = None;
-                fr.active.clear();
+            Some(_) => {
+                if let Some(fr) = self.stack.last_mut().and_then(|c| c.frames.pop()) {
+                    let mut fr = self.end_frame_scopes(fr, false);
+                    fr.function = f;
+                    fr.block = None;
+                    fr.active.clear();
+                    if let Some(c) = self.stack.last_mut() {
+                        c.frames.push(fr);
+                    }
+                }
             }
-            None => c.frames.push(Frame {
-                function: f,
-                block: None,
-                return_to: None,
-                active: Vec::new(),
-            }),
+            None => c.frames.push(Frame::new(f, None)),
         }
     }
 
@@ -547,6 +705,74 @@ impl<'a> Replay<'a> {
                 }
             }
         }
+        // Flow-fact counters: this block's entry and the edge into it. A loop
+        // entered anew first ends its last entry's counts.
+        let entered: Vec<usize> = self
+            .headers
+            .get(&(f, b))
+            .into_iter()
+            .flatten()
+            .copied()
+            .filter(|&l| {
+                loops
+                    .get(f)
+                    .and_then(|x| x.get(l))
+                    .is_some_and(|lp| !prev.is_some_and(|a| lp.back_edges.contains(&(a, b))))
+            })
+            .collect();
+        if !entered.is_empty() {
+            let mut ended = Vec::new();
+            if let Some(frame) = self.stack.last_mut().and_then(|c| c.frames.last_mut()) {
+                frame.per_loop_entry.retain(|&(l, counter, n)| {
+                    let end = entered.contains(&l);
+                    if end {
+                        ended.push((counter, n));
+                    }
+                    !end
+                });
+            }
+            for (counter, n) in ended {
+                self.fold(counter, n, None);
+            }
+        }
+        let edge = (f, prev.unwrap_or(usize::MAX), b);
+        let hits: Vec<usize> = self
+            .counter_blocks
+            .get(&(f, b))
+            .into_iter()
+            .flatten()
+            .chain(self.counter_edges.get(&edge).into_iter().flatten())
+            .copied()
+            .collect();
+        let counters = self.counters;
+        for k in hits {
+            let Some(spec) = counters.get(k) else {
+                continue;
+            };
+            let Some(c) = self.stack.last_mut() else {
+                break;
+            };
+            match spec.scope {
+                CounterScope::Activation => bump(&mut c.per_activation, k),
+                CounterScope::Call(_) => {
+                    if let Some(fr) = c.frames.last_mut() {
+                        bump(&mut fr.per_call, k);
+                    }
+                }
+                CounterScope::LoopEntry(_, l) => {
+                    if let Some(fr) = c.frames.last_mut() {
+                        match fr
+                            .per_loop_entry
+                            .iter_mut()
+                            .find(|(x, counter, _)| *x == l && *counter == k)
+                        {
+                            Some((_, _, n)) => *n += 1,
+                            None => fr.per_loop_entry.push((l, k, 1)),
+                        }
+                    }
+                }
+            }
+        }
         if let Some((from, to)) = odd_edge {
             let name = self.name(f).to_string();
             self.note(|| format!("{name}: edge {from:#010x} -> {to:#010x} is not in the graph"));
@@ -596,8 +822,22 @@ impl<'a> Replay<'a> {
             .iter()
             .map(|(&f, &n)| (self.name(f).to_string(), n))
             .collect();
+        let indirect_calls = self
+            .indirect
+            .iter()
+            .map(|(&(site, target), &count)| IndirectObservation {
+                site,
+                from: self.program.containing(site).unwrap_or(usize::MAX),
+                target,
+                target_name: self.name(target).to_string(),
+                count,
+            })
+            .collect();
         TraceCheck {
             loops,
+            counters: self.counter_obs,
+            sections: self.section_stats,
+            indirect_calls,
             roots: self.root_stats,
             other_handlers,
             tb_executions: self.tb_executions,

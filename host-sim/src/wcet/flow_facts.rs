@@ -1,0 +1,305 @@
+//! Flow facts: the bounds the IPET takes over more than one loop entry (per
+//! activation of a task, per call of a function, a counter shared by several
+//! places, the calls of a line capped per activation, the retries an exception
+//! can cause), each with what it counts in the binary, so that every QEMU trace
+//! checks it as it checks a loop's bound per entry.
+//!
+//! A fact counts exactly what [`super::ipet`] constrains: a loop's back edges
+//! (and its entries, where the bound is on iterations of a loop whose header
+//! starts each of them, [`ipet::bounds_header_runs`]), the back edges of the
+//! nested loops that share its bound, and the runs of the blocks whose calls a
+//! `times per activation` line caps. A fact no trace exercised is reported as
+//! such: its bound rests on the argument written beside it alone.
+
+use super::annotations::Annotation;
+use super::cfg::Program;
+use super::ipet::{self, CopySizes, LoopFact, Per};
+use super::loops::Loop;
+use super::trace_check::{CounterScope, CounterSpec, TraceCheck};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// One flow fact, what bounds it and what the traces saw of it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FlowFact {
+    /// The counter's name (`counted in NAME`), else the fact's source line.
+    pub name: String,
+    /// What one count is per: `activation`, `call of FUNCTION`, `loop entry`.
+    pub per: String,
+    /// What is counted: loop iterations, calls of a line, retries.
+    pub counts: String,
+    /// The bound per scope (for retries, per task: `bound_by_task`).
+    pub bound: u64,
+    /// Per task, where the bound depends on the task (retries: its preemptions).
+    pub bound_by_task: Vec<(String, u64)>,
+    /// The annotations or rules that state it (`file:line: expression`).
+    pub sources: Vec<String>,
+    /// Loops and blocks it counts on.
+    pub members: usize,
+    /// Largest count in one scope over the traces; `None`: no trace exercised it.
+    pub observed_max: Option<u64>,
+    /// Scopes (activations, calls, entries) in which the traces saw it count.
+    pub observed_scopes: u64,
+    /// What the replay counts for it.
+    #[serde(skip)]
+    pub counter: CounterSpec,
+}
+
+impl FlowFact {
+    /// Whether a trace exercised the fact.
+    pub fn exercised(&self) -> bool {
+        self.observed_max.is_some()
+    }
+}
+
+/// The counted edges of one loop fact: its back edges, and its entries where
+/// the bound counts the header's runs.
+fn loop_edges(
+    program: &Program,
+    loops: &[Vec<Loop>],
+    fact: &LoopFact,
+    shared: bool,
+) -> Vec<(usize, usize, usize)> {
+    let f = fact.function;
+    let (Some(func), Some(l)) = (
+        program.functions.get(f),
+        loops.get(f).and_then(|ls| ls.get(fact.loop_index)),
+    ) else {
+        return Vec::new();
+    };
+    let mut edges: Vec<(usize, usize, usize)> =
+        l.back_edges.iter().map(|&(a, b)| (f, a, b)).collect();
+    if ipet::bounds_header_runs(fact, func, l, shared) {
+        edges.extend(l.entry_edges.iter().map(|&(a, b)| (f, a, b)));
+    }
+    edges
+}
+
+/// The flow facts of an analysis: `facts` (the loops' bounds), `copies.caps` (the
+/// capped lines), `annotations` (for names and sources), `origin` (each loop
+/// fact's stated source) and `retries` (per task, the retries an activation can
+/// make, [`super::ecu_app::preemptions_of`] × the retries per preemption).
+pub fn flow_facts(
+    program: &Program,
+    loops: &[Vec<Loop>],
+    facts: &[LoopFact],
+    copies: &CopySizes,
+    annotations: &[Annotation],
+    origin: &BTreeMap<(usize, usize), String>,
+    retries: &[(String, u64)],
+) -> Vec<FlowFact> {
+    let name_of = |f: usize| {
+        program
+            .functions
+            .get(f)
+            .map_or("?".to_string(), |x| x.demangled.clone())
+    };
+    let source = |k: usize| {
+        annotations.get(k).map_or("?".to_string(), |a| {
+            format!("{}:{}: `{}`", a.file, a.line, a.expression)
+        })
+    };
+    // Loops whose bound another loop of the same function shares.
+    let members_of = |f: usize, x: usize| -> Vec<&LoopFact> {
+        facts
+            .iter()
+            .filter(|g| g.function == f && g.group == Some(x))
+            .collect()
+    };
+    let mut out: Vec<FlowFact> = Vec::new();
+    // Counters shared by annotations (`counted in NAME`, and the caps per
+    // activation of a line), by their group's annotation index.
+    let mut groups: BTreeMap<usize, FlowFact> = BTreeMap::new();
+    let group_fact = |g: usize| {
+        let a = annotations.get(g);
+        let counter = a.and_then(|a| a.counter.clone());
+        let sources: Vec<String> = match &counter {
+            Some(c) => annotations
+                .iter()
+                .enumerate()
+                .filter(|(_, b)| b.counter.as_deref() == Some(c.as_str()))
+                .map(|(k, _)| source(k))
+                .collect(),
+            None => vec![source(g)],
+        };
+        FlowFact {
+            name: counter
+                .unwrap_or_else(|| a.map_or("?".to_string(), |a| format!("{}:{}", a.file, a.line))),
+            per: "activation".into(),
+            counts: String::new(),
+            bound: a.map_or(0, |a| a.bound),
+            bound_by_task: Vec::new(),
+            sources,
+            members: 0,
+            observed_max: None,
+            observed_scopes: 0,
+            counter: CounterSpec {
+                scope: CounterScope::Activation,
+                blocks: Vec::new(),
+                edges: Vec::new(),
+            },
+        }
+    };
+    let mut retry = FlowFact {
+        name: "exception retries".into(),
+        per: "activation".into(),
+        counts: "back edges of the retry loops (load/store-exclusive, `per preemption`)".into(),
+        bound: retries.iter().map(|r| r.1).max().unwrap_or(0),
+        bound_by_task: retries.to_vec(),
+        sources: vec![
+            "one retry per preemption of the activation (an exception clears the exclusive monitor; `wcet-bound: N per preemption`)"
+                .into(),
+        ],
+        members: 0,
+        observed_max: None,
+        observed_scopes: 0,
+        counter: CounterSpec {
+            scope: CounterScope::Activation,
+            blocks: Vec::new(),
+            edges: Vec::new(),
+        },
+    };
+    for fact in facts.iter().filter(|f| f.group.is_none()) {
+        let (f, x) = (fact.function, fact.loop_index);
+        let shared = members_of(f, x);
+        let mut edges = loop_edges(program, loops, fact, !shared.is_empty());
+        for m in &shared {
+            edges.extend(loop_edges(program, loops, m, true));
+        }
+        let n = 1 + shared.len();
+        let stated = origin.get(&(f, x)).cloned().unwrap_or_default();
+        match fact.per {
+            Per::Entry => {}
+            Per::Preemption => {
+                retry.counter.edges.extend(edges);
+                retry.members += n;
+            }
+            Per::Counted(g) => {
+                let e = groups.entry(g).or_insert_with(|| group_fact(g));
+                e.counter.edges.extend(edges);
+                e.members += n;
+            }
+            Per::Activation | Per::Call => {
+                let (per, scope) = match fact.per {
+                    Per::Call => (format!("call of `{}`", name_of(f)), CounterScope::Call(f)),
+                    _ => ("activation".to_string(), CounterScope::Activation),
+                };
+                out.push(FlowFact {
+                    name: stated.split(": `").next().unwrap_or(&stated).to_string(),
+                    per,
+                    counts: format!("iterations of a loop of `{}`", name_of(f)),
+                    bound: fact.bound,
+                    bound_by_task: Vec::new(),
+                    sources: vec![stated],
+                    members: n,
+                    observed_max: None,
+                    observed_scopes: 0,
+                    counter: CounterSpec {
+                        scope,
+                        blocks: Vec::new(),
+                        edges,
+                    },
+                });
+            }
+        }
+    }
+    for cap in &copies.caps {
+        let blocks = cap.blocks.iter().map(|&b| (cap.function, b));
+        match cap.activation_group {
+            Some(g) => {
+                let g = copies.counters.get(&g).copied().unwrap_or(g);
+                let e = groups.entry(g).or_insert_with(|| group_fact(g));
+                e.counter.blocks.extend(blocks);
+                e.members += cap.blocks.len();
+            }
+            None => {
+                let scope = match cap.loop_index {
+                    Some(l) => CounterScope::LoopEntry(cap.function, l),
+                    None => CounterScope::Call(cap.function),
+                };
+                let stated = cap.annotation.map_or_else(String::new, source);
+                out.push(FlowFact {
+                    name: stated.split(": `").next().unwrap_or(&stated).to_string(),
+                    per: match cap.loop_index {
+                        Some(_) => format!("loop entry in `{}`", name_of(cap.function)),
+                        None => format!("call of `{}`", name_of(cap.function)),
+                    },
+                    counts: "runs of the line's calls".into(),
+                    bound: cap.bound,
+                    bound_by_task: Vec::new(),
+                    sources: vec![stated],
+                    members: cap.blocks.len(),
+                    observed_max: None,
+                    observed_scopes: 0,
+                    counter: CounterSpec {
+                        scope,
+                        blocks: blocks.collect(),
+                        edges: Vec::new(),
+                    },
+                });
+            }
+        }
+    }
+    for mut g in groups.into_values() {
+        g.counts = match (g.counter.edges.is_empty(), g.counter.blocks.is_empty()) {
+            (false, false) => "loop iterations and runs of capped calls, summed".into(),
+            (false, true) => "loop iterations, summed over the loops".into(),
+            _ => "runs of the line's calls, every inlined copy".into(),
+        };
+        out.push(g);
+    }
+    if retry.members > 0 {
+        out.push(retry);
+    }
+    for f in &mut out {
+        f.counter.edges.sort_unstable();
+        f.counter.edges.dedup();
+        f.counter.blocks.sort_unstable();
+        f.counter.blocks.dedup();
+    }
+    out
+}
+
+/// Folds one trace's counts into `facts` (whose counters were given to the
+/// replay in this order); returns one message per fact the trace saw above its
+/// bound.
+pub fn observe(facts: &mut [FlowFact], check: &TraceCheck, trace: &str) -> Vec<String> {
+    let mut violations = Vec::new();
+    for (fact, seen) in facts.iter_mut().zip(&check.counters) {
+        if seen.scopes == 0 {
+            continue;
+        }
+        fact.observed_scopes += seen.scopes;
+        fact.observed_max = Some(fact.observed_max.unwrap_or(0).max(seen.max));
+        let over: Vec<String> = if fact.bound_by_task.is_empty() {
+            (seen.max > fact.bound)
+                .then(|| format!("observed {}", seen.max))
+                .into_iter()
+                .collect()
+        } else {
+            seen.by_root
+                .iter()
+                .filter_map(|(task, n)| {
+                    let b = fact
+                        .bound_by_task
+                        .iter()
+                        .find(|(t, _)| t == task)
+                        .map_or(0, |x| x.1);
+                    (*n > b).then(|| format!("task {task}: bound {b}, observed {n}"))
+                })
+                .collect()
+        };
+        if !over.is_empty() {
+            violations.push(format!(
+                "{trace}: flow fact `{}` ({} per {}, bound {}; {}): {}",
+                fact.name,
+                fact.counts,
+                fact.per,
+                fact.bound,
+                fact.sources.join("; "),
+                over.join(", ")
+            ));
+        }
+    }
+    violations
+}
