@@ -495,6 +495,10 @@ pub fn minimal_apex<T: Real>(points: &[(T, T)], c: T) -> Option<(T, T)> {
         // Each pair once: n(n − 1)/2 for n ≤ 2·MAX_VERTICES points, per call.
         // wcet-bound: 2 * MAX_VERTICES * (2 * MAX_VERTICES - 1) / 2 per call
         for &(xk, ek) in points.iter().skip(i + 1) {
+            // The compiler makes the path of a zero `dx`, which skips the loop's
+            // head, a binary loop of its own nested in it: their back edges
+            // together are the loop's iterations.
+            // wcet-bound: same loop
             let dx = xi - xk;
             if dx != T::ZERO {
                 // e_i + c(ξ_i − x)² = e_k + c(ξ_k − x)²  ⇔  x = ((e_i − e_k) + c(ξ_i² − ξ_k²)) / (2c(ξ_i − ξ_k))

@@ -541,7 +541,8 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
     let (_dir, edited) = edited_sources("firmware/src/reference_path/loading.rs", |t| {
         t.replace("// wcet-bound: ECU_PATH_ROWS", "// wcet-bound: 10")
     });
-    let wrong = host_sim::wcet::analysis::analyse(elf, &edited, &[trace]).unwrap();
+    let wrong =
+        host_sim::wcet::analysis::analyse(elf, &edited, std::slice::from_ref(&trace)).unwrap();
     assert!(!wrong.violations.is_empty());
     assert!(
         wrong
@@ -551,6 +552,106 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
         "{:?}",
         wrong.violations
     );
+    // A flow fact per activation below its true count: every poll of the control
+    // task crosses its cycle's back edges at least twice.
+    let honest_fact = honest
+        .flow_facts
+        .iter()
+        .find(|f| {
+            f.sources
+                .iter()
+                .any(|s| s.contains("firmware/src/bin/ecu.rs"))
+                && f.bound == 3
+        })
+        .unwrap();
+    assert!(
+        honest_fact.observed_max.unwrap_or(0) >= 2,
+        "{honest_fact:?}"
+    );
+    let (_dir, edited) = edited_sources("firmware/src/bin/ecu.rs", |t| {
+        t.replace(
+            "// wcet-bound: 3 per activation",
+            "// wcet-bound: 1 per activation",
+        )
+    });
+    let wrong = host_sim::wcet::analysis::analyse(elf, &edited, &[trace]).unwrap();
+    assert!(
+        wrong
+            .violations
+            .iter()
+            .any(|v| v.contains("flow fact") && v.contains("bound 1")),
+        "{:?}",
+        wrong.violations
+    );
+}
+
+/// One source loop the compiler split into nested binary loops (the QP's main
+/// loop: a path that skips its head) shares its bound only where the source says
+/// so (`// wcet-bound: same loop`): without it the inner loop is refused, with a
+/// message that names the lines it may be written on.
+#[test]
+#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+fn a_split_loop_without_its_own_annotation_is_refused() {
+    let elf = ecu_elf();
+    let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    assert_eq!(before.unbounded_loops, 0);
+    assert!(before.loops.iter().any(|l| l
+        .source
+        .as_deref()
+        .unwrap_or("")
+        .contains("qp/src/active_set.rs")
+        && l.source.as_deref().unwrap_or("").contains("`same loop`")));
+    let (_dir, edited) = edited_sources("qp/src/active_set.rs", |t| {
+        t.replace("// wcet-bound: same loop", "// (removed by a test)")
+    });
+    let after = host_sim::wcet::analysis::analyse(elf, &edited, &[]).unwrap();
+    let refused: Vec<_> = after.loops.iter().filter(|l| l.bound.is_none()).collect();
+    assert_eq!(refused.len(), 1, "{refused:?}");
+    let why = refused[0].why_unbounded.as_deref().unwrap_or("");
+    assert!(
+        why.contains("enclosing loop's")
+            && why.contains("same loop")
+            && why.contains("qp/src/active_set.rs:"),
+        "{why}"
+    );
+}
+
+/// A dependency's loop inlined into a firmware line does not take the line's
+/// annotation when a loop of the firmware's own code took it: the timer queue's
+/// list walk inlined into the control task's `delay_until` line is bounded by the
+/// fact about its own line in `rtic-time`, the task's poll cycle on that line by
+/// the line's annotation.
+#[test]
+#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+fn an_inlined_library_loop_takes_no_bound_of_the_line_it_is_inlined_on() {
+    let elf = ecu_elf();
+    let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    let cycle = a
+        .loops
+        .iter()
+        .find(|l| l.function == "USART2" && l.irreducible)
+        .unwrap();
+    assert!(
+        cycle
+            .source
+            .as_deref()
+            .unwrap_or("")
+            .starts_with("firmware/src/bin/ecu.rs"),
+        "{cycle:?}"
+    );
+    let walks: Vec<_> = a
+        .loops
+        .iter()
+        .filter(|l| l.function == "USART2" && l.file == cycle.file && l.line == cycle.line)
+        .filter(|l| !l.irreducible)
+        .collect();
+    assert!(!walks.is_empty());
+    for w in walks {
+        assert!(
+            w.source.as_deref().unwrap_or("").starts_with("rtic-time-"),
+            "{w:?}"
+        );
+    }
 }
 
 /// An atomic increment: load-exclusive, add, store-exclusive, retry on failure.

@@ -143,6 +143,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             if sol.iterations >= settings.max_iter {
                 return QpStatus::IterationLimit;
             }
+            // The compiler splits this loop: a path that skips its head is a binary
+            // loop of its own, nested in it; their back edges together are its
+            // iterations.
+            // wcet-bound: same loop
             sol.iterations += 1;
             if !self.solve_lam_star() {
                 if !self.refactor(p, tols, sol, settings.max_refactorizations) {

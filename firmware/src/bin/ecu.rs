@@ -294,6 +294,10 @@ impl Link {
             }
             if !ended {
                 self.reader.reset();
+                // The compiler makes this path, which skips the loop's head, a binary
+                // loop of its own nested in the loop: their back edges together are
+                // the loop's iterations.
+                // wcet-bound: same loop
                 self.rejected = self.rejected.wrapping_add(1);
                 continue;
             }

@@ -314,8 +314,14 @@ pub fn analyse(
         // Outer loops first: an inner loop does not take an annotation one of its
         // enclosing loops took (the compiler may put both back edges on one line);
         // it takes the next of its lines that has one, or none.
+        // The firmware's loops before the dependencies' (a library loop inlined
+        // into a firmware line takes the line's annotation only if no firmware loop
+        // of the function took it: it is the line's own loop's otherwise; a library
+        // loop nests no firmware loop, so every parent still comes first).
+        let library_loops: Vec<bool> = ls.iter().map(|l| is_library_loop(func, l, &ctx)).collect();
+        let mut firmware_taken: std::collections::BTreeSet<(String, u32)> = Default::default();
         let mut order: Vec<usize> = (0..ls.len()).collect();
-        order.sort_by_key(|&x| loops::depth(ls, x));
+        order.sort_by_key(|&x| (library_loops[x], loops::depth(ls, x)));
         for x in order {
             let l = &ls[x];
             // The loop's telling instructions, and their lines (innermost frame in
@@ -408,27 +414,75 @@ pub fn analyse(
                     continue;
                 }
             }
-            let hit = keys
+            // A loop of a dependency's code inlined into a firmware line takes no
+            // annotation of the firmware's: those bound the line's own loop.
+            let library = library_loops[x];
+            let firmware_key = keys
                 .iter()
+                .filter(|key| !library || !firmware_taken.contains(*key))
                 .find(|key| annotation_of(key).is_some() && !taken.contains(*key))
-                .cloned()
-                .or_else(|| {
-                    // A dependency's loop, inlined or not: the facts about its code
-                    // (at any frame of the inlining chain, innermost first).
-                    candidates
+                .cloned();
+            if let (false, Some(key)) = (library, &firmware_key) {
+                firmware_taken.insert(key.clone());
+            }
+            let hit = firmware_key.or_else(|| {
+                // A dependency's loop, inlined or not: the facts about its code
+                // (at any frame of the inlining chain, innermost first).
+                candidates
+                    .iter()
+                    .flat_map(|&a| frames(&ctx, a))
+                    .map(|(file, line)| (short_path(&file), line))
+                    .filter(|key| !library || !firmware_taken.contains(key))
+                    .find(|key| annotation_of(key).is_some() && !taken.contains(key))
+            });
+            let same_loop = hit
+                .as_ref()
+                .and_then(&annotation_of)
+                .is_some_and(|a| a.scope == annotations::Scope::SameLoop);
+            let Some(key) = hit.clone().filter(|_| !same_loop) else {
+                if !same_loop {
+                    let shares = keys.iter().any(|key| taken.contains(key));
+                    let own: Vec<String> = keys
                         .iter()
-                        .flat_map(|&a| frames(&ctx, a))
-                        .map(|(file, line)| (short_path(&file), line))
-                        .find(|key| annotation_of(key).is_some() && !taken.contains(key))
-                });
-            let Some(key) = hit else {
-                // Its only annotated lines are an enclosing loop's: one source loop
-                // the compiler split into nested binary loops (a `continue` path, an
-                // unrolled remainder). It shares that loop's bound: their back edges
-                // together, against that loop's entries.
+                        .filter(|k| k.1 > 0 && !taken.contains(*k))
+                        .map(|(f, l)| format!("{f}:{l}"))
+                        .collect::<std::collections::BTreeSet<_>>()
+                        .into_iter()
+                        .collect();
+                    notes.insert(
+                        (k, x),
+                        if library {
+                            let inner = candidates
+                                .first()
+                                .and_then(|&a| frames(&ctx, a).into_iter().next())
+                                .map(|(f, l)| format!("{}:{l}", short_path(&f)))
+                                .unwrap_or_default();
+                            format!(
+                                "a loop of a dependency's code ({inner}) inlined into a firmware line whose \
+                                 annotation bounds a loop of the firmware's: state its bound as a dependency \
+                                 fact about its own line (host_sim::wcet::annotations::dependency_facts), or \
+                                 annotate a line of its own"
+                            )
+                        } else if shares {
+                            format!(
+                                "its only annotated line is its enclosing loop's: if the compiler split that \
+                                 source loop into these nested binary loops, write `// wcet-bound: same loop` \
+                                 on one of its own lines ({}), else annotate it there",
+                                own.join(", ")
+                            )
+                        } else {
+                            bounds::why_not(func, l)
+                        },
+                    );
+                    continue;
+                }
+                // `same loop`: one source loop the compiler split into nested binary
+                // loops (a `continue` path). It shares the bound of the nearest
+                // enclosing loop that has one: their back edges together, against
+                // that loop's entries.
                 let mut q = l.parent;
                 while let Some(p) = q {
-                    if matched[p].as_ref().is_some_and(|m| keys.contains(m)) {
+                    if facts.iter().any(|f| f.function == k && f.loop_index == p) {
                         break;
                     }
                     q = ls[p].parent;
@@ -442,7 +496,7 @@ pub fn analyse(
                 });
                 if let Some((p, hf)) = host {
                     let rep = hf.group.unwrap_or(p);
-                    matched[x] = matched[p].clone();
+                    matched[x] = hit.clone();
                     facts.push(LoopFact {
                         function: k,
                         loop_index: x,
@@ -452,21 +506,20 @@ pub fn analyse(
                     origin.insert(
                         (k, x),
                         format!(
-                            "shares the bound of the loop at {:#x} (same source loop): {}",
+                            "{}:{}: `same loop`: shares the bound of the loop at {:#x}: {}",
+                            hit.as_ref().map_or("?", |h| h.0.as_str()),
+                            hit.as_ref().map_or(0, |h| h.1),
                             func.blocks.get(ls[rep].header).map_or(0, |b| b.start),
                             origin.get(&(k, rep)).cloned().unwrap_or_default()
                         ),
                     );
                     continue;
                 }
-                let shares = keys.iter().any(|key| taken.contains(key));
                 notes.insert(
                     (k, x),
-                    if shares {
-                        "its only annotated line is its enclosing loop's: annotate another of its lines (its header's)".into()
-                    } else {
-                        bounds::why_not(func, l)
-                    },
+                    "`same loop`, but no enclosing binary loop has a bound to share: \
+                     the loop is not nested in the one it was split from"
+                        .into(),
                 );
                 continue;
             };
@@ -508,7 +561,8 @@ pub fn analyse(
                     annotations::Scope::Entry
                     | annotations::Scope::Bytes
                     | annotations::Scope::LoopEntry
-                    | annotations::Scope::Runs => Per::Entry,
+                    | annotations::Scope::Runs
+                    | annotations::Scope::SameLoop => Per::Entry,
                     annotations::Scope::Call => Per::Call,
                     annotations::Scope::Activation => {
                         match a.counter.as_deref().and_then(|c| counter_groups.get(c)) {
@@ -544,7 +598,8 @@ pub fn analyse(
                         annotations::Scope::Entry
                         | annotations::Scope::Bytes
                         | annotations::Scope::LoopEntry
-                        | annotations::Scope::Runs => "",
+                        | annotations::Scope::Runs
+                        | annotations::Scope::SameLoop => "",
                     },
                     a.counter
                         .as_ref()
@@ -1095,6 +1150,21 @@ impl StaticAnalysis {
             .with_context(|| format!("writing {}", dir.join("static.md").display()))?;
         Ok(())
     }
+}
+
+/// Whether every instruction of loop `l` is a dependency's code (the innermost
+/// frame of its inlining chain outside the firmware's crates): a library loop,
+/// inlined or not, whose bound is a fact about the library's own line.
+fn is_library_loop(f: &Function, l: &Loop, ctx: &addr2line::Loader) -> bool {
+    l.blocks.iter().all(|&b| {
+        f.blocks.get(b).is_none_or(|blk| {
+            f.instructions[blk.first..blk.end].iter().all(|i| {
+                frames(ctx, i.address)
+                    .first()
+                    .is_none_or(|(file, _)| annotations::firmware_source_path(file).is_none())
+            })
+        })
+    })
 }
 
 /// Addresses whose source line may carry a loop's annotation, most telling first:

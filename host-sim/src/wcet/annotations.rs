@@ -67,11 +67,23 @@
 //! binary does not set the size to a constant before the call. Every loop of
 //! those functions takes at most one back edge per byte.
 //!
+//! With `same loop` (no expression), the annotation states that the binary loop
+//! holding its line is part of the binary loop around it: one source loop the
+//! compiler split into nested binary loops (a `continue` path that jumps past the
+//! loop's head). Their back edges together take the enclosing loop's bound per
+//! its entry, a flow fact the traces check like the others.
+//!
 //! A binary loop is matched by the source line of its back-edge branch, else of
 //! the first instruction of its header, else of the other instructions of those
 //! two blocks (each the innermost frame in the firmware's own sources, inlining
 //! followed). A loop nested in another loop matched to the same annotation is
-//! refused: it needs its own.
+//! refused: it needs its own (a bound, or `same loop`). A loop whose every
+//! instruction is a dependency's code (a library loop inlined into a firmware
+//! line: a timer queue's list walk inside a call, a checksum's loop) takes the
+//! line's annotation only when no loop of the firmware's own code in the same
+//! function took it (the annotation is then the library loop's: the checksum's
+//! bytes); else it takes a dependency fact ([`dependency_facts`]) about its own
+//! source line, or none.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -102,6 +114,11 @@ pub enum Scope {
     /// of the task, summed over every place the line's code was inlined (a
     /// recovery step with its own cap per activation).
     Runs,
+    /// `same loop`: the binary loop holding the line is part of the source loop
+    /// around it, which the compiler split into nested binary loops (a `continue`
+    /// path that skips the loop's head): their back edges together take the
+    /// enclosing loop's bound, per its entry.
+    SameLoop,
 }
 
 /// One `// wcet-bound:` annotation.
@@ -411,7 +428,9 @@ pub fn parse_source(
             }
             None => (spec, None),
         };
-        let (expr, scope) = if let Some(e) = spec.strip_suffix("times per activation") {
+        let (expr, scope) = if spec == "same loop" {
+            ("0", Scope::SameLoop)
+        } else if let Some(e) = spec.strip_suffix("times per activation") {
             (e.trim(), Scope::Runs)
         } else if let Some(e) = spec.strip_suffix("per call") {
             (e.trim(), Scope::Call)

@@ -121,8 +121,9 @@ pub(super) fn copy_sizes(
         for &k in &reach {
             let func = &program.functions[k];
             let ls = loops::natural_loops(func).unwrap_or_default();
-            let mut groups: BTreeMap<(Option<usize>, u64, Option<usize>, usize), Vec<usize>> =
-                BTreeMap::new();
+            // (innermost loop, bound, activation group, annotation) → blocks.
+            type CapKey = (Option<usize>, u64, Option<usize>, usize);
+            let mut groups: BTreeMap<CapKey, Vec<usize>> = BTreeMap::new();
             for (b, block) in func.blocks.iter().enumerate() {
                 let hit = func.instructions[block.first..block.end]
                     .iter()

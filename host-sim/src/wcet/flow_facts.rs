@@ -169,7 +169,28 @@ pub fn flow_facts(
         let n = 1 + shared.len();
         let stated = origin.get(&(f, x)).cloned().unwrap_or_default();
         match fact.per {
-            Per::Entry => {}
+            // A bound per entry alone is checked as a loop bound; shared with the
+            // nested loops split from it (`same loop`), their back edges together
+            // are a flow fact per entry of this loop.
+            Per::Entry if shared.is_empty() => {}
+            Per::Entry => out.push(FlowFact {
+                name: stated.split(": `").next().unwrap_or(&stated).to_string(),
+                per: format!("entry of a loop of `{}`", name_of(f)),
+                counts: format!(
+                    "iterations of one source loop split into {n} binary loops (`same loop`)"
+                ),
+                bound: fact.bound,
+                bound_by_task: Vec::new(),
+                sources: vec![stated],
+                members: n,
+                observed_max: None,
+                observed_scopes: 0,
+                counter: CounterSpec {
+                    scope: CounterScope::LoopEntry(f, x),
+                    blocks: Vec::new(),
+                    edges,
+                },
+            }),
             Per::Preemption => {
                 retry.counter.edges.extend(edges);
                 retry.members += n;
