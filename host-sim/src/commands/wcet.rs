@@ -76,7 +76,13 @@ impl WcetArgs {
     }
 }
 
-fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -> PilArgs {
+pub(crate) fn pil_args(
+    out: PathBuf,
+    obstacles: &str,
+    mu: f64,
+    duration: f64,
+    elf: &Path,
+) -> PilArgs {
     PilArgs {
         run: RunArgs {
             track: PAPER_TRACK.into(),
@@ -213,7 +219,7 @@ fn traced_pil_run(
 }
 
 /// A CPI report standing for a bound given on the command line.
-fn given_cpi(c: f64) -> CpiReport {
+pub(crate) fn given_cpi(c: f64) -> CpiReport {
     CpiReport {
         total: cpi::Figures {
             instructions: 0,
