@@ -40,13 +40,23 @@ pub struct WcetArgs {
     /// time each at most.
     #[arg(long, default_value_t = 200.0)]
     pub duration: f64,
-    /// Compare with committed expectations (a `wcet.json`); fail when a size or an
-    /// instruction count grew past it by more than --margin.
-    #[arg(long)]
+    /// Compare with the expected values (`.ci/expected/wcet.json`, written by
+    /// --write-expected); fail when a checked figure differs from its blessed value
+    /// or grew past its baseline by more than --margin.
+    #[arg(long, conflicts_with = "write_expected")]
     pub expected: Option<PathBuf>,
-    /// Relative growth allowed against --expected.
+    /// Relative growth allowed over a baseline, by --expected and --write-expected.
     #[arg(long, default_value_t = 0.05)]
     pub margin: f64,
+    /// Bless this report's figures into this expected-values file (CI's step:
+    /// `.ci/bless-expected`); refused when one grew past its baseline by more than
+    /// --margin, unless --accept-growth says why.
+    #[arg(long, conflicts_with = "static_only")]
+    pub write_expected: Option<PathBuf>,
+    /// With --write-expected: accept growth past the margin, for this reason
+    /// (recorded in the file beside the raised baselines).
+    #[arg(long, requires = "write_expected")]
+    pub accept_growth: Option<String>,
     /// The workspace root: the loop annotations (`// wcet-bound:`) are read from
     /// its firmware crates' sources, `firmware/src` and `qp/src`.
     #[arg(long, default_value = ".")]
@@ -82,7 +92,13 @@ impl WcetArgs {
     }
 }
 
-fn pil_args(out: PathBuf, obstacles: &str, mu: f64, duration: f64, elf: &Path) -> PilArgs {
+pub(crate) fn pil_args(
+    out: PathBuf,
+    obstacles: &str,
+    mu: f64,
+    duration: f64,
+    elf: &Path,
+) -> PilArgs {
     PilArgs {
         run: RunArgs {
             track: PAPER_TRACK.into(),
@@ -219,7 +235,7 @@ fn traced_pil_run(
 }
 
 /// A CPI report standing for a bound given on the command line.
-fn given_cpi(c: f64) -> CpiReport {
+pub(crate) fn given_cpi(c: f64) -> CpiReport {
     CpiReport {
         total: cpi::Figures {
             instructions: 0,
@@ -384,18 +400,12 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         bail!("required goals missed:\n  {}", missed.join("\n  "));
     }
     if let Some(e) = &args.expected {
-        let text = fs::read_to_string(e)
-            .with_context(|| format!("cannot read the expectations {}", e.display()))?;
-        let fails = report::expected::check_against_expected(&r, &text, args.margin);
-        if !fails.is_empty() {
-            bail!(
-                "the ECU grew past {} (+{:.0} %):\n  {}",
-                e.display(),
-                args.margin * 100.0,
-                fails.join("\n  ")
-            );
-        }
-        println!("within {} (+{:.0} %)", e.display(), args.margin * 100.0);
+        report::expected::check_file(&r, e, args.margin)?;
+    }
+    if let Some(e) = &args.write_expected {
+        // Figures from an analysis that failed are no reference to bless.
+        analysis_errors(&analysis, &args.out)?;
+        report::expected::write_file(&r, e, args.margin, args.accept_growth.as_deref())?;
     }
     analysis_errors(&analysis, &args.out)
 }

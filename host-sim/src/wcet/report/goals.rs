@@ -94,6 +94,17 @@ pub(super) fn goals(
         .map(|r| r.plan_deadline_misses + r.control_deadline_misses)
         .sum();
     let not_completed = runs.iter().filter(|r| !r.completed).count();
+    // A miss counts wherever it happened; "no miss" is claimed only over runs that
+    // reached the end of their scenario (a lap), not over a run cut short.
+    let (misses_name, misses_value) = if misses == 0 && not_completed > 0 {
+        (
+            "deadline misses over the runs (none counted, but a run did not complete: \
+             zero is claimed only over completed runs)",
+            None,
+        )
+    } else {
+        ("deadline misses over the runs", Some(misses as f64))
+    };
     vec![
         goal(
             "plan-warm-observed",
@@ -190,13 +201,7 @@ pub(super) fn goals(
             GOAL_FLASH_BYTES,
             "bytes",
         ),
-        goal(
-            "deadline-misses",
-            "deadline misses over the runs",
-            Some(misses as f64),
-            0.0,
-            "misses",
-        ),
+        goal("deadline-misses", misses_name, misses_value, 0.0, "misses"),
         goal(
             "runs-completed",
             "PIL runs not completed",
@@ -209,6 +214,10 @@ pub(super) fn goals(
 
 #[cfg(test)]
 mod tests {
+    use super::super::{
+        Coverage, ElfMemory, MemoryReport, RunEntry, StaticSummary, StaticTiming, TaskTiming,
+        Tasks, WindowTiming,
+    };
     use super::*;
 
     #[test]
@@ -231,6 +240,293 @@ mod tests {
         assert!(
             err.contains("no goal z") && err.contains("a, b, c"),
             "{err}"
+        );
+        Ok(())
+    }
+
+    /// What [`goals`] reads, every goal met by a small margin (figures of the
+    /// kind the ECU's report has).
+    struct Fixture {
+        tasks: Tasks,
+        memory: MemoryReport,
+        runs: Vec<RunEntry>,
+        statics: StaticSummary,
+    }
+
+    fn timing(statics: StaticTiming, observed: f64, budget: f64) -> TaskTiming {
+        TaskTiming {
+            observed_max_instructions: observed,
+            observed_p50_instructions: observed / 2.0,
+            observed_warm_max_instructions: None,
+            observed_cold_max_instructions: None,
+            statics,
+            budget_cycles: budget,
+            budget_us: budget / 168.0,
+        }
+    }
+
+    fn run(dir: &str) -> RunEntry {
+        RunEntry {
+            dir: dir.into(),
+            completed: true,
+            plan_activations: 880,
+            plan_deadline_misses: 0,
+            control_deadline_misses: 0,
+            plan_failures: 0,
+            stack_high_water_bytes: 5_000,
+            elf: "ecu".into(),
+        }
+    }
+
+    impl Fixture {
+        fn all_met() -> Self {
+            let plan = StaticTiming {
+                static_bound_instructions: Some(7_800_000),
+                static_bound_cycles: Some(14_700_000),
+                job_static_bound_cycles: Some(14_600_000),
+                response_time_bound_us: Some(96_800.0),
+                deadline_us: Some(100_000.0),
+                traced_max_cycles: Some(5_400_000),
+                tightness: Some(2.7),
+            };
+            let control = StaticTiming {
+                static_bound_instructions: Some(60_000),
+                static_bound_cycles: Some(130_000),
+                job_static_bound_cycles: Some(4_995),
+                response_time_bound_us: Some(903.0),
+                deadline_us: Some(10_000.0),
+                traced_max_cycles: Some(44_000),
+                tightness: Some(2.9),
+            };
+            let mut plan_timing = timing(plan.clone(), 720_000.0, 15.96e6);
+            plan_timing.observed_warm_max_instructions = Some(480_000.0);
+            Self {
+                tasks: Tasks {
+                    plan: plan_timing,
+                    control: timing(control.clone(), 1_500.0, 5_000.0),
+                    plan_window: WindowTiming {
+                        observed_max_instructions: 720_000.0,
+                        static_bound_cycles: Some(13_000_000),
+                        budget_cycles: 15.96e6,
+                        period_cycles: 16.8e6,
+                    },
+                },
+                memory: MemoryReport {
+                    sections: ElfMemory::default(),
+                    static_ram_bytes: 48_700,
+                    flash_bytes: 155_000,
+                    stack_bound_bytes: 8_144,
+                    stack_method: "fixture".into(),
+                    stack_sound: true,
+                    stack_misses: Vec::new(),
+                    stack_high_water_bytes: 5_232,
+                    stack_size_bytes: 82_000,
+                },
+                runs: vec![run("lap-a"), run("lap-b")],
+                statics: StaticSummary {
+                    plan,
+                    control,
+                    window_job_static_bound_cycles: Some(13_000_000),
+                    coverage: Coverage::default(),
+                },
+            }
+        }
+
+        fn goals(&self) -> Vec<Goal> {
+            goals(&self.tasks, &self.memory, &self.runs, &self.statics)
+        }
+    }
+
+    /// Checks that exactly the goals `ids` are missed, and that `--require` with
+    /// every goal names each of them.
+    fn only_missed(f: &Fixture, ids: &[&str]) -> Result<(), String> {
+        let goals = f.goals();
+        let mut missed: Vec<&str> = goals.iter().filter(|g| !g.met).map(|g| g.id).collect();
+        let mut want = ids.to_vec();
+        missed.sort_unstable();
+        want.sort_unstable();
+        assert_eq!(missed, want, "{goals:#?}");
+        let every: Vec<String> = goals.iter().map(|g| g.id.to_string()).collect();
+        let lines = missed_required(&goals, &every)?;
+        for id in ids {
+            assert!(
+                lines.iter().any(|l| l.starts_with(&format!("{id} ("))),
+                "--require {id} did not fail: {lines:?}"
+            );
+        }
+        Ok(())
+    }
+
+    /// One test per goal (`name: "goal-id" + "also-missed"... => breach;`): the
+    /// breach applied to [`Fixture::all_met`] misses that goal and no other but
+    /// those listed after it.
+    macro_rules! breaches {
+        ($($test:ident: $id:literal $(+ $also:literal)* => $breach:expr;)*) => {
+            $(
+                #[test]
+                fn $test() -> Result<(), String> {
+                    let mut f = Fixture::all_met();
+                    let breach: fn(&mut Fixture) = $breach;
+                    breach(&mut f);
+                    only_missed(&f, &[$id $(, $also)*])
+                }
+            )*
+            /// The goals the breach tests make fail.
+            const BREACHED: &[&str] = &[$($id),*];
+        };
+    }
+
+    breaches! {
+        plan_warm_observed_fails_over_half_a_million_instructions: "plan-warm-observed" =>
+            |f| f.tasks.plan.observed_warm_max_instructions = Some(500_001.0);
+        plan_job_budget_fails_when_the_bound_exceeds_the_budget: "plan-job-budget" =>
+            |f| f.tasks.plan.statics.job_static_bound_cycles = Some(15_960_001);
+        plan_job_budget_fails_without_a_bound: "plan-job-budget" =>
+            |f| f.tasks.plan.statics.job_static_bound_cycles = None;
+        window_job_budget_fails_when_the_adoption_exceeds_the_budget: "window-job-budget" =>
+            |f| f.tasks.plan_window.static_bound_cycles = Some(15_960_001);
+        plan_tightness_fails_over_three: "plan-tightness" =>
+            |f| f.tasks.plan.statics.tightness = Some(3.01);
+        control_job_budget_fails_one_cycle_over: "control-job-budget" =>
+            |f| f.tasks.control.statics.job_static_bound_cycles = Some(5_001);
+        plan_response_time_fails_past_the_period: "plan-response-time" =>
+            |f| f.tasks.plan.statics.response_time_bound_us = Some(100_000.1);
+        control_response_time_fails_without_a_bound_within_the_deadline: "control-response-time" =>
+            |f| f.tasks.control.statics.response_time_bound_us = None;
+        analysis_complete_fails_on_an_unbounded_loop: "analysis-complete" =>
+            |f| f.statics.coverage.unbounded_loops = 1;
+        analysis_complete_fails_on_a_recursion: "analysis-complete" =>
+            |f| f.statics.coverage.recursions = vec!["[a, b]".into()];
+        stack_covered_fails_on_an_unresolved_indirect_call: "stack-covered" =>
+            |f| f.memory.stack_misses = vec!["indirect call in f: blx r2".into()];
+        control_observed_fails_over_two_thousand_instructions: "control-observed" =>
+            |f| f.tasks.control.observed_max_instructions = 2_001.0;
+        static_ram_fails_over_48_kib: "static-ram" =>
+            |f| f.memory.static_ram_bytes = 49_153;
+        stack_bound_fails_over_8_kib: "stack-bound" =>
+            |f| f.memory.stack_bound_bytes = 8_193;
+        flash_fails_over_256_kib: "flash" =>
+            |f| f.memory.flash_bytes = 262_145;
+        deadline_misses_fails_on_a_plan_overrun: "deadline-misses" =>
+            |f| f.runs[0].plan_deadline_misses = 1;
+        deadline_misses_fails_on_a_control_overrun: "deadline-misses" =>
+            |f| f.runs[1].control_deadline_misses = 1;
+        runs_completed_fails_on_a_run_cut_short_and_no_miss_is_claimed_over_it:
+            "runs-completed" + "deadline-misses" =>
+            |f| f.runs[1].completed = false;
+    }
+
+    #[test]
+    fn the_fixture_meets_every_goal() -> Result<(), String> {
+        only_missed(&Fixture::all_met(), &[])
+    }
+
+    #[test]
+    fn every_goal_has_a_breach_test() {
+        let mut ids: Vec<&str> = Fixture::all_met().goals().iter().map(|g| g.id).collect();
+        let mut breached = BREACHED.to_vec();
+        ids.sort_unstable();
+        breached.sort_unstable();
+        breached.dedup();
+        assert_eq!(breached, ids, "add a case to breaches! for each new goal");
+    }
+
+    #[test]
+    fn a_miss_in_a_run_cut_short_still_counts() -> Result<(), String> {
+        let mut f = Fixture::all_met();
+        f.runs[1].completed = false;
+        f.runs[1].plan_deadline_misses = 3;
+        let goals = f.goals();
+        let misses = goals
+            .iter()
+            .find(|g| g.id == "deadline-misses")
+            .ok_or("no deadline-misses goal")?;
+        assert_eq!(
+            (misses.value, misses.met, misses.name.as_str()),
+            (Some(3.0), false, "deadline misses over the runs")
+        );
+        Ok(())
+    }
+
+    /// The real ECU ELF (`cargo ecu`); fails when it has not been built.
+    fn real_elf() -> std::path::PathBuf {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../target/thumbv7em-none-eabihf/release/ecu");
+        assert!(
+            path.is_file(),
+            "the ECU binary {} is missing: build it first (cargo ecu)",
+            path.display()
+        );
+        path
+    }
+
+    /// The real ECU in QEMU, each instruction 256 ns instead of 16 (`-icount
+    /// shift=8`, as if the core ran at a sixteenth of its speed): every plan
+    /// activation overruns its 100 ms period. The ECU's own deadline monitor
+    /// counts the misses, the report carries them, and `--require
+    /// deadline-misses` fails. On its own clock, over the same 2 s, no miss is
+    /// counted, but the run does not complete its lap, so no pass is claimed.
+    #[test]
+    #[ignore = "needs the ECU binary (cargo ecu) and qemu-system-arm"]
+    fn real_ecu_elf_deadline_gate_fails_on_an_injected_overrun() -> anyhow::Result<()> {
+        let elf = real_elf();
+        let tmp = tempfile::tempdir()?;
+        let report = |shift: u32| -> anyhow::Result<(Goal, crate::closed_loop::summary::Summary)> {
+            let dir = tmp.path().join(format!("shift-{shift}"));
+            let mut args = crate::commands::wcet::pil_args(dir.clone(), "paper", 1.0, 2.0, &elf);
+            args.icount_shift = shift;
+            crate::commands::pil::run(&args)?;
+            let inputs = super::super::ReportInputs {
+                run_dirs: vec![dir.clone()],
+                elf: elf.clone(),
+                stack_levels: crate::wcet::ecu_app::ecu_priority_levels(),
+                cpi: crate::commands::wcet::given_cpi(2.6),
+                statics: StaticSummary::default(),
+                plan_period_cycles: 16.8e6,
+                plan_budget_cycles: 15.96e6,
+                control_budget_cycles: 5_000.0,
+                clock_hz: 168_000_000,
+            };
+            let r = super::super::build_report(&inputs)?;
+            let summary: crate::closed_loop::summary::Summary =
+                serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json"))?)?;
+            let g = r
+                .goals
+                .iter()
+                .find(|g| g.id == "deadline-misses")
+                .cloned()
+                .ok_or_else(|| anyhow::anyhow!("no deadline-misses goal"))?;
+            Ok((g, summary))
+        };
+        let (slow, s) = report(8)?;
+        let ecu_count =
+            s.ecu_plan_deadline_misses.unwrap_or(0) + s.ecu_control_deadline_misses.unwrap_or(0);
+        assert!(
+            ecu_count > 0,
+            "no miss counted by the ECU at 256 ns per instruction: {s:?}"
+        );
+        assert_eq!(slow.value, Some(ecu_count as f64), "{slow:?}");
+        assert!(!slow.met);
+        let required = ["deadline-misses".to_string()];
+        let lines = missed_required(std::slice::from_ref(&slow), &required)
+            .map_err(|e| anyhow::anyhow!(e))?;
+        assert!(
+            lines.len() == 1 && lines[0].starts_with("deadline-misses ("),
+            "{lines:?}"
+        );
+        let (own_clock, s) = report(4)?;
+        assert_eq!(
+            (
+                s.plan_deadline_misses,
+                s.control_deadline_misses,
+                s.completed
+            ),
+            (0, 0, false)
+        );
+        assert_eq!(
+            (own_clock.value, own_clock.met),
+            (None, false),
+            "{own_clock:?}"
         );
         Ok(())
     }
