@@ -124,6 +124,10 @@ static EPOCH_TICKS: AtomicU32 = AtomicU32::new(0);
 static EPOCH_TICKS_HI: AtomicU32 = AtomicU32::new(0);
 
 /// Core clock ticks since the monotonic started (168 MHz; 64 bits never wrap).
+/// Not inlined: one copy of its retry loops and of the monotonic's wrap check
+/// (which a task sees only if SysTick wrapped and its exception is not yet
+/// taken) instead of one per call site.
+#[inline(never)]
 fn core_ticks() -> u64 {
     loop {
         let a = Mono::now().ticks();

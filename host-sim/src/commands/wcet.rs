@@ -209,6 +209,62 @@ fn full_set_trace(args: &WcetArgs) -> Result<PathBuf> {
     traced_pil_run(args, &dir, &track.to_string_lossy(), "none", speed)
 }
 
+/// The straight of the traced run that receives and adopts a window of the road:
+/// its length, m, its half-width, m, and the speed the run starts at, m/s (about
+/// the car's top speed at μ 1, so the planner holds it). Its rows are 1 m apart:
+/// more than a window's, so the ECU holds windows of it.
+const WINDOW_STRAIGHT: (f64, f64, f64) = (480.0, 3.5, 25.0);
+
+/// A box beside the line of the window run, m along and left of the centre line:
+/// inside the second window, so its adoption places an obstacle.
+const WINDOW_BOX: (f64, f64) = (230.0, 2.5);
+
+/// Runs a PIL run on [`WINDOW_STRAIGHT`] until just after the plan task adopted
+/// the first window sent while driving (the feeder sends it when the car is
+/// `BEHIND_M + ADVANCE_M` into the first window), with QEMU's execution trace
+/// written to a file, and returns the file: the route frames received by the
+/// control and plan tasks, the window's adoption (`window_job`), the obstacle
+/// placed on the new window.
+fn window_trace(args: &WcetArgs) -> Result<PathBuf> {
+    use crate::world::route::{ADVANCE_M, BEHIND_M};
+    let dir = args.out.join("trace-window");
+    fs::create_dir_all(&dir)?;
+    let (length, half_width, speed) = WINDOW_STRAIGHT;
+    let mut csv = String::from("# x_m,y_m,w_tr_right_m,w_tr_left_m\n");
+    for k in 0..=(length as usize) {
+        csv.push_str(&format!("{k}.0,0.0,{half_width},{half_width}\n"));
+    }
+    let track = dir.join("straight.csv");
+    fs::write(&track, csv)?;
+    let (bx, by) = WINDOW_BOX;
+    let h = 0.5;
+    let mut boxes = String::from("id,x_m,y_m\n");
+    for (cx, cy) in [
+        (bx - h, by - h),
+        (bx - h, by + h),
+        (bx + h, by + h),
+        (bx + h, by - h),
+    ] {
+        boxes.push_str(&format!("beside,{cx},{cy}\n"));
+    }
+    let obstacles = dir.join("box_beside.csv");
+    fs::write(&obstacles, boxes)?;
+    // The window is due after BEHIND_M + ADVANCE_M at about `speed`, adopted by
+    // the plan activation after it; half a second more leaves a plan on it.
+    let seconds = (BEHIND_M + ADVANCE_M) / speed + 0.6;
+    let mut a = pil_args(
+        dir.join("run"),
+        &obstacles.to_string_lossy(),
+        1.0,
+        seconds,
+        &args.elf,
+    );
+    a.run.track = track.to_string_lossy().into_owned();
+    a.run.open = true;
+    a.run.initial_speed = speed;
+    traced_run(a, &dir)
+}
+
 /// A PIL run of `--trace-seconds` on `track` at μ 1 with `obstacles`, starting at
 /// `speed` m/s, its output and QEMU's execution trace in `dir`; returns the
 /// trace's file.
@@ -219,7 +275,6 @@ fn traced_pil_run(
     obstacles: &str,
     speed: f64,
 ) -> Result<PathBuf> {
-    let log = dir.join("qemu-trace.log");
     let mut a = pil_args(
         dir.join("run"),
         obstacles,
@@ -229,6 +284,13 @@ fn traced_pil_run(
     );
     a.run.track = track.into();
     a.run.initial_speed = speed;
+    traced_run(a, dir)
+}
+
+/// Runs the PIL run `a` with QEMU's execution trace written to `dir`; returns
+/// the trace's file.
+fn traced_run(mut a: PilArgs, dir: &Path) -> Result<PathBuf> {
+    let log = dir.join("qemu-trace.log");
     a.trace = Some(std::path::absolute(&log)?);
     pil::run(&a)?;
     Ok(log)
@@ -322,6 +384,10 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         args.trace_seconds
     );
     traces.push(full_set_trace(args)?);
+    println!(
+        "PIL run with QEMU's execution trace on a straight until the first window of the road sent while driving is adopted"
+    );
+    traces.push(window_trace(args)?);
 
     // The cost model refitted on every measured activation, kept for the
     // simulator's timeline (an estimate, not a bound).

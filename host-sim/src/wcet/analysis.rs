@@ -152,6 +152,9 @@ pub struct StaticAnalysis {
     /// The bounds over more than one loop entry (per activation, per call, the
     /// counters, the capped lines, the retries), each checked on the traces.
     pub flow_facts: Vec<super::flow_facts::FlowFact>,
+    /// The loops the traces executed, and why each other one was not (`None`
+    /// without traces).
+    pub coverage: Option<super::coverage::Coverage>,
 }
 
 /// One of the blocks that cost a task's bound the most.
@@ -865,6 +868,7 @@ pub fn analyse(
         .iter()
         .filter_map(|(n, sym, _, _)| program.find(sym).first().map(|&f| (n.to_string(), f)))
         .collect();
+    let mut blocks_run: std::collections::BTreeSet<(usize, usize)> = Default::default();
     for trace in traces {
         let file = std::fs::File::open(trace)
             .with_context(|| format!("opening the QEMU trace {}", trace.display()))?;
@@ -877,6 +881,7 @@ pub fn analyse(
             &counters,
             &sections,
         )?;
+        blocks_run.extend(check.blocks_run.iter().copied());
         violations.extend(super::flow_facts::observe(
             &mut flow_facts,
             &check,
@@ -958,11 +963,29 @@ pub fn analyse(
             }
         }
     }
+    let coverage = (!traces.is_empty()).then(|| {
+        let sites: Vec<super::coverage::LoopSite<'_>> = loop_rows
+            .iter()
+            .map(|(&key, row)| super::coverage::LoopSite {
+                key,
+                file: &row.file,
+                line: row.line,
+                tasks: &row.tasks,
+                traced: row.observed_max.is_some(),
+            })
+            .collect();
+        let locate = |a: u32| {
+            let (file, line) = location(&ctx, a);
+            (short_path(&file), line)
+        };
+        super::coverage::coverage(&program, &all_loops, &sites, &blocks_run, &locate)
+    });
     let loops: Vec<LoopEntry> = loop_rows.into_values().collect();
     Ok(StaticAnalysis {
         traces: traces.iter().map(|t| t.display().to_string()).collect(),
         violations,
         flow_facts,
+        coverage,
         elf: elf.display().to_string(),
         assumptions: memory.assumptions(),
         unbounded_loops: loops.iter().filter(|l| l.bound.is_none()).count(),
@@ -1112,6 +1135,64 @@ impl StaticAnalysis {
                     );
                 }
                 let _ = writeln!(s);
+            }
+        }
+        let _ = writeln!(
+            s,
+            "\n## Flow facts\n\nThe bounds over more than one loop entry, each counted in the \
+             traces as the IPET counts it (block entries and edges per activation, call or loop \
+             entry); `–`: no trace exercised it, its bound rests on its source's argument alone.\n"
+        );
+        let _ = writeln!(
+            s,
+            "| fact | per | counts | bound | traced max | traced scopes | source |"
+        );
+        let _ = writeln!(s, "|---|---|---|---:|---:|---:|---|");
+        for f in &self.flow_facts {
+            let bound = if f.bound_by_task.is_empty() {
+                f.bound.to_string()
+            } else {
+                f.bound_by_task
+                    .iter()
+                    .map(|(t, b)| format!("{t} {b}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            let _ = writeln!(
+                s,
+                "| `{}` | {} | {} | {} | {} | {} | {} |",
+                f.name,
+                f.per,
+                f.counts,
+                bound,
+                f.observed_max.map_or("–".to_string(), |m| m.to_string()),
+                f.observed_scopes,
+                f.sources.join("; ")
+            );
+        }
+        if let Some(c) = &self.coverage {
+            let _ = writeln!(
+                s,
+                "\n## Coverage\n\n{} of the {} loops the tasks reach were executed by a trace \
+                 ({:.1} %). The others, with the reason read off the traces:\n",
+                c.traced, c.loops, c.percent
+            );
+            let _ = writeln!(
+                s,
+                "| function | header | source | tasks | why no trace ran it |"
+            );
+            let _ = writeln!(s, "|---|---|---|---|---|");
+            for u in &c.untraced {
+                let _ = writeln!(
+                    s,
+                    "| `{}` | {} | {}:{} | {} | {} |",
+                    u.function,
+                    u.header,
+                    u.file,
+                    u.line,
+                    u.tasks.join(", "),
+                    u.reason
+                );
             }
         }
         let _ = writeln!(s, "\n## Processor and memory model\n");

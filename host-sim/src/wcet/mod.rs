@@ -10,6 +10,7 @@
 //! | [`graph`] | strongly connected components (recursion, irreducible cycles) |
 //! | [`bounds`] | loop bounds recognised from the binary (counted loops) |
 //! | [`annotations`] | loop bounds written beside the loops in the firmware source (`// wcet-bound: EXPR`), matched through the DWARF line table |
+//! | [`coverage`] | the loops no trace executed, each with the reason read off the traces |
 //! | [`copies`] | block copies and fills: the functions and the bytes each call site moves |
 //! | [`flow_facts`] | the bounds over more than one loop entry (per activation, per call, counters, capped lines, retries), each with what it counts, checked on the traces |
 //! | [`ipet`] | implicit path enumeration: a task's bound as a linear program (`good_lp`, `microlp`) |
@@ -32,6 +33,7 @@ pub mod bounds;
 pub mod cache;
 pub mod cfg;
 pub mod copies;
+pub mod coverage;
 pub mod cpi;
 pub mod ecu_app;
 pub mod flash_data;

@@ -89,6 +89,13 @@ pub struct StaticTiming {
     pub traced_max_cycles: Option<u64>,
     /// `static_bound_cycles / traced_max_cycles` (dimensionless, ≥ 1 when sound).
     pub tightness: Option<f64>,
+    /// Calls of the task's job seen in the traces.
+    pub job_traced_activations: u64,
+    /// Largest traced call of the job priced with the bound's block cycles, in
+    /// cycles.
+    pub job_traced_max_cycles: Option<u64>,
+    /// `job_static_bound_cycles / job_traced_max_cycles` (dimensionless).
+    pub job_tightness: Option<f64>,
 }
 
 /// What the static analysis of the ELF found, as the report uses it.
@@ -118,6 +125,16 @@ pub struct Coverage {
     pub unresolved_indirect_calls: Vec<String>,
     /// Call cycles (an error of the analysis).
     pub recursions: Vec<String>,
+    /// The bounds over more than one loop entry, each with its source and its
+    /// largest traced count (`observed_max`, `null`: no trace exercised it).
+    pub flow_facts: Vec<super::flow_facts::FlowFact>,
+    /// Loops the traces executed, percent of the loops the tasks reach (`null`
+    /// without traces).
+    pub loops_traced_percent: Option<f64>,
+    /// The loops no trace executed, each with the reason read off the traces.
+    pub untraced_loops: Vec<super::coverage::UntracedLoop>,
+    /// Budgeted jobs (sections with a budget) and their traced calls.
+    pub jobs_traced: Vec<(String, u64)>,
 }
 
 impl Coverage {
@@ -140,7 +157,11 @@ impl StaticSummary {
         };
         let task = |name: &str, job: &str| {
             let t = analysis.tasks.iter().find(|t| t.name == name);
+            let j = analysis.tasks.iter().find(|t| t.name == job);
             StaticTiming {
+                job_traced_activations: j.map_or(0, |j| j.observed_activations),
+                job_traced_max_cycles: j.and_then(|j| j.observed_max_cycles),
+                job_tightness: j.and_then(|j| j.tightness),
                 static_bound_instructions: t.and_then(|t| t.static_bound_instructions),
                 static_bound_cycles: t.and_then(|t| t.static_bound_cycles),
                 job_static_bound_cycles: bound_cycles(job),
@@ -162,6 +183,19 @@ impl StaticSummary {
                     .recursions
                     .iter()
                     .map(|r| format!("{r:?}"))
+                    .collect(),
+                flow_facts: analysis.flow_facts.clone(),
+                loops_traced_percent: analysis.coverage.as_ref().map(|c| c.percent),
+                untraced_loops: analysis
+                    .coverage
+                    .as_ref()
+                    .map(|c| c.untraced.clone())
+                    .unwrap_or_default(),
+                jobs_traced: analysis
+                    .tasks
+                    .iter()
+                    .filter(|t| t.budget_cycles.is_some())
+                    .map(|t| (t.name.clone(), t.observed_activations))
                     .collect(),
             },
         }
@@ -675,6 +709,7 @@ active_constraints,max_validity_slack_rad";
                     deadline_us: Some(100_000.0),
                     traced_max_cycles: Some(3_000_000),
                     tightness: Some(4.0),
+                    ..Default::default()
                 },
                 control: StaticTiming {
                     static_bound_instructions: Some(3000),
@@ -684,6 +719,7 @@ active_constraints,max_validity_slack_rad";
                     deadline_us: Some(10_000.0),
                     traced_max_cycles: None,
                     tightness: None,
+                    ..Default::default()
                 },
                 ..Default::default()
             },
@@ -917,7 +953,14 @@ active_constraints,max_validity_slack_rad";
         }
         assert!(v["tasks"]["plan"]["tightness"].is_f64());
         assert!(v["tasks"]["control"]["response_time_bound_us"].is_null());
-        for key in ["loops", "unresolved_indirect_calls", "recursions"] {
+        for key in [
+            "loops",
+            "unresolved_indirect_calls",
+            "recursions",
+            "flow_facts",
+            "untraced_loops",
+            "jobs_traced",
+        ] {
             assert!(v[key].is_array(), "{key}");
         }
         assert_eq!(v["unbounded_loops"].as_u64(), Some(0));
@@ -937,7 +980,7 @@ active_constraints,max_validity_slack_rad";
         assert_eq!(v["symbols"]["allocator"].as_bool(), Some(false));
         assert_eq!(v["symbols"]["soft_double"].as_bool(), Some(false));
         assert_eq!(v["runs"].as_array().map(Vec::len), Some(2));
-        assert_eq!(v["goals"].as_array().map(Vec::len), Some(15));
+        assert_eq!(v["goals"].as_array().map(Vec::len), Some(18));
         assert!(v["goals"][0]["met"].is_boolean());
         let md = std::fs::read_to_string(out.join("wcet.md"))?;
         assert!(

@@ -211,6 +211,9 @@ pub struct TraceCheck {
     pub sections: Vec<SectionObservation>,
     /// Indirect calls and jumps taken, by site then target.
     pub indirect_calls: Vec<IndirectObservation>,
+    /// Blocks `(function, block)` entered at least once, in any context, sorted.
+    #[serde(skip)]
+    pub blocks_run: Vec<(usize, usize)>,
     /// Per root, in the order given.
     pub roots: Vec<RootObservation>,
     /// Activations of exception handlers that are not roots (faults), by name.

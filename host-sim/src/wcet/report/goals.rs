@@ -16,6 +16,9 @@ pub const GOAL_CONTROL_MAX_INSTRUCTIONS: f64 = 2000.0;
 pub const GOAL_STATIC_RAM_BYTES: f64 = 49_152.0;
 /// Goal: static stack bound at most this, in bytes (8 KiB).
 pub const GOAL_STACK_BOUND_BYTES: f64 = 8_192.0;
+/// Goal: the loops the tasks reach that no trace executed, at most this percent of
+/// them (95 % traced).
+pub const GOAL_LOOPS_UNTRACED_PERCENT: f64 = 5.0;
 /// Goal: flash image at most this, in bytes (256 KiB).
 pub const GOAL_FLASH_BYTES: f64 = 262_144.0;
 
@@ -167,6 +170,41 @@ pub(super) fn goals(
             "",
         ),
         goal(
+            "flow-facts",
+            "flow facts below their traced maximum",
+            Some(
+                statics
+                    .coverage
+                    .flow_facts
+                    .iter()
+                    .filter(|f| f.observed_max.is_some_and(|m| m > f.bound))
+                    .count() as f64,
+            ),
+            0.0,
+            "facts",
+        ),
+        goal(
+            "loops-traced",
+            "loops the tasks reach that no trace executed",
+            statics.coverage.loops_traced_percent.map(|p| 100.0 - p),
+            GOAL_LOOPS_UNTRACED_PERCENT,
+            "% of the loops",
+        ),
+        goal(
+            "jobs-traced",
+            "budgeted jobs no trace called",
+            Some(
+                statics
+                    .coverage
+                    .jobs_traced
+                    .iter()
+                    .filter(|(_, n)| *n == 0)
+                    .count() as f64,
+            ),
+            0.0,
+            "jobs",
+        ),
+        goal(
             "stack-covered",
             "stack bound: what it does not cover",
             Some(memory.stack_misses.len() as f64),
@@ -288,6 +326,7 @@ mod tests {
                 deadline_us: Some(100_000.0),
                 traced_max_cycles: Some(5_400_000),
                 tightness: Some(2.7),
+                ..StaticTiming::default()
             };
             let control = StaticTiming {
                 static_bound_instructions: Some(60_000),
@@ -297,6 +336,7 @@ mod tests {
                 deadline_us: Some(10_000.0),
                 traced_max_cycles: Some(44_000),
                 tightness: Some(2.9),
+                ..StaticTiming::default()
             };
             let mut plan_timing = timing(plan.clone(), 720_000.0, 15.96e6);
             plan_timing.observed_warm_max_instructions = Some(480_000.0);
@@ -327,7 +367,11 @@ mod tests {
                     plan,
                     control,
                     window_job_static_bound_cycles: Some(13_000_000),
-                    coverage: Coverage::default(),
+                    coverage: Coverage {
+                        loops_traced_percent: Some(100.0),
+                        jobs_traced: vec![("control_job".into(), 10), ("plan_job".into(), 2)],
+                        ..Coverage::default()
+                    },
                 },
             }
         }
@@ -387,6 +431,29 @@ mod tests {
             |f| f.tasks.plan_window.static_bound_cycles = Some(15_960_001);
         plan_tightness_fails_over_three: "plan-tightness" =>
             |f| f.tasks.plan.statics.tightness = Some(3.01);
+        flow_facts_fails_on_a_fact_below_its_traced_count: "flow-facts" =>
+            |f| f.statics.coverage.flow_facts.push(crate::wcet::flow_facts::FlowFact {
+                name: "qp_iterations".into(),
+                per: "activation".into(),
+                counts: "loop iterations".into(),
+                bound: 56,
+                bound_by_task: Vec::new(),
+                sources: vec!["qp/src/active_set.rs:143".into()],
+                members: 2,
+                observed_max: Some(57),
+                observed_scopes: 1,
+                counter: crate::wcet::trace_check::CounterSpec {
+                    scope: crate::wcet::trace_check::CounterScope::Activation,
+                    blocks: Vec::new(),
+                    edges: Vec::new(),
+                },
+            });
+        loops_traced_fails_under_ninety_five_percent: "loops-traced" =>
+            |f| f.statics.coverage.loops_traced_percent = Some(94.9);
+        loops_traced_fails_without_traces: "loops-traced" =>
+            |f| f.statics.coverage.loops_traced_percent = None;
+        jobs_traced_fails_on_a_job_never_called: "jobs-traced" =>
+            |f| f.statics.coverage.jobs_traced.push(("window_job".into(), 0));
         control_job_budget_fails_one_cycle_over: "control-job-budget" =>
             |f| f.tasks.control.statics.job_static_bound_cycles = Some(5_001);
         plan_response_time_fails_past_the_period: "plan-response-time" =>

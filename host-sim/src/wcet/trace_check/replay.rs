@@ -191,6 +191,8 @@ pub(super) struct Replay<'a> {
     section_at: HashMap<u32, usize>,
     section_stats: Vec<SectionObservation>,
     indirect: BTreeMap<(u32, usize), u64>,
+    /// Blocks entered at least once, in any context.
+    blocks_run: std::collections::BTreeSet<(usize, usize)>,
     other: BTreeMap<usize, u64>,
     tb_executions: u64,
     instructions: u64,
@@ -295,6 +297,7 @@ impl<'a> Replay<'a> {
             section_at,
             section_stats,
             indirect: BTreeMap::new(),
+            blocks_run: Default::default(),
             other: BTreeMap::new(),
             tb_executions: 0,
             instructions: 0,
@@ -641,6 +644,7 @@ impl<'a> Replay<'a> {
 
     fn enter_block(&mut self, f: usize, b: usize) {
         self.block_entries += 1;
+        self.blocks_run.insert((f, b));
         let program = self.program;
         let loops = self.loops;
         let Some(block) = program.functions.get(f).and_then(|x| x.blocks.get(b)) else {
@@ -838,6 +842,7 @@ impl<'a> Replay<'a> {
             counters: self.counter_obs,
             sections: self.section_stats,
             indirect_calls,
+            blocks_run: self.blocks_run.into_iter().collect(),
             roots: self.root_stats,
             other_handlers,
             tb_executions: self.tb_executions,
