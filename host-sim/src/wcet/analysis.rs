@@ -155,6 +155,9 @@ pub struct StaticAnalysis {
     /// The loops the traces executed, and why each other one was not (`None`
     /// without traces).
     pub coverage: Option<super::coverage::Coverage>,
+    /// The tasks' critical sections (interrupts disabled, RTIC locks) with their
+    /// bounds: what blocks a higher priority in the response-time analysis.
+    pub critical_sections: Vec<super::critical::CriticalSection>,
 }
 
 /// One of the blocks that cost a task's bound the most.
@@ -817,9 +820,41 @@ pub fn analyse(
                 .map(|t| t.2 as f64),
         });
     }
+    // The tasks' critical sections (interrupts disabled, RTIC locks), each with
+    // its bound: the blocking of the response-time analysis.
+    let callee_bounds: std::cell::RefCell<BTreeMap<usize, Option<u64>>> = Default::default();
+    let callee = |g: usize| -> Option<u64> {
+        if let Some(&b) = callee_bounds.borrow().get(&g) {
+            return b;
+        }
+        let b = ipet::task_bound(&program, &all_loops, g, &facts, 0, &copies, Cost::Cycles)
+            .ok()
+            .map(|b| b.bound);
+        callee_bounds.borrow_mut().insert(g, b);
+        b
+    };
+    let task_reach: Vec<(String, Vec<usize>)> = ECU_TASKS
+        .iter()
+        .filter_map(|&(n, sym)| {
+            let root = *program.find(sym).first()?;
+            Some((n.to_string(), program.completing_reachable(&[root])))
+        })
+        .collect();
+    let locate = |a: u32| {
+        let (file, line) = location(&ctx, a);
+        format!("{}:{line}", short_path(&file))
+    };
+    let critical_sections = super::critical::critical_sections(
+        &program,
+        &memory,
+        &all_loops,
+        &facts,
+        &task_reach,
+        &callee,
+        &locate,
+    );
     // Response times: each task's static bound, the SysTick above both, the
-    // plan swap blocking the control task (the `plan` lock's ceiling is the
-    // control task's priority).
+    // critical sections of lower priorities as blocking.
     let cycles_of = |n: &str| {
         tasks
             .iter()
@@ -833,18 +868,20 @@ pub fn analyse(
             complete = false;
             break;
         };
-        let (cs, ceiling) = match n {
-            "plan" => (cycles_of("publish_plan").unwrap_or(0) as f64, 2),
-            _ => (0.0, 0),
-        };
+        let mut sections = Vec::new();
+        for s in critical_sections.iter().filter(|s| s.task == n) {
+            match s.bound_cycles {
+                Some(b) => sections.push((s.ceiling, b as f64)),
+                None => complete = false,
+            }
+        }
         activities.push(super::rta::Activity {
             name: n.to_string(),
             priority: prio,
             period_us: period as f64,
             deadline_us: period as f64,
             wcet_cycles: c as f64,
-            critical_section_cycles: cs,
-            critical_section_ceiling: ceiling,
+            critical_sections: sections,
         });
     }
     if complete {
@@ -986,6 +1023,7 @@ pub fn analyse(
         violations,
         flow_facts,
         coverage,
+        critical_sections,
         elf: elf.display().to_string(),
         assumptions: memory.assumptions(),
         unbounded_loops: loops.iter().filter(|l| l.bound.is_none()).count(),
@@ -1194,6 +1232,36 @@ impl StaticAnalysis {
                     u.reason
                 );
             }
+        }
+        let _ = writeln!(
+            s,
+            "\n## Critical sections\n\nThe code the tasks run with interrupts disabled or a \
+             lock's ceiling raised: each blocks the priorities it masks for its length (the \
+             response-time analysis charges the longest of a lower priority).\n"
+        );
+        let _ = writeln!(
+            s,
+            "| task | function | start | source | masks | bound, cycles |"
+        );
+        let _ = writeln!(s, "|---|---|---|---|---|---:|");
+        for c in &self.critical_sections {
+            let masks = if c.ceiling == super::critical::ALL_MASKED {
+                "every interrupt".to_string()
+            } else {
+                format!("priorities up to {}", c.ceiling)
+            };
+            let _ = writeln!(
+                s,
+                "| {} | `{}` | {:#x} | {} | {masks} | {} |",
+                c.task,
+                c.function,
+                c.start,
+                c.source,
+                c.bound_cycles.map_or_else(
+                    || format!("**none**: {}", c.why.as_deref().unwrap_or("")),
+                    |b| b.to_string()
+                )
+            );
         }
         let _ = writeln!(s, "\n## Processor and memory model\n");
         for a in &self.assumptions {

@@ -19,6 +19,7 @@
 //! | [`analysis`] | the static analysis put together (`static.json`, `static.md`) |
 //! | [`trace_check`] | QEMU execution traces replayed against the graphs: loop trip counts per entry, activation costs with the same block costs |
 //! | [`stack`] | static stack bound: frame sizes from `llvm-objdump` prologues, call graph, preemption levels |
+//! | [`critical`] | the critical sections of the tasks' code (interrupts disabled, RTIC locks) and their bounds: the RTA's blocking |
 //! | [`cpi`] | cycles-per-instruction bound from a QEMU execution trace and a Cortex-M4 timing table |
 //! | [`report`] | the timing and memory report (`wcet.json`, `wcet.md`) from PIL runs, the ELF and the two bounds; CI comparison |
 //!
@@ -35,6 +36,7 @@ pub mod cfg;
 pub mod copies;
 pub mod coverage;
 pub mod cpi;
+pub mod critical;
 pub mod ecu_app;
 pub mod flash_data;
 pub mod flow_facts;

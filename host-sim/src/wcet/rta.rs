@@ -4,8 +4,10 @@
 //!
 //! For each task `i`, `R = C_i + B_i + Σ_{j ∈ hp(i)} ⌈R / T_j⌉ · C_j` to a fixed
 //! point, where `C` is the static worst-case execution time, `B_i` the longest
-//! critical section of a lower-priority task on a resource a task of priority
-//! `≥ i` also uses (under SRP a task is blocked at most once, before it starts),
+//! critical section of a lower-priority task that masks priority `i`: a lock on a
+//! resource whose ceiling is `≥ i`, or a section with interrupts disabled, which
+//! masks every priority (under SRP a task is blocked at most once, before it
+//! starts),
 //! and `hp(i)` the tasks and interrupts of higher priority, each with its minimum
 //! inter-arrival time `T`. Every preemption also costs an exception entry and
 //! exit ([`PREEMPTION_CYCLES`]), charged to the preempting activation's `C`.
@@ -36,13 +38,11 @@ pub struct Activity {
     pub deadline_us: f64,
     /// Worst-case execution time, cycles (preemption overhead not included).
     pub wcet_cycles: f64,
-    /// Longest critical section this activity holds on a shared resource, cycles
-    /// (it blocks the higher-priority users of that resource).
-    pub critical_section_cycles: f64,
-    /// Ceiling of that resource: the highest priority of a task using it (RTIC
-    /// raises the running priority to it inside the lock). Activities of higher
-    /// priority than the ceiling are not blocked.
-    pub critical_section_ceiling: u8,
+    /// Its critical sections: `(ceiling, cycles)`, the highest priority each masks
+    /// (a lock's resource ceiling, to which RTIC raises the running priority;
+    /// `u8::MAX` with interrupts disabled) and its bound. Each blocks the
+    /// activities of higher priority up to its ceiling.
+    pub critical_sections: Vec<(u8, f64)>,
 }
 
 /// The response-time bound of one activity.
@@ -68,8 +68,10 @@ pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
         .map(|a| {
             let blocking = activities
                 .iter()
-                .filter(|l| l.priority < a.priority && l.critical_section_ceiling >= a.priority)
-                .map(|l| l.critical_section_cycles)
+                .filter(|l| l.priority < a.priority)
+                .flat_map(|l| l.critical_sections.iter())
+                .filter(|&&(ceiling, _)| ceiling >= a.priority)
+                .map(|&(_, cycles)| cycles)
                 .fold(0.0, f64::max);
             let higher: Vec<&Activity> = activities
                 .iter()
@@ -112,6 +114,10 @@ mod tests {
     use super::*;
 
     fn schedule(control_cs: f64) -> Vec<Activity> {
+        schedule_with(vec![(2, control_cs)])
+    }
+
+    fn schedule_with(plan_sections: Vec<(u8, f64)>) -> Vec<Activity> {
         vec![
             Activity {
                 name: "systick".into(),
@@ -119,8 +125,7 @@ mod tests {
                 period_us: 1_000.0,
                 deadline_us: 1_000.0,
                 wcet_cycles: 500.0,
-                critical_section_cycles: 0.0,
-                critical_section_ceiling: 0,
+                critical_sections: Vec::new(),
             },
             Activity {
                 name: "control".into(),
@@ -128,8 +133,7 @@ mod tests {
                 period_us: 10_000.0,
                 deadline_us: 10_000.0,
                 wcet_cycles: 5_000.0,
-                critical_section_cycles: 0.0,
-                critical_section_ceiling: 0,
+                critical_sections: Vec::new(),
             },
             Activity {
                 name: "plan".into(),
@@ -137,8 +141,7 @@ mod tests {
                 period_us: 100_000.0,
                 deadline_us: 100_000.0,
                 wcet_cycles: 10.0e6,
-                critical_section_cycles: control_cs,
-                critical_section_ceiling: 2,
+                critical_sections: plan_sections,
             },
         ]
     }
@@ -159,6 +162,26 @@ mod tests {
         let plan = r[2].response_time_bound_us.unwrap();
         assert!(plan > 10.0e6 / 168.0 && plan < 100_000.0);
         assert!(r.iter().all(|x| x.meets_deadline));
+    }
+
+    #[test]
+    fn interrupts_disabled_block_every_higher_priority_a_lock_only_up_to_its_ceiling() {
+        let us = |c: f64| c / 168.0;
+        // A lock at ceiling 2 blocks control, not SysTick.
+        let lock = response_times(&schedule_with(vec![(2, 3_000.0)]), 168e6);
+        assert!((lock[1].blocking_us - us(3_000.0)).abs() < 1e-9);
+        assert_eq!(lock[0].blocking_us, 0.0);
+        // Interrupts disabled for 1,000 cycles block both; the longest section of a
+        // lower priority is the one charged.
+        let masked = response_times(
+            &schedule_with(vec![(2, 3_000.0), (u8::MAX, 1_000.0)]),
+            168e6,
+        );
+        assert!((masked[0].blocking_us - us(1_000.0)).abs() < 1e-9);
+        assert!((masked[1].blocking_us - us(3_000.0)).abs() < 1e-9);
+        let systick_before = lock[0].response_time_bound_us.unwrap();
+        let systick_after = masked[0].response_time_bound_us.unwrap();
+        assert!((systick_after - systick_before - us(1_000.0)).abs() < 1e-9);
     }
 
     #[test]
