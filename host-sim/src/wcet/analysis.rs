@@ -12,9 +12,7 @@ use super::cfg::Function;
 use super::cfg::{self, FlashData, MemoryModel, Program};
 pub use super::copies::copy_size_register;
 use super::copies::copy_sizes;
-pub use super::ecu_app::{
-    ecu_indirect_targets, preemptions_of, ECU_SCHEDULE, ECU_SECTIONS, ECU_TASKS,
-};
+pub use super::ecu_app::{preemptions_of, ECU_SCHEDULE, ECU_SECTIONS, ECU_TASKS};
 use super::ipet::{self, Cost, LoopFact, Per};
 use super::loops::{self, reverse_post_order, Loop};
 use super::{annotations, bounds, demangle};
@@ -158,6 +156,12 @@ pub struct StaticAnalysis {
     /// The tasks' critical sections (interrupts disabled, RTIC locks) with their
     /// bounds: what blocks a higher priority in the response-time analysis.
     pub critical_sections: Vec<super::critical::CriticalSection>,
+    /// The functions indirect calls and jumps may reach, read from the binary:
+    /// each with where its address is.
+    pub indirect_targets: Vec<super::indirect::Taken>,
+    /// The indirect transfers the traces took (each checked against its site's
+    /// targets): `(site, function, target, times)`.
+    pub indirect_calls_traced: Vec<(String, String, String, u64)>,
 }
 
 /// One of the blocks that cost a task's bound the most.
@@ -234,7 +238,15 @@ pub fn analyse(
         flash_data: FlashData::classify(&file, &raw, MemoryModel::STM32F405.flash, demangle),
         ..MemoryModel::STM32F405
     };
-    let program: Program = cfg::build_program(&raw, &ecu_indirect_targets(), &memory, demangle)?;
+    // Indirect calls and jumps may reach every function whose address the binary
+    // holds or builds (its data sections, literal pools, movw/movt pairs).
+    let taken = super::indirect::address_taken(&raw, &super::indirect::data_sections(&file));
+    let program: Program = cfg::build_program(
+        &raw,
+        &super::indirect::targets(&raw, &taken, demangle),
+        &memory,
+        demangle,
+    )?;
     let ctx = addr2line::Loader::new(elf)
         .map_err(|e| anyhow::anyhow!("DWARF line table of {}: {e}", elf.display()))?;
 
@@ -906,6 +918,7 @@ pub fn analyse(
         .filter_map(|(n, sym, _, _)| program.find(sym).first().map(|&f| (n.to_string(), f)))
         .collect();
     let mut blocks_run: std::collections::BTreeSet<(usize, usize)> = Default::default();
+    let mut indirect_calls_traced: Vec<(String, String, String, u64)> = Vec::new();
     for trace in traces {
         let file = std::fs::File::open(trace)
             .with_context(|| format!("opening the QEMU trace {}", trace.display()))?;
@@ -919,6 +932,25 @@ pub fn analyse(
             &sections,
         )?;
         blocks_run.extend(check.blocks_run.iter().copied());
+        for o in &check.indirect_calls {
+            let from = program
+                .functions
+                .get(o.from)
+                .map_or("?".to_string(), |f| f.demangled.clone());
+            let key = (format!("{:#x}", o.site), from, o.target_name.clone());
+            match indirect_calls_traced
+                .iter_mut()
+                .find(|(s, f, t, _)| (s, f, t) == (&key.0, &key.1, &key.2))
+            {
+                Some(row) => row.3 += o.count,
+                None => indirect_calls_traced.push((key.0, key.1, key.2, o.count)),
+            }
+        }
+        violations.extend(
+            super::indirect::unexpected_targets(&program, &check)
+                .into_iter()
+                .map(|v| format!("{}: {v}", trace.display())),
+        );
         violations.extend(super::flow_facts::observe(
             &mut flow_facts,
             &check,
@@ -1024,6 +1056,8 @@ pub fn analyse(
         flow_facts,
         coverage,
         critical_sections,
+        indirect_targets: taken.into_values().flatten().collect(),
+        indirect_calls_traced,
         elf: elf.display().to_string(),
         assumptions: memory.assumptions(),
         unbounded_loops: loops.iter().filter(|l| l.bound.is_none()).count(),

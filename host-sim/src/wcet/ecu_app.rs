@@ -1,11 +1,10 @@
 //! What the analyses know of the ECU's RTIC application (`firmware/src/bin/ecu.rs`):
 //! its tasks and the interrupts they run in, the sections bounded apart (the jobs,
-//! the plan swap) with their budgets, the schedule, the targets of its indirect
-//! calls, and for the stack bound its priority levels and the functions that run
-//! once or with interrupts masked. The numbers come from the firmware's own
-//! constants.
+//! the plan swap) with their budgets, the schedule, and for the stack bound its
+//! priority levels and the functions that run once or with interrupts masked. The
+//! numbers come from the firmware's own constants. The targets of its indirect
+//! calls are read from the binary ([`super::indirect`]).
 
-use super::cfg::IndirectTargets;
 use super::stack::PriorityLevel;
 /// The ECU's tasks as the RTIC application binds them: name and handler symbol.
 /// `plan` runs in the priority-1 dispatcher, `control` in the priority-2 one, the
@@ -64,26 +63,6 @@ pub fn preemptions_of(task: &str) -> u64 {
         .filter(|t| t.1 > prio)
         .map(|t| deadline.div_ceil(t.2))
         .sum()
-}
-
-/// Targets of the ECU binary's indirect calls: RTIC's executor calls its wakers
-/// through `core::task::RawWakerVTable` (the dispatchers, the SysTick timer queue
-/// and `delay_until`), and the executor's `waker_wake` jumps to the task's pend
-/// function (`FnOnce::call_once` closures that pend the dispatcher interrupt).
-pub fn ecu_indirect_targets() -> IndirectTargets {
-    let waker = vec!["rtic::export::executor::waker_".to_string()];
-    IndirectTargets {
-        rules: vec![
-            ("SysTick".into(), waker.clone()),
-            ("USART1".into(), waker.clone()),
-            ("USART2".into(), waker.clone()),
-            ("rtic_time::".into(), waker),
-            (
-                "rtic::export::executor::waker_wake".into(),
-                vec!["core::ops::function::FnOnce::call_once".into()],
-            ),
-        ],
-    }
 }
 
 /// The ECU's functions counted once in the stack bound: the panic handler's work,

@@ -6,6 +6,7 @@
 //! | [`memory_model`] | the processor and memory model the cycles are worst cases under: Cortex-M4 timing, flash lines and wait states, the ART accelerator |
 //! | [`flash_data`] | which data loads can read flash (the ELF's sections, the ways code forms addresses) |
 //! | [`cache`] | the ART accelerator's instruction cache: loops whose lines stay cached fetch each once per entry (persistence) |
+//! | [`indirect`] | the targets of indirect calls, read from the binary: the functions whose address its data, literal pools or movw/movt pairs hold |
 //! | [`loops`] | dominators and natural loops; irreducible cycles refused |
 //! | [`graph`] | strongly connected components (recursion, irreducible cycles) |
 //! | [`bounds`] | loop bounds recognised from the binary (counted loops) |
@@ -15,7 +16,7 @@
 //! | [`flow_facts`] | the bounds over more than one loop entry (per activation, per call, counters, capped lines, retries), each with what it counts, checked on the traces |
 //! | [`ipet`] | implicit path enumeration: a task's bound as a linear program (`good_lp`, `microlp`) |
 //! | [`rta`] | response-time analysis, fixed priorities with RTIC's stack resource policy |
-//! | [`ecu_app`] | what the analyses know of the ECU's RTIC application: tasks, sections, schedule, indirect call targets, priority levels, functions run once or masked |
+//! | [`ecu_app`] | what the analyses know of the ECU's RTIC application: tasks, sections, schedule, priority levels, functions run once or masked |
 //! | [`analysis`] | the static analysis put together (`static.json`, `static.md`) |
 //! | [`trace_check`] | QEMU execution traces replayed against the graphs: loop trip counts per entry, activation costs with the same block costs |
 //! | [`stack`] | static stack bound: frame sizes from `llvm-objdump` prologues, call graph, preemption levels |
@@ -41,6 +42,7 @@ pub mod ecu_app;
 pub mod flash_data;
 pub mod flow_facts;
 pub mod graph;
+pub mod indirect;
 pub mod ipet;
 pub mod loops;
 pub mod memory_model;

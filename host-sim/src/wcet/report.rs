@@ -346,7 +346,7 @@ pub fn build_report(inputs: &ReportInputs) -> Result<WcetReport> {
         &inputs.stack_levels,
         &ecu_once(),
         &ecu_masked(),
-        &super::analysis::ecu_indirect_targets(),
+        &super::indirect::targets_of_elf(&inputs.elf)?,
     )
     .with_context(|| format!("stack bound of {}", inputs.elf.display()))?;
     assemble_report(inputs, &runs, memory, symbols, stack)
