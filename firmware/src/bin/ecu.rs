@@ -675,9 +675,13 @@ mod app {
         let (link, route) = open_link(cx.local.link_storage, cx.local.route_storage);
         let planner = cx.local.planner_storage;
         let control = set_up(link, planner);
-        // The timeline starts at the beginning of the monotonic's current tick: the
-        // first release of both tasks.
-        let start = Mono::now().ticks();
+        // The timeline starts at the beginning of the monotonic's next tick: the
+        // first release of both tasks, which then run at a tick as every later
+        // release does. The set-up ends anywhere within a tick: a timeline started
+        // at the beginning of that tick would put the first release up to 1 ms
+        // before the tasks first run, and the first actuation would be sent up to
+        // 1 ms after its release (and act a plant step later in the loop).
+        let start = Mono::now().ticks().wrapping_add(1);
         START_MONO_TICKS.store(start, Ordering::Relaxed);
         let epoch = u64::from(start) * u64::from(TICKS_PER_MONO);
         EPOCH_TICKS.store(epoch as u32, Ordering::Relaxed);
