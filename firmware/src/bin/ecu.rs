@@ -19,8 +19,9 @@
 //!
 //! **The ECU watches its own deadlines** ([`firmware::deadline`]): each task's
 //! releases (release `k` at `k` periods on the timeline, whose start is the
-//! first `control` release), completions (`control`: the actuation frame sent;
-//! `plan`: the plan published), response times, deadline misses, budget
+//! first `control` release), completions (`control`: its actuation frame
+//! written, reported by the next frame; `plan`: the plan published, stamped
+//! under the lock), response times, deadline misses, budget
 //! overruns (its own core clock cycles, preemption excluded, over 5,000 /
 //! 15.96 M) and skipped releases are counted on its own clock and sent in every
 //! actuation frame (`plan`'s with its plan event). A `control` overrun is not
@@ -580,14 +581,17 @@ fn window_job(
 }
 
 /// The plan swap, inside the `plan` lock: the critical section that blocks the
-/// control task. Not inlined: the timing analysis bounds it alone.
+/// control task. Not inlined: the timing analysis bounds it alone. Returns whether
+/// the plan was published (the late-plan policy judges its age at the instant the
+/// swap starts) and the plan task's completion, µs: the instant the swap is done.
+/// Nothing else runs under the lock, so `control` first sees the plan just after.
 #[inline(never)]
 fn publish_plan(
     planner: &mut PlanTask<f32, PATH_CAP>,
     shared: &mut firmware::plan::Plan<f32>,
-    finish_us: u64,
-) -> bool {
-    planner.publish_at(shared, finish_us)
+) -> (bool, u64) {
+    let published = planner.publish_at(shared, now_us());
+    (published, now_us())
 }
 
 /// The plan task's own core clock ticks since `t0`: the ticks elapsed less the
@@ -621,6 +625,7 @@ fn actuation_frame(seq: u32, a: &Actuation<f32>, fault: u8, ticks: u32) -> Actua
         control_ticks: ticks,
         release_us: 0,
         sent_us: 0,
+        previous_response_us: None,
         control: link::TaskTimingFrame::default(),
         watchdog_trips: 0,
         plan: None,
@@ -784,6 +789,9 @@ mod app {
     async fn control(mut cx: control::Context) {
         let mut monitor = DeadlineMonitor::control();
         let mut watchdog = PlanWatchdog::plan();
+        // The previous activation's response time, µs: it completes after its frame
+        // is written, so the next frame reports it (none before the first).
+        let mut previous_response_us: Option<u32> = None;
         loop {
             // WCET: a poll resumes in this loop, so the binary has a cycle with two entry
             // blocks (irreducible): the loop's head (the first poll) and the delay's
@@ -815,10 +823,8 @@ mod app {
             watchdog.check(release_us, control.state().plans_seen);
             FRICTION_MU_BITS.store(control.friction_mu().to_bits(), Ordering::Relaxed);
             let ticks = core_ticks().saturating_sub(t1).min(u32::MAX as u64) as u32;
-            // Completion: the actuation leaves now.
-            let sent_us = now_us();
-            monitor.complete(sent_us, u64::from(ticks));
-            // K consecutive misses: zero torque, the steering held where it was.
+            // K consecutive misses (the previous activations' late completions and
+            // skipped releases): zero torque, the steering held where it was.
             let held = f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed));
             let (act, stopped) = deadline::control_output(&monitor, act, held);
             if stopped {
@@ -828,11 +834,23 @@ mod app {
             }
             let mut frame = actuation_frame(est.seq, &act, fault, ticks);
             frame.release_us = release_us;
-            frame.sent_us = sent_us;
+            frame.previous_response_us = previous_response_us;
             frame.control = monitor.counts().into();
             frame.watchdog_trips = watchdog.trips();
             frame.plan = cx.shared.plan_event.lock(|p| p.take());
+            // Two instants (the host counts from the same two):
+            // * sent: the frame carries the instant it is handed to the link, the
+            //   last one it can carry: its encoding (the PIL's stand-in for a bus
+            //   driver) cannot include an instant taken after it. The plant applies
+            //   the actuation from then.
+            // * completion: the frame has been written (a semihosting write takes no
+            //   virtual time: the host has the bytes at this instant). The response
+            //   time runs to here, so the link's encoding counts in it; the next
+            //   frame reports it, with the counts that include it.
+            frame.sent_us = now_us();
             cx.local.link.send(&Up::Actuation(frame));
+            let done = monitor.complete(now_us(), u64::from(ticks));
+            previous_response_us = Some(done.response_us.min(u64::from(u32::MAX)) as u32);
             add_control_ticks(t0);
             // The next release not yet past: the ones that fell during an overrun
             // are skipped and counted, not absorbed.
@@ -888,8 +906,8 @@ mod app {
                 let result = plan_job(planner, &est, friction_mu);
                 // The record's copy of the plan, taken before the swap, outside the lock.
                 let computed = planner.pending().copied();
-                let finish_us = now_us();
-                let published = cx.shared.plan.lock(|p| publish_plan(planner, p, finish_us));
+                // Completion: the plan published, stamped under the lock.
+                let (published, finish_us) = cx.shared.plan.lock(|p| publish_plan(planner, p));
                 let own = own_ticks(t0, c0);
                 monitor.complete(finish_us, own);
                 PlanEventFrame::new(

@@ -38,8 +38,10 @@
 //!
 //! Budgets are in ECU cycles (control 5,000, plan 15.96 M); deadlines are times: a
 //! plan activation whose response time exceeds its 100 ms period, and a control
-//! activation whose answer is sent more than its 10 ms period after its release
-//! ([`ControlOutput::sent_us`]), are deadline misses, and so is every skipped
+//! activation that completes more than its 10 ms period after its release
+//! ([`ControlOutput::completion`]: when its answer has left it, which may follow
+//! the instant the answer carries, [`ControlOutput::sent_us`]), are deadline
+//! misses, and so is every skipped
 //! release of either task (counted apart too: `plan_skipped_releases`,
 //! `control_skipped_releases`). An activation over its cycle budget is a budget overrun, counted apart
 //! (it may or may not miss its deadline, depending on the clock). All are counted
@@ -501,7 +503,9 @@ impl<'a> Meter<'a> {
         }
         res.control_costs.push(c.cycles);
         res.control_instructions.push(c.instructions);
-        if c.sent_us.saturating_sub(c.release_us) > CONTROL_PERIOD_US {
+        if c.completion
+            .is_some_and(|d| d.response_us() > CONTROL_PERIOD_US)
+        {
             sum.control_deadline_misses += 1;
         }
         sum.control_deadline_misses += u64::from(c.control_skipped_releases);

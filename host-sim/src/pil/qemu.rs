@@ -22,7 +22,9 @@ use firmware::plan::Plan;
 use firmware::state_estimate::StateEstimate;
 use firmware::tasks::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
 
-use crate::closed_loop::ecu::{ControlOutput, Ecu, EcuCounts, EcuTaskCounts, SimulatedEcu};
+use crate::closed_loop::ecu::{
+    ControlCompletion, ControlOutput, Ecu, EcuCounts, EcuTaskCounts, SimulatedEcu,
+};
 use crate::closed_loop::plan_activation::{plan_status_name, PlanActivation};
 use crate::closed_loop::SimOptions;
 use crate::model::vehicle::VehicleParams;
@@ -499,6 +501,15 @@ impl Ecu<f32> for QemuEcu {
         if u64::from(frame.control_ticks) > CONTROL_BUDGET_CYCLES {
             self.tick_overruns.control += 1;
         }
+        // The previous activation's completion (its frame written), which this
+        // frame reports.
+        let completion =
+            self.last_release_us
+                .zip(frame.previous_response_us)
+                .map(|(release_us, r)| ControlCompletion {
+                    release_us,
+                    completed_us: release_us + u64::from(r),
+                });
         // Control releases the ECU skipped: the gap to the last one it reported.
         let control_skipped_releases = match self.last_release_us {
             Some(last) => {
@@ -516,6 +527,7 @@ impl Ecu<f32> for QemuEcu {
             actuation: actuation_of(&frame),
             release_us: frame.release_us,
             sent_us: frame.sent_us,
+            completion,
             control_skipped_releases,
             ecu_counts: self.ecu_counts,
             instructions,
