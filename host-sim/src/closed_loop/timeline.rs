@@ -170,6 +170,18 @@ pub struct PlanTrace {
     pub xy: Vec<[f64; 2]>,
 }
 
+/// When a control activation's answer was sent and from when the plant applied it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ActuationTiming {
+    /// The control release it answered, µs.
+    pub release_us: u64,
+    /// When the ECU sent it, µs ([`ControlOutput::sent_us`]).
+    pub sent_us: u64,
+    /// The instant of the plant step from which it acts, µs: the step containing
+    /// `sent_us`, never before the release (module docs).
+    pub applied_us: u64,
+}
+
 /// Everything a run produces.
 #[derive(Clone, Debug, Default)]
 pub struct RunResult {
@@ -185,6 +197,8 @@ pub struct RunResult {
     pub control_costs: Vec<f64>,
     /// Estimated cost of each control activation, instructions.
     pub control_instructions: Vec<f64>,
+    /// When each control activation's answer was sent and applied, one per log row.
+    pub actuations: Vec<ActuationTiming>,
     /// Figures of merit.
     pub summary: Summary,
 }
@@ -349,6 +363,11 @@ pub fn run_with<T: Real, E: Ecu<T>>(
             let act = c.actuation;
             // From the plant step containing the send instant (module docs).
             let apply_us = (c.sent_us / step_us * step_us).max(t_us);
+            res.actuations.push(ActuationTiming {
+                release_us: c.release_us,
+                sent_us: c.sent_us,
+                applied_us: apply_us,
+            });
             pending.push_back((
                 apply_us,
                 Inputs {
