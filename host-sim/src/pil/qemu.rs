@@ -101,6 +101,9 @@ pub struct QemuEcu {
     route_frames: u16,
     /// The last control release the ECU reported, µs.
     last_release_us: Option<u64>,
+    /// That activation's own ticks: its budget overrun is counted with its
+    /// completion, which the next frame reports (as the ECU counts it).
+    last_control_ticks: Option<u32>,
     /// The plan task's counts as of the last plan event.
     plan_counts: EcuTaskCounts,
     /// Budget overruns on the ECU's clock, counted by the host from the ticks.
@@ -266,6 +269,7 @@ impl QemuEcu {
             route: BufWriter::new(route),
             route_frames: 0,
             last_release_us: None,
+            last_control_ticks: None,
             plan_counts: Default::default(),
             tick_overruns: TickOverruns::default(),
             ecu_counts: None,
@@ -498,9 +502,6 @@ impl Ecu<f32> for QemuEcu {
             self.plan_counts = p.timing.into();
             plans.push(self.activation_of(p));
         }
-        if u64::from(frame.control_ticks) > CONTROL_BUDGET_CYCLES {
-            self.tick_overruns.control += 1;
-        }
         // The previous activation's completion (its frame written), which this
         // frame reports.
         let completion =
@@ -510,6 +511,14 @@ impl Ecu<f32> for QemuEcu {
                     release_us,
                     completed_us: release_us + u64::from(r),
                 });
+        if completion.is_some()
+            && self
+                .last_control_ticks
+                .is_some_and(|t| u64::from(t) > CONTROL_BUDGET_CYCLES)
+        {
+            self.tick_overruns.control += 1;
+        }
+        self.last_control_ticks = Some(frame.control_ticks);
         // Control releases the ECU skipped: the gap to the last one it reported.
         let control_skipped_releases = match self.last_release_us {
             Some(last) => {
