@@ -145,7 +145,7 @@ fn actuation(big: u64, v: f32, plan: Option<PlanEventFrame>) -> ActuationFrame {
         control_ticks: big as u32,
         release_us: big,
         sent_us: big,
-        previous_response_us: Some(big as u32),
+        previous_response_us: big as u32,
         control: timing(big),
         watchdog_trips: big as u32,
         plan,
@@ -367,7 +367,7 @@ fn largest_frames_fit_max_frame_bytes() {
     // Version 3: release and send instants, the two tasks' deadline counts, the
     // watchdog's trips and the plan's end (249 bytes in version 2); version 7:
     // the previous control activation's response time (336 bytes in version 6).
-    assert_eq!(MAX_UP_FRAME_BYTES, 342);
+    assert_eq!(MAX_UP_FRAME_BYTES, 341);
     assert_eq!(frame_of(&downs[1]).len(), MAX_DOWN_FRAME_BYTES);
     // What the control link carries while driving: `Sensor`, `Stop`; the largest
     // sensor frame is exactly the bound the ECU's receive loop stops at.
@@ -793,7 +793,7 @@ fn any_up() -> impl Strategy<Value = Up> {
         any::<(u32, u8, u8, u32)>(),
         prop::array::uniform8(any_f32()),
         (any::<u64>(), any::<u64>(), any_timing(), any::<u32>()),
-        prop::option::of(any::<u32>()),
+        any::<u32>(),
         prop::option::of(any_plan_event()),
     )
         .prop_map(

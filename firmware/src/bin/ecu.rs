@@ -148,7 +148,13 @@ defmt::timestamp!("{=u64:us}", now_us());
 
 /// µs since the timeline's start.
 fn now_us() -> u64 {
-    core_ticks().saturating_sub(epoch_ticks()) * 1_000_000 / SYSCLK_HZ as u64
+    timeline_us(core_ticks())
+}
+
+/// The instant of a core clock tick count `ticks` ([`core_ticks`]) on the
+/// timeline, µs since its start.
+fn timeline_us(ticks: u64) -> u64 {
+    ticks.saturating_sub(epoch_ticks()) * 1_000_000 / SYSCLK_HZ as u64
 }
 
 /// The monotonic's instant of a time on the timeline, `t_us` µs (whole ms).
@@ -581,17 +587,23 @@ fn window_job(
 }
 
 /// The plan swap, inside the `plan` lock: the critical section that blocks the
-/// control task. Not inlined: the timing analysis bounds it alone. Returns whether
-/// the plan was published (the late-plan policy judges its age at the instant the
-/// swap starts) and the plan task's completion, µs: the instant the swap is done.
-/// Nothing else runs under the lock, so `control` first sees the plan just after.
+/// control task. Not inlined: the timing analysis bounds it alone. Publishes the
+/// plan under the late-plan policy, its age judged at `now_us` (µs, taken just
+/// before the lock: one clock read fewer in the critical section), and sets
+/// `swapped_ticks` to the plan task's completion, the core clock tick count
+/// ([`core_ticks`]) when the swap is done: nothing else runs under the lock, so
+/// `control` first sees the plan just after (its conversion to µs, a 64-bit
+/// division, is left outside). Returns whether the plan was published.
 #[inline(never)]
 fn publish_plan(
     planner: &mut PlanTask<f32, PATH_CAP>,
     shared: &mut firmware::plan::Plan<f32>,
-) -> (bool, u64) {
-    let published = planner.publish_at(shared, now_us());
-    (published, now_us())
+    now_us: u64,
+    swapped_ticks: &mut u64,
+) -> bool {
+    let published = planner.publish_at(shared, now_us);
+    *swapped_ticks = core_ticks();
+    published
 }
 
 /// The plan task's own core clock ticks since `t0`: the ticks elapsed less the
@@ -625,7 +637,7 @@ fn actuation_frame(seq: u32, a: &Actuation<f32>, fault: u8, ticks: u32) -> Actua
         control_ticks: ticks,
         release_us: 0,
         sent_us: 0,
-        previous_response_us: None,
+        previous_response_us: 0,
         control: link::TaskTimingFrame::default(),
         watchdog_trips: 0,
         plan: None,
@@ -790,8 +802,8 @@ mod app {
         let mut monitor = DeadlineMonitor::control();
         let mut watchdog = PlanWatchdog::plan();
         // The previous activation's response time, µs: it completes after its frame
-        // is written, so the next frame reports it (none before the first).
-        let mut previous_response_us: Option<u32> = None;
+        // is written, so the next frame reports it (0 before the first).
+        let mut previous_response_us: u32 = 0;
         loop {
             // WCET: a poll resumes in this loop, so the binary has a cycle with two entry
             // blocks (irreducible): the loop's head (the first poll) and the delay's
@@ -849,12 +861,14 @@ mod app {
             //   frame reports it, with the counts that include it.
             frame.sent_us = now_us();
             cx.local.link.send(&Up::Actuation(frame));
-            let done = monitor.complete(now_us(), u64::from(ticks));
-            previous_response_us = Some(done.response_us.min(u64::from(u32::MAX)) as u32);
+            let end_us = now_us();
+            let done = monitor.complete(end_us, u64::from(ticks));
+            previous_response_us = done.response_us.min(u64::from(u32::MAX)) as u32;
             add_control_ticks(t0);
-            // The next release not yet past: the ones that fell during an overrun
-            // are skipped and counted, not absorbed.
-            monitor.next_release(now_us());
+            // The activation ends with its completion. The next release not yet
+            // past: the ones that fell during an overrun are skipped and counted,
+            // not absorbed.
+            monitor.next_release(end_us);
         }
     }
 
@@ -906,8 +920,15 @@ mod app {
                 let result = plan_job(planner, &est, friction_mu);
                 // The record's copy of the plan, taken before the swap, outside the lock.
                 let computed = planner.pending().copied();
-                // Completion: the plan published, stamped under the lock.
-                let (published, finish_us) = cx.shared.plan.lock(|p| publish_plan(planner, p));
+                // The late-plan policy judges the plan's age now; the completion is
+                // the plan published, stamped under the lock.
+                let now = now_us();
+                let mut swapped_ticks = 0;
+                let published = cx
+                    .shared
+                    .plan
+                    .lock(|p| publish_plan(planner, p, now, &mut swapped_ticks));
+                let finish_us = timeline_us(swapped_ticks);
                 let own = own_ticks(t0, c0);
                 monitor.complete(finish_us, own);
                 PlanEventFrame::new(

@@ -56,7 +56,7 @@
 //!   delimiters in a row) are idle and ignored.
 //!
 //! The largest frames: [`MAX_DOWN_FRAME_BYTES`] (a `PathChunk`, 269 bytes) and
-//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 342 bytes), both
+//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 341 bytes), both
 //! including the delimiter and checked at compile time against
 //! [`MAX_FRAME_BYTES`].
 //!
@@ -280,8 +280,8 @@ pub struct ActuationFrame {
     /// Response time of the previous control activation, µs (saturated at
     /// `u32::MAX`): from its release to its completion, the instant its
     /// actuation frame had been written, which only the next frame can carry;
-    /// `None` in the first frame (version 7).
-    pub previous_response_us: Option<u32>,
+    /// 0 in the first frame, which has no previous activation (version 7).
+    pub previous_response_us: u32,
     /// The control task's deadline counts up to the previous activation: its
     /// completion ([`ActuationFrame::previous_response_us`]) and the releases it
     /// skipped at its end; of this activation, only its release.
@@ -519,7 +519,6 @@ pub const MAX_UP_PAYLOAD_BYTES: usize = TAG_BYTES
             + 2
             + U32_MAX_BYTES
             + 2 * U64_MAX_BYTES
-            + 1
             + U32_MAX_BYTES
             + TIMING_MAX_BYTES
             + U32_MAX_BYTES

@@ -503,14 +503,11 @@ impl Ecu<f32> for QemuEcu {
             plans.push(self.activation_of(p));
         }
         // The previous activation's completion (its frame written), which this
-        // frame reports.
-        let completion =
-            self.last_release_us
-                .zip(frame.previous_response_us)
-                .map(|(release_us, r)| ControlCompletion {
-                    release_us,
-                    completed_us: release_us + u64::from(r),
-                });
+        // frame reports (the first frame has no previous activation).
+        let completion = self.last_release_us.map(|release_us| ControlCompletion {
+            release_us,
+            completed_us: release_us + u64::from(frame.previous_response_us),
+        });
         if completion.is_some()
             && self
                 .last_control_ticks
