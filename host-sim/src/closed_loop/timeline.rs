@@ -18,8 +18,10 @@
 //! during which it was sent, `⌊sent / step⌋·step` (never before the release it
 //! answers), and is held until the next one takes effect. An answer sent within
 //! the first plant step after its release (every answer of the ECU at 168 MHz in
-//! PIL: at most 0.1 ms, the first 0.58 ms) acts at the release, so on-time answers
-//! give the same trajectory as before; a late answer acts late. Every 100 ms the
+//! PIL, the first included: its first release is a tick of its monotonic, as
+//! every later one) acts at the release, so on-time answers give the same
+//! trajectory as the modelled ECU's; a late answer acts late. The instant and
+//! step of each are in [`RunResult::actuations`]. Every 100 ms the
 //! `plan` task is released on the state at its release (after `control`, which
 //! has the higher priority, ran at the same instant). How long it runs and when
 //! its plan is published is the ECU's to say ([`SimulatedEcu`]: see
