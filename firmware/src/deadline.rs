@@ -14,8 +14,13 @@
 //! release, `(k + 1)·P`: the period is the deadline.
 //!
 //! * **Completion** ([`DeadlineMonitor::complete`]): the instant the activation's
-//!   result leaves it (`control`: the actuation frame is sent; `plan`: the plan is
-//!   published). Response time = completion − release. A response time over the
+//!   result has left it (`control`: its actuation frame has been written to the
+//!   link, the encoding included; `plan`: the plan has been swapped in under the
+//!   lock). Response time = completion − release. A `control` frame cannot carry
+//!   an instant after its own encoding: it carries the instant it was handed to
+//!   the link (`ActuationFrame::sent_us`, from which the plant applies it), and the
+//!   next frame carries this completion with the counts that include it. A
+//!   response time over the
 //!   period is a **deadline miss**. The activation's own execution (its core
 //!   clock cycles, preemption excluded) over the budget is a **budget overrun**,
 //!   counted apart (it may or may not miss).
@@ -32,7 +37,8 @@
 //!   absorbed. The releases that fell during it are skipped and counted; after
 //!   [`CONTROL_MISS_LIMIT`] consecutive misses (late completions and skipped
 //!   releases alike, reset by an activation that completes in time)
-//!   [`DeadlineMonitor::safe_stop`] latches: from then on every activation sends
+//!   [`DeadlineMonitor::safe_stop`] latches: from the next activation on (an
+//!   activation's own completion follows its frame) every activation sends
 //!   the safe actuation (zero torque, steering held, as the panic path does) with
 //!   the fault [`crate::link::FAULT_DEADLINE`], until the ECU is reset.
 //! * `plan` (100 ms, budget [`PLAN_BUDGET_CYCLES`]): the late-plan policy of

@@ -145,6 +145,7 @@ fn actuation(big: u64, v: f32, plan: Option<PlanEventFrame>) -> ActuationFrame {
         control_ticks: big as u32,
         release_us: big,
         sent_us: big,
+        previous_response_us: big as u32,
         control: timing(big),
         watchdog_trips: big as u32,
         plan,
@@ -281,11 +282,11 @@ fn frame_layout_is_version_postcard_crc_cobs() {
     // The CRC is CRC-32/ISO-HDLC (check value of "123456789").
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
     assert_eq!(crc.checksum(b"123456789"), 0xCBF4_3926);
-    // Pinned bytes: `Down::Start` is version 6, tag 3, then its CRC (zlib.crc32(b"\x06\x03")
-    // = 0x8E8AE4C3, little-endian, no zero byte), stuffed: one COBS block of 6 bytes.
+    // Pinned bytes: `Down::Start` is version 7, tag 3, then its CRC (zlib.crc32(b"\x07\x03")
+    // = 0x9791D582, little-endian, no zero byte), stuffed: one COBS block of 6 bytes.
     assert_eq!(
         frame_of(&Down::Start),
-        [0x07, 0x06, 0x03, 0xC3, 0xE4, 0x8A, 0x8E, 0x00]
+        [0x07, 0x07, 0x03, 0x82, 0xD5, 0x91, 0x97, 0x00]
     );
 }
 
@@ -364,8 +365,9 @@ fn largest_frames_fit_max_frame_bytes() {
     assert_eq!(largest_up_payload, MAX_UP_PAYLOAD_BYTES);
     assert_eq!(MAX_DOWN_FRAME_BYTES, 269);
     // Version 3: release and send instants, the two tasks' deadline counts, the
-    // watchdog's trips and the plan's end (249 bytes in version 2).
-    assert_eq!(MAX_UP_FRAME_BYTES, 336);
+    // watchdog's trips and the plan's end (249 bytes in version 2); version 7:
+    // the previous control activation's response time (336 bytes in version 6).
+    assert_eq!(MAX_UP_FRAME_BYTES, 341);
     assert_eq!(frame_of(&downs[1]).len(), MAX_DOWN_FRAME_BYTES);
     // What the control link carries while driving: `Sensor`, `Stop`; the largest
     // sensor frame is exactly the bound the ECU's receive loop stops at.
@@ -791,6 +793,7 @@ fn any_up() -> impl Strategy<Value = Up> {
         any::<(u32, u8, u8, u32)>(),
         prop::array::uniform8(any_f32()),
         (any::<u64>(), any::<u64>(), any_timing(), any::<u32>()),
+        any::<u32>(),
         prop::option::of(any_plan_event()),
     )
         .prop_map(
@@ -798,6 +801,7 @@ fn any_up() -> impl Strategy<Value = Up> {
                 (seq, mode, fault, control_ticks),
                 f,
                 (release_us, sent_us, control, watchdog_trips),
+                previous_response_us,
                 plan,
             )| {
                 Up::Actuation(ActuationFrame {
@@ -812,6 +816,7 @@ fn any_up() -> impl Strategy<Value = Up> {
                     control_ticks,
                     release_us,
                     sent_us,
+                    previous_response_us,
                     control,
                     watchdog_trips,
                     plan,

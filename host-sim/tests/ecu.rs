@@ -7,7 +7,7 @@
 
 use firmware::state_estimate::StateEstimate;
 use host_sim::closed_loop::cost_model::CostModel;
-use host_sim::closed_loop::ecu::{ControlOutput, Ecu, SimulatedEcu};
+use host_sim::closed_loop::ecu::{ControlCompletion, ControlOutput, Ecu, SimulatedEcu};
 use host_sim::closed_loop::simulate::simulate;
 use host_sim::closed_loop::timeline::{self, RunResult};
 use host_sim::closed_loop::{Precision, SimOptions};
@@ -341,12 +341,17 @@ fn a_control_activation_slower_than_its_period_is_a_deadline_miss() {
     );
 }
 
-/// The modelled ECU with the send instant of its answers moved: `delay_us` µs
-/// later for the activation released at `at_us`.
+/// The modelled ECU with the answer of the activation released at `at_us` sent
+/// `sent_after_us` µs after its release and completed `completed_after_us` after
+/// it; with `lagged`, each completion is reported by the next output, as the ECU
+/// in QEMU reports it (its frame cannot carry its own completion).
 struct LateAnswer {
     inner: SimulatedEcu<f32>,
     at_us: u64,
-    delay_us: u64,
+    sent_after_us: u64,
+    completed_after_us: u64,
+    lagged: bool,
+    previous: Option<ControlCompletion>,
 }
 
 impl Ecu<f32> for LateAnswer {
@@ -357,7 +362,14 @@ impl Ecu<f32> for LateAnswer {
     ) -> anyhow::Result<ControlOutput<f32>> {
         let mut out = self.inner.control(t_us, est)?;
         if t_us == self.at_us {
-            out.sent_us = t_us + self.delay_us;
+            out.sent_us = t_us + self.sent_after_us;
+            out.completion = Some(ControlCompletion {
+                release_us: t_us,
+                completed_us: t_us + self.completed_after_us,
+            });
+        }
+        if self.lagged {
+            out.completion = std::mem::replace(&mut self.previous, out.completion);
         }
         Ok(out)
     }
@@ -371,7 +383,12 @@ impl Ecu<f32> for LateAnswer {
     }
 }
 
-fn run_with_answer_sent(at_us: u64, delay_us: u64) -> RunResult {
+fn run_with_answer(
+    at_us: u64,
+    sent_after_us: u64,
+    completed_after_us: u64,
+    lagged: bool,
+) -> RunResult {
     let scenario = Scenario::paper(true);
     let v = VehicleParams::default();
     let opts = SimOptions {
@@ -381,9 +398,17 @@ fn run_with_answer_sent(at_us: u64, delay_us: u64) -> RunResult {
     let mut ecu = LateAnswer {
         inner: SimulatedEcu::<f32>::new(&scenario, &v, &opts).unwrap(),
         at_us,
-        delay_us,
+        sent_after_us,
+        completed_after_us,
+        lagged,
+        previous: None,
     };
     timeline::run_with(&scenario, &v, &opts, &mut ecu, |_, _| {}).unwrap()
+}
+
+/// [`run_with_answer`] completed when sent (the modelled ECU's answers).
+fn run_with_answer_sent(at_us: u64, delay_us: u64) -> RunResult {
+    run_with_answer(at_us, delay_us, delay_us, false)
 }
 
 #[test]
@@ -406,6 +431,32 @@ fn an_answer_acts_from_the_plant_step_it_was_sent_in_so_only_a_late_one_changes_
     assert_eq!(late.summary.control_deadline_misses, 0);
     let missed = run_with_answer_sent(at_us, 10_001);
     assert_eq!(missed.summary.control_deadline_misses, 1);
+}
+
+#[test]
+fn the_plant_applies_an_answer_from_its_send_instant_and_its_deadline_is_judged_from_its_completion(
+) {
+    // As the ECU in QEMU: an answer sent (handed to its link) 0.5 ms after its
+    // release completes when its frame has been written, here 10.2 ms after the
+    // release, and the next output reports that completion.
+    let at_us = 1_500_000;
+    let nominal = run_with_answer(at_us, 500, 500, true);
+    let late = run_with_answer(at_us, 500, 10_200, true);
+    // The plant acts on the send instant only: the same trajectory bit for bit.
+    assert_eq!(nominal.log, late.log);
+    // The deadline on the completion: one miss, counted when it is reported.
+    assert_eq!(nominal.summary.control_deadline_misses, 0);
+    assert_eq!(late.summary.control_deadline_misses, 1);
+    // Exactly at the deadline is in time (a response over the period misses).
+    let at_deadline = run_with_answer(at_us, 500, 10_000, true);
+    assert_eq!(at_deadline.summary.control_deadline_misses, 0);
+    // A completion of the last activation, never reported, is not counted: the
+    // ECU's own counts, in its frames, cannot hold it either.
+    let duration_us = 3_000_000;
+    let unreported = run_with_answer(duration_us, 500, 10_200, true);
+    assert_eq!(unreported.summary.control_deadline_misses, 0);
+    let reported = run_with_answer(duration_us, 500, 10_200, false);
+    assert_eq!(reported.summary.control_deadline_misses, 1);
 }
 
 /// An ECU that reports its plans' positions only, as the ECU in QEMU does: the

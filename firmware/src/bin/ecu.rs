@@ -19,8 +19,9 @@
 //!
 //! **The ECU watches its own deadlines** ([`firmware::deadline`]): each task's
 //! releases (release `k` at `k` periods on the timeline, whose start is the
-//! first `control` release), completions (`control`: the actuation frame sent;
-//! `plan`: the plan published), response times, deadline misses, budget
+//! first `control` release), completions (`control`: its actuation frame
+//! written, reported by the next frame; `plan`: the plan published, stamped
+//! under the lock), response times, deadline misses, budget
 //! overruns (its own core clock cycles, preemption excluded, over 5,000 /
 //! 15.96 M) and skipped releases are counted on its own clock and sent in every
 //! actuation frame (`plan`'s with its plan event). A `control` overrun is not
@@ -151,7 +152,13 @@ defmt::timestamp!("{=u64:us}", now_us());
 
 /// µs since the timeline's start.
 fn now_us() -> u64 {
-    core_ticks().saturating_sub(epoch_ticks()) * 1_000_000 / SYSCLK_HZ as u64
+    timeline_us(core_ticks())
+}
+
+/// The instant of a core clock tick count `ticks` ([`core_ticks`]) on the
+/// timeline, µs since its start.
+fn timeline_us(ticks: u64) -> u64 {
+    ticks.saturating_sub(epoch_ticks()) * 1_000_000 / SYSCLK_HZ as u64
 }
 
 /// The monotonic's instant of a time on the timeline, `t_us` µs (whole ms).
@@ -588,14 +595,23 @@ fn window_job(
 }
 
 /// The plan swap, inside the `plan` lock: the critical section that blocks the
-/// control task. Not inlined: the timing analysis bounds it alone.
+/// control task. Not inlined: the timing analysis bounds it alone. Publishes the
+/// plan under the late-plan policy, its age judged at `now_us` (µs, taken just
+/// before the lock: one clock read fewer in the critical section), and sets
+/// `swapped_ticks` to the plan task's completion, the core clock tick count
+/// ([`core_ticks`]) when the swap is done: nothing else runs under the lock, so
+/// `control` first sees the plan just after (its conversion to µs, a 64-bit
+/// division, is left outside). Returns whether the plan was published.
 #[inline(never)]
 fn publish_plan(
     planner: &mut PlanTask<f32, PATH_CAP>,
     shared: &mut firmware::plan::Plan<f32>,
-    finish_us: u64,
+    now_us: u64,
+    swapped_ticks: &mut u64,
 ) -> bool {
-    planner.publish_at(shared, finish_us)
+    let published = planner.publish_at(shared, now_us);
+    *swapped_ticks = core_ticks();
+    published
 }
 
 /// The plan task's own core clock ticks since `t0`: the ticks elapsed less the
@@ -629,6 +645,7 @@ fn actuation_frame(seq: u32, a: &Actuation<f32>, fault: u8, ticks: u32) -> Actua
         control_ticks: ticks,
         release_us: 0,
         sent_us: 0,
+        previous_response_us: 0,
         control: link::TaskTimingFrame::default(),
         watchdog_trips: 0,
         plan: None,
@@ -683,9 +700,13 @@ mod app {
         let (link, route) = open_link(cx.local.link_storage, cx.local.route_storage);
         let planner = cx.local.planner_storage;
         let control = set_up(link, planner);
-        // The timeline starts at the beginning of the monotonic's current tick: the
-        // first release of both tasks.
-        let start = Mono::now().ticks();
+        // The timeline starts at the beginning of the monotonic's next tick: the
+        // first release of both tasks, which then run at a tick as every later
+        // release does. The set-up ends anywhere within a tick: a timeline started
+        // at the beginning of that tick would put the first release up to 1 ms
+        // before the tasks first run, and the first actuation would be sent up to
+        // 1 ms after its release (and act a plant step later in the loop).
+        let start = Mono::now().ticks().wrapping_add(1);
         START_MONO_TICKS.store(start, Ordering::Relaxed);
         let epoch = u64::from(start) * u64::from(TICKS_PER_MONO);
         EPOCH_TICKS.store(epoch as u32, Ordering::Relaxed);
@@ -788,6 +809,9 @@ mod app {
     async fn control(mut cx: control::Context) {
         let mut monitor = DeadlineMonitor::control();
         let mut watchdog = PlanWatchdog::plan();
+        // The previous activation's response time, µs: it completes after its frame
+        // is written, so the next frame reports it (0 before the first).
+        let mut previous_response_us: u32 = 0;
         loop {
             // WCET: a poll resumes in this loop, so the binary has a cycle with two entry
             // blocks (irreducible): the loop's head (the first poll) and the delay's
@@ -820,10 +844,8 @@ mod app {
             watchdog.check(release_us, control.state().plans_seen);
             FRICTION_MU_BITS.store(control.friction_mu().to_bits(), Ordering::Relaxed);
             let ticks = core_ticks().saturating_sub(t1).min(u32::MAX as u64) as u32;
-            // Completion: the actuation leaves now.
-            let sent_us = now_us();
-            monitor.complete(sent_us, u64::from(ticks));
-            // K consecutive misses: zero torque, the steering held where it was.
+            // K consecutive misses (the previous activations' late completions and
+            // skipped releases): zero torque, the steering held where it was.
             let held = f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed));
             let (act, stopped) = deadline::control_output(&monitor, act, held);
             if stopped {
@@ -833,15 +855,29 @@ mod app {
             }
             let mut frame = actuation_frame(est.seq, &act, fault, ticks);
             frame.release_us = release_us;
-            frame.sent_us = sent_us;
+            frame.previous_response_us = previous_response_us;
             frame.control = monitor.counts().into();
             frame.watchdog_trips = watchdog.trips();
             frame.plan = cx.shared.plan_event.lock(|p| p.take());
+            // Two instants (the host counts from the same two):
+            // * sent: the frame carries the instant it is handed to the link, the
+            //   last one it can carry: its encoding (the PIL's stand-in for a bus
+            //   driver) cannot include an instant taken after it. The plant applies
+            //   the actuation from then.
+            // * completion: the frame has been written (a semihosting write takes no
+            //   virtual time: the host has the bytes at this instant). The response
+            //   time runs to here, so the link's encoding counts in it; the next
+            //   frame reports it, with the counts that include it.
+            frame.sent_us = now_us();
             cx.local.link.send(&Up::Actuation(frame));
+            let end_us = now_us();
+            let done = monitor.complete(end_us, u64::from(ticks));
+            previous_response_us = done.response_us.min(u64::from(u32::MAX)) as u32;
             add_control_ticks(t0);
-            // The next release not yet past: the ones that fell during an overrun
-            // are skipped and counted, not absorbed.
-            monitor.next_release(now_us());
+            // The activation ends with its completion. The next release not yet
+            // past: the ones that fell during an overrun are skipped and counted,
+            // not absorbed.
+            monitor.next_release(end_us);
         }
     }
 
@@ -893,8 +929,15 @@ mod app {
                 let result = plan_job(planner, &est, friction_mu);
                 // The record's copy of the plan, taken before the swap, outside the lock.
                 let computed = planner.pending().copied();
-                let finish_us = now_us();
-                let published = cx.shared.plan.lock(|p| publish_plan(planner, p, finish_us));
+                // The late-plan policy judges the plan's age now; the completion is
+                // the plan published, stamped under the lock.
+                let now = now_us();
+                let mut swapped_ticks = 0;
+                let published = cx
+                    .shared
+                    .plan
+                    .lock(|p| publish_plan(planner, p, now, &mut swapped_ticks));
+                let finish_us = timeline_us(swapped_ticks);
                 let own = own_ticks(t0, c0);
                 monitor.complete(finish_us, own);
                 PlanEventFrame::new(

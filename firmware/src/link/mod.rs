@@ -16,7 +16,10 @@
 //! new window of the road instead of planning ([`PlanEventFrame::status`]
 //! [`PLAN_WINDOW`], its time in `window_ticks`). Version 5: that activation also
 //! receives the window's frames (before, the activation before it did, after
-//! publishing). Everything here works on fixed buffers: no heap, no `alloc`,
+//! publishing). Version 7: the control task completes when its actuation frame
+//! has been written, so each [`ActuationFrame`] reports the previous
+//! activation's response time ([`ActuationFrame::previous_response_us`]) and
+//! counts up to it. Everything here works on fixed buffers: no heap, no `alloc`,
 //! no panic; every refused frame is a [`FrameError`] value the receiver counts.
 //!
 //! # Wire format
@@ -53,7 +56,7 @@
 //!   delimiters in a row) are idle and ignored.
 //!
 //! The largest frames: [`MAX_DOWN_FRAME_BYTES`] (a `PathChunk`, 269 bytes) and
-//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 336 bytes), both
+//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 341 bytes), both
 //! including the delimiter and checked at compile time against
 //! [`MAX_FRAME_BYTES`].
 //!
@@ -99,7 +102,7 @@ use crate::vehicle_config::VehicleConfig;
 use qp::QpStatus;
 
 /// Version of this wire format, the first byte of every raw frame.
-pub const LINK_VERSION: u8 = 6;
+pub const LINK_VERSION: u8 = 7;
 /// The largest encoded frame, bytes, including its 0x00 delimiter.
 pub const MAX_FRAME_BYTES: usize = 512;
 /// Track rows per [`PathChunkFrame`].
@@ -269,12 +272,19 @@ pub struct ActuationFrame {
     /// The control release this activation ran at, µs on the ECU's timeline
     /// (release `k` at `k`·10 ms; version 3).
     pub release_us: u64,
-    /// When this frame was sent, µs on the ECU's timeline (`now_us()`): the
-    /// activation's completion; the plant applies the actuation from then.
+    /// When this frame was sent, µs on the ECU's timeline: stamped once
+    /// everything else it carries is final, immediately before it is encoded and
+    /// written (an instant carried inside a frame's bytes cannot follow their
+    /// encoding). The plant applies the actuation from then.
     pub sent_us: u64,
-    /// The control task's deadline counts, this activation's completion included
-    /// (its skipped releases are counted at its end, so they show in the next
-    /// frame).
+    /// Response time of the previous control activation, µs (saturated at
+    /// `u32::MAX`): from its release to its completion, the instant its
+    /// actuation frame had been written, which only the next frame can carry;
+    /// 0 in the first frame, which has no previous activation (version 7).
+    pub previous_response_us: u32,
+    /// The control task's deadline counts up to the previous activation: its
+    /// completion ([`ActuationFrame::previous_response_us`]) and the releases it
+    /// skipped at its end; of this activation, only its release.
     pub control: TaskTimingFrame,
     /// Times the control task's watchdog saw no new plan for more than
     /// [`crate::deadline::PLAN_WATCHDOG_PERIODS`] plan periods, trips.
@@ -509,6 +519,7 @@ pub const MAX_UP_PAYLOAD_BYTES: usize = TAG_BYTES
             + 2
             + U32_MAX_BYTES
             + 2 * U64_MAX_BYTES
+            + U32_MAX_BYTES
             + TIMING_MAX_BYTES
             + U32_MAX_BYTES
             + 1

@@ -91,6 +91,23 @@ pub struct EcuCounts {
     pub watchdog_trips: u64,
 }
 
+/// A control activation's completion, as the ECU timed it: the instant its
+/// answer had left it (its deadline is judged from this).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ControlCompletion {
+    /// The control release it answered, µs.
+    pub release_us: u64,
+    /// Its completion, µs on the same timeline.
+    pub completed_us: u64,
+}
+
+impl ControlCompletion {
+    /// Its response time: completion − release, µs.
+    pub fn response_us(&self) -> u64 {
+        self.completed_us.saturating_sub(self.release_us)
+    }
+}
+
 /// What one control activation produced.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ControlOutput<T> {
@@ -101,8 +118,13 @@ pub struct ControlOutput<T> {
     pub release_us: u64,
     /// When the ECU sent the actuation, µs on the same timeline: the plant applies
     /// it from the plant step containing that instant (see [`crate::closed_loop::timeline`]).
-    /// Its response time is `sent_us − release_us`.
     pub sent_us: u64,
+    /// A control activation's completion that became known with this output: this
+    /// activation's own for the modelled ECU (no link to write to: it completes
+    /// when it sends), the previous one's for the ECU in QEMU (it completes once
+    /// its frame has been written, which only its next frame can report; `None`
+    /// in the first). The control deadline misses are counted from these.
+    pub completion: Option<ControlCompletion>,
     /// Control releases the ECU skipped before this one (it was still busy).
     pub control_skipped_releases: u32,
     /// The ECU's own deadline counts after this activation, `None` when the ECU
@@ -425,6 +447,10 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
             actuation,
             release_us: t_us,
             sent_us,
+            completion: Some(ControlCompletion {
+                release_us: t_us,
+                completed_us: sent_us,
+            }),
             control_skipped_releases: 0,
             ecu_counts: None,
             instructions,

@@ -18,8 +18,10 @@
 //! during which it was sent, `⌊sent / step⌋·step` (never before the release it
 //! answers), and is held until the next one takes effect. An answer sent within
 //! the first plant step after its release (every answer of the ECU at 168 MHz in
-//! PIL: at most 0.1 ms, the first 0.58 ms) acts at the release, so on-time answers
-//! give the same trajectory as before; a late answer acts late. Every 100 ms the
+//! PIL, the first included: its first release is a tick of its monotonic, as
+//! every later one) acts at the release, so on-time answers give the same
+//! trajectory as the modelled ECU's; a late answer acts late. The instant and
+//! step of each are in [`RunResult::actuations`]. Every 100 ms the
 //! `plan` task is released on the state at its release (after `control`, which
 //! has the higher priority, ran at the same instant). How long it runs and when
 //! its plan is published is the ECU's to say ([`SimulatedEcu`]: see
@@ -38,8 +40,10 @@
 //!
 //! Budgets are in ECU cycles (control 5,000, plan 15.96 M); deadlines are times: a
 //! plan activation whose response time exceeds its 100 ms period, and a control
-//! activation whose answer is sent more than its 10 ms period after its release
-//! ([`ControlOutput::sent_us`]), are deadline misses, and so is every skipped
+//! activation that completes more than its 10 ms period after its release
+//! ([`ControlOutput::completion`]: when its answer has left it, which may follow
+//! the instant the answer carries, [`ControlOutput::sent_us`]), are deadline
+//! misses, and so is every skipped
 //! release of either task (counted apart too: `plan_skipped_releases`,
 //! `control_skipped_releases`). An activation over its cycle budget is a budget overrun, counted apart
 //! (it may or may not miss its deadline, depending on the clock). All are counted
@@ -168,6 +172,18 @@ pub struct PlanTrace {
     pub xy: Vec<[f64; 2]>,
 }
 
+/// When a control activation's answer was sent and from when the plant applied it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ActuationTiming {
+    /// The control release it answered, µs.
+    pub release_us: u64,
+    /// When the ECU sent it, µs ([`ControlOutput::sent_us`]).
+    pub sent_us: u64,
+    /// The instant of the plant step from which it acts, µs: the step containing
+    /// `sent_us`, never before the release (module docs).
+    pub applied_us: u64,
+}
+
 /// Everything a run produces.
 #[derive(Clone, Debug, Default)]
 pub struct RunResult {
@@ -183,6 +199,8 @@ pub struct RunResult {
     pub control_costs: Vec<f64>,
     /// Estimated cost of each control activation, instructions.
     pub control_instructions: Vec<f64>,
+    /// When each control activation's answer was sent and applied, one per log row.
+    pub actuations: Vec<ActuationTiming>,
     /// Figures of merit.
     pub summary: Summary,
 }
@@ -347,6 +365,11 @@ pub fn run_with<T: Real, E: Ecu<T>>(
             let act = c.actuation;
             // From the plant step containing the send instant (module docs).
             let apply_us = (c.sent_us / step_us * step_us).max(t_us);
+            res.actuations.push(ActuationTiming {
+                release_us: c.release_us,
+                sent_us: c.sent_us,
+                applied_us: apply_us,
+            });
             pending.push_back((
                 apply_us,
                 Inputs {
@@ -501,7 +524,9 @@ impl<'a> Meter<'a> {
         }
         res.control_costs.push(c.cycles);
         res.control_instructions.push(c.instructions);
-        if c.sent_us.saturating_sub(c.release_us) > CONTROL_PERIOD_US {
+        if c.completion
+            .is_some_and(|d| d.response_us() > CONTROL_PERIOD_US)
+        {
             sum.control_deadline_misses += 1;
         }
         sum.control_deadline_misses += u64::from(c.control_skipped_releases);

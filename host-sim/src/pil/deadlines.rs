@@ -72,6 +72,7 @@ pub fn count_mismatches(s: &Summary, ticks: &TickOverruns) -> Vec<String> {
 pub struct TickOverruns {
     /// Plan activations whose ticks exceeded the plan budget.
     pub plan: u64,
-    /// Control activations whose ticks exceeded the control budget.
+    /// Control activations whose ticks exceeded the control budget, each counted
+    /// with its completion, which the next frame reports (as the ECU counts it).
     pub control: u64,
 }

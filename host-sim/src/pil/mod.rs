@@ -32,9 +32,12 @@
 //!
 //! # Deadlines, counted twice
 //!
-//! Each actuation frame carries the control release it answers and its send
-//! instant on the ECU's clock, each plan event its release, finish and end; the
-//! host counts misses and skipped releases from these stamps, and budget
+//! Each actuation frame carries the control release it answers, its send
+//! instant on the ECU's clock (the plant applies it from then) and the previous
+//! control activation's response time (a control activation completes once its
+//! frame has been written, which only the next frame can say); each plan event
+//! its release, finish (the plan published) and end; the host counts misses and
+//! skipped releases from these stamps, and budget
 //! overruns from the measured ticks, as the driver does for any ECU. The ECU
 //! counts them itself ([`firmware::deadline`]) and sends its counts in the same
 //! frames; [`count_mismatches`](deadlines::count_mismatches) compares the two and `host-sim pil` fails when

@@ -22,7 +22,9 @@ use firmware::plan::Plan;
 use firmware::state_estimate::StateEstimate;
 use firmware::tasks::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
 
-use crate::closed_loop::ecu::{ControlOutput, Ecu, EcuCounts, EcuTaskCounts, SimulatedEcu};
+use crate::closed_loop::ecu::{
+    ControlCompletion, ControlOutput, Ecu, EcuCounts, EcuTaskCounts, SimulatedEcu,
+};
 use crate::closed_loop::plan_activation::{plan_status_name, PlanActivation};
 use crate::closed_loop::SimOptions;
 use crate::model::vehicle::VehicleParams;
@@ -99,6 +101,9 @@ pub struct QemuEcu {
     route_frames: u16,
     /// The last control release the ECU reported, µs.
     last_release_us: Option<u64>,
+    /// That activation's own ticks: its budget overrun is counted with its
+    /// completion, which the next frame reports (as the ECU counts it).
+    last_control_ticks: Option<u32>,
     /// The plan task's counts as of the last plan event.
     plan_counts: EcuTaskCounts,
     /// Budget overruns on the ECU's clock, counted by the host from the ticks.
@@ -264,6 +269,7 @@ impl QemuEcu {
             route: BufWriter::new(route),
             route_frames: 0,
             last_release_us: None,
+            last_control_ticks: None,
             plan_counts: Default::default(),
             tick_overruns: TickOverruns::default(),
             ecu_counts: None,
@@ -496,9 +502,20 @@ impl Ecu<f32> for QemuEcu {
             self.plan_counts = p.timing.into();
             plans.push(self.activation_of(p));
         }
-        if u64::from(frame.control_ticks) > CONTROL_BUDGET_CYCLES {
+        // The previous activation's completion (its frame written), which this
+        // frame reports (the first frame has no previous activation).
+        let completion = self.last_release_us.map(|release_us| ControlCompletion {
+            release_us,
+            completed_us: release_us + u64::from(frame.previous_response_us),
+        });
+        if completion.is_some()
+            && self
+                .last_control_ticks
+                .is_some_and(|t| u64::from(t) > CONTROL_BUDGET_CYCLES)
+        {
             self.tick_overruns.control += 1;
         }
+        self.last_control_ticks = Some(frame.control_ticks);
         // Control releases the ECU skipped: the gap to the last one it reported.
         let control_skipped_releases = match self.last_release_us {
             Some(last) => {
@@ -516,6 +533,7 @@ impl Ecu<f32> for QemuEcu {
             actuation: actuation_of(&frame),
             release_us: frame.release_us,
             sent_us: frame.sent_us,
+            completion,
             control_skipped_releases,
             ecu_counts: self.ecu_counts,
             instructions,
