@@ -837,8 +837,8 @@ active_constraints,max_validity_slack_rad";
         assert_eq!(r.stack_high_water_bytes, 11620);
         assert_eq!(r.memory.static_ram_bytes, 42_000);
         assert_eq!(r.memory.flash_bytes, 142_424);
-        // main 16 B; USART1 8 B + 104 B exception frame; its blx is reported.
-        assert_eq!(r.memory.stack_bound_bytes, 16 + 8 + 104);
+        // main 16 B; USART1 8 B + 108 B of exception entry; its blx is reported.
+        assert_eq!(r.memory.stack_bound_bytes, 16 + 8 + 108);
         assert!(!r.memory.stack_sound);
         assert!(
             r.memory.stack_misses.iter().any(|m| m.contains("blx")),
@@ -1042,7 +1042,7 @@ active_constraints,max_validity_slack_rad";
         };
         assert_eq!(value("memory.text_bytes"), Some(100_000));
         assert_eq!(value("memory.flash_bytes"), Some(142_424));
-        assert_eq!(value("memory.stack_bound_bytes"), Some(128));
+        assert_eq!(value("memory.stack_bound_bytes"), Some(132));
         assert_eq!(
             value("tasks.plan.observed_warm_max_instructions"),
             Some(1_200_000)
@@ -1115,7 +1115,7 @@ active_constraints,max_validity_slack_rad";
     #[test]
     #[ignore = "needs the ECU binary: cargo ecu"]
     fn real_ecu_elf_stack_bound_covers_every_vector_table_handler() -> Result<()> {
-        use crate::wcet::stack::{disassemble, parse_objdump, Counted, EXCEPTION_FRAME_FPU_BYTES};
+        use crate::wcet::stack::{disassemble, parse_objdump, Counted, EXCEPTION_ENTRY_BYTES};
         let elf = real_elf();
         let stack = crate::wcet::stack::analyse_elf_once(
             &elf,
@@ -1187,7 +1187,7 @@ active_constraints,max_validity_slack_rad";
         assert!(!path.contains(&"ecu::safe_stop_work"), "{path:?}");
         assert_eq!(
             hard_fault.contribution_bytes,
-            hard_fault.roots[0].depth_bytes + EXCEPTION_FRAME_FPU_BYTES
+            hard_fault.roots[0].depth_bytes + EXCEPTION_ENTRY_BYTES
         );
         let nmi = fault("NMI")?;
         let sum = |counted: Counted| -> u32 {

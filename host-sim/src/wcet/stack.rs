@@ -35,7 +35,10 @@
 //! [`EXCEPTION_FRAME_FPU_BYTES`]. Lazy stacking (FPCCR.LSPEN, the reset state)
 //! defers only the stores of s0–s15 and FPSCR: the space is reserved on entry,
 //! whatever the exception, so a fault or NMI taken in FPU code reserves 104 B like
-//! an interrupt does. Every level but thread mode and the once level adds one.
+//! an interrupt does. CCR.STKALIGN (set at reset) aligns the frame to 8 bytes: one
+//! more word when the interrupted stack pointer is 4 mod 8, which code allows
+//! between pushes ([`EXCEPTION_ALIGNMENT_PAD_BYTES`]). Every level but thread mode
+//! and the once level adds both ([`EXCEPTION_ENTRY_BYTES`]).
 //!
 //! **Faults (ARMv7-M).** HardFault has the fixed priority −1 and NMI −2; every
 //! other exception has a configurable priority ≥ 0. An exception preempts only
@@ -68,6 +71,15 @@ pub const EXCEPTION_FRAME_BASIC_BYTES: u32 = 32;
 /// Exception frame with FPU context (adds s0–s15, FPSCR and a reserved word), in
 /// bytes; lazy stacking reserves it whenever the FPU is enabled.
 pub const EXCEPTION_FRAME_FPU_BYTES: u32 = 104;
+/// Padding an exception entry may add below the interrupted code's stack pointer,
+/// in bytes: CCR.STKALIGN (set at reset on the Cortex-M4) aligns the frame to 8
+/// bytes, one word lower when that pointer is 4 mod 8, as it is between a push of
+/// one word and its pop (`vpush {s0}` passing a float argument, a frame whose size
+/// is 4 mod 8).
+pub const EXCEPTION_ALIGNMENT_PAD_BYTES: u32 = 4;
+/// What one exception entry adds to the stack at most, in bytes: the FPU frame and
+/// the alignment padding.
+pub const EXCEPTION_ENTRY_BYTES: u32 = EXCEPTION_FRAME_FPU_BYTES + EXCEPTION_ALIGNMENT_PAD_BYTES;
 
 /// The stack frame of a function as read from its instructions.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
@@ -657,7 +669,8 @@ pub struct LevelReport {
     pub counted: Counted,
     /// Each root of the level.
     pub roots: Vec<RootReport>,
-    /// Exception frame stacked on entry to this level, in bytes (0 in thread mode).
+    /// Exception frame and alignment padding stacked on entry to this level, at
+    /// most, in bytes ([`EXCEPTION_ENTRY_BYTES`]; 0 in thread mode and the once level).
     pub exception_frame_bytes: u32,
     /// This level's share of the bound: deepest root plus exception frame, in bytes.
     pub contribution_bytes: u32,
@@ -841,8 +854,8 @@ const METHOD: &str = "Static bound from the disassembly: each function's frame i
 stack-pointer decrements (push, vpush, stmdb sp!, str [sp, #-N]!, sub sp by an immediate or by a \
 movw/movt constant); the depth of a root is the deepest chain of direct calls (bl, blx <symbol>) \
 and tail calls (a branch to another function, its caller's frame kept); each preemption level \
-adds its deepest handler and a 104-byte FPU exception frame (lazy stacking reserves it for every \
-exception, faults included). The panic path's work, entered once with interrupts disabled and \
+adds its deepest handler and 108 bytes of exception entry: the 104-byte FPU frame (lazy stacking \
+reserves it for every exception, faults included) and up to 4 bytes that align it to 8. The panic path's work, entered once with interrupts disabled and \
 never returning, is counted once as a level of its own; the set-up functions init runs before \
 enabling interrupts leave the thread level (the bound is at least their depth plus that once \
 level and the faults). Not covered: the targets of indirect calls (function pointers, trait \
@@ -941,7 +954,7 @@ fn given_levels(program: &Program, levels: &[PriorityLevel]) -> Result<Vec<Level
             name: level.name.clone(),
             counted: Counted::PriorityLevel,
             // Thread mode stacks no exception frame; every interrupt priority does.
-            exception_frame_bytes: if k == 0 { 0 } else { EXCEPTION_FRAME_FPU_BYTES },
+            exception_frame_bytes: if k == 0 { 0 } else { EXCEPTION_ENTRY_BYTES },
             roots,
         });
     }
@@ -972,7 +985,7 @@ fn place_vectors(
     let single = |name: String, counted, index| Level {
         name: format!("{name} ({})", counted_level_name(counted)),
         counted,
-        exception_frame_bytes: EXCEPTION_FRAME_FPU_BYTES,
+        exception_frame_bytes: EXCEPTION_ENTRY_BYTES,
         roots: vec![Root {
             symbol: symbol(&name, index),
             name: name.clone(),
@@ -1035,7 +1048,7 @@ fn place_vectors(
         above_chain.push(Level {
             name: format!("unbound exceptions and interrupts ({})", DEFAULT_HANDLER),
             counted: Counted::UnboundOnTop,
-            exception_frame_bytes: EXCEPTION_FRAME_FPU_BYTES,
+            exception_frame_bytes: EXCEPTION_ENTRY_BYTES,
             roots: vec![Root {
                 name: DEFAULT_HANDLER.to_string(),
                 index,
@@ -1326,6 +1339,9 @@ pub fn analyse_elf_once(
 pub(crate) mod tests {
     use super::*;
 
+    /// One exception entry, in bytes.
+    const E: u32 = EXCEPTION_ENTRY_BYTES;
+
     /// The thread level with root `roots[0]`, then `priority i` with root `roots[i]`.
     pub(crate) fn levels(roots: &[&str]) -> Vec<PriorityLevel> {
         let name = |i: usize| match i {
@@ -1446,8 +1462,8 @@ Disassembly of section .text:
             .map(|e| e.function.as_str())
             .collect();
         assert_eq!(path, vec!["main", "big", "leaf"]);
-        assert_eq!(report.levels[1].contribution_bytes, leaf + 104);
-        assert_eq!(report.total_bytes, main + big + leaf + leaf + 104);
+        assert_eq!(report.levels[1].contribution_bytes, leaf + E);
+        assert_eq!(report.total_bytes, main + big + leaf + leaf + E);
         assert!(report.indirect_calls.is_empty() && report.cycles.is_empty());
         // No vector table: the handlers outside the roots are not covered.
         assert!(!report.sound && !report.vector_table, "{report:?}");
@@ -1488,9 +1504,9 @@ Disassembly of section .text:
         let levels = levels(&["t", "h"]);
         let p = parse_objdump(text);
         let every = stack_bound(&p, &levels)?;
-        assert_eq!(every.total_bytes, (8 + 1024) + (16 + 1024 + 104));
+        assert_eq!(every.total_bytes, (8 + 1024) + (16 + 1024 + E));
         let once = stack_bound_once(&p, &levels, &["stop".to_string()], &[])?;
-        assert_eq!(once.total_bytes, 8 + (16 + 104) + 1024);
+        assert_eq!(once.total_bytes, 8 + (16 + E) + 1024);
         assert_eq!(once.levels.len(), 3);
         assert_eq!(once.levels[2].exception_frame_bytes, 0);
         Ok(())
@@ -1516,7 +1532,7 @@ Disassembly of section .text:
 ";
         let levels = levels(&["main", "h"]);
         let p = parse_objdump(text);
-        let h = 16 + 256 + 104;
+        let h = 16 + 256 + E;
         assert_eq!(stack_bound(&p, &levels)?.total_bytes, 8 + 2048 + h);
         let r = stack_bound_once(&p, &levels, &[], &["setup".to_string()])?;
         assert_eq!(r.init_bytes, 8 + 2048);
@@ -1646,16 +1662,16 @@ Disassembly of section .text:
             names,
             vec![
                 ("thread", Counted::PriorityLevel, thread),
-                ("priority 1", Counted::PriorityLevel, 72 + 104),
+                ("priority 1", Counted::PriorityLevel, 72 + E),
                 (
                     "unbound exceptions and interrupts (DefaultHandler)",
                     Counted::UnboundOnTop,
-                    8 + 104
+                    8 + E
                 ),
                 (
                     "PendSV (priority unknown, on top of the chain)",
                     Counted::OnTop,
-                    24 + 104
+                    24 + E
                 ),
                 (
                     "once (interrupts disabled, never returns)",
@@ -1666,14 +1682,14 @@ Disassembly of section .text:
                 (
                     "HardFault (on top of everything)",
                     Counted::FaultOnTop,
-                    16 + 104
+                    16 + E
                 ),
-                ("NMI (on top of everything)", Counted::FaultOnTop, 8 + 104),
+                ("NMI (on top of everything)", Counted::FaultOnTop, 8 + E),
             ]
         );
         assert_eq!(
             r.total_bytes,
-            thread + (72 + 104) + (8 + 104) + (24 + 104) + 48 + (16 + 104) + (8 + 104)
+            thread + (72 + E) + (8 + E) + (24 + E) + 48 + (16 + E) + (8 + E)
         );
         // Every entry is some root's, once; Reset joined main in thread mode.
         let roots = r.roots();
@@ -1711,10 +1727,7 @@ Disassembly of section .text:
         let frame = 2048 + 8;
         let shallow = app_bound(frame, &without)?;
         let deep = app_bound(frame, &vectors)?;
-        assert_eq!(
-            deep.total_bytes - shallow.total_bytes,
-            frame + EXCEPTION_FRAME_FPU_BYTES
-        );
+        assert_eq!(deep.total_bytes - shallow.total_bytes, frame + E);
         // Only the given roots: HardFault is left out, and the report says so.
         let given = stack_bound_once(
             &parse_objdump(&app(frame)),

@@ -220,7 +220,7 @@ fn render_stack(s: &mut String, r: &WcetReport) -> std::fmt::Result {
     )?;
     writeln!(
         s,
-        "| level | counted | deepest root | depth (B) | exception frame (B) | worst path |"
+        "| level | counted | deepest root | depth (B) | exception entry (B) | worst path |"
     )?;
     writeln!(s, "|---|---|---|---:|---:|---|")?;
     for level in &r.stack.levels {
