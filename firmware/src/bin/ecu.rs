@@ -965,9 +965,9 @@ mod app {
 
 #[panic_handler]
 fn panic(_info: &core::panic::PanicInfo) -> ! {
-    // Interrupts off first, in a frame of a few bytes: nothing preempts the
-    // handler's work below (the stack bound counts `safe_stop`'s chain once, not
-    // at every priority level).
+    // Interrupts off first, in a frame of a few bytes: no interrupt preempts the
+    // handler's work below (only NMI and HardFault can), so the stack bound counts
+    // its chain (`safe_stop_work`'s) once, not at every priority level.
     cortex_m::interrupt::disable();
     safe_stop(link::FAULT_PANIC)
 }
@@ -983,10 +983,12 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
 }
 
 /// Safe actuators after a panic or a fault (`fault`: [`link::FAULT_PANIC`] or
-/// [`link::FAULT_HARDFAULT`]), interrupts disabled: zero torque on every wheel,
-/// the steering held where it was, sent as an actuator frame; a fixed line on the
-/// semihosting stderr; then the ECU stops. It neither formats nor panics, and a
-/// second entry (a fault on this path) exits at once: it cannot re-enter itself.
+/// [`link::FAULT_HARDFAULT`]), interrupts disabled; the entry both handlers call.
+/// The static guard comes first, in a frame of a few bytes: a second entry (a
+/// fault on the path below) exits at once, so [`safe_stop_work`] runs at most once
+/// and its frame is on the stack at most once. The stack bound relies on that: it
+/// counts the work's chain once, whether a panic or a HardFault entered it, and
+/// HardFault (taken at any depth, even during the work) with only this guard.
 #[inline(never)]
 fn safe_stop(fault: u8) -> ! {
     // WCET: an exclusive store (the swap's LDREX/STREX retry) fails only if an exception
@@ -996,6 +998,16 @@ fn safe_stop(fault: u8) -> ! {
     if STOPPING.swap(true, Ordering::Relaxed) {
         exit(false)
     }
+    safe_stop_work(fault)
+}
+
+/// The safe stop's work, reached only through [`safe_stop`]'s guard: zero torque
+/// on every wheel, the steering held where it was, sent as an actuator frame; a
+/// fixed line on the semihosting stderr; then the ECU stops. It neither formats nor
+/// panics. Not inlined: its frame (the frame buffer) is allocated only past the
+/// guard.
+#[inline(never)]
+fn safe_stop_work(fault: u8) -> ! {
     let delta = f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed));
     let fd = UP_FD.load(Ordering::Relaxed);
     if fd != 0 {

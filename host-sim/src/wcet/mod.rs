@@ -19,7 +19,8 @@
 //! | [`ecu_app`] | what the analyses know of the ECU's RTIC application: tasks, sections, schedule, priority levels, functions run once or masked |
 //! | [`analysis`] | the static analysis put together (`static.json`, `static.md`) |
 //! | [`trace_check`] | QEMU execution traces replayed against the graphs: loop trip counts per entry, activation costs with the same block costs |
-//! | [`stack`] | static stack bound: frame sizes from `llvm-objdump` prologues, call graph, preemption levels |
+//! | [`stack`] | static stack bound: frame sizes from `llvm-objdump` prologues, call graph, preemption levels, every vector-table handler |
+//! | [`vector_table`] | the ELF's exception vector table: the handler of each exception |
 //! | [`critical`] | the critical sections of the tasks' code (interrupts disabled, RTIC locks) and their bounds: the RTA's blocking |
 //! | [`cpi`] | cycles-per-instruction bound from a QEMU execution trace and a Cortex-M4 timing table |
 //! | [`report`] | the timing and memory report (`wcet.json`, `wcet.md`) from PIL runs, the ELF and the two bounds; CI comparison |
@@ -50,6 +51,7 @@ pub mod report;
 pub mod rta;
 pub mod stack;
 pub mod trace_check;
+pub mod vector_table;
 
 use std::path::{Path, PathBuf};
 

@@ -33,7 +33,7 @@ pub mod pil_runs;
 
 use super::cpi::CpiReport;
 use super::ecu_app::{ecu_masked, ecu_once};
-use super::stack::{PriorityLevel, StackReport};
+use super::stack::{PriorityLevel, StackReport, StackRoot};
 use anyhow::{bail, ensure, Context, Result};
 use elf::{elf_memory, elf_symbols, ElfMemory, ElfSymbols};
 use goals::{goals, Goal};
@@ -270,8 +270,12 @@ pub struct MemoryReport {
     /// `true` if nothing reachable escaped the stack analysis.
     pub stack_sound: bool,
     /// What the stack bound misses: indirect calls, unresolved calls, unknown
-    /// frames, recursion (one line each).
+    /// frames, recursion, vector-table handlers it could not place (one line each).
     pub stack_misses: Vec<String>,
+    /// Every root of the stack bound: thread mode, each priority level's handlers,
+    /// every other handler of the vector table, the functions counted once; with
+    /// how each is counted and its depth.
+    pub stack_roots: Vec<StackRoot>,
     /// Deepest painted-stack use over the PIL runs, in bytes.
     pub stack_high_water_bytes: u64,
     /// Size of the stack region (RAM below the statics, flip-link), in bytes.
@@ -538,6 +542,16 @@ fn stack_misses(stack: &StackReport) -> Vec<String> {
     for cycle in &stack.cycles {
         misses.push(format!("recursion: {}", cycle.join(" -> ")));
     }
+    for handler in &stack.unplaced_handlers {
+        misses.push(format!("vector-table handler not placed: {handler}"));
+    }
+    if !stack.vector_table {
+        misses.push(
+            "no vector table read: handlers other than the given roots (HardFault, NMI) \
+             are not in the bound"
+                .to_string(),
+        );
+    }
     misses
 }
 
@@ -547,23 +561,15 @@ fn memory_report(
     high_water: u64,
     stack_size: u64,
 ) -> MemoryReport {
-    let levels: Vec<String> = stack
-        .levels
-        .iter()
-        .map(|l| format!("{} {} B", l.name, l.contribution_bytes))
-        .collect();
     MemoryReport {
         sections: *memory,
         static_ram_bytes: memory.static_ram_bytes(),
         flash_bytes: memory.flash_bytes(),
         stack_bound_bytes: u64::from(stack.total_bytes),
-        stack_method: format!(
-            "{} Levels (bound = their sum): {}.",
-            stack.method,
-            levels.join(" + ")
-        ),
+        stack_method: format!("{} Bound: {}.", stack.method, stack.formula()),
         stack_sound: stack.sound,
         stack_misses: stack_misses(stack),
+        stack_roots: stack.roots(),
         stack_high_water_bytes: high_water,
         stack_size_bytes: stack_size,
     }
@@ -578,7 +584,7 @@ mod tests {
     use super::*;
     use crate::wcet::cpi::Figures;
     use crate::wcet::ecu_app::ecu_priority_levels;
-    use crate::wcet::stack::{parse_objdump, stack_bound, tests::levels};
+    use crate::wcet::stack::{parse_objdump, stack_bound, tests::levels, Counted};
     use std::path::Path;
 
     const HEADER: &str = "activation,release_us,finish_us,instructions,cycles,status,published,\
@@ -733,6 +739,11 @@ active_constraints,max_validity_slack_rad";
     /// Two runs: warm activations up to 1.2e6, a cold one of 2.0e6 with a deadline
     /// miss; control maxima 1500 and 1800.
     fn fixture_report(root: &Path) -> Result<WcetReport> {
+        fixture_report_with(root, stack()?)
+    }
+
+    /// [`fixture_report`] with this stack report.
+    fn fixture_report_with(root: &Path, stack: StackReport) -> Result<WcetReport> {
         let a = write_run(
             root,
             "run-a",
@@ -752,7 +763,7 @@ active_constraints,max_validity_slack_rad";
         )?;
         let inputs = inputs(vec![a.clone(), b.clone()]);
         let runs = [load_pil_run(&a)?, load_pil_run(&b)?];
-        assemble_report(&inputs, &runs, memory(), ElfSymbols::default(), stack()?)
+        assemble_report(&inputs, &runs, memory(), ElfSymbols::default(), stack)
     }
 
     fn goal_of<'a>(r: &'a WcetReport, name: &str) -> Result<&'a Goal> {
@@ -862,8 +873,8 @@ active_constraints,max_validity_slack_rad";
         assert_eq!(r.stack_high_water_bytes, 11620);
         assert_eq!(r.memory.static_ram_bytes, 42_000);
         assert_eq!(r.memory.flash_bytes, 142_424);
-        // main 16 B; USART1 8 B + 104 B exception frame; its blx is reported.
-        assert_eq!(r.memory.stack_bound_bytes, 16 + 8 + 104);
+        // main 16 B; USART1 8 B + 108 B of exception entry; its blx is reported.
+        assert_eq!(r.memory.stack_bound_bytes, 16 + 8 + 108);
         assert!(!r.memory.stack_sound);
         assert!(
             r.memory.stack_misses.iter().any(|m| m.contains("blx")),
@@ -893,6 +904,56 @@ active_constraints,max_validity_slack_rad";
         assert!(goal_of(&r, "flash")?.met);
         let misses = goal_of(&r, "deadline misses over the runs")?;
         assert_eq!((misses.value, misses.met), (Some(1.0), false));
+        Ok(())
+    }
+
+    #[test]
+    fn a_vector_table_handler_not_placed_is_a_stack_covered_gap() -> Result<()> {
+        use crate::wcet::stack::stack_bound_vectors;
+        use crate::wcet::vector_table::VectorEntry;
+        // `main` 16 B, `USART1` 8 B, nothing indirect; Reset is `main`.
+        let text = "
+08000000 <main>:
+ 8000000:      \tpush\t{r4, r5, r6, lr}
+ 8000002:      \tbx\tlr
+08000010 <USART1>:
+ 8000010:      \tpush\t{r7, lr}
+ 8000012:      \tbx\tlr
+";
+        let entry = |exception, address| VectorEntry { exception, address };
+        let mut vectors = vec![entry(1, 0x0800_0000), entry(16, 0x0800_0010)];
+        let p = parse_objdump(text);
+        let covered = stack_bound_vectors(&p, &levels(&["main", "USART1"]), &[], &[], &vectors)?;
+        // An entry into the middle of `USART1`: no function starts there.
+        vectors.push(entry(21, 0x0800_0012));
+        let gap = stack_bound_vectors(&p, &levels(&["main", "USART1"]), &[], &[], &vectors)?;
+        let tmp = tempfile::tempdir()?;
+        let r = fixture_report_with(tmp.path(), covered)?;
+        let goal = goal_of(&r, "stack bound: what it does not cover")?;
+        assert_eq!((goal.value, goal.met), (Some(0.0), true), "{:?}", r.memory);
+        assert!(r.memory.stack_sound);
+        let roots: Vec<(&str, &[String])> = r
+            .memory
+            .stack_roots
+            .iter()
+            .map(|root| (root.name.as_str(), root.exceptions.as_slice()))
+            .collect();
+        assert_eq!(
+            roots,
+            vec![
+                ("main", &["Reset".to_string()][..]),
+                ("USART1", &["IRQ 0".to_string()][..])
+            ]
+        );
+        let r = fixture_report_with(tmp.path(), gap)?;
+        let goal = goal_of(&r, "stack bound: what it does not cover")?;
+        assert_eq!((goal.value, goal.met), (Some(1.0), false));
+        assert!(!r.memory.stack_sound);
+        assert!(
+            r.memory.stack_misses[0].contains("IRQ 5"),
+            "{:?}",
+            r.memory.stack_misses
+        );
         Ok(())
     }
 
@@ -977,6 +1038,17 @@ active_constraints,max_validity_slack_rad";
             assert!(v["memory"][key].is_u64(), "memory.{key}");
         }
         assert!(v["memory"]["stack_method"].is_string());
+        let roots = v["memory"]["stack_roots"].as_array().map(Vec::as_slice);
+        let first = roots.and_then(<[_]>::first);
+        assert_eq!(
+            first.map(|r| (&r["name"], &r["counted"], &r["depth_bytes"])),
+            Some((
+                &serde_json::json!("main"),
+                &serde_json::json!("priority_level"),
+                &serde_json::json!(16)
+            )),
+            "{roots:?}"
+        );
         assert_eq!(v["symbols"]["allocator"].as_bool(), Some(false));
         assert_eq!(v["symbols"]["soft_double"].as_bool(), Some(false));
         assert_eq!(v["runs"].as_array().map(Vec::len), Some(2));
@@ -1013,7 +1085,7 @@ active_constraints,max_validity_slack_rad";
         };
         assert_eq!(value("memory.text_bytes"), Some(100_000));
         assert_eq!(value("memory.flash_bytes"), Some(142_424));
-        assert_eq!(value("memory.stack_bound_bytes"), Some(128));
+        assert_eq!(value("memory.stack_bound_bytes"), Some(132));
         assert_eq!(
             value("tasks.plan.observed_warm_max_instructions"),
             Some(1_200_000)
@@ -1085,14 +1157,22 @@ active_constraints,max_validity_slack_rad";
 
     #[test]
     #[ignore = "needs the ECU binary: cargo ecu"]
-    fn real_ecu_elf_stack_bound_resolves_every_level() -> Result<()> {
+    fn real_ecu_elf_stack_bound_covers_every_vector_table_handler() -> Result<()> {
+        use crate::wcet::stack::{disassemble, parse_objdump, Counted, EXCEPTION_ENTRY_BYTES};
         let elf = real_elf();
-        let stack = crate::wcet::stack::analyse_elf(&elf, &ecu_priority_levels())?;
+        let stack = crate::wcet::stack::analyse_elf_once(
+            &elf,
+            &ecu_priority_levels(),
+            &ecu_once(),
+            &ecu_masked(),
+            &crate::wcet::indirect::targets_of_elf(&elf)?,
+        )?;
         for level in &stack.levels {
-            let root = level.roots.first();
+            let root = level.roots.iter().max_by_key(|r| r.depth_bytes);
             eprintln!(
-                "{}: {} B = {:?}",
+                "{} ({}): {} B = {:?}",
                 level.name,
+                level.counted.label(),
                 level.contribution_bytes,
                 root.map(|r| r
                     .worst_path
@@ -1100,27 +1180,88 @@ active_constraints,max_validity_slack_rad";
                     .map(|e| format!("{} {}", e.function, e.frame_bytes))
                     .collect::<Vec<_>>())
             );
-            assert_eq!(
-                level.roots.len(),
-                1,
-                "{} resolved to {:?}",
-                level.name,
-                level.roots
-            );
-            assert!(level.roots.iter().all(|r| r.depth_bytes > 0));
         }
         eprintln!(
-            "total {} B, sound {}, misses {:#?}",
-            stack.total_bytes,
+            "{}; sound {}, misses {:#?}",
+            stack.formula(),
             stack.sound,
             stack_misses(&stack)
         );
-        assert!(stack.total_bytes > 0 && stack.total_bytes < 1 << 20);
-        // The dispatchers run different tasks: not the default handler.
-        assert!(stack
-            .levels
+        // Every entry of the vector table is one root's, once.
+        let roots = stack.roots();
+        let mut listed: Vec<&str> = roots
             .iter()
-            .all(|l| l.roots.iter().all(|r| r.function != "DefaultHandler")));
+            .flat_map(|r| r.exceptions.iter().map(String::as_str))
+            .collect();
+        listed.sort_unstable();
+        let mut entries: Vec<String> = crate::wcet::vector_table::read_vector_table(&elf)?
+            .iter()
+            .map(|e| e.name())
+            .collect();
+        entries.sort_unstable();
+        assert_eq!(listed, entries);
+        assert!(stack.vector_table && stack.unplaced_handlers.is_empty());
+        // The tasks' interrupts are their levels' roots, not the default handler:
+        // the dispatchers USART1 (IRQ 37) and USART2 (IRQ 38), and SysTick.
+        for (level, entry) in [(1, "IRQ 37"), (2, "IRQ 38"), (3, "SysTick")] {
+            let root = &stack.levels[level].roots[0];
+            assert_eq!(root.exceptions, [entry], "{}", stack.levels[level].name);
+            assert_ne!(root.function, crate::wcet::stack::DEFAULT_HANDLER);
+        }
+        // HardFault on top, with its exception frame, through the application's
+        // handler to the safe stop's guard; the guard's work is counted once.
+        let fault = |name: &str| {
+            stack
+                .levels
+                .iter()
+                .find(|l| l.counted == Counted::FaultOnTop && l.roots[0].root == name)
+                .with_context(|| format!("no {name} level: {:?}", stack.levels))
+        };
+        let hard_fault = fault("HardFault")?;
+        let path: Vec<&str> = hard_fault.roots[0]
+            .worst_path
+            .iter()
+            .map(|e| e.function.as_str())
+            .collect();
+        assert!(
+            path.contains(&"ecu::__cortex_m_rt_HardFault") && path.contains(&"ecu::safe_stop"),
+            "{path:?}"
+        );
+        assert!(!path.contains(&"ecu::safe_stop_work"), "{path:?}");
+        assert_eq!(
+            hard_fault.contribution_bytes,
+            hard_fault.roots[0].depth_bytes + EXCEPTION_ENTRY_BYTES
+        );
+        let nmi = fault("NMI")?;
+        let sum = |counted: Counted| -> u32 {
+            stack
+                .levels
+                .iter()
+                .filter(|l| l.counted == counted)
+                .map(|l| l.contribution_bytes)
+                .sum()
+        };
+        assert!(
+            stack.total_bytes
+                >= sum(Counted::PriorityLevel)
+                    + sum(Counted::Once)
+                    + hard_fault.contribution_bytes
+                    + nmi.contribution_bytes
+        );
+        // Counting the work once holds only if nothing but the guard calls it.
+        let program = parse_objdump(&disassemble(&elf)?);
+        let once = ecu_once();
+        let callers: Vec<String> = program
+            .functions
+            .iter()
+            .filter(|f| {
+                f.calls
+                    .iter()
+                    .any(|c| once.contains(&crate::wcet::demangle(&c.target)))
+            })
+            .map(|f| crate::wcet::demangle(&f.name))
+            .collect();
+        assert_eq!(callers, ["ecu::safe_stop"], "callers of {once:?}");
         Ok(())
     }
 
@@ -1140,11 +1281,35 @@ active_constraints,max_validity_slack_rad";
         inputs.elf = elf.clone();
         let r = build_report(&inputs)?;
         assert_eq!(r.memory.sections.text_bytes, elf_memory(&elf)?.text_bytes);
-        // Four priority levels and the panic handler's work, counted once.
-        assert_eq!(r.stack.levels.len(), 5);
-        assert!(r.stack.levels[4].roots[0].function.contains("safe_stop"));
+        // Four priority levels, the unbound interrupts, the safe stop's work
+        // counted once, HardFault and NMI.
+        let levels: Vec<(Counted, &str)> = r
+            .stack
+            .levels
+            .iter()
+            .map(|l| (l.counted, l.roots[0].root.as_str()))
+            .collect();
+        let level = Counted::PriorityLevel;
+        assert_eq!(
+            levels,
+            [
+                (level, "main"),
+                (level, "USART1"),
+                (level, "USART2"),
+                (level, "SysTick"),
+                (Counted::UnboundOnTop, "DefaultHandler"),
+                (Counted::Once, "ecu::safe_stop_work"),
+                (Counted::FaultOnTop, "HardFault"),
+                (Counted::FaultOnTop, "NMI"),
+            ]
+        );
         assert_eq!(r.memory.stack_bound_bytes, u64::from(r.stack.total_bytes));
+        assert_eq!(r.memory.stack_roots, r.stack.roots());
         assert!(r.memory.stack_method.contains("SysTick"));
+        assert!(r
+            .memory
+            .stack_method
+            .contains("HardFault (on top of everything)"));
         write_report(tmp.path(), &r)?;
         let md = std::fs::read_to_string(tmp.path().join("wcet.md"))?;
         assert!(md.contains("firmware::mpc::Mpc<T>::"), "{md}");

@@ -11,12 +11,55 @@
 //! plus the deepest callee, computed by an iterative depth-first search with
 //! memoisation; a cycle in the call graph is reported and makes the bound unsound.
 //!
-//! On a Cortex-M4F with the FPU in use every preemption level stacks an exception
-//! frame of [`EXCEPTION_FRAME_FPU_BYTES`] (lazy stacking reserves the FPU part) on
-//! top of its handler's depth, so the bound of an application whose thread mode
-//! runs `main` and whose interrupts run at `L` priority levels is
-//! `depth(main) + Σ_levels (max depth of the level's handlers + 104 B)`.
+//! **Roots.** The application's priority levels are given (thread mode runs
+//! `main`; each interrupt priority its tasks' handlers). With the ELF's vector
+//! table ([`super::vector_table`]) every handler it lists is placed, or reported:
+//!
+//! * `Reset` is thread mode's entry: a root of the thread level;
+//! * a handler that is a root of a given level is counted in that level;
+//! * HardFault and NMI are counted on top of everything ([`Counted::FaultOnTop`]);
+//! * the configurable exceptions and interrupts the application does not bind,
+//!   which the vector table points at the default handler (`DefaultHandler`), share
+//!   one level on top of the preemption chain ([`Counted::UnboundOnTop`]): the
+//!   application leaves them at their reset priority, 0, the highest configurable
+//!   one, and exceptions of one priority do not preempt each other;
+//! * any other handler has a priority the analysis does not know: each is counted
+//!   on top of the chain ([`Counted::OnTop`]), as if it could preempt all the
+//!   others;
+//! * an entry whose address starts no function of the disassembly cannot be
+//!   placed: it is listed ([`StackReport::unplaced_handlers`]) and the bound is
+//!   not sound.
+//!
+//! **Exception frames.** On a Cortex-M4F whose interrupted code has used the FPU
+//! (CONTROL.FPCA set) exception entry stacks the extended frame of
+//! [`EXCEPTION_FRAME_FPU_BYTES`]. Lazy stacking (FPCCR.LSPEN, the reset state)
+//! defers only the stores of s0–s15 and FPSCR: the space is reserved on entry,
+//! whatever the exception, so a fault or NMI taken in FPU code reserves 104 B like
+//! an interrupt does. CCR.STKALIGN (set at reset) aligns the frame to 8 bytes: one
+//! more word when the interrupted stack pointer is 4 mod 8, which code allows
+//! between pushes ([`EXCEPTION_ALIGNMENT_PAD_BYTES`]). Every level but thread mode
+//! and the once level adds both ([`EXCEPTION_ENTRY_BYTES`]).
+//!
+//! **Faults (ARMv7-M).** HardFault has the fixed priority −1 and NMI −2; every
+//! other exception has a configurable priority ≥ 0. An exception preempts only
+//! code of a lower priority: NMI preempts HardFault and everything else, HardFault
+//! everything but NMI. Masking interrupts (PRIMASK, `cpsid i`) stops every
+//! configurable exception, not HardFault or NMI. A fault raised while the core
+//! runs at priority −1 or −2 (in HardFault or NMI) enters no exception: the core
+//! locks up, stacking nothing. So at most one HardFault and one NMI frame are on
+//! the stack, NMI above HardFault, at any depth of the rest: the bound adds both.
+//!
+//! **Once.** Functions entered at most once in a run, with interrupts disabled,
+//! never returning (the panic path's work, behind a guard) are cut from every
+//! chain and counted once, in a level of their own: no interrupt nests on them,
+//! and wherever they start (under a priority level, after a panic, or under
+//! HardFault, after a fault) one chain of them is on the stack at most.
+//!
+//! The bound: `max(thread + Σ priority levels + Σ handlers on top, init) + once +
+//! HardFault + NMI`, each level its deepest root plus its exception frame, `init`
+//! the thread's depth through the functions run with interrupts masked.
 
+use super::vector_table::{VectorEntry, HARD_FAULT, NMI, RESET};
 use super::{demangle, WcetError};
 use serde::Serialize;
 use std::collections::HashMap;
@@ -28,6 +71,15 @@ pub const EXCEPTION_FRAME_BASIC_BYTES: u32 = 32;
 /// Exception frame with FPU context (adds s0–s15, FPSCR and a reserved word), in
 /// bytes; lazy stacking reserves it whenever the FPU is enabled.
 pub const EXCEPTION_FRAME_FPU_BYTES: u32 = 104;
+/// Padding an exception entry may add below the interrupted code's stack pointer,
+/// in bytes: CCR.STKALIGN (set at reset on the Cortex-M4) aligns the frame to 8
+/// bytes, one word lower when that pointer is 4 mod 8, as it is between a push of
+/// one word and its pop (`vpush {s0}` passing a float argument, a frame whose size
+/// is 4 mod 8).
+pub const EXCEPTION_ALIGNMENT_PAD_BYTES: u32 = 4;
+/// What one exception entry adds to the stack at most, in bytes: the FPU frame and
+/// the alignment padding.
+pub const EXCEPTION_ENTRY_BYTES: u32 = EXCEPTION_FRAME_FPU_BYTES + EXCEPTION_ALIGNMENT_PAD_BYTES;
 
 /// The stack frame of a function as read from its instructions.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
@@ -150,15 +202,18 @@ impl Program {
         self.names.get(symbol).and_then(|&i| self.functions.get(i))
     }
 
+    /// The function starting at `address` (Thumb bit ignored).
+    pub fn at(&self, address: u32) -> Option<usize> {
+        self.functions
+            .iter()
+            .position(|f| f.address == address & !1)
+    }
+
     /// Adds `alias` for the function starting at `address` (symbols sharing an
     /// address, e.g. interrupt names bound to `DefaultHandler`, which
     /// `llvm-objdump` prints once). Returns `false` if no function starts there.
     pub fn add_alias(&mut self, alias: &str, address: u32) -> bool {
-        match self
-            .functions
-            .iter()
-            .position(|f| f.address == address & !1)
-        {
+        match self.at(address) {
             Some(i) => {
                 self.names.entry(alias.to_string()).or_insert(i);
                 true
@@ -540,16 +595,69 @@ pub struct PathEntry {
 /// The worst-case depth from one root function.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct RootReport {
-    /// The root as asked for (symbol or alias), or the matched name for a prefix.
+    /// The root as asked for (symbol or alias), or the matched name for a prefix;
+    /// for a handler placed from the vector table alone, its exception's name.
     pub root: String,
-    /// Demangled name of the function it resolved to (interrupts bound to the
-    /// default handler resolve to its first symbol).
+    /// Demangled name of the function it resolved to; for a handler placed from
+    /// the vector table its exception's symbol or `DefaultHandler` when the
+    /// function has that symbol (the disassembly prints one symbol per address).
     pub function: String,
     /// Worst-case stack depth from the root's entry, in bytes (its own frame
     /// included, no exception frame).
     pub depth_bytes: u32,
     /// The call path reaching that depth, root first.
     pub worst_path: Vec<PathEntry>,
+    /// The vector-table entries whose handler it is (`HardFault`, `IRQ 37`;
+    /// [`super::vector_table::exception_name`]); empty for a root no entry names.
+    pub exceptions: Vec<String>,
+}
+
+/// How a level's contribution enters the bound.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Counted {
+    /// Thread mode or one interrupt priority of the application: a link of the
+    /// preemption chain.
+    PriorityLevel,
+    /// The exceptions and interrupts the application does not bind, at the
+    /// default handler and their reset priority: one level on top of the chain.
+    UnboundOnTop,
+    /// A handler of a priority the analysis does not know: on top of the chain.
+    OnTop,
+    /// Functions entered at most once, interrupts disabled: counted once.
+    Once,
+    /// HardFault or NMI: on top of everything.
+    FaultOnTop,
+}
+
+impl Counted {
+    /// How the report says it.
+    pub fn label(self) -> &'static str {
+        match self {
+            Counted::PriorityLevel => "priority level",
+            Counted::UnboundOnTop => "unbound, on top",
+            Counted::OnTop => "priority unknown, on top",
+            Counted::Once => "once",
+            Counted::FaultOnTop => "fault, on top",
+        }
+    }
+}
+
+/// One root of the bound, as `wcet.json`'s `memory.stack_roots` lists it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct StackRoot {
+    /// The root's name: as given (`main`, `USART1`) or its exception's.
+    pub name: String,
+    /// Demangled name of its function.
+    pub symbol: String,
+    /// The vector-table entries it handles (exception names).
+    pub exceptions: Vec<String>,
+    /// The level it is counted in.
+    pub level: String,
+    /// How that level is counted.
+    pub counted: Counted,
+    /// Its worst-case depth, in bytes (no exception frame).
+    pub depth_bytes: u32,
 }
 
 /// One priority level: thread mode or the handlers sharing an interrupt priority.
@@ -557,9 +665,12 @@ pub struct RootReport {
 pub struct LevelReport {
     /// The level's name as given.
     pub name: String,
+    /// How its contribution enters the bound.
+    pub counted: Counted,
     /// Each root of the level.
     pub roots: Vec<RootReport>,
-    /// Exception frame stacked on entry to this level, in bytes (0 in thread mode).
+    /// Exception frame and alignment padding stacked on entry to this level, at
+    /// most, in bytes ([`EXCEPTION_ENTRY_BYTES`]; 0 in thread mode and the once level).
     pub exception_frame_bytes: u32,
     /// This level's share of the bound: deepest root plus exception frame, in bytes.
     pub contribution_bytes: u32,
@@ -586,18 +697,20 @@ pub struct IndirectCall {
 /// Worst-case stack bound of an application.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StackReport {
-    /// Thread mode first, then each preemption level in increasing priority.
+    /// Thread mode first, then each preemption level in increasing priority, the
+    /// handlers on top of them, the once level, HardFault and NMI.
     pub levels: Vec<LevelReport>,
-    /// The bound, in bytes: the sum of the levels' contributions, or the thread's
-    /// depth while interrupts are still disabled (`init_bytes`) plus the once
-    /// level, whichever is larger.
+    /// The bound, in bytes: the larger of the chain (the priority levels and the
+    /// handlers on top) and the thread's depth while interrupts are still disabled
+    /// (`init_bytes`), plus the once level and the faults on top.
     pub total_bytes: u32,
     /// The thread roots' depth including the functions that run only with
     /// interrupts disabled (the set-up in `init`), in bytes; the thread level's
     /// contribution leaves those out (nothing can preempt them).
     pub init_bytes: u32,
     /// `false` if anything reachable was not analysed: an unknown frame, an indirect
-    /// call, a call to a symbol not in the disassembly, or a cycle.
+    /// call, a call to a symbol not in the disassembly, a cycle, a vector-table
+    /// entry not placed, or handlers outside the given roots (no vector table read).
     pub sound: bool,
     /// Reachable functions whose frame was not understood.
     pub unknown_frames: Vec<UnknownFrame>,
@@ -609,6 +722,11 @@ pub struct StackReport {
     /// Call-graph cycles reachable from a root (demangled names, the first repeated
     /// at the end): recursion, whose depth the bound does not include.
     pub cycles: Vec<Vec<String>>,
+    /// Whether the roots include every handler of a vector table (`false`: the
+    /// roots were given, handlers outside them are not covered).
+    pub vector_table: bool,
+    /// Vector-table entries the bound could not place, each with why.
+    pub unplaced_handlers: Vec<String>,
     /// What the analysis covers and misses.
     pub method: String,
 }
@@ -736,33 +854,233 @@ const METHOD: &str = "Static bound from the disassembly: each function's frame i
 stack-pointer decrements (push, vpush, stmdb sp!, str [sp, #-N]!, sub sp by an immediate or by a \
 movw/movt constant); the depth of a root is the deepest chain of direct calls (bl, blx <symbol>) \
 and tail calls (a branch to another function, its caller's frame kept); each preemption level \
-adds its deepest handler and a 104-byte FPU exception frame. The panic handler's work, entered \
-with interrupts disabled and never returning, is counted once as a level of its own; the set-up \
-functions init runs before enabling interrupts leave the thread level (the bound is at least their \
-depth plus that once level). Not covered: the targets of indirect \
-calls (function pointers, trait objects: listed), recursion (cycles: listed), frames the parser \
-did not understand (listed, their understood part counted), inline assembly that moves sp other \
-than by these instructions, and handlers not given as roots (e.g. HardFault).";
+adds its deepest handler and 108 bytes of exception entry: the 104-byte FPU frame (lazy stacking \
+reserves it for every exception, faults included) and up to 4 bytes that align it to 8. The panic path's work, entered once with interrupts disabled and \
+never returning, is counted once as a level of its own; the set-up functions init runs before \
+enabling interrupts leave the thread level (the bound is at least their depth plus that once \
+level and the faults). Not covered: the targets of indirect calls (function pointers, trait \
+objects: listed), recursion (cycles: listed), frames the parser did not understand (listed, their \
+understood part counted), inline assembly that moves sp other than by these instructions.";
+
+/// How the roots were found, after [`METHOD`].
+const VECTOR_TABLE_METHOD: &str = "Every handler of the vector table is a root: Reset in \
+thread mode, the tasks' interrupts in their levels, the exceptions and interrupts the application \
+does not bind (the default handler, left at reset priority 0: none preempts another) one level on \
+top of the chain, any other handler on top of its own, and HardFault and NMI (priorities -1 and \
+-2: at any depth, NMI over HardFault, neither over itself or HardFault over NMI, a fault there \
+locks up) on top of everything; an entry that starts no function is listed.";
+
+/// What the roots leave out when no vector table was read.
+const NO_VECTOR_TABLE: &str = "No vector table was read: handlers other than the given roots \
+(HardFault, NMI) are not in the bound.";
 
 /// Worst-case stack bound of `program` for `levels` (thread mode first, then each
-/// preemption level in increasing priority).
+/// preemption level in increasing priority), the roots given, no vector table.
 pub fn stack_bound(program: &Program, levels: &[PriorityLevel]) -> Result<StackReport, WcetError> {
     stack_bound_once(program, levels, &[], &[])
 }
 
 /// [`stack_bound`] where the functions `once` (e.g. the panic handler's work) are
-/// entered with interrupts disabled and never return: nothing can preempt them
-/// and they run at most once, so their chain is one more level of the bound
-/// (without an exception frame) instead of being added under every level that
-/// can call them. The functions `masked` run only with interrupts disabled (RTIC's
-/// `init` calls them before it enables interrupts): the thread level's
-/// contribution leaves them out, and the bound is at least the thread's depth
-/// with them (`init_bytes`) plus the once level.
+/// entered at most once in a run, with interrupts disabled, and never return: no
+/// interrupt preempts them and one chain of them is on the stack at most, so they
+/// are cut from every other chain and counted once, as one more level of the
+/// bound (without an exception frame). The functions `masked` run only with
+/// interrupts disabled (RTIC's `init` calls them before it enables interrupts):
+/// the thread level's contribution leaves them out, and the bound is at least the
+/// thread's depth with them (`init_bytes`) plus the once level.
 pub fn stack_bound_once(
     program: &Program,
     levels: &[PriorityLevel],
     once: &[String],
     masked: &[String],
+) -> Result<StackReport, WcetError> {
+    bound(program, levels, once, masked, None)
+}
+
+/// [`stack_bound_once`] with every handler of the vector table `vectors` placed
+/// (the module's **Roots**): HardFault, NMI and the handlers the levels do not
+/// name are counted on top; an entry that starts no function of `program` is
+/// listed in [`StackReport::unplaced_handlers`] and makes the bound unsound.
+pub fn stack_bound_vectors(
+    program: &Program,
+    levels: &[PriorityLevel],
+    once: &[String],
+    masked: &[String],
+    vectors: &[VectorEntry],
+) -> Result<StackReport, WcetError> {
+    bound(program, levels, once, masked, Some(vectors))
+}
+
+/// A root before its depth is known.
+struct Root {
+    name: String,
+    index: usize,
+    exceptions: Vec<String>,
+    /// The symbol to name its function by, when the disassembly printed another
+    /// one of that address (`WWDG` for `DefaultHandler`).
+    symbol: Option<String>,
+}
+
+/// A level before its depths are known.
+struct Level {
+    name: String,
+    counted: Counted,
+    exception_frame_bytes: u32,
+    roots: Vec<Root>,
+}
+
+/// The given levels' roots, resolved.
+fn given_levels(program: &Program, levels: &[PriorityLevel]) -> Result<Vec<Level>, WcetError> {
+    let mut out = Vec::new();
+    for (k, level) in levels.iter().enumerate() {
+        let mut roots = Vec::new();
+        for root in &level.roots {
+            let found = program.resolve(root);
+            if found.is_empty() {
+                return Err(WcetError::UnknownRoot(root.clone()));
+            }
+            for index in found {
+                let function = demangle(&program.functions[index].name);
+                let exact = program.names.get(root) == Some(&index) || function == *root;
+                roots.push(Root {
+                    name: if exact { root.clone() } else { function },
+                    index,
+                    exceptions: Vec::new(),
+                    symbol: None,
+                });
+            }
+        }
+        out.push(Level {
+            name: level.name.clone(),
+            counted: Counted::PriorityLevel,
+            // Thread mode stacks no exception frame; every interrupt priority does.
+            exception_frame_bytes: if k == 0 { 0 } else { EXCEPTION_ENTRY_BYTES },
+            roots,
+        });
+    }
+    Ok(out)
+}
+
+/// Places every entry of `vectors` (the module's **Roots**): into `levels`, or in
+/// the levels returned (the handlers on top of the chain, then the faults on top
+/// of everything); what cannot be placed goes to `unplaced`.
+fn place_vectors(
+    program: &Program,
+    levels: &mut [Level],
+    vectors: &[VectorEntry],
+    unplaced: &mut Vec<String>,
+) -> (Vec<Level>, Vec<Level>) {
+    let default = program.names.get(DEFAULT_HANDLER).copied();
+    // A handler's function is named by its exception's symbol (`Reset`,
+    // `HardFault`) or the default handler's when they are symbols of it.
+    let symbol = |name: &str, index: usize| {
+        [name, DEFAULT_HANDLER]
+            .into_iter()
+            .find(|s| program.names.get(*s) == Some(&index))
+            .map(str::to_string)
+    };
+    let mut unbound: Vec<String> = Vec::new();
+    let mut on_top = Vec::new();
+    let mut faults = Vec::new();
+    let single = |name: String, counted, index| Level {
+        name: format!("{name} ({})", counted_level_name(counted)),
+        counted,
+        exception_frame_bytes: EXCEPTION_ENTRY_BYTES,
+        roots: vec![Root {
+            symbol: symbol(&name, index),
+            name: name.clone(),
+            index,
+            exceptions: vec![name],
+        }],
+    };
+    for entry in vectors {
+        let name = entry.name();
+        let Some(index) = program.at(entry.address) else {
+            unplaced.push(format!(
+                "{name} (vector {}) -> {:#010x}: no function of the disassembly starts there, \
+                 so its stack use is unknown (a handler without a symbol, or a vector table \
+                 that does not hold handlers)",
+                entry.exception, entry.address
+            ));
+            continue;
+        };
+        // HardFault and NMI first: fixed priorities above every level, whatever
+        // function handles them.
+        if entry.exception == NMI || entry.exception == HARD_FAULT {
+            faults.push((entry.exception, single(name, Counted::FaultOnTop, index)));
+            continue;
+        }
+        // A handler that is a root of a given level runs at that level (RTIC binds
+        // each task's interrupt to a handler of its own). The default handler
+        // serves many entries: only the one a level names (`SysTick`) is that
+        // level's; the others are unbound.
+        let known = levels.iter_mut().find_map(|l| {
+            l.roots.iter_mut().find(|r| {
+                r.index == index
+                    && l.counted == Counted::PriorityLevel
+                    && (Some(index) != default || r.name == name)
+            })
+        });
+        if let Some(root) = known {
+            root.exceptions.push(name);
+        } else if entry.exception == RESET {
+            match levels.first_mut() {
+                Some(thread) => thread.roots.push(Root {
+                    symbol: symbol(&name, index),
+                    name: name.clone(),
+                    index,
+                    exceptions: vec![name],
+                }),
+                None => unplaced.push(format!(
+                    "{name} -> {:#010x}: no thread level to count thread mode's entry in \
+                     (give the application's levels, thread mode first)",
+                    entry.address
+                )),
+            }
+        } else if Some(index) == default {
+            unbound.push(name);
+        } else {
+            on_top.push(single(name, Counted::OnTop, index));
+        }
+    }
+    let mut above_chain = Vec::new();
+    if let (Some(index), false) = (default, unbound.is_empty()) {
+        above_chain.push(Level {
+            name: format!("unbound exceptions and interrupts ({})", DEFAULT_HANDLER),
+            counted: Counted::UnboundOnTop,
+            exception_frame_bytes: EXCEPTION_ENTRY_BYTES,
+            roots: vec![Root {
+                name: DEFAULT_HANDLER.to_string(),
+                index,
+                exceptions: unbound,
+                symbol: Some(DEFAULT_HANDLER.to_string()),
+            }],
+        });
+    }
+    above_chain.extend(on_top);
+    // HardFault below NMI, as they nest.
+    faults.sort_by_key(|(exception, _)| std::cmp::Reverse(*exception));
+    (above_chain, faults.into_iter().map(|(_, l)| l).collect())
+}
+
+/// The level name's suffix for a handler counted `counted`.
+fn counted_level_name(counted: Counted) -> &'static str {
+    match counted {
+        Counted::FaultOnTop => "on top of everything",
+        _ => "priority unknown, on top of the chain",
+    }
+}
+
+/// The default handler's symbol (cortex-m-rt): the vector table's entry for every
+/// exception and interrupt the application does not bind.
+pub const DEFAULT_HANDLER: &str = "DefaultHandler";
+
+fn bound(
+    program: &Program,
+    levels: &[PriorityLevel],
+    once: &[String],
+    masked: &[String],
+    vectors: Option<&[VectorEntry]>,
 ) -> Result<StackReport, WcetError> {
     let mark = |names: &[String], cut: &mut Vec<bool>| -> Result<(), WcetError> {
         for root in names {
@@ -781,67 +1099,84 @@ pub fn stack_bound_once(
     let init_depths = compute_depths(program, &cut);
     mark(masked, &mut cut)?;
     let depths = compute_depths(program, &cut);
-    let init_bytes = levels
+
+    let mut placed = given_levels(program, levels)?;
+    let mut unplaced_handlers = Vec::new();
+    let (above_chain, faults) = match vectors {
+        Some(v) => place_vectors(program, &mut placed, v, &mut unplaced_handlers),
+        None => (Vec::new(), Vec::new()),
+    };
+    placed.extend(above_chain);
+    if !once.is_empty() {
+        let mut roots = Vec::new();
+        for root in once {
+            for index in program.resolve(root) {
+                roots.push(Root {
+                    name: demangle(&program.functions[index].name),
+                    index,
+                    exceptions: Vec::new(),
+                    symbol: None,
+                });
+            }
+        }
+        placed.push(Level {
+            name: "once (interrupts disabled, never returns)".into(),
+            counted: Counted::Once,
+            exception_frame_bytes: 0,
+            roots,
+        });
+    }
+    placed.extend(faults);
+
+    let init_bytes = placed
         .first()
+        .filter(|l| !levels.is_empty() && l.counted == Counted::PriorityLevel)
         .map(|l| {
             l.roots
                 .iter()
-                .flat_map(|r| program.resolve(r))
-                .map(|i| init_depths.depth[i])
+                .map(|r| init_depths.depth[r.index])
                 .max()
                 .unwrap_or(0)
         })
         .unwrap_or(0);
     let mut all_roots = Vec::new();
     let mut level_reports = Vec::new();
-    let once_level = (!once.is_empty()).then(|| PriorityLevel {
-        name: "once (interrupts disabled, never returns)".into(),
-        roots: once.to_vec(),
-    });
-    for (k, level) in levels.iter().chain(once_level.iter()).enumerate() {
+    for level in placed {
         let mut roots = Vec::new();
-        for root in &level.roots {
-            let found = program.resolve(root);
-            if found.is_empty() {
-                return Err(WcetError::UnknownRoot(root.clone()));
-            }
-            for i in found {
-                all_roots.push(i);
-                let mut worst_path = Vec::new();
-                let mut at = Some(i);
-                while let Some(f) = at {
-                    let func = &program.functions[f];
-                    worst_path.push(PathEntry {
-                        function: demangle(&func.name),
-                        frame_bytes: func.frame.bytes(),
-                    });
-                    at = depths.next[f];
-                }
-                let function = demangle(&program.functions[i].name);
-                let exact = program.names.get(root) == Some(&i) || function == *root;
-                roots.push(RootReport {
-                    root: if exact {
-                        root.clone()
-                    } else {
+        for root in level.roots {
+            all_roots.push(root.index);
+            let mut worst_path = Vec::new();
+            let mut at = Some(root.index);
+            let function = root
+                .symbol
+                .unwrap_or_else(|| demangle(&program.functions[root.index].name));
+            while let Some(f) = at {
+                let func = &program.functions[f];
+                worst_path.push(PathEntry {
+                    function: if f == root.index {
                         function.clone()
+                    } else {
+                        demangle(&func.name)
                     },
-                    function,
-                    depth_bytes: depths.depth[i],
-                    worst_path,
+                    frame_bytes: func.frame.bytes(),
                 });
+                at = depths.next[f];
             }
+            roots.push(RootReport {
+                root: root.name,
+                function,
+                depth_bytes: depths.depth[root.index],
+                worst_path,
+                exceptions: root.exceptions,
+            });
         }
-        let exception_frame_bytes = if k == 0 || k >= levels.len() {
-            0
-        } else {
-            EXCEPTION_FRAME_FPU_BYTES
-        };
         let deepest = roots.iter().map(|r| r.depth_bytes).max().unwrap_or(0);
         level_reports.push(LevelReport {
-            name: level.name.clone(),
+            name: level.name,
+            counted: level.counted,
             roots,
-            exception_frame_bytes,
-            contribution_bytes: deepest + exception_frame_bytes,
+            exception_frame_bytes: level.exception_frame_bytes,
+            contribution_bytes: deepest + level.exception_frame_bytes,
         });
     }
     let seen = reachable(program, &all_roots);
@@ -884,20 +1219,29 @@ pub fn stack_bound_once(
                 .collect()
         })
         .collect();
-    let once_bytes = if once.is_empty() {
-        0
-    } else {
-        level_reports.last().map_or(0, |l| l.contribution_bytes)
+    let sum = |which: &[Counted]| -> u32 {
+        level_reports
+            .iter()
+            .filter(|l| which.contains(&l.counted))
+            .map(|l| l.contribution_bytes)
+            .sum()
     };
-    let total_bytes = level_reports
-        .iter()
-        .map(|l| l.contribution_bytes)
-        .sum::<u32>()
-        .max(init_bytes + once_bytes);
+    let chain = sum(&[
+        Counted::PriorityLevel,
+        Counted::UnboundOnTop,
+        Counted::OnTop,
+    ]);
+    let total_bytes = chain.max(init_bytes) + sum(&[Counted::Once]) + sum(&[Counted::FaultOnTop]);
     let sound = unknown_frames.is_empty()
         && indirect_calls.is_empty()
         && unresolved_calls.is_empty()
-        && cycles.is_empty();
+        && cycles.is_empty()
+        && unplaced_handlers.is_empty()
+        && vectors.is_some();
+    let method = match vectors {
+        Some(_) => format!("{METHOD} {VECTOR_TABLE_METHOD}"),
+        None => format!("{METHOD} {NO_VECTOR_TABLE}"),
+    };
     Ok(StackReport {
         levels: level_reports,
         total_bytes,
@@ -907,13 +1251,66 @@ pub fn stack_bound_once(
         indirect_calls,
         unresolved_calls,
         cycles,
-        method: METHOD.to_string(),
+        vector_table: vectors.is_some(),
+        unplaced_handlers,
+        method,
     })
+}
+
+impl StackReport {
+    /// Every root of the bound, level by level.
+    pub fn roots(&self) -> Vec<StackRoot> {
+        self.levels
+            .iter()
+            .flat_map(|l| {
+                l.roots.iter().map(move |r| StackRoot {
+                    name: r.root.clone(),
+                    symbol: r.function.clone(),
+                    exceptions: r.exceptions.clone(),
+                    level: l.name.clone(),
+                    counted: l.counted,
+                    depth_bytes: r.depth_bytes,
+                })
+            })
+            .collect()
+    }
+
+    /// The bound as a sum of its levels' contributions, e.g. `max(thread 820 B +
+    /// … = 7000 B, init 4000 B) + once 828 B + HardFault (…) 128 B = 7956 B`.
+    pub fn formula(&self) -> String {
+        let terms = |which: &[Counted]| -> Vec<String> {
+            self.levels
+                .iter()
+                .filter(|l| which.contains(&l.counted))
+                .map(|l| format!("{} {} B", l.name, l.contribution_bytes))
+                .collect()
+        };
+        let chain_levels = [
+            Counted::PriorityLevel,
+            Counted::UnboundOnTop,
+            Counted::OnTop,
+        ];
+        let chain: u32 = self
+            .levels
+            .iter()
+            .filter(|l| chain_levels.contains(&l.counted))
+            .map(|l| l.contribution_bytes)
+            .sum();
+        let mut out = format!(
+            "max({} = {chain} B, init {} B)",
+            terms(&chain_levels).join(" + "),
+            self.init_bytes
+        );
+        for term in terms(&[Counted::Once, Counted::FaultOnTop]) {
+            out += &format!(" + {term}");
+        }
+        out + &format!(" = {} B", self.total_bytes)
+    }
 }
 
 /// Disassembles `elf`, adds every function symbol of its symbol table as an alias
 /// (interrupt handlers bound to `DefaultHandler` share its address), and bounds the
-/// stack of `levels`.
+/// stack of `levels` and of every handler of its vector table.
 pub fn analyse_elf(elf: &Path, levels: &[PriorityLevel]) -> Result<StackReport, WcetError> {
     analyse_elf_once(elf, levels, &[], &[], &Default::default())
 }
@@ -934,12 +1331,16 @@ pub fn analyse_elf_once(
         program.add_alias(&symbol.name, symbol.address);
     }
     program.resolve_indirect(targets, super::demangle);
-    stack_bound_once(&program, levels, once, masked)
+    let vectors = super::vector_table::read_vector_table(elf)?;
+    stack_bound_vectors(&program, levels, once, masked, &vectors)
 }
 
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+
+    /// One exception entry, in bytes.
+    const E: u32 = EXCEPTION_ENTRY_BYTES;
 
     /// The thread level with root `roots[0]`, then `priority i` with root `roots[i]`.
     pub(crate) fn levels(roots: &[&str]) -> Vec<PriorityLevel> {
@@ -952,6 +1353,17 @@ pub(crate) mod tests {
             .enumerate()
             .map(|(i, r)| PriorityLevel::new(&name(i), &[r]))
             .collect()
+    }
+
+    /// The bound of `levels` with a vector table read that lists no handler: only
+    /// what the roots reach decides whether it is sound.
+    fn bound_with_empty_vector_table(
+        p: &Program,
+        levels: &[PriorityLevel],
+    ) -> Result<StackReport, WcetError> {
+        let report = stack_bound_vectors(p, levels, &[], &[], &[])?;
+        assert!(report.vector_table);
+        Ok(report)
     }
 
     /// A hand-written disassembly: `main` calls `leaf` and `big` (large frame via
@@ -1050,15 +1462,24 @@ Disassembly of section .text:
             .map(|e| e.function.as_str())
             .collect();
         assert_eq!(path, vec!["main", "big", "leaf"]);
-        assert_eq!(report.levels[1].contribution_bytes, leaf + 104);
-        assert_eq!(report.total_bytes, main + big + leaf + leaf + 104);
+        assert_eq!(report.levels[1].contribution_bytes, leaf + E);
+        assert_eq!(report.total_bytes, main + big + leaf + leaf + E);
+        assert!(report.indirect_calls.is_empty() && report.cycles.is_empty());
+        // No vector table: the handlers outside the roots are not covered.
+        assert!(!report.sound && !report.vector_table, "{report:?}");
+        Ok(())
+    }
+
+    #[test]
+    fn a_clean_program_with_its_vector_table_read_is_sound() -> Result<(), WcetError> {
+        let report = bound_with_empty_vector_table(&program(), &levels(&["main", "leaf"]))?;
         assert!(report.sound, "{report:?}");
         Ok(())
     }
 
     #[test]
     fn indirect_call_makes_the_bound_unsound() -> Result<(), WcetError> {
-        let report = stack_bound(&program(), &levels(&["handler"]))?;
+        let report = bound_with_empty_vector_table(&program(), &levels(&["handler"]))?;
         assert!(!report.sound);
         assert_eq!(report.indirect_calls.len(), 1);
         assert_eq!(report.indirect_calls[0].function, "handler");
@@ -1083,9 +1504,9 @@ Disassembly of section .text:
         let levels = levels(&["t", "h"]);
         let p = parse_objdump(text);
         let every = stack_bound(&p, &levels)?;
-        assert_eq!(every.total_bytes, (8 + 1024) + (16 + 1024 + 104));
+        assert_eq!(every.total_bytes, (8 + 1024) + (16 + 1024 + E));
         let once = stack_bound_once(&p, &levels, &["stop".to_string()], &[])?;
-        assert_eq!(once.total_bytes, 8 + (16 + 104) + 1024);
+        assert_eq!(once.total_bytes, 8 + (16 + E) + 1024);
         assert_eq!(once.levels.len(), 3);
         assert_eq!(once.levels[2].exception_frame_bytes, 0);
         Ok(())
@@ -1111,7 +1532,7 @@ Disassembly of section .text:
 ";
         let levels = levels(&["main", "h"]);
         let p = parse_objdump(text);
-        let h = 16 + 256 + 104;
+        let h = 16 + 256 + E;
         assert_eq!(stack_bound(&p, &levels)?.total_bytes, 8 + 2048 + h);
         let r = stack_bound_once(&p, &levels, &[], &["setup".to_string()])?;
         assert_eq!(r.init_bytes, 8 + 2048);
@@ -1134,7 +1555,7 @@ Disassembly of section .text:
 08000020 <c>:
  8000020:      \tbx\tlr
 ";
-        let report = stack_bound(&parse_objdump(text), &levels(&["a"]))?;
+        let report = bound_with_empty_vector_table(&parse_objdump(text), &levels(&["a"]))?;
         assert!(!report.sound);
         assert_eq!(
             report.cycles,
@@ -1156,9 +1577,236 @@ Disassembly of section .text:
             p.get("f").map(|f| f.frame.clone()),
             Some(Frame::Unknown { known_bytes: 8, .. })
         ));
-        let report = stack_bound(&p, &levels(&["f"]))?;
+        let report = bound_with_empty_vector_table(&p, &levels(&["f"]))?;
         assert!(!report.sound);
         assert_eq!(report.unknown_frames.len(), 1);
+        Ok(())
+    }
+
+    /// A hand-written application: `Reset` calls `main` (284 B deep through
+    /// `work`); `USART1` (72 B) is the only priority level; `HardFault` has a frame
+    /// of `hard_fault_frame` bytes (8 B pushed, the rest by `sub.w`) and calls
+    /// `stop`, the once function (48 B), which `work` reaches too (a panic);
+    /// `DefaultHandler` (8 B) loops; `PendSV` (24 B) is a handler of its own.
+    fn app(hard_fault_frame: u32) -> String {
+        format!(
+            "
+08000000 <Reset>:
+ 8000000:      \tbl\t0x8000010 <main>
+08000010 <main>:
+ 8000010:      \tpush\t{{r7, lr}}
+ 8000012:      \tbl\t0x8000020 <work>
+08000020 <work>:
+ 8000020:      \tpush\t{{r4, r5, r6, r7, lr}}
+ 8000022:      \tsub\tsp, #0x100
+ 8000024:      \tbl\t0x8000060 <stop>
+08000030 <USART1>:
+ 8000030:      \tpush\t{{r4, lr}}
+ 8000032:      \tsub\tsp, #0x40
+08000040 <HardFault>:
+ 8000040:      \tpush\t{{r7, lr}}
+ 8000042:      \tsub.w\tsp, sp, #{:#x}
+ 8000046:      \tbl\t0x8000060 <stop>
+08000050 <DefaultHandler>:
+ 8000050:      \tpush\t{{r7, lr}}
+ 8000052:      \tb\t0x8000052 <DefaultHandler+0x2>
+08000060 <stop>:
+ 8000060:      \tsub\tsp, #0x30
+ 8000062:      \tb\t0x8000062 <stop+0x2>
+08000070 <PendSV>:
+ 8000070:      \tpush\t{{r4, r5, r6, r7, r8, lr}}
+",
+            hard_fault_frame - 8
+        )
+    }
+
+    /// The vector table of [`app`]: Reset, NMI and IRQ 1–3 at the default handler,
+    /// HardFault, PendSV, USART1 at IRQ 0.
+    fn app_vectors() -> Vec<VectorEntry> {
+        let at = |exception: u32, address: u32| VectorEntry { exception, address };
+        vec![
+            at(1, 0x0800_0000),
+            at(2, 0x0800_0050),
+            at(3, 0x0800_0040),
+            at(14, 0x0800_0070),
+            at(16, 0x0800_0030),
+            at(17, 0x0800_0050),
+            at(18, 0x0800_0050),
+            at(19, 0x0800_0050),
+        ]
+    }
+
+    fn app_levels() -> Vec<PriorityLevel> {
+        levels(&["main", "USART1"])
+    }
+
+    fn app_bound(hard_fault_frame: u32, vectors: &[VectorEntry]) -> Result<StackReport, WcetError> {
+        let p = parse_objdump(&app(hard_fault_frame));
+        stack_bound_vectors(&p, &app_levels(), &["stop".to_string()], &[], vectors)
+    }
+
+    #[test]
+    fn every_vector_table_handler_is_placed_and_counted() -> Result<(), WcetError> {
+        let r = app_bound(16, &app_vectors())?;
+        assert!(
+            r.sound && r.vector_table && r.unplaced_handlers.is_empty(),
+            "{r:?}"
+        );
+        let names: Vec<(&str, Counted, u32)> = r
+            .levels
+            .iter()
+            .map(|l| (l.name.as_str(), l.counted, l.contribution_bytes))
+            .collect();
+        let thread = 8 + 276;
+        assert_eq!(
+            names,
+            vec![
+                ("thread", Counted::PriorityLevel, thread),
+                ("priority 1", Counted::PriorityLevel, 72 + E),
+                (
+                    "unbound exceptions and interrupts (DefaultHandler)",
+                    Counted::UnboundOnTop,
+                    8 + E
+                ),
+                (
+                    "PendSV (priority unknown, on top of the chain)",
+                    Counted::OnTop,
+                    24 + E
+                ),
+                (
+                    "once (interrupts disabled, never returns)",
+                    Counted::Once,
+                    48
+                ),
+                // `stop` is cut from HardFault's chain: it is counted once.
+                (
+                    "HardFault (on top of everything)",
+                    Counted::FaultOnTop,
+                    16 + E
+                ),
+                ("NMI (on top of everything)", Counted::FaultOnTop, 8 + E),
+            ]
+        );
+        assert_eq!(
+            r.total_bytes,
+            thread + (72 + E) + (8 + E) + (24 + E) + 48 + (16 + E) + (8 + E)
+        );
+        // Every entry is some root's, once; Reset joined main in thread mode.
+        let roots = r.roots();
+        let mut listed: Vec<&str> = roots
+            .iter()
+            .flat_map(|root| root.exceptions.iter().map(String::as_str))
+            .collect();
+        listed.sort_unstable();
+        let mut want: Vec<String> = app_vectors().iter().map(VectorEntry::name).collect();
+        want.sort_unstable();
+        assert_eq!(listed, want);
+        let reset = roots.iter().find(|root| root.name == "Reset");
+        assert_eq!(
+            reset.map(|root| (root.level.as_str(), root.depth_bytes)),
+            Some(("thread", thread))
+        );
+        let usart1 = roots.iter().find(|root| root.name == "USART1");
+        assert_eq!(
+            usart1.map(|root| root.exceptions.clone()),
+            Some(vec!["IRQ 0".to_string()])
+        );
+        assert!(r.formula().ends_with(&format!("= {} B", r.total_bytes)));
+        Ok(())
+    }
+
+    #[test]
+    fn a_fault_handler_with_a_deep_frame_raises_the_bound_by_its_frame_and_exception_frame(
+    ) -> Result<(), WcetError> {
+        let vectors = app_vectors();
+        let without: Vec<VectorEntry> = vectors
+            .iter()
+            .copied()
+            .filter(|e| e.exception != HARD_FAULT)
+            .collect();
+        let frame = 2048 + 8;
+        let shallow = app_bound(frame, &without)?;
+        let deep = app_bound(frame, &vectors)?;
+        assert_eq!(deep.total_bytes - shallow.total_bytes, frame + E);
+        // Only the given roots: HardFault is left out, and the report says so.
+        let given = stack_bound_once(
+            &parse_objdump(&app(frame)),
+            &app_levels(),
+            &["stop".to_string()],
+            &[],
+        )?;
+        assert!(given.total_bytes < shallow.total_bytes);
+        assert!(!given.vector_table && given.method.contains("No vector table"));
+        Ok(())
+    }
+
+    #[test]
+    fn the_once_function_is_counted_once_under_a_panic_or_a_fault() -> Result<(), WcetError> {
+        // Without `stop` counted once, it would be in the thread's chain and in
+        // HardFault's: 48 B twice.
+        let p = parse_objdump(&app(16));
+        let every = stack_bound_vectors(&p, &app_levels(), &[], &[], &app_vectors())?;
+        let once = app_bound(16, &app_vectors())?;
+        assert_eq!(every.total_bytes, once.total_bytes + 48);
+        Ok(())
+    }
+
+    #[test]
+    fn a_vector_entry_that_starts_no_function_is_named_and_unsound() -> Result<(), WcetError> {
+        let mut vectors = app_vectors();
+        // Inside USART1's body, no function's start.
+        vectors.push(VectorEntry {
+            exception: 21,
+            address: 0x0800_0032,
+        });
+        let r = app_bound(16, &vectors)?;
+        assert!(!r.sound);
+        assert_eq!(r.unplaced_handlers.len(), 1, "{:?}", r.unplaced_handlers);
+        let line = &r.unplaced_handlers[0];
+        assert!(
+            line.contains("IRQ 5") && line.contains("0x08000032"),
+            "{line}"
+        );
+        // The entries that could be placed still are.
+        assert_eq!(r.total_bytes, app_bound(16, &app_vectors())?.total_bytes);
+        Ok(())
+    }
+
+    #[test]
+    fn the_default_handler_is_found_and_named_by_its_alias() -> Result<(), WcetError> {
+        // llvm-objdump prints one symbol per address, here an interrupt's name.
+        let mut p = parse_objdump(&app(16).replace("DefaultHandler", "WWDG"));
+        assert!(p.add_alias(DEFAULT_HANDLER, 0x0800_0050));
+        let r = stack_bound_vectors(&p, &app_levels(), &[], &[], &app_vectors())?;
+        let named: Vec<(&str, &str)> = r
+            .levels
+            .iter()
+            .filter(|l| l.counted != Counted::PriorityLevel)
+            .map(|l| (l.roots[0].root.as_str(), l.roots[0].function.as_str()))
+            .collect();
+        assert_eq!(
+            named,
+            [
+                ("DefaultHandler", "DefaultHandler"),
+                ("PendSV", "PendSV"),
+                ("HardFault", "HardFault"),
+                ("NMI", "DefaultHandler"),
+            ]
+        );
+        assert_eq!(
+            r.levels[2].roots[0].worst_path[0].function,
+            "DefaultHandler"
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn without_a_default_handler_symbol_each_handler_is_on_top() -> Result<(), WcetError> {
+        let p = parse_objdump(&app(16).replace("DefaultHandler", "Loop"));
+        let r = stack_bound_vectors(&p, &app_levels(), &[], &[], &app_vectors())?;
+        // IRQ 1–3 and PendSV: four levels of their own.
+        let on_top = r.levels.iter().filter(|l| l.counted == Counted::OnTop);
+        assert_eq!(on_top.count(), 4);
         Ok(())
     }
 

@@ -46,7 +46,6 @@ use super::WcetError;
 use replay::Replay;
 use serde::Serialize;
 use std::io::BufRead;
-use std::path::Path;
 use tb_stream::{Event, Resolved, TbStream};
 
 /// Names of the Cortex-M fault and system handlers recognised as exception entries
@@ -282,38 +281,7 @@ impl TraceCheck {
     }
 }
 
-/// The exception handlers of an ELF's vector table (`.vector_table`: word 0 the
-/// initial stack pointer, word 1 `Reset`, then one handler address | 1 per
-/// exception), as function indices of `program`, without `Reset`.
-pub fn vector_table_handlers(elf: &Path, program: &Program) -> Result<Vec<usize>, WcetError> {
-    use object::{Object, ObjectSection};
-    let data = super::read_elf(elf)?;
-    let file = super::parse_elf(elf, &data)?;
-    let section = file
-        .section_by_name(".vector_table")
-        .ok_or_else(|| WcetError::Elf {
-            path: elf.to_path_buf(),
-            message: "no .vector_table section".to_string(),
-        })?;
-    let bytes = section.data().map_err(|e| WcetError::Elf {
-        path: elf.to_path_buf(),
-        message: e.to_string(),
-    })?;
-    let words: Vec<u32> = bytes
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
-    let reset = words.get(1).copied().unwrap_or(0) & !1;
-    let mut out: Vec<usize> = words
-        .iter()
-        .skip(2)
-        .filter(|&&w| w != 0 && w & !1 != reset)
-        .filter_map(|&w| program.at(w & !1))
-        .collect();
-    out.sort_unstable();
-    out.dedup();
-    Ok(out)
-}
+pub use super::vector_table::vector_table_handlers;
 
 /// Replays `log` against `program`. `loops[f]` are the natural loops of function
 /// `f` (an empty list for a function without loops or not analysed); `roots` are

@@ -359,6 +359,7 @@ mod tests {
                     stack_method: "fixture".into(),
                     stack_sound: true,
                     stack_misses: Vec::new(),
+                    stack_roots: Vec::new(),
                     stack_high_water_bytes: 5_232,
                     stack_size_bytes: 82_000,
                 },

@@ -220,9 +220,9 @@ fn render_stack(s: &mut String, r: &WcetReport) -> std::fmt::Result {
     )?;
     writeln!(
         s,
-        "| level | deepest root | depth (B) | exception frame (B) | worst path |"
+        "| level | counted | deepest root | depth (B) | exception entry (B) | worst path |"
     )?;
-    writeln!(s, "|---|---|---:|---:|---|")?;
+    writeln!(s, "|---|---|---|---:|---:|---|")?;
     for level in &r.stack.levels {
         let deepest = level.roots.iter().max_by_key(|root| root.depth_bytes);
         let (root, depth, path) = deepest.map_or((String::new(), 0, String::new()), |root| {
@@ -235,8 +235,25 @@ fn render_stack(s: &mut String, r: &WcetReport) -> std::fmt::Result {
         });
         writeln!(
             s,
-            "| {} | {root} | {depth} | {} | {path} |",
-            level.name, level.exception_frame_bytes
+            "| {} | {} | {root} | {depth} | {} | {path} |",
+            level.name,
+            level.counted.label(),
+            level.exception_frame_bytes
+        )?;
+    }
+    writeln!(
+        s,
+        "\nRoots (`memory.stack_roots`):\n\n| root | function | vector-table entries | counted | depth (B) |\n|---|---|---|---|---:|"
+    )?;
+    for root in &r.memory.stack_roots {
+        writeln!(
+            s,
+            "| {} | `{}` | {} | {} | {} |",
+            root.name,
+            root.symbol,
+            compact_exceptions(&root.exceptions),
+            root.counted.label(),
+            root.depth_bytes
         )?;
     }
     writeln!(s, "\n{}\n", r.memory.stack_method)?;
@@ -248,6 +265,38 @@ fn render_stack(s: &mut String, r: &WcetReport) -> std::fmt::Result {
         writeln!(s)?;
     }
     Ok(())
+}
+
+/// Exception names with runs of consecutive interrupts joined: `SVCall, IRQ 0–36,
+/// IRQ 39`; `—` for none.
+fn compact_exceptions(names: &[String]) -> String {
+    let irq = |n: &String| n.strip_prefix("IRQ ").and_then(|k| k.parse::<u32>().ok());
+    let mut out: Vec<String> = Vec::new();
+    let mut run: Option<(u32, u32)> = None;
+    let close = |run: &mut Option<(u32, u32)>, out: &mut Vec<String>| match run.take() {
+        Some((a, b)) if a == b => out.push(format!("IRQ {a}")),
+        Some((a, b)) => out.push(format!("IRQ {a}–{b}")),
+        None => {}
+    };
+    for name in names {
+        match (irq(name), run) {
+            (Some(k), Some((a, b))) if k == b + 1 => run = Some((a, k)),
+            (Some(k), _) => {
+                close(&mut run, &mut out);
+                run = Some((k, k));
+            }
+            (None, _) => {
+                close(&mut run, &mut out);
+                out.push(name.clone());
+            }
+        }
+    }
+    close(&mut run, &mut out);
+    if out.is_empty() {
+        "—".to_string()
+    } else {
+        out.join(", ")
+    }
 }
 
 fn render_runs(s: &mut String, r: &WcetReport) -> std::fmt::Result {
