@@ -834,15 +834,21 @@ pub fn analyse(
     }
     // The tasks' critical sections (interrupts disabled, RTIC locks), each with
     // its bound: the blocking of the response-time analysis.
-    let callee_bounds: std::cell::RefCell<BTreeMap<usize, Option<u64>>> = Default::default();
-    let callee = |g: usize| -> Option<u64> {
-        if let Some(&b) = callee_bounds.borrow().get(&g) {
+    // A call inside a section that masks every interrupt retries nothing; inside a
+    // lock, the higher priorities can preempt it: the retries of the task's
+    // activation (the most preemptions of any task, a bound for every section).
+    let most_retries = retries.iter().map(|r| r.1).max().unwrap_or(0);
+    let callee_bounds: std::cell::RefCell<BTreeMap<(usize, bool), Option<u64>>> =
+        Default::default();
+    let callee = |g: usize, preemptible: bool| -> Option<u64> {
+        if let Some(&b) = callee_bounds.borrow().get(&(g, preemptible)) {
             return b;
         }
-        let b = ipet::task_bound(&program, &all_loops, g, &facts, 0, &copies, Cost::Cycles)
+        let r = if preemptible { most_retries } else { 0 };
+        let b = ipet::task_bound(&program, &all_loops, g, &facts, r, &copies, Cost::Cycles)
             .ok()
             .map(|b| b.bound);
-        callee_bounds.borrow_mut().insert(g, b);
+        callee_bounds.borrow_mut().insert((g, preemptible), b);
         b
     };
     let task_reach: Vec<(String, Vec<usize>)> = ECU_TASKS

@@ -94,8 +94,9 @@ fn iterations(fact: &LoopFact, func: &super::cfg::Function, l: &Loop, shared: bo
 }
 
 /// The bound of the section starting at instruction `at` of block `b0` of
-/// function `f` with `ceiling`, or why there is none. `callee` gives a called
-/// function's own bound in cycles.
+/// function `f` with `ceiling`, or why there is none. `callee(g, preemptible)`
+/// gives a called function's own bound in cycles: with the retries a preemption
+/// can cause when the section does not mask every interrupt.
 #[allow(clippy::too_many_arguments)]
 fn section_bound(
     program: &Program,
@@ -106,7 +107,7 @@ fn section_bound(
     b0: usize,
     at: usize,
     ceiling: u8,
-    callee: &dyn Fn(usize) -> Option<u64>,
+    callee: &dyn Fn(usize, bool) -> Option<u64>,
 ) -> Result<u64, String> {
     let func = &program.functions[f];
     // The section's blocks: from `at` on, up to the instructions that end it
@@ -209,8 +210,9 @@ fn section_bound(
                 }
             }
         }
+        let preemptible = ceiling != ALL_MASKED;
         let bound_of = |g: usize| {
-            callee(g).ok_or_else(|| {
+            callee(g, preemptible).ok_or_else(|| {
                 format!(
                     "its call of `{}` has no bound",
                     program.functions[g].demangled
@@ -312,7 +314,7 @@ pub fn critical_sections(
     all_loops: &[Vec<Loop>],
     facts: &[LoopFact],
     tasks: &[(String, Vec<usize>)],
-    callee: &dyn Fn(usize) -> Option<u64>,
+    callee: &dyn Fn(usize, bool) -> Option<u64>,
     locate: &dyn Fn(u32) -> String,
 ) -> Vec<CriticalSection> {
     let mut out = Vec::new();
@@ -400,7 +402,7 @@ Disassembly of section .text:
         let helper = program.at(0x0800_0134).ok_or("no helper")?;
         let loops: Vec<Vec<Loop>> = vec![Vec::new(); program.functions.len()];
         let helper_cycles = 100;
-        let callee = |g: usize| (g == helper).then_some(helper_cycles);
+        let callee = |g: usize, _: bool| (g == helper).then_some(helper_cycles);
         let sections = critical_sections(
             &program,
             &memory,
@@ -439,7 +441,7 @@ Disassembly of section .text:
             &loops,
             &[],
             &[("plan".to_string(), vec![task])],
-            &|_| None,
+            &|_, _| None,
             &|a: u32| format!("{a:#x}"),
         );
         assert_eq!(unbounded[1].bound_cycles, None);
