@@ -899,6 +899,7 @@ pub fn analyse(
             period_us: period as f64,
             deadline_us: period as f64,
             wcet_cycles: c as f64,
+            burst: None,
             critical_sections: sections,
         });
     }

@@ -38,6 +38,12 @@ pub struct Activity {
     pub deadline_us: f64,
     /// Worst-case execution time, cycles (preemption overhead not included).
     pub wcet_cycles: f64,
+    /// At most this many activations in any window of this length, `(count,
+    /// window µs)`, besides the minimum inter-arrival `period_us` (an interrupt
+    /// the application rate-limits: a link's bytes, at most so many a control
+    /// period and no closer than a byte's time at its baud rate); `None`: the
+    /// period alone.
+    pub burst: Option<(u64, f64)>,
     /// Its critical sections: `(ceiling, cycles)`, the highest priority each masks
     /// (a lock's resource ceiling, to which RTIC raises the running priority;
     /// `u8::MAX` with interrupts disabled) and its bound. Each blocks the
@@ -58,6 +64,16 @@ pub struct Response {
     pub blocking_us: f64,
     /// Whether the bound is within the deadline.
     pub meets_deadline: bool,
+}
+
+/// The most activations of `h` in a window of `r` µs: `⌈r / T⌉`, and with a burst
+/// cap `(k, W)` at most `k · ⌈r / W⌉` of them.
+fn arrivals(h: &Activity, r: f64) -> f64 {
+    let by_period = (r / h.period_us).ceil();
+    match h.burst {
+        Some((k, w)) if w > 0.0 => by_period.min(k as f64 * (r / w).ceil()),
+        _ => by_period,
+    }
 }
 
 /// Response-time bounds of every activity on a core clocked at `clock_hz`.
@@ -86,7 +102,7 @@ pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
                 let next = us(own)
                     + higher
                         .iter()
-                        .map(|h| (r / h.period_us).ceil() * us(h.wcet_cycles + PREEMPTION_CYCLES))
+                        .map(|h| arrivals(h, r) * us(h.wcet_cycles + PREEMPTION_CYCLES))
                         .sum::<f64>();
                 if next > a.deadline_us {
                     break;
@@ -125,6 +141,7 @@ mod tests {
                 period_us: 1_000.0,
                 deadline_us: 1_000.0,
                 wcet_cycles: 500.0,
+                burst: None,
                 critical_sections: Vec::new(),
             },
             Activity {
@@ -133,6 +150,7 @@ mod tests {
                 period_us: 10_000.0,
                 deadline_us: 10_000.0,
                 wcet_cycles: 5_000.0,
+                burst: None,
                 critical_sections: Vec::new(),
             },
             Activity {
@@ -141,6 +159,7 @@ mod tests {
                 period_us: 100_000.0,
                 deadline_us: 100_000.0,
                 wcet_cycles: 10.0e6,
+                burst: None,
                 critical_sections: plan_sections,
             },
         ]
@@ -182,6 +201,40 @@ mod tests {
         let systick_before = lock[0].response_time_bound_us.unwrap();
         let systick_after = masked[0].response_time_bound_us.unwrap();
         assert!((systick_after - systick_before - us(1_000.0)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_rate_limited_interrupt_interferes_by_its_cap_not_its_inter_arrival() {
+        // A byte interrupt: 400 cycles, a byte every 10.85 µs, at most 100 bytes
+        // per 10 ms.
+        let mut s = schedule(1_000.0);
+        let byte = |burst| Activity {
+            name: "link".into(),
+            priority: 4,
+            period_us: 10.85,
+            deadline_us: 10.85,
+            wcet_cycles: 400.0,
+            burst,
+            critical_sections: Vec::new(),
+        };
+        s.push(byte(None));
+        let free = response_times(&s, 168e6);
+        // Unlimited, it takes 400 + 419 of every 1,823 cycles, near half the core,
+        // and the plan task, at 10 M cycles, misses its 100 ms.
+        assert!(!free[2].meets_deadline);
+        s.pop();
+        s.push(byte(Some((100, 10_000.0))));
+        let capped = response_times(&s, 168e6);
+        assert!(capped.iter().all(|x| x.meets_deadline));
+        // control's window (< 10 ms) holds at most 100 of them.
+        let plain = response_times(&schedule(1_000.0), 168e6);
+        let extra =
+            capped[1].response_time_bound_us.unwrap() - plain[1].response_time_bound_us.unwrap();
+        assert!(
+            extra <= 100.0 * (400.0 + PREEMPTION_CYCLES) / 168.0 + 1e-9,
+            "{extra}"
+        );
+        assert!(extra > 0.0);
     }
 
     #[test]
