@@ -560,6 +560,7 @@ pub const fn frame_bytes_for_payload(payload: usize) -> usize {
 }
 
 mod codes;
+pub mod demux;
 mod framing;
 pub use codes::*;
 pub use framing::*;
