@@ -51,8 +51,16 @@ pub(crate) struct Workspace<T, const N: usize, const M: usize, const W: usize, c
     pub(crate) bound_state: [Option<Side>; N],
     /// Appends since the last from-scratch factorisation.
     pub(crate) updates: u32,
-    /// Pivot of the last `append` relative to its diagonal entry.
+    /// Pivot of the last `append` relative to its diagonal entry (of the pending
+    /// row, once a removal has updated it).
     pub(crate) last_rel_pivot: T,
+    /// Row `n` of [`Self::ldl`] holds a constraint whose pivot `append` found too
+    /// small (it depends on the working set): it is not in the working set, but
+    /// each `remove` updates it with the rows below the removed one, so that it
+    /// enters, once its pivot has grown, without its row being formed again.
+    pub(crate) pending: bool,
+    /// The pending row's diagonal entry `m̃ᵀm̃ + δ`, for its relative pivot.
+    pub(crate) pending_diag: T,
     /// Per row (`M`, one byte to keep the solver small): [`ROW_TRANSFORMED`] once
     /// the row holds `a_i R⁻¹` in this solve (rows are transformed only when they
     /// enter the working set); otherwise the length of its prefix that can be
@@ -185,11 +193,13 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
         }
         self.updates = 0;
+        self.pending = false;
         dropped
     }
 
     /// Appends constraint `e` as row `n` of the factor. On `Singular`, the row `n` of
-    /// the packed storage holds `L_new = D⁻¹L⁻¹ M_{W,e}` but `n` is unchanged.
+    /// the packed storage holds `L_new = D⁻¹L⁻¹ M_{W,e}` and its pivot, `n` is
+    /// unchanged and the row is [`Self::pending`].
     #[inline(never)]
     pub(crate) fn append(
         &mut self,
@@ -258,16 +268,19 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         self.ldl[s + n] = dn;
         self.last_rel_pivot = dn / diag;
         if !(dn > tols.pivot * diag) || !dn.is_finite() {
+            self.pending = true;
+            self.pending_diag = diag;
             return Err(AppendError::Singular);
         }
         self.commit(p, e);
         Ok(())
     }
 
-    /// Makes the row `n` written by `append` part of the factor, with its `d`
-    /// ([`Self::dw`]).
+    /// Makes the row `n` written by `append` (or the pending row) part of the
+    /// factor, with its `d` ([`Self::dw`]).
     pub(crate) fn commit(&mut self, p: &QpProblem<T, N, M>, e: ActiveConstraint) {
         let n = self.n;
+        self.pending = false;
         if n >= W {
             return;
         }
@@ -282,7 +295,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     }
 
     /// Removes working-set entry `p` (and its multiplier): deletes its row and column
-    /// of `LDLᵀ` and updates the trailing block by a rank-one update.
+    /// of `LDLᵀ` and updates the trailing block by a rank-one update. A
+    /// [`pending`](Self::pending) row below the working set's is updated with the
+    /// others (it stays pending, one row up), and its new relative pivot is left in
+    /// [`Self::last_rel_pivot`].
     #[inline(never)]
     pub(crate) fn remove(&mut self, pos: usize) {
         let n = self.n;
@@ -293,25 +309,28 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         if let Some(st) = self.state_mut(e.index) {
             *st = None;
         }
+        // Rows of the packed storage below the removed one that move: the working
+        // set's, and the pending row (row `n`, only when `n < W`).
+        let rows = (n + usize::from(self.pending)).min(W);
         let mut alpha = self.ldl[row_start(pos) + pos];
-        // z (new indices pos..n-1) = old column pos of L below the diagonal.
-        // `n ≤ W` (see `Workspace::n`) bounds this and every loop over the working set.
+        // z (new indices pos..rows-1) = old column pos of L below the diagonal.
+        // `rows ≤ W` bounds this and every loop over the working set.
         // wcet-bound: WS
-        for r in (pos + 1)..n {
+        for r in (pos + 1)..rows {
             self.tmp[r - 1] = self.ldl[row_start(r) + pos];
         }
-        // Shift rows pos+1..n up by one, dropping column pos: entry k of the new
+        // Shift rows pos+1..rows up by one, dropping column pos: entry k of the new
         // row r − 1 is entry k (k < pos) or k + 1 (k ≥ pos) of the old row r
         // (destinations precede sources, so a forward copy is safe).
         // wcet-bound: WS
-        for r in (pos + 1)..n {
+        for r in (pos + 1)..rows {
             let (src, dst) = (row_start(r), row_start(r - 1));
             let (lo, hi) = self.ldl.split_at_mut(src.min(WL));
             let (Some(to), Some(from)) = (lo.get_mut(dst..dst + r), hi.get(..=r)) else {
                 break;
             };
             for (k, v) in to.iter_mut().enumerate() {
-                // Σ r over pos < r < n ≤ W per call.
+                // Σ r over pos < r < rows ≤ W per call.
                 // wcet-bound: WS * (WS - 1) / 2 per call
                 *v = from
                     .get(k + usize::from(k >= pos))
@@ -327,16 +346,17 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         let nn = n - 1;
         self.n = nn;
-        // Rank-one update of the trailing block (rows/cols pos..nn) by alpha z zᵀ,
+        // Rank-one update of the trailing block (rows/cols pos..rows-1) by alpha z zᵀ,
         // row by row: each column j's `p_j` (z's entry) and `β_j` are final once
         // its own row is done, so row r takes its columns pos..r in order, each
         // entry with the same operations in the same order as column by column.
         // A column with `p_j = 0` changes nothing (`β_j = 0`: its entries get
         // `−0·l` and `+0·acc`, which leave finite values as they are) and keeps its
         // `d_j` and `α`; the loop has no branch. Then row r's entry of `y`, its row
-        // of L final.
+        // of L final. The pending row (`r = nn`) needs its entries and its pivot
+        // only: it is no column of the working set's, and has no `y` yet.
         // wcet-bound: WS
-        for r in pos..nn {
+        for r in pos..(rows - 1) {
             let s = row_start(r);
             let (head, tail) = self.tmp.split_at_mut(r.min(W));
             let Some(zr) = tail.first_mut() else {
@@ -349,15 +369,21 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.beta.get(pos..r),
             ) {
                 for ((l, &pj), &bj) in l.iter_mut().zip(ps).zip(bs) {
-                    // Σ (r − pos) over pos ≤ r < n − 1 < W per call.
+                    // Σ (r − pos) over pos ≤ r < rows − 1 < W per call.
                     // wcet-bound: WS * (WS - 1) / 2 per call
                     acc -= pj * *l;
                     *l += bj * acc;
                 }
             }
             *zr = acc;
+            let d_idx = s + r;
+            if r == nn {
+                let dnew = self.ldl[d_idx] + alpha * acc * acc;
+                self.ldl[d_idx] = dnew;
+                self.last_rel_pivot = dnew / self.pending_diag;
+                break;
+            }
             if acc != T::ZERO {
-                let d_idx = s + r;
                 let dr = self.ldl[d_idx];
                 let dnew = dr + alpha * acc * acc;
                 self.beta[r] = acc * alpha / dnew;

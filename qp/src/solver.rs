@@ -67,6 +67,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 bound_state: [None; N],
                 updates: 0,
                 last_rel_pivot: T::ZERO,
+                pending: false,
+                pending_diag: T::ZERO,
                 row_code: [ROW_FULL; M],
             },
             solution: QpSolution::new(),

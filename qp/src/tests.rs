@@ -228,3 +228,73 @@ fn dependent_rows_are_refused_by_append() {
     assert_eq!(s.work.append(&s.problem, e(1), tols), Ok(()));
     assert!((s.work.ldl[row_start(1) + 1] - 0.25).abs() < 1e-12);
 }
+
+/// A row `append` refuses stays pending below the working set; each removal
+/// updates it as the factor's own rows, so that its entries and pivot are those
+/// of appending it afresh to what is left (to rounding), and it stays singular
+/// while what it depends on is still there.
+#[test]
+fn removals_update_a_pending_row_as_a_fresh_append() {
+    for seed in 0..20u64 {
+        let mut s = filled(seed);
+        // Row 5 = 0.7·row 0 − 1.3·row 3, all three hard.
+        let (a0, a3) = (s.problem.a[0], s.problem.a[3]);
+        for j in 0..5 {
+            s.problem.a[5][j] = 0.7 * a0[j] - 1.3 * a3[j];
+        }
+        for i in [0, 3, 5] {
+            s.problem.soft[i] = 0.0;
+        }
+        assert!(factor_h(&mut s.problem.h));
+        transform(&mut s.problem, &mut s.work);
+        let tols = QpSettings::<f64>::new(10).effective();
+        let e = |c| ActiveConstraint {
+            index: c,
+            side: Side::Upper,
+        };
+        let mut fresh = s.clone();
+        let set = [
+            ConstraintIndex::Row(0),
+            ConstraintIndex::Bound(1),
+            ConstraintIndex::Row(3),
+            ConstraintIndex::Row(4),
+        ];
+        for &c in &set {
+            s.work.append(&s.problem, e(c), tols).unwrap();
+        }
+        let new = e(ConstraintIndex::Row(5));
+        assert_eq!(
+            s.work.append(&s.problem, new, tols),
+            Err(AppendError::Singular)
+        );
+        assert!(s.work.pending);
+        // Removing the bound, which the row does not depend on: still singular.
+        s.work.remove(1);
+        assert!(s.work.pending);
+        let n = s.work.n;
+        assert!(s.work.ldl[row_start(n) + n].abs() < 1e-9 * s.work.pending_diag);
+        // Removing row 3: the pending row's entries and pivot are a fresh append's.
+        s.work.remove(1);
+        let n = s.work.n;
+        for &c in &[ConstraintIndex::Row(0), ConstraintIndex::Row(4)] {
+            fresh.work.append(&fresh.problem, e(c), tols).unwrap();
+        }
+        assert_eq!(fresh.work.append(&fresh.problem, new, tols), Ok(()));
+        let r = row_start(n);
+        for k in r..=r + n {
+            assert!(
+                (s.work.ldl[k] - fresh.work.ldl[k]).abs() < 1e-10 * (1.0 + fresh.work.ldl[k].abs()),
+                "seed {seed} k {k}: {} against {}",
+                s.work.ldl[k],
+                fresh.work.ldl[k]
+            );
+        }
+        assert!(s.work.ldl[r + n] > tols.pivot * s.work.pending_diag);
+        assert!((s.work.last_rel_pivot - fresh.work.last_rel_pivot).abs() < 1e-10);
+        // Committed, it is the working set's last row with its forward entry.
+        s.work.commit(&s.problem, new);
+        assert!(!s.work.pending);
+        assert_eq!(s.work.n, n + 1);
+        assert!((s.work.y[n] - fresh.work.y[n]).abs() < 1e-9 * (1.0 + fresh.work.y[n].abs()));
+    }
+}
