@@ -28,7 +28,7 @@
 
 use crate::cholesky::solve_upper;
 use crate::factor::{AppendError, Workspace, ROW_FULL, ROW_TRANSFORMED};
-use crate::rows::{bounds_of, con_row, delta, dot_prefix, held_bound, row_start, sign, sub_scaled};
+use crate::rows::{bounds_of, con_row, delta, dot_groups, held_bound, row_start, sign, sub_scaled};
 use crate::settings::Tols;
 use crate::{
     ActiveConstraint, ConstraintIndex, QpProblem, QpSettings, QpSolution, QpStatus, Real, Side,
@@ -83,47 +83,70 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         tol: T,
         skip: Option<ConstraintIndex>,
     ) -> Option<ActiveConstraint> {
+        // The largest violation beyond `tol` so far, of `cand` (its constraint and
+        // value: the side follows from it at the end); `skip` only as a fallback.
+        // A violation `max(lo − val, val − hi)` compared with the best (the common
+        // case, nothing to do) is the only test of each inactive constraint.
         let mut best = tol;
-        let mut cand = None;
-        let mut fallback = None;
-        let mut consider = |val: T, lo: T, hi: T, index: ConstraintIndex| {
-            let (viol, side) = if lo - val > val - hi {
-                (lo - val, Side::Lower)
-            } else {
-                (val - hi, Side::Upper)
-            };
-            if Some(index) == skip {
-                if viol > tol {
-                    fallback = Some(ActiveConstraint { index, side });
+        let mut cand: Option<(ConstraintIndex, T)> = None;
+        let mut fallback: Option<(ConstraintIndex, T)> = None;
+        let (skip_bound, skip_row) = match skip {
+            Some(ConstraintIndex::Bound(j)) => (j as usize, usize::MAX),
+            Some(ConstraintIndex::Row(i)) => (usize::MAX, i as usize),
+            None => (usize::MAX, usize::MAX),
+        };
+        // The first violation above `best` at the skipped constraint sets the
+        // fallback (once another is a candidate, `best > tol` and it is not used).
+        let mut consider = |viol: T, val: T, index: ConstraintIndex, skipped: bool| {
+            if viol > best {
+                if skipped {
+                    fallback = Some((index, val));
+                } else {
+                    best = viol;
+                    cand = Some((index, val));
                 }
-            } else if viol > best {
-                best = viol;
-                cand = Some(ActiveConstraint { index, side });
             }
         };
+        // `N` through `black_box`: a loop of a constant trip count would be unrolled,
+        // and its annotation (source iterations) would bound the unrolled trips.
+        let bounds = core::hint::black_box(N).min(N);
         // wcet-bound: NV
-        for j in 0..N {
+        for j in 0..bounds {
             if self.bound_state[j].is_none() {
-                consider(x[j], p.x_lo[j], p.x_hi[j], ConstraintIndex::Bound(j as u16));
+                let val = x[j];
+                let (dl, du) = (p.x_lo[j] - val, val - p.x_hi[j]);
+                let viol = if dl > du { dl } else { du };
+                consider(viol, val, ConstraintIndex::Bound(j as u16), j == skip_bound);
             }
         }
         // wcet-bound: NC
-        for i in 0..p.m.min(M) {
+        for (i, a) in p.a.iter().enumerate().take(p.m) {
             if self.row_state[i].is_none() {
                 // m̃_iᵀu once the row is transformed, else a_iᵀx (the same value),
-                // over the row's nonzero prefix: one loop for the three cases, whose
-                // trip count is not a constant, so the compiler keeps it rolled and
-                // this loop's code small enough to stay in the flash cache.
-                let (y, len) = match self.row_code[i] {
-                    ROW_TRANSFORMED => (&self.u, N),
-                    ROW_FULL => (x, N),
-                    groups => (x, 4 * groups as usize),
+                // over the row's nonzero prefix (its whole groups of four).
+                let code = self.row_code[i];
+                let (y, groups, rest) = if code == ROW_TRANSFORMED {
+                    (&self.u, N / 4, true)
+                } else if code == ROW_FULL {
+                    (x, N / 4, true)
+                } else {
+                    (x, code as usize, false)
                 };
-                let val = dot_prefix(&p.a[i], y, len);
-                consider(val, p.lo[i], p.hi[i], ConstraintIndex::Row(i as u16));
+                let val = dot_groups(core::hint::black_box(a), y, groups, rest);
+                let (dl, du) = (p.lo[i] - val, val - p.hi[i]);
+                let viol = if dl > du { dl } else { du };
+                consider(viol, val, ConstraintIndex::Row(i as u16), i == skip_row);
             }
         }
-        cand.or(fallback)
+        cand.or(fallback).map(|(index, val)| {
+            let (lo, hi) = bounds_of(p, index);
+            let side = if lo - val > val - hi {
+                Side::Lower
+            } else {
+                Side::Upper
+            };
+            ActiveConstraint { index, side }
+        })
     }
 
     /// Refactors from scratch (dropping dependent entries, and a pending row) and

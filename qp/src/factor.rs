@@ -4,7 +4,9 @@
 //! scratch when rounding spoiled it, and the system is solved with it.
 
 use crate::cholesky::{solve_transposed, store_inverse_row};
-use crate::rows::{bounds_of, con_row, delta, held_bound, mdot, row_start, sub_scaled};
+use crate::rows::{
+    bounds_of, con_row, delta, held_bound, mdot, row_start, sub_products, sub_scaled,
+};
 use crate::settings::Tols;
 use crate::{ActiveConstraint, ConstraintIndex, QpProblem, QpSettings, Real, Side};
 
@@ -245,13 +247,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.ldl.get(sl..sl + l).unwrap_or(&[]),
                 self.ldl.get(s..s + l).unwrap_or(&[]),
             );
-            // Σ l over l < n ≤ W per append (one call of `append`, not inlined
-            // further); Σ n(n − 1)/2 over the rows of one rebuild.
-            // wcet-bound in append: WS * (WS - 1) / 2 per call
-            // wcet-bound in rebuild: WS * (WS - 1) * (WS - 2) / 6 per call
-            for (&a, &b) in row.iter().zip(y) {
-                acc -= a * b;
-            }
+            acc = sub_products(acc, core::hint::black_box(row), y);
             self.ldl[s + l] = acc;
         }
         let diag = mdot(p, e.index, e.index) + delta(p, e.index);
@@ -407,12 +403,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             self.ldl.get(s..s + r).unwrap_or(&[]),
             self.y.get(..r).unwrap_or(&[]),
         );
-        // `r < n ≤ W` entries; Σ r over the rows r < n ≤ W one `remove` redoes.
-        // wcet-bound: WS
-        // wcet-bound in remove: WS * (WS - 1) / 2 per call
-        for (&l, &y) in l.iter().zip(y) {
-            acc -= l * y;
-        }
+        acc = sub_products(acc, l, y);
         if let Some(d) = self.y.get_mut(r) {
             *d = acc;
         }
@@ -444,10 +435,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             // Row r of the packed L against x[0..r], as slices (no index checks
             // in the loop); the same products in the same order.
             let l = self.ldl.get(s..s + r).unwrap_or(&[]);
-            for (&l, &x) in l.iter().zip(self.tmp.iter()) {
-                // Bounds the `for k in 0..r` loop: Σ r over r < n ≤ W per call.
-                acc -= l * x; // wcet-bound: WS * (WS - 1) / 2 per call
-            }
+            acc = sub_products(acc, l, self.tmp.get(..r).unwrap_or(&[]));
             self.tmp[r] = acc;
         }
         self.ldl_back_tmp();

@@ -127,18 +127,72 @@ pub(crate) fn sub_scaled<T: Real>(y: &mut [T], s: T, x: &[T]) {
     }
 }
 
+/// `acc − Σ_k a_k b_k` over two slices of equal length, each product subtracted
+/// in order (the same operations as a loop of `acc -= a_k·b_k`, so the same
+/// result), four a trip: the trips of a forward substitution's row.
+#[inline(always)]
+pub(crate) fn sub_products<T: Real>(mut acc: T, a: &[T], b: &[T]) -> T {
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    // A row of the factor against the entries before it: fewer than W entries
+    // (`commit`'s row of `y`); Σ r/4 over the rows r < n ≤ W of one `append`, one
+    // `remove` or one `ldl_solve_tmp`; over one `rebuild`'s appends Σ n(n − 1)/8
+    // and its commits' rows Σ n/4.
+    // wcet-bound: WS / 4
+    // wcet-bound in append: WS * (WS - 1) / 8 per call
+    // wcet-bound in remove: WS * (WS - 1) / 8 per call
+    // wcet-bound in ldl_solve_tmp: WS * (WS - 1) / 8 per call
+    // wcet-bound in rebuild: WS * (WS - 1) * (WS - 2) / 24 + WS * (WS - 1) / 8 per call
+    for (x, y) in ca.zip(cb) {
+        acc -= x[0] * y[0];
+        acc -= x[1] * y[1];
+        acc -= x[2] * y[2];
+        acc -= x[3] * y[3];
+    }
+    // wcet-bound: 3
+    for (&p, &q) in ra.iter().zip(rb) {
+        acc -= p * q;
+    }
+    acc
+}
+
 /// `Σ_{k ≥ start} a_k b_k` ([`dot4`]).
 #[inline]
 pub(crate) fn dot_from<T: Real, const N: usize>(a: &[T; N], b: &[T; N], start: usize) -> T {
     dot4(a.get(start..).unwrap_or(&[]), b.get(start..).unwrap_or(&[]))
 }
 
-/// [`dot4`] from 0 over the first `len` entries only: the same result as over
-/// all `N` when the rest of `a` is zero and `len` is a multiple of 4 (or `N`), since
-/// the four partial sums then group the entries alike.
-#[inline]
-pub(crate) fn dot_prefix<T: Real, const N: usize>(a: &[T; N], b: &[T; N], len: usize) -> T {
-    dot4(a.get(..len).unwrap_or(a), b.get(..len).unwrap_or(b))
+/// [`dot4`] over the first `4·groups` entries (`groups ≤ N/4`), and with `rest`
+/// the `N mod 4` entries after the last whole group: [`dot4`] over all `N` entries
+/// when `groups = N/4` and `rest`, over a prefix of `4·groups` entries otherwise
+/// (the same sums in the same order: the four partial sums, then the rest).
+/// Unrolled, each group behind a test of `groups`: no loop, so the bound charges
+/// the groups a row has, not a trip more.
+#[inline(always)]
+pub(crate) fn dot_groups<T: Real, const N: usize>(
+    a: &[T; N],
+    b: &[T; N],
+    groups: usize,
+    rest: bool,
+) -> T {
+    let mut acc = [T::ZERO; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (c, (x, y)) in ca.zip(cb).enumerate() {
+        if c >= groups {
+            break;
+        }
+        for ((s, &p), &q) in acc.iter_mut().zip(x).zip(y) {
+            *s += p * q;
+        }
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    if rest {
+        for (&p, &q) in ra.iter().zip(rb) {
+            s += p * q;
+        }
+    }
+    s
 }
 
 /// Entry of the working-set matrix `m̃_c1ᵀ m̃_c2`.

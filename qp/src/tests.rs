@@ -298,3 +298,45 @@ fn removals_update_a_pending_row_as_a_fresh_append() {
         assert!((s.work.y[n] - fresh.work.y[n]).abs() < 1e-9 * (1.0 + fresh.work.y[n].abs()));
     }
 }
+
+/// The unrolled kernels give their loops' results bit for bit: `dot_groups` is
+/// `dot4` over all entries, or over a prefix of whole groups of a row that is zero
+/// after it; `sub_products` is a loop of `acc -= a·b`.
+#[test]
+fn unrolled_kernels_are_their_loops_bit_for_bit() {
+    use crate::rows::{dot4, dot_groups, sub_products};
+    let mut st = 7u64;
+    for _ in 0..200 {
+        let mut a = [0.0f32; 11];
+        let mut b = [0.0f32; 11];
+        for (x, y) in a.iter_mut().zip(b.iter_mut()) {
+            *x = lcg(&mut st) as f32 * 1e3;
+            *y = lcg(&mut st) as f32;
+        }
+        // All entries, the remainder of 11 included.
+        assert_eq!(
+            dot_groups(&a, &b, 2, true).to_bits(),
+            dot4(&a, &b).to_bits()
+        );
+        // A row zero after its first g groups.
+        for g in 0..=2 {
+            let mut z = a;
+            z[4 * g..].fill(0.0);
+            assert_eq!(
+                dot_groups(&z, &b, g, false).to_bits(),
+                dot4(&z, &b).to_bits()
+            );
+        }
+        for len in 0..=11 {
+            let acc0 = lcg(&mut st) as f32;
+            let mut acc = acc0;
+            for k in 0..len {
+                acc -= a[k] * b[k];
+            }
+            assert_eq!(
+                sub_products(acc0, &a[..len], &b[..len]).to_bits(),
+                acc.to_bits()
+            );
+        }
+    }
+}
