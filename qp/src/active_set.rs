@@ -431,8 +431,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.tmp.get_mut(..r).unwrap_or(&mut []),
                 self.ldl.get(sr..sr + r).unwrap_or(&[]),
             );
-            // `t` and `l` have the same length r.
-            sub_scaled(t, cr, l);
+            // `t` and `l` have the same length r; their addresses through
+            // `black_box` (as in `ldl_back_tmp`).
+            sub_scaled(core::hint::black_box(t), cr, core::hint::black_box(l));
         }
         let mut cmax = T::ZERO;
         // wcet-bound: WS

@@ -414,14 +414,22 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// loops stay out of the QP's main loop, whose bound is matched by its lines.
     #[inline(never)]
     pub(crate) fn solve_lam_star_tmp(&mut self) -> bool {
-        let n = self.n;
+        let n = self.n.min(W);
+        // `D⁻¹y` (the copy and the division of `ldl_back_tmp` in one pass: the same
+        // values).
         // wcet-bound: WS
         for r in 0..n {
-            self.tmp[r] = self.y[r];
+            self.tmp[r] = self.y[r] / self.ldl[row_start(r) + r];
         }
-        self.ldl_back_tmp();
+        self.lt_solve_tmp();
+        // `x·0` is ±0 for a finite `x`, NaN otherwise: the sum is 0 exactly when
+        // every entry is finite (no branch per entry).
+        let mut probe = T::ZERO;
         // wcet-bound: WS
-        self.tmp.iter().take(n).all(|v| v.is_finite())
+        for &v in self.tmp.iter().take(n) {
+            probe += v * T::ZERO;
+        }
+        probe == T::ZERO
     }
 
     /// Solves `(M_WW + D) x = tmp` in place in `tmp[0..n]`.
@@ -445,13 +453,20 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// [`Self::ldl_solve_tmp`].
     #[inline(always)]
     fn ldl_back_tmp(&mut self) {
-        let n = self.n;
+        let n = self.n.min(W);
         // wcet-bound: WS
         for r in 0..n {
             self.tmp[r] /= self.ldl[row_start(r) + r];
         }
-        // Lᵀ x = y by columns of Lᵀ (rows of the packed L, contiguous): once x_r is
-        // final, its share leaves the entries above it.
+        self.lt_solve_tmp();
+    }
+
+    /// Solves `Lᵀ x = tmp` in place in `tmp[0..n]`, by columns of `Lᵀ` (rows of the
+    /// packed `L`, contiguous): once `x_r` is final, its share leaves the entries
+    /// above it.
+    #[inline(always)]
+    fn lt_solve_tmp(&mut self) {
+        let n = self.n.min(W);
         // wcet-bound: WS
         for r in (1..n).rev() {
             let xr = self.tmp[r];
@@ -463,8 +478,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.tmp.get_mut(..r).unwrap_or(&mut []),
                 self.ldl.get(s..s + r).unwrap_or(&[]),
             );
-            // `t` and `l` have the same length r.
-            sub_scaled(t, xr, l);
+            // `t` and `l` have the same length r; their addresses through
+            // `black_box`, as pointers (offsets from the workspace's base are past
+            // a load's immediate range: each load would form its address anew).
+            sub_scaled(core::hint::black_box(t), xr, core::hint::black_box(l));
         }
     }
 }

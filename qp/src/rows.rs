@@ -107,8 +107,12 @@ pub(crate) fn dot4<T: Real>(a: &[T], b: &[T]) -> T {
 /// entry's own operation: the same result as one at a time).
 #[inline(always)]
 pub(crate) fn sub_scaled<T: Real>(y: &mut [T], s: T, x: &[T]) {
-    let mut yc = y.chunks_exact_mut(4);
-    let mut xc = x.chunks_exact(4);
+    // The whole groups and the rest apart: one counter for the groups' loop, and
+    // the rest (at most three entries) without a loop.
+    let k = y.len().min(x.len());
+    let whole = k - k % 4;
+    let (y4, yr) = y.split_at_mut(whole);
+    let (x4, xr) = x.split_at(whole.min(x.len()));
     // `primal`: a transformed row's tail (at most N entries); `ldl_solve_tmp` and
     // `null_space_step`: the first r entries of `tmp`, Σ r/4 over 1 ≤ r < n ≤ W per
     // call.
@@ -116,14 +120,20 @@ pub(crate) fn sub_scaled<T: Real>(y: &mut [T], s: T, x: &[T]) {
     // wcet-bound in ldl_solve_tmp: WS * (WS - 1) / 8 per call
     // wcet-bound in solve_lam_star_tmp: WS * (WS - 1) / 8 per call
     // wcet-bound in null_space_step: WS * (WS - 1) / 8 per call
-    for (y4, x4) in (&mut yc).zip(&mut xc) {
+    for (y4, x4) in y4.chunks_exact_mut(4).zip(x4.chunks_exact(4)) {
         for (y, &x) in y4.iter_mut().zip(x4) {
             *y -= s * x;
         }
     }
-    // wcet-bound: 3
-    for (y, &x) in yc.into_remainder().iter_mut().zip(xc.remainder()) {
+    let mut rest = yr.iter_mut().zip(xr);
+    if let Some((y, &x)) = rest.next() {
         *y -= s * x;
+        if let Some((y, &x)) = rest.next() {
+            *y -= s * x;
+            if let Some((y, &x)) = rest.next() {
+                *y -= s * x;
+            }
+        }
     }
 }
 
