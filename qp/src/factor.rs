@@ -309,31 +309,6 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // set's, and the pending row (row `n`, only when `n < W`).
         let rows = (n + usize::from(self.pending)).min(W);
         let mut alpha = self.ldl[row_start(pos) + pos];
-        // z (new indices pos..rows-1) = old column pos of L below the diagonal.
-        // `rows ≤ W` bounds this and every loop over the working set.
-        // wcet-bound: WS
-        for r in (pos + 1)..rows {
-            self.tmp[r - 1] = self.ldl[row_start(r) + pos];
-        }
-        // Shift rows pos+1..rows up by one, dropping column pos: entry k of the new
-        // row r − 1 is entry k (k < pos) or k + 1 (k ≥ pos) of the old row r
-        // (destinations precede sources, so a forward copy is safe).
-        // wcet-bound: WS
-        for r in (pos + 1)..rows {
-            let (src, dst) = (row_start(r), row_start(r - 1));
-            let (lo, hi) = self.ldl.split_at_mut(src.min(WL));
-            let (Some(to), Some(from)) = (lo.get_mut(dst..dst + r), hi.get(..=r)) else {
-                break;
-            };
-            for (k, v) in to.iter_mut().enumerate() {
-                // Σ r over pos < r < rows ≤ W per call.
-                // wcet-bound: WS * (WS - 1) / 2 per call
-                *v = from
-                    .get(k + usize::from(k >= pos))
-                    .copied()
-                    .unwrap_or(T::ZERO);
-            }
-        }
         for r in pos..(n - 1) {
             self.ws[r] = self.ws[r + 1];
             self.dw[r] = self.dw[r + 1];
@@ -342,51 +317,64 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         let nn = n - 1;
         self.n = nn;
-        // Rank-one update of the trailing block (rows/cols pos..rows-1) by alpha z zᵀ,
-        // row by row: each column j's `p_j` (z's entry) and `β_j` are final once
-        // its own row is done, so row r takes its columns pos..r in order, each
-        // entry with the same operations in the same order as column by column.
-        // A column with `p_j = 0` changes nothing (`β_j = 0`: its entries get
-        // `−0·l` and `+0·acc`, which leave finite values as they are) and keeps its
-        // `d_j` and `α`; the loop has no branch. Then row r's entry of `y`, its row
-        // of L final. The pending row (`r = nn`) needs its entries and its pivot
-        // only: it is no column of the working set's, and has no `y` yet.
+        // Each row below the removed one moves up a row (old row r + 1 is the new row
+        // r: destinations precede sources, so rows are done in order), dropping
+        // column pos: its entries before pos are copied, its entry at pos is `z_r`
+        // (the removed column), and the trailing block (columns pos..r) takes the
+        // rank-one update by alpha z zᵀ, row by row: each column j's `p_j` (z's
+        // entry, kept in `tmp`) and `β_j` are final once its own row is done, so
+        // row r takes its columns pos..r in order, each entry with the same
+        // operations in the same order as column by column. A column with `p_j = 0`
+        // changes nothing (`β_j = 0`: its entries get `−0·l` and `+0·acc`, which
+        // leave finite values as they are) and keeps its `d_j` and `α`; the loop
+        // has no branch. Then row r's entry of `y`, its row of L final. The pending
+        // row (`r = nn`) needs its entries and its pivot only: it is no column of
+        // the working set's, and has no `y` yet. `rows ≤ W` bounds the loops.
         // wcet-bound: WS
         for r in pos..(rows - 1) {
-            let s = row_start(r);
-            let (head, tail) = self.tmp.split_at_mut(r.min(W));
-            let Some(zr) = tail.first_mut() else {
+            let dst = row_start(r);
+            let src = dst + r + 1;
+            let (lo, hi) = self.ldl.split_at_mut(src.min(WL));
+            let (Some(new), Some(old)) = (lo.get_mut(dst..dst + r + 1), hi.get(..r + 2)) else {
                 break;
             };
-            let mut acc = *zr;
-            if let (Some(l), Some(ps), Some(bs)) = (
-                self.ldl.get_mut(s + pos..s + r),
-                head.get(pos..),
-                self.beta.get(pos..r),
-            ) {
-                for ((l, &pj), &bj) in l.iter_mut().zip(ps).zip(bs) {
+            let (new_head, new_tail) = new.split_at_mut(pos.min(r));
+            let (old_head, old_tail) = old.split_at(pos.min(r));
+            for (d, &v) in new_head.iter_mut().zip(old_head) {
+                // pos entries of each of the rows below pos: below W²/4 per call.
+                // wcet-bound: WS * WS / 4 per call
+                *d = v;
+            }
+            // old_tail: z_r, the entries of columns pos + 1..=r, the pivot.
+            let Some((&zr, old_rest)) = old_tail.split_first() else {
+                break;
+            };
+            let mut acc = zr;
+            if let (Some(ps), Some(bs)) = (self.tmp.get(pos..r), self.beta.get(pos..r)) {
+                for (((l, &o), &pj), &bj) in new_tail.iter_mut().zip(old_rest).zip(ps).zip(bs) {
                     // Σ (r − pos) over pos ≤ r < rows − 1 < W per call.
                     // wcet-bound: WS * (WS - 1) / 2 per call
-                    acc -= pj * *l;
-                    *l += bj * acc;
+                    acc -= pj * o;
+                    *l = o + bj * acc;
                 }
             }
-            *zr = acc;
-            let d_idx = s + r;
+            self.tmp[r] = acc;
+            let dr = old_rest.get(r - pos).copied().unwrap_or(T::ZERO);
+            let d_idx = dst + r;
             if r == nn {
-                let dnew = self.ldl[d_idx] + alpha * acc * acc;
+                let dnew = dr + alpha * acc * acc;
                 self.ldl[d_idx] = dnew;
                 self.last_rel_pivot = dnew / self.pending_diag;
                 break;
             }
             if acc != T::ZERO {
-                let dr = self.ldl[d_idx];
                 let dnew = dr + alpha * acc * acc;
                 self.beta[r] = acc * alpha / dnew;
                 alpha = dr * alpha / dnew;
                 self.ldl[d_idx] = dnew;
             } else {
                 self.beta[r] = T::ZERO;
+                self.ldl[d_idx] = dr;
             }
             self.forward_entry(r);
         }

@@ -11,6 +11,7 @@
 
 use super::warm_start::{RowId, RowKind};
 use super::*;
+use crate::bicycle::FIRST_LIVE;
 
 impl<T: Real> Mpc<T> {
     /// Linearises around `ū` from `xi0` and writes the condensed QP into the solver
@@ -294,26 +295,26 @@ impl<T: Real> Condensing<T> {
         // wcet-bound: NX
         for i in 0..NX {
             let out = &mut new[i];
-            // Row i of A has at most four nonzeros (the kinematic bicycle's
-            // structure); they are summed in column order in one pass per entry,
-            // the same sums as adding one column after the other to a zero row.
+            // Row i of A has at most four nonzeros: the identity's in the columns
+            // before FIRST_LIVE (its own, if i is one of them: the others are zero
+            // exactly, `Discretization::a`), and the three live columns. Its
+            // nonzero terms are summed in column order in one pass per entry, the
+            // same sums as adding one column after the other to a zero row.
             let mut terms: [(&[T; NV], T); 4] = [(&old[0], T::ZERO); 4];
             let mut cnt = 0;
-            let mut extra = false;
-            // Over the NX entries of row i; the compiler splits this loop (runs of zeros
-            // skipped), each part at the two annotated lines below advancing `l`: NX each.
-            for (l, &ail) in lin.a[i].iter().enumerate() {
-                // wcet-bound: NX
-                if ail == T::ZERO {
-                    continue;
+            if let Some(&aii) = lin.a[i].get(..FIRST_LIVE).and_then(|r| r.get(i)) {
+                if aii != T::ZERO {
+                    terms[0] = (&old[i], aii);
+                    cnt = 1;
                 }
-                // wcet-bound: NX
-                match terms.get_mut(cnt) {
-                    Some(t) => {
+            }
+            for l in FIRST_LIVE..NX {
+                let ail = lin.a[i][l];
+                if ail != T::ZERO {
+                    if let Some(t) = terms.get_mut(cnt) {
                         *t = (&old[l], ail);
                         cnt += 1;
                     }
-                    None => extra = true,
                 }
             }
             let [(s0, a0), (s1, a1), (s2, a2), (s3, a3)] = terms;
@@ -340,24 +341,10 @@ impl<T: Real> Condensing<T> {
                         *d = (a0 * s0[j] + a1 * s1[j]) + a2 * s2[j];
                     }
                 }
-                4 if !extra => {
+                _ => {
                     // wcet-bound: NV
                     for (j, d) in o.iter_mut().enumerate() {
                         *d = ((a0 * s0[j] + a1 * s1[j]) + a2 * s2[j]) + a3 * s3[j];
-                    }
-                }
-                _ => {
-                    // wcet-bound: NV * 4 bytes
-                    o.fill(T::ZERO);
-                    for l in 0..NX {
-                        let ail = lin.a[i][l];
-                        if ail == T::ZERO {
-                            continue;
-                        }
-                        // wcet-bound: NV
-                        for (d, s) in o.iter_mut().zip(old[l][..used].iter()) {
-                            *d += ail * *s;
-                        }
                     }
                 }
             }
