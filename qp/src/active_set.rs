@@ -61,7 +61,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             if l == T::ZERO {
                 continue;
             }
-            let row = con_row(p, self.ws[k].index);
+            let row = con_row(p, &self.rinv, self.ws[k].index);
             if let Some(u0) = self.u.get_mut(row.start) {
                 *u0 -= l * row.head;
             }
@@ -472,7 +472,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         for k in 0..self.n {
             let e = self.ws[k];
             let b = held_bound(p, e);
-            self.tmp[k] = con_row(p, e.index).dot(&self.u) - b - self.lam[k] * delta(p, e.index);
+            self.tmp[k] =
+                con_row(p, &self.rinv, e.index).dot(&self.u) - b - self.lam[k] * delta(p, e.index);
         }
         self.ldl_solve_tmp();
         // wcet-bound: WS
@@ -499,7 +500,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         (0..self.n).all(|k| {
             let e = self.ws[k];
             let b = held_bound(p, e);
-            let val = con_row(p, e.index).dot(&self.u);
+            let val = con_row(p, &self.rinv, e.index).dot(&self.u);
             let target = b + self.lam[k] * delta(p, e.index);
             // Relative to the magnitudes involved: rows are formed in the working
             // precision, so their rounding scales with them.

@@ -173,7 +173,7 @@ pub(crate) fn transform<
     solve_transposed(&p.h, &mut w.v, 0);
     for j in 0..N {
         store_inverse_row(&mut p.h, j);
-        w.bound_ready[j] = true;
+        w.rinv[j] = T::ONE / p.h[j][j];
     }
 }
 

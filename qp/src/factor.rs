@@ -4,9 +4,7 @@
 //! scratch when rounding spoiled it, and the system is solved with it.
 
 use crate::cholesky::{solve_transposed, store_inverse_row};
-use crate::rows::{
-    bounds_of, con_row, delta, held_bound, mdot, row_start, sub_products, sub_scaled,
-};
+use crate::rows::{bounds_of, con_row, delta, held_bound, row_start, sub_products, sub_scaled};
 use crate::settings::Tols;
 use crate::{ActiveConstraint, ConstraintIndex, QpProblem, QpSettings, Real, Side};
 
@@ -43,10 +41,12 @@ pub(crate) struct Workspace<T, const N: usize, const M: usize, const W: usize, c
     pub(crate) v: [T; N],
     /// `u = R x` (`N`).
     pub(crate) u: [T; N],
-    /// Whether bound `j`'s row `e_jᵀ R⁻¹` is stored in this solve (`N`): `R` itself
-    /// is kept, not inverted, and a bound's row is computed when it enters the working
-    /// set, into the lower triangle of `h` (see [`store_inverse_row`]).
-    pub(crate) bound_ready: [bool; N],
+    /// `1/R_jj` once bound `j`'s row `e_jᵀ R⁻¹` is stored in this solve, its first
+    /// nonzero entry; 0 before (`N`, 1/m of the variable's units: a finite `R_jj`
+    /// has a nonzero inverse). `R` itself is kept, not inverted, and a bound's row
+    /// is computed when it enters the working set, into the lower triangle of `h`
+    /// (see [`store_inverse_row`]).
+    pub(crate) rinv: [T; N],
     /// Side at which each row is active (`M`).
     pub(crate) row_state: [Option<Side>; M],
     /// Side at which each bound is active (`N`).
@@ -131,7 +131,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         tols: Tols<T>,
     ) {
         let count = if settings.warm_start { self.n } else { 0 };
-        self.bound_ready.fill(false);
+        self.rinv.fill(T::ZERO);
         // wcet-bound: WS
         for r in 0..count.min(W) {
             self.prepare(p, self.ws[r].index);
@@ -150,10 +150,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             ConstraintIndex::Row(i) => i as usize,
             ConstraintIndex::Bound(j) => {
                 let j = j as usize;
-                if let Some(ready) = self.bound_ready.get_mut(j) {
-                    if !*ready {
+                if let Some(inv) = self.rinv.get_mut(j) {
+                    if *inv == T::ZERO {
                         store_inverse_row(&mut p.h, j);
-                        *ready = true;
+                        *inv = T::ONE / p.h[j][j];
                     }
                 }
                 return;
@@ -229,11 +229,12 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             return Err(AppendError::Full);
         }
         let s = row_start(n);
+        let re = con_row(p, &self.rinv, e.index);
         // b_l = M_{l,e}
         // wcet-bound: WS
         // wcet-bound in rebuild: WS * (WS - 1) / 2 per call
         for l in 0..n {
-            self.ldl[s + l] = mdot(p, self.ws[l].index, e.index);
+            self.ldl[s + l] = con_row(p, &self.rinv, self.ws[l].index).dot_row::<N>(&re);
         }
         // Forward solve with the unit lower L: y = L⁻¹ b.
         // wcet-bound: WS
@@ -250,7 +251,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             acc = sub_products(acc, core::hint::black_box(row), y);
             self.ldl[s + l] = acc;
         }
-        let diag = mdot(p, e.index, e.index) + delta(p, e.index);
+        let diag = re.dot_row::<N>(&re) + delta(p, e.index);
         let mut dn = diag;
         // wcet-bound: WS
         // wcet-bound in rebuild: WS * (WS - 1) / 2 per call
@@ -281,7 +282,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             return;
         }
         self.ws[n] = e;
-        self.dw[n] = held_bound(p, e) + con_row(p, e.index).dot(&self.v);
+        self.dw[n] = held_bound(p, e) + con_row(p, &self.rinv, e.index).dot(&self.v);
         self.forward_entry(n);
         if let Some(st) = self.state_mut(e.index) {
             *st = Some(e.side);

@@ -18,25 +18,29 @@ impl<T: Real> ConRow<'_, T> {
     pub(crate) fn dot<const N: usize>(&self, x: &[T; N]) -> T {
         let xs = x.get(self.start + 1..).unwrap_or(&[]);
         let x0 = x.get(self.start).copied().unwrap_or(T::ZERO);
-        self.head * x0 + dot4(self.tail, xs)
+        self.head * x0 + dot4_unrolled(self.tail, xs, (N - 1) / 4)
     }
 
-    /// `m̃₁ᵀm̃₂`. Inlined into its callers' loops, which then call nothing and
-    /// keep their code in the flash interface's cache.
+    /// `m̃₁ᵀm̃₂` of two rows of `N` columns. Inlined into its callers' loops, which
+    /// then call nothing and keep their code in the flash interface's cache.
     #[inline(always)]
-    pub(crate) fn dot_row(&self, other: &Self) -> T {
+    pub(crate) fn dot_row<const N: usize>(&self, other: &Self) -> T {
         let (lo, hi) = if self.start <= other.start {
             (self, other)
         } else {
             (other, self)
         };
-        if lo.start == hi.start {
-            return lo.head * hi.head + dot4(lo.tail, hi.tail);
-        }
-        // lo's entry at hi.start is its tail[off − 1].
-        let off = hi.start - lo.start;
-        let at = lo.tail.get(off - 1).copied().unwrap_or(T::ZERO);
-        at * hi.head + dot4(lo.tail.get(off..).unwrap_or(&[]), hi.tail)
+        // lo's entry at hi.start (its head, or its tail[off − 1]) times hi's head,
+        // then the tails from there on: one copy of the unrolled product, so that
+        // the loops that inline this keep their code in the flash cache.
+        let (first, lo_tail) = if lo.start == hi.start {
+            (lo.head * hi.head, lo.tail)
+        } else {
+            let off = hi.start - lo.start;
+            let at = lo.tail.get(off - 1).copied().unwrap_or(T::ZERO);
+            (at * hi.head, lo.tail.get(off..).unwrap_or(&[]))
+        };
+        first + dot4_unrolled(lo_tail, hi.tail, (N - 1) / 4)
     }
 }
 
@@ -54,19 +58,21 @@ pub(crate) fn row_start(r: usize) -> usize {
 }
 
 /// The transformed row of a constraint: a general row's `a_iᵀR⁻¹` in place of
-/// `a_i`, a bound's `e_jᵀR⁻¹` from the lower triangle of `h` ([`store_inverse_row`](crate::cholesky::store_inverse_row)).
+/// `a_i`, a bound's `e_jᵀR⁻¹` from the lower triangle of `h` ([`store_inverse_row`](crate::cholesky::store_inverse_row)),
+/// its first entry `1/R_jj` from `rinv` (`Workspace::rinv`).
 #[inline]
-pub(crate) fn con_row<T: Real, const N: usize, const M: usize>(
-    p: &QpProblem<T, N, M>,
+pub(crate) fn con_row<'a, T: Real, const N: usize, const M: usize>(
+    p: &'a QpProblem<T, N, M>,
+    rinv: &[T; N],
     c: ConstraintIndex,
-) -> ConRow<'_, T> {
+) -> ConRow<'a, T> {
     match c {
         ConstraintIndex::Bound(j) => {
             let j = (j as usize).min(N - 1);
             let dst = N - 1 - j;
             ConRow {
                 start: j,
-                head: T::ONE / p.h[j][j],
+                head: rinv[j],
                 tail: p.h[dst].get(..dst).unwrap_or(&[]),
             }
         }
@@ -97,8 +103,53 @@ pub(crate) fn dot4<T: Real>(a: &[T], b: &[T]) -> T {
         }
     }
     let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
-    for (&p, &q) in ra.iter().zip(rb) {
+    // The rest, at most three entries, without a loop.
+    let mut rest = ra.iter().zip(rb);
+    if let Some((&p, &q)) = rest.next() {
         s += p * q;
+        if let Some((&p, &q)) = rest.next() {
+            s += p * q;
+            if let Some((&p, &q)) = rest.next() {
+                s += p * q;
+            }
+        }
+    }
+    s
+}
+
+/// [`dot4`] of two slices of equal length, at most `4·max_groups + 3` entries (a
+/// constant of the caller's, so that the loop unrolls: `(N − 1)/4` for a row's
+/// tail), unrolled: each
+/// group of four behind a test of the length, the rest (at most three) likewise,
+/// no loop, so the bound charges the groups the slices have (the same sums in the
+/// same order). The slices' addresses go through `black_box`: as offsets from a
+/// struct's base each load's address would be formed anew (past a load's
+/// immediate range), as pointers there is one each.
+#[inline(always)]
+pub(crate) fn dot4_unrolled<T: Real>(a: &[T], b: &[T], max_groups: usize) -> T {
+    let (a, b) = (core::hint::black_box(a), core::hint::black_box(b));
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    let groups = ca.len().min(cb.len());
+    let mut acc = [T::ZERO; 4];
+    for (c, (x, y)) in ca.zip(cb).enumerate().take(max_groups) {
+        if c >= groups {
+            break;
+        }
+        for ((s, &p), &q) in acc.iter_mut().zip(x).zip(y) {
+            *s += p * q;
+        }
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    let mut rest = ra.iter().zip(rb);
+    if let Some((&p, &q)) = rest.next() {
+        s += p * q;
+        if let Some((&p, &q)) = rest.next() {
+            s += p * q;
+            if let Some((&p, &q)) = rest.next() {
+                s += p * q;
+            }
+        }
     }
     s
 }
@@ -203,16 +254,6 @@ pub(crate) fn dot_groups<T: Real, const N: usize>(
         }
     }
     s
-}
-
-/// Entry of the working-set matrix `m̃_c1ᵀ m̃_c2`.
-#[inline]
-pub(crate) fn mdot<T: Real, const N: usize, const M: usize>(
-    p: &QpProblem<T, N, M>,
-    c1: ConstraintIndex,
-    c2: ConstraintIndex,
-) -> T {
-    con_row(p, c1).dot_row(&con_row(p, c2))
 }
 
 /// `1/ρ` for a soft row, else 0.

@@ -62,7 +62,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 ldl: [T::ZERO; WL],
                 v: [T::ZERO; N],
                 u: [T::ZERO; N],
-                bound_ready: [false; N],
+                rinv: [T::ZERO; N],
                 row_state: [None; M],
                 bound_state: [None; N],
                 updates: 0,

@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used, clippy::panic)]
 use crate::cholesky::{factor_h, inverse_row, solve_upper, transform};
 use crate::factor::AppendError;
-use crate::rows::{con_row, mdot, row_start};
+use crate::rows::{con_row, row_start};
 use crate::{ldl_len, ActiveConstraint, ConstraintIndex, QpSettings, QpSolver, Side};
 
 type S = QpSolver<f64, 5, 8, 8, { ldl_len(8) }>;
@@ -112,7 +112,7 @@ fn bound_rows_in_the_lower_triangle_are_rows_of_the_inverse() {
         }
     }
     for j in 0..5u16 {
-        let row = con_row(&s.problem, ConstraintIndex::Bound(j));
+        let row = con_row(&s.problem, &s.work.rinv, ConstraintIndex::Bound(j));
         assert_eq!(row.start, j as usize);
         let mut full = [0.0; 5];
         full[row.start] = row.head;
@@ -127,10 +127,8 @@ fn bound_rows_in_the_lower_triangle_are_rows_of_the_inverse() {
             let want: f64 = (0..5)
                 .map(|k| inv[i as usize][k] * inv[j as usize][k])
                 .sum();
-            let got = mdot(
-                &s.problem,
-                ConstraintIndex::Bound(i),
-                ConstraintIndex::Bound(j),
+            let got = con_row(&s.problem, &s.work.rinv, ConstraintIndex::Bound(i)).dot_row::<5>(
+                &con_row(&s.problem, &s.work.rinv, ConstraintIndex::Bound(j)),
             );
             assert!((got - want).abs() < 1e-12, "({i}, {j})");
         }
@@ -301,10 +299,10 @@ fn removals_update_a_pending_row_as_a_fresh_append() {
 
 /// The unrolled kernels give their loops' results bit for bit: `dot_groups` is
 /// `dot4` over all entries, or over a prefix of whole groups of a row that is zero
-/// after it; `sub_products` is a loop of `acc -= a·b`.
+/// after it; `dot4_unrolled` is `dot4`; `sub_products` is a loop of `acc -= a·b`.
 #[test]
 fn unrolled_kernels_are_their_loops_bit_for_bit() {
-    use crate::rows::{dot4, dot_groups, sub_products};
+    use crate::rows::{dot4, dot4_unrolled, dot_groups, sub_products};
     let mut st = 7u64;
     for _ in 0..200 {
         let mut a = [0.0f32; 11];
