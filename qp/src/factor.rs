@@ -67,7 +67,7 @@ pub(crate) struct Workspace<T, const N: usize, const M: usize, const W: usize, c
     /// the row holds `a_i R⁻¹` in this solve (rows are transformed only when they
     /// enter the working set); otherwise the length of its prefix that can be
     /// nonzero, in groups of four entries (its last nonzero entry rounded up to the
-    /// four-sum groups of [`dot_from`](crate::rows::dot_from), so that a dot product over the prefix gives
+    /// four-sum groups of [`dot_groups`](crate::rows::dot_groups), so that a dot product over the prefix gives
     /// the same result as over all `N` entries), or [`ROW_FULL`].
     pub(crate) row_code: [u8; M],
 }

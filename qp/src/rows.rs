@@ -89,30 +89,22 @@ pub(crate) fn con_row<'a, T: Real, const N: usize, const M: usize>(
 
 /// `Σ a_k b_k` over two slices of equal length, in four interleaved partial sums
 /// (independent additions pipeline; one chain would wait on each addition's
-/// latency), then the remainder in order.
-#[inline]
+/// latency), then the remainder in order: the sums the solver's dot products
+/// make ([`dot4_unrolled`], [`dot_groups`], `solve_upper`'s rows), as a plain
+/// loop, the tests' reference.
+#[cfg(test)]
 pub(crate) fn dot4<T: Real>(a: &[T], b: &[T]) -> T {
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
     let (ra, rb) = (ca.remainder(), cb.remainder());
     let mut acc = [T::ZERO; 4];
-    // Every caller passes slices of `[T; N]` rows (at most N entries): N/4 chunks.
-    // wcet-bound: NV / 4
     for (x, y) in ca.zip(cb) {
         for ((s, &p), &q) in acc.iter_mut().zip(x).zip(y) {
             *s += p * q;
         }
     }
     let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
-    // The rest, at most three entries, without a loop.
-    let mut rest = ra.iter().zip(rb);
-    if let Some((&p, &q)) = rest.next() {
+    for (&p, &q) in ra.iter().zip(rb) {
         s += p * q;
-        if let Some((&p, &q)) = rest.next() {
-            s += p * q;
-            if let Some((&p, &q)) = rest.next() {
-                s += p * q;
-            }
-        }
     }
     s
 }
@@ -215,12 +207,6 @@ pub(crate) fn sub_products<T: Real>(mut acc: T, a: &[T], b: &[T]) -> T {
         acc -= p * q;
     }
     acc
-}
-
-/// `Σ_{k ≥ start} a_k b_k` ([`dot4`]).
-#[inline]
-pub(crate) fn dot_from<T: Real, const N: usize>(a: &[T; N], b: &[T; N], start: usize) -> T {
-    dot4(a.get(start..).unwrap_or(&[]), b.get(start..).unwrap_or(&[]))
 }
 
 /// [`dot4`] over the first `4·groups` entries (`groups ≤ N/4`), and with `rest`

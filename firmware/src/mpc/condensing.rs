@@ -357,9 +357,9 @@ impl<T: Real> Condensing<T> {
 
     /// `row = Σ coef · S_k[state]` over the first `ncols` columns (the rest zero);
     /// returns the row's constant `nominal − row·ū`.
-    fn lin_row(
+    fn lin_row<const K: usize>(
         &mut self,
-        terms: &[(usize, T)],
+        terms: &[(usize, T); K],
         nominal: T,
         u_bar: &[[T; NU]; HORIZON],
         ncols: usize,
@@ -664,22 +664,23 @@ fn add_square_root_rows<T: Real>(
     }
 }
 
-/// [`Condensing::lin_row`] into `row`, from the sensitivities `sens`.
-fn lin_row_into<T: Real>(
+/// [`Condensing::lin_row`] into `row`, from the sensitivities `sens`; at most three
+/// terms (`K ≤ 3`, checked at compile time).
+fn lin_row_into<T: Real, const K: usize>(
     sens: &[[T; NV]; NX],
     row: &mut [T; NV],
-    terms: &[(usize, T)],
+    terms: &[(usize, T); K],
     nominal: T,
     u_bar: &[[T; NU]; HORIZON],
     ncols: usize,
 ) -> T {
+    const { assert!(K <= 3, "lin_row_into sums at most three terms") };
     let n = ncols.min(NV);
-    // The terms with a nonzero coefficient (at most three are used), summed in their
-    // order in one pass per entry, with the dot product `row·ū` in the same pass
-    // (the same sums as adding one term after the other to a zero row).
+    // The terms with a nonzero coefficient (at most three), summed in their order
+    // in one pass per entry, with the dot product `row·ū` in the same pass (the
+    // same sums as adding one term after the other to a zero row).
     let mut used: [(&[T; NV], T); 3] = [(&sens[0], T::ZERO); 3];
     let mut cnt = 0;
-    let mut extra = false;
     // `terms` has 1 or 3 entries (the arrays of tracking_costs and obstacle_rows);
     // the compiler splits this loop, its parts at the two annotated lines below: 3 each.
     for &(state, coef) in terms {
@@ -689,12 +690,9 @@ fn lin_row_into<T: Real>(
         // wcet-bound: 3
         if let Some(srow) = sens.get(state) {
             // wcet-bound: 3
-            match used.get_mut(cnt) {
-                Some(t) => {
-                    *t = (srow, coef);
-                    cnt += 1;
-                }
-                None => extra = true,
+            if let Some(t) = used.get_mut(cnt) {
+                *t = (srow, coef);
+                cnt += 1;
             }
         }
     }
@@ -707,7 +705,7 @@ fn lin_row_into<T: Real>(
     let mut acc = T::ZERO;
     let [(s0, c0), (s1, c1), (s2, c2)] = used;
     match cnt {
-        1 if !extra => {
+        1 => {
             // wcet-bound: NV
             for j in 0..n {
                 let r = c0 * s0[j];
@@ -715,7 +713,7 @@ fn lin_row_into<T: Real>(
                 acc += r * u[j];
             }
         }
-        2 if !extra => {
+        2 => {
             // wcet-bound: NV
             for j in 0..n {
                 let r = c0 * s0[j] + c1 * s1[j];
@@ -723,7 +721,7 @@ fn lin_row_into<T: Real>(
                 acc += r * u[j];
             }
         }
-        3 if !extra => {
+        3 => {
             // wcet-bound: NV
             for j in 0..n {
                 let r = (c0 * s0[j] + c1 * s1[j]) + c2 * s2[j];
@@ -732,17 +730,12 @@ fn lin_row_into<T: Real>(
             }
         }
         _ => {
-            row.fill(T::ZERO);
-            for &(state, coef) in terms {
-                if coef == T::ZERO {
-                    continue;
-                }
-                if let Some(srow) = sens.get(state) {
-                    // wcet-bound: NV
-                    for j in 0..n {
-                        row[j] += coef * srow[j];
-                    }
-                }
+            // No nonzero term: a zero row (its tail is zero already), and its
+            // product with ū as the terms' loops would make it.
+            if let Some(head) = row.get_mut(..n) {
+                // WCET: `row` holds NV f32.
+                // wcet-bound: NV * 4 bytes
+                head.fill(T::ZERO);
             }
             acc = dot(row, u_bar, n);
         }
