@@ -14,7 +14,7 @@ pub(crate) struct ConRow<'a, T> {
 
 impl<T: Real> ConRow<'_, T> {
     /// `m̃ᵀx` (the tail in four partial sums).
-    #[inline]
+    #[inline(always)]
     pub(crate) fn dot<const N: usize>(&self, x: &[T; N]) -> T {
         let xs = x.get(self.start + 1..).unwrap_or(&[]);
         let x0 = x.get(self.start).copied().unwrap_or(T::ZERO);
@@ -76,14 +76,20 @@ pub(crate) fn con_row<'a, T: Real, const N: usize, const M: usize>(
                 tail: p.h[dst].get(..dst).unwrap_or(&[]),
             }
         }
-        ConstraintIndex::Row(i) => {
-            let a = &p.a[i as usize];
-            ConRow {
+        // A constraint of the working set is in range (`admissible`); out of
+        // range, a zero row (no panic path).
+        ConstraintIndex::Row(i) => match p.a.get(i as usize) {
+            Some(a) => ConRow {
                 start: 0,
-                head: a[0],
+                head: a.first().copied().unwrap_or(T::ZERO),
                 tail: a.get(1..).unwrap_or(&[]),
-            }
-        }
+            },
+            None => ConRow {
+                start: 0,
+                head: T::ZERO,
+                tail: &[],
+            },
+        },
     }
 }
 
@@ -250,7 +256,9 @@ pub(crate) fn delta<T: Real, const N: usize, const M: usize>(
 ) -> T {
     match c {
         ConstraintIndex::Row(i) => {
-            let rho = p.soft[i as usize];
+            // A constraint of the working set is in range (`admissible`); out of
+            // range, a hard row (no panic path).
+            let rho = p.soft.get(i as usize).copied().unwrap_or(T::ZERO);
             if rho > T::ZERO {
                 T::ONE / rho
             } else {
@@ -267,9 +275,18 @@ pub(crate) fn bounds_of<T: Real, const N: usize, const M: usize>(
     p: &QpProblem<T, N, M>,
     c: ConstraintIndex,
 ) -> (T, T) {
+    // A constraint of the working set or a candidate is in range; out of range,
+    // one without bounds (no panic path).
+    let at = |lo: &[T], hi: &[T], k: u16| {
+        let k = k as usize;
+        (
+            lo.get(k).copied().unwrap_or(T::NEG_INFINITY),
+            hi.get(k).copied().unwrap_or(T::INFINITY),
+        )
+    };
     match c {
-        ConstraintIndex::Bound(j) => (p.x_lo[j as usize], p.x_hi[j as usize]),
-        ConstraintIndex::Row(i) => (p.lo[i as usize], p.hi[i as usize]),
+        ConstraintIndex::Bound(j) => at(&p.x_lo, &p.x_hi, j),
+        ConstraintIndex::Row(i) => at(&p.lo, &p.hi, i),
     }
 }
 
