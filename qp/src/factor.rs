@@ -18,17 +18,18 @@ pub(crate) struct Workspace<T, const N: usize, const M: usize, const W: usize, c
     pub(crate) n: usize,
     /// Current (dual-feasible) multipliers of the working set (`W`).
     pub(crate) lam: [T; W],
-    /// `d_k = b_k + m̃_kᵀv` of each working-set entry (`W`), computed by `commit`
-    /// when the entry enters: the right-hand side `−d_W` of `λ*`'s system, constant
-    /// over a solve (`v`, the held bound and the transformed row do not change), so
-    /// each iteration reads it instead of a dot product per entry.
-    pub(crate) dw: [T; W],
-    /// `y = L⁻¹(−d_W)` (`W`): the forward substitution of `λ*`'s system, kept with
-    /// the factor (`commit` adds an entry, `remove` redoes those below the removed
-    /// row) so that each iteration solves only `D Lᵀ λ* = y`. Each entry is
-    /// computed by the same operations in the same order as a forward
-    /// substitution from scratch, so `λ*` is the same bit for bit.
+    /// `y = L⁻¹(−d_W)` (`W`), `d_k = b_k + m̃_kᵀv`: the forward substitution of
+    /// `λ*`'s system (its right-hand side `−d_W` is constant over a solve: `v`, the
+    /// held bounds and the transformed rows do not change), kept with the factor.
+    /// `commit` computes the new entry's from `d` and the entries above it, as a
+    /// forward substitution does.
     pub(crate) y: [T; W],
+    /// `ℓ = D⁻¹y` (`W`): the last row of the factor of the working-set matrix
+    /// bordered by `−d_W`, so that each iteration solves only `Lᵀλ* = ℓ`. `commit`
+    /// divides the new entry of `y` by its pivot; `remove` updates `ℓ` as the
+    /// factor's own rows (the rank-one update of the bordered matrix), in `O(n)`,
+    /// and sets `y = Dℓ` for the entries it changed.
+    pub(crate) ly: [T; W],
     /// Scratch (`W`): the rank-one update's `β_j` per column, in `remove`.
     pub(crate) beta: [T; W],
     /// Scratch (`W`): right-hand side then `λ*` of the working-set system, rank-one
@@ -274,7 +275,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     }
 
     /// Makes the row `n` written by `append` (or the pending row) part of the
-    /// factor, with its `d` ([`Self::dw`]).
+    /// factor, with its entries of `y` and `ℓ`.
     pub(crate) fn commit(&mut self, p: &QpProblem<T, N, M>, e: ActiveConstraint) {
         let n = self.n;
         self.pending = false;
@@ -282,8 +283,16 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             return;
         }
         self.ws[n] = e;
-        self.dw[n] = held_bound(p, e) + con_row(p, &self.rinv, e.index).dot(&self.v);
-        self.forward_entry(n);
+        let d = held_bound(p, e) + con_row(p, &self.rinv, e.index).dot(&self.v);
+        // Row n of the forward substitution `L y = −d_W`.
+        let s = row_start(n);
+        let yn = sub_products(
+            -d,
+            self.ldl.get(s..s + n).unwrap_or(&[]),
+            self.y.get(..n).unwrap_or(&[]),
+        );
+        self.y[n] = yn;
+        self.ly[n] = yn / self.ldl[s + n];
         if let Some(st) = self.state_mut(e.index) {
             *st = Some(e.side);
         }
@@ -312,7 +321,6 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         let mut alpha = self.ldl[row_start(pos) + pos];
         for r in pos..(n - 1) {
             self.ws[r] = self.ws[r + 1];
-            self.dw[r] = self.dw[r + 1];
             // Bounds the `for r in pos..(n - 1)` loop (its back edge is on this line).
             self.lam[r] = self.lam[r + 1]; // wcet-bound: WS
         }
@@ -328,9 +336,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // operations in the same order as column by column. A column with `p_j = 0`
         // changes nothing (`β_j = 0`: its entries get `−0·l` and `+0·acc`, which
         // leave finite values as they are) and keeps its `d_j` and `α`; the loop
-        // has no branch. Then row r's entry of `y`, its row of L final. The pending
-        // row (`r = nn`) needs its entries and its pivot only: it is no column of
-        // the working set's, and has no `y` yet. `rows ≤ W` bounds the loops.
+        // has no branch. The pending row (`r = nn`) needs its entries and its pivot
+        // only: it is no column of the working set's. `rows ≤ W` bounds the loops.
         // wcet-bound: WS
         for r in pos..(rows - 1) {
             let dst = row_start(r);
@@ -377,24 +384,18 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.beta[r] = T::ZERO;
                 self.ldl[d_idx] = dr;
             }
-            self.forward_entry(r);
         }
-    }
-
-    /// `y[r]` from `−d_r` and the entries above it: row `r` of the forward
-    /// substitution `L y = −d_W`. Inlined into `commit` (one row) and into
-    /// `remove` (rows `pos..n − 1`), whose copy of its loop is bounded per call.
-    #[inline(always)]
-    fn forward_entry(&mut self, r: usize) {
-        let s = row_start(r);
-        let mut acc = -self.dw[r];
-        let (l, y) = (
-            self.ldl.get(s..s + r).unwrap_or(&[]),
-            self.y.get(..r).unwrap_or(&[]),
-        );
-        acc = sub_products(acc, l, y);
-        if let Some(d) = self.y.get_mut(r) {
-            *d = acc;
+        // The bordered matrix's last row, `ℓ`, takes the same update: its entry at
+        // pos is its `z`, its entries pos + 1..n move one to the left. Then
+        // `y = Dℓ` where they changed.
+        let mut acc = self.ly[pos];
+        // wcet-bound: WS
+        for j in pos..nn {
+            let o = self.ly[j + 1];
+            acc -= self.tmp[j] * o;
+            let l = o + self.beta[j] * acc;
+            self.ly[j] = l;
+            self.y[j] = l * self.ldl[row_start(j) + j];
         }
     }
 
@@ -404,11 +405,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     #[inline(never)]
     pub(crate) fn solve_lam_star_tmp(&mut self) -> bool {
         let n = self.n.min(W);
-        // `D⁻¹y` (the copy and the division of `ldl_back_tmp` in one pass: the same
-        // values).
+        // `ℓ = D⁻¹y`, kept with the factor.
         // wcet-bound: WS
         for r in 0..n {
-            self.tmp[r] = self.y[r] / self.ldl[row_start(r) + r];
+            self.tmp[r] = self.ly[r];
         }
         self.lt_solve_tmp();
         // `x·0` is ±0 for a finite `x`, NaN otherwise: the sum is 0 exactly when

@@ -194,12 +194,11 @@ pub(crate) fn sub_products<T: Real>(mut acc: T, a: &[T], b: &[T]) -> T {
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
     let (ra, rb) = (ca.remainder(), cb.remainder());
     // A row of the factor against the entries before it: fewer than W entries
-    // (`commit`'s row of `y`); Σ r/4 over the rows r < n ≤ W of one `append`, one
-    // `remove` or one `ldl_solve_tmp`; over one `rebuild`'s appends Σ n(n − 1)/8
-    // and its commits' rows Σ n/4.
+    // (`commit`'s row of `y`); Σ r/4 over the rows r < n ≤ W of one `append` or
+    // one `ldl_solve_tmp`; over one `rebuild`'s appends Σ n(n − 1)/8 and its
+    // commits' rows Σ n/4.
     // wcet-bound: WS / 4
     // wcet-bound in append: WS * (WS - 1) / 8 per call
-    // wcet-bound in remove: WS * (WS - 1) / 8 per call
     // wcet-bound in ldl_solve_tmp: WS * (WS - 1) / 8 per call
     // wcet-bound in rebuild: WS * (WS - 1) * (WS - 2) / 24 + WS * (WS - 1) / 8 per call
     for (x, y) in ca.zip(cb) {

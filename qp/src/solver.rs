@@ -55,7 +55,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 }; W],
                 n: 0,
                 lam: [T::ZERO; W],
-                dw: [T::ZERO; W],
+                ly: [T::ZERO; W],
                 y: [T::ZERO; W],
                 beta: [T::ZERO; W],
                 tmp: [T::ZERO; W],
