@@ -338,12 +338,19 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         // leave finite values as they are) and keeps its `d_j` and `α`; the loop
         // has no branch. The pending row (`r = nn`) needs its entries and its pivot
         // only: it is no column of the working set's. `rows ≤ W` bounds the loops.
+        // The storage from new row pos on: new row r is its first r + 1 entries, old
+        // row r + 1 the r + 2 after them, and the next new row starts where that
+        // old row did.
+        let mut rest: &mut [T] = self.ldl.get_mut(row_start(pos)..).unwrap_or(&mut []);
         // wcet-bound: WS
         for r in pos..(rows - 1) {
-            let dst = row_start(r);
-            let src = dst + r + 1;
-            let (lo, hi) = self.ldl.split_at_mut(src.min(WL));
-            let (Some(new), Some(old)) = (lo.get_mut(dst..dst + r + 1), hi.get(..r + 2)) else {
+            let at = (r + 1).min(rest.len());
+            let (new, after) = core::mem::take(&mut rest).split_at_mut(at);
+            let (Some(old), Some(ps), Some(bs)) = (
+                after.get(..r + 2),
+                self.tmp.get(pos..r),
+                self.beta.get(pos..r),
+            ) else {
                 break;
             };
             let (new_head, new_tail) = new.split_at_mut(pos.min(r));
@@ -357,32 +364,42 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             let Some((&zr, old_rest)) = old_tail.split_first() else {
                 break;
             };
-            let mut acc = zr;
-            if let (Some(ps), Some(bs)) = (self.tmp.get(pos..r), self.beta.get(pos..r)) {
-                for (((l, &o), &pj), &bj) in new_tail.iter_mut().zip(old_rest).zip(ps).zip(bs) {
-                    // Σ (r − pos) over pos ≤ r < rows − 1 < W per call.
-                    // wcet-bound: WS * (WS - 1) / 2 per call
-                    acc -= pj * o;
-                    *l = o + bj * acc;
-                }
-            }
-            self.tmp[r] = acc;
             let dr = old_rest.get(r - pos).copied().unwrap_or(T::ZERO);
-            let d_idx = dst + r;
+            let mut acc = zr;
+            // The slices' addresses through `black_box`: one pointer each (as
+            // offsets from the workspace's base, each load's address would be
+            // formed anew).
+            let (new_tail, old_rest, ps, bs) = (
+                core::hint::black_box(new_tail),
+                core::hint::black_box(old_rest),
+                core::hint::black_box(ps),
+                core::hint::black_box(bs),
+            );
+            for (((l, &o), &pj), &bj) in new_tail.iter_mut().zip(old_rest).zip(ps).zip(bs) {
+                // Σ (r − pos) over pos ≤ r < rows − 1 < W per call.
+                // wcet-bound: WS * (WS - 1) / 2 per call
+                acc -= pj * o;
+                *l = o + bj * acc;
+            }
+            let d_new = if r == nn || acc != T::ZERO {
+                dr + alpha * acc * acc
+            } else {
+                dr
+            };
+            if let Some(d) = new.last_mut() {
+                *d = d_new;
+            }
+            rest = after;
+            self.tmp[r] = acc;
             if r == nn {
-                let dnew = dr + alpha * acc * acc;
-                self.ldl[d_idx] = dnew;
-                self.last_rel_pivot = dnew / self.pending_diag;
+                self.last_rel_pivot = d_new / self.pending_diag;
                 break;
             }
             if acc != T::ZERO {
-                let dnew = dr + alpha * acc * acc;
-                self.beta[r] = acc * alpha / dnew;
-                alpha = dr * alpha / dnew;
-                self.ldl[d_idx] = dnew;
+                self.beta[r] = acc * alpha / d_new;
+                alpha = dr * alpha / d_new;
             } else {
                 self.beta[r] = T::ZERO;
-                self.ldl[d_idx] = dr;
             }
         }
         // The bordered matrix's last row, `ℓ`, takes the same update: its entry at
