@@ -10,21 +10,25 @@
 //! (a blocking multiplier's, or a null-space step's, which may also let the
 //! pending row enter), or the end of the solve (a refactorization may follow a
 //! failed check of optimality). A refactorization may append once more (the
-//! retry of a pending row), and the entries it drops count as iterations. With
-//! `K` the iteration cap, `R` the refactorization cap and `P` the solves (the
-//! MPC's passes) sharing them, `A` appends and `Rm` removals:
+//! retry of a pending row). The entries a refactorization or the warm start
+//! drops count as iterations. With `K` the iteration cap, `R` the
+//! refactorization cap and `P` the solves (the MPC's passes) sharing them, `A`
+//! appends, `Rm` removals, `n_s` warm entries and `D` drops:
 //!
-//! * `A + Rm ≤ K + R`: the appends beyond their iterations are the retries;
-//! * per solve, the entries plus the pending row, `Φ ≤ W`, grow by one per append
-//!   and shrink by one per removal (and by the drops and a discarded pending
-//!   row), so `A ≤ P·W + Rm + drops + R` and `Rm ≤ P·W + A`.
+//! * `A + Rm + D ≤ K + R`: the appends beyond their iterations are the retries;
+//! * per solve, the entries plus the pending row, `Φ ≤ W`, start at the warm
+//!   entries kept, `n_s` less the start's drops, grow by one per append and
+//!   shrink by one per removal (and by the drops and a discarded pending row),
+//!   so `A ≤ W − n_s + Rm + D + R` and `Rm ≤ W + A`.
 //!
-//! Hence `A ≤ (K + 2R + P·W)/2` and `Rm ≤ (K + R + P·W)/2`: a working set of `W`
-//! entries is reached by `W` appends and each append past it needs a removal, so
-//! at most about half of an activation's iterations append and half remove. The
+//! Hence `2A + n_s ≤ K + 2R + P·W` and `Rm ≤ (K + R + P·W)/2`: a working set of
+//! `W` entries is reached by `W` appends or warm entries, and each append past it
+//! needs a removal, so at most about half of an activation's iterations append
+//! and half remove, and a warm start takes its share of the appends. The
 //! iterations that neither append nor remove end a solve or refactor: at most
-//! `P + R`. The timing annotations cap the calls of `append`, `remove`, `primal`
-//! and `most_violated` so; the traces check them.
+//! `P + R`. The timing annotations cap the calls of `append` (with the
+//! transformations and the warm entries: counted in `balance`), `remove`,
+//! `primal` and `most_violated` so; the traces check them.
 
 use crate::cholesky::solve_upper;
 use crate::factor::{AppendError, Workspace, ROW_FULL, ROW_TRANSFORMED};
@@ -313,21 +317,21 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     ) -> Result<(), QpStatus> {
         let max_iter = settings.max_iter;
         // One transformation per `add`, one `add` per main-loop iteration that
-        // adds: as many as the appends' first attempts (below).
-        // wcet-bound: (QP_MAX_ITER + 2 * QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS) / 2 times per activation
+        // adds, and its first append (below, in the same block of the binary as
+        // this call): counted with the retries and the warm start's pairs of
+        // entries (module `active_set`, *Counts*; `Workspace::start`).
+        // wcet-bound: (QP_MAX_ITER + 3 * QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS + 1) / 2 times per activation, counted in balance
         self.prepare(p, e.index);
         let p = &*p;
         // The first attempt is the main loop's iteration's; a retry follows a
-        // refactorization. Appends at most `(K + 2R + P·W)/2` per activation
-        // (module `active_set`, *Counts*), first attempts and retries together.
-        // wcet-bound: (QP_MAX_ITER + 2 * QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS) / 2 times per activation, counted in appends
+        // refactorization.
         let mut first = self.append(p, e, tols);
         if first == Err(AppendError::Singular) && self.updates > 0 {
             // The small pivot may be accumulated rounding: refactor (which drops the
             // pending row) and retry once, within the solve's refactorization cap.
             match self.refactor(p, tols, sol, settings) {
                 Ok(true) => {
-                    // wcet-bound: (QP_MAX_ITER + 2 * QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS) / 2 times per activation, counted in appends
+                    // wcet-bound: (QP_MAX_ITER + 3 * QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS + 1) / 2 times per activation, counted in balance
                     first = self.append(p, e, tols);
                 }
                 Ok(false) => {}

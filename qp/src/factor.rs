@@ -124,28 +124,56 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     }
 
     /// Starts a solve: clears the flags and (warm start) re-activates the given
-    /// working set with `λ = 0`, dropping inadmissible or dependent entries.
+    /// working set with `λ = 0`, its entries transformed two at a time
+    /// ([`Self::prepare_pair`]), then factored, dropping inadmissible or dependent
+    /// entries; returns how many it dropped (each an iteration against the cap:
+    /// module `active_set`, *Counts*).
     pub(crate) fn start(
         &mut self,
         p: &mut QpProblem<T, N, M>,
         settings: &QpSettings<T>,
         tols: Tols<T>,
-    ) {
-        let count = if settings.warm_start { self.n } else { 0 };
+    ) -> u32 {
+        let count = if settings.warm_start {
+            self.n.min(W)
+        } else {
+            0
+        };
         self.rinv.fill(T::ZERO);
-        // wcet-bound: WS
-        for r in 0..count.min(W) {
-            self.prepare(p, self.ws[r].index);
+        // Pairs of warm entries (`count ≤ W`).
+        // wcet-bound: WS / 2
+        for r in (0..count).step_by(2) {
+            // A pair of warm entries, with the appends of the activation's
+            // iterations: each append beyond the working set's capacity needs an
+            // iteration that removes, so twice the appends plus the warm entries
+            // are at most `K + 2R + P·W`, and the appends (first attempts and
+            // retries) plus the pairs at most half of `K + 3R + P·W`, rounded up
+            // (module `active_set`, *Counts*).
+            // wcet-bound: (QP_MAX_ITER + 3 * QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS + 1) / 2 times per activation, counted in balance
+            self.prepare_pair(p, r, count);
         }
-        self.rebuild(p, tols, count);
+        let dropped = self.rebuild(p, tols, count);
         self.lam.fill(T::ZERO);
+        dropped as u32
+    }
+
+    /// [`Self::prepare`] of warm entries `r` and `r + 1` (those below `count`).
+    /// Not inlined: its calls are counted per activation.
+    #[inline(never)]
+    fn prepare_pair(&mut self, p: &mut QpProblem<T, N, M>, r: usize, count: usize) {
+        // wcet-bound: 2
+        for k in r..(r + 2).min(count) {
+            self.prepare(p, self.ws[k].index);
+        }
     }
 
     /// Transforms row constraint `c` to `a_iᵀ R⁻¹` in place, or computes bound `c`'s
     /// row `e_jᵀ R⁻¹` into the lower triangle of `h` ([`store_inverse_row`]), unless
     /// already done in this
     /// solve. Only constraints that enter the working set are ever transformed: the
-    /// others are checked as `a_iᵀ x` or `x_j`.
+    /// others are checked as `a_iᵀ x` or `x_j`. Not inlined: its calls are counted
+    /// per activation (one call, whatever its paths call).
+    #[inline(never)]
     pub(crate) fn prepare(&mut self, p: &mut QpProblem<T, N, M>, c: ConstraintIndex) {
         let i = match c {
             ConstraintIndex::Row(i) => i as usize,

@@ -183,7 +183,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                         self.work.v = p.f;
                         solve_transposed(&p.h, &mut self.work.v, 0);
                         let tols = self.settings.effective();
-                        self.work.start(p, &self.settings, tols);
+                        let dropped = self.work.start(p, &self.settings, tols);
+                        self.solution.iterations = dropped;
                         self.work
                             .iterate(p, &self.settings, tols, &mut self.solution)
                     }
