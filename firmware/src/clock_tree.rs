@@ -110,7 +110,7 @@ impl PllConfig {
     /// else 1 MHz; VCO at twice [`SYSCLK_HZ`], `p` = 2, `q` for [`PLL48_HZ`].
     /// Whether they are usable is [`PllConfig::is_valid_for`]'s answer.
     pub const fn for_hse(hse_hz: u32) -> Self {
-        let vco_in = if hse_hz % 2_000_000 == 0 {
+        let vco_in = if hse_hz.is_multiple_of(2_000_000) {
             2_000_000
         } else {
             1_000_000
@@ -137,10 +137,10 @@ impl PllConfig {
             && (p == 2 || p == 4 || p == 6 || p == 8)
             && q >= 2
             && q <= 15;
-        if !factors || !(hse >= 4_000_000 && hse <= 26_000_000) {
+        if !factors || hse < 4_000_000 || hse > 26_000_000 {
             return false;
         }
-        let vco_in_exact = hse % m == 0;
+        let vco_in_exact = hse.is_multiple_of(m);
         let vco_in = hse / m;
         let vco = vco_in * n;
         vco_in_exact
@@ -148,9 +148,9 @@ impl PllConfig {
             && vco_in <= 2_000_000
             && vco >= 100_000_000
             && vco <= 432_000_000
-            && vco % p == 0
+            && vco.is_multiple_of(p)
             && vco / p == SYSCLK_HZ as u64
-            && vco % q == 0
+            && vco.is_multiple_of(q)
             && vco / q == PLL48_HZ as u64
     }
 

@@ -1084,6 +1084,12 @@ unsafe fn HardFault() -> ! {
 /// script makes `NonMaskableInt` the default handler only where the program
 /// defines none): `#[exception]` would put a trampoline frame below this one,
 /// 8 bytes more under the stack bound's NMI level, which it cannot spare.
+///
+/// # Safety
+///
+/// Only the hardware calls it, through the vector table. It touches no data a
+/// critical section protects (atomics and the semihosting up-link only), so it
+/// may preempt one.
 #[no_mangle]
 pub unsafe extern "C" fn NonMaskableInt() -> ! {
     safe_stop(link::FAULT_NMI)
