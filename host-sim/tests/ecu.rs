@@ -796,3 +796,21 @@ fn a_window_is_adopted_by_the_first_plan_release_after_it_arrives() {
         .all(|p| p.status == "optimal" && p.passes >= 1));
     assert_eq!(reported.len(), 6, "releases 0 to 500 ms reported by 600 ms");
 }
+
+/// A set-up the ECU refuses because its clock set-up failed: the host says so and
+/// names the step from the Ready frame's detail, for every clock error.
+#[test]
+fn a_clock_set_up_refusal_is_named_with_its_step() {
+    use firmware::clock_tree::ClockError;
+    use firmware::link::SetupError;
+    use host_sim::pil::frames::setup_refusal;
+    for e in ClockError::ALL {
+        let text = setup_refusal(SetupError::ClockFailed.code(), e.code());
+        assert!(
+            text.contains("clock set-up failed") && text.contains(e.name()),
+            "{text}"
+        );
+    }
+    let text = setup_refusal(SetupError::ClockFailed.code(), 0);
+    assert!(text.contains("unknown clock error"), "{text}");
+}
