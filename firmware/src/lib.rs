@@ -21,6 +21,7 @@
 //! | [`plan`], [`state_estimate`] | the two resources the tasks share |
 //! | [`tasks`] | the 100 Hz `control` and 10 Hz `plan` tasks |
 //! | [`timing`] | the ECU's clock and the tasks' periods, each written once |
+//! | [`clock_tree`] | the STM32F405's clock tree from the board's crystal to the ECU's clock, RM0090's sequence over a register-access trait |
 //! | [`deadline`] | the tasks' releases, response times, misses and overruns on the ECU's clock; the watchdog |
 //! | [`vehicle_config`] | the car's numbers the settings derive from |
 //! | [`link`] | frames between the ECU and the simulator (processor-in-the-loop) |
@@ -30,6 +31,7 @@
 #![cfg_attr(not(test), no_std)]
 
 pub mod bicycle;
+pub mod clock_tree;
 pub mod deadline;
 pub mod friction;
 pub mod link;

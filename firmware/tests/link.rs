@@ -619,9 +619,10 @@ fn status_codes_round_trip_and_names_are_distinct() {
     assert_eq!(fault_from_code(5), Err(5));
     assert_eq!(fault_name(5), "Unknown");
     // The ECU's own codes: outside the control faults, named, distinct.
-    let own = [FAULT_PANIC, FAULT_HARDFAULT, FAULT_DEADLINE];
+    let own = [FAULT_PANIC, FAULT_HARDFAULT, FAULT_NMI, FAULT_DEADLINE];
     let names: std::collections::HashSet<_> = own.iter().map(|&c| fault_name(c)).collect();
-    assert_eq!(names.len(), 3);
+    assert_eq!(names.len(), 4);
+    assert_eq!(fault_name(FAULT_NMI), "Nmi");
     for c in own {
         assert!(fault_from_code(c).is_err());
         assert_ne!(fault_name(c), "Unknown");

@@ -694,13 +694,14 @@ fn real_ecu_panic_and_fault_handlers_cannot_reach_the_panic_handler_again() {
         .filter(|n| {
             n.ends_with("rust_begin_unwind")
                 || n.as_str() == "HardFault"
-                || n.contains("__cortex_m_rt_HardFault")
+                || n.as_str() == "NonMaskableInt"
                 || n.starts_with("ecu::safe_stop")
         })
         .collect();
     println!("roots: {roots:?}");
     assert!(roots.iter().any(|n| n.ends_with("rust_begin_unwind")));
     assert!(roots.iter().any(|n| n.as_str() == "HardFault"));
+    assert!(roots.iter().any(|n| n.as_str() == "NonMaskableInt"));
     assert!(roots.iter().any(|n| n.starts_with("ecu::safe_stop")));
     let panicky = |n: &str| {
         n.ends_with("rust_begin_unwind") || n.contains("core::panicking") || n == "<indirect>"
@@ -737,21 +738,24 @@ fn real_ecu_panic_and_fault_handlers_cannot_reach_the_panic_handler_again() {
 
 #[test]
 #[ignore = "needs the ECU application (`cargo ecu`) and llvm-objdump; .ci/run runs it"]
-fn real_ecu_has_a_hardfault_handler_of_its_own() {
+fn real_ecu_has_hardfault_and_nmi_handlers_of_its_own() {
     let elf = real_ecu_elf();
     let out = std::process::Command::new(llvm_objdump())
-        .args(["-t", "--demangle"])
+        .args(["-d", "--demangle", "--no-show-raw-insn"])
         .arg(&elf)
         .output()
         .unwrap();
-    let symbols = String::from_utf8_lossy(&out.stdout);
-    // cortex-m-rt's trampoline jumps to the application's handler, not its
-    // default infinite loop.
-    assert!(
-        symbols.contains("ecu::__cortex_m_rt_HardFault"),
-        "no HardFault handler in the ECU application"
-    );
-    assert!(symbols.contains("ecu::safe_stop"));
+    assert!(out.status.success());
+    let graph = call_graph(&String::from_utf8_lossy(&out.stdout));
+    // The vectors' targets are the application's handlers, which call the safe
+    // stop's guard, not cortex-m-rt's default infinite loop.
+    for handler in ["HardFault", "NonMaskableInt"] {
+        let calls = graph.get(handler).cloned().unwrap_or_default();
+        assert!(
+            calls.iter().any(|c| c.starts_with("ecu::safe_stop")),
+            "{handler} does not call ecu::safe_stop: {calls:?}"
+        );
+    }
 }
 
 /// A window of the road given between two plan releases is received and adopted
@@ -791,4 +795,22 @@ fn a_window_is_adopted_by_the_first_plan_release_after_it_arrives() {
         .filter(|p| !p.window)
         .all(|p| p.status == "optimal" && p.passes >= 1));
     assert_eq!(reported.len(), 6, "releases 0 to 500 ms reported by 600 ms");
+}
+
+/// A set-up the ECU refuses because its clock set-up failed: the host says so and
+/// names the step from the Ready frame's detail, for every clock error.
+#[test]
+fn a_clock_set_up_refusal_is_named_with_its_step() {
+    use firmware::clock_tree::ClockError;
+    use firmware::link::SetupError;
+    use host_sim::pil::frames::setup_refusal;
+    for e in ClockError::ALL {
+        let text = setup_refusal(SetupError::ClockFailed.code(), e.code());
+        assert!(
+            text.contains("clock set-up failed") && text.contains(e.name()),
+            "{text}"
+        );
+    }
+    let text = setup_refusal(SetupError::ClockFailed.code(), 0);
+    assert!(text.contains("unknown clock error"), "{text}");
 }

@@ -48,13 +48,25 @@
 //! or adopts, never both, so the plan task's worst case is the larger of the
 //! two, not their sum.
 //!
-//! **Panic and faults**: the panic handler and the HardFault handler (MemManage,
+//! **Clock**: `init` first sets the clock tree ([`firmware::clock_tree`]: the
+//! crystal, the PLL, 168 MHz, the flash latency before the switch, the clock
+//! security system on). Under QEMU's `netduinoplus2`, which has no RCC (its
+//! registers read 0) and a fixed 168 MHz clock, the sequence writes nothing and
+//! says so. A failed sequence on silicon (no crystal, no PLL lock, no switch)
+//! leaves the core on its internal oscillator: the ECU answers the set-up with a
+//! `Ready` frame of status [`link::SetupError::ClockFailed`] and stops, so the
+//! control loop never runs at the wrong clock.
+//!
+//! **Panic and faults**: the panic handler, the HardFault handler (MemManage,
 //! BusFault and UsageFault are left disabled in SHCSR, so they escalate to
-//! HardFault) command zero torque with the steering held, send it as an actuator
-//! frame with the fault code ([`link::FAULT_PANIC`], [`link::FAULT_HARDFAULT`]),
-//! write a fixed line to the semihosting stderr and stop. Nothing on that path
-//! formats (no `defmt`, no `core::fmt`) or can panic, and a static guard sends a
-//! second entry straight to the exit: the handlers cannot re-enter themselves.
+//! HardFault) and the NMI handler (the clock security system's: the crystal
+//! failed and the hardware switched the core to its internal oscillator) command
+//! zero torque with the steering held, send it as an actuator frame with the
+//! fault code ([`link::FAULT_PANIC`], [`link::FAULT_HARDFAULT`],
+//! [`link::FAULT_NMI`]), write a fixed line to the semihosting stderr and stop.
+//! Nothing on that path formats (no `defmt`, no `core::fmt`) or can panic, and a
+//! static guard sends a second entry straight to the exit: the handlers cannot
+//! re-enter themselves.
 //!
 //! Build: `cargo ecu`; run in the loop with the simulator: `host-sim pil`.
 #![no_std]
@@ -69,6 +81,7 @@ use core::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 
 use cortex_m_semihosting::syscall;
 use defmt_semihosting as _;
+use firmware::clock_tree::{self, ClockError, ClockRegisters, ClockSource, Register};
 use firmware::deadline::{self, DeadlineMonitor, PlanWatchdog};
 use firmware::link::{
     self, ActuationFrame, Down, FrameReader, Up, MAX_DOWN_FRAME_BYTES,
@@ -652,6 +665,44 @@ fn actuation_frame(seq: u32, a: &Actuation<f32>, fault: u8, ticks: u32) -> Actua
     }
 }
 
+/// The clock tree's registers on the device, through the PAC: volatile word
+/// accesses at RM0090's addresses.
+struct DeviceClockRegisters<'a> {
+    rcc: &'a stm32f4::stm32f405::RCC,
+    pwr: &'a stm32f4::stm32f405::PWR,
+    flash: &'a stm32f4::stm32f405::FLASH,
+}
+
+impl ClockRegisters for DeviceClockRegisters<'_> {
+    fn read(&mut self, register: Register) -> u32 {
+        match register {
+            Register::RccCr => self.rcc.cr.read().bits(),
+            Register::RccPllcfgr => self.rcc.pllcfgr.read().bits(),
+            Register::RccCfgr => self.rcc.cfgr.read().bits(),
+            Register::RccApb1enr => self.rcc.apb1enr.read().bits(),
+            Register::PwrCr => self.pwr.cr.read().bits(),
+            Register::PwrCsr => self.pwr.csr.read().bits(),
+            Register::FlashAcr => self.flash.acr.read().bits(),
+        }
+    }
+
+    fn write(&mut self, register: Register, value: u32) {
+        // Whole words: the sequence writes RM0090's fields and keeps every other
+        // bit as it read it (the PAC's `bits` is unsafe for that reason).
+        unsafe {
+            match register {
+                Register::RccCr => self.rcc.cr.write(|w| w.bits(value)),
+                Register::RccPllcfgr => self.rcc.pllcfgr.write(|w| w.bits(value)),
+                Register::RccCfgr => self.rcc.cfgr.write(|w| w.bits(value)),
+                Register::RccApb1enr => self.rcc.apb1enr.write(|w| w.bits(value)),
+                Register::PwrCr => self.pwr.cr.write(|w| w.bits(value)),
+                Register::PwrCsr => self.pwr.csr.write(|w| w.bits(value)),
+                Register::FlashAcr => self.flash.acr.write(|w| w.bits(value)),
+            }
+        }
+    }
+}
+
 #[rtic::app(device = stm32f4::stm32f405, dispatchers = [USART1, USART2])]
 mod app {
     use super::*;
@@ -689,17 +740,24 @@ mod app {
         staging_storage: Staging = Staging::new(),
         link_storage: Option<Link> = None,
         route_storage: Option<RouteLink> = None,
+        clock_storage: Option<Result<ClockSource, ClockError>> = None,
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         paint_stack();
-        configure_flash(&cx.device.FLASH);
+        // In a static: the result waits there, not in the frame the tasks first run
+        // above, until the set-up answers with it.
+        let clock = cx.local.clock_storage.insert(configure_clock(
+            &cx.device.RCC,
+            &cx.device.PWR,
+            &cx.device.FLASH,
+        ));
         Mono::start(cx.core.SYST, SYSCLK_HZ);
         // The set-up's work runs in functions of their own, so their frames are gone
         // when `init` returns and the tasks it spawned run on this stack (RTIC
         // enables interrupts before `init`'s caller returns).
         let (link, route) = open_link(cx.local.link_storage, cx.local.route_storage);
         let planner = cx.local.planner_storage;
-        let control = set_up(link, planner);
+        let control = set_up(link, planner, clock);
         // The timeline starts at the beginning of the monotonic's next tick: the
         // first release of both tasks, which then run at a tick as every later
         // release does. The set-up ends anywhere within a tick: a timeline started
@@ -729,17 +787,18 @@ mod app {
         )
     }
 
-    /// The flash interface as the timing analysis models it (`host-sim wcet`'s
-    /// memory model): 5 wait states (168 MHz at 3.3 V, RM0090 table 10), the ART
-    /// accelerator's instruction and data caches on, its prefetch off (a prefetch
-    /// in flight could delay a branch's fetch, which the model does not charge).
-    fn configure_flash(flash: &stm32f4::stm32f405::FLASH) {
-        flash.acr.write(|w| {
-            w.latency().ws5();
-            w.prften().clear_bit();
-            w.icen().set_bit();
-            w.dcen().set_bit()
-        });
+    /// The clock tree from reset to 168 MHz from the crystal, the flash
+    /// interface as the timing analysis models it included
+    /// ([`clock_tree::configure`] on the device's registers). Not inlined: it
+    /// runs before interrupts are enabled, and its frame is gone when the tasks
+    /// first run.
+    #[inline(never)]
+    fn configure_clock(
+        rcc: &stm32f4::stm32f405::RCC,
+        pwr: &stm32f4::stm32f405::PWR,
+        flash: &stm32f4::stm32f405::FLASH,
+    ) -> Result<ClockSource, ClockError> {
+        clock_tree::configure(&mut DeviceClockRegisters { rcc, pwr, flash })
     }
 
     /// Opens the link to the simulator into its storage (so `init`'s own frame
@@ -760,15 +819,46 @@ mod app {
     }
 
     /// The set-up from the simulator's frames (car, first window, obstacles), then
-    /// `Ready`; stops the ECU on a refused set-up.
+    /// `Ready`; stops the ECU on a refused set-up, and when the clock set-up
+    /// (`clock`) failed (status [`link::SetupError::ClockFailed`], detail the
+    /// [`ClockError`]'s code).
     #[inline(never)]
-    fn set_up(link: &mut Link, planner: &mut PlanTask<f32, PATH_CAP>) -> ControlTask<f32> {
+    fn set_up(
+        link: &mut Link,
+        planner: &mut PlanTask<f32, PATH_CAP>,
+        clock: &Result<ClockSource, ClockError>,
+    ) -> ControlTask<f32> {
+        match *clock {
+            Ok(ClockSource::Pll { hse_hz }) => defmt::info!(
+                "ecu: clock: HSE {=u32} Hz -> PLL, {=u32} Hz",
+                hse_hz,
+                SYSCLK_HZ
+            ),
+            Ok(ClockSource::Fixed) => defmt::info!(
+                "ecu: clock: no RCC (RCC_CR reads 0): the machine's fixed clock, taken as {=u32} Hz",
+                SYSCLK_HZ
+            ),
+            // The code, not the name: the names would take static RAM (read-only
+            // data is copied to SRAM); the host names the code from the Ready frame.
+            Err(e) => defmt::error!(
+                "ecu: clock set-up failed (ClockError code {=u16}): on the internal oscillator",
+                e.code()
+            ),
+        }
         let mut setup = Setup::new();
         let control = loop {
             match link.receive() {
                 Some(Down::Config(c)) => setup.config(&c, planner),
                 Some(Down::PathChunk(c)) => setup.path_chunk(&c, planner),
                 Some(Down::Obstacle(o)) => setup.obstacle(&o),
+                Some(Down::Start) if clock.is_err() => {
+                    let detail = clock.err().map_or(0, ClockError::code);
+                    link.send(&Up::Ready(ReadyFrame {
+                        status: link::SetupError::ClockFailed.code(),
+                        detail,
+                    }));
+                    exit(false)
+                }
                 Some(Down::Start) => match setup.finish(planner) {
                     Ok(control) => break control,
                     Err(f) => {
@@ -975,15 +1065,39 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
 /// HardFault, and the configurable faults escalated to it: MemManage, BusFault
 /// and UsageFault are not enabled in SCB SHCSR, so the core raises HardFault for
 /// them (a stack overflow into flip-link's guard, an invalid instruction, a bus
-/// error). Safe actuators, a fault frame, stop.
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+/// error). Safe actuators, a fault frame, stop. Without cortex-m-rt's trampoline
+/// (which only passes the exception frame, unused here): the vector points at
+/// this function, one frame fewer under the stack bound's HardFault level.
+#[cortex_m_rt::exception(trampoline = false)]
+unsafe fn HardFault() -> ! {
     cortex_m::interrupt::disable();
     safe_stop(link::FAULT_HARDFAULT)
 }
 
-/// Safe actuators after a panic or a fault (`fault`: [`link::FAULT_PANIC`] or
-/// [`link::FAULT_HARDFAULT`]), interrupts disabled; the entry both handlers call.
+/// NMI: on the STM32F405 the clock security system raises it when the crystal
+/// (HSE) fails, after the hardware switched the core to its internal oscillator
+/// (16 MHz: every timing is off by a factor 10.5). Safe actuators, a fault frame,
+/// stop, as HardFault. It runs at priority −2, so nothing preempts it and there
+/// are no interrupts to disable.
+///
+/// Defined by its symbol, the one cortex-m-rt's vector table names (its linker
+/// script makes `NonMaskableInt` the default handler only where the program
+/// defines none): `#[exception]` would put a trampoline frame below this one,
+/// 8 bytes more under the stack bound's NMI level, which it cannot spare.
+///
+/// # Safety
+///
+/// Only the hardware calls it, through the vector table. It touches no data a
+/// critical section protects (atomics and the semihosting up-link only), so it
+/// may preempt one.
+#[no_mangle]
+pub unsafe extern "C" fn NonMaskableInt() -> ! {
+    safe_stop(link::FAULT_NMI)
+}
+
+/// Safe actuators after a panic or a fault (`fault`: [`link::FAULT_PANIC`],
+/// [`link::FAULT_HARDFAULT`] or [`link::FAULT_NMI`]), interrupts disabled or
+/// from the NMI; the entry the three handlers call.
 /// The static guard comes first, in a frame of a few bytes: a second entry (a
 /// fault on the path below) exits at once, so [`safe_stop_work`] runs at most once
 /// and its frame is on the stack at most once. The stack bound relies on that: it
@@ -992,8 +1106,9 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
 #[inline(never)]
 fn safe_stop(fault: u8) -> ! {
     // WCET: an exclusive store (the swap's LDREX/STREX retry) fails only if an exception
-    // is taken between the two; both callers (panic, HardFault) disable interrupts first, and
-    // the exceptions that still can (NMI, HardFault) do not return here: no retry.
+    // is taken between the two; the panic and HardFault handlers disable interrupts first,
+    // nothing preempts the NMI handler, and the exceptions that still can (NMI, HardFault)
+    // do not return here: no retry.
     // wcet-bound: 1
     if STOPPING.swap(true, Ordering::Relaxed) {
         exit(false)
@@ -1022,10 +1137,10 @@ fn safe_stop_work(fault: u8) -> ! {
     }
     let err = ERR_FD.load(Ordering::Relaxed);
     if err != 0 {
-        let line: &[u8] = if fault == link::FAULT_HARDFAULT {
-            b"ecu: HardFault: safe stop\n"
-        } else {
-            b"ecu: panic: safe stop\n"
+        let line: &[u8] = match fault {
+            link::FAULT_HARDFAULT => b"ecu: HardFault: safe stop\n",
+            link::FAULT_NMI => b"ecu: NMI (clock security): safe stop\n",
+            _ => b"ecu: panic: safe stop\n",
         };
         sh_write(err, line);
     }

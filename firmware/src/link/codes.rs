@@ -83,7 +83,7 @@ macro_rules! wire_codes {
     };
 }
 
-/// Why the ECU refused the set-up (the [`ReadyFrame::status`] codes, 1..=12).
+/// Why the ECU refused the set-up (the [`ReadyFrame::status`] codes, 1..=13).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SetupError {
     /// `Start`, a `PathChunk` or an `Obstacle` came before any `Config` (detail 0).
@@ -114,6 +114,10 @@ pub enum SetupError {
     /// An obstacle leaves the car no room to pass on either side (detail: its
     /// index).
     ObstacleBlocksRoad,
+    /// The ECU's clock set-up failed: the core runs on its internal oscillator,
+    /// not at its clock, and the control loop does not start (detail: the
+    /// [`crate::clock_tree::ClockError`]'s code).
+    ClockFailed,
 }
 
 wire_codes!(impl SetupError {
@@ -129,6 +133,7 @@ wire_codes!(impl SetupError {
     MissingObstacle = 10,
     InvalidObstacle = 11,
     ObstacleBlocksRoad = 12,
+    ClockFailed = 13,
 });
 
 /// Name of a [`ReadyFrame::status`]: `"Accepted"` for 0, the [`SetupError`]'s
@@ -246,6 +251,11 @@ pub const FAULT_PANIC: u8 = 255;
 /// [`ActuationFrame::fault`] of the ECU's fault handler (HardFault, and MemManage,
 /// BusFault and UsageFault escalated to it): zero torque, steering held.
 pub const FAULT_HARDFAULT: u8 = 254;
+/// [`ActuationFrame::fault`] of the ECU's NMI handler: zero torque, steering
+/// held. On the STM32F405 the clock security system raises the NMI when the
+/// crystal (HSE) fails; the hardware has then switched the core to its internal
+/// oscillator.
+pub const FAULT_NMI: u8 = 252;
 /// [`ActuationFrame::fault`] of the control task's consecutive-miss rule
 /// ([`crate::deadline::CONTROL_MISS_LIMIT`]): zero torque, steering held.
 pub const FAULT_DEADLINE: u8 = 253;
@@ -276,7 +286,8 @@ pub const fn fault_from_code(code: u8) -> Result<Option<ControlFault>, u8> {
 }
 
 /// Name of an [`ActuationFrame::fault`] code (`"None"` for 0; `"Panic"`,
-/// `"HardFault"`, `"DeadlineMisses"` for the ECU's own codes), or `"Unknown"`.
+/// `"HardFault"`, `"Nmi"`, `"DeadlineMisses"` for the ECU's own codes), or
+/// `"Unknown"`.
 pub const fn fault_name(code: u8) -> &'static str {
     match fault_from_code(code) {
         Ok(None) => "None",
@@ -286,6 +297,7 @@ pub const fn fault_name(code: u8) -> &'static str {
         Ok(Some(ControlFault::Numerical)) => "Numerical",
         Err(FAULT_PANIC) => "Panic",
         Err(FAULT_HARDFAULT) => "HardFault",
+        Err(FAULT_NMI) => "Nmi",
         Err(FAULT_DEADLINE) => "DeadlineMisses",
         Err(_) => "Unknown",
     }

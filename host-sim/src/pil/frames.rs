@@ -70,6 +70,10 @@ pub fn setup_refusal(status: u8, detail: u16) -> String {
         Some(E::ObstacleBlocksRoad) => format!(
             "obstacle {detail} leaves no room to pass on either side: move it, make it narrower, or widen the track there"
         ),
+        Some(E::ClockFailed) => format!(
+            "its clock set-up failed ({}): it runs on its internal oscillator and does not start the control loop",
+            firmware::clock_tree::ClockError::from_code(detail).map_or("unknown clock error", |e| e.name())
+        ),
         None => format!("unknown status {status} (detail {detail}): is the ECU application of another version?"),
     }
 }

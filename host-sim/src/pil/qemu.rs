@@ -422,6 +422,12 @@ impl QemuEcu {
                         a.delta_rad
                     )
                 }
+                Up::Actuation(a) if a.fault == link::FAULT_NMI => {
+                    bail!(
+                        "the ECU took an NMI (the clock security system's: its crystal failed and the core fell back to its internal oscillator); it commanded zero torque, steering held at {:.3} rad, and stopped",
+                        a.delta_rad
+                    )
+                }
                 Up::Actuation(_) => self.counters.stale += 1,
                 _ => self.counters.rejected += 1,
             }

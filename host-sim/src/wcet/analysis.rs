@@ -879,6 +879,16 @@ pub fn analyse(
             .find(|t: &&TaskStatic| t.name == n)
             .and_then(|t| t.static_bound_cycles)
     };
+    // A preemption by a task refills at most the cache lines its code can evict.
+    let refill_of = |n: &str| {
+        let lines = task_reach
+            .iter()
+            .find(|(t, _)| t == n)
+            .map_or(super::cache::CACHE_LINES, |(_, reach)| {
+                super::cache::evicting_lines(&program, reach)
+            });
+        (lines * program.line_fetch_cycles) as f64
+    };
     let mut activities = Vec::new();
     let mut complete = true;
     for &(n, prio, period) in &ECU_SCHEDULE {
@@ -899,6 +909,7 @@ pub fn analyse(
             period_us: period as f64,
             deadline_us: period as f64,
             wcet_cycles: c as f64,
+            refill_cycles: refill_of(n),
             burst: None,
             critical_sections: sections,
         });

@@ -12,8 +12,12 @@
 //! its lines is then fetched from flash at most once per entry of the loop. The
 //! bound charges the loop's lines once per entry ([`Region::lines`] ×
 //! the line fetch cost) and its blocks without their fetch. A preemption may
-//! evict the lines: [`PREEMPTION_REFILL_CYCLES`] charges each preemption the
-//! refill of a whole cache.
+//! evict the lines: the response-time analysis charges each preemption the
+//! refill of the lines the preempting activation can evict, its evicting cache
+//! blocks: the distinct flash lines of the code it can run, at most the whole
+//! cache ([`evicting_lines`], [`PREEMPTION_REFILL_CYCLES`]). With LRU replacement
+//! a preempted task's lines keep their order and age by at most that many places,
+//! so at most that many of them are evicted and fetched again.
 
 use super::cfg::Program;
 use super::loops::Loop;
@@ -26,6 +30,24 @@ pub const CACHE_LINES: u64 = 64;
 /// of the preempted task's cache, which then fetches them again, at most 64
 /// lines of 6 cycles (5 wait states and the access).
 pub const PREEMPTION_REFILL_CYCLES: f64 = (CACHE_LINES * 6) as f64;
+
+/// The evicting cache blocks of an activation: the distinct flash lines of the
+/// code the functions `reach` can run, at most [`CACHE_LINES`]: the most lines of
+/// another task's cache a preemption by it can evict.
+pub fn evicting_lines(program: &Program, reach: &[usize]) -> u64 {
+    let mut lines: BTreeSet<u64> = BTreeSet::new();
+    for &f in reach {
+        for b in &program.functions[f].blocks {
+            if let Some((lo, hi)) = b.lines {
+                lines.extend(lo..=hi);
+            }
+            if lines.len() as u64 >= CACHE_LINES {
+                return CACHE_LINES;
+            }
+        }
+    }
+    lines.len() as u64
+}
 
 /// A loop whose lines stay in the cache while it runs.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -67,7 +67,8 @@ pub fn preemptions_of(task: &str) -> u64 {
 
 /// The ECU's functions counted once in the stack bound: the safe stop's work,
 /// entered with interrupts disabled (the panic handler and HardFault disable them
-/// in a frame of a few bytes, then call `ecu::safe_stop`), which never returns, and
+/// in a frame of a few bytes, then call `ecu::safe_stop`; the NMI handler calls it
+/// at priority −2, where nothing preempts it), which never returns, and
 /// only past `safe_stop`'s static guard (`STOPPING`): a second entry, a fault on
 /// the work, exits in the guard's few bytes, so the work's frame is on the stack
 /// at most once. Exact name: `ecu::safe_stop` itself, the guard, is counted
@@ -76,11 +77,12 @@ pub fn ecu_once() -> Vec<String> {
     vec!["ecu::safe_stop_work".to_string()]
 }
 
-/// The ECU's functions that run only with interrupts disabled: the set-up, called
-/// from RTIC's `init` before interrupts are enabled (their frames are gone when
-/// the tasks first run).
+/// The ECU's functions that run only with interrupts disabled: the clock set-up
+/// and the set-up, called from RTIC's `init` before interrupts are enabled (their
+/// frames are gone when the tasks first run).
 pub fn ecu_masked() -> Vec<String> {
     vec![
+        "ecu::app::configure_clock".to_string(),
         "ecu::app::set_up".to_string(),
         "ecu::app::open_link".to_string(),
     ]

@@ -25,9 +25,11 @@ pub struct MemoryModel {
 }
 
 impl MemoryModel {
-    /// The STM32F405 at 168 MHz: 5 wait states, 16-byte lines, flash at 0x0800_0000.
+    /// The STM32F405 at 168 MHz: the wait states the ECU's clock set-up writes
+    /// (`firmware::clock_tree::FLASH_LATENCY_WS`, 5), 16-byte lines, flash at
+    /// 0x0800_0000.
     pub const STM32F405: MemoryModel = MemoryModel {
-        flash_wait_states: 5,
+        flash_wait_states: firmware::clock_tree::FLASH_LATENCY_WS,
         flash_line_bytes: 16,
         flash: (0x0800_0000, 0x0810_0000),
         flash_data: FlashData::Anywhere(Vec::new()),
@@ -46,8 +48,8 @@ impl MemoryModel {
             ),
             format!(
                 "Instruction fetch: from flash with {} wait states, {}-byte lines, the ART \
-                 accelerator's prefetch off and its instruction cache on (the ECU's init sets \
-                 FLASH_ACR so). Each line a block touches costs {} cycles, added to (not \
+                 accelerator's prefetch off and its instruction cache on (the ECU's clock set-up, \
+                 firmware::clock_tree::configure, sets FLASH_ACR so). Each line a block touches costs {} cycles, added to (not \
                  overlapped with) the block's execution, and once more after each call (the \
                  return address's line); a fall-through into the line the previous block \
                  ended in is not charged again (the flash interface's 128-bit line buffer, \

@@ -24,7 +24,9 @@
 //! | [`goals`] | the project goals and `--require` |
 //! | [`markdown`] | writing `wcet.json` and `wcet.md` |
 //! | [`expected`] | the CI comparison with a committed `wcet.json` |
+//! | [`clock`] | the core clock, its source and the function that sets it |
 
+pub mod clock;
 pub mod elf;
 pub mod expected;
 pub mod goals;
@@ -308,6 +310,8 @@ pub struct RunEntry {
 pub struct WcetReport {
     /// Core clock, in Hz.
     pub clock_hz: u64,
+    /// The core clock as the binary sets it: frequency, source, the function.
+    pub clock: clock::ClockReport,
     /// Cycles per instruction of the traced ECU code (dimensionless): the
     /// worst-case cycles of the blocks that ran over their instructions, an
     /// average over that trace, not a bound for other code.
@@ -353,7 +357,9 @@ pub fn build_report(inputs: &ReportInputs) -> Result<WcetReport> {
         &super::indirect::targets_of_elf(&inputs.elf)?,
     )
     .with_context(|| format!("stack bound of {}", inputs.elf.display()))?;
-    assemble_report(inputs, &runs, memory, symbols, stack)
+    let mut report = assemble_report(inputs, &runs, memory, symbols, stack)?;
+    report.clock = clock::ClockReport::of_elf(&inputs.elf)?;
+    Ok(report)
 }
 
 fn check_inputs(inputs: &ReportInputs, cpi: f64) -> Result<()> {
@@ -440,6 +446,8 @@ pub fn assemble_report(
     let goals = goals(&tasks, &memory, &run_entries, &inputs.statics);
     Ok(WcetReport {
         clock_hz: inputs.clock_hz,
+        // The function that sets it is read from the ELF by `build_report`.
+        clock: clock::ClockReport::of_firmware(None),
         traced_cycles_per_instruction: cpi,
         traced_cpi_method: inputs.cpi.justification.clone(),
         tasks,
@@ -992,6 +1000,12 @@ active_constraints,max_validity_slack_rad";
         let v: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("wcet.json"))?)?;
         assert_eq!(v["clock_hz"].as_u64(), Some(168_000_000));
+        assert_eq!(v["clock"]["sysclk_hz"].as_u64(), Some(168_000_000));
+        assert_eq!(
+            v["clock"]["source"].as_str(),
+            Some("HSE 25 MHz → PLL (M 25, N 336, P 2, Q 7)")
+        );
+        assert!(v["clock"]["configured_in"].is_null(), "no ELF read");
         assert_eq!(v["traced_cycles_per_instruction"].as_f64(), Some(1.5));
         assert_eq!(v["traced_cpi_method"].as_str(), Some("fixture CPI"));
         for task in ["plan", "control"] {
@@ -1208,8 +1222,9 @@ active_constraints,max_validity_slack_rad";
             assert_eq!(root.exceptions, [entry], "{}", stack.levels[level].name);
             assert_ne!(root.function, crate::wcet::stack::DEFAULT_HANDLER);
         }
-        // HardFault on top, with its exception frame, through the application's
-        // handler to the safe stop's guard; the guard's work is counted once.
+        // HardFault and NMI on top, with their exception frames, each through the
+        // application's handler (the vector's target itself) to the safe stop's
+        // guard; the guard's work is counted once.
         let fault = |name: &str| {
             stack
                 .levels
@@ -1217,22 +1232,21 @@ active_constraints,max_validity_slack_rad";
                 .find(|l| l.counted == Counted::FaultOnTop && l.roots[0].root == name)
                 .with_context(|| format!("no {name} level: {:?}", stack.levels))
         };
+        let path = |level: &crate::wcet::stack::LevelReport| -> Vec<String> {
+            level.roots[0]
+                .worst_path
+                .iter()
+                .map(|e| e.function.clone())
+                .collect()
+        };
         let hard_fault = fault("HardFault")?;
-        let path: Vec<&str> = hard_fault.roots[0]
-            .worst_path
-            .iter()
-            .map(|e| e.function.as_str())
-            .collect();
-        assert!(
-            path.contains(&"ecu::__cortex_m_rt_HardFault") && path.contains(&"ecu::safe_stop"),
-            "{path:?}"
-        );
-        assert!(!path.contains(&"ecu::safe_stop_work"), "{path:?}");
+        assert_eq!(path(hard_fault), ["HardFault", "ecu::safe_stop"]);
         assert_eq!(
             hard_fault.contribution_bytes,
             hard_fault.roots[0].depth_bytes + EXCEPTION_ENTRY_BYTES
         );
         let nmi = fault("NMI")?;
+        assert_eq!(path(nmi), ["NonMaskableInt", "ecu::safe_stop"]);
         let sum = |counted: Counted| -> u32 {
             stack
                 .levels
@@ -1281,6 +1295,10 @@ active_constraints,max_validity_slack_rad";
         inputs.elf = elf.clone();
         let r = build_report(&inputs)?;
         assert_eq!(r.memory.sections.text_bytes, elf_memory(&elf)?.text_bytes);
+        assert_eq!(
+            r.clock.configured_in.as_deref(),
+            Some("firmware::clock_tree::configure")
+        );
         // Four priority levels, the unbound interrupts, the safe stop's work
         // counted once, HardFault and NMI.
         let levels: Vec<(Counted, &str)> = r

@@ -10,20 +10,21 @@
 //! starts),
 //! and `hp(i)` the tasks and interrupts of higher priority, each with its minimum
 //! inter-arrival time `T`. Every preemption also costs an exception entry and
-//! exit ([`PREEMPTION_CYCLES`]), charged to the preempting activation's `C`.
+//! exit ([`ENTRY_EXIT_CYCLES`]) and the refill of the cache lines the preempting
+//! activation can evict ([`Activity::refill_cycles`]), charged to it.
 //! The iteration stops at the fixed point or as soon as `R` exceeds the deadline.
 
+#[cfg(test)]
 use super::cache::PREEMPTION_REFILL_CYCLES;
 use serde::Serialize;
 
-/// What one preemption costs, cycles: exception entry and exit on a Cortex-M4F
-/// with lazy FPU stacking, 12 each with zero-wait-state stacking (TRM §3.3; the
-/// frame is in SRAM), the vector read from flash with its 5 wait states at
-/// 168 MHz (the vector table is in flash; the ART's data cache assumed to miss),
-/// on return the preempted code's flash line fetched again (5 wait states and the
-/// access), and the instruction cache the preempted task counted on refilled
-/// ([`PREEMPTION_REFILL_CYCLES`]).
-pub const PREEMPTION_CYCLES: f64 = 12.0 + 5.0 + 12.0 + 6.0 + PREEMPTION_REFILL_CYCLES;
+/// What one preemption costs besides the cache refill, cycles: exception entry
+/// and exit on a Cortex-M4F with lazy FPU stacking, 12 each with zero-wait-state
+/// stacking (TRM §3.3; the frame is in SRAM), the vector read from flash with its
+/// 5 wait states at 168 MHz (the vector table is in flash; the ART's data cache
+/// assumed to miss), on return the preempted code's flash line fetched again
+/// (5 wait states and the access).
+pub const ENTRY_EXIT_CYCLES: f64 = 12.0 + 5.0 + 12.0 + 6.0;
 
 /// A task or interrupt of the schedule.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -38,6 +39,10 @@ pub struct Activity {
     pub deadline_us: f64,
     /// Worst-case execution time, cycles (preemption overhead not included).
     pub wcet_cycles: f64,
+    /// The cache refill one of its preemptions causes the preempted task, cycles:
+    /// the lines it can evict (`wcet::cache::evicting_lines`) at a line fetch
+    /// each, at most the whole cache.
+    pub refill_cycles: f64,
     /// At most this many activations in any window of this length, `(count,
     /// window µs)`, besides the minimum inter-arrival `period_us` (an interrupt
     /// the application rate-limits: a link's bytes, at most so many a control
@@ -93,7 +98,7 @@ pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
                 .iter()
                 .filter(|h| h.priority > a.priority)
                 .collect();
-            let own = a.wcet_cycles + PREEMPTION_CYCLES + blocking;
+            let own = a.wcet_cycles + ENTRY_EXIT_CYCLES + a.refill_cycles + blocking;
             let mut r = us(own);
             let mut result = None;
             // Each step adds at least one activity's cost or stops: bounded by the
@@ -102,7 +107,9 @@ pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
                 let next = us(own)
                     + higher
                         .iter()
-                        .map(|h| arrivals(h, r) * us(h.wcet_cycles + PREEMPTION_CYCLES))
+                        .map(|h| {
+                            arrivals(h, r) * us(h.wcet_cycles + ENTRY_EXIT_CYCLES + h.refill_cycles)
+                        })
                         .sum::<f64>();
                 if next > a.deadline_us {
                     break;
@@ -141,6 +148,7 @@ mod tests {
                 period_us: 1_000.0,
                 deadline_us: 1_000.0,
                 wcet_cycles: 500.0,
+                refill_cycles: PREEMPTION_REFILL_CYCLES,
                 burst: None,
                 critical_sections: Vec::new(),
             },
@@ -150,6 +158,7 @@ mod tests {
                 period_us: 10_000.0,
                 deadline_us: 10_000.0,
                 wcet_cycles: 5_000.0,
+                refill_cycles: PREEMPTION_REFILL_CYCLES,
                 burst: None,
                 critical_sections: Vec::new(),
             },
@@ -159,6 +168,7 @@ mod tests {
                 period_us: 100_000.0,
                 deadline_us: 100_000.0,
                 wcet_cycles: 10.0e6,
+                refill_cycles: PREEMPTION_REFILL_CYCLES,
                 burst: None,
                 critical_sections: plan_sections,
             },
@@ -170,7 +180,7 @@ mod tests {
         let r = response_times(&schedule(1_000.0), 168e6);
         // Entry and exit with the vector read from flash, the preempted line
         // fetched again and the cache refilled: 12 + 5 + 12 + 6 + 64 × 6 cycles.
-        assert_eq!(PREEMPTION_CYCLES, 419.0);
+        assert_eq!(ENTRY_EXIT_CYCLES + PREEMPTION_REFILL_CYCLES, 419.0);
         // control: C + overhead + B = 5419 + 1000 cycles, one SysTick (919).
         let control = r[1].response_time_bound_us.unwrap();
         assert!(
@@ -214,6 +224,7 @@ mod tests {
             period_us: 10.85,
             deadline_us: 10.85,
             wcet_cycles: 400.0,
+            refill_cycles: PREEMPTION_REFILL_CYCLES,
             burst,
             critical_sections: Vec::new(),
         };
@@ -231,10 +242,25 @@ mod tests {
         let extra =
             capped[1].response_time_bound_us.unwrap() - plain[1].response_time_bound_us.unwrap();
         assert!(
-            extra <= 100.0 * (400.0 + PREEMPTION_CYCLES) / 168.0 + 1e-9,
+            extra <= 100.0 * (400.0 + ENTRY_EXIT_CYCLES + PREEMPTION_REFILL_CYCLES) / 168.0 + 1e-9,
             "{extra}"
         );
         assert!(extra > 0.0);
+    }
+
+    #[test]
+    fn a_small_preempting_activity_is_charged_the_lines_it_can_evict() {
+        let full = response_times(&schedule(1_000.0), 168e6);
+        let mut small = schedule(1_000.0);
+        // SysTick's code fits 10 lines: it evicts at most 10 of control's.
+        small[0].refill_cycles = 60.0;
+        let small = response_times(&small, 168e6);
+        let saved =
+            full[1].response_time_bound_us.unwrap() - small[1].response_time_bound_us.unwrap();
+        assert!(
+            (saved - (PREEMPTION_REFILL_CYCLES - 60.0) / 168.0).abs() < 1e-9,
+            "{saved}"
+        );
     }
 
     #[test]

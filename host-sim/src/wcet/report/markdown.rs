@@ -74,6 +74,18 @@ fn render_markdown(r: &WcetReport) -> Result<String, std::fmt::Error> {
         r.elf,
         num(r.clock_hz as f64 / 1e6),
     )?;
+    writeln!(
+        s,
+        "Core clock {} MHz from {}, set by `{}`; on QEMU's netduinoplus2 (no RCC: it reads 0) \
+         the set-up returns {}, the machine's fixed clock.\n",
+        num(r.clock.sysclk_hz as f64 / 1e6),
+        r.clock.source,
+        r.clock
+            .configured_in
+            .as_deref()
+            .unwrap_or("no function of the ELF"),
+        r.clock.in_qemu,
+    )?;
     render_goals(&mut s, r)?;
     render_tasks(&mut s, r)?;
     render_memory(&mut s, r)?;
