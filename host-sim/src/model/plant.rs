@@ -151,12 +151,20 @@ pub const DEFAULT_DT_S: f64 = 1e-3;
 pub const BRAKE_LOCK_RADPS: f64 = 2.0;
 
 /// Wheel speed under which the brake torque `torque_nm` (N·m) fades, rad/s: the
-/// larger of [`BRAKE_LOCK_RADPS`] and `|T|·dt/(1.5·I_r)`. The fade is a viscous
-/// lock of rate `|T|/(ω_lock·I_r)`; keeping that rate times the step `dt_s` under
-/// 1.5 keeps RK4 (stable to 2.78) well damped whatever the torque and the step.
+/// larger of [`BRAKE_LOCK_RADPS`] and `|T|·dt/(BRAKE_LOCK_RATE_DT·I_r)`. The fade
+/// is a viscous lock of rate `|T|/(ω_lock·I_r)`, at most `BRAKE_LOCK_RATE_DT/dt`.
 pub fn brake_lock_radps(torque_nm: f64, dt_s: f64, wheel_inertia_kg_m2: f64) -> f64 {
-    BRAKE_LOCK_RADPS.max(torque_nm.abs() * dt_s / (1.5 * wheel_inertia_kg_m2))
+    BRAKE_LOCK_RADPS.max(torque_nm.abs() * dt_s / (BRAKE_LOCK_RATE_DT * wheel_inertia_kg_m2))
 }
+
+/// Largest rate of the brakes' viscous lock times the step (see
+/// [`brake_lock_radps`]). At a standstill the wheel's spin mode has the tyre's
+/// rate too: the slip ratio's floor `v_κ` puts it at `2/dt` (`2.07/dt` with the
+/// car's own inertia, default car), and the two add. RK4 is stable to 2.78/dt on
+/// the real axis: with the lock's 0.5 on top the sum stays under it, so a car held
+/// on its brakes on a slope settles (a larger lock rate let the RK4 step sit at a
+/// spurious fixed point whose forces were not the car's).
+pub const BRAKE_LOCK_RATE_DT: f64 = 0.5;
 
 /// Torque acting on a wheel spinning at `omega_radps` for the commanded torque
 /// `torque_nm` (N·m): drive torque as is, brake torque (negative) against the
