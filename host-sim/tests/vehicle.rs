@@ -80,6 +80,30 @@ fn tyre_coefficients_default_to_zero_and_scales_to_one() {
 }
 
 #[test]
+fn the_rolling_resistance_is_optional_and_checked() {
+    let line = template()
+        .lines()
+        .find(|l| l.starts_with("crr = "))
+        .unwrap()
+        .to_string();
+    // Absent: none.
+    let v = VehicleParams::from_toml_str(&template().replace(&line, "")).unwrap();
+    assert_eq!(v.crr, 0.0);
+    assert_eq!(VehicleParams::default().crr, 0.012);
+    for (bad, says) in [
+        ("crr = -0.01", "must be zero or positive"),
+        ("crr = 0.2", "must be at most 0.1"),
+        ("crr = nan", "finite"),
+    ] {
+        let e = error_of(&template().replace(&line, bad));
+        assert!(
+            e.contains(r#"field "crr""#) && e.contains(says),
+            "{bad}: {e}"
+        );
+    }
+}
+
+#[test]
 fn an_unreadable_file_names_the_path() {
     let e = VehicleParams::from_toml_file("/nonexistent/car.toml").unwrap_err();
     assert!(matches!(e, VehicleError::Io { .. }));
