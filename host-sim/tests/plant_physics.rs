@@ -1,10 +1,11 @@
 //! The plant at the limit: physics checks that a wrong force or a wrong moment
 //! would fail (friction limit on a steady circle, momentum and energy balances,
 //! rest, wheel lift, the road's grade, drag and rolling resistance against hand
-//! calculations).
+//! calculations, the actuators' step responses against their closed form).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use host_sim::closed_loop::validity::{sweep_radius, StopCause, ValidityConfig};
+use host_sim::model::actuator::ActuatorParams;
 use host_sim::model::plant::{Inputs, Plant, RoadUnder, State, FL, FR, RL, RR};
 use host_sim::model::tire::{self, TireParams};
 use host_sim::model::vehicle::{VehicleParams, G};
@@ -580,4 +581,74 @@ fn a_car_held_on_its_brakes_on_a_grade_loads_its_rear_axle_and_its_accelerometer
         (moment - pull).abs() < 0.02 * pull,
         "the loads' moment {moment} N·m against the pull's {pull} N·m"
     );
+}
+
+/// The closed form of a rate-limited first-order lag behind a pure delay (see
+/// `host_sim::model::actuator`): its output at `t` (s) for a step of `a` at 0.
+fn lagged_step(a: f64, tau_s: f64, delay_s: f64, rate: f64, t: f64) -> f64 {
+    if t < delay_s {
+        return 0.0;
+    }
+    let (sign, a) = (a.signum(), a.abs());
+    if a <= rate * tau_s {
+        return sign * a * (1.0 - (-(t - delay_s) / tau_s).exp());
+    }
+    let t1 = delay_s + (a - rate * tau_s) / rate;
+    sign * if t < t1 {
+        rate * (t - delay_s)
+    } else {
+        a - rate * tau_s * (-(t - t1) / tau_s).exp()
+    }
+}
+
+#[test]
+fn the_actuators_step_responses_are_a_delay_a_lag_and_a_rate_limit() {
+    // Steering: 0.25 rad asked with 80 ms of lag, 20 ms of delay and 0.5 rad/s at
+    // most (a ramp, then the lag's tail); torque: -800 N·m with 50 ms, 10 ms and
+    // 40 kN·m/s (the lag alone: its rate stays under the limit).
+    let p = VehicleParams {
+        actuators: ActuatorParams {
+            steering_time_constant_s: 0.08,
+            steering_delay_s: 0.02,
+            steering_rate_limit_rad_per_s: 0.5,
+            torque_time_constant_s: 0.05,
+            torque_delay_s: 0.01,
+            torque_rate_limit_nm_per_s: 40_000.0,
+        },
+        ..VehicleParams::default()
+    };
+    let mut plant = Plant::new(p, State::at_speed(15.0, &p)).unwrap();
+    let step = Inputs {
+        torque_nm: [-800.0; 4],
+        delta_rad: 0.25,
+    };
+    let h = plant.dt_s();
+    let mut ramp_steps = 0;
+    for k in 0..600 {
+        plant.step(&step, 1.0).unwrap();
+        let o = plant.outputs();
+        // Step k applies the actuator's value at its end.
+        let t = (k + 1) as f64 * h;
+        let delta = lagged_step(0.25, 0.08, 0.02, 0.5, t);
+        let torque = lagged_step(-800.0, 0.05, 0.01, 40_000.0, t);
+        // The discrete switch from the ramp to the tail may fall a step from the
+        // continuous one: within a step's worth of rate.
+        assert!(
+            (o.delta_rad - delta).abs() <= 0.5 * h + 1e-12,
+            "t = {t} s: steering {} rad, closed form {delta} rad",
+            o.delta_rad
+        );
+        for applied in o.torque_nm {
+            assert!(
+                (applied - torque).abs() <= 1e-9 * 800.0,
+                "t = {t} s: torque {applied} N·m, closed form {torque} N·m"
+            );
+        }
+        let ramp = 0.5 * (t - 0.02);
+        if t > 0.02 && (o.delta_rad - ramp).abs() < 1e-12 {
+            ramp_steps += 1;
+        }
+    }
+    // The rate limit held the steering on its ramp up to 0.25 − 0.5·0.08 = 0.21 rad.
+    assert!(ramp_steps >= 410, "{ramp_steps} steps on the ramp");
 }

@@ -6,7 +6,9 @@
 //! `ω_i` (`i` = fl, fr, rl, rr). Inputs: the four wheel torques and the front steering
 //! angle (both front wheels). Vehicle frame x forward, y left, z up; yaw, roll and
 //! pitch right-handed (yaw counter-clockwise, roll positive when the left side rises,
-//! pitch positive nose down).
+//! pitch positive nose down). The commands go through the car's actuators
+//! ([`crate::model::actuator`]: delay, lag, rate limit; ideal by default) before
+//! the plant applies them, held over each step.
 //!
 //! # Equations (the paper's, with these choices)
 //!
@@ -165,6 +167,7 @@
 //! independent calls. `PLANT_BENCH_STEPS=N cargo bench -p host-sim --bench plant`
 //! runs a fixed number of steps (for instruction counters).
 
+use crate::model::actuator::Actuators;
 use crate::model::tire;
 use crate::model::vehicle::{InvalidField, VehicleParams, G};
 
@@ -315,15 +318,15 @@ impl State {
     }
 }
 
-/// Inputs of the plant, held constant over a step.
+/// Inputs of the plant, held constant over a step: the commands to its actuators.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Inputs {
     /// Torque commanded on each wheel `[fl, fr, rl, rr]`, N·m: positive drives forward,
     /// negative is a brake torque of that magnitude, acting against the wheel's
     /// rotation (it stops a wheel, it never spins it backwards; see the module doc).
     pub torque_nm: [f64; 4],
-    /// Steering angle of both front wheels, rad (positive to the left). Clamped to
-    /// the vehicle's `max_steer_rad`.
+    /// Steering angle of both front wheels, rad (positive to the left). The
+    /// steering actuator holds it within the vehicle's `max_steer_rad`.
     pub delta_rad: f64,
 }
 
@@ -353,8 +356,12 @@ impl RoadUnder {
 pub struct Outputs {
     /// Simulated time, s.
     pub time_s: f64,
-    /// Steering angle applied (after the mechanical limit), rad.
+    /// Steering angle applied over the last step (the steering actuator's output,
+    /// within the mechanical limit), rad.
     pub delta_rad: f64,
+    /// Wheel torques applied over the last step `[fl, fr, rl, rr]` (the torque
+    /// actuators' outputs), N·m.
+    pub torque_nm: [f64; 4],
     /// Normal loads `F_zi`, N (never negative).
     pub fz_n: [f64; 4],
     /// Wheels whose load would be negative or zero (lifted off the road).
@@ -458,7 +465,7 @@ struct StepInputs {
     delta_rad: f64,
     /// `sin δ_i`, `cos δ_i` of each wheel (`δ` front, 0 rear).
     sin_cos_delta: [(f64, f64); 4],
-    /// Commanded wheel torques, N·m.
+    /// Wheel torques applied, N·m.
     torque_nm: [f64; 4],
     /// Road friction under each wheel `[fl, fr, rl, rr]`.
     mu: [f64; 4],
@@ -491,7 +498,9 @@ pub struct Plant {
     state: State,
     dt_s: f64,
     time_s: f64,
+    /// What the actuators applied over the last step.
     last_inputs: Inputs,
+    actuators: Actuators,
     road: RoadUnder,
     lift: WheelLift,
 }
@@ -532,6 +541,7 @@ impl Plant {
             dt_s,
             time_s: 0.0,
             last_inputs: Inputs::default(),
+            actuators: Actuators::new(&p.actuators, p.max_steer_rad, dt_s),
             road: RoadUnder::level(1.0),
             lift: WheelLift::default(),
         })
@@ -574,10 +584,11 @@ impl Plant {
         if !road.grade_rad.is_finite() || road.grade_rad.abs() >= core::f64::consts::FRAC_PI_4 {
             return Err(PlantError::Grade(road.grade_rad));
         }
-        let max = self.params.max_steer_rad;
+        let command = (inputs.delta_rad, inputs.torque_nm);
+        let applied = self.actuators.peek(command.0, command.1);
         let inp = Inputs {
-            torque_nm: inputs.torque_nm,
-            delta_rad: inputs.delta_rad.clamp(-max, max),
+            torque_nm: applied.1,
+            delta_rad: applied.0,
         };
         let si = self.step_inputs(&inp, road);
         let h = self.dt_s;
@@ -597,6 +608,7 @@ impl Plant {
         self.state = State::from_array(&y);
         self.time_s += h;
         self.last_inputs = inp;
+        self.actuators.commit(command, applied);
         self.road = *road;
         Ok(())
     }
@@ -662,8 +674,9 @@ impl Plant {
             .max(self.derived.kappa_floor_per_k * k_n)
     }
 
-    /// Loads, slips, forces and accelerations at the current state with the inputs
-    /// and frictions of the last step (zero torque, straight, `μ = 1` before any step).
+    /// Loads, slips, forces and accelerations at the current state with what the
+    /// actuators applied and the road of the last step (zero torque, straight,
+    /// `μ = 1`, level before any step).
     pub fn outputs(&self) -> Outputs {
         let y = self.state.to_array();
         let si = self.step_inputs(&self.last_inputs, &self.road);
@@ -766,6 +779,7 @@ impl Plant {
             *o = Outputs {
                 time_s: o.time_s,
                 delta_rad: si.delta_rad,
+                torque_nm: si.torque_nm,
                 fz_n: w.map(|x| x.fz),
                 wheel_lifted: lifted,
                 kappa: w.map(|x| x.kappa),

@@ -11,6 +11,7 @@ use firmware::vehicle_config::VehicleConfig;
 use firmware::Real;
 use serde::Deserialize;
 
+use crate::model::actuator::ActuatorParams;
 use crate::model::tire::{self, TireParams};
 
 /// Parameters of the vehicle (the notations of the paper's Table I). SI units.
@@ -60,6 +61,10 @@ pub struct VehicleParams {
     pub low_speed_mps: f64,
     /// Tyre (the same on the four wheels; right-hand wheels mirrored).
     pub tyre: TireParams,
+    /// The steering and torque actuators' dynamics (the optional `[actuators]`
+    /// table; ideal when absent: see [`crate::model::actuator`]).
+    #[serde(default)]
+    pub actuators: ActuatorParams,
 }
 
 impl Default for VehicleParams {
@@ -69,7 +74,7 @@ impl Default for VehicleParams {
     /// rates that give about 4° of roll per g, the 205/60R15 PAC2002 tyre of
     /// Pacejka's book (Table A3.1), whose peak friction is about 1 at `μ = 1`, and a
     /// passenger-car tyre's rolling resistance on a paved road (`C_rr` 0.012; the
-    /// sources are in `host-sim/vehicles/default.toml`).
+    /// sources are in `host-sim/vehicles/default.toml`); ideal actuators.
     fn default() -> Self {
         Self {
             mass_kg: 1500.0,
@@ -91,6 +96,7 @@ impl Default for VehicleParams {
             max_steer_rad: 0.6,
             low_speed_mps: 0.5,
             tyre: TireParams::default(),
+            actuators: ActuatorParams::default(),
         }
     }
 }
@@ -173,8 +179,9 @@ impl VehicleParams {
         Ok(params)
     }
 
-    /// Checks every field: finite, positive where the model divides by it, and a
-    /// tyre whose forces have the signs of this project's convention.
+    /// Checks every field: finite, positive where the model divides by it, the
+    /// actuators' ranges, and a tyre whose forces have the signs of this project's
+    /// convention.
     pub fn validate(&self) -> Result<(), InvalidField> {
         let positive = [
             ("mass_kg", self.mass_kg),
@@ -218,6 +225,7 @@ impl VehicleParams {
                 return Err(bad(name, format!("must be zero or positive, got {v}")));
             }
         }
+        self.actuators.validate()?;
         if self.crr > MAX_CRR {
             return Err(bad(
                 "crr",
