@@ -37,6 +37,9 @@
 //! Everything is computed in whole plant steps: deterministic, no allocation after
 //! the plant is built.
 
+use std::fmt;
+use std::str::FromStr;
+
 use serde::Deserialize;
 
 use crate::model::vehicle::InvalidField;
@@ -152,6 +155,83 @@ impl ActuatorParams {
         }
         Ok(())
     }
+}
+
+impl ActuatorParams {
+    /// These parameters with `settings` applied in order (a later one for the same
+    /// field wins).
+    pub fn with_settings(&self, settings: &[ActuatorSetting]) -> Self {
+        let mut p = *self;
+        for s in settings {
+            if let Some(f) = p.field_mut(s.field) {
+                *f = s.value;
+            }
+        }
+        p
+    }
+}
+
+/// One actuator parameter given for a run (`--actuator KEY=VALUE`): a field of
+/// [`ActuatorParams`] and its value, over the vehicle file's.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ActuatorSetting {
+    /// The field's name (one of [`ACTUATOR_FIELDS`]).
+    pub field: &'static str,
+    /// Its value, in the field's unit.
+    pub value: f64,
+}
+
+impl fmt::Display for ActuatorSetting {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}={}", self.field, self.value)
+    }
+}
+
+impl FromStr for ActuatorSetting {
+    type Err = String;
+    /// `KEY=VALUE`: a field of [`ACTUATOR_FIELDS`] and a value in its range (see
+    /// [`ActuatorParams::validate`]; `inf` for no rate limit).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let keys = ACTUATOR_FIELDS
+            .iter()
+            .map(|(n, unit)| format!("{n} ({unit})"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let (key, value) = s
+            .split_once('=')
+            .ok_or_else(|| format!("--actuator {s:?}: wants KEY=VALUE with KEY one of {keys}"))?;
+        let (key, value) = (key.trim(), value.trim());
+        let field = ACTUATOR_FIELDS
+            .iter()
+            .map(|(n, _)| *n)
+            .find(|n| *n == key)
+            .ok_or_else(|| {
+                format!("--actuator {s:?}: no actuator field {key:?}; KEY is one of {keys}")
+            })?;
+        let value: f64 = value
+            .parse()
+            .map_err(|_| format!("--actuator {s:?}: VALUE {value:?} is not a number"))?;
+        let setting = ActuatorSetting { field, value };
+        ActuatorParams::default()
+            .with_settings(&[setting])
+            .validate()
+            .map_err(|e| format!("--actuator {s:?}: {}", e.reason))?;
+        Ok(setting)
+    }
+}
+
+/// `--actuator`'s help: the keys, their units and what the shipped cars have.
+pub fn actuator_help() -> String {
+    let ideal = ActuatorParams::default().named_values();
+    let keys = ACTUATOR_FIELDS
+        .iter()
+        .zip(ideal)
+        .map(|((n, unit), (_, v))| format!("  {n}: {unit} (ideal: {v})"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    format!(
+        "An actuator parameter of the plant's car, KEY=VALUE, over the vehicle file's [actuators] table (repeatable; the same in every run of a sweep). The steering angle and each wheel torque go through a pure delay, a first-order lag and a rate limit; the shipped cars' are ideal. Keys:\n{keys}"
+    )
 }
 
 /// One actuator: its delay line, lag, rate limit, range and output.
@@ -293,6 +373,30 @@ mod tests {
             a.commit((0.0, t), out);
         }
         assert_eq!(seen, vec![0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 4.0]);
+    }
+
+    #[test]
+    fn settings_parse_apply_and_refuse_nonsense_with_the_reason() {
+        let s: ActuatorSetting = "steering_time_constant_s=0.08".parse().unwrap();
+        assert_eq!(s.to_string(), "steering_time_constant_s=0.08");
+        let r: ActuatorSetting = " torque_rate_limit_nm_per_s = inf ".parse().unwrap();
+        assert_eq!(r.value, f64::INFINITY);
+        let p = ActuatorParams::default().with_settings(&[s, r]);
+        assert_eq!(p.steering_time_constant_s, 0.08);
+        assert_eq!(p.to_settings_string(), "steering_time_constant_s=0.08");
+        for (bad, says) in [
+            ("steering_time_constant_s", "wants KEY=VALUE"),
+            ("steering_lag=0.1", "no actuator field \"steering_lag\""),
+            ("torque_delay_s=fast", "VALUE \"fast\" is not a number"),
+            ("torque_delay_s=1.5", "must be in [0, 1] s"),
+            ("steering_rate_limit_rad_per_s=-1", "must be positive"),
+        ] {
+            let e = bad.parse::<ActuatorSetting>().unwrap_err();
+            assert!(
+                e.starts_with("--actuator") && e.contains(says),
+                "{bad}: {e}"
+            );
+        }
     }
 
     #[test]

@@ -10,6 +10,7 @@
 //! | [`obstacle_placement`] | boxes on any track; random obstacles from a seed |
 //! | [`lap_patches`] | stretches of road along a lap with a value of their own (`START_M:LENGTH_M:VALUE`), shared by friction and grade |
 //! | [`road_friction`] | friction that changes along the road (`--mu-patch`); μ̂ judged against it |
+//! | [`road_grade`] | the road's grade along the lap (`--grade`); the grade under the car |
 //! | [`scenario`] | the built-in `paper` scenario and `--track`/`--obstacles` resolution |
 //! | [`route`] | the windows of the road the ECU holds, sent as the car moves on |
 //! | [`disturbance`] | noise, delay, dropout, steering rate limit, late obstacle at the ECU's boundary |
@@ -22,6 +23,7 @@ pub mod lap_patches;
 pub mod obstacle_file;
 pub mod obstacle_placement;
 pub mod road_friction;
+pub mod road_grade;
 pub mod route;
 pub mod scenario;
 pub mod track;
