@@ -16,7 +16,10 @@ use firmware::Real;
 use crate::closed_loop::ecu::{ControlOutput, Ecu, SimulatedEcu};
 use crate::closed_loop::SimOptions;
 use crate::model::vehicle::{vehicle_config, VehicleParams};
-use crate::world::disturbance::{Disturbances, DropoutKind, SplitMix64, NOISE_UNIT};
+use crate::world::disturbance::{
+    estimate_biases, Disturbances, DropoutKind, EstimateBias, SplitMix64, LATERAL_NOISE_STREAM,
+    NOISE_STREAM, NOISE_UNIT,
+};
 use crate::world::route::Window;
 use crate::world::scenario::Scenario;
 
@@ -40,6 +43,10 @@ pub struct DisturbedEcu<T: Real> {
     inner: SimulatedEcu<T>,
     d: Disturbances,
     rng: SplitMix64,
+    /// The lateral speed's noise, a stream of its own.
+    rng_lateral: SplitMix64,
+    /// The run's biases on the lateral speed and the yaw rate.
+    bias: EstimateBias,
     history: VecDeque<StateEstimate<T>>,
     last_delivered: Option<StateEstimate<T>>,
     last_delta: Option<T>,
@@ -97,7 +104,9 @@ impl<T: Real> DisturbedEcu<T> {
         };
         Ok(Self {
             inner,
-            rng: SplitMix64::new(d.seed ^ 0x6E6F_6973_6521),
+            rng: SplitMix64::new(d.seed ^ NOISE_STREAM),
+            rng_lateral: SplitMix64::new(d.seed ^ LATERAL_NOISE_STREAM),
+            bias: estimate_biases(d.seed, d.noise_scale),
             d,
             history: VecDeque::new(),
             last_delivered: None,
@@ -118,15 +127,27 @@ impl<T: Real> DisturbedEcu<T> {
         let mut m = *truth;
         if self.d.noise_scale > 0.0 {
             let k = self.d.noise_scale;
-            let add = |x: T, sigma: f64, rng: &mut SplitMix64| {
-                T::from_f64(x.to_f64() + k * sigma * rng.gaussian())
+            // The truth plus a bias (m, rad, m/s or rad/s) plus a draw of `sigma`.
+            let add = |x: T, bias: f64, sigma: f64, rng: &mut SplitMix64| {
+                T::from_f64(x.to_f64() + bias + k * sigma * rng.gaussian())
             };
-            let n = NOISE_UNIT;
-            m.x_m = add(m.x_m, n.position_m, &mut self.rng);
-            m.y_m = add(m.y_m, n.position_m, &mut self.rng);
-            m.psi_rad = add(m.psi_rad, n.heading_rad, &mut self.rng);
-            m.vx_mps = add(m.vx_mps, n.speed_mps, &mut self.rng);
-            m.yaw_rate_radps = add(m.yaw_rate_radps, n.yaw_rate_radps, &mut self.rng);
+            let (n, b) = (NOISE_UNIT, self.bias);
+            m.x_m = add(m.x_m, 0.0, n.position_m, &mut self.rng);
+            m.y_m = add(m.y_m, 0.0, n.position_m, &mut self.rng);
+            m.psi_rad = add(m.psi_rad, 0.0, n.heading_rad, &mut self.rng);
+            m.vx_mps = add(m.vx_mps, 0.0, n.speed_mps, &mut self.rng);
+            m.yaw_rate_radps = add(
+                m.yaw_rate_radps,
+                b.yaw_rate_radps,
+                n.yaw_rate_radps,
+                &mut self.rng,
+            );
+            m.vy_mps = add(
+                m.vy_mps,
+                b.lateral_speed_mps,
+                n.lateral_speed_mps,
+                &mut self.rng_lateral,
+            );
         }
         let keep = self.d.delay_periods() + 1;
         self.history.push_back(m);
