@@ -251,3 +251,83 @@ pub fn centroid(v: &[[f64; 2]]) -> [f64; 2] {
     let (x, y) = v.iter().fold((0.0, 0.0), |(x, y), p| (x + p[0], y + p[1]));
     [x / n, y / n]
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::world::disturbance::run_seed;
+
+    /// The estimates the tasks see, `n` of them, for a car standing still at 10 m/s
+    /// straight ahead, at noise level `k` with the seed `seed`.
+    fn seen_at_level(k: f64, seed: u64, n: usize) -> (StateEstimate<f64>, Vec<StateEstimate<f64>>) {
+        let d = Disturbances {
+            noise_scale: k,
+            seed,
+            ..Disturbances::default()
+        };
+        let mut ecu = DisturbedEcu::<f64>::new(
+            &Scenario::paper(false),
+            &VehicleParams::default(),
+            &SimOptions::default(),
+            d,
+        )
+        .unwrap();
+        let truth = StateEstimate {
+            vx_mps: 10.0,
+            vy_mps: 0.1,
+            yaw_rate_radps: 0.05,
+            ..StateEstimate::zeroed()
+        };
+        let seen = (0..n)
+            .map(|i| ecu.seen(i as u64 * CONTROL_PERIOD_US, &truth))
+            .collect();
+        (truth, seen)
+    }
+
+    fn mean_and_sd(xs: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+        let n = xs.clone().count() as f64;
+        let mean = xs.clone().sum::<f64>() / n;
+        let var = xs.map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+        (mean, var.sqrt())
+    }
+
+    #[test]
+    fn the_lateral_speed_and_yaw_rate_the_tasks_see_carry_the_runs_bias_and_the_levels_noise() {
+        let (k, n) = (4.0, 20_000);
+        let seed = run_seed("paper", 3);
+        let bias = estimate_biases(seed, k);
+        let (truth, seen) = seen_at_level(k, seed, n);
+        let (vy_mean, vy_sd) = mean_and_sd(seen.iter().map(|m| m.vy_mps - truth.vy_mps));
+        let (r_mean, r_sd) =
+            mean_and_sd(seen.iter().map(|m| m.yaw_rate_radps - truth.yaw_rate_radps));
+        let (sv, sr) = (
+            k * NOISE_UNIT.lateral_speed_mps,
+            k * NOISE_UNIT.yaw_rate_radps,
+        );
+        // The mean is the bias within four standard errors; the spread the level's.
+        let se = 4.0 / (n as f64).sqrt();
+        assert!(
+            (vy_mean - bias.lateral_speed_mps).abs() < se * sv,
+            "{vy_mean} vs {bias:?}"
+        );
+        assert!(
+            (r_mean - bias.yaw_rate_radps).abs() < se * sr,
+            "{r_mean} vs {bias:?}"
+        );
+        assert!((vy_sd / sv - 1.0).abs() < 0.03, "σ {vy_sd}");
+        assert!((r_sd / sr - 1.0).abs() < 0.03, "σ {r_sd}");
+        // This seed's biases are large enough to tell from the noise's mean.
+        assert!(bias.lateral_speed_mps.abs() > 10.0 * se * sv, "{bias:?}");
+        assert!(bias.yaw_rate_radps.abs() > 10.0 * se * sr, "{bias:?}");
+        // The same seed, the same draws; level 0, the truth.
+        let (_, again) = seen_at_level(k, seed, 100);
+        assert_eq!(format!("{:?}", &seen[..100]), format!("{again:?}"));
+        let (truth, clean) = seen_at_level(0.0, seed, 100);
+        assert!(clean.iter().all(|m| *m
+            == StateEstimate {
+                stamp_us: m.stamp_us,
+                ..truth
+            }));
+    }
+}
