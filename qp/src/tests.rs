@@ -334,6 +334,13 @@ fn unrolled_kernels_are_their_loops_bit_for_bit() {
                 dot4(&z, &b).to_bits()
             );
         }
+        // Every length up to 4·2 + 3 (two groups and a remainder of three).
+        for len in 0..=11 {
+            assert_eq!(
+                dot4_unrolled(&a[..len], &b[..len], 2).to_bits(),
+                dot4(&a[..len], &b[..len]).to_bits()
+            );
+        }
         for len in 0..=11 {
             let acc0 = lcg(&mut st) as f32;
             let mut acc = acc0;
