@@ -171,7 +171,9 @@ pub(crate) fn solve_upper<T: Real, const N: usize>(r: &[[T; N]; N], u: &[T; N], 
     }
 }
 
-/// Row `j` of `R⁻¹` (`e_jᵀ R⁻¹`, zero before column `j`) into `out`.
+/// Row `j` of `R⁻¹` (`e_jᵀ R⁻¹`, zero before column `j`) into `out`: the tests'
+/// reference for [`store_inverse_row`].
+#[cfg(test)]
 pub(crate) fn inverse_row<T: Real, const N: usize>(r: &[[T; N]; N], j: usize, out: &mut [T; N]) {
     out.fill(T::ZERO);
     if let Some(o) = out.get_mut(j) {
@@ -209,20 +211,48 @@ pub(crate) fn transform<
 /// in the lower triangle of `h`, which holds `R` in its upper triangle: the `N−1−j`
 /// entries after the diagonal go to `h[N−1−j][0..N−1−j]`, the lower part of row
 /// `N−1−j`, exactly its length (so the rows of all `N` bounds fit at once). The
-/// solve reads the upper triangle only.
+/// solve reads the upper triangle only. Not inlined: its loops' bounds are per
+/// call.
+#[inline(never)]
 pub(crate) fn store_inverse_row<T: Real, const N: usize>(h: &mut [[T; N]; N], j: usize) {
     if j >= N {
         return;
     }
-    let mut row = [T::ZERO; N];
-    inverse_row(h, j, &mut row);
+    // `solve_transposed` of `e_j` from `j`, written where the row is kept rather
+    // than into a row of its own and copied (a frame of `N` entries and a `memcpy`
+    // less on the plan task's deepest stack path): `x_j = 1/R_jj`, and `x_k` for
+    // `k > j` at `h[dst][k − j − 1]`, the same sums in the same order, so bit for
+    // bit `inverse_row`'s (the test `store_inverse_row_is_inverse_row`).
     let dst = N - 1 - j;
-    if let (Some(d), Some(src)) = (
-        h.get_mut(dst).and_then(|r| r.get_mut(..dst)),
-        row.get(j + 1..),
-    ) {
-        // WCET: fewer than N entries; on the ECU the QP is the MPC's, N = NV f32.
-        // wcet-bound: NV * 4 bytes
-        d.copy_from_slice(src);
+    let xj = (T::ONE - T::ZERO) / h[j][j];
+    // wcet-bound: NV
+    for l in j + 1..N {
+        let mut acc = [T::ZERO; 4];
+        let mut k = j;
+        // The first group apart (it holds `x_j`), so that the others read `x` from
+        // the kept row without a test.
+        if k + 4 <= l {
+            acc[0] += xj * h[j][l];
+            for q in 1..4 {
+                acc[q] += h[dst][q - 1] * h[j + q][l];
+            }
+            k += 4;
+        }
+        // As `solve_transposed`'s: Σ_{l<N} (l − j)/4 ≤ N(N − 1)/8 over the call.
+        // wcet-bound: NV * (NV - 1) / 8 per call
+        while k + 4 <= l {
+            for (q, a) in acc.iter_mut().enumerate() {
+                *a += h[dst][k + q - j - 1] * h[k + q][l];
+            }
+            k += 4;
+        }
+        let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+        // wcet-bound: 3
+        while k < l {
+            let x = if k == j { xj } else { h[dst][k - j - 1] };
+            s += x * h[k][l];
+            k += 1;
+        }
+        h[dst][l - j - 1] = (T::ZERO - s) / h[l][l];
     }
 }

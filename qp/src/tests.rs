@@ -354,3 +354,40 @@ fn unrolled_kernels_are_their_loops_bit_for_bit() {
         }
     }
 }
+
+/// `store_inverse_row` writes row `j` of `R⁻¹` into the lower triangle bit for bit
+/// as `inverse_row` computes it, for every `j` of an 11 × 11 `R` (groups of four
+/// and remainders), and leaves the upper triangle (`R`) as it was.
+#[test]
+fn store_inverse_row_is_inverse_row() {
+    const N: usize = 11;
+    let mut st = 11u64;
+    for _ in 0..50 {
+        let mut r = [[0.0f32; N]; N];
+        for (i, row) in r.iter_mut().enumerate() {
+            for (k, x) in row.iter_mut().enumerate().skip(i) {
+                *x = if k == i {
+                    0.5 + lcg(&mut st).abs() as f32
+                } else {
+                    lcg(&mut st) as f32
+                };
+            }
+        }
+        let mut h = r;
+        for j in 0..N {
+            crate::cholesky::store_inverse_row(&mut h, j);
+        }
+        for j in 0..N {
+            let mut want = [0.0f32; N];
+            inverse_row(&r, j, &mut want);
+            for l in j + 1..N {
+                assert_eq!(h[N - 1 - j][l - j - 1].to_bits(), want[l].to_bits());
+            }
+        }
+        for i in 0..N {
+            for k in i..N {
+                assert_eq!(h[i][k].to_bits(), r[i][k].to_bits());
+            }
+        }
+    }
+}
