@@ -467,8 +467,11 @@ fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
         cycles(&a, "plan_job"),
         cycles(&a, "window_job"),
     );
-    assert!(window > 1_000_000 && plan > window, "{plan} {window}");
-    assert!(task >= plan, "the task {task} < its job {plan}");
+    assert!(window > 1_000_000 && plan > 1_000_000, "{plan} {window}");
+    assert!(
+        task >= plan.max(window),
+        "the task {task} < its larger job, {plan} or {window}"
+    );
     assert!(
         task <= plan.max(window) + 200_000,
         "the task {task} is more than its larger job, {plan} or {window}, and 200 k"
@@ -585,8 +588,8 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
     );
 }
 
-/// One source loop the compiler split into nested binary loops (the QP's main
-/// loop: a path that skips its head) shares its bound only where the source says
+/// One source loop the compiler split into nested binary loops (the control
+/// link's frame reader in `USART2`: a path that skips its head) shares its bound only where the source says
 /// so (`// wcet-bound: same loop`): without it the inner loop is refused, with a
 /// message that names the lines it may be written on.
 #[test]
@@ -599,9 +602,9 @@ fn a_split_loop_without_its_own_annotation_is_refused() {
         .source
         .as_deref()
         .unwrap_or("")
-        .contains("qp/src/active_set.rs")
+        .contains("firmware/src/bin/ecu.rs")
         && l.source.as_deref().unwrap_or("").contains("`same loop`")));
-    let (_dir, edited) = edited_sources("qp/src/active_set.rs", |t| {
+    let (_dir, edited) = edited_sources("firmware/src/bin/ecu.rs", |t| {
         t.replace("// wcet-bound: same loop", "// (removed by a test)")
     });
     let after = host_sim::wcet::analysis::analyse(elf, &edited, &[]).unwrap();
@@ -611,7 +614,7 @@ fn a_split_loop_without_its_own_annotation_is_refused() {
     assert!(
         why.contains("enclosing loop's")
             && why.contains("same loop")
-            && why.contains("qp/src/active_set.rs:"),
+            && why.contains("firmware/src/bin/ecu.rs:"),
         "{why}"
     );
 }
