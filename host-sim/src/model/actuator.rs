@@ -34,6 +34,16 @@
 //! has its own channel, with the same parameters: one lag for the drive and the
 //! brakes alike.
 //!
+//! # Brake effectiveness
+//!
+//! A brake's torque is its pads' friction times the clamping force the command
+//! asks: the pads' friction varies with their temperature, wear and wetness (about
+//! ±20 % on a road car), so the torque a brake gives per N·m commanded,
+//! [`ActuatorParams::brake_gain`], is not the firmware's to know. A negative
+//! (braking) wheel-torque command is multiplied by it before its channel; a drive
+//! torque (an electric motor's, known from its current) is not. 1 by default: the
+//! brakes give what is asked.
+//!
 //! Everything is computed in whole plant steps: deterministic, no allocation after
 //! the plant is built.
 
@@ -68,6 +78,9 @@ pub struct ActuatorParams {
     pub torque_delay_s: f64,
     /// Largest rate of each wheel torque, N·m/s, > 0 (`inf`: none).
     pub torque_rate_limit_nm_per_s: f64,
+    /// Brake torque the brakes give per N·m of braking commanded, dimensionless,
+    /// in `[0.25, 2]` (1: as commanded; module docs, *Brake effectiveness*).
+    pub brake_gain: f64,
 }
 
 impl Default for ActuatorParams {
@@ -80,19 +93,25 @@ impl Default for ActuatorParams {
             torque_time_constant_s: 0.0,
             torque_delay_s: 0.0,
             torque_rate_limit_nm_per_s: f64::INFINITY,
+            brake_gain: 1.0,
         }
     }
 }
 
+/// Range of [`ActuatorParams::brake_gain`], dimensionless: a brake that gives a
+/// quarter of its torque, or twice it, is broken, not worn.
+pub const BRAKE_GAIN_RANGE: [f64; 2] = [0.25, 2.0];
+
 /// The fields of [`ActuatorParams`] by name (as in the vehicle file and
 /// `--actuator`), with their unit.
-pub const ACTUATOR_FIELDS: [(&str, &str); 6] = [
+pub const ACTUATOR_FIELDS: [(&str, &str); 7] = [
     ("steering_time_constant_s", "s"),
     ("steering_delay_s", "s"),
     ("steering_rate_limit_rad_per_s", "rad/s"),
     ("torque_time_constant_s", "s"),
     ("torque_delay_s", "s"),
     ("torque_rate_limit_nm_per_s", "N·m/s"),
+    ("brake_gain", "N·m per N·m commanded"),
 ];
 
 impl ActuatorParams {
@@ -105,12 +124,13 @@ impl ActuatorParams {
             "torque_time_constant_s" => &mut self.torque_time_constant_s,
             "torque_delay_s" => &mut self.torque_delay_s,
             "torque_rate_limit_nm_per_s" => &mut self.torque_rate_limit_nm_per_s,
+            "brake_gain" => &mut self.brake_gain,
             _ => return None,
         })
     }
 
     /// The fields with their names, in the order of [`ACTUATOR_FIELDS`].
-    pub fn named_values(&self) -> [(&'static str, f64); 6] {
+    pub fn named_values(&self) -> [(&'static str, f64); 7] {
         [
             (ACTUATOR_FIELDS[0].0, self.steering_time_constant_s),
             (ACTUATOR_FIELDS[1].0, self.steering_delay_s),
@@ -118,6 +138,7 @@ impl ActuatorParams {
             (ACTUATOR_FIELDS[3].0, self.torque_time_constant_s),
             (ACTUATOR_FIELDS[4].0, self.torque_delay_s),
             (ACTUATOR_FIELDS[5].0, self.torque_rate_limit_nm_per_s),
+            (ACTUATOR_FIELDS[6].0, self.brake_gain),
         ]
     }
 
@@ -136,12 +157,17 @@ impl ActuatorParams {
 
     /// Checks every field (named `actuators.<field>` in the error): time constants
     /// and delays in `[0, MAX_ACTUATOR_TIME_S]`, rate limits positive (infinite
-    /// allowed), nothing NaN.
+    /// allowed), the brake gain in [`BRAKE_GAIN_RANGE`], nothing NaN.
     pub fn validate(&self) -> Result<(), InvalidField> {
         for (name, v) in self.named_values() {
             let field = format!("actuators.{name}");
             let bad = |reason: String| Err(InvalidField { field, reason });
-            if name.contains("rate_limit") {
+            if name == "brake_gain" {
+                let [lo, hi] = BRAKE_GAIN_RANGE;
+                if !(lo..=hi).contains(&v) {
+                    return bad(format!("must be in [{lo}, {hi}] (1: as commanded), got {v}"));
+                }
+            } else if name.contains("rate_limit") {
                 if v.is_nan() || v <= 0.0 {
                     return bad(format!(
                         "a rate limit must be positive (inf for none), got {v}"
@@ -230,7 +256,7 @@ pub fn actuator_help() -> String {
         .collect::<Vec<_>>()
         .join("\n");
     format!(
-        "An actuator parameter of the plant's car, KEY=VALUE, over the vehicle file's [actuators] table (repeatable; the same in every run of a sweep). The steering angle and each wheel torque go through a pure delay, a first-order lag and a rate limit; the shipped cars' are ideal. Keys:\n{keys}"
+        "An actuator parameter of the plant's car, KEY=VALUE, over the vehicle file's [actuators] table (repeatable; the same in every run of a sweep). The steering angle and each wheel torque go through a pure delay, a first-order lag and a rate limit, a braking torque first through the brakes' gain; the shipped cars' are ideal. Keys:\n{keys}"
     )
 }
 
@@ -295,6 +321,8 @@ impl Channel {
 pub struct Actuators {
     steering: Channel,
     torque: [Channel; 4],
+    /// [`ActuatorParams::brake_gain`].
+    brake_gain: f64,
 }
 
 impl Actuators {
@@ -319,25 +347,38 @@ impl Actuators {
                 dt_s,
             ),
             torque: [torque(), torque(), torque(), torque()],
+            brake_gain: p.brake_gain,
         }
     }
 
     /// What the actuators apply over the next step for the commanded steering
     /// angle (rad) and wheel torques (N·m), without moving on (see
-    /// [`Actuators::commit`]).
+    /// [`Actuators::commit`]). A braking torque goes through the brakes' gain
+    /// first (module docs).
     pub fn peek(&self, delta_rad: f64, torque_nm: [f64; 4]) -> (f64, [f64; 4]) {
         (
             self.steering.peek(delta_rad),
-            std::array::from_fn(|i| self.torque[i].peek(torque_nm[i])),
+            std::array::from_fn(|i| self.torque[i].peek(self.brake(torque_nm[i]))),
         )
+    }
+
+    /// The torque the brakes give for the command `u` (N·m): `u·brake_gain`
+    /// when braking, `u` otherwise (exactly: a gain of 1 changes nothing).
+    fn brake(&self, u: f64) -> f64 {
+        if u < 0.0 && self.brake_gain != 1.0 {
+            u * self.brake_gain
+        } else {
+            u
+        }
     }
 
     /// Moves on one step with the commands given to [`Actuators::peek`] and the
     /// outputs it returned.
     pub fn commit(&mut self, command: (f64, [f64; 4]), applied: (f64, [f64; 4])) {
         self.steering.commit(command.0, applied.0);
-        for (i, c) in self.torque.iter_mut().enumerate() {
-            c.commit(command.1[i], applied.1[i]);
+        for (i, u) in command.1.into_iter().enumerate() {
+            let u = self.brake(u);
+            self.torque[i].commit(u, applied.1[i]);
         }
     }
 }
@@ -373,6 +414,23 @@ mod tests {
             a.commit((0.0, t), out);
         }
         assert_eq!(seen, vec![0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 4.0]);
+    }
+
+    #[test]
+    fn the_brakes_gain_scales_braking_only() {
+        let p = ActuatorParams {
+            brake_gain: 0.7,
+            ..ActuatorParams::default()
+        };
+        let mut a = Actuators::new(&p, 0.6, 1e-3);
+        let t = [100.0, -100.0, -0.0, 0.0];
+        let out = a.peek(0.0, t);
+        assert_eq!(out.1, [100.0, -70.0, -0.0, 0.0]);
+        a.commit((0.0, t), out);
+        let s: ActuatorSetting = "brake_gain=0.8".parse().unwrap();
+        assert_eq!(s.value, 0.8);
+        let e = "brake_gain=3".parse::<ActuatorSetting>().unwrap_err();
+        assert!(e.contains("[0.25, 2]"), "{e}");
     }
 
     #[test]
