@@ -18,11 +18,12 @@
 //! # How
 //!
 //! Each period, with `V` the measured speed and `T` the total wheel torque applied
-//! over the period that just ended (the last command), `a_cmd = (T/(r_eff·m₀) −
-//! r(V))/k̂` is what the torque asks of the tyres, m/s²: the acceleration of the
-//! car as estimated by [`crate::longitudinal_estimator`] (its mass ratio `k̂` and
-//! its resistances `r(V)`, per configured mass `m₀`), so that a heavier car or
-//! more drag is not read as slip. A speed observer integrates it and is
+//! over the period that just ended (the last command), `a_cmd = (y_d + b̂·y_b −
+//! r(V))/k̂` (`y = T/(r_eff·m₀)`, its drive part `y_d ≥ 0` and braking part
+//! `y_b ≤ 0`) is what the torque asks of the tyres, m/s²: the acceleration of the
+//! car as estimated by [`crate::longitudinal_estimator`] (its mass ratio `k̂`, its
+//! resistances `r(V)` per configured mass `m₀`, its brakes' gain `b̂`), so that a
+//! heavier car, more drag or weaker brakes are not read as slip. A speed observer integrates it and is
 //! pulled to the measured speed with the time constant `τ_o`
 //! ([`FrictionConfig::observer_time_s`]):
 //!
@@ -48,9 +49,12 @@
 //! limit = s₀ + u·|a_cmd|,   s₀ = shortfall_mps2_limit (× vigilance while μ̂ < μ_nominal)
 //! ```
 //!
-//! for [`FrictionConfig::confirm_s`]: `u` is the mass ratio's uncertainty
+//! for [`FrictionConfig::confirm_s`]: `u` is the mass ratio's uncertainty when
+//! driving
 //! ([`crate::longitudinal_estimator::LongitudinalEstimator::mass_uncertainty`],
-//! 0.25 before anything is learned, a few % once it is), so slip is the
+//! 0.25 before anything is learned, a few % once it is), the brakes' gain's when
+//! braking ([`crate::longitudinal_estimator::LongitudinalEstimator::brake_uncertainty`],
+//! 0.3 before), so slip is the
 //! shortfall that grows with the demand beyond what the estimated car explains;
 //! once the road has shown slip ([`FrictionConfig::vigilance`], 0.6) a relapse is
 //! caught earlier.
@@ -552,7 +556,8 @@ impl<T: Real> FrictionEstimator<T> {
         // What the torque gives the car as estimated (its mass and resistances),
         // tyres gripping.
         let lon = &self.longitudinal;
-        let a_cmd = (torque_nm * inv_mr - lon.resistance_mps2(v)) * lon.inverse_mass_ratio();
+        let a_cmd = (lon.applied_mps2(inv_mr, torque_nm) - lon.resistance_mps2(v))
+            * lon.inverse_mass_ratio();
         // V̂ integrates the commanded acceleration and is pulled to the measured
         // speed in `observer_time_s`: (V̂ − V)/τ_o is the shortfall low-passed at
         // τ_o, from the speed itself, not its noisy derivative. Forward Euler
@@ -593,14 +598,18 @@ impl<T: Real> FrictionEstimator<T> {
         if used > self.shown {
             self.shown = used;
         }
-        // The threshold grows with the demand by the mass ratio's uncertainty: a
-        // shortfall a car as heavy as the estimate allows would show is not slip.
+        // The threshold grows with the demand by the mass ratio's uncertainty
+        // (driving) or the brakes' gain's (braking): a shortfall a car as heavy,
+        // or brakes as weak, as the estimate allows would show is not slip.
         let base = if self.mu < cfg.mu_nominal {
             cfg.shortfall_mps2_limit * cfg.vigilance
         } else {
             cfg.shortfall_mps2_limit
         };
-        let limit = base + self.longitudinal.mass_uncertainty(&cfg.longitudinal) * demand;
+        let u = self
+            .longitudinal
+            .uncertainty(&cfg.longitudinal, cmd < T::ZERO);
+        let limit = base + u * demand;
         // Standing, a brake holds the car without decelerating it: no slip.
         let short =
             demand >= cfg.min_demand_mps2 && shortfall > limit && v.abs() >= cfg.standstill_mps;
@@ -677,6 +686,7 @@ impl<T: Real> FrictionEstimator<T> {
             grip_mps2: self.mu * T::lit(crate::G),
             driven_share: cfg.driven_load_share,
             slipping: self.slipping || short,
+            slip_ratio: T::ZERO,
         };
         self.longitudinal.update(&cfg.longitudinal, inv_mr, &sample);
     }
@@ -733,12 +743,15 @@ mod tests {
         }
 
         /// A rig whose car of true mass `mass_ratio·M` was driven gently (±1.5 m/s²
-        /// asked of it, no slip) for 40 s: its mass is learned. Returns the speed.
+        /// asked of it and coasting, no slip) for 120 s: its mass and brakes are
+        /// learned. Returns the speed.
         fn learned(mass_ratio: f64) -> (Self, f64) {
             let mut r = Self::new();
             let mut v = 20.0;
-            for k in 0..10 {
-                let a = if k % 2 == 0 { 1.5 } else { -1.5 };
+            // Driving, coasting, braking: the mass from the first two, the
+            // brakes' gain from the third.
+            for k in 0..30 {
+                let a = [1.5, 0.0, -1.5][k % 3];
                 v = r.drive(v, a, a / mass_ratio, 0.0, 4.0);
             }
             (r, v)

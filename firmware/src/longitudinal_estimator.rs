@@ -1,6 +1,7 @@
-//! Online estimate of the car's longitudinal dynamics: its effective mass and its
-//! driving resistances, from the wheel torque and the measured speed while the
-//! tyres are far from their limit (not in the paper, which knows its car).
+//! Online estimate of the car's longitudinal dynamics: its effective mass, its
+//! driving resistances and its brakes' effectiveness, from the wheel torque and
+//! the measured speed while the tyres are far from their limit (not in the paper,
+//! which knows its car).
 //!
 //! # Why
 //!
@@ -13,16 +14,36 @@
 //!
 //! # Model
 //!
-//! With `T` the total wheel torque applied over a period (N·m), `r` the wheel
-//! radius, `m₀` the configured mass and `V` the speed, the longitudinal dynamics
-//! off the tyres' limit, normalised by `m₀`:
+//! With `T` the total wheel torque commanded over a period (N·m; positive drives
+//! the front wheels, negative brakes the four), `r` the wheel radius, `m₀` the
+//! configured mass and `V` the speed, the longitudinal dynamics off the tyres'
+//! limit, normalised by `m₀`:
 //!
 //! ```text
-//! y = T/(r·m₀) = k·V̇ + r₀ + r₂·(V/V_ref)²        m/s²
+//! y = T/(r·m₀) = y_d + y_b,  y_d = max(y, 0),  y_b = min(y, 0)      m/s²
+//! y_d + b·y_b = k·V̇ + r₀ + r₂·(V/V_ref)²
 //! θ = [k, r₀, r₂]:  k = m/m₀ (effective mass ratio: wheel inertias included),
 //!                   r₀ = F₀/m₀ (rolling resistance, grade; m/s²),
 //!                   r₂ = c₂·V_ref²/m₀ (aerodynamic drag at V_ref = 30 m/s; m/s²)
+//! b:                the brakes' gain, brake torque given per N·m commanded
 //! ```
+//!
+//! A drive torque is what the motor gives (known from its current); a brake's
+//! is its pads' friction times the force asked, which heat, wear and water
+//! change by ±20 % or more. One ratio for both read a weak brake as a light car
+//! and flagged the next acceleration as slip, or read a strong one as a heavy
+//! car and flagged the next braking (a brake gain of 0.7 or 1.3 in the
+//! simulator's plant: `μ̂` from 1 to 0.6 and 0.4 on a dry oval).
+//!
+//! **What tells them apart**: braking alone measures only `b/k` (the two are
+//! proportional there); driving and coasting measure `k` and the resistances with
+//! the brakes off. So `θ` is learnt from the samples whose filter memory holds no
+//! braking (`|H·y_b|` at most [`LongitudinalConfig::brake_idle_mps2`]), `b` from
+//! those with braking (`H·y_b` at least [`LongitudinalConfig::brake_excitation_mps2`]
+//! in magnitude) given `θ`: the braking's own evidence, the shortfall of the
+//! deceleration the brakes give on what the learnt car needs. Slip is kept out
+//! of both by the gate below (no slip flagged, the demand within a fraction of
+//! the grip, the wheels' slip ratio small when they are measured).
 //!
 //! The speed is not differentiated: `y`, `V` and `(V/V_ref)²` go through the same
 //! second-order low-pass filter `H = 1/(τs + 1)²` (two cascaded first-order
@@ -35,16 +56,27 @@
 //! # Estimator
 //!
 //! Recursive least squares with exponential forgetting (memory
-//! [`LongitudinalConfig::memory_s`], `λ = 1 − Δt/memory`), `φ = [H·V̇, 1, H·q]`:
+//! [`LongitudinalConfig::memory_s`], `λ = 1 − Δt/memory`), `φ = [H·V̇, 1, H·q]`,
+//! on the samples without braking:
 //!
 //! ```text
-//! g = P·φ / (λ + φᵀ·P·φ),   θ ← clamp(θ + g·(H·y − θᵀφ)),   P ← (P − g·φᵀ·P)/λ
+//! g = P·φ / (λ + φᵀ·P·φ),   θ ← clamp(θ + g·(H·y_d − θᵀφ)),   P ← (P − g·φᵀ·P)/λ
+//! ```
+//!
+//! and a scalar one for `b` on the braking samples, `φ_b = H·y_b`,
+//! `z = k·H·V̇ + r₀ + r₂·H·q − H·y_d` (what the brakes gave, per `m₀`):
+//!
+//! ```text
+//! g_b = P_b·φ_b / (λ + P_b·φ_b²),   b ← clamp(b + g_b·(z − b·φ_b)),   P_b ← (1 − g_b·φ_b)·P_b/λ
 //! ```
 //!
 //! * **Gate** (the tyres far from their limit, the model valid): a sample counts
 //!   only when, for the whole of the last [`LongitudinalConfig::settle_s`] (the
 //!   filters' memory), the speed was at least [`LongitudinalConfig::min_speed_mps`],
-//!   no slip was flagged, the demand `|y|/k̂` was at most
+//!   no slip was flagged, the wheels' measured slip ratio was at most
+//!   [`LongitudinalConfig::max_slip_ratio`] (a driven wheel spinning up past its
+//!   peak loses little force at first: its shortfall, too small to flag, would
+//!   read as mass), the demand `|y_d + b̂·y_b − r̂|/k̂` was at most
 //!   [`LongitudinalConfig::demand_fraction`] of `μ̂·g` (of the driven axle's share
 //!   when driving), and the lateral acceleration `|V·ψ̇|` at most
 //!   [`LongitudinalConfig::lateral_fraction`] of `μ̂·g` (cornering drag is not in
@@ -55,23 +87,33 @@
 //!   resistances only (`φ = [0, 1, H·q]` against `H·y − k̂·H·V̇`) and without
 //!   forgetting (`λ = 1`): no information on the mass means none is forgotten, so
 //!   `P` cannot wind up, and the speed's noise in `H·V̇` cannot drag `k` to 0.
+//!   A braking sample whose `|H·y_b|` is under
+//!   [`LongitudinalConfig::brake_excitation_mps2`] but over the idle level informs
+//!   nothing.
 //! * **Bounds**: `θ` is clamped to `[k_min, k_max] × [−r₀,max, r₀,max] ×
-//!   [0, r₂,max]`; the trace of `P` is held at most its prior's (scaled down when
-//!   above); a non-finite or non-positive diagonal resets `P` to its prior.
+//!   [0, r₂,max]`, `b` to [`LongitudinalConfig::brake_gain_bounds`]; the trace of
+//!   `P` is held at most its prior's (scaled down when above), `P_b` at most its
+//!   prior; a non-finite or non-positive diagonal resets `P` (`P_b`) to its prior.
 //! * **Uncertainty** of the mass ratio, used by the friction check as a tolerance
-//!   on the relative shortfall: `u = u_max·sqrt(P₀₀/P₀₀,prior)` (at most
-//!   [`LongitudinalConfig::mass_uncertainty_max`]: before any sample a shortfall
-//!   the heaviest car allowed would show is not slip).
+//!   on the relative shortfall when driving: `u = u_max·sqrt(P₀₀/P₀₀,prior)` (at
+//!   most [`LongitudinalConfig::mass_uncertainty_max`]: before any sample a
+//!   shortfall the heaviest car allowed would show is not slip); of the brakes'
+//!   gain, the tolerance when braking, `u_b = u_b,max·sqrt(P_b/P_b,prior)` (at most
+//!   [`LongitudinalConfig::brake_uncertainty_max`]: braking measures `b/k`, which
+//!   `b` is learnt as, so `u_b` alone is that ratio's).
 //!
 //! Non-finite inputs are refused (the filters restart, `θ` and `P` are kept).
 //!
 //! # Cost
 //!
-//! Per period about 90 floating-point operations, one division (the RLS gain;
-//! the inverse mass ratio only on an update) and one square root (on the FPU);
-//! no loop, no branch on data but the gate; 84 bytes of state in `f32`.
+//! Per period about 100 floating-point operations, two divisions (the RLS gain,
+//! and the inverse of the parameter updated: mass ratio or brake gain; the
+//! braking and the driving updates exclusive) and one square root (on the FPU);
+//! no loop, no branch on data but the gate and the choice of update; 108 bytes of
+//! state in `f32`.
 
 use crate::Real;
+use qp::real::smaller;
 
 /// Reference speed of the drag term `r₂·(V/V_ref)²`, m/s.
 pub const V_REF_MPS: f32 = 30.0;
@@ -111,6 +153,21 @@ pub struct LongitudinalConfig<T> {
     pub prior_variance: [T; 3],
     /// Uncertainty of the mass ratio at the prior, `u_max`, in `[0, 1)`.
     pub mass_uncertainty_max: T,
+    /// Largest wheel slip ratio `|κ|` of a sample, dimensionless, > 0 (module
+    /// docs; a sample without measured wheel speeds gives 0).
+    pub max_slip_ratio: T,
+    /// Filtered braking `|H·y_b|` up to which a sample counts as one without
+    /// braking (for `θ`), m/s², ≥ 0.
+    pub brake_idle_mps2: T,
+    /// Filtered braking `|H·y_b|` from which a sample informs the brakes' gain,
+    /// m/s², > `brake_idle_mps2`.
+    pub brake_excitation_mps2: T,
+    /// Bounds of the brakes' gain `b`: `[min, max]`, `0 < min ≤ 1 ≤ max`.
+    pub brake_gain_bounds: [T; 2],
+    /// Prior variance of `b`, per `(m/s²)²` of residual, > 0.
+    pub brake_prior_variance: T,
+    /// Uncertainty of the brakes' gain at the prior, `u_b,max`, in `[0, 1)`.
+    pub brake_uncertainty_max: T,
 }
 
 /// Why a [`LongitudinalConfig`] was refused.
@@ -132,7 +189,9 @@ impl<T: Real> LongitudinalConfig<T> {
     ///
     /// * filters `τ = 0.3 s` (two stages), a sample counts after 1.2 s of gate
     ///   (`4τ`: the filters have forgotten all but 2 % of what came before);
-    /// * memory 20 s of excited samples;
+    /// * memory 10 s of excited samples (the mass is learnt from the driving
+    ///   alone, about a quarter of a lap's time: a load changed at a stop is
+    ///   followed within about two laps' accelerations);
     /// * gate: above 3 m/s, demand at most 0.5 of `μ̂·g` (a tyre at half its
     ///   friction gives its force at a few % of slip), lateral at most 0.3;
     /// * excitation 0.2 m/s² of filtered demand;
@@ -143,13 +202,21 @@ impl<T: Real> LongitudinalConfig<T> {
     ///   excited samples at 1 m/s²), uncertainty 0.25 at the prior
     ///   (a car 1.33 times heavier gives a relative shortfall of 0.25; more
     ///   would hide the front wheels spinning at a planner friction 1.5 times
-    ///   the road's: a shortfall of 0.49 of 3.5 m/s² asked).
+    ///   the road's: a shortfall of 0.49 of 3.5 m/s² asked);
+    /// * wheel slip ratio at most 0.03 (a tyre gives half its peak force at
+    ///   about 0.02 of slip; spinning or locking, 0.1 and more);
+    /// * brakes idle under 0.05 m/s² of filtered braking (a gain wrong by 0.5
+    ///   then errs by 0.025 m/s² on `θ`'s samples), excited from 0.3 m/s²;
+    /// * `b ∈ [0.5, 1.5]`, prior variance 0.1 (`u_b` halves after about 1 s of
+    ///   braking at 1.5 m/s²), uncertainty 0.3 at the prior (a brake 30 % weaker
+    ///   than commanded is not slip before anything is learnt; locked wheels
+    ///   lose 2–8 m/s² of 5–8 asked, more than that).
     pub fn for_car(mass_kg: T, wheel_radius_m: T) -> Self {
         Self {
             mass_kg,
             wheel_radius_m,
             filter_time_s: T::lit(0.3),
-            memory_s: T::lit(20.0),
+            memory_s: T::lit(10.0),
             settle_s: T::lit(1.2),
             min_speed_mps: T::lit(3.0),
             demand_fraction: T::HALF,
@@ -160,6 +227,12 @@ impl<T: Real> LongitudinalConfig<T> {
             r2_max_mps2: T::ONE,
             prior_variance: [T::HALF, T::lit(0.1), T::lit(0.1)],
             mass_uncertainty_max: T::lit(0.25),
+            max_slip_ratio: T::lit(0.03),
+            brake_idle_mps2: T::lit(0.05),
+            brake_excitation_mps2: T::lit(0.3),
+            brake_gain_bounds: [T::HALF, T::lit(1.5)],
+            brake_prior_variance: T::lit(0.1),
+            brake_uncertainty_max: T::lit(0.3),
         }
     }
 
@@ -177,7 +250,11 @@ impl<T: Real> LongitudinalConfig<T> {
         if !(nonneg(self.min_speed_mps)
             && fraction(self.demand_fraction)
             && fraction(self.lateral_fraction)
-            && nonneg(self.excitation_mps2))
+            && nonneg(self.excitation_mps2)
+            && pos(self.max_slip_ratio)
+            && nonneg(self.brake_idle_mps2)
+            && self.brake_excitation_mps2.is_finite()
+            && self.brake_excitation_mps2 > self.brake_idle_mps2)
         {
             return Err(LongitudinalConfigError::InvalidGate);
         }
@@ -193,7 +270,14 @@ impl<T: Real> LongitudinalConfig<T> {
             && pos(p1)
             && pos(p2)
             && nonneg(self.mass_uncertainty_max)
-            && self.mass_uncertainty_max < T::ONE)
+            && self.mass_uncertainty_max < T::ONE
+            && pos(self.brake_gain_bounds[0])
+            && self.brake_gain_bounds[0] <= T::ONE
+            && self.brake_gain_bounds[1].is_finite()
+            && self.brake_gain_bounds[1] >= T::ONE
+            && pos(self.brake_prior_variance)
+            && nonneg(self.brake_uncertainty_max)
+            && self.brake_uncertainty_max < T::ONE)
         {
             return Err(LongitudinalConfigError::InvalidBounds);
         }
@@ -208,8 +292,8 @@ pub struct LongitudinalSample<T> {
     pub dt_s: T,
     /// Measured speed `V`, m/s.
     pub v_mps: T,
-    /// Total wheel torque applied over the period that ended at the measurement,
-    /// N·m.
+    /// Total wheel torque commanded over the period that ended at the
+    /// measurement, N·m (negative: braking, before the brakes' gain).
     pub torque_nm: T,
     /// Lateral acceleration `V·ψ̇`, m/s².
     pub lateral_mps2: T,
@@ -219,6 +303,9 @@ pub struct LongitudinalSample<T> {
     pub driven_share: T,
     /// True when slip is flagged (the friction check): no sample counts.
     pub slipping: bool,
+    /// Largest slip ratio `|κ|` of the wheels, dimensionless (0 when the wheel
+    /// speeds are not measured).
+    pub slip_ratio: T,
 }
 
 /// The estimator's state (module docs): filters, parameters, covariance.
@@ -228,12 +315,16 @@ pub struct LongitudinalEstimator<T> {
     theta: [T; 3],
     /// `1/k`.
     inv_k: T,
+    /// The brakes' gain `b` (dimensionless), `1/b`, and its variance `P_b`.
+    brake: [T; 3],
     /// `P` (symmetric), its upper triangle `[p00, p01, p02, p11, p12, p22]`.
     p: [T; 6],
-    /// The filters' stages: speed (m/s), `y` (m/s²), `(V/V_ref)²`: `[stage 1, stage 2]`.
+    /// The filters' stages: speed (m/s), `y` (m/s²), `(V/V_ref)²`, `y_b` (m/s²):
+    /// `[stage 1, stage 2]`.
     v_f: [T; 2],
     y_f: [T; 2],
     q_f: [T; 2],
+    yb_f: [T; 2],
     /// Time the gate has held, s (`< 0`: the filters restart at the next sample).
     clean_s: T,
     /// Samples that counted (wrapping).
@@ -253,20 +344,24 @@ impl<T: Real> LongitudinalEstimator<T> {
         Self {
             theta: [T::ONE, T::ZERO, T::ZERO],
             inv_k: T::ONE,
+            brake: [T::ONE, T::ONE, T::ZERO],
             p: [T::ZERO; 6],
             v_f: [T::ZERO; 2],
             y_f: [T::ZERO; 2],
             q_f: [T::ZERO; 2],
+            yb_f: [T::ZERO; 2],
             clean_s: T::NEG_INFINITY,
             updates: 0,
         }
     }
 
-    /// Forgets everything: the configured car, no resistance, the prior
-    /// covariance of `cfg` (valid: [`LongitudinalConfig::validate`]).
+    /// Forgets everything: the configured car, no resistance, brakes as
+    /// commanded, the prior covariances of `cfg` (valid:
+    /// [`LongitudinalConfig::validate`]).
     pub fn start(&mut self, cfg: &LongitudinalConfig<T>) {
         *self = Self::new();
         self.reset_covariance(cfg);
+        self.brake[2] = cfg.brake_prior_variance;
     }
 
     fn reset_covariance(&mut self, cfg: &LongitudinalConfig<T>) {
@@ -302,10 +397,11 @@ impl<T: Real> LongitudinalEstimator<T> {
         self.theta[1] + self.theta[2] * q * q
     }
 
-    /// The acceleration the torque `torque_nm` (N·m) gives the estimated car at
-    /// the speed `v_mps` (m/s) when its tyres grip, m/s²: `(y − r(V))/k`.
+    /// The acceleration the torque `torque_nm` (N·m, commanded) gives the
+    /// estimated car at the speed `v_mps` (m/s) when its tyres grip, m/s²:
+    /// `(y_d + b·y_b − r(V))/k`.
     pub fn expected_accel_mps2(&self, cfg: &LongitudinalConfig<T>, torque_nm: T, v_mps: T) -> T {
-        let y = torque_nm / (cfg.mass_kg * cfg.wheel_radius_m);
+        let y = self.applied_mps2(T::ONE / (cfg.mass_kg * cfg.wheel_radius_m), torque_nm);
         (y - self.resistance_mps2(v_mps)) * self.inv_k
     }
 
@@ -314,6 +410,49 @@ impl<T: Real> LongitudinalEstimator<T> {
     pub fn mass_uncertainty(&self, cfg: &LongitudinalConfig<T>) -> T {
         let ratio = (self.p[0] / cfg.prior_variance[0]).clamp(T::ZERO, T::ONE);
         cfg.mass_uncertainty_max * ratio.sqrt()
+    }
+
+    /// The brakes' gain `b`, brake torque given per N·m commanded,
+    /// dimensionless, within its bounds.
+    pub fn brake_gain(&self) -> T {
+        self.brake[0]
+    }
+
+    /// `1/b`, dimensionless.
+    pub fn inverse_brake_gain(&self) -> T {
+        self.brake[1]
+    }
+
+    /// The uncertainty `u_b` of the brakes' gain (module docs), dimensionless,
+    /// in `[0, brake_uncertainty_max]`: a relative shortfall under `u_b` when
+    /// braking may be the brakes.
+    pub fn brake_uncertainty(&self, cfg: &LongitudinalConfig<T>) -> T {
+        let ratio = (self.brake[2] / cfg.brake_prior_variance).clamp(T::ZERO, T::ONE);
+        cfg.brake_uncertainty_max * ratio.sqrt()
+    }
+
+    /// The tolerance on the relative shortfall for a demand of sign `braking`:
+    /// [`Self::brake_uncertainty`] when braking, [`Self::mass_uncertainty`]
+    /// otherwise, dimensionless (one square root).
+    pub fn uncertainty(&self, cfg: &LongitudinalConfig<T>, braking: bool) -> T {
+        let (p, prior, max) = if braking {
+            (self.brake[2], cfg.brake_prior_variance, cfg.brake_uncertainty_max)
+        } else {
+            (self.p[0], cfg.prior_variance[0], cfg.mass_uncertainty_max)
+        };
+        max * (p / prior).clamp(T::ZERO, T::ONE).sqrt()
+    }
+
+    /// The force per configured mass the torque `torque_nm` (N·m) gives through
+    /// the wheels, m/s²: `y_d + b·y_b` of `y = torque·inv_mr` (`inv_mr` is
+    /// `1/(m₀·r)`, 1/(kg·m)).
+    pub fn applied_mps2(&self, inv_mr: T, torque_nm: T) -> T {
+        let y = torque_nm * inv_mr;
+        if y < T::ZERO {
+            y * self.brake[0]
+        } else {
+            y
+        }
     }
 
     /// Samples that counted so far (wrapping).
@@ -335,9 +474,11 @@ impl<T: Real> LongitudinalEstimator<T> {
         s: &LongitudinalSample<T>,
     ) -> bool {
         let y = s.torque_nm * inv_mr;
+        let yb = smaller(y, T::ZERO);
         let q = s.v_mps * T::lit(1.0 / V_REF_MPS);
         let q = q * q;
-        let finite = (y + q + s.dt_s + s.lateral_mps2 + s.grip_mps2 + s.driven_share).is_finite();
+        let finite = (y + q + s.dt_s + s.lateral_mps2 + s.grip_mps2 + s.driven_share + s.slip_ratio)
+            .is_finite();
         if !(finite && s.dt_s > T::ZERO) {
             self.restart();
             return false;
@@ -347,6 +488,7 @@ impl<T: Real> LongitudinalEstimator<T> {
             self.v_f = [s.v_mps; 2];
             self.y_f = [y; 2];
             self.q_f = [q; 2];
+            self.yb_f = [yb; 2];
             self.clean_s = T::ZERO;
             return false;
         }
@@ -362,15 +504,20 @@ impl<T: Real> LongitudinalEstimator<T> {
         let q1 = self.q_f[0] + kf * (q - self.q_f[0]);
         let q2 = self.q_f[1] + kf * (q1 - self.q_f[1]);
         self.q_f = [q1, q2];
+        let b1 = self.yb_f[0] + kf * (yb - self.yb_f[0]);
+        let b2 = self.yb_f[1] + kf * (b1 - self.yb_f[1]);
+        self.yb_f = [b1, b2];
 
         // The gate, over the filters' memory.
-        let demand = (y - self.resistance_mps2(s.v_mps)) * self.inv_k;
+        let applied = y + (self.brake[0] - T::ONE) * yb;
+        let demand = (applied - self.resistance_mps2(s.v_mps)) * self.inv_k;
         let share = if demand > T::ZERO {
             s.driven_share
         } else {
             T::ONE
         };
         let open = !s.slipping
+            && s.slip_ratio.abs() <= cfg.max_slip_ratio
             && s.v_mps >= cfg.min_speed_mps
             && demand.abs() <= cfg.demand_fraction * s.grip_mps2 * share
             && s.lateral_mps2.abs() <= cfg.lateral_fraction * s.grip_mps2;
@@ -378,6 +525,23 @@ impl<T: Real> LongitudinalEstimator<T> {
         if self.clean_s < cfg.settle_s {
             return false;
         }
+        // H·y_d: the drive's share of the filtered torque.
+        let yd2 = y2 - b2;
+        if b2 <= -cfg.brake_excitation_mps2 {
+            // Braking: what the brakes gave, z = k·H·V̇ + r(·) − H·y_d, against
+            // the filtered braking commanded.
+            let [k, r0, r2] = self.theta;
+            let z = k * accel + r0 + r2 * q2 - yd2;
+            self.brake_rls(cfg, b2, z, s.dt_s / cfg.memory_s);
+            return true;
+        }
+        if b1 < -cfg.brake_idle_mps2 || b2 < -cfg.brake_idle_mps2 {
+            // Braking in the filters' memory, too little to tell `b`: nothing.
+            return false;
+        }
+        // The brakes idle: the drive's torque (the little braking left, at the
+        // gain learnt) against the mass and the resistances.
+        let y2 = yd2 + self.brake[0] * b2;
         // Excitation: the filtered demand (the torque's, free of the speed's noise).
         let excited =
             ((y2 - self.theta[1] - self.theta[2] * q2) * self.inv_k).abs() >= cfg.excitation_mps2;
@@ -390,6 +554,31 @@ impl<T: Real> LongitudinalEstimator<T> {
             self.rls(cfg, [T::ZERO, T::ONE, q2], y, T::ZERO);
         }
         true
+    }
+
+    /// One scalar recursive-least-squares step of the brakes' gain on
+    /// `φ_b = H·y_b` (m/s², < 0) and `z` (m/s²), forgetting the fraction `forget`
+    /// (module docs).
+    // One caller, once per control period: inlined, no call to bound.
+    #[inline(always)]
+    fn brake_rls(&mut self, cfg: &LongitudinalConfig<T>, phi: T, z: T, forget: T) {
+        let [b, _, p] = self.brake;
+        let (lambda, inv_lambda) = (T::ONE - forget, T::ONE + forget);
+        let pf = p * phi;
+        let g = pf / (lambda + pf * phi);
+        let [lo, hi] = cfg.brake_gain_bounds;
+        let b = (b + g * (z - b * phi)).clamp(lo, hi);
+        let p = smaller((p - g * pf) * inv_lambda, cfg.brake_prior_variance);
+        if b.is_finite() {
+            self.brake[0] = b;
+            self.brake[1] = T::ONE / b;
+        }
+        self.brake[2] = if p.is_finite() && p > T::ZERO {
+            p
+        } else {
+            cfg.brake_prior_variance
+        };
+        self.updates = self.updates.wrapping_add(1);
     }
 
     /// One recursive-least-squares step on `φ`, `y` (module docs), forgetting the
@@ -452,7 +641,12 @@ mod tests {
     const DT: f64 = 0.01;
 
     fn cfg() -> LongitudinalConfig<f64> {
-        LongitudinalConfig::for_car(M, R)
+        cfg_of()
+    }
+
+    /// The settings in the precision `T`.
+    fn cfg_of<T: Real>() -> LongitudinalConfig<T> {
+        LongitudinalConfig::for_car(T::from_f64(M), T::from_f64(R))
     }
 
     /// A deterministic pseudo-random normal sample (SplitMix64 + Box–Muller).
@@ -479,6 +673,10 @@ mod tests {
         m: f64,
         f0: f64,
         c2: f64,
+        /// The brakes' gain: brake torque given per N·m commanded.
+        brake: f64,
+        /// The wheels' slip ratio reported with each sample.
+        slip_ratio: f64,
         v: f64,
         t: f64,
         sigma: f64,
@@ -491,6 +689,8 @@ mod tests {
                 m,
                 f0,
                 c2,
+                brake: 1.0,
+                slip_ratio: 0.0,
                 v: 20.0,
                 t: 0.0,
                 sigma,
@@ -500,21 +700,29 @@ mod tests {
 
         /// Runs `secs`, feeding the estimator; `accel_cmd(t)` is the acceleration
         /// asked of the configured car (m/s²) before resistance.
-        fn run(
+        /// Runs `secs`, feeding the estimator (in the precision `T`);
+        /// `accel_cmd(t)` is the acceleration asked of the configured car (m/s²)
+        /// before resistance.
+        fn run<T: Real>(
             &mut self,
-            e: &mut LongitudinalEstimator<f64>,
+            e: &mut LongitudinalEstimator<T>,
             secs: f64,
             accel_cmd: impl Fn(f64) -> f64,
             slip: impl Fn(f64, f64) -> f64,
         ) {
-            let c = cfg();
-            let inv_mr = 1.0 / (M * R);
+            let c = cfg_of::<T>();
+            let inv_mr = T::from_f64(1.0 / (M * R));
             for _ in 0..(secs / DT).round() as usize {
                 let a_cmd = accel_cmd(self.t);
                 // The torque a controller would apply: the configured car's
                 // feed-forward plus the true resistance (a PID's integral).
                 let torque = (M * a_cmd + self.f0 + self.c2 * self.v * self.v) * R;
-                let force = torque / R - self.f0 - self.c2 * self.v * self.v;
+                let given = if torque < 0.0 {
+                    torque * self.brake
+                } else {
+                    torque
+                };
+                let force = given / R - self.f0 - self.c2 * self.v * self.v;
                 let lost = slip(self.t, a_cmd);
                 self.v += (force / self.m - lost) * DT;
                 self.t += DT;
@@ -523,14 +731,15 @@ mod tests {
                     &c,
                     inv_mr,
                     &LongitudinalSample {
-                        dt_s: DT,
-                        v_mps: meas,
-                        torque_nm: torque,
-                        lateral_mps2: 0.0,
-                        grip_mps2: 9.81,
-                        driven_share: 0.585,
-                        // Not flagged: the demand gate alone keeps slip out.
+                        dt_s: T::from_f64(DT),
+                        v_mps: T::from_f64(meas),
+                        torque_nm: T::from_f64(torque),
+                        lateral_mps2: T::ZERO,
+                        grip_mps2: T::from_f64(9.81),
+                        driven_share: T::from_f64(0.585),
+                        // Not flagged: the gate alone keeps slip out.
                         slipping: false,
+                        slip_ratio: T::from_f64(if lost > 0.0 { self.slip_ratio } else { 0.0 }),
                     },
                 );
             }
@@ -618,8 +827,10 @@ mod tests {
         car.run(&mut e, 40.0, pattern, |_, _| 0.0);
         assert!((e.mass_ratio() - 1.0).abs() < 0.03);
         // 30 % heavier from now on (a trailer hitched).
+        // 90 s of the pattern: 25 s of excited driving samples, 2.5 memories
+        // (the brakings inform the brakes' gain, not the mass).
         car.m = 1.3 * M;
-        car.run(&mut e, 60.0, pattern, |_, _| 0.0);
+        car.run(&mut e, 90.0, pattern, |_, _| 0.0);
         let k = e.mass_ratio();
         assert!((k - 1.3).abs() < 0.04, "k = {k}");
         // The acceleration expected of 3 m/s² asked is the heavier car's.
@@ -645,9 +856,11 @@ mod tests {
         // half the driven axle's grip) that spins the wheels: 2 m/s² lost.
         car.m = 1.3 * M;
         let hard = |t: f64| if t % 12.0 < 2.0 { 4.5 } else { pattern(t) };
+        // 150 s: the pattern's driving left between the spins (2 s in 12, less
+        // the gate's settling) holds 2.5 memories of excited samples.
         car.run(
             &mut e,
-            90.0,
+            150.0,
             hard,
             |t, _| if t % 12.0 < 2.0 { 2.0 } else { 0.0 },
         );
@@ -688,11 +901,111 @@ mod tests {
                 grip_mps2: 9.81,
                 driven_share: 0.6,
                 slipping: false,
+                slip_ratio: 0.0,
             };
             assert!(!e.update(&cfg(), inv, &s));
             assert_eq!(e.mass_ratio(), before.mass_ratio());
             assert_eq!(e.resistance_terms_mps2(), before.resistance_terms_mps2());
         }
+    }
+
+    /// The pattern of [`pattern`] with the brakes' gain `brake` and the mass
+    /// `m/M = k`, in f32 as on the ECU: both are found, each within 3 %, and
+    /// their uncertainties fall.
+    fn learns_brakes_apart_from_mass(k: f64, brake: f64) {
+        let c = cfg_of::<f32>();
+        let mut e = LongitudinalEstimator::<f32>::new();
+        e.start(&c);
+        let mut car = Car::new(k * M, 150.0, 0.418, 0.02);
+        car.brake = brake;
+        car.run(&mut e, 120.0, pattern, |_, _| 0.0);
+        let (k_hat, b_hat) = (e.mass_ratio(), e.brake_gain());
+        assert!(((k_hat as f64) - k).abs() < 0.03 * k, "k = {k_hat}, true {k}");
+        assert!(
+            ((b_hat as f64) - brake).abs() < 0.03 * brake,
+            "b = {b_hat}, true {brake}"
+        );
+        assert!(e.mass_uncertainty(&c) < 0.05, "u = {}", e.mass_uncertainty(&c));
+        assert!(e.brake_uncertainty(&c) < 0.05, "u_b = {}", e.brake_uncertainty(&c));
+        // The braking expected of the torque is the brakes' and the car's.
+        let torque = -3.0 * M * R;
+        let a = e.expected_accel_mps2(&c, torque as f32, 0.0) as f64;
+        let r0 = e.resistance_terms_mps2()[0] as f64;
+        let expected = (-3.0 * brake - r0) / k;
+        assert!((a - expected).abs() < 0.1, "a = {a}, expected {expected}");
+    }
+
+    #[test]
+    fn weak_brakes_are_learnt_as_brakes_not_as_a_light_car() {
+        learns_brakes_apart_from_mass(1.0, 0.7);
+    }
+
+    #[test]
+    fn strong_brakes_on_a_heavy_car_are_learnt_apart() {
+        learns_brakes_apart_from_mass(1.3, 1.3);
+        learns_brakes_apart_from_mass(0.8, 0.85);
+    }
+
+    #[test]
+    fn braking_alone_leaves_the_mass_and_its_uncertainty_alone() {
+        // Braking and coasting only: b/k is all there is to learn, as b.
+        let c = cfg_of::<f32>();
+        let mut e = LongitudinalEstimator::<f32>::new();
+        e.start(&c);
+        let mut car = Car::new(1.2 * M, 0.0, 0.0, 0.0);
+        let brake_only = |t: f64| if t % 8.0 < 3.0 { -1.5 } else { 0.0 };
+        // From 30 m/s to 7.5 m/s in six brakings.
+        car.v = 30.0;
+        car.run(&mut e, 48.0, brake_only, |_, _| 0.0);
+        assert_eq!(e.mass_ratio(), 1.0);
+        assert_eq!(e.mass_uncertainty(&c), c.mass_uncertainty_max);
+        // The brakes seem 1/1.2 as strong to the configured car.
+        let b = e.brake_gain();
+        assert!((b - 1.0 / 1.2).abs() < 0.03, "b = {b}");
+    }
+
+    #[test]
+    fn slip_below_the_demand_gate_is_not_learnt_as_mass() {
+        // The road gives less than the tyres were thought to: at 2 m/s² asked
+        // (under the gate's half of 0.585·g, 2.87 m/s²), the driven wheels
+        // spin up and 0.6 m/s² of it is lost, a shortfall under the friction
+        // check's threshold (0.6 + u·2): unflagged. Read as mass it would be
+        // k = 2/1.4 = 1.43.
+        let spin = |t: f64| if t % 12.0 < 4.0 { 2.0 } else { pattern(t) };
+        let lost = |t: f64, _: f64| if t % 12.0 < 4.0 { 0.6 } else { 0.0 };
+        // The wheel speeds measured: slip ratio 0.08 while spinning. The gate
+        // refuses those samples.
+        let c = cfg_of::<f32>();
+        let mut e = LongitudinalEstimator::<f32>::new();
+        e.start(&c);
+        let mut car = Car::new(M, 100.0, 0.418, 0.02);
+        car.slip_ratio = 0.08;
+        car.run(&mut e, 120.0, spin, lost);
+        let k = e.mass_ratio();
+        assert!((k - 1.0).abs() < 0.03, "k = {k}");
+        // Without wheel speeds (slip ratio 0: not measured) the same slip is
+        // learnt as mass: the demand gate alone does not separate them.
+        let mut e = LongitudinalEstimator::<f32>::new();
+        e.start(&c);
+        let mut car = Car::new(M, 100.0, 0.418, 0.02);
+        car.run(&mut e, 120.0, spin, lost);
+        assert!(e.mass_ratio() > 1.1, "k = {}", e.mass_ratio());
+    }
+
+    #[test]
+    fn the_brakes_gain_is_bounded_and_settings_checked() {
+        let mut c = cfg();
+        c.brake_gain_bounds = [1.1, 1.5];
+        assert_eq!(c.validate(), Err(LongitudinalConfigError::InvalidBounds));
+        let mut c = cfg();
+        c.brake_excitation_mps2 = c.brake_idle_mps2;
+        assert_eq!(c.validate(), Err(LongitudinalConfigError::InvalidGate));
+        // Brakes giving nothing (a failed circuit): b stops at its bound.
+        let mut e = started();
+        let mut car = Car::new(M, 0.0, 0.0, 0.0);
+        car.brake = 0.2;
+        car.run(&mut e, 60.0, pattern, |_, _| 0.0);
+        assert_eq!(e.brake_gain(), 0.5);
     }
 
     mod props {
@@ -707,7 +1020,7 @@ mod tests {
             fn estimates_stay_within_their_bounds(
                 samples in proptest::collection::vec(
                     (1e-4f64..0.1, -50.0f64..80.0, -3e4f64..3e4, -20.0f64..20.0,
-                     0.0f64..20.0, 0.05f64..1.0, any::<bool>()),
+                     0.0f64..20.0, 0.05f64..1.0, any::<bool>(), 0.0f64..0.1),
                     1..400),
                 seed_k in 0.0f64..1.0,
             ) {
@@ -717,10 +1030,11 @@ mod tests {
                 e.theta[0] = 0.6 + 1.2 * seed_k;
                 e.inv_k = 1.0 / e.theta[0];
                 let inv = 1.0 / (M * R);
-                for (dt, v, t, lat, grip, share, slip) in samples {
+                for (dt, v, t, lat, grip, share, slip, kappa) in samples {
                     let s = LongitudinalSample {
                         dt_s: dt, v_mps: v, torque_nm: t, lateral_mps2: lat,
                         grip_mps2: grip, driven_share: share, slipping: slip,
+                        slip_ratio: kappa,
                     };
                     e.update(&c, inv, &s);
                     let [k, r0, r2] = e.theta;
@@ -736,6 +1050,12 @@ mod tests {
                     let u = e.mass_uncertainty(&c);
                     prop_assert!((0.0..=0.25).contains(&u));
                     prop_assert!(e.expected_accel_mps2(&c, t, v).is_finite());
+                    let b = e.brake_gain();
+                    prop_assert!((0.5..=1.5).contains(&b), "b = {}", b);
+                    prop_assert!((e.inverse_brake_gain() * b - 1.0).abs() < 1e-9);
+                    prop_assert!(e.brake[2] > 0.0 && e.brake[2] <= c.brake_prior_variance);
+                    let ub = e.brake_uncertainty(&c);
+                    prop_assert!((0.0..=c.brake_uncertainty_max).contains(&ub));
                 }
             }
         }

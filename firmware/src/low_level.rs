@@ -14,6 +14,7 @@
 //! ```text
 //! T = −K_P·e − K_D·V̇_f − K_I·∫e dτ  (+ T_ff)        total wheel torque, N·m
 //! T_ff = (m·a_plan + F₀ + c₂·V²)·r_eff               (our addition, switchable)
+//!        (divided by the brakes' gain b when negative: braking is commanded)
 //! ```
 //!
 //! `T_ff` is **not in the paper** (a pure PID there): it feeds the plan's
@@ -21,7 +22,10 @@
 //! wheel radius, and the driving resistances `F₀ + c₂·V²` (N), so that the PID only
 //! corrects model error. [`control`] uses the configured mass and no resistance
 //! (the PID's integral holds drag and grade); [`control_with_model`] the mass and
-//! resistances the `control` task estimates ([`crate::longitudinal_estimator`]). It is
+//! resistances the `control` task estimates ([`crate::longitudinal_estimator`]), and
+//! its brakes' gain `b` (the torque a brake gives per N·m commanded: a braking
+//! feed-forward and the braking limit are commanded as `1/b` of the torque the
+//! car needs, [`CarModel::inverse_brake_gain`]). It is
 //! on by default; [`LowLevelConfig::accel_feedforward`] switches it off to get the
 //! paper's controller. `T` is limited to
 //! `[−max_braking_torque_nm, max_traction_torque_nm]`, the speed PID's anti-windup
@@ -529,8 +533,13 @@ pub struct CarModel<T> {
     /// `(m·a + F₀ + c₂·V²)·r_eff` (a traction control).
     pub traction_grip_mps2: T,
     /// Deceleration the brakes may be asked for at most, m/s², > 0 (+∞: none):
-    /// the braking torque is limited to `m·a·r_eff` (an anti-lock limit).
+    /// the braking torque is limited to `m·a·r_eff/b` (an anti-lock limit).
     pub braking_grip_mps2: T,
+    /// `1/b`, the inverse of the brakes' gain `b` (brake torque given per N·m
+    /// commanded; [`crate::longitudinal_estimator`]), dimensionless, > 0: a
+    /// braking feed-forward and the anti-lock limit are commanded as `1/b` of
+    /// the torque the car needs (1: the brakes give what is asked).
+    pub inverse_brake_gain: T,
     /// True when the steering may turn no further from straight ahead than the
     /// last command (it may turn back): the front tyres slide at a large angle
     /// ([`crate::tasks::ControlTask::steering_held`]).
@@ -547,6 +556,7 @@ impl<T: Real> CarModel<T> {
             drag_n_per_mps2: T::ZERO,
             traction_grip_mps2: T::INFINITY,
             braking_grip_mps2: T::INFINITY,
+            inverse_brake_gain: T::ONE,
             hold_steering: false,
         }
     }
@@ -643,11 +653,24 @@ pub fn control_with_model<T: Real>(
     // Within the grip (`min` keeps the configured limit for +∞ or NaN grip).
     let t_grip = ((mass * car.traction_grip_mps2 + resistance.max(T::ZERO)) * r).max(T::ZERO);
     let t_max = cfg.max_traction_torque_nm.min(t_grip);
+    // The brakes give `b` of the torque commanded: a braking torque is
+    // commanded as `1/b` of the one the car needs (a gain out of (0, ∞): 1).
+    let inv_b = if car.inverse_brake_gain > T::ZERO && car.inverse_brake_gain.is_finite() {
+        car.inverse_brake_gain
+    } else {
+        T::ONE
+    };
     let b_max = cfg
         .max_braking_torque_nm
-        .min((mass * car.braking_grip_mps2 * r).max(T::ZERO));
+        .min((mass * car.braking_grip_mps2 * r * inv_b).max(T::ZERO));
     let torque_ff = if cfg.accel_feedforward {
-        ((mass * now_ref.accel_mps2 + resistance) * r).clamp(-b_max, t_max)
+        let needed = (mass * now_ref.accel_mps2 + resistance) * r;
+        let commanded = if needed < T::ZERO {
+            needed * inv_b
+        } else {
+            needed
+        };
+        commanded.clamp(-b_max, t_max)
     } else {
         T::ZERO
     };

@@ -701,7 +701,8 @@ impl<T: Real> ControlTask<T> {
     }
 
     /// The car as the friction check estimates it
-    /// ([`crate::longitudinal_estimator`]): the feed-forward's model, and the
+    /// ([`crate::longitudinal_estimator`]): the feed-forward's model (mass,
+    /// resistances, the brakes' gain), and the
     /// torque limits of the grip `μ̂·g` it found at the lateral acceleration
     /// `lateral_mps2` (m/s²; the friction ellipse `sqrt(1 − (a_y/grip)²)`, at least
     /// 0.3; half of it while slip is flagged) ([`TORQUE_GRIP_FRACTION`] of it:
@@ -778,6 +779,7 @@ impl<T: Real> ControlTask<T> {
             // spun them at the start, unseen, its lightness hiding the shortfall).
             traction_grip_mps2: traction,
             braking_grip_mps2: grip * larger(axle, T::ZERO),
+            inverse_brake_gain: lon.inverse_brake_gain(),
             hold_steering: self.steering_held(),
         }
     }

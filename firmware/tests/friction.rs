@@ -129,15 +129,18 @@ impl Rig {
     }
 
     /// A rig whose car, of the configured mass, climbing a grade that costs it
-    /// `grade_mps2` (m/s²), was driven gently (±1.5 m/s² asked of it, no slip)
-    /// for 40 s from 20 m/s: its mass and resistance are learned. Returns the
-    /// speed.
+    /// `grade_mps2` (m/s²), was driven gently (±1.5 m/s² and coasting, the
+    /// grade's torque on top, no slip) for 120 s from 20 m/s: its mass,
+    /// resistance and brakes are learned. Returns the speed.
     fn learned(grade_mps2: f64) -> (Self, f64) {
         let mut r = Self::new();
         let mut v = 20.0;
-        for k in 0..10 {
-            let a = if k % 2 == 0 { 1.5 } else { -1.5 };
-            v = r.drive(v, a, a - grade_mps2, 4.0);
+        // Driving, coasting, braking: the coasting tells the grade from the
+        // mass (the brakes' gain is learnt from the braking alone).
+        // The torque holds the grade too, so that the speed stays about 20 m/s.
+        for k in 0..30 {
+            let a = [1.5, 0.0, -1.5][k % 3];
+            v = r.drive(v, a + grade_mps2, a, 4.0);
         }
         (r, v)
     }

@@ -967,6 +967,45 @@ fn braking_is_shared_between_the_axles_as_configured() {
     assert!((rl - 0.15 * t).abs() < 1e-9 && rl == rr, "{rl} {rr} of {t}");
 }
 
+/// Brakes that give 0.7 of the torque commanded: the braking feed-forward and
+/// the anti-lock limit are commanded as 1/0.7 of what the car needs; driving is
+/// not touched.
+#[test]
+fn braking_is_commanded_through_the_brakes_gain() {
+    let cfg = LowLevelConfig::<f64>::default();
+    let car = CarModel {
+        mass_kg: 1500.0,
+        braking_grip_mps2: 4.0,
+        inverse_brake_gain: 1.0 / 0.7,
+        ..CarModel::configured(&cfg)
+    };
+    let run = |accel: f64, car: &CarModel<f64>| {
+        let mut plan = straight_plan(0, 10.0);
+        for u in plan.inputs.iter_mut() {
+            u[0] = accel;
+        }
+        let mut st = LowLevelState::new();
+        control_with_model(&cfg, &mut st, &plan, &est(10.0, 0.0), 0, car).unwrap()
+    };
+    let a = run(-2.0, &car);
+    assert!((a.torque_ff_nm + 1500.0 * 2.0 * 0.3 / 0.7).abs() < 1e-9, "{}", a.torque_ff_nm);
+    // At the limit: m·a_grip·r/b.
+    let a = run(-6.0, &car);
+    assert!((a.torque_ff_nm + 1500.0 * 4.0 * 0.3 / 0.7).abs() < 1e-9, "{}", a.torque_ff_nm);
+    // Driving as commanded.
+    let a = run(1.0, &car);
+    assert!((a.torque_ff_nm - 1500.0 * 0.3).abs() < 1e-9, "{}", a.torque_ff_nm);
+    // A gain that is not usable (0, NaN, negative): as commanded.
+    for bad in [0.0, f64::NAN, -2.0, f64::INFINITY] {
+        let b = CarModel {
+            inverse_brake_gain: bad,
+            ..car
+        };
+        let a = run(-2.0, &b);
+        assert!((a.torque_ff_nm + 1500.0 * 2.0 * 0.3).abs() < 1e-9, "{bad}: {}", a.torque_ff_nm);
+    }
+}
+
 #[test]
 fn the_feedforward_holds_the_cars_model_and_the_torque_its_grip() {
     let cfg = LowLevelConfig::<f64>::default();
@@ -980,6 +1019,7 @@ fn the_feedforward_holds_the_cars_model_and_the_torque_its_grip() {
         drag_n_per_mps2: 0.5,
         traction_grip_mps2: f64::INFINITY,
         braking_grip_mps2: f64::INFINITY,
+        inverse_brake_gain: 1.0,
         hold_steering: false,
     };
     // On the planned speed: (m·a + F₀ + c₂·V²)·r.
