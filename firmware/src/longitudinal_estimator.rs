@@ -436,7 +436,11 @@ impl<T: Real> LongitudinalEstimator<T> {
     /// otherwise, dimensionless (one square root).
     pub fn uncertainty(&self, cfg: &LongitudinalConfig<T>, braking: bool) -> T {
         let (p, prior, max) = if braking {
-            (self.brake[2], cfg.brake_prior_variance, cfg.brake_uncertainty_max)
+            (
+                self.brake[2],
+                cfg.brake_prior_variance,
+                cfg.brake_uncertainty_max,
+            )
         } else {
             (self.p[0], cfg.prior_variance[0], cfg.mass_uncertainty_max)
         };
@@ -477,8 +481,9 @@ impl<T: Real> LongitudinalEstimator<T> {
         let yb = smaller(y, T::ZERO);
         let q = s.v_mps * T::lit(1.0 / V_REF_MPS);
         let q = q * q;
-        let finite = (y + q + s.dt_s + s.lateral_mps2 + s.grip_mps2 + s.driven_share + s.slip_ratio)
-            .is_finite();
+        let finite =
+            (y + q + s.dt_s + s.lateral_mps2 + s.grip_mps2 + s.driven_share + s.slip_ratio)
+                .is_finite();
         if !(finite && s.dt_s > T::ZERO) {
             self.restart();
             return false;
@@ -920,13 +925,24 @@ mod tests {
         car.brake = brake;
         car.run(&mut e, 120.0, pattern, |_, _| 0.0);
         let (k_hat, b_hat) = (e.mass_ratio(), e.brake_gain());
-        assert!(((k_hat as f64) - k).abs() < 0.03 * k, "k = {k_hat}, true {k}");
+        assert!(
+            ((k_hat as f64) - k).abs() < 0.03 * k,
+            "k = {k_hat}, true {k}"
+        );
         assert!(
             ((b_hat as f64) - brake).abs() < 0.03 * brake,
             "b = {b_hat}, true {brake}"
         );
-        assert!(e.mass_uncertainty(&c) < 0.05, "u = {}", e.mass_uncertainty(&c));
-        assert!(e.brake_uncertainty(&c) < 0.05, "u_b = {}", e.brake_uncertainty(&c));
+        assert!(
+            e.mass_uncertainty(&c) < 0.05,
+            "u = {}",
+            e.mass_uncertainty(&c)
+        );
+        assert!(
+            e.brake_uncertainty(&c) < 0.05,
+            "u_b = {}",
+            e.brake_uncertainty(&c)
+        );
         // The braking expected of the torque is the brakes' and the car's.
         let torque = -3.0 * M * R;
         let a = e.expected_accel_mps2(&c, torque as f32, 0.0) as f64;

@@ -688,6 +688,13 @@ impl<T: Real> ControlTask<T> {
         }
     }
 
+    /// The estimate of the car's mass, resistances and brakes' gain
+    /// ([`crate::longitudinal_estimator`]; its settings are
+    /// `friction_config().longitudinal`).
+    pub fn longitudinal(&self) -> &crate::longitudinal_estimator::LongitudinalEstimator<T> {
+        self.friction.longitudinal()
+    }
+
     /// The friction check's settings.
     pub fn friction_config(&self) -> &FrictionConfig<T> {
         &self.friction_config

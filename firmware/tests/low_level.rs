@@ -988,13 +988,25 @@ fn braking_is_commanded_through_the_brakes_gain() {
         control_with_model(&cfg, &mut st, &plan, &est(10.0, 0.0), 0, car).unwrap()
     };
     let a = run(-2.0, &car);
-    assert!((a.torque_ff_nm + 1500.0 * 2.0 * 0.3 / 0.7).abs() < 1e-9, "{}", a.torque_ff_nm);
+    assert!(
+        (a.torque_ff_nm + 1500.0 * 2.0 * 0.3 / 0.7).abs() < 1e-9,
+        "{}",
+        a.torque_ff_nm
+    );
     // At the limit: m·a_grip·r/b.
     let a = run(-6.0, &car);
-    assert!((a.torque_ff_nm + 1500.0 * 4.0 * 0.3 / 0.7).abs() < 1e-9, "{}", a.torque_ff_nm);
+    assert!(
+        (a.torque_ff_nm + 1500.0 * 4.0 * 0.3 / 0.7).abs() < 1e-9,
+        "{}",
+        a.torque_ff_nm
+    );
     // Driving as commanded.
     let a = run(1.0, &car);
-    assert!((a.torque_ff_nm - 1500.0 * 0.3).abs() < 1e-9, "{}", a.torque_ff_nm);
+    assert!(
+        (a.torque_ff_nm - 1500.0 * 0.3).abs() < 1e-9,
+        "{}",
+        a.torque_ff_nm
+    );
     // A gain that is not usable (0, NaN, negative): as commanded.
     for bad in [0.0, f64::NAN, -2.0, f64::INFINITY] {
         let b = CarModel {
@@ -1002,7 +1014,11 @@ fn braking_is_commanded_through_the_brakes_gain() {
             ..car
         };
         let a = run(-2.0, &b);
-        assert!((a.torque_ff_nm + 1500.0 * 2.0 * 0.3).abs() < 1e-9, "{bad}: {}", a.torque_ff_nm);
+        assert!(
+            (a.torque_ff_nm + 1500.0 * 2.0 * 0.3).abs() < 1e-9,
+            "{bad}: {}",
+            a.torque_ff_nm
+        );
     }
 }
 

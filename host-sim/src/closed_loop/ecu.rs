@@ -44,6 +44,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::closed_loop::cost_model::CostModel;
 use crate::closed_loop::plan_activation::{mpc_error_name, PlanActivation, WINDOW_STATUS};
+use crate::closed_loop::summary::CarEstimate;
 use crate::closed_loop::SimOptions;
 use crate::model::vehicle::vehicle_config;
 use crate::model::vehicle::VehicleParams;
@@ -147,6 +148,25 @@ pub struct ControlOutput<T> {
     /// (`firmware::sideslip`), `None` when the ECU does not report it (processor
     /// in the loop).
     pub sideslip_lag: Option<f64>,
+    /// The control task's estimate of the car after this activation
+    /// (`firmware::longitudinal_estimator`), `None` when the ECU does not report
+    /// it (processor in the loop).
+    pub car_estimate: Option<CarEstimate>,
+}
+
+/// The estimate of the car of the control task `control`.
+pub fn car_estimate_of<T: Real>(control: &ControlTask<T>) -> CarEstimate {
+    let lon = control.longitudinal();
+    let cfg = &control.friction_config().longitudinal;
+    let [r0, r2] = lon.resistance_terms_mps2();
+    CarEstimate {
+        mass_ratio: lon.mass_ratio().to_f64(),
+        mass_uncertainty: lon.mass_uncertainty(cfg).to_f64(),
+        resistance_r0_mps2: r0.to_f64(),
+        resistance_r2_mps2: r2.to_f64(),
+        brake_gain: lon.brake_gain().to_f64(),
+        brake_uncertainty: lon.brake_uncertainty(cfg).to_f64(),
+    }
 }
 
 /// The firmware side of the closed loop.
@@ -459,6 +479,7 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
             skipped_releases,
             friction_mu: Some(self.control.friction_mu().to_f64()),
             sideslip_lag: Some(self.planner.sideslip_lag().to_f64()),
+            car_estimate: Some(car_estimate_of(&self.control)),
         })
     }
 

@@ -93,6 +93,20 @@ pub struct Summary {
     /// (`firmware::sideslip`: the plans' course lags the kinematic bicycle's by
     /// `λ·a_y`), null when the ECU does not report it (processor in the loop).
     pub sideslip_lag: Option<f64>,
+    /// The control task's mass ratio `k = m/m₀` at the end of the run
+    /// (`firmware::longitudinal_estimator`; this and the five after it null
+    /// when the ECU does not report them: processor in the loop).
+    pub est_mass_ratio: Option<f64>,
+    /// Its uncertainty `u` at the end of the run, dimensionless.
+    pub est_mass_uncertainty: Option<f64>,
+    /// The estimated resistance at rest per configured mass `r₀`, m/s².
+    pub est_resistance_r0_mps2: Option<f64>,
+    /// The estimated drag per configured mass at 30 m/s `r₂`, m/s².
+    pub est_resistance_r2_mps2: Option<f64>,
+    /// The estimated brakes' gain `b` (brake torque given per N·m commanded).
+    pub est_brake_gain: Option<f64>,
+    /// Its uncertainty `u_b`, dimensionless.
+    pub est_brake_uncertainty: Option<f64>,
     /// The patches of road with their own friction, `START:LENGTH:MU` joined by `;`
     /// (empty without any).
     pub mu_patches: String,
@@ -156,6 +170,38 @@ pub struct Summary {
     /// Times the ECU's watchdog saw no new plan for more than
     /// `firmware::deadline::PLAN_WATCHDOG_PERIODS` plan periods, null without an ECU.
     pub ecu_watchdog_trips: Option<u64>,
+}
+
+/// The control task's estimate of the car's longitudinal dynamics
+/// (`firmware::longitudinal_estimator`), in the units of its docs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CarEstimate {
+    /// Mass ratio `k = m/m₀` (effective mass over the configured one).
+    pub mass_ratio: f64,
+    /// Its uncertainty `u` (the friction check's tolerance on a relative
+    /// shortfall when driving), dimensionless.
+    pub mass_uncertainty: f64,
+    /// Resistance at rest per configured mass `r₀` (rolling resistance, grade),
+    /// m/s².
+    pub resistance_r0_mps2: f64,
+    /// Aerodynamic drag per configured mass at 30 m/s, `r₂`, m/s².
+    pub resistance_r2_mps2: f64,
+    /// The brakes' gain `b`: brake torque given per N·m commanded.
+    pub brake_gain: f64,
+    /// Its uncertainty `u_b` (the tolerance when braking), dimensionless.
+    pub brake_uncertainty: f64,
+}
+
+impl Summary {
+    /// The estimate of the car at the end of the run.
+    pub fn set_car_estimate(&mut self, e: &CarEstimate) {
+        self.est_mass_ratio = Some(e.mass_ratio);
+        self.est_mass_uncertainty = Some(e.mass_uncertainty);
+        self.est_resistance_r0_mps2 = Some(e.resistance_r0_mps2);
+        self.est_resistance_r2_mps2 = Some(e.resistance_r2_mps2);
+        self.est_brake_gain = Some(e.brake_gain);
+        self.est_brake_uncertainty = Some(e.brake_uncertainty);
+    }
 }
 
 /// The outcome of a finished run ([`Outcome`]'s docs: worst first).

@@ -87,7 +87,7 @@ use serde::Serialize;
 
 use crate::closed_loop::ecu::{ControlOutput, Ecu, SimulatedEcu};
 use crate::closed_loop::plan_activation::PlanActivation;
-use crate::closed_loop::summary::Summary;
+use crate::closed_loop::summary::{CarEstimate, Summary};
 use crate::closed_loop::SimOptions;
 use crate::model::plant::{Inputs, Plant, RoadUnder, State};
 use crate::model::vehicle::VehicleParams;
@@ -178,6 +178,31 @@ pub struct LogRow {
     /// plans' course lags the kinematic bicycle's by `λ·a_y`; NaN when the ECU does
     /// not report it (processor in the loop).
     pub sideslip_lag_rad_per_mps2: f64,
+    /// The control task's mass ratio `k = m/m₀` (`firmware::longitudinal_estimator`;
+    /// this and the five columns after it NaN when the ECU does not report them).
+    pub est_mass_ratio: f64,
+    /// Its uncertainty `u`, dimensionless.
+    pub est_mass_uncertainty: f64,
+    /// The estimated resistance at rest per configured mass `r₀`, m/s².
+    pub est_resistance_r0_mps2: f64,
+    /// The estimated drag per configured mass at 30 m/s `r₂`, m/s².
+    pub est_resistance_r2_mps2: f64,
+    /// The estimated brakes' gain `b` (brake torque given per N·m commanded).
+    pub est_brake_gain: f64,
+    /// Its uncertainty `u_b`, dimensionless.
+    pub est_brake_uncertainty: f64,
+}
+
+impl LogRow {
+    /// The columns of the control task's estimate of the car.
+    pub fn set_car_estimate(&mut self, e: &CarEstimate) {
+        self.est_mass_ratio = e.mass_ratio;
+        self.est_mass_uncertainty = e.mass_uncertainty;
+        self.est_resistance_r0_mps2 = e.resistance_r0_mps2;
+        self.est_resistance_r2_mps2 = e.resistance_r2_mps2;
+        self.est_brake_gain = e.brake_gain;
+        self.est_brake_uncertainty = e.brake_uncertainty;
+    }
 }
 
 /// A published plan's positions (for the trajectory figure).
@@ -424,6 +449,10 @@ pub fn run_with<T: Real, E: Ecu<T>>(
             if let Some(lag) = c.sideslip_lag {
                 row.sideslip_lag_rad_per_mps2 = lag;
                 meter.sum.sideslip_lag = Some(lag);
+            }
+            if let Some(e) = c.car_estimate {
+                row.set_car_estimate(&e);
+                meter.sum.set_car_estimate(&e);
             }
             res.log.push(row);
             if let Some(reason) = meter.stop_reason(t_us, &st, &row) {
@@ -685,6 +714,12 @@ impl<'a> Meter<'a> {
             friction_mu: f64::NAN,
             road_mu: f64::NAN,
             sideslip_lag_rad_per_mps2: f64::NAN,
+            est_mass_ratio: f64::NAN,
+            est_mass_uncertainty: f64::NAN,
+            est_resistance_r0_mps2: f64::NAN,
+            est_resistance_r2_mps2: f64::NAN,
+            est_brake_gain: f64::NAN,
+            est_brake_uncertainty: f64::NAN,
         }
     }
 

@@ -270,6 +270,20 @@ pub fn friction_line(s: &Summary) -> String {
     )
 }
 
+/// The line `run` prints on the control task's estimate of the car at the end of
+/// the run, when the ECU reports it.
+pub fn estimate_line(s: &Summary) -> Option<String> {
+    Some(format!(
+        "car estimate: mass ratio {:.3} ± {:.3} | r0 {:.3} m/s² | r2 {:.3} m/s² at 30 m/s | brake gain {:.3} ± {:.3}",
+        s.est_mass_ratio?,
+        s.est_mass_uncertainty?,
+        s.est_resistance_r0_mps2?,
+        s.est_resistance_r2_mps2?,
+        s.est_brake_gain?,
+        s.est_brake_uncertainty?,
+    ))
+}
+
 /// The line `run` and `pil` print on the plant's road grades and actuators, when
 /// the run has either.
 pub fn plant_line(s: &Summary) -> Option<String> {
@@ -310,6 +324,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let sum = &result.summary;
     println!("{}", summary_line(&s.scenario, sum));
     println!("{}", friction_line(sum));
+    if let Some(line) = estimate_line(sum) {
+        println!("{line}");
+    }
     if let Some(line) = plant_line(sum) {
         println!("{line}");
     }

@@ -165,7 +165,9 @@ impl ActuatorParams {
             if name == "brake_gain" {
                 let [lo, hi] = BRAKE_GAIN_RANGE;
                 if !(lo..=hi).contains(&v) {
-                    return bad(format!("must be in [{lo}, {hi}] (1: as commanded), got {v}"));
+                    return bad(format!(
+                        "must be in [{lo}, {hi}] (1: as commanded), got {v}"
+                    ));
                 }
             } else if name.contains("rate_limit") {
                 if v.is_nan() || v <= 0.0 {

@@ -548,6 +548,7 @@ impl Ecu<f32> for QemuEcu {
             skipped_releases,
             friction_mu: None,
             sideslip_lag: None,
+            car_estimate: None,
         })
     }
 
