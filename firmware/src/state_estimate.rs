@@ -5,7 +5,7 @@ use qp::real::all_finite;
 
 /// Vehicle state as measured/estimated at one instant (SI units). Serde derives carry
 /// it in the simulator's sensor frame ([`crate::link::SensorFrame`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StateEstimate<T> {
     /// Time of the measurement, µs since start.
     pub stamp_us: u64,
@@ -23,10 +23,23 @@ pub struct StateEstimate<T> {
     pub yaw_rate_radps: T,
     /// Front steering angle currently applied, rad.
     pub delta_rad: T,
+    /// The four wheels' circumferential speeds `ω·r_eff` `[fl, fr, rl, rr]`, m/s
+    /// (an ABS system's wheel-speed sensors). Not finite: not measured (the
+    /// friction check then reads slip from the acceleration alone); not part of
+    /// [`StateEstimate::is_finite`].
+    pub wheel_speed_mps: [T; 4],
+}
+
+impl<T: Real> Default for StateEstimate<T> {
+    /// [`StateEstimate::zeroed`].
+    fn default() -> Self {
+        Self::zeroed()
+    }
 }
 
 impl<T: Real> StateEstimate<T> {
-    /// An all-zero estimate at time 0; a valid `const` initialiser.
+    /// An all-zero estimate at time 0, its wheel speeds not measured (NaN); a
+    /// valid `const` initialiser.
     pub const fn zeroed() -> Self {
         Self {
             stamp_us: 0,
@@ -37,6 +50,7 @@ impl<T: Real> StateEstimate<T> {
             vy_mps: T::ZERO,
             yaw_rate_radps: T::ZERO,
             delta_rad: T::ZERO,
+            wheel_speed_mps: [T::NAN; 4],
         }
     }
 
@@ -50,8 +64,8 @@ impl<T: Real> StateEstimate<T> {
         }
     }
 
-    /// True when every field is finite (NaN and ±∞ are refused by the tasks;
-    /// [`all_finite`]: no branch per field).
+    /// True when every field but the wheel speeds is finite (NaN and ±∞ are
+    /// refused by the tasks; [`all_finite`]: no branch per field).
     pub fn is_finite(&self) -> bool {
         all_finite([
             self.x_m,

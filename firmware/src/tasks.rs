@@ -712,7 +712,9 @@ impl<T: Real> ControlTask<T> {
     /// resistances, the brakes' gain), and the
     /// torque limits of the grip `μ̂·g` it found at the lateral acceleration
     /// `lateral_mps2` (m/s²; the friction ellipse `sqrt(1 − (a_y/grip)²)`, at least
-    /// 0.3; half of it while slip is flagged) ([`TORQUE_GRIP_FRACTION`] of it:
+    /// 0.3; half of it while slip is flagged; half the traction's while a driven
+    /// wheel spins, half the braking's while a wheel locks, by the wheel speeds
+    /// of the last estimate) ([`TORQUE_GRIP_FRACTION`] of it:
     /// of the driven axle's share for traction, as much as its inside wheel
     /// carries under the lateral load transfer and less the load the car's own
     /// acceleration moves off the driven front axle, for the lightest mass the
@@ -728,13 +730,15 @@ impl<T: Real> ControlTask<T> {
         let mu = smaller(self.friction.mu(), fc.mu_nominal);
         let grip = mu * T::lit(crate::G * TORQUE_GRIP_FRACTION);
         // While slip is flagged the wheels are past their peak (spinning or
-        // locked: without wheel speeds, the only sign): half the grip, so that
-        // they roll again (what an anti-lock system or a traction control does).
-        let grip = if self.friction.slipping() {
-            grip * T::HALF
-        } else {
-            grip
-        };
+        // locked): half the grip, so that they roll again (what an anti-lock
+        // system or a traction control does). With wheel speeds, a driven wheel
+        // that spins halves the traction's, a wheel that locks the braking's
+        // (`crate::friction`, *Wheel speeds*).
+        let slipping = self.friction.slipping();
+        let grip = if slipping { grip * T::HALF } else { grip };
+        let half = |on: bool| if on && !slipping { T::HALF } else { T::ONE };
+        let traction_half = half(self.friction.wheel_spinning());
+        let braking_half = half(self.friction.wheel_locking());
         // The friction ellipse: what the lateral acceleration leaves, at least 0.3
         // of it (a car sliding sideways still brakes).
         let lat = lateral_mps2 / grip;
@@ -784,8 +788,8 @@ impl<T: Real> ControlTask<T> {
             // estimate allows, `m̂·(1 − u)`: a car lighter than configured has
             // less load on its driven wheels (the heavy car at 0.8 of its mass
             // spun them at the start, unseen, its lightness hiding the shortfall).
-            traction_grip_mps2: traction,
-            braking_grip_mps2: grip * larger(axle, T::ZERO),
+            traction_grip_mps2: traction * traction_half,
+            braking_grip_mps2: grip * larger(axle, T::ZERO) * braking_half,
             inverse_brake_gain: lon.inverse_brake_gain(),
             hold_steering: self.steering_held(),
         }
@@ -797,6 +801,7 @@ impl<T: Real> ControlTask<T> {
     /// no valid plan) it returns the safe actuation and counts it.
     pub fn run(&mut self, est: &StateEstimate<T>, plan: &Plan<T>, now_us: u64) -> Actuation<T> {
         self.stats.activations = self.stats.activations.wrapping_add(1);
+        self.friction.read_wheels(&self.friction_config, est);
         let lateral = self.lateral_demand(est);
         let car = self.car_model(lateral);
         match low_level::control_with_model(&self.config, &mut self.state, plan, est, now_us, &car)

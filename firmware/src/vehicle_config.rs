@@ -93,7 +93,8 @@ impl<T: Real> VehicleConfig<T> {
     /// planned with the friction `mu_planner`: its mass, wheel radius, the front
     /// axle's static share of the weight (front-wheel drive, as
     /// [`VehicleConfig::mpc_settings`]), `h/L` and `h/t` (the track `t` the width
-    /// less 0.25 m) and the wheelbase (the front tyres' grip check).
+    /// less 0.25 m), the wheelbase (the front tyres' grip check) and half the
+    /// track (the wheels' ground speeds).
     pub fn friction_config(&self, mu_planner: T) -> FrictionConfig<T> {
         let mut c = FrictionConfig::for_car(
             self.mass_kg,
@@ -106,6 +107,7 @@ impl<T: Real> VehicleConfig<T> {
         let track = (self.width_m - T::lit(0.25)).max(T::HALF * self.width_m);
         c.cg_height_over_track = self.cg_height_m / track;
         c.wheelbase_m = self.wheelbase_m();
+        c.half_track_m = T::HALF * track;
         c
     }
 

@@ -58,6 +58,7 @@ fn estimate(stamp_us: u64, v: f32) -> StateEstimate<f32> {
         vy_mps: v,
         yaw_rate_radps: v,
         delta_rad: v,
+        wheel_speed_mps: [1.0, 2.0, 3.0, 4.0],
     }
 }
 

@@ -597,3 +597,91 @@ fn at_the_fast_ceiling_the_estimate_creeps() {
     assert!((rise - creep).abs() < 1e-3 * creep, "first step {rise}");
     assert!(v > 0.0);
 }
+
+/// The wheels against the ground: rolling (straight, cornering, steered at
+/// low speed) is neither spin nor lock; a driven wheel past the slip ratio
+/// spins, any wheel below it locks; not measured (NaN), neither.
+#[test]
+fn wheel_speeds_tell_a_rolling_wheel_from_a_spinning_or_locked_one() {
+    use firmware::state_estimate::StateEstimate;
+    let mut c = cfg();
+    c.half_track_m = 0.65;
+    let mut e = FrictionEstimator::new();
+    e.start(&c);
+    let est = |vx: f64, yaw: f64, delta: f64, w: [f64; 4]| StateEstimate {
+        vx_mps: vx,
+        yaw_rate_radps: yaw,
+        delta_rad: delta,
+        wheel_speed_mps: w,
+        ..StateEstimate::zeroed()
+    };
+    let mut read = |s: StateEstimate<f64>| {
+        e.read_wheels(&c, &s);
+        (e.wheel_spinning(), e.wheel_locking(), e.wheel_slip_mps())
+    };
+    // Straight at 20 m/s, rolling.
+    assert_eq!(read(est(20.0, 0.0, 0.0, [20.0; 4])), (false, false, 0.0));
+    // Turning left at 0.5 rad/s: the left wheels 0.325 m/s slower, the right
+    // ones faster.
+    let (l, r) = (20.0 - 0.325, 20.0 + 0.325);
+    let (spin, lock, most) = read(est(
+        20.0,
+        0.5,
+        0.05,
+        [l / (0.05f64).cos(), r / (0.05f64).cos(), l, r],
+    ));
+    assert!(!spin && !lock && most < 0.01, "{most}");
+    // A hairpin at 5 m/s steered 0.5 rad: the front wheels roll 1/cos δ as
+    // fast as the car (0.69 m/s more): the second-order factor leaves 0.07 m/s
+    // (its fourth-order term), under the margin.
+    let f = 5.0 / (0.5f64).cos();
+    let (spin, lock, most) = read(est(5.0, 0.0, 0.5, [f, f, 5.0, 5.0]));
+    assert!(!spin && !lock && most < 0.08, "{most}");
+    // A front wheel at slip ratio 0.2 at 20 m/s spins; at 0.1 it does not.
+    assert_eq!(read(est(20.0, 0.0, 0.0, [24.0, 20.0, 20.0, 20.0])).0, true);
+    assert_eq!(read(est(20.0, 0.0, 0.0, [22.0, 20.0, 20.0, 20.0])).0, false);
+    // A rear wheel faster is not a driven wheel spinning.
+    let (spin, lock, most) = read(est(20.0, 0.0, 0.0, [20.0, 20.0, 24.0, 20.0]));
+    assert!(!spin && !lock && (most - 4.0).abs() < 1e-12);
+    // Any wheel at slip ratio −0.25 locks.
+    assert_eq!(read(est(20.0, 0.0, 0.0, [20.0, 20.0, 20.0, 15.0])).1, true);
+    assert_eq!(read(est(20.0, 0.0, 0.0, [15.0, 20.0, 20.0, 20.0])).1, true);
+    // Under the margin at walking pace: a wheel 0.4 m/s off at 1 m/s is noise.
+    assert_eq!(
+        read(est(1.0, 0.0, 0.0, [1.4, 1.0, 0.6, 1.0])),
+        (false, false, 0.4)
+    );
+    // Not measured.
+    assert_eq!(
+        read(est(20.0, 0.0, 0.0, [f64::NAN; 4])),
+        (false, false, 0.0)
+    );
+}
+
+/// A driven wheel that spins is slip though the torque asks little (under the
+/// demand at which the shortfall is looked for) and the car accelerates as
+/// asked: the event lowers the estimate.
+#[test]
+fn a_spinning_wheel_is_slip_whatever_the_shortfall() {
+    use firmware::state_estimate::StateEstimate;
+    let c = cfg();
+    let mut e = FrictionEstimator::new();
+    e.start(&c);
+    let (mut v, mut t) = (15.0, 0u64);
+    for k in 0..300 {
+        // 0.5 m/s² asked and given; from 2 s on the front wheels at slip 0.3.
+        let w = if k >= 200 { 1.3 * v } else { v };
+        let s = StateEstimate {
+            stamp_us: t,
+            vx_mps: v,
+            wheel_speed_mps: [w, w, v, v],
+            ..StateEstimate::zeroed()
+        };
+        e.read_wheels(&c, &s);
+        e.update(&c, t, t, v, 0.0, 0.5 * M * R);
+        v += 0.5 * 0.01;
+        t += CONTROL_PERIOD_US;
+    }
+    assert_eq!(e.events(), 1);
+    assert!(e.mu() < MU, "μ̂ = {}", e.mu());
+}

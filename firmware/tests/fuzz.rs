@@ -99,6 +99,7 @@ fn estimate_of(
         vy_mps: vy,
         yaw_rate_radps: r,
         delta_rad: d,
+        ..StateEstimate::zeroed()
     }
 }
 

@@ -95,6 +95,7 @@ fn estimate(stamp_us: u64, v: f32) -> StateEstimate<f32> {
         vy_mps: v,
         yaw_rate_radps: v,
         delta_rad: v,
+        wheel_speed_mps: [v, 2.0 * v, -v, 0.5 * v],
     }
 }
 
@@ -282,11 +283,11 @@ fn frame_layout_is_version_postcard_crc_cobs() {
     // The CRC is CRC-32/ISO-HDLC (check value of "123456789").
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
     assert_eq!(crc.checksum(b"123456789"), 0xCBF4_3926);
-    // Pinned bytes: `Down::Start` is version 7, tag 3, then its CRC (zlib.crc32(b"\x07\x03")
-    // = 0x9791D582, little-endian, no zero byte), stuffed: one COBS block of 6 bytes.
+    // Pinned bytes: `Down::Start` is version 8, tag 3, then its CRC (zlib.crc32(b"\x08\x03")
+    // = 0x1009C94D, little-endian, no zero byte), stuffed: one COBS block of 6 bytes.
     assert_eq!(
         frame_of(&Down::Start),
-        [0x07, 0x07, 0x03, 0x82, 0xD5, 0x91, 0x97, 0x00]
+        [0x07, 0x08, 0x03, 0x4D, 0xC9, 0x09, 0x10, 0x00]
     );
 }
 
@@ -695,7 +696,7 @@ fn any_down() -> impl Strategy<Value = Down> {
     let sensor = (
         any::<u32>(),
         any::<u64>(),
-        prop::array::uniform7(any_f32()),
+        prop::array::uniform11(any_f32()),
         any::<u16>(),
     )
         .prop_map(|(seq, stamp_us, v, route_frames)| {
@@ -711,6 +712,7 @@ fn any_down() -> impl Strategy<Value = Down> {
                     vy_mps: v[4],
                     yaw_rate_radps: v[5],
                     delta_rad: v[6],
+                    wheel_speed_mps: [v[7], v[8], v[9], v[10]],
                 },
             })
         });

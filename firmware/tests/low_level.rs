@@ -651,6 +651,7 @@ impl Car {
             vy_mps: 0.0,
             yaw_rate_radps: self.yaw_rate(),
             delta_rad: self.delta,
+            ..StateEstimate::zeroed()
         }
     }
 }
@@ -683,6 +684,7 @@ fn est_f32(e: &StateEstimate<f64>) -> StateEstimate<f32> {
         vy_mps: e.vy_mps as f32,
         yaw_rate_radps: e.yaw_rate_radps as f32,
         delta_rad: e.delta_rad as f32,
+        ..StateEstimate::zeroed()
     }
 }
 

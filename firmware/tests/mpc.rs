@@ -66,6 +66,7 @@ fn est<T: Real>(x: f64, y: f64, psi: f64, v: f64, delta: f64, stamp_us: u64) -> 
         vy_mps: T::ZERO,
         yaw_rate_radps: T::ZERO,
         delta_rad: T::from_f64(delta),
+        ..StateEstimate::zeroed()
     }
 }
 
@@ -105,6 +106,7 @@ fn drive<T: Real>(
             vy_mps: T::ZERO,
             yaw_rate_radps: T::ZERO,
             delta_rad: xi[5],
+            ..StateEstimate::zeroed()
         };
         out.push((plan, r));
     }

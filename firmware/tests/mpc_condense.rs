@@ -324,6 +324,7 @@ fn condensing_matches_the_dense_reference() {
             vy_mps: 0.0,
             yaw_rate_radps: 0.0,
             delta_rad: delta,
+            ..StateEstimate::zeroed()
         };
         for step in 0..4 {
             // Each pass's QP and the nominal inputs it was built around.

@@ -241,6 +241,7 @@ fn lap_of_a_lagging_car(lag: f64, learn: bool) -> (f64, f64) {
             vy_mps: xi[3] * course.sin(),
             yaw_rate_radps: yaw_rate,
             delta_rad: xi[5],
+            ..StateEstimate::zeroed()
         };
         // A failed activation (a QP at its iteration cap, 2–6 of the 600 here)
         // keeps the input, as the control task keeps the last plan.

@@ -36,6 +36,7 @@ impl Car {
             vy_mps: 0.0,
             yaw_rate_radps: 0.0,
             delta_rad: self.xi[5],
+            ..StateEstimate::zeroed()
         }
     }
 }
@@ -271,6 +272,7 @@ fn understeer_saturates_the_front_and_the_brakes_leave_the_steering_its_grip() {
                 vy_mps: 0.0,
                 yaw_rate_radps: yaw_rate,
                 delta_rad: 0.1,
+                ..StateEstimate::zeroed()
             };
             torque = control
                 .run(&e, &plan, k * CONTROL_PERIOD_US)
@@ -399,4 +401,40 @@ fn the_traction_limit_counts_the_load_the_cars_own_acceleration_takes_off_the_fr
             assert!(limit < 0.86 * without, "{limit} vs {without}");
         }
     }
+}
+
+/// Traction control and an anti-lock limit from the wheel speeds: a driven
+/// front wheel that spins halves the traction grip, a wheel that locks halves
+/// the braking grip, from the activation that sees it; wheels that roll (or are
+/// not measured) leave both as they were.
+#[test]
+fn a_spinning_wheel_halves_the_traction_and_a_locked_one_the_braking() {
+    let (_, mut control, _) = setup();
+    let plan = Plan::<f64>::zeroed();
+    let at = |wheels: [f64; 4]| StateEstimate {
+        vx_mps: 20.0,
+        wheel_speed_mps: wheels,
+        ..StateEstimate::zeroed()
+    };
+    let mut limits = |wheels: [f64; 4]| {
+        control.run(&at(wheels), &plan, 0);
+        let m = control.car_model(0.0);
+        (m.traction_grip_mps2, m.braking_grip_mps2)
+    };
+    let (t0, b0) = limits([f64::NAN; 4]);
+    assert_eq!(limits([20.0; 4]), (t0, b0));
+    // The front left wheel 4 m/s faster than the ground (slip ratio 0.2 >
+    // 0.15·20 + 0.5 m/s): traction halved.
+    let (t, b) = limits([24.0, 20.0, 20.0, 20.0]);
+    assert!(
+        (t - 0.5 * t0).abs() < 1e-12 && b == b0,
+        "{t} {b} vs {t0} {b0}"
+    );
+    // A rear wheel (undriven) spinning is not traction slip; locking is.
+    assert_eq!(limits([20.0, 20.0, 24.0, 20.0]), (t0, b0));
+    let (t, b) = limits([20.0, 20.0, 20.0, 15.0]);
+    assert!(
+        t == t0 && (b - 0.5 * b0).abs() < 1e-12,
+        "{t} {b} vs {t0} {b0}"
+    );
 }

@@ -69,6 +69,7 @@ fn estimate_at(rows: &[[f64; 4]], i: usize, stamp_us: u64) -> StateEstimate<f64>
         vy_mps: 0.0,
         yaw_rate_radps: 0.0,
         delta_rad: 0.0,
+        ..StateEstimate::zeroed()
     }
 }
 
@@ -85,6 +86,7 @@ fn estimate_along(plan: &Plan<f64>, stamp_us: u64) -> StateEstimate<f64> {
         vy_mps: 0.0,
         yaw_rate_radps: 0.0,
         delta_rad: n.delta_rad,
+        ..StateEstimate::zeroed()
     }
 }
 

@@ -26,6 +26,8 @@ fn start_estimate(scenario: &Scenario, v: f64, t_us: u64) -> StateEstimate<f32> 
         vy_mps: 0.0,
         yaw_rate_radps: 0.0,
         delta_rad: 0.0,
+        // The wheels rolling at the car's speed.
+        wheel_speed_mps: [v as f32; 4],
     }
 }
 

@@ -614,6 +614,7 @@ fn the_actuators_step_responses_are_a_delay_a_lag_and_a_rate_limit() {
             torque_time_constant_s: 0.05,
             torque_delay_s: 0.01,
             torque_rate_limit_nm_per_s: 40_000.0,
+            brake_gain: 1.0,
         },
         ..VehicleParams::default()
     };

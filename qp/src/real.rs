@@ -64,6 +64,8 @@ pub trait Real:
     const NEG_INFINITY: Self;
     /// Largest finite value.
     const MAX: Self;
+    /// Not a number (a const, for `const fn` initialisers: a value not measured).
+    const NAN: Self;
 
     /// Converts an `f32` literal or value.
     fn lit(v: f32) -> Self;
@@ -155,6 +157,7 @@ macro_rules! impl_real {
             const INFINITY: Self = <$t>::INFINITY;
             const NEG_INFINITY: Self = <$t>::NEG_INFINITY;
             const MAX: Self = <$t>::MAX;
+            const NAN: Self = <$t>::NAN;
 
             #[inline]
             fn lit(v: f32) -> Self {

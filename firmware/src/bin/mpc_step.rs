@@ -138,6 +138,7 @@ fn main() -> ! {
         vy_mps: 0.0,
         yaw_rate_radps: 0.0,
         delta_rad: 0.0,
+        ..StateEstimate::zeroed()
     };
     let (mut max_warm, mut sum_warm, mut cold, mut failures) = (0u32, 0u64, 0u32, 0u32);
     let mut max_iter = 0u32;
@@ -238,6 +239,7 @@ fn estimate_of(xi: &[f32; 6], stamp_us: u64) -> StateEstimate<f32> {
         vy_mps: 0.0,
         yaw_rate_radps: 0.0,
         delta_rad: xi[5],
+        ..StateEstimate::zeroed()
     }
 }
 

@@ -19,7 +19,9 @@
 //! publishing). Version 7: the control task completes when its actuation frame
 //! has been written, so each [`ActuationFrame`] reports the previous
 //! activation's response time ([`ActuationFrame::previous_response_us`]) and
-//! counts up to it. Everything here works on fixed buffers: no heap, no `alloc`,
+//! counts up to it. Version 8: the state estimate carries the four wheel
+//! speeds ([`StateEstimate::wheel_speed_mps`], 16 bytes more in a
+//! [`SensorFrame`]). Everything here works on fixed buffers: no heap, no `alloc`,
 //! no panic; every refused frame is a [`FrameError`] value the receiver counts.
 //!
 //! # Wire format
@@ -102,7 +104,7 @@ use crate::vehicle_config::VehicleConfig;
 use qp::QpStatus;
 
 /// Version of this wire format, the first byte of every raw frame.
-pub const LINK_VERSION: u8 = 7;
+pub const LINK_VERSION: u8 = 8;
 /// The largest encoded frame, bytes, including its 0x00 delimiter.
 pub const MAX_FRAME_BYTES: usize = 512;
 /// Track rows per [`PathChunkFrame`].
@@ -478,7 +480,7 @@ const TAG_BYTES: usize = 1;
 /// Largest postcard encoding of a [`VehicleConfig<f32>`] (8 `f32`), bytes.
 const VEHICLE_MAX_BYTES: usize = 8 * F32_BYTES;
 /// Largest postcard encoding of a [`StateEstimate<f32>`], bytes.
-const ESTIMATE_MAX_BYTES: usize = U64_MAX_BYTES + 7 * F32_BYTES;
+const ESTIMATE_MAX_BYTES: usize = U64_MAX_BYTES + 11 * F32_BYTES;
 /// Largest postcard encoding of a [`TaskTimingFrame`] (5 `u32`), bytes.
 const TIMING_MAX_BYTES: usize = 5 * U32_MAX_BYTES;
 /// Largest postcard encoding of a [`PlanEventFrame`], bytes.

@@ -18,7 +18,7 @@ use crate::closed_loop::SimOptions;
 use crate::model::vehicle::{vehicle_config, VehicleParams};
 use crate::world::disturbance::{
     estimate_biases, Disturbances, DropoutKind, EstimateBias, SplitMix64, LATERAL_NOISE_STREAM,
-    NOISE_STREAM, NOISE_UNIT,
+    NOISE_STREAM, NOISE_UNIT, WHEEL_NOISE_STREAM,
 };
 use crate::world::route::Window;
 use crate::world::scenario::Scenario;
@@ -45,6 +45,8 @@ pub struct DisturbedEcu<T: Real> {
     rng: SplitMix64,
     /// The lateral speed's noise, a stream of its own.
     rng_lateral: SplitMix64,
+    /// Draws of the wheel speeds' noise (a stream of their own).
+    rng_wheels: SplitMix64,
     /// The run's biases on the lateral speed and the yaw rate.
     bias: EstimateBias,
     history: VecDeque<StateEstimate<T>>,
@@ -106,6 +108,7 @@ impl<T: Real> DisturbedEcu<T> {
             inner,
             rng: SplitMix64::new(d.seed ^ NOISE_STREAM),
             rng_lateral: SplitMix64::new(d.seed ^ LATERAL_NOISE_STREAM),
+            rng_wheels: SplitMix64::new(d.seed ^ WHEEL_NOISE_STREAM),
             bias: estimate_biases(d.seed, d.noise_scale),
             d,
             history: VecDeque::new(),
@@ -148,6 +151,9 @@ impl<T: Real> DisturbedEcu<T> {
                 n.lateral_speed_mps,
                 &mut self.rng_lateral,
             );
+            for w in m.wheel_speed_mps.iter_mut() {
+                *w = add(*w, 0.0, n.wheel_speed_mps, &mut self.rng_wheels);
+            }
         }
         let keep = self.d.delay_periods() + 1;
         self.history.push_back(m);
@@ -168,6 +174,7 @@ impl<T: Real> DisturbedEcu<T> {
                         vy_mps: nan,
                         yaw_rate_radps: nan,
                         delta_rad: nan,
+                        wheel_speed_mps: [nan; 4],
                     }
                 }
                 DropoutKind::Hold => self.last_delivered.unwrap_or(delayed),
@@ -277,6 +284,7 @@ mod tests {
             vx_mps: 10.0,
             vy_mps: 0.1,
             yaw_rate_radps: 0.05,
+            wheel_speed_mps: [10.0, 10.1, 9.9, 10.0],
             ..StateEstimate::zeroed()
         };
         let seen = (0..n)
@@ -320,6 +328,16 @@ mod tests {
         // This seed's biases are large enough to tell from the noise's mean.
         assert!(bias.lateral_speed_mps.abs() > 10.0 * se * sv, "{bias:?}");
         assert!(bias.yaw_rate_radps.abs() > 10.0 * se * sr, "{bias:?}");
+        // Each wheel's speed: unbiased, the level's noise.
+        for i in 0..4 {
+            let (w_mean, w_sd) = mean_and_sd(
+                seen.iter()
+                    .map(|m| m.wheel_speed_mps[i] - truth.wheel_speed_mps[i]),
+            );
+            let sw = k * NOISE_UNIT.wheel_speed_mps;
+            assert!(w_mean.abs() < se * sw, "wheel {i}: mean {w_mean}");
+            assert!((w_sd / sw - 1.0).abs() < 0.03, "wheel {i}: σ {w_sd}");
+        }
         // The same seed, the same draws; level 0, the truth.
         let (_, again) = seen_at_level(k, seed, 100);
         assert_eq!(format!("{:?}", &seen[..100]), format!("{again:?}"));

@@ -145,6 +145,15 @@ pub struct LogRow {
     pub lateral_error_m: f64,
     /// Arc length driven along the track, m.
     pub progress_m: f64,
+    /// Wheel speed `ω·r_eff` front left (the plant's, before the estimate's
+    /// noise and delay), m/s.
+    pub wheel_speed_fl_mps: f64,
+    /// Wheel speed front right, m/s.
+    pub wheel_speed_fr_mps: f64,
+    /// Wheel speed rear left, m/s.
+    pub wheel_speed_rl_mps: f64,
+    /// Wheel speed rear right, m/s.
+    pub wheel_speed_rr_mps: f64,
     /// Slip ratio front left.
     pub kappa_fl: f64,
     /// Slip ratio front right.
@@ -194,6 +203,16 @@ pub struct LogRow {
 }
 
 impl LogRow {
+    /// The wheel-speed columns, `[fl, fr, rl, rr]`, m/s.
+    pub fn set_wheel_speeds(&mut self, w: [f64; 4]) {
+        [
+            self.wheel_speed_fl_mps,
+            self.wheel_speed_fr_mps,
+            self.wheel_speed_rl_mps,
+            self.wheel_speed_rr_mps,
+        ] = w;
+    }
+
     /// The columns of the control task's estimate of the car.
     pub fn set_car_estimate(&mut self, e: &CarEstimate) {
         self.est_mass_ratio = e.mass_ratio;
@@ -254,7 +273,9 @@ fn front_overhang_from_cg_m(v: &VehicleParams) -> f64 {
     v.lf_m + 0.9
 }
 
-fn estimate<T: Real>(s: &State, delta_rad: f64, t_us: u64) -> StateEstimate<T> {
+/// The plant's true state as an estimate at `t_us` (µs): the measured steering
+/// angle `delta_rad` (rad) and the wheel speeds `ω·r_eff` (`r_eff_m`, m).
+fn estimate<T: Real>(s: &State, delta_rad: f64, t_us: u64, r_eff_m: f64) -> StateEstimate<T> {
     StateEstimate {
         stamp_us: t_us,
         x_m: T::from_f64(s.x_m),
@@ -264,6 +285,7 @@ fn estimate<T: Real>(s: &State, delta_rad: f64, t_us: u64) -> StateEstimate<T> {
         vy_mps: T::from_f64(s.vy_mps),
         yaw_rate_radps: T::from_f64(s.yaw_rate_radps),
         delta_rad: T::from_f64(delta_rad),
+        wheel_speed_mps: s.omega_radps.map(|w| T::from_f64(w * r_eff_m)),
     }
 }
 
@@ -384,7 +406,7 @@ pub fn run_with<T: Real, E: Ecu<T>>(
         if t_us.is_multiple_of(CONTROL_PERIOD_US) {
             let st = *plant.state();
             let out = plant.outputs();
-            let est = estimate::<T>(&st, out.delta_rad, t_us);
+            let est = estimate::<T>(&st, out.delta_rad, t_us, vehicle.r_eff_m);
             if let Some(w) = feeder.update(s_start + meter.progress_m) {
                 ecu.set_window(&w).with_context(|| {
                     format!("window of the road at t = {:.3} s", t_us as f64 * 1e-6)
@@ -434,6 +456,7 @@ pub fn run_with<T: Real, E: Ecu<T>>(
                 * grade
                     .under_car_rad(meter.s_prev, vehicle.lf_m, vehicle.lr_m)
                     .tan();
+            row.set_wheel_speeds(st.omega_radps.map(|w| w * vehicle.r_eff_m));
             row.road_mu = road
                 .wheels_mu(meter.s_prev, vehicle.lf_m, vehicle.lr_m)
                 .into_iter()
@@ -700,6 +723,10 @@ impl<'a> Meter<'a> {
             road_grade_pct: 0.0,
             lateral_error_m: lat,
             progress_m: self.progress_m,
+            wheel_speed_fl_mps: f64::NAN,
+            wheel_speed_fr_mps: f64::NAN,
+            wheel_speed_rl_mps: f64::NAN,
+            wheel_speed_rr_mps: f64::NAN,
             kappa_fl: out.kappa[0],
             kappa_fr: out.kappa[1],
             kappa_rl: out.kappa[2],

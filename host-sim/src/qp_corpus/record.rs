@@ -240,6 +240,7 @@ fn record_in<T: Real>(
             vy_mps: T::ZERO,
             yaw_rate_radps: T::ZERO,
             delta_rad: xi[5],
+            ..StateEstimate::zeroed()
         };
     }
     Ok(out)

@@ -8,7 +8,9 @@
 //! 1. **Noise** (measured at the instant): independent Gaussian draws added to the
 //!    true state, standard deviations `scale ×` [`NOISE_UNIT`]: position X and Y
 //!    0.05 m each, heading 0.005 rad (0.29°), longitudinal speed 0.05 m/s, yaw rate
-//!    0.005 rad/s, lateral speed 0.02 m/s (an RTK-GNSS/INS estimate). The lateral
+//!    0.005 rad/s, lateral speed 0.02 m/s (an RTK-GNSS/INS estimate), each
+//!    wheel's speed 0.03 m/s (an ABS tone wheel's count over 10 ms, from a
+//!    stream of its own: the other channels' draws are those without it). The lateral
 //!    speed and the yaw rate (what the plan task's sideslip learner reads) also
 //!    carry a **bias**, constant over the run and drawn once from its seed
 //!    ([`estimate_biases`]), of standard deviation `scale ×` 0.02 m/s and
@@ -59,6 +61,8 @@ pub struct NoiseSigmas {
     pub lateral_speed_bias_mps: f64,
     /// The yaw rate's bias over a run, rad/s.
     pub yaw_rate_bias_radps: f64,
+    /// Each wheel's speed `ω·r_eff`, m/s.
+    pub wheel_speed_mps: f64,
 }
 
 /// Noise level 1: an RTK-GNSS/INS-grade estimate.
@@ -70,6 +74,7 @@ pub const NOISE_UNIT: NoiseSigmas = NoiseSigmas {
     lateral_speed_mps: 0.02,
     lateral_speed_bias_mps: 0.02,
     yaw_rate_bias_radps: 0.002,
+    wheel_speed_mps: 0.03,
 };
 
 /// The biases of a run's estimate (see the module docs).
@@ -101,6 +106,8 @@ pub const NOISE_STREAM: u64 = 0x6E6F_6973_6521;
 /// Mixed into a run's seed for the lateral speed's noise.
 pub const LATERAL_NOISE_STREAM: u64 = 0x6C61_7465_7261_6C21;
 
+/// Mixed into a run's seed for the wheel speeds' noise.
+pub const WHEEL_NOISE_STREAM: u64 = 0x7768_6565_6c73_2121;
 /// Mixed into a run's seed for the biases.
 pub const BIAS_STREAM: u64 = 0x6269_6173_6573_2121;
 
