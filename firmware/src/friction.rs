@@ -138,11 +138,14 @@
 //! [`FrictionConfig::wheel_slip_ratio`], 0.15: the default tyre gives its peak
 //! force at a slip ratio of about 0.1, and on the 17 circuits without fault
 //! the largest measured is under 0.09; `d₀` =
-//! [`FrictionConfig::wheel_slip_margin_mps`], 0.5 m/s: the wheel-speed noise at
-//! level 4 is 0.12 m/s per wheel, and the ground-speed approximations err most
-//! at low speed). A wheel that spins or locks (the car moving) is slip as a
-//! confirmed shortfall is, whatever the demand: the event lowers `μ̂` to the
-//! friction used at its peak, as below. Their largest difference from the
+//! [`FrictionConfig::wheel_slip_margin_mps`], 1 m/s: at noise level 4 a wheel's
+//! difference from the ground's carries 0.12 m/s of the wheel's noise and
+//! 0.2 m/s of the speed's, so 1 m/s is over 4 of their σ; the ground-speed
+//! approximations err most at low speed). A wheel that spins or locks (the car
+//! moving) is slip at once, without the confirmation a shortfall needs (the
+//! traction control or anti-lock limit it triggers ends it within a few
+//! periods), whatever the demand: the event lowers `μ̂` to the friction used
+//! at its peak, as below. Their largest difference from the
 //! ground's `|ω·r − V|` goes to the estimator of the car, whose samples count
 //! only under `0.03·|V|` ([`crate::longitudinal_estimator`]: a wheel slipping
 //! too little to flag is not learnt as mass). Without wheel speeds (not
@@ -163,9 +166,11 @@
 //! # Cost
 //!
 //! Per period about 60 floating-point operations and two divisions; the square
-//! root only on a slip; plus the estimator of the mass and resistances (about 90
-//! operations, one division, one square root). Deterministic, no allocation, no
-//! loop, no branch on data but the slip test and the estimator's gate.
+//! root only on a slip; the wheel speeds about 20 operations, no division; plus
+//! the estimator of the mass, resistances and brakes (about 100 operations, two
+//! divisions, one square root). Deterministic, no allocation, no loop, no branch
+//! on data but the slip test and the estimator's gate. Its static bound with the
+//! rest of the control job: `host-sim wcet` (`control_job`).
 
 use crate::longitudinal_estimator::{
     LongitudinalConfig, LongitudinalEstimator, LongitudinalSample,
@@ -330,7 +335,7 @@ impl<T: Real> FrictionConfig<T> {
             standstill_s: T::TWO,
             half_track_m: T::ZERO,
             wheel_slip_ratio: T::lit(0.15),
-            wheel_slip_margin_mps: T::HALF,
+            wheel_slip_margin_mps: T::ONE,
             longitudinal: LongitudinalConfig::for_car(mass_kg, wheel_radius_m),
         }
     }
@@ -719,7 +724,10 @@ impl<T: Real> FrictionEstimator<T> {
         } else {
             T::ZERO
         };
-        if short && self.shortfall_s >= cfg.confirm_s {
+        // A wheel that spins or locks is measured, not inferred: no confirmation
+        // (the traction control or anti-lock limit it triggers ends it within
+        // a few periods, before a confirmation would come).
+        if wheel || (short && self.shortfall_s >= cfg.confirm_s) {
             // A shortfall that returns within `event_gap_s` of the last one
             // continues its event (the spun wheels braked back to the road's
             // speed take the brake torque first: not a second slip).

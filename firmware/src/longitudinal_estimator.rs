@@ -108,8 +108,9 @@
 //!
 //! Per period about 100 floating-point operations, two divisions (the RLS gain,
 //! and the inverse of the parameter updated: mass ratio or brake gain; the
-//! braking and the driving updates exclusive) and one square root (on the FPU);
-//! no loop, no branch on data but the gate and the choice of update; 108 bytes of
+//! braking and the driving updates exclusive) and one square root (on the FPU,
+//! the updated parameter's uncertainty: kept, so that reading it costs none); no
+//! loop, no branch on data but the gate and the choice of update; 116 bytes of
 //! state in `f32`.
 
 use crate::Real;
@@ -319,6 +320,9 @@ pub struct LongitudinalEstimator<T> {
     inv_k: T,
     /// The brakes' gain `b` (dimensionless), `1/b`, and its variance `P_b`.
     brake: [T; 3],
+    /// The uncertainties `[u, u_b]` of `P` and `P_b` as they stand (computed
+    /// when they change: one square root per update, none per read).
+    u: [T; 2],
     /// `P` (symmetric), its upper triangle `[p00, p01, p02, p11, p12, p22]`.
     p: [T; 6],
     /// The filters' stages: speed (m/s), `y` (m/s²), `(V/V_ref)²`, `y_b` (m/s²):
@@ -347,6 +351,7 @@ impl<T: Real> LongitudinalEstimator<T> {
             theta: [T::ONE, T::ZERO, T::ZERO],
             inv_k: T::ONE,
             brake: [T::ONE, T::ONE, T::ZERO],
+            u: [T::ZERO; 2],
             p: [T::ZERO; 6],
             v_f: [T::ZERO; 2],
             y_f: [T::ZERO; 2],
@@ -364,6 +369,7 @@ impl<T: Real> LongitudinalEstimator<T> {
         *self = Self::new();
         self.reset_covariance(cfg);
         self.brake[2] = cfg.brake_prior_variance;
+        self.u = [cfg.mass_uncertainty_max, cfg.brake_uncertainty_max];
     }
 
     fn reset_covariance(&mut self, cfg: &LongitudinalConfig<T>) {
@@ -409,9 +415,9 @@ impl<T: Real> LongitudinalEstimator<T> {
 
     /// The uncertainty `u` of the mass ratio (module docs), dimensionless, in
     /// `[0, mass_uncertainty_max]`: a relative shortfall under `u` may be mass.
-    pub fn mass_uncertainty(&self, cfg: &LongitudinalConfig<T>) -> T {
-        let ratio = (self.p[0] / cfg.prior_variance[0]).clamp(T::ZERO, T::ONE);
-        cfg.mass_uncertainty_max * ratio.sqrt()
+    /// Kept from the last update of `P` (`cfg` is the one it was computed with).
+    pub fn mass_uncertainty(&self, _cfg: &LongitudinalConfig<T>) -> T {
+        self.u[0]
     }
 
     /// The brakes' gain `b`, brake torque given per N·m commanded,
@@ -428,24 +434,24 @@ impl<T: Real> LongitudinalEstimator<T> {
     /// The uncertainty `u_b` of the brakes' gain (module docs), dimensionless,
     /// in `[0, brake_uncertainty_max]`: a relative shortfall under `u_b` when
     /// braking may be the brakes.
-    pub fn brake_uncertainty(&self, cfg: &LongitudinalConfig<T>) -> T {
-        let ratio = (self.brake[2] / cfg.brake_prior_variance).clamp(T::ZERO, T::ONE);
-        cfg.brake_uncertainty_max * ratio.sqrt()
+    /// Kept from the last update of `P_b`.
+    pub fn brake_uncertainty(&self, _cfg: &LongitudinalConfig<T>) -> T {
+        self.u[1]
     }
 
     /// The tolerance on the relative shortfall for a demand of sign `braking`:
     /// [`Self::brake_uncertainty`] when braking, [`Self::mass_uncertainty`]
     /// otherwise, dimensionless (one square root).
-    pub fn uncertainty(&self, cfg: &LongitudinalConfig<T>, braking: bool) -> T {
-        let (p, prior, max) = if braking {
-            (
-                self.brake[2],
-                cfg.brake_prior_variance,
-                cfg.brake_uncertainty_max,
-            )
+    pub fn uncertainty(&self, _cfg: &LongitudinalConfig<T>, braking: bool) -> T {
+        if braking {
+            self.u[1]
         } else {
-            (self.p[0], cfg.prior_variance[0], cfg.mass_uncertainty_max)
-        };
+            self.u[0]
+        }
+    }
+
+    /// `u_max·sqrt(p/prior)`, `p/prior` within `[0, 1]` (module docs).
+    fn uncertainty_of(p: T, prior: T, max: T) -> T {
         max * (p / prior).clamp(T::ZERO, T::ONE).sqrt()
     }
 
@@ -516,7 +522,8 @@ impl<T: Real> LongitudinalEstimator<T> {
 
         // The gate, over the filters' memory.
         let applied = y + (self.brake[0] - T::ONE) * yb;
-        let demand = (applied - self.resistance_mps2(s.v_mps)) * self.inv_k;
+        // r(V) from `q` as computed above (`resistance_mps2`, without its square).
+        let demand = (applied - self.theta[1] - self.theta[2] * q) * self.inv_k;
         let share = if demand > T::ZERO {
             s.driven_share
         } else {
@@ -584,6 +591,11 @@ impl<T: Real> LongitudinalEstimator<T> {
         } else {
             cfg.brake_prior_variance
         };
+        self.u[1] = Self::uncertainty_of(
+            self.brake[2],
+            cfg.brake_prior_variance,
+            cfg.brake_uncertainty_max,
+        );
         self.updates = self.updates.wrapping_add(1);
     }
 
@@ -634,6 +646,8 @@ impl<T: Real> LongitudinalEstimator<T> {
             }
             self.p = p;
         }
+        self.u[0] =
+            Self::uncertainty_of(self.p[0], cfg.prior_variance[0], cfg.mass_uncertainty_max);
         self.updates = self.updates.wrapping_add(1);
     }
 }

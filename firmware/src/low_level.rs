@@ -644,22 +644,22 @@ pub fn control_with_model<T: Real>(
     };
     // The car's model, or the configured car where it is not usable.
     let resistance = car.resistance_n + car.drag_n_per_mps2 * v * v;
-    let (mass, resistance) = if (car.mass_kg + resistance).is_finite() && car.mass_kg > T::ZERO {
-        (car.mass_kg, resistance)
+    // The brakes give `b` of the torque commanded: a braking torque is
+    // commanded as `1/b` of the one the car needs (one finiteness test for the
+    // three; a gain not in (0, ∞) with the rest: the configured car, 1).
+    let (mass, resistance, inv_b) = if (car.mass_kg + resistance + car.inverse_brake_gain)
+        .is_finite()
+        && car.mass_kg > T::ZERO
+        && car.inverse_brake_gain > T::ZERO
+    {
+        (car.mass_kg, resistance, car.inverse_brake_gain)
     } else {
-        (cfg.mass_kg, T::ZERO)
+        (cfg.mass_kg, T::ZERO, T::ONE)
     };
     let r = cfg.wheel_radius_m;
     // Within the grip (`min` keeps the configured limit for +∞ or NaN grip).
     let t_grip = ((mass * car.traction_grip_mps2 + resistance.max(T::ZERO)) * r).max(T::ZERO);
     let t_max = cfg.max_traction_torque_nm.min(t_grip);
-    // The brakes give `b` of the torque commanded: a braking torque is
-    // commanded as `1/b` of the one the car needs (a gain out of (0, ∞): 1).
-    let inv_b = if car.inverse_brake_gain > T::ZERO && car.inverse_brake_gain.is_finite() {
-        car.inverse_brake_gain
-    } else {
-        T::ONE
-    };
     let b_max = cfg
         .max_braking_torque_nm
         .min((mass * car.braking_grip_mps2 * r * inv_b).max(T::ZERO));

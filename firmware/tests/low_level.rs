@@ -1009,7 +1009,8 @@ fn braking_is_commanded_through_the_brakes_gain() {
         "{}",
         a.torque_ff_nm
     );
-    // A gain that is not usable (0, NaN, negative): as commanded.
+    // A gain that is not usable (0, NaN, negative, ∞): the configured car (its
+    // mass, 1500 kg as here; no resistance), brakes as commanded.
     for bad in [0.0, f64::NAN, -2.0, f64::INFINITY] {
         let b = CarModel {
             inverse_brake_gain: bad,

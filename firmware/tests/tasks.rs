@@ -423,15 +423,15 @@ fn a_spinning_wheel_halves_the_traction_and_a_locked_one_the_braking() {
     };
     let (t0, b0) = limits([f64::NAN; 4]);
     assert_eq!(limits([20.0; 4]), (t0, b0));
-    // The front left wheel 4 m/s faster than the ground (slip ratio 0.2 >
-    // 0.15·20 + 0.5 m/s): traction halved.
-    let (t, b) = limits([24.0, 20.0, 20.0, 20.0]);
+    // The front left wheel 5 m/s faster than the ground (slip ratio 0.25, over
+    // 0.15·20 + 1 m/s): traction halved.
+    let (t, b) = limits([25.0, 20.0, 20.0, 20.0]);
     assert!(
         (t - 0.5 * t0).abs() < 1e-12 && b == b0,
         "{t} {b} vs {t0} {b0}"
     );
     // A rear wheel (undriven) spinning is not traction slip; locking is.
-    assert_eq!(limits([20.0, 20.0, 24.0, 20.0]), (t0, b0));
+    assert_eq!(limits([20.0, 20.0, 25.0, 20.0]), (t0, b0));
     let (t, b) = limits([20.0, 20.0, 20.0, 15.0]);
     assert!(
         t == t0 && (b - 0.5 * b0).abs() < 1e-12,
