@@ -141,15 +141,17 @@
 //! [`FrictionConfig::wheel_slip_margin_mps`], 1 m/s: at noise level 4 a wheel's
 //! difference from the ground's carries 0.12 m/s of the wheel's noise and
 //! 0.2 m/s of the speed's, so 1 m/s is over 4 of their σ; the ground-speed
-//! approximations err most at low speed). A wheel that spins or locks (the car
-//! moving) is slip at once, without the confirmation a shortfall needs (the
-//! traction control or anti-lock limit it triggers ends it within a few
-//! periods), whatever the demand: the event lowers `μ̂` to the friction used
-//! at its peak, as below. Their largest difference from the
-//! ground's `|ω·r − V|` goes to the estimator of the car, whose samples count
-//! only under `0.03·|V|` ([`crate::longitudinal_estimator`]: a wheel slipping
-//! too little to flag is not learnt as mass). Without wheel speeds (not
-//! finite), slip is read from the shortfall alone.
+//! approximations err most at low speed). A driven wheel that spins, or two
+//! wheels or more that lock, for [`FrictionConfig::wheel_confirm_s`] (30 ms;
+//! the car moving) are slip whatever the demand: the event lowers `μ̂` to the
+//! friction used at its peak, as below. One wheel locked alone is not: on a
+//! dry road it is what the inside wheel, unloaded in a bend, does under
+//! braking, and the anti-lock limit it triggers ends it (`docs/tuning.md`,
+//! *Wheel speeds*). Their largest difference from the ground's `|ω·r − V|`
+//! goes to the estimator of the car, whose samples count only under
+//! `0.03·|V|` ([`crate::longitudinal_estimator`]: a wheel slipping too little
+//! to flag is not learnt as mass). Without wheel speeds (not finite), slip is
+//! read from the shortfall alone.
 //!
 //! The control task limits the torque by them too
 //! ([`crate::tasks::ControlTask::car_model`]): while a driven wheel spins, half
@@ -166,7 +168,7 @@
 //! # Cost
 //!
 //! Per period about 60 floating-point operations and two divisions; the square
-//! root only on a slip; the wheel speeds about 20 operations, no division; plus
+//! root only on a slip; the wheel speeds about 30 operations, no division; plus
 //! the estimator of the mass, resistances and brakes (about 100 operations, two
 //! divisions, one square root). Deterministic, no allocation, no loop, no branch
 //! on data but the slip test and the estimator's gate. Its static bound with the
@@ -272,6 +274,10 @@ pub struct FrictionConfig<T> {
     /// neither spins nor locks, whatever the speed, m/s, ≥ 0 (the sensors' noise
     /// and the ground speed's approximations at low speed).
     pub wheel_slip_margin_mps: T,
+    /// Time a wheel must spin or lock before it is a slip event, s, ≥ 0 (the
+    /// traction control and anti-lock limit act at once; module docs, *Wheel
+    /// speeds*).
+    pub wheel_confirm_s: T,
     /// The estimator of the car's mass and resistances
     /// ([`crate::longitudinal_estimator`]).
     pub longitudinal: LongitudinalConfig<T>,
@@ -336,6 +342,7 @@ impl<T: Real> FrictionConfig<T> {
             half_track_m: T::ZERO,
             wheel_slip_ratio: T::lit(0.15),
             wheel_slip_margin_mps: T::ONE,
+            wheel_confirm_s: T::lit(0.03),
             longitudinal: LongitudinalConfig::for_car(mass_kg, wheel_radius_m),
         }
     }
@@ -384,6 +391,7 @@ impl<T: Real> FrictionConfig<T> {
             && pos(self.wheel_slip_ratio)
             && self.wheel_slip_ratio < T::ONE
             && nonneg(self.wheel_slip_margin_mps)
+            && nonneg(self.wheel_confirm_s)
             && self.longitudinal.validate().is_ok()
             && self.longitudinal.mass_kg == self.mass_kg
             && self.longitudinal.wheel_radius_m == self.wheel_radius_m
@@ -439,7 +447,12 @@ pub struct FrictionEstimator<T> {
     /// measured).
     wheel_spin: bool,
     wheel_lock: bool,
+    /// Two wheels or more lock (a slip event; one alone may be a wheel
+    /// unloaded by the load transfer in a bend).
+    wheels_lock: bool,
     wheel_slip_mps: T,
+    /// Time a wheel has spun or locked, s.
+    wheel_s: T,
     /// `1/(m·r_eff)` (1/(kg·m)), `1/τ_o` and `1/τ_f` (1/s), set by
     /// [`FrictionEstimator::start`].
     inverses: [T; 3],
@@ -476,7 +489,9 @@ impl<T: Real> FrictionEstimator<T> {
             longitudinal: LongitudinalEstimator::new(),
             wheel_spin: false,
             wheel_lock: false,
+            wheels_lock: false,
             wheel_slip_mps: T::ZERO,
+            wheel_s: T::ZERO,
             inverses: [T::ZERO; 3],
         }
     }
@@ -530,7 +545,7 @@ impl<T: Real> FrictionEstimator<T> {
     }
 
     /// True when a wheel locked at the last estimate (module docs, *Wheel
-    /// speeds*).
+    /// speeds*): the anti-lock limit (a slip event needs two).
     pub fn wheel_locking(&self) -> bool {
         self.wheel_lock
     }
@@ -565,6 +580,11 @@ impl<T: Real> FrictionEstimator<T> {
         let low = smaller(smaller(diff[0], diff[1]), smaller(diff[2], diff[3]));
         self.wheel_spin = ok && spin > limit;
         self.wheel_lock = ok && low < -limit;
+        let locked = u8::from(diff[0] < -limit)
+            + u8::from(diff[1] < -limit)
+            + u8::from(diff[2] < -limit)
+            + u8::from(diff[3] < -limit);
+        self.wheels_lock = ok && locked >= 2;
         self.wheel_slip_mps = if ok { larger(high, -low) } else { T::ZERO };
     }
 
@@ -715,19 +735,22 @@ impl<T: Real> FrictionEstimator<T> {
             .uncertainty(&cfg.longitudinal, cmd < T::ZERO);
         let limit = base + u * demand;
         // Standing, a brake holds the car without decelerating it: no slip. A
-        // wheel that spins or locks is slip, whatever the shortfall.
+        // driven wheel that spins, or two wheels that lock, is slip whatever the
+        // shortfall.
         let moving = v.abs() >= cfg.standstill_mps;
-        let wheel = (self.wheel_spin || self.wheel_lock) && moving;
+        let wheel = (self.wheel_spin || self.wheels_lock) && moving;
+        self.wheel_s = if wheel { self.wheel_s + dt } else { T::ZERO };
         let short = wheel || (demand >= cfg.min_demand_mps2 && shortfall > limit && moving);
         self.shortfall_s = if short {
             self.shortfall_s + dt
         } else {
             T::ZERO
         };
-        // A wheel that spins or locks is measured, not inferred: no confirmation
-        // (the traction control or anti-lock limit it triggers ends it within
-        // a few periods, before a confirmation would come).
-        if wheel || (short && self.shortfall_s >= cfg.confirm_s) {
+        // A driven wheel that spins or two wheels that lock are measured, not
+        // inferred: a shorter confirmation than the shortfall's.
+        if (wheel && self.wheel_s >= cfg.wheel_confirm_s)
+            || (short && self.shortfall_s >= cfg.confirm_s)
+        {
             // A shortfall that returns within `event_gap_s` of the last one
             // continues its event (the spun wheels braked back to the road's
             // speed take the brake torque first: not a second slip).

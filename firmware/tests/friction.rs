@@ -68,6 +68,13 @@ fn each_setting_out_of_its_range_is_refused_and_each_edge_accepted() {
         ("max gap 0", |c| c.max_gap_s = 0.0),
         ("standstill speed < 0", |c| c.standstill_mps = -1.0),
         ("standstill time < 0", |c| c.standstill_s = -1.0),
+        ("half track < 0", |c| c.half_track_m = -0.8),
+        ("wheel slip ratio 0", |c| c.wheel_slip_ratio = 0.0),
+        ("wheel slip ratio 1", |c| c.wheel_slip_ratio = 1.0),
+        ("wheel slip ratio NaN", |c| c.wheel_slip_ratio = f64::NAN),
+        ("wheel margin < 0", |c| c.wheel_slip_margin_mps = -0.1),
+        ("wheel confirm < 0", |c| c.wheel_confirm_s = -0.01),
+        ("wheel confirm NaN", |c| c.wheel_confirm_s = f64::NAN),
         ("estimator invalid", |c| c.longitudinal.memory_s = -1.0),
         ("estimator's mass", |c| c.longitudinal.mass_kg = 1600.0),
         ("estimator's wheel", |c| {
@@ -101,6 +108,10 @@ fn each_setting_out_of_its_range_is_refused_and_each_edge_accepted() {
         ("clear fraction 1", |c| c.clear_fraction = 1.0),
         ("standstill speed 0", |c| c.standstill_mps = 0.0),
         ("standstill time 0", |c| c.standstill_s = 0.0),
+        ("half track 0.8", |c| c.half_track_m = 0.8),
+        ("wheel slip ratio 0.99", |c| c.wheel_slip_ratio = 0.99),
+        ("wheel margin 0", |c| c.wheel_slip_margin_mps = 0.0),
+        ("wheel confirm 0", |c| c.wheel_confirm_s = 0.0),
     ];
     for (what, change) in accepted {
         assert!(valid_with(change), "{what} refused");
@@ -685,4 +696,73 @@ fn a_spinning_wheel_is_slip_whatever_the_shortfall() {
     }
     assert_eq!(e.events(), 1);
     assert!(e.mu() < MU, "μ̂ = {}", e.mu());
+}
+
+/// One wheel locked alone (the inside wheel unloaded in a bend) halves the
+/// braking but is no slip event; two locked are, after the wheels'
+/// confirmation.
+#[test]
+fn one_locked_wheel_is_no_slip_event_two_are() {
+    use firmware::state_estimate::StateEstimate;
+    let c = cfg();
+    let run = |wheels: fn(f64) -> [f64; 4]| {
+        let mut e = FrictionEstimator::new();
+        e.start(&c);
+        let (mut v, mut t) = (20.0, 0u64);
+        for k in 0..300 {
+            // 0.5 m/s² of braking asked and given; from 2 s on the wheels of
+            // `wheels`.
+            let w = if k >= 200 { wheels(v) } else { [v; 4] };
+            let s = StateEstimate {
+                stamp_us: t,
+                vx_mps: v,
+                wheel_speed_mps: w,
+                ..StateEstimate::zeroed()
+            };
+            e.read_wheels(&c, &s);
+            e.update(&c, t, t, v, 0.0, -0.5 * M * R);
+            v -= 0.5 * 0.01;
+            t += CONTROL_PERIOD_US;
+        }
+        (e.events(), e.wheel_locking())
+    };
+    assert_eq!(run(|v| [v, v, v, 0.5 * v]), (0, true));
+    assert_eq!(run(|v| [v, v, 0.5 * v, 0.5 * v]), (1, true));
+}
+
+/// A wheel's spin is an event only once it lasts `wheel_confirm_s` (30 ms):
+/// a spin of two periods (a bump, a noisy sample) is not; of four it is, and
+/// the traction-control flag is up from its first period either way.
+#[test]
+fn a_spin_shorter_than_the_wheels_confirmation_is_no_event() {
+    use firmware::state_estimate::StateEstimate;
+    let c = cfg();
+    let run = |periods: usize| {
+        let mut e = FrictionEstimator::new();
+        e.start(&c);
+        let (mut v, mut t) = (15.0, 0u64);
+        let mut flagged = false;
+        for k in 0..300 {
+            // 0.5 m/s² asked and given; from 2 s on the front wheels at slip
+            // 0.3 for `periods` periods.
+            let spin = (200..200 + periods).contains(&k);
+            let w = if spin { 1.3 * v } else { v };
+            let s = StateEstimate {
+                stamp_us: t,
+                vx_mps: v,
+                wheel_speed_mps: [w, w, v, v],
+                ..StateEstimate::zeroed()
+            };
+            e.read_wheels(&c, &s);
+            flagged |= k == 200 && e.wheel_spinning();
+            e.update(&c, t, t, v, 0.0, 0.5 * M * R);
+            v += 0.5 * 0.01;
+            t += CONTROL_PERIOD_US;
+        }
+        (e.events(), flagged, e.mu())
+    };
+    assert_eq!(run(2), (0, true, MU));
+    let (events, flagged, mu) = run(4);
+    assert_eq!((events, flagged), (1, true));
+    assert!(mu < MU, "μ̂ = {mu}");
 }

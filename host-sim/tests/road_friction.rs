@@ -155,8 +155,10 @@ fn read_log(path: &std::path::Path) -> Vec<LogRow> {
 #[test]
 fn the_sweeps_false_drop_column_follows_its_definition_on_the_runs_trace() {
     let dir = tempfile::tempdir().unwrap();
-    // The wet patch on a road of μ 1: the friction check lowers μ̂ there, so there
-    // is something to judge (a false drop or not, depending on how fast μ̂ recovers).
+    // An icy patch (μ 0.3) on a road of μ 1: the friction check lowers μ̂ there,
+    // so there is something to judge (a false drop or not, depending on how fast
+    // μ̂ recovers). On the wet patch of μ 0.5 the traction control and the
+    // anti-lock limit keep the wheels' slip small enough that μ̂ stays at 1.
     let spec = RunSpec {
         index: 0,
         track: "paper".into(),
@@ -172,7 +174,7 @@ fn the_sweeps_false_drop_column_follows_its_definition_on_the_runs_trace() {
     let common = Common {
         setting: Setting {
             duration_s: 200.0,
-            mu_patches: vec![PATCH],
+            mu_patches: vec![MuPatch { mu: 0.3, ..PATCH }],
             ..Setting::default()
         },
         obstacle_dir: None,
@@ -183,7 +185,7 @@ fn the_sweeps_false_drop_column_follows_its_definition_on_the_runs_trace() {
     let cell = |name: &str| cells.iter().find(|(h, _)| h == name).unwrap().1.clone();
     assert_eq!(cell("error"), "");
     let log = read_log(&dir.path().join("0").join("log.csv"));
-    assert!(log.iter().any(|r| r.road_mu == 0.5));
+    assert!(log.iter().any(|r| r.road_mu == 0.3));
     assert!(log.iter().any(|r| r.friction_mu < 1.0), "μ̂ never moved");
     let want = first_false_drop(&log);
     assert_eq!(cell("mu_false_drop"), want.is_some().to_string());
@@ -194,7 +196,7 @@ fn the_sweeps_false_drop_column_follows_its_definition_on_the_runs_trace() {
         }
         None => assert_eq!(cell("mu_false_drop_s"), ""),
     }
-    assert_eq!(cell("mu_patches"), "300:200:0.5");
+    assert_eq!(cell("mu_patches"), "300:200:0.3");
     let low: f64 = cell("friction_mu_min").parse().unwrap();
     let lowest = log
         .iter()

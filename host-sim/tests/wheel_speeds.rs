@@ -1,8 +1,9 @@
 //! Wheel speeds in the state estimate, end to end: a planner told 1.5 times the
 //! road's friction (`mu-high`) asks more than the tyres give. With the wheel
-//! speeds the friction check sees the driven wheels spin and lowers μ̂, and the
-//! traction control and anti-lock limit keep the wheels' slip near the tyres'
-//! peak (without them, on Oschersleben: slip ratio 0.82 and μ̂ left at 1.5).
+//! speeds the traction control and anti-lock limit keep the wheels' slip near
+//! the tyres' peak (without them, on Oschersleben: slip ratio 0.82), also when
+//! the wheel speeds are noisy and late like the rest of the estimate; and on a
+//! dry road the noisy, late wheels lower μ̂ nowhere.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use host_sim::closed_loop::set_up::{RunSpec, Setting};
@@ -10,9 +11,15 @@ use host_sim::sweep::execute::{execute, Common};
 use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
 
-/// One lap of `track` (a file of `tests/data`) at μ 1 under `fault`, as the
-/// sweep runs it; the cells of `names`.
-fn lap<const N: usize>(track: &str, fault: Fault, names: [&str; N]) -> [String; N] {
+/// One lap of `track` (a file of `tests/data`) at μ 1 under `fault`, at the
+/// noise level `noise` with the estimate `delay_ms` late (ms), as the sweep
+/// runs it; the cells of `names`.
+fn lap<const N: usize>(
+    track: &str,
+    fault: Fault,
+    (noise, delay_ms): (f64, f64),
+    names: [&str; N],
+) -> [String; N] {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data")
         .join(track);
@@ -23,8 +30,8 @@ fn lap<const N: usize>(track: &str, fault: Fault, names: [&str; N]) -> [String; 
         mu_planner: 1.0,
         vehicle: None,
         mass_scale: 1.0,
-        noise: 0.0,
-        delay_ms: 0.0,
+        noise,
+        delay_ms,
         fault,
         seed: 0,
     };
@@ -48,10 +55,11 @@ fn lap<const N: usize>(track: &str, fault: Fault, names: [&str; N]) -> [String; 
 }
 
 #[test]
-fn a_planner_asking_too_much_spins_no_wheel_far_past_its_peak_and_lowers_mu_hat() {
+fn a_planner_asking_too_much_spins_no_wheel_far_past_its_peak() {
     let [outcome, slip, mu_min] = lap(
         "Oschersleben.csv",
         Fault::MuHigh(1.5),
+        (0.0, 0.0),
         ["outcome", "max_abs_slip_ratio", "friction_mu_min"],
     );
     assert_eq!(outcome, "ok");
@@ -59,6 +67,42 @@ fn a_planner_asking_too_much_spins_no_wheel_far_past_its_peak_and_lowers_mu_hat(
     // The default tyre's peak is at a slip ratio of about 0.1; the wheel is
     // caught past 0.15 (plus 1 m/s) and its torque halved.
     assert!(slip < 0.25, "slip ratio {slip}");
-    // μ̂ below the planner's 1.5, not below the one-event floor 0.6 × 1.5.
-    assert!((0.89..1.5).contains(&mu_min), "μ̂ min {mu_min}");
+    // The traction control keeps the spins short: no slip event, μ̂ at the
+    // planner's, never under the road's.
+    assert!(mu_min >= 0.9, "μ̂ min {mu_min}");
+}
+
+/// The same with the estimate at noise level 4 (`--noise high`: each wheel's
+/// speed 0.12 m/s of noise) and 100 ms late, wheel speeds included: the limits
+/// act on what the wheels did 100 ms before, so the slip goes further past the
+/// peak than with the wheels seen at once, but is still held, far under the
+/// 0.82 reached without the wheel speeds.
+#[test]
+fn noisy_late_wheel_speeds_still_hold_the_slip_of_a_planner_asking_too_much() {
+    let [outcome, slip] = lap(
+        "Oschersleben.csv",
+        Fault::MuHigh(1.5),
+        (4.0, 100.0),
+        ["outcome", "max_abs_slip_ratio"],
+    );
+    assert_eq!(outcome, "ok");
+    let slip: f64 = slip.parse().unwrap();
+    assert!(slip < 0.4, "slip ratio {slip}");
+}
+
+/// On a dry road with the planner's friction, a noisy estimate 100 ms late:
+/// the inside wheel unloaded in a braked bend, or the noise, is no slip event
+/// (before one wheel locked alone counted, it lowered μ̂ to 0.8 or less).
+#[test]
+fn noisy_late_wheel_speeds_lower_mu_hat_nowhere_on_a_dry_road() {
+    let [outcome, drop, mu_min] = lap(
+        "Oschersleben.csv",
+        Fault::None,
+        (4.0, 100.0),
+        ["outcome", "mu_false_drop", "friction_mu_min"],
+    );
+    assert_eq!(outcome, "ok");
+    assert_eq!(drop, "false", "μ̂ min {mu_min}");
+    let mu_min: f64 = mu_min.parse().unwrap();
+    assert!(mu_min >= 0.99, "μ̂ min {mu_min}");
 }
