@@ -438,3 +438,57 @@ fn a_spinning_wheel_halves_the_traction_and_a_locked_one_the_braking() {
         "{t} {b} vs {t0} {b0}"
     );
 }
+
+/// The same limits reach the torque commanded: a plan asking 6 m/s² (or −8) of
+/// a car at 20 m/s gets the traction (braking) limit; with a driven wheel
+/// spinning (any wheel locked) in the estimate, half its grip, in that very
+/// activation. The car's model is the one the task reports (resistances
+/// included), so the torque is checked against it exactly.
+#[test]
+fn a_spinning_or_locked_wheel_halves_the_torque_commanded_at_once() {
+    let car = vehicle();
+    let r = car.wheel_radius_m;
+    let plan_asking = |accel: f64| {
+        let mut p = Plan::<f64>::zeroed();
+        p.dt_s = 0.2;
+        for (k, n) in p.nodes.iter_mut().enumerate() {
+            n.v_mps = 20.0;
+            n.x_m = 20.0 * 0.2 * k as f64;
+            n.s_m = n.x_m;
+        }
+        for u in p.inputs.iter_mut() {
+            u[0] = accel;
+        }
+        p
+    };
+    // The torque of one activation of a fresh task, and the limit its model
+    // gives: traction `(m·a_t + F₀ + c₂·V²)·r`, braking `m·a_b·r/b`.
+    let torque = |accel: f64, wheels: [f64; 4]| {
+        let mut control = car.control_task(1.0).unwrap();
+        let e = StateEstimate {
+            vx_mps: 20.0,
+            wheel_speed_mps: wheels,
+            ..StateEstimate::zeroed()
+        };
+        let a = control.run(&e, &plan_asking(accel), 0);
+        assert_eq!(a.mode, Mode::Following);
+        let m = control.car_model(0.0);
+        let res = m.resistance_n + m.drag_n_per_mps2 * 400.0;
+        let traction = (m.mass_kg * m.traction_grip_mps2 + res.max(0.0)) * r;
+        let braking = m.mass_kg * m.braking_grip_mps2 * r * m.inverse_brake_gain;
+        (a.torque_total_nm, traction, braking)
+    };
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-9 * b.abs().max(1.0);
+    let rolling = [20.0; 4];
+    let (t0, traction0, _) = torque(6.0, rolling);
+    assert!(close(t0, traction0), "{t0} vs {traction0}");
+    let (t, traction, _) = torque(6.0, [20.0, 26.0, 20.0, 20.0]);
+    assert!(close(t, traction) && t < 0.6 * t0, "{t} vs {t0}");
+    let (b0, _, braking0) = torque(-8.0, rolling);
+    assert!(close(b0, -braking0), "{b0} vs {braking0}");
+    let (b, _, braking) = torque(-8.0, [20.0, 20.0, 14.0, 20.0]);
+    assert!(close(b, -braking) && close(b, 0.5 * b0), "{b} vs {b0}");
+    // A locked wheel leaves the traction alone, a spinning one the braking.
+    assert!(close(torque(6.0, [20.0, 20.0, 14.0, 20.0]).0, t0));
+    assert!(close(torque(-8.0, [26.0, 20.0, 20.0, 20.0]).0, b0));
+}

@@ -348,4 +348,56 @@ mod tests {
                 ..truth
             }));
     }
+
+    /// The wheel speeds are delayed and dropped with the rest of the estimate:
+    /// 30 ms late, they are those of three periods before; in a NaN dropout not
+    /// measured; in a held one, the last delivered.
+    #[test]
+    fn the_wheel_speeds_are_delayed_and_dropped_with_the_estimate() {
+        use crate::world::disturbance::{Dropout, DropoutKind};
+        for kind in [DropoutKind::Nan, DropoutKind::Hold] {
+            let d = Disturbances {
+                delay_ms: 30.0,
+                dropout: Some(Dropout {
+                    start_us: 10 * CONTROL_PERIOD_US,
+                    periods: 3,
+                    kind,
+                }),
+                ..Disturbances::default()
+            };
+            let mut ecu = DisturbedEcu::<f64>::new(
+                &Scenario::paper(false),
+                &VehicleParams::default(),
+                &SimOptions::default(),
+                d,
+            )
+            .unwrap();
+            // Each period the truth's wheels turn 1 m/s faster, each its own.
+            let wheels = |i: u64| {
+                let v = 10.0 + i as f64;
+                [v, v + 0.1, v + 0.2, v + 0.3]
+            };
+            for i in 0..20u64 {
+                let t_us = i * CONTROL_PERIOD_US;
+                let truth = StateEstimate {
+                    stamp_us: t_us,
+                    vx_mps: 10.0 + i as f64,
+                    wheel_speed_mps: wheels(i),
+                    ..StateEstimate::zeroed()
+                };
+                let seen = ecu.seen(t_us, &truth).wheel_speed_mps;
+                let want = match (i, kind) {
+                    (10..=12, DropoutKind::Nan) => [f64::NAN; 4],
+                    // The last delivered: period 9's, three periods late.
+                    (10..=12, DropoutKind::Hold) => wheels(6),
+                    _ => wheels(i.saturating_sub(3)),
+                };
+                assert_eq!(
+                    format!("{seen:?}"),
+                    format!("{want:?}"),
+                    "{kind:?}, period {i}"
+                );
+            }
+        }
+    }
 }
