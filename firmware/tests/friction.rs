@@ -650,14 +650,14 @@ fn wheel_speeds_tell_a_rolling_wheel_from_a_spinning_or_locked_one() {
     assert!(!spin && !lock && most < 0.08, "{most}");
     // A front wheel at slip ratio 0.25 at 20 m/s spins (0.15·20 + 1 = 4 m/s
     // is the limit); at 0.15 it does not.
-    assert_eq!(read(est(20.0, 0.0, 0.0, [25.0, 20.0, 20.0, 20.0])).0, true);
-    assert_eq!(read(est(20.0, 0.0, 0.0, [23.0, 20.0, 20.0, 20.0])).0, false);
+    assert!(read(est(20.0, 0.0, 0.0, [25.0, 20.0, 20.0, 20.0])).0);
+    assert!(!read(est(20.0, 0.0, 0.0, [23.0, 20.0, 20.0, 20.0])).0);
     // A rear wheel faster is not a driven wheel spinning.
     let (spin, lock, most) = read(est(20.0, 0.0, 0.0, [20.0, 20.0, 24.0, 20.0]));
     assert!(!spin && !lock && (most - 4.0).abs() < 1e-12);
     // Any wheel at slip ratio −0.25 locks.
-    assert_eq!(read(est(20.0, 0.0, 0.0, [20.0, 20.0, 20.0, 15.0])).1, true);
-    assert_eq!(read(est(20.0, 0.0, 0.0, [15.0, 20.0, 20.0, 20.0])).1, true);
+    assert!(read(est(20.0, 0.0, 0.0, [20.0, 20.0, 20.0, 15.0])).1);
+    assert!(read(est(20.0, 0.0, 0.0, [15.0, 20.0, 20.0, 20.0])).1);
     // Under the margin at walking pace: a wheel 0.4 m/s off at 1 m/s is noise.
     assert_eq!(
         read(est(1.0, 0.0, 0.0, [1.4, 1.0, 0.6, 1.0])),
