@@ -83,7 +83,7 @@ macro_rules! wire_codes {
     };
 }
 
-/// Why the ECU refused the set-up (the [`ReadyFrame::status`] codes, 1..=12).
+/// Why the ECU refused the set-up (the [`ReadyFrame::status`] codes, 1..=13).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SetupError {
     /// `Start`, a `PathChunk` or an `Obstacle` came before any `Config` (detail 0).
@@ -114,6 +114,10 @@ pub enum SetupError {
     /// An obstacle leaves the car no room to pass on either side (detail: its
     /// index).
     ObstacleBlocksRoad,
+    /// A set-up frame was refused (detail: the [`Refusal::code`], `Auth` 1 when
+    /// the ECU and the simulator hold different link keys; version 8): a set-up
+    /// with a frame missing is not completed.
+    FrameRefused,
 }
 
 wire_codes!(impl SetupError {
@@ -129,6 +133,7 @@ wire_codes!(impl SetupError {
     MissingObstacle = 10,
     InvalidObstacle = 11,
     ObstacleBlocksRoad = 12,
+    FrameRefused = 13,
 });
 
 /// Name of a [`ReadyFrame::status`]: `"Accepted"` for 0, the [`SetupError`]'s

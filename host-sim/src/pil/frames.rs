@@ -70,6 +70,11 @@ pub fn setup_refusal(status: u8, detail: u16) -> String {
         Some(E::ObstacleBlocksRoad) => format!(
             "obstacle {detail} leaves no room to pass on either side: move it, make it narrower, or widen the track there"
         ),
+        Some(E::FrameRefused) => match u8::try_from(detail).ok().and_then(firmware::link::Refusal::from_code) {
+            Some(firmware::link::Refusal::Auth) => "it refused a set-up frame as forged: the ECU application was built with another link key than the simulator's (build both with the same ECU_LINK_KEY, or give the ECU's key with --link-key)".into(),
+            Some(r) => format!("it refused a set-up frame ({}): the link damaged or repeated a frame; run again", r.name()),
+            None => format!("it refused a set-up frame (reason {detail}): is the ECU application of another version?"),
+        },
         None => format!("unknown status {status} (detail {detail}): is the ECU application of another version?"),
     }
 }
