@@ -118,6 +118,10 @@ pub enum SetupError {
     /// not at its clock, and the control loop does not start (detail: the
     /// [`crate::clock_tree::ClockError`]'s code).
     ClockFailed,
+    /// A set-up frame was refused (detail: the [`Refusal::code`], `Auth` 1 when
+    /// the ECU and the simulator hold different link keys; version 8): a set-up
+    /// with a frame missing is not completed.
+    FrameRefused,
 }
 
 wire_codes!(impl SetupError {
@@ -134,6 +138,7 @@ wire_codes!(impl SetupError {
     InvalidObstacle = 11,
     ObstacleBlocksRoad = 12,
     ClockFailed = 13,
+    FrameRefused = 14,
 });
 
 /// Name of a [`ReadyFrame::status`]: `"Accepted"` for 0, the [`SetupError`]'s

@@ -46,6 +46,12 @@ pub struct DisturbedEcu<T: Real> {
     pending: Option<PendingObstacle<T>>,
     appeared_at_us: Option<u64>,
     obstacle_settings: firmware::obstacles::ObstacleSettings<T>,
+    /// A window of the road given during a dropout that withholds it
+    /// ([`crate::world::disturbance::Dropout::withholds_route`]), for its first
+    /// period.
+    withheld_window: Option<Window>,
+    /// The next control instant, µs (a window is given before its activation).
+    next_control_us: u64,
 }
 
 impl<T: Real> DisturbedEcu<T> {
@@ -105,6 +111,8 @@ impl<T: Real> DisturbedEcu<T> {
             pending,
             appeared_at_us: None,
             obstacle_settings,
+            withheld_window: None,
+            next_control_us: 0,
         })
     }
 
@@ -136,19 +144,7 @@ impl<T: Real> DisturbedEcu<T> {
         let delayed = self.history.front().copied().unwrap_or(m);
         let out = match self.d.dropout {
             Some(dr) if dr.covers(t_us) => match dr.kind {
-                DropoutKind::Nan => {
-                    let nan = T::from_f64(f64::NAN);
-                    StateEstimate {
-                        stamp_us: t_us,
-                        x_m: nan,
-                        y_m: nan,
-                        psi_rad: nan,
-                        vx_mps: nan,
-                        vy_mps: nan,
-                        yaw_rate_radps: nan,
-                        delta_rad: nan,
-                    }
-                }
+                DropoutKind::Nan => StateEstimate::unavailable(t_us),
                 DropoutKind::Hold => self.last_delivered.unwrap_or(delayed),
             },
             _ => delayed,
@@ -157,6 +153,14 @@ impl<T: Real> DisturbedEcu<T> {
             self.last_delivered = Some(out);
         }
         out
+    }
+
+    /// Whether a window of the road given for the control instant `t_us` (µs)
+    /// is withheld until the dropout ends.
+    fn withholding(&self, t_us: u64) -> bool {
+        self.d
+            .dropout
+            .is_some_and(|dr| dr.withholds_route && dr.covers(t_us))
     }
 
     /// Gives the late obstacle to the planner once the car is close enough.
@@ -209,7 +213,13 @@ impl<T: Real> DisturbedEcu<T> {
 impl<T: Real> Ecu<T> for DisturbedEcu<T> {
     fn control(&mut self, t_us: u64, est: &StateEstimate<T>) -> Result<ControlOutput<T>> {
         self.maybe_reveal(t_us, est)?;
+        if !self.withholding(t_us) {
+            if let Some(w) = self.withheld_window.take() {
+                self.inner.set_window(&w)?;
+            }
+        }
         let seen = self.seen(t_us, est);
+        self.next_control_us = t_us + CONTROL_PERIOD_US;
         let mut c = self.inner.control(t_us, &seen)?;
         self.limit_steering(&mut c, est);
         Ok(c)
@@ -220,7 +230,14 @@ impl<T: Real> Ecu<T> for DisturbedEcu<T> {
     }
 
     fn set_window(&mut self, w: &Window) -> Result<()> {
-        self.inner.set_window(w)
+        // Given before the control activation of its instant (the trait's docs).
+        match self.d.dropout {
+            _ if self.withholding(self.next_control_us) => {
+                self.withheld_window = Some(w.clone());
+                Ok(())
+            }
+            _ => self.inner.set_window(w),
+        }
     }
 }
 

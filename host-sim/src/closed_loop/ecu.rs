@@ -89,6 +89,9 @@ pub struct EcuCounts {
     pub control: EcuTaskCounts,
     /// Times the control task's watchdog saw no new plan for too long.
     pub watchdog_trips: u64,
+    /// Frames the ECU refused, by reason (forged, replayed, corrupt), on both
+    /// its channels.
+    pub frames_refused: firmware::link::RefusalCounts,
 }
 
 /// A control activation's completion, as the ECU timed it: the instant its

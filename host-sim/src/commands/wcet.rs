@@ -124,6 +124,8 @@ pub(crate) fn pil_args(
         no_compare: true,
         frame_timeout: 60.0,
         max_model_underestimate_pct: None,
+        link_key: firmware::link::LINK_KEY,
+        link_fault: None,
     }
 }
 
