@@ -207,9 +207,11 @@ fn instant_at(t_us: u64) -> <Mono as rtic_monotonics::Monotonic>::Instant {
 /// refused: the host writes one frame per release.
 const RECEIVE_FRAMES: usize = 2;
 
-/// Frames of one window of the road on the route channel: the most the plan task
-/// reads per activation.
-const ROUTE_FRAMES: u32 = link::route_frames(PATH_CAP) as u32;
+/// Route frames the plan task reads per activation at most: one (the host sends
+/// at most one per plan period, before the sensor frame of the plan's release),
+/// so a window of the road arrives over `link::route_frames(PATH_CAP)` plan
+/// periods and no activation verifies a whole window.
+const ROUTE_FRAMES: u32 = 1;
 
 /// Why the control task got no sensor frame to act on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -522,7 +524,8 @@ impl RouteLink {
         let mut reader: FrameReader<MAX_DOWN_FRAME_BYTES> = FrameReader::new();
         let mut mac = LinkMac::new(&LINK_KEY);
         let mut byte = [0u8; 1];
-        // wcet-bound: ROUTE_FRAMES
+        // WCET: ROUTE_FRAMES, this application's one frame per activation.
+        // wcet-bound: 1
         for _ in 0..frames.min(ROUTE_FRAMES) {
             // One frame's bytes up to its delimiter; decoded after the loop, once
             // per frame.
@@ -723,22 +726,26 @@ fn plan_job(
     planner.run(est)
 }
 
-/// The plan task's adoption of a window of the road, in place of [`plan_job`]:
-/// the `frames` frames announced since the last activation read from the route
-/// channel (at most [`ROUTE_FRAMES`]), and the window they complete adopted: its
-/// rows copied into the path's storage, the path computed, the MPC's warm start
-/// moved, the obstacles' parabolas rebuilt ([`PlanTask::adopt_window`]). False
-/// when the planner refused it (then without a path); true when adopted or when
-/// the frames completed no window. Not inlined: the timing analysis bounds it
-/// alone, against [`deadline::PLAN_BUDGET_CYCLES`].
+/// The plan task's reception of the frames of the road announced since its last
+/// activation: at most [`ROUTE_FRAMES`], verified and staged. True when the
+/// staged window is complete: this activation adopts it ([`window_job`]) instead
+/// of planning. Not inlined: the timing analysis bounds it alone; an activation
+/// runs it, then one of the two jobs.
 #[inline(never)]
-fn window_job(
-    route: &mut RouteLink,
-    frames: u32,
-    planner: &mut PlanTask<f32, PATH_CAP>,
-    staging: &mut Staging,
-) -> bool {
+fn route_job(route: &mut RouteLink, frames: u32, staging: &mut Staging) -> bool {
     route.receive(frames.min(ROUTE_FRAMES), staging);
+    staging.ready.is_some()
+}
+
+/// The plan task's adoption of a window of the road, in place of [`plan_job`]:
+/// the staged window ([`route_job`]) copied into the path's storage, the path
+/// computed, the MPC's warm start moved, the obstacles' parabolas rebuilt
+/// ([`PlanTask::adopt_window`]). False when the planner refused it (then without
+/// a path); true when adopted or when no window was complete. Not inlined: the
+/// timing analysis bounds it alone, against [`deadline::PLAN_BUDGET_CYCLES`]
+/// with [`route_job`] before it.
+#[inline(never)]
+fn window_job(planner: &mut PlanTask<f32, PATH_CAP>, staging: &mut Staging) -> bool {
     staging.take_into(planner).is_none_or(|w| {
         planner
             .adopt_window(w.rows as usize, w.origin_m, w.closed)
@@ -1157,22 +1164,22 @@ mod app {
             let planner = &mut *cx.local.planner;
             // The frames of the road announced since the last activation (by the
             // control task's sensor frames: at a common release it runs first). At
-            // most a window's frames per activation; the rest wait for the next.
+            // most ROUTE_FRAMES per activation; the rest wait for the next.
             let frames = ROUTE_PENDING.swap(0, Ordering::Relaxed);
             if frames > ROUTE_FRAMES {
                 ROUTE_PENDING.fetch_add(frames - ROUTE_FRAMES, Ordering::Relaxed);
             }
-            // An activation with frames of the road to read receives them and adopts
-            // the window they complete instead of planning (the control task follows
-            // the last plan meanwhile): an activation adopts or plans, never both, so
-            // the plan task's worst case is the larger of the two, not their sum.
             let t0 = core_ticks();
             let c0 = CONTROL_TICKS.load(Ordering::Relaxed);
-            // One of the two jobs per activation, the window's or the plan's, on
-            // two branches of one test (the task's static bound is then the larger
-            // of the two: a job called on both paths would be charged on both).
-            let mut event = if frames > 0 {
-                if !window_job(cx.local.route, frames, planner, cx.local.staging) {
+            // The frame of the road first; when it completes a window, the
+            // activation adopts it instead of planning (the control task follows
+            // the last plan meanwhile): an activation adopts or plans, never both,
+            // on two branches of one test (the task's static bound is then the
+            // larger of the two: a job called on both paths would be charged on
+            // both).
+            let complete = frames > 0 && route_job(cx.local.route, frames, cx.local.staging);
+            let mut event = if complete {
+                if !window_job(planner, cx.local.staging) {
                     // Counted with the refused route frames (the Done frame's
                     // `rejected_frames`); no logging in a task.
                     ROUTE_REJECTED.fetch_add(1, Ordering::Relaxed);

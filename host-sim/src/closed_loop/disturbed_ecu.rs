@@ -46,12 +46,6 @@ pub struct DisturbedEcu<T: Real> {
     pending: Option<PendingObstacle<T>>,
     appeared_at_us: Option<u64>,
     obstacle_settings: firmware::obstacles::ObstacleSettings<T>,
-    /// A window of the road given during a dropout that withholds it
-    /// ([`crate::world::disturbance::Dropout::withholds_route`]), for its first
-    /// period.
-    withheld_window: Option<Window>,
-    /// The next control instant, µs (a window is given before its activation).
-    next_control_us: u64,
 }
 
 impl<T: Real> DisturbedEcu<T> {
@@ -111,8 +105,6 @@ impl<T: Real> DisturbedEcu<T> {
             pending,
             appeared_at_us: None,
             obstacle_settings,
-            withheld_window: None,
-            next_control_us: 0,
         })
     }
 
@@ -155,9 +147,10 @@ impl<T: Real> DisturbedEcu<T> {
         out
     }
 
-    /// Whether a window of the road given for the control instant `t_us` (µs)
-    /// is withheld until the dropout ends.
-    fn withholding(&self, t_us: u64) -> bool {
+    /// Whether the sensor frame of the control instant `t_us` (µs) is refused, so
+    /// that the control task does not learn of the frames of the road sent with
+    /// it ([`crate::world::disturbance::Dropout::withholds_route`]).
+    fn refused(&self, t_us: u64) -> bool {
         self.d
             .dropout
             .is_some_and(|dr| dr.withholds_route && dr.covers(t_us))
@@ -213,13 +206,10 @@ impl<T: Real> DisturbedEcu<T> {
 impl<T: Real> Ecu<T> for DisturbedEcu<T> {
     fn control(&mut self, t_us: u64, est: &StateEstimate<T>) -> Result<ControlOutput<T>> {
         self.maybe_reveal(t_us, est)?;
-        if !self.withholding(t_us) {
-            if let Some(w) = self.withheld_window.take() {
-                self.inner.set_window(&w)?;
-            }
+        if self.refused(t_us) {
+            self.inner.refuse_sensor_frame();
         }
         let seen = self.seen(t_us, est);
-        self.next_control_us = t_us + CONTROL_PERIOD_US;
         let mut c = self.inner.control(t_us, &seen)?;
         self.limit_steering(&mut c, est);
         Ok(c)
@@ -230,14 +220,7 @@ impl<T: Real> Ecu<T> for DisturbedEcu<T> {
     }
 
     fn set_window(&mut self, w: &Window) -> Result<()> {
-        // Given before the control activation of its instant (the trait's docs).
-        match self.d.dropout {
-            _ if self.withholding(self.next_control_us) => {
-                self.withheld_window = Some(w.clone());
-                Ok(())
-            }
-            _ => self.inner.set_window(w),
-        }
+        self.inner.set_window(w)
     }
 }
 

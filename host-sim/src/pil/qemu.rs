@@ -132,6 +132,12 @@ pub struct QemuEcu {
     /// Route frames written since the start, in all (announced in each sensor
     /// frame: a refused one loses no announcement).
     route_frames: u32,
+    /// Frames of the road not yet sent: one goes before the sensor frame of each
+    /// plan release (the ECU's plan task reads one per activation).
+    route_queue: std::collections::VecDeque<Down>,
+    /// The plan releases (µs) before whose sensor frame a frame of the road went:
+    /// the activations that received one (the records' `route_frames`).
+    route_releases: std::collections::BTreeSet<u64>,
     /// The last control release the ECU reported, µs.
     last_release_us: Option<u64>,
     /// That activation's own ticks: its budget overrun is counted with its
@@ -324,6 +330,8 @@ impl QemuEcu {
             active: Plan::zeroed(),
             route: BufWriter::new(route),
             route_frames: 0,
+            route_queue: Default::default(),
+            route_releases: Default::default(),
             last_release_us: None,
             last_control_ticks: None,
             plan_counts: Default::default(),
@@ -544,8 +552,18 @@ impl QemuEcu {
         Ok((frame, fault))
     }
 
-    /// One control period: sends the estimate at `t_us`, returns the ECU's answer.
+    /// One control period: sends the estimate at `t_us` (after a frame of the
+    /// road at a plan release, if one waits), returns the ECU's answer.
     pub fn exchange(&mut self, est: &StateEstimate<f32>) -> Result<link::ActuationFrame> {
+        if est.stamp_us.is_multiple_of(PLAN_PERIOD_US) {
+            if let Some(f) = self.route_queue.pop_front() {
+                self.route_releases.insert(est.stamp_us);
+                self.send_route(&f)?;
+                self.route
+                    .flush()
+                    .context("the ECU closed its route channel")?;
+            }
+        }
         self.seq = self.seq.wrapping_add(1);
         let msg = Down::Sensor(SensorFrame {
             seq: self.seq,
@@ -656,6 +674,7 @@ impl QemuEcu {
             } else {
                 0.0
             },
+            route_frames: u32::from(self.route_releases.contains(&p.release_us)),
             max_validity_slack_rad: None,
         }
     }
@@ -733,17 +752,16 @@ impl Ecu<f32> for QemuEcu {
     }
 
     fn set_window(&mut self, w: &Window) -> Result<()> {
-        // On the route channel, announced by the next sensor frame.
-        for f in path_chunks(&w.rows) {
-            self.send_route(&f)?;
-        }
-        self.send_route(&Down::Window(link::WindowFrame {
+        // On the route channel, one frame per plan release, each announced by the
+        // sensor frame after it. A window that comes while another is still on
+        // its way replaces the frames not yet sent (its first chunk restarts the
+        // ECU's staging).
+        self.route_queue = path_chunks(&w.rows).into_iter().collect();
+        self.route_queue.push_back(Down::Window(link::WindowFrame {
             rows: w.rows.len() as u16,
             origin_m: w.origin_m as f32,
             closed: w.closed,
-        }))?;
-        self.route
-            .flush()
-            .context("the ECU closed its route channel")
+        }));
+        Ok(())
     }
 }
