@@ -6,7 +6,8 @@
 //!   below, written to `$OUT_DIR/link_key.rs`;
 //! * the workspace's `memory.x` on the linker search path for the ECU build (in a
 //!   workspace the linker runs in the package directory, so the root `memory.x`
-//!   would not be found by `cortex-m-rt`'s `link.x` without this).
+//!   would not be found by `cortex-m-rt`'s `link.x` without this), and the control
+//!   job first in the ECU's `.text` (a symbol ordering file).
 use std::{env, fs, path::PathBuf};
 
 /// The environment variable that sets the link key at build time.
@@ -76,5 +77,14 @@ fn main() -> Result<(), String> {
         fs::read("../memory.x").map_err(|e| format!("memory.x at the workspace root: {e}"))?;
     fs::write(out.join("memory.x"), memory).map_err(|e| format!("writing to OUT_DIR: {e}"))?;
     println!("cargo:rustc-link-search={}", out.display());
+    // The control job first in `.text` (right after `Reset`): its bound is then
+    // independent of the size of the code that would otherwise come before it.
+    let order = out.join("symbol-order.txt");
+    fs::write(&order, "ecu_control_job\n").map_err(|e| format!("writing to OUT_DIR: {e}"))?;
+    println!(
+        "cargo:rustc-link-arg-bins=--symbol-ordering-file={}",
+        order.display()
+    );
+    println!("cargo:rustc-link-arg-bins=--no-warn-symbol-ordering");
     Ok(())
 }

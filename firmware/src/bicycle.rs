@@ -103,7 +103,9 @@ pub fn node_from_state<T: Real>(x: &State<T>) -> crate::plan::PlanNode<T> {
 pub struct Discretization<T> {
     /// `F(ξ, u)`, the state after the step (same units as [`State`]).
     pub x_next: State<T>,
-    /// `∂F/∂ξ`, 6×6, row `i` = output state `i`.
+    /// `∂F/∂ξ`, 6×6, row `i` = output state `i`. Its columns before
+    /// [`FIRST_LIVE`] are the identity's, exactly (the dynamics do not depend on
+    /// `s`, `X`, `Y`).
     pub a: [[T; NX]; NX],
     /// `∂F/∂u`, 6×2, row `i` = output state `i`, column `j` = input `j`.
     pub b: [[T; NU]; NX],
@@ -202,8 +204,10 @@ fn stage<T: Real>(
 /// First column of `[ξ; u]` that a stage's state can depend on: the dynamics do
 /// not depend on `s`, `X`, `Y` (columns `0..FIRST_LIVE`), so every stage's
 /// derivative with respect to them is zero and `∂ξ_next/∂(s, X, Y)` is the
-/// identity. The Jacobian products run over the columns from here on only.
-const FIRST_LIVE: usize = V;
+/// identity. The Jacobian products run over the columns from here on only; the
+/// MPC's sensitivity propagation reads the identity's columns as such
+/// ([`Discretization::a`]).
+pub const FIRST_LIVE: usize = V;
 const _: () = assert!(S < FIRST_LIVE && X < FIRST_LIVE && Y < FIRST_LIVE);
 const _: () = assert!(V >= FIRST_LIVE && PSI >= FIRST_LIVE && DELTA >= FIRST_LIVE);
 

@@ -2,8 +2,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use firmware::bicycle::{
-    discretize, node_from_state, state_from_node, BicycleGeometry, Discretization, DELTA, NU, NX,
-    PSI, S, V, X, Y,
+    discretize, node_from_state, state_from_node, BicycleGeometry, Discretization, DELTA,
+    FIRST_LIVE, NU, NX, PSI, S, V, X, Y,
 };
 use firmware::Real;
 use proptest::prelude::*;
@@ -328,6 +328,25 @@ proptest! {
         a in -8.0f64..6.0, r in -0.5f64..0.5, lag in 0.0f64..0.03,
     ) {
         assert_lagged_jacobians_match([3.0, 10.0, -2.0, v, psi, delta], [a, r], 0.1, lag);
+    }
+}
+
+proptest! {
+    /// The MPC's sensitivity propagation takes the columns of `A` before
+    /// `FIRST_LIVE` as the identity's, exactly (in f32, as on the ECU).
+    #[test]
+    fn the_jacobian_is_the_identity_in_the_columns_before_the_live_ones(
+        v in 0.0f32..35.0, psi in -7.0f32..7.0, delta in -0.5f32..0.5,
+        a in -8.0f32..6.0, r in -0.5f32..0.5, lag in 0.0f32..0.03,
+    ) {
+        let g = BicycleGeometry { l_f_m: 1.2f32, l_r_m: 1.6 };
+        let x = [3.0f32, 10.0, -2.0, v, psi, delta];
+        let d = g.discretize_lagged(&x, &[a, r], 0.1, Real::tan(delta), lag);
+        for (i, row) in d.a.iter().enumerate() {
+            for (j, &aij) in row.iter().enumerate().take(FIRST_LIVE) {
+                prop_assert_eq!(aij.to_bits(), if i == j { 1.0f32 } else { 0.0 }.to_bits());
+            }
+        }
     }
 }
 

@@ -100,7 +100,7 @@ fn message(kind: u8, k: u32, v: f32) -> Down {
                 max_steer_rad: v,
             },
             mu_planner: v,
-            closed: k % 2 == 0,
+            closed: k.is_multiple_of(2),
             path_rows: k as u16,
             obstacles: k as u8,
         }),

@@ -165,6 +165,59 @@ fn a_bad_mu_patch_is_refused_with_the_reason_and_the_lap_length() {
 }
 
 #[test]
+fn a_bad_grade_or_actuator_is_refused_with_the_reason_in_run_pil_and_sweep() {
+    let dir = tempfile::tempdir().unwrap();
+    for (args, want) in [
+        (&["--grade=300:200"][..], "wants START_M:LENGTH_M:PERCENT"),
+        (
+            &["--grade=300:200:6%"],
+            "PERCENT \"6%\" is not a finite number",
+        ),
+        (
+            &["--grade=300:200:35"],
+            "PERCENT must be a grade in [-30, 30] %",
+        ),
+        (&["--grade", "-5:200:6"], "START_M must be ≥ 0"),
+        (&["--grade=300:0:6"], "LENGTH_M must be a positive length"),
+        // The paper track's lap is 980.6 m long.
+        (
+            &["--grade=5000:200:6"],
+            "past the end of the lap of track `paper` (980.6",
+        ),
+        (&["--grade=0:3000:-6"], "does not fit track `paper` (980.6"),
+        (
+            &["--grade=100:300:6", "--grade=300:300:-6"],
+            "give each stretch of road one grade",
+        ),
+        (&["--actuator=steering_lag_s=0.1"], "no actuator field"),
+        (&["--actuator=torque_delay_s"], "wants KEY=VALUE"),
+        (&["--actuator=torque_delay_s=2"], "must be in [0, 1] s"),
+        (
+            &["--actuator=steering_rate_limit_rad_per_s=0"],
+            "a rate limit must be positive",
+        ),
+    ] {
+        for cmd in ["run", "pil", "sweep"] {
+            let mut c = host_sim();
+            c.arg(cmd).args(args);
+            if cmd == "sweep" {
+                c.args(["--track", "paper"]);
+            }
+            let o = c
+                .arg("--no-plots")
+                .arg("--out")
+                .arg(dir.path())
+                .output()
+                .unwrap();
+            assert!(!o.status.success(), "{cmd} {args:?}");
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert!(err.contains(want), "{cmd} {args:?}: {err}");
+            assert!(!err.contains("panicked"), "{cmd} {args:?}: {err}");
+        }
+    }
+}
+
+#[test]
 fn run_refuses_a_bad_load_noise_or_delay() {
     let dir = tempfile::tempdir().unwrap();
     for (arg, want) in [
@@ -241,6 +294,8 @@ fn run_pil_and_sweep_spell_every_scenario_option_alike() {
         "delay-ms",
         "fault",
         "mu-patch",
+        "grade",
+        "actuator",
         "laps",
         "duration",
         "initial-speed",
@@ -304,6 +359,10 @@ fn the_same_words_parse_to_the_same_scenario_in_run_pil_and_sweep_old_spellings_
         "mu-high:1.2",
         "--mu-patch",
         "100:50:0.5",
+        "--grade",
+        "200:100:-6",
+        "--actuator",
+        "torque_time_constant_s=0.05",
         "--laps",
         "2",
         "--duration",
@@ -538,6 +597,10 @@ fn run_with_a_sweep_runs_factors_replays_it() {
         "1.2",
         "--fault",
         "steer-rate:0.4",
+        "--grade",
+        "50:100:-6",
+        "--actuator",
+        "steering_time_constant_s=0.05",
         "--seed",
         "1",
         "--duration",
@@ -575,6 +638,8 @@ fn run_with_a_sweep_runs_factors_replays_it() {
     let cell = |k: &str| &row[head.iter().position(|h| h == k).unwrap()];
     assert_ne!(cell("obstacle_count"), "0");
     assert_eq!(cell("fault"), "steer-rate:0.4");
+    assert_eq!(cell("grade_patches"), "50:100:-6");
+    assert_eq!(cell("actuators"), "steering_time_constant_s=0.05");
     let mut compared = 0;
     for (k, v) in summary.as_object().unwrap() {
         let Some(i) = head.iter().position(|h| h == k) else {

@@ -1,7 +1,7 @@
 //! The 9-DoF plant: loads, straight-line behaviour, standstill, determinism.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use host_sim::model::plant::{Inputs, Plant, PlantError, State, FL, FR, RL, RR};
+use host_sim::model::plant::{Inputs, Plant, PlantError, RoadUnder, State, FL, FR, RL, RR};
 use host_sim::model::vehicle::{VehicleParams, G};
 
 fn run(plant: &mut Plant, inputs: &Inputs, seconds: f64) {
@@ -188,6 +188,15 @@ fn bad_inputs_are_errors_not_panics() {
         plant.step(&Inputs::default(), f64::INFINITY),
         Err(PlantError::Mu(_))
     ));
+    for grade_rad in [f64::NAN, 0.8, -1.0] {
+        let road = RoadUnder {
+            mu: [1.0; 4],
+            grade_rad,
+        };
+        let e = plant.step_on_road(&Inputs::default(), &road).unwrap_err();
+        assert!(matches!(e, PlantError::Grade(_)), "{e}");
+        assert!(e.to_string().contains("grade"), "{e}");
+    }
     assert_eq!(*plant.state(), before);
     let nan_state = State {
         vy_mps: f64::NAN,
@@ -230,7 +239,14 @@ fn a_hard_launch_from_rest_and_a_hard_stop_stay_finite_and_sensible() {
         };
         run(&mut plant, &launch, 3.0);
         let s = *plant.state();
-        assert!(s.vx_mps > 10.0 && s.vx_mps < 20.0, "dt={dt}: {s:?}");
+        // By hand: the torque's force less the rolling resistance, on the mass and
+        // the wheels' inertia (drag is under 1 % here).
+        let m_eff = p.mass_kg + 4.0 * p.wheel_inertia_kg_m2 / p.r_eff_m.powi(2);
+        let v_hand = 3.0 * (1600.0 / p.r_eff_m - p.crr * p.mass_kg * G) / m_eff;
+        assert!(
+            (s.vx_mps - v_hand).abs() < 0.05 * v_hand,
+            "dt={dt}: {s:?}, by hand {v_hand} m/s"
+        );
         let o = plant.outputs();
         assert!(o.kappa[FL] > 0.0 && o.kappa[FL] < 0.2, "{:?}", o.kappa);
         let stop = Inputs {

@@ -80,6 +80,64 @@ fn tyre_coefficients_default_to_zero_and_scales_to_one() {
 }
 
 #[test]
+fn the_rolling_resistance_is_optional_and_checked() {
+    let line = template()
+        .lines()
+        .find(|l| l.starts_with("crr = "))
+        .unwrap()
+        .to_string();
+    // Absent: none.
+    let v = VehicleParams::from_toml_str(&template().replace(&line, "")).unwrap();
+    assert_eq!(v.crr, 0.0);
+    assert_eq!(VehicleParams::default().crr, 0.012);
+    for (bad, says) in [
+        ("crr = -0.01", "must be zero or positive"),
+        ("crr = 0.2", "must be at most 0.1"),
+        ("crr = nan", "finite"),
+    ] {
+        let e = error_of(&template().replace(&line, bad));
+        assert!(
+            e.contains(r#"field "crr""#) && e.contains(says),
+            "{bad}: {e}"
+        );
+    }
+}
+
+#[test]
+fn the_actuators_table_is_optional_and_its_fields_are_named() {
+    // The template with its `[actuators]` table's lines replaced by `table`.
+    let text = template();
+    let a = text.find("[actuators]\n").unwrap();
+    let b = a + text[a..].find("\n\n").unwrap();
+    let with = |table: &str| format!("{}[actuators]\n{table}{}", &text[..a], &text[b..]);
+    let without = VehicleParams::from_toml_str(&with("")).unwrap();
+    assert_eq!(without, VehicleParams::default());
+    let v = VehicleParams::from_toml_str(&with(
+        "steering_time_constant_s = 0.08\ntorque_rate_limit_nm_per_s = 20000.0\nsteering_rate_limit_rad_per_s = inf",
+    ))
+    .unwrap();
+    assert_eq!(v.actuators.steering_time_constant_s, 0.08);
+    assert_eq!(v.actuators.torque_rate_limit_nm_per_s, 20000.0);
+    assert_eq!(v.actuators.steering_rate_limit_rad_per_s, f64::INFINITY);
+    assert_eq!(v.actuators.torque_delay_s, 0.0);
+    let e = error_of(&with("steering_lag_s = 0.1"));
+    assert!(
+        e.contains("unknown field") && e.contains("steering_lag_s"),
+        "{e}"
+    );
+    let e = error_of(&with("torque_delay_s = 1.5"));
+    assert!(
+        e.contains(r#"field "actuators.torque_delay_s""#) && e.contains("[0, 1] s"),
+        "{e}"
+    );
+    let e = error_of(&with("steering_rate_limit_rad_per_s = 0.0"));
+    assert!(
+        e.contains(r#"field "actuators.steering_rate_limit_rad_per_s""#),
+        "{e}"
+    );
+}
+
+#[test]
 fn an_unreadable_file_names_the_path() {
     let e = VehicleParams::from_toml_file("/nonexistent/car.toml").unwrap_err();
     assert!(matches!(e, VehicleError::Io { .. }));

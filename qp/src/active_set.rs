@@ -2,10 +2,37 @@
 //! first blocking multiplier and its removal, the most violated constraint and its
 //! addition (with the null-space swap of a dependent one), the final refinement and
 //! the output of the solution.
+//!
+//! # Counts
+//!
+//! Every iteration does at most one of: an append (`append`'s first attempt: the
+//! row enters, or stays pending when it depends on the working set), a removal
+//! (a blocking multiplier's, or a null-space step's, which may also let the
+//! pending row enter), or the end of the solve (a refactorization may follow a
+//! failed check of optimality). A refactorization may append once more (the
+//! retry of a pending row). The entries a refactorization or the warm start
+//! drops count as iterations. With `K` the iteration cap, `R` the
+//! refactorization cap and `P` the solves (the MPC's passes) sharing them, `A`
+//! appends, `Rm` removals, `n_s` warm entries and `D` drops:
+//!
+//! * `A + Rm + D ≤ K + R`: the appends beyond their iterations are the retries;
+//! * per solve, the entries plus the pending row, `Φ ≤ W`, start at the warm
+//!   entries kept, `n_s` less the start's drops, grow by one per append and
+//!   shrink by one per removal (and by the drops and a discarded pending row),
+//!   so `A ≤ W − n_s + Rm + D + R` and `Rm ≤ W + A`.
+//!
+//! Hence `2A + n_s ≤ K + 2R + P·W` and `Rm ≤ (K + R + P·W)/2`: a working set of
+//! `W` entries is reached by `W` appends or warm entries, and each append past it
+//! needs a removal, so at most about half of an activation's iterations append
+//! and half remove, and a warm start takes its share of the appends. The
+//! iterations that neither append nor remove end a solve or refactor: at most
+//! `P + R`. The timing annotations cap the calls of `append` (with the
+//! transformations and the warm entries: counted in `balance`), `remove`,
+//! `primal` and `most_violated` so; the traces check them.
 
 use crate::cholesky::solve_upper;
 use crate::factor::{AppendError, Workspace, ROW_FULL, ROW_TRANSFORMED};
-use crate::rows::{bounds_of, con_row, delta, dot_prefix, held_bound, row_start, sign, sub_scaled};
+use crate::rows::{bounds_of, con_row, delta, dot_groups, held_bound, row_start, sign, sub_scaled};
 use crate::settings::Tols;
 use crate::{
     ActiveConstraint, ConstraintIndex, QpProblem, QpSettings, QpSolution, QpStatus, Real, Side,
@@ -25,7 +52,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         lo == hi
     }
 
-    /// `u = −v − M̃_Wᵀ λ`, and `x = R⁻¹ u` into `x`.
+    /// `u = −v − M̃_Wᵀ λ`, and `x = R⁻¹ u` into `x`. Not inlined: its calls are
+    /// capped per activation.
+    #[inline(never)]
     pub(crate) fn primal(&mut self, p: &QpProblem<T, N, M>, x: &mut [T; N]) {
         for (u, v) in self.u.iter_mut().zip(self.v.iter()) {
             *u = -*v;
@@ -36,7 +65,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             if l == T::ZERO {
                 continue;
             }
-            let row = con_row(p, self.ws[k].index);
+            let row = con_row(p, &self.rinv, self.ws[k].index);
             if let Some(u0) = self.u.get_mut(row.start) {
                 *u0 -= l * row.head;
             }
@@ -48,7 +77,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     }
 
     /// Most violated inactive constraint (beyond `tol`), given `u` and `x`. `skip` is
-    /// chosen only if no other constraint is violated (anti-cycling).
+    /// chosen only if no other constraint is violated (anti-cycling). Not inlined:
+    /// its calls are capped per activation.
+    #[inline(never)]
     pub(crate) fn most_violated(
         &self,
         p: &QpProblem<T, N, M>,
@@ -56,69 +87,100 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         tol: T,
         skip: Option<ConstraintIndex>,
     ) -> Option<ActiveConstraint> {
+        // The largest violation beyond `tol` so far, of `cand` (its constraint and
+        // value: the side follows from it at the end); `skip` only as a fallback.
+        // A violation `max(lo − val, val − hi)` compared with the best (the common
+        // case, nothing to do) is the only test of each inactive constraint.
         let mut best = tol;
-        let mut cand = None;
-        let mut fallback = None;
-        let mut consider = |val: T, lo: T, hi: T, index: ConstraintIndex| {
-            let (viol, side) = if lo - val > val - hi {
-                (lo - val, Side::Lower)
-            } else {
-                (val - hi, Side::Upper)
-            };
-            if Some(index) == skip {
-                if viol > tol {
-                    fallback = Some(ActiveConstraint { index, side });
+        let mut cand: Option<(ConstraintIndex, T)> = None;
+        let mut fallback: Option<(ConstraintIndex, T)> = None;
+        let (skip_bound, skip_row) = match skip {
+            Some(ConstraintIndex::Bound(j)) => (j as usize, usize::MAX),
+            Some(ConstraintIndex::Row(i)) => (usize::MAX, i as usize),
+            None => (usize::MAX, usize::MAX),
+        };
+        // The first violation above `best` at the skipped constraint sets the
+        // fallback (once another is a candidate, `best > tol` and it is not used).
+        let mut consider = |viol: T, val: T, index: ConstraintIndex, skipped: bool| {
+            if viol > best {
+                if skipped {
+                    fallback = Some((index, val));
+                } else {
+                    best = viol;
+                    cand = Some((index, val));
                 }
-            } else if viol > best {
-                best = viol;
-                cand = Some(ActiveConstraint { index, side });
             }
         };
+        // `N` through `black_box`: a loop of a constant trip count would be unrolled,
+        // and its annotation (source iterations) would bound the unrolled trips.
+        let bounds = core::hint::black_box(N).min(N);
         // wcet-bound: NV
-        for j in 0..N {
+        for j in 0..bounds {
             if self.bound_state[j].is_none() {
-                consider(x[j], p.x_lo[j], p.x_hi[j], ConstraintIndex::Bound(j as u16));
+                let val = x[j];
+                let (dl, du) = (p.x_lo[j] - val, val - p.x_hi[j]);
+                let viol = if dl > du { dl } else { du };
+                consider(viol, val, ConstraintIndex::Bound(j as u16), j == skip_bound);
             }
         }
         // wcet-bound: NC
-        for i in 0..p.m.min(M) {
+        for (i, a) in p.a.iter().enumerate().take(p.m) {
             if self.row_state[i].is_none() {
                 // m̃_iᵀu once the row is transformed, else a_iᵀx (the same value),
-                // over the row's nonzero prefix: one loop for the three cases, whose
-                // trip count is not a constant, so the compiler keeps it rolled and
-                // this loop's code small enough to stay in the flash cache.
-                let (y, len) = match self.row_code[i] {
-                    ROW_TRANSFORMED => (&self.u, N),
-                    ROW_FULL => (x, N),
-                    groups => (x, 4 * groups as usize),
+                // over the row's nonzero prefix (its whole groups of four).
+                let code = self.row_code[i];
+                let (y, groups, rest) = if code == ROW_TRANSFORMED {
+                    (&self.u, N / 4, true)
+                } else if code == ROW_FULL {
+                    (x, N / 4, true)
+                } else {
+                    (x, code as usize, false)
                 };
-                let val = dot_prefix(&p.a[i], y, len);
-                consider(val, p.lo[i], p.hi[i], ConstraintIndex::Row(i as u16));
+                let val = dot_groups(core::hint::black_box(a), y, groups, rest);
+                let (dl, du) = (p.lo[i] - val, val - p.hi[i]);
+                let viol = if dl > du { dl } else { du };
+                consider(viol, val, ConstraintIndex::Row(i as u16), i == skip_row);
             }
         }
-        cand.or(fallback)
+        cand.or(fallback).map(|(index, val)| {
+            let (lo, hi) = bounds_of(p, index);
+            let side = if lo - val > val - hi {
+                Side::Lower
+            } else {
+                Side::Upper
+            };
+            ActiveConstraint { index, side }
+        })
     }
 
-    /// Refactors from scratch (dropping dependent entries) and counts it; false,
-    /// and nothing done, once `max` refactorizations were made in this solve.
+    /// Refactors from scratch (dropping dependent entries, and a pending row) and
+    /// counts it: `Ok(false)`, and nothing done, once `max_refactorizations` were
+    /// made in this solve. Each entry it drops counts as an iteration against the
+    /// cap, as a removal does (`Err(IterationLimit)` when that passes the cap): the
+    /// working set then shrinks only by counted iterations, which bounds the
+    /// additions of a solve (module `active_set`, *Counts*).
     pub(crate) fn refactor(
         &mut self,
         p: &QpProblem<T, N, M>,
         tols: Tols<T>,
         sol: &mut QpSolution<T, N, M>,
-        max: u32,
-    ) -> bool {
-        if sol.refactorizations >= max {
-            return false;
+        settings: &QpSettings<T>,
+    ) -> Result<bool, QpStatus> {
+        if sol.refactorizations >= settings.max_refactorizations {
+            return Ok(false);
         }
         let n = self.n;
         // The MPC gives each pass what is left of the activation's
         // QP_MAX_REFACTORIZATIONS (firmware's mpc.rs `step_inner`).
         // wcet-bound: QP_MAX_REFACTORIZATIONS times per activation
-        let dropped = self.rebuild(p, tols, n);
+        let dropped = self.rebuild(p, tols, n) as u32;
         sol.refactorizations += 1;
-        sol.removed += dropped as u32;
-        true
+        sol.removed += dropped;
+        sol.iterations = sol.iterations.saturating_add(dropped);
+        if sol.iterations > settings.max_iter {
+            return Err(QpStatus::IterationLimit);
+        }
+        Ok(true)
     }
 
     /// The main loop; returns the exit status (the solution is written by `output`).
@@ -149,8 +211,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             // wcet-bound: same loop
             sol.iterations += 1;
             if !self.solve_lam_star() {
-                if !self.refactor(p, tols, sol, settings.max_refactorizations) {
-                    return QpStatus::NumericalError;
+                match self.refactor(p, tols, sol, settings) {
+                    Ok(true) => {}
+                    Ok(false) => return QpStatus::NumericalError,
+                    Err(st) => return st,
                 }
                 if !self.solve_lam_star() {
                     return QpStatus::NumericalError;
@@ -191,6 +255,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 } else {
                     Some(self.ws[pos].index)
                 };
+                // A removal needs an entry added before it (or the start's), and
+                // each takes an iteration: at most `(K + R + P·W)/2` per activation
+                // (module `active_set`, *Counts*).
+                // wcet-bound: (QP_MAX_ITER + QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS) / 2 times per activation, counted in removals
                 self.remove(pos);
                 sol.removed += 1;
                 continue;
@@ -198,6 +266,11 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             for k in 0..self.n {
                 self.lam[k] = self.tmp[k];
             }
+            // An iteration that removes nothing adds (one append, at most
+            // `(K + 2R + P·W)/2` of them), or ends the pass, or refactors (module
+            // `active_set`, *Counts*). The cap is on the block that makes this call,
+            // which also calls `most_violated` (one cap per block).
+            // wcet-bound: (QP_MAX_ITER + 2 * QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS) / 2 + COLD_START_PASSES + QP_MAX_REFACTORIZATIONS times per activation
             self.primal(p, &mut sol.x);
             let Some(e) = self.most_violated(p, &sol.x, tols.primal, blocked) else {
                 // Optimal if the working set itself holds; if it does not, the factor is
@@ -213,8 +286,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                     return QpStatus::NumericalError;
                 }
                 checked_refactor = true;
-                if !self.refactor(p, tols, sol, settings.max_refactorizations) {
-                    return QpStatus::NumericalError;
+                match self.refactor(p, tols, sol, settings) {
+                    Ok(true) => {}
+                    Ok(false) => return QpStatus::NumericalError,
+                    Err(st) => return st,
                 }
                 continue;
             };
@@ -225,12 +300,13 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
     }
 
-    /// Adds the violated constraint `e`. If it depends linearly on the working set,
-    /// moves `λ` along the dual null-space direction (which keeps `u` and raises the
-    /// dual cost) until a multiplier reaches zero, removes that constraint and tries
-    /// again (at most `W` times, each null-space step an iteration against
-    /// `max_iter`: past it, `IterationLimit`); no multiplier reaching zero means
-    /// infeasible.
+    /// Adds the violated constraint `e`. If it depends linearly on the working set
+    /// (its pivot too small: the row stays [`pending`](Workspace::pending)), moves
+    /// `λ` along the dual null-space direction (which keeps `u` and raises the dual
+    /// cost) until a multiplier reaches zero and removes that constraint, whose
+    /// removal updates the pending row's pivot, until the row enters: each such
+    /// step an iteration against `max_iter` (past it, `IterationLimit`); no
+    /// multiplier reaching zero means infeasible.
     pub(crate) fn add(
         &mut self,
         p: &mut QpProblem<T, N, M>,
@@ -240,51 +316,51 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         settings: &QpSettings<T>,
     ) -> Result<(), QpStatus> {
         let max_iter = settings.max_iter;
+        // One transformation per `add`, one `add` per main-loop iteration that
+        // adds, and its first append (below, in the same block of the binary as
+        // this call): counted with the retries and the warm start's pairs of
+        // entries (module `active_set`, *Counts*; `Workspace::start`).
+        // wcet-bound: (QP_MAX_ITER + 3 * QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS + 1) / 2 times per activation, counted in balance
         self.prepare(p, e.index);
         let p = &*p;
+        // The first attempt is the main loop's iteration's; a retry follows a
+        // refactorization.
+        let mut first = self.append(p, e, tols);
+        if first == Err(AppendError::Singular) && self.updates > 0 {
+            // The small pivot may be accumulated rounding: refactor (which drops the
+            // pending row) and retry once, within the solve's refactorization cap.
+            match self.refactor(p, tols, sol, settings) {
+                Ok(true) => {
+                    // wcet-bound: (QP_MAX_ITER + 3 * QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS + 1) / 2 times per activation, counted in balance
+                    first = self.append(p, e, tols);
+                }
+                Ok(false) => {}
+                Err(st) => return Err(st),
+            }
+        }
+        match first {
+            Ok(()) => {
+                self.lam[self.n - 1] = T::ZERO;
+                sol.added += 1;
+                return Ok(());
+            }
+            Err(AppendError::Full) => return Err(QpStatus::WorkingSetFull),
+            Err(AppendError::Singular) => {}
+        }
         let sigma = sign::<T>(e.side);
         // Multiplier the new constraint has accumulated over null-space steps.
         let mut lam_e = T::ZERO;
-        let mut refactored = false;
-        // `0..=W`: W + 1 attempts. The first is the main loop's iteration's (it
-        // calls `add` once); each later one follows a null-space step and its
-        // removal, counted as an iteration against `max_iter` (what is left of the
-        // activation's cap), or
-        // a refactorization, counted against `max_refactorizations` (likewise):
-        // QP_MAX_ITER + QP_MAX_REFACTORIZATIONS attempts in an activation.
-        // wcet-bound: QP_MAX_ITER + QP_MAX_REFACTORIZATIONS per activation
-        for _ in 0..=W {
-            // Every attempt, first or not, summed over the activation's `add`s: the
-            // first is paid by its main-loop iteration, each later one by a removal
-            // (an iteration) or a refactorization, so the attempts of all the `add`s
-            // share the activation's caps.
-            // wcet-bound: QP_MAX_ITER + QP_MAX_REFACTORIZATIONS times per activation
-            match self.append(p, e, tols) {
-                Ok(()) => {
-                    self.lam[self.n - 1] = lam_e;
-                    sol.added += 1;
-                    return Ok(());
-                }
-                Err(AppendError::Full) => return Err(QpStatus::WorkingSetFull),
-                Err(AppendError::Singular) => {}
-            }
-            if !refactored && self.updates > 0 {
-                // The small pivot may be accumulated rounding: refactor and retry
-                // (once per `add`, within the solve's refactorization cap).
-                refactored = true;
-                if self.refactor(p, tols, sol, settings.max_refactorizations) {
-                    continue;
-                }
-            }
-            // The null-space step, an iteration of its own against `max_iter`
-            // (with the removal that follows it, or the commit that ends the
-            // `add`): the main loop's iteration that called `add` pays for the
-            // first append only, so no iteration pays for an append and a
-            // null-space step (the plan task's worst case per iteration).
+        // Each null-space step is an iteration of its own against `max_iter` (what
+        // is left of the activation's cap) and removes an entry, so there are fewer
+        // than W of them per `add`; a back edge follows each but the last.
+        // wcet-bound: QP_MAX_ITER per activation
+        for _ in 0..W {
             if sol.iterations >= max_iter {
+                self.pending = false;
                 return Err(QpStatus::IterationLimit);
             }
             sol.iterations += 1;
+            // One call per null-space step: an iteration, with the main loop's.
             // wcet-bound: QP_MAX_ITER times per activation, counted in qp_iterations
             let block = self.null_space_step(p, sigma, tols.noise);
             let n = self.n;
@@ -300,6 +376,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                     sol.added += 1;
                     return Ok(());
                 }
+                self.pending = false;
                 return Err(QpStatus::Infeasible);
             };
             // wcet-bound: WS
@@ -312,11 +389,20 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.lam[k] = l;
             }
             lam_e += t * sigma;
-            // One per null-space step (the iteration counted above).
-            // wcet-bound: QP_MAX_ITER times per activation
+            // wcet-bound: (QP_MAX_ITER + QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS) / 2 times per activation, counted in removals
             self.remove(pos);
             sol.removed += 1;
+            // The removal updated the pending row: it enters once its pivot passes
+            // the test `append` made.
+            let dn = self.ldl[row_start(self.n) + self.n];
+            if dn > tols.pivot * self.pending_diag && dn.is_finite() {
+                self.commit(p, e);
+                self.lam[self.n - 1] = lam_e;
+                sol.added += 1;
+                return Ok(());
+            }
         }
+        self.pending = false;
         Err(QpStatus::NumericalError)
     }
 
@@ -349,8 +435,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.tmp.get_mut(..r).unwrap_or(&mut []),
                 self.ldl.get(sr..sr + r).unwrap_or(&[]),
             );
-            // `t` and `l` have the same length r.
-            sub_scaled(t, cr, l);
+            // `t` and `l` have the same length r; their addresses through
+            // `black_box` (as in `ldl_back_tmp`).
+            sub_scaled(core::hint::black_box(t), cr, core::hint::black_box(l));
         }
         let mut cmax = T::ZERO;
         // wcet-bound: WS
@@ -389,7 +476,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         for k in 0..self.n {
             let e = self.ws[k];
             let b = held_bound(p, e);
-            self.tmp[k] = con_row(p, e.index).dot(&self.u) - b - self.lam[k] * delta(p, e.index);
+            self.tmp[k] =
+                con_row(p, &self.rinv, e.index).dot(&self.u) - b - self.lam[k] * delta(p, e.index);
         }
         self.ldl_solve_tmp();
         // wcet-bound: WS
@@ -416,7 +504,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         (0..self.n).all(|k| {
             let e = self.ws[k];
             let b = held_bound(p, e);
-            let val = con_row(p, e.index).dot(&self.u);
+            let val = con_row(p, &self.rinv, e.index).dot(&self.u);
             let target = b + self.lam[k] * delta(p, e.index);
             // Relative to the magnitudes involved: rows are formed in the working
             // precision, so their rounding scales with them.

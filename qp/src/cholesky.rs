@@ -1,7 +1,6 @@
 //! The Hessian's factor `R` (`H = RᵀR`): Cholesky factorisation, the triangular
 //! solves with `R` and `Rᵀ`, and the rows of `R⁻¹` the bounds use.
 
-use crate::rows::dot_from;
 use crate::Real;
 #[cfg(test)]
 use crate::{factor::Workspace, QpProblem};
@@ -138,12 +137,43 @@ pub(crate) fn solve_transposed<T: Real, const N: usize>(
 pub(crate) fn solve_upper<T: Real, const N: usize>(r: &[[T; N]; N], u: &[T; N], x: &mut [T; N]) {
     // wcet-bound: NV
     for j in (0..N).rev() {
-        let s = dot_from(&r[j], x, j + 1);
+        // `dot_from(&r[j], x, j + 1)`: the same sums, in a loop that stays rolled
+        // (its slices through `black_box`), so that its bound is the triangle's,
+        // not `N/4` groups for every row.
+        let (a, b) = (
+            core::hint::black_box(r[j].get(j + 1..).unwrap_or(&[])),
+            core::hint::black_box(x.get(j + 1..).unwrap_or(&[])),
+        );
+        let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+        let (ra, rb) = (ca.remainder(), cb.remainder());
+        let mut acc = [T::ZERO; 4];
+        // Σ (N − 1 − j)/4 over the rows j < N: N(N − 1)/8 per call of `primal`,
+        // which inlines this and calls it once.
+        // wcet-bound: NV / 4
+        // wcet-bound in primal: NV * (NV - 1) / 8 per call
+        for (x4, y4) in ca.zip(cb) {
+            for ((s, &p), &q) in acc.iter_mut().zip(x4).zip(y4) {
+                *s += p * q;
+            }
+        }
+        let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+        let mut rest = ra.iter().zip(rb);
+        if let Some((&p, &q)) = rest.next() {
+            s += p * q;
+            if let Some((&p, &q)) = rest.next() {
+                s += p * q;
+                if let Some((&p, &q)) = rest.next() {
+                    s += p * q;
+                }
+            }
+        }
         x[j] = (u[j] - s) / r[j][j];
     }
 }
 
-/// Row `j` of `R⁻¹` (`e_jᵀ R⁻¹`, zero before column `j`) into `out`.
+/// Row `j` of `R⁻¹` (`e_jᵀ R⁻¹`, zero before column `j`) into `out`: the tests'
+/// reference for [`store_inverse_row`].
+#[cfg(test)]
 pub(crate) fn inverse_row<T: Real, const N: usize>(r: &[[T; N]; N], j: usize, out: &mut [T; N]) {
     out.fill(T::ZERO);
     if let Some(o) = out.get_mut(j) {
@@ -173,7 +203,7 @@ pub(crate) fn transform<
     solve_transposed(&p.h, &mut w.v, 0);
     for j in 0..N {
         store_inverse_row(&mut p.h, j);
-        w.bound_ready[j] = true;
+        w.rinv[j] = T::ONE / p.h[j][j];
     }
 }
 
@@ -181,20 +211,48 @@ pub(crate) fn transform<
 /// in the lower triangle of `h`, which holds `R` in its upper triangle: the `N−1−j`
 /// entries after the diagonal go to `h[N−1−j][0..N−1−j]`, the lower part of row
 /// `N−1−j`, exactly its length (so the rows of all `N` bounds fit at once). The
-/// solve reads the upper triangle only.
+/// solve reads the upper triangle only. Not inlined: its loops' bounds are per
+/// call.
+#[inline(never)]
 pub(crate) fn store_inverse_row<T: Real, const N: usize>(h: &mut [[T; N]; N], j: usize) {
     if j >= N {
         return;
     }
-    let mut row = [T::ZERO; N];
-    inverse_row(h, j, &mut row);
+    // `solve_transposed` of `e_j` from `j`, written where the row is kept rather
+    // than into a row of its own and copied (a frame of `N` entries and a `memcpy`
+    // less on the plan task's deepest stack path): `x_j = 1/R_jj`, and `x_k` for
+    // `k > j` at `h[dst][k − j − 1]`, the same sums in the same order, so bit for
+    // bit `inverse_row`'s (the test `store_inverse_row_is_inverse_row`).
     let dst = N - 1 - j;
-    if let (Some(d), Some(src)) = (
-        h.get_mut(dst).and_then(|r| r.get_mut(..dst)),
-        row.get(j + 1..),
-    ) {
-        // WCET: fewer than N entries; on the ECU the QP is the MPC's, N = NV f32.
-        // wcet-bound: NV * 4 bytes
-        d.copy_from_slice(src);
+    let xj = (T::ONE - T::ZERO) / h[j][j];
+    // wcet-bound: NV
+    for l in j + 1..N {
+        let mut acc = [T::ZERO; 4];
+        let mut k = j;
+        // The first group apart (it holds `x_j`), so that the others read `x` from
+        // the kept row without a test.
+        if k + 4 <= l {
+            acc[0] += xj * h[j][l];
+            for q in 1..4 {
+                acc[q] += h[dst][q - 1] * h[j + q][l];
+            }
+            k += 4;
+        }
+        // As `solve_transposed`'s: Σ_{l<N} (l − j)/4 ≤ N(N − 1)/8 over the call.
+        // wcet-bound: NV * (NV - 1) / 8 per call
+        while k + 4 <= l {
+            for (q, a) in acc.iter_mut().enumerate() {
+                *a += h[dst][k + q - j - 1] * h[k + q][l];
+            }
+            k += 4;
+        }
+        let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+        // wcet-bound: 3
+        while k < l {
+            let x = if k == j { xj } else { h[dst][k - j - 1] };
+            s += x * h[k][l];
+            k += 1;
+        }
+        h[dst][l - j - 1] = (T::ZERO - s) / h[l][l];
     }
 }

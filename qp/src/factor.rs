@@ -4,7 +4,7 @@
 //! scratch when rounding spoiled it, and the system is solved with it.
 
 use crate::cholesky::{solve_transposed, store_inverse_row};
-use crate::rows::{bounds_of, con_row, delta, held_bound, mdot, row_start, sub_scaled};
+use crate::rows::{bounds_of, con_row, delta, held_bound, row_start, sub_products, sub_scaled};
 use crate::settings::Tols;
 use crate::{ActiveConstraint, ConstraintIndex, QpProblem, QpSettings, Real, Side};
 
@@ -18,17 +18,18 @@ pub(crate) struct Workspace<T, const N: usize, const M: usize, const W: usize, c
     pub(crate) n: usize,
     /// Current (dual-feasible) multipliers of the working set (`W`).
     pub(crate) lam: [T; W],
-    /// `d_k = b_k + m̃_kᵀv` of each working-set entry (`W`), computed by `commit`
-    /// when the entry enters: the right-hand side `−d_W` of `λ*`'s system, constant
-    /// over a solve (`v`, the held bound and the transformed row do not change), so
-    /// each iteration reads it instead of a dot product per entry.
-    pub(crate) dw: [T; W],
-    /// `y = L⁻¹(−d_W)` (`W`): the forward substitution of `λ*`'s system, kept with
-    /// the factor (`commit` adds an entry, `remove` redoes those below the removed
-    /// row) so that each iteration solves only `D Lᵀ λ* = y`. Each entry is
-    /// computed by the same operations in the same order as a forward
-    /// substitution from scratch, so `λ*` is the same bit for bit.
+    /// `y = L⁻¹(−d_W)` (`W`), `d_k = b_k + m̃_kᵀv`: the forward substitution of
+    /// `λ*`'s system (its right-hand side `−d_W` is constant over a solve: `v`, the
+    /// held bounds and the transformed rows do not change), kept with the factor.
+    /// `commit` computes the new entry's from `d` and the entries above it, as a
+    /// forward substitution does.
     pub(crate) y: [T; W],
+    /// `ℓ = D⁻¹y` (`W`): the last row of the factor of the working-set matrix
+    /// bordered by `−d_W`, so that each iteration solves only `Lᵀλ* = ℓ`. `commit`
+    /// divides the new entry of `y` by its pivot; `remove` updates `ℓ` as the
+    /// factor's own rows (the rank-one update of the bordered matrix), in `O(n)`,
+    /// and sets `y = Dℓ` for the entries it changed.
+    pub(crate) ly: [T; W],
     /// Scratch (`W`): the rank-one update's `β_j` per column, in `remove`.
     pub(crate) beta: [T; W],
     /// Scratch (`W`): right-hand side then `λ*` of the working-set system, rank-one
@@ -41,23 +42,33 @@ pub(crate) struct Workspace<T, const N: usize, const M: usize, const W: usize, c
     pub(crate) v: [T; N],
     /// `u = R x` (`N`).
     pub(crate) u: [T; N],
-    /// Whether bound `j`'s row `e_jᵀ R⁻¹` is stored in this solve (`N`): `R` itself
-    /// is kept, not inverted, and a bound's row is computed when it enters the working
-    /// set, into the lower triangle of `h` (see [`store_inverse_row`]).
-    pub(crate) bound_ready: [bool; N],
+    /// `1/R_jj` once bound `j`'s row `e_jᵀ R⁻¹` is stored in this solve, its first
+    /// nonzero entry; 0 before (`N`, 1/m of the variable's units: a finite `R_jj`
+    /// has a nonzero inverse). `R` itself is kept, not inverted, and a bound's row
+    /// is computed when it enters the working set, into the lower triangle of `h`
+    /// (see [`store_inverse_row`]).
+    pub(crate) rinv: [T; N],
     /// Side at which each row is active (`M`).
     pub(crate) row_state: [Option<Side>; M],
     /// Side at which each bound is active (`N`).
     pub(crate) bound_state: [Option<Side>; N],
     /// Appends since the last from-scratch factorisation.
     pub(crate) updates: u32,
-    /// Pivot of the last `append` relative to its diagonal entry.
+    /// Pivot of the last `append` relative to its diagonal entry (of the pending
+    /// row, once a removal has updated it).
     pub(crate) last_rel_pivot: T,
+    /// Row `n` of [`Self::ldl`] holds a constraint whose pivot `append` found too
+    /// small (it depends on the working set): it is not in the working set, but
+    /// each `remove` updates it with the rows below the removed one, so that it
+    /// enters, once its pivot has grown, without its row being formed again.
+    pub(crate) pending: bool,
+    /// The pending row's diagonal entry `m̃ᵀm̃ + δ`, for its relative pivot.
+    pub(crate) pending_diag: T,
     /// Per row (`M`, one byte to keep the solver small): [`ROW_TRANSFORMED`] once
     /// the row holds `a_i R⁻¹` in this solve (rows are transformed only when they
     /// enter the working set); otherwise the length of its prefix that can be
     /// nonzero, in groups of four entries (its last nonzero entry rounded up to the
-    /// four-sum groups of [`dot_from`](crate::rows::dot_from), so that a dot product over the prefix gives
+    /// four-sum groups of [`dot_groups`](crate::rows::dot_groups), so that a dot product over the prefix gives
     /// the same result as over all `N` entries), or [`ROW_FULL`].
     pub(crate) row_code: [u8; M],
 }
@@ -113,37 +124,65 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     }
 
     /// Starts a solve: clears the flags and (warm start) re-activates the given
-    /// working set with `λ = 0`, dropping inadmissible or dependent entries.
+    /// working set with `λ = 0`, its entries transformed two at a time
+    /// ([`Self::prepare_pair`]), then factored, dropping inadmissible or dependent
+    /// entries; returns how many it dropped (each an iteration against the cap:
+    /// module `active_set`, *Counts*).
     pub(crate) fn start(
         &mut self,
         p: &mut QpProblem<T, N, M>,
         settings: &QpSettings<T>,
         tols: Tols<T>,
-    ) {
-        let count = if settings.warm_start { self.n } else { 0 };
-        self.bound_ready.fill(false);
-        // wcet-bound: WS
-        for r in 0..count.min(W) {
-            self.prepare(p, self.ws[r].index);
+    ) -> u32 {
+        let count = if settings.warm_start {
+            self.n.min(W)
+        } else {
+            0
+        };
+        self.rinv.fill(T::ZERO);
+        // Pairs of warm entries (`count ≤ W`).
+        // wcet-bound: WS / 2
+        for r in (0..count).step_by(2) {
+            // A pair of warm entries, with the appends of the activation's
+            // iterations: each append beyond the working set's capacity needs an
+            // iteration that removes, so twice the appends plus the warm entries
+            // are at most `K + 2R + P·W`, and the appends (first attempts and
+            // retries) plus the pairs at most half of `K + 3R + P·W`, rounded up
+            // (module `active_set`, *Counts*).
+            // wcet-bound: (QP_MAX_ITER + 3 * QP_MAX_REFACTORIZATIONS + COLD_START_PASSES * WS + 1) / 2 times per activation, counted in balance
+            self.prepare_pair(p, r, count);
         }
-        self.rebuild(p, tols, count);
+        let dropped = self.rebuild(p, tols, count);
         self.lam.fill(T::ZERO);
+        dropped as u32
+    }
+
+    /// [`Self::prepare`] of warm entries `r` and `r + 1` (those below `count`).
+    /// Not inlined: its calls are counted per activation.
+    #[inline(never)]
+    fn prepare_pair(&mut self, p: &mut QpProblem<T, N, M>, r: usize, count: usize) {
+        // wcet-bound: 2
+        for k in r..(r + 2).min(count) {
+            self.prepare(p, self.ws[k].index);
+        }
     }
 
     /// Transforms row constraint `c` to `a_iᵀ R⁻¹` in place, or computes bound `c`'s
     /// row `e_jᵀ R⁻¹` into the lower triangle of `h` ([`store_inverse_row`]), unless
     /// already done in this
     /// solve. Only constraints that enter the working set are ever transformed: the
-    /// others are checked as `a_iᵀ x` or `x_j`.
+    /// others are checked as `a_iᵀ x` or `x_j`. Not inlined: its calls are counted
+    /// per activation (one call, whatever its paths call).
+    #[inline(never)]
     pub(crate) fn prepare(&mut self, p: &mut QpProblem<T, N, M>, c: ConstraintIndex) {
         let i = match c {
             ConstraintIndex::Row(i) => i as usize,
             ConstraintIndex::Bound(j) => {
                 let j = j as usize;
-                if let Some(ready) = self.bound_ready.get_mut(j) {
-                    if !*ready {
+                if let Some(inv) = self.rinv.get_mut(j) {
+                    if *inv == T::ZERO {
                         store_inverse_row(&mut p.h, j);
-                        *ready = true;
+                        *inv = T::ONE / p.h[j][j];
                     }
                 }
                 return;
@@ -185,11 +224,13 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             }
         }
         self.updates = 0;
+        self.pending = false;
         dropped
     }
 
     /// Appends constraint `e` as row `n` of the factor. On `Singular`, the row `n` of
-    /// the packed storage holds `L_new = D⁻¹L⁻¹ M_{W,e}` but `n` is unchanged.
+    /// the packed storage holds `L_new = D⁻¹L⁻¹ M_{W,e}` and its pivot, `n` is
+    /// unchanged and the row is [`Self::pending`].
     #[inline(never)]
     pub(crate) fn append(
         &mut self,
@@ -217,11 +258,12 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             return Err(AppendError::Full);
         }
         let s = row_start(n);
+        let re = con_row(p, &self.rinv, e.index);
         // b_l = M_{l,e}
         // wcet-bound: WS
         // wcet-bound in rebuild: WS * (WS - 1) / 2 per call
         for l in 0..n {
-            self.ldl[s + l] = mdot(p, self.ws[l].index, e.index);
+            self.ldl[s + l] = con_row(p, &self.rinv, self.ws[l].index).dot_row::<N>(&re);
         }
         // Forward solve with the unit lower L: y = L⁻¹ b.
         // wcet-bound: WS
@@ -235,16 +277,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.ldl.get(sl..sl + l).unwrap_or(&[]),
                 self.ldl.get(s..s + l).unwrap_or(&[]),
             );
-            // Σ l over l < n ≤ W per append (one call of `append`, not inlined
-            // further); Σ n(n − 1)/2 over the rows of one rebuild.
-            // wcet-bound in append: WS * (WS - 1) / 2 per call
-            // wcet-bound in rebuild: WS * (WS - 1) * (WS - 2) / 6 per call
-            for (&a, &b) in row.iter().zip(y) {
-                acc -= a * b;
-            }
+            acc = sub_products(acc, core::hint::black_box(row), y);
             self.ldl[s + l] = acc;
         }
-        let diag = mdot(p, e.index, e.index) + delta(p, e.index);
+        let diag = re.dot_row::<N>(&re) + delta(p, e.index);
         let mut dn = diag;
         // wcet-bound: WS
         // wcet-bound in rebuild: WS * (WS - 1) / 2 per call
@@ -258,22 +294,33 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         self.ldl[s + n] = dn;
         self.last_rel_pivot = dn / diag;
         if !(dn > tols.pivot * diag) || !dn.is_finite() {
+            self.pending = true;
+            self.pending_diag = diag;
             return Err(AppendError::Singular);
         }
         self.commit(p, e);
         Ok(())
     }
 
-    /// Makes the row `n` written by `append` part of the factor, with its `d`
-    /// ([`Self::dw`]).
+    /// Makes the row `n` written by `append` (or the pending row) part of the
+    /// factor, with its entries of `y` and `ℓ`.
     pub(crate) fn commit(&mut self, p: &QpProblem<T, N, M>, e: ActiveConstraint) {
         let n = self.n;
+        self.pending = false;
         if n >= W {
             return;
         }
         self.ws[n] = e;
-        self.dw[n] = held_bound(p, e) + con_row(p, e.index).dot(&self.v);
-        self.forward_entry(n);
+        let d = held_bound(p, e) + con_row(p, &self.rinv, e.index).dot(&self.v);
+        // Row n of the forward substitution `L y = −d_W`.
+        let s = row_start(n);
+        let yn = sub_products(
+            -d,
+            self.ldl.get(s..s + n).unwrap_or(&[]),
+            self.y.get(..n).unwrap_or(&[]),
+        );
+        self.y[n] = yn;
+        self.ly[n] = yn / self.ldl[s + n];
         if let Some(st) = self.state_mut(e.index) {
             *st = Some(e.side);
         }
@@ -282,7 +329,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     }
 
     /// Removes working-set entry `p` (and its multiplier): deletes its row and column
-    /// of `LDLᵀ` and updates the trailing block by a rank-one update.
+    /// of `LDLᵀ` and updates the trailing block by a rank-one update. A
+    /// [`pending`](Self::pending) row below the working set's is updated with the
+    /// others (it stays pending, one row up), and its new relative pivot is left in
+    /// [`Self::last_rel_pivot`].
     #[inline(never)]
     pub(crate) fn remove(&mut self, pos: usize) {
         let n = self.n;
@@ -293,102 +343,104 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         if let Some(st) = self.state_mut(e.index) {
             *st = None;
         }
+        // Rows of the packed storage below the removed one that move: the working
+        // set's, and the pending row (row `n`, only when `n < W`).
+        let rows = (n + usize::from(self.pending)).min(W);
         let mut alpha = self.ldl[row_start(pos) + pos];
-        // z (new indices pos..n-1) = old column pos of L below the diagonal.
-        // `n ≤ W` (see `Workspace::n`) bounds this and every loop over the working set.
-        // wcet-bound: WS
-        for r in (pos + 1)..n {
-            self.tmp[r - 1] = self.ldl[row_start(r) + pos];
-        }
-        // Shift rows pos+1..n up by one, dropping column pos: entry k of the new
-        // row r − 1 is entry k (k < pos) or k + 1 (k ≥ pos) of the old row r
-        // (destinations precede sources, so a forward copy is safe).
-        // wcet-bound: WS
-        for r in (pos + 1)..n {
-            let (src, dst) = (row_start(r), row_start(r - 1));
-            let (lo, hi) = self.ldl.split_at_mut(src.min(WL));
-            let (Some(to), Some(from)) = (lo.get_mut(dst..dst + r), hi.get(..=r)) else {
-                break;
-            };
-            for (k, v) in to.iter_mut().enumerate() {
-                // Σ r over pos < r < n ≤ W per call.
-                // wcet-bound: WS * (WS - 1) / 2 per call
-                *v = from
-                    .get(k + usize::from(k >= pos))
-                    .copied()
-                    .unwrap_or(T::ZERO);
-            }
-        }
         for r in pos..(n - 1) {
             self.ws[r] = self.ws[r + 1];
-            self.dw[r] = self.dw[r + 1];
             // Bounds the `for r in pos..(n - 1)` loop (its back edge is on this line).
             self.lam[r] = self.lam[r + 1]; // wcet-bound: WS
         }
         let nn = n - 1;
         self.n = nn;
-        // Rank-one update of the trailing block (rows/cols pos..nn) by alpha z zᵀ,
-        // row by row: each column j's `p_j` (z's entry) and `β_j` are final once
-        // its own row is done, so row r takes its columns pos..r in order, each
-        // entry with the same operations in the same order as column by column.
-        // A column with `p_j = 0` changes nothing (`β_j = 0`: its entries get
-        // `−0·l` and `+0·acc`, which leave finite values as they are) and keeps its
-        // `d_j` and `α`; the loop has no branch. Then row r's entry of `y`, its row
-        // of L final.
+        // Each row below the removed one moves up a row (old row r + 1 is the new row
+        // r: destinations precede sources, so rows are done in order), dropping
+        // column pos: its entries before pos are copied, its entry at pos is `z_r`
+        // (the removed column), and the trailing block (columns pos..r) takes the
+        // rank-one update by alpha z zᵀ, row by row: each column j's `p_j` (z's
+        // entry, kept in `tmp`) and `β_j` are final once its own row is done, so
+        // row r takes its columns pos..r in order, each entry with the same
+        // operations in the same order as column by column. A column with `p_j = 0`
+        // changes nothing (`β_j = 0`: its entries get `−0·l` and `+0·acc`, which
+        // leave finite values as they are) and keeps its `d_j` and `α`; the loop
+        // has no branch. The pending row (`r = nn`) needs its entries and its pivot
+        // only: it is no column of the working set's. `rows ≤ W` bounds the loops.
+        // The storage from new row pos on: new row r is its first r + 1 entries, old
+        // row r + 1 the r + 2 after them, and the next new row starts where that
+        // old row did.
+        let mut rest: &mut [T] = self.ldl.get_mut(row_start(pos)..).unwrap_or(&mut []);
         // wcet-bound: WS
-        for r in pos..nn {
-            let s = row_start(r);
-            let (head, tail) = self.tmp.split_at_mut(r.min(W));
-            let Some(zr) = tail.first_mut() else {
+        for r in pos..(rows - 1) {
+            let at = (r + 1).min(rest.len());
+            let (new, after) = core::mem::take(&mut rest).split_at_mut(at);
+            let (Some(old), Some(ps), Some(bs)) = (
+                after.get(..r + 2),
+                self.tmp.get(pos..r),
+                self.beta.get(pos..r),
+            ) else {
                 break;
             };
-            let mut acc = *zr;
-            if let (Some(l), Some(ps), Some(bs)) = (
-                self.ldl.get_mut(s + pos..s + r),
-                head.get(pos..),
-                self.beta.get(pos..r),
-            ) {
-                for ((l, &pj), &bj) in l.iter_mut().zip(ps).zip(bs) {
-                    // Σ (r − pos) over pos ≤ r < n − 1 < W per call.
-                    // wcet-bound: WS * (WS - 1) / 2 per call
-                    acc -= pj * *l;
-                    *l += bj * acc;
-                }
+            let (new_head, new_tail) = new.split_at_mut(pos.min(r));
+            let (old_head, old_tail) = old.split_at(pos.min(r));
+            for (d, &v) in new_head.iter_mut().zip(old_head) {
+                // pos entries of each of the rows below pos: below W²/4 per call.
+                // wcet-bound: WS * WS / 4 per call
+                *d = v;
             }
-            *zr = acc;
+            // old_tail: z_r, the entries of columns pos + 1..=r, the pivot.
+            let Some((&zr, old_rest)) = old_tail.split_first() else {
+                break;
+            };
+            let dr = old_rest.get(r - pos).copied().unwrap_or(T::ZERO);
+            let mut acc = zr;
+            // The slices' addresses through `black_box`: one pointer each (as
+            // offsets from the workspace's base, each load's address would be
+            // formed anew).
+            let (new_tail, old_rest, ps, bs) = (
+                core::hint::black_box(new_tail),
+                core::hint::black_box(old_rest),
+                core::hint::black_box(ps),
+                core::hint::black_box(bs),
+            );
+            for (((l, &o), &pj), &bj) in new_tail.iter_mut().zip(old_rest).zip(ps).zip(bs) {
+                // Σ (r − pos) over pos ≤ r < rows − 1 < W per call.
+                // wcet-bound: WS * (WS - 1) / 2 per call
+                acc -= pj * o;
+                *l = o + bj * acc;
+            }
+            let d_new = if r == nn || acc != T::ZERO {
+                dr + alpha * acc * acc
+            } else {
+                dr
+            };
+            if let Some(d) = new.last_mut() {
+                *d = d_new;
+            }
+            rest = after;
+            self.tmp[r] = acc;
+            if r == nn {
+                self.last_rel_pivot = d_new / self.pending_diag;
+                break;
+            }
             if acc != T::ZERO {
-                let d_idx = s + r;
-                let dr = self.ldl[d_idx];
-                let dnew = dr + alpha * acc * acc;
-                self.beta[r] = acc * alpha / dnew;
-                alpha = dr * alpha / dnew;
-                self.ldl[d_idx] = dnew;
+                self.beta[r] = acc * alpha / d_new;
+                alpha = dr * alpha / d_new;
             } else {
                 self.beta[r] = T::ZERO;
             }
-            self.forward_entry(r);
         }
-    }
-
-    /// `y[r]` from `−d_r` and the entries above it: row `r` of the forward
-    /// substitution `L y = −d_W`. Inlined into `commit` (one row) and into
-    /// `remove` (rows `pos..n − 1`), whose copy of its loop is bounded per call.
-    #[inline(always)]
-    fn forward_entry(&mut self, r: usize) {
-        let s = row_start(r);
-        let mut acc = -self.dw[r];
-        let (l, y) = (
-            self.ldl.get(s..s + r).unwrap_or(&[]),
-            self.y.get(..r).unwrap_or(&[]),
-        );
-        // `r < n ≤ W` entries; Σ r over the rows r < n ≤ W one `remove` redoes.
+        // The bordered matrix's last row, `ℓ`, takes the same update: its entry at
+        // pos is its `z`, its entries pos + 1..n move one to the left. Then
+        // `y = Dℓ` where they changed.
+        let mut acc = self.ly[pos];
         // wcet-bound: WS
-        // wcet-bound in remove: WS * (WS - 1) / 2 per call
-        for (&l, &y) in l.iter().zip(y) {
-            acc -= l * y;
-        }
-        if let Some(d) = self.y.get_mut(r) {
-            *d = acc;
+        for j in pos..nn {
+            let o = self.ly[j + 1];
+            acc -= self.tmp[j] * o;
+            let l = o + self.beta[j] * acc;
+            self.ly[j] = l;
+            self.y[j] = l * self.ldl[row_start(j) + j];
         }
     }
 
@@ -397,14 +449,21 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// loops stay out of the QP's main loop, whose bound is matched by its lines.
     #[inline(never)]
     pub(crate) fn solve_lam_star_tmp(&mut self) -> bool {
-        let n = self.n;
+        let n = self.n.min(W);
+        // `ℓ = D⁻¹y`, kept with the factor.
         // wcet-bound: WS
         for r in 0..n {
-            self.tmp[r] = self.y[r];
+            self.tmp[r] = self.ly[r];
         }
-        self.ldl_back_tmp();
+        self.lt_solve_tmp();
+        // `x·0` is ±0 for a finite `x`, NaN otherwise: the sum is 0 exactly when
+        // every entry is finite (no branch per entry).
+        let mut probe = T::ZERO;
         // wcet-bound: WS
-        self.tmp.iter().take(n).all(|v| v.is_finite())
+        for &v in self.tmp.iter().take(n) {
+            probe += v * T::ZERO;
+        }
+        probe == T::ZERO
     }
 
     /// Solves `(M_WW + D) x = tmp` in place in `tmp[0..n]`.
@@ -418,10 +477,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             // Row r of the packed L against x[0..r], as slices (no index checks
             // in the loop); the same products in the same order.
             let l = self.ldl.get(s..s + r).unwrap_or(&[]);
-            for (&l, &x) in l.iter().zip(self.tmp.iter()) {
-                // Bounds the `for k in 0..r` loop: Σ r over r < n ≤ W per call.
-                acc -= l * x; // wcet-bound: WS * (WS - 1) / 2 per call
-            }
+            acc = sub_products(acc, l, self.tmp.get(..r).unwrap_or(&[]));
             self.tmp[r] = acc;
         }
         self.ldl_back_tmp();
@@ -431,13 +487,20 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// [`Self::ldl_solve_tmp`].
     #[inline(always)]
     fn ldl_back_tmp(&mut self) {
-        let n = self.n;
+        let n = self.n.min(W);
         // wcet-bound: WS
         for r in 0..n {
             self.tmp[r] /= self.ldl[row_start(r) + r];
         }
-        // Lᵀ x = y by columns of Lᵀ (rows of the packed L, contiguous): once x_r is
-        // final, its share leaves the entries above it.
+        self.lt_solve_tmp();
+    }
+
+    /// Solves `Lᵀ x = tmp` in place in `tmp[0..n]`, by columns of `Lᵀ` (rows of the
+    /// packed `L`, contiguous): once `x_r` is final, its share leaves the entries
+    /// above it.
+    #[inline(always)]
+    fn lt_solve_tmp(&mut self) {
+        let n = self.n.min(W);
         // wcet-bound: WS
         for r in (1..n).rev() {
             let xr = self.tmp[r];
@@ -449,8 +512,10 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 self.tmp.get_mut(..r).unwrap_or(&mut []),
                 self.ldl.get(s..s + r).unwrap_or(&[]),
             );
-            // `t` and `l` have the same length r.
-            sub_scaled(t, xr, l);
+            // `t` and `l` have the same length r; their addresses through
+            // `black_box`, as pointers (offsets from the workspace's base are past
+            // a load's immediate range: each load would form its address anew).
+            sub_scaled(core::hint::black_box(t), xr, core::hint::black_box(l));
         }
     }
 }

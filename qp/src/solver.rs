@@ -55,18 +55,20 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                 }; W],
                 n: 0,
                 lam: [T::ZERO; W],
-                dw: [T::ZERO; W],
+                ly: [T::ZERO; W],
                 y: [T::ZERO; W],
                 beta: [T::ZERO; W],
                 tmp: [T::ZERO; W],
                 ldl: [T::ZERO; WL],
                 v: [T::ZERO; N],
                 u: [T::ZERO; N],
-                bound_ready: [false; N],
+                rinv: [T::ZERO; N],
                 row_state: [None; M],
                 bound_state: [None; N],
                 updates: 0,
                 last_rel_pivot: T::ZERO,
+                pending: false,
+                pending_diag: T::ZERO,
                 row_code: [ROW_FULL; M],
             },
             solution: QpSolution::new(),
@@ -181,7 +183,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
                         self.work.v = p.f;
                         solve_transposed(&p.h, &mut self.work.v, 0);
                         let tols = self.settings.effective();
-                        self.work.start(p, &self.settings, tols);
+                        let dropped = self.work.start(p, &self.settings, tols);
+                        self.solution.iterations = dropped;
                         self.work
                             .iterate(p, &self.settings, tols, &mut self.solution)
                     }

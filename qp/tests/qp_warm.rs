@@ -153,6 +153,43 @@ fn shifted_working_set_on_a_receding_horizon() {
     assert!(is <= iw, "shifted warm {is} > unshifted warm {iw}");
 }
 
+/// A warm entry the start drops (out of range, a duplicate, at an infinite bound)
+/// counts as an iteration against the cap, as a removal does: the bound on the
+/// appends of a solve rests on it (`qp`'s module `active_set`, *Counts*).
+#[test]
+fn the_warm_starts_drops_count_as_iterations() {
+    let mut p = QpProblem::<f64, N, M>::new();
+    for j in 0..N {
+        p.h[j][j] = 1.0;
+        p.f[j] = 0.1 * j as f64;
+        p.x_lo[j] = -10.0;
+        p.x_hi[j] = if j == 1 { f64::INFINITY } else { 10.0 };
+    }
+    let e = |index, side| ActiveConstraint { index, side };
+    let stale = [
+        e(ConstraintIndex::Row(M as u16 + 3), Side::Upper),
+        e(ConstraintIndex::Bound(0), Side::Lower),
+        e(ConstraintIndex::Bound(0), Side::Lower),
+        e(ConstraintIndex::Bound(1), Side::Upper),
+    ];
+    // Cold: the unconstrained optimum, one iteration.
+    let mut s = Box::new(Solver::new());
+    *s.problem_mut() = p.clone();
+    assert_eq!(s.solve(), QpStatus::Optimal);
+    assert_eq!(s.solution().iterations, 1);
+    // Warm from the stale set: three entries dropped (out of range, duplicate,
+    // infinite bound), Bound(0) kept and removed by a blocking step, then the
+    // optimum: 3 + 2 iterations.
+    for (cap, status) in [(3, QpStatus::IterationLimit), (5, QpStatus::Optimal)] {
+        let mut s = Box::new(Solver::new());
+        s.settings.max_iter = cap;
+        s.set_working_set(&stale);
+        *s.problem_mut() = p.clone();
+        assert_eq!(s.solve(), status, "cap {cap}");
+        assert_eq!(s.solution().iterations, cap, "cap {cap}");
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(300))]
 

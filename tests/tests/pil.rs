@@ -333,6 +333,7 @@ fn hairpin_with_boxes(mu: f64) -> Scenario {
         obstacles,
         mu,
         mu_patches: Vec::new(),
+        grade_patches: Vec::new(),
         initial_speed_mps: 15.0,
     }
 }

@@ -703,8 +703,12 @@ impl Staging {
 
 /// The control task's own work, [`ControlTask::run`] on the estimate and the plan
 /// (inside the `plan` lock). Not inlined: the timing analysis bounds it alone,
-/// against [`deadline::CONTROL_BUDGET_CYCLES`].
+/// against [`deadline::CONTROL_BUDGET_CYCLES`]. Its symbol has a fixed name, which
+/// the firmware's build script lists first in the linker's symbol ordering: it
+/// starts `.text` right after `Reset`, so its flash lines (and its bound) do not
+/// move when other code changes size.
 #[inline(never)]
+#[export_name = "ecu_control_job"]
 fn control_job(
     control: &mut ControlTask<f32>,
     e: &firmware::state_estimate::StateEstimate<f32>,

@@ -11,6 +11,7 @@
 
 use super::warm_start::{RowId, RowKind};
 use super::*;
+use crate::bicycle::FIRST_LIVE;
 
 impl<T: Real> Mpc<T> {
     /// Linearises around `ū` from `xi0` and writes the condensed QP into the solver
@@ -294,26 +295,26 @@ impl<T: Real> Condensing<T> {
         // wcet-bound: NX
         for i in 0..NX {
             let out = &mut new[i];
-            // Row i of A has at most four nonzeros (the kinematic bicycle's
-            // structure); they are summed in column order in one pass per entry,
-            // the same sums as adding one column after the other to a zero row.
+            // Row i of A has at most four nonzeros: the identity's in the columns
+            // before FIRST_LIVE (its own, if i is one of them: the others are zero
+            // exactly, `Discretization::a`), and the three live columns. Its
+            // nonzero terms are summed in column order in one pass per entry, the
+            // same sums as adding one column after the other to a zero row.
             let mut terms: [(&[T; NV], T); 4] = [(&old[0], T::ZERO); 4];
             let mut cnt = 0;
-            let mut extra = false;
-            // Over the NX entries of row i; the compiler splits this loop (runs of zeros
-            // skipped), each part at the two annotated lines below advancing `l`: NX each.
-            for (l, &ail) in lin.a[i].iter().enumerate() {
-                // wcet-bound: NX
-                if ail == T::ZERO {
-                    continue;
+            if let Some(&aii) = lin.a[i].get(..FIRST_LIVE).and_then(|r| r.get(i)) {
+                if aii != T::ZERO {
+                    terms[0] = (&old[i], aii);
+                    cnt = 1;
                 }
-                // wcet-bound: NX
-                match terms.get_mut(cnt) {
-                    Some(t) => {
+            }
+            for l in FIRST_LIVE..NX {
+                let ail = lin.a[i][l];
+                if ail != T::ZERO {
+                    if let Some(t) = terms.get_mut(cnt) {
                         *t = (&old[l], ail);
                         cnt += 1;
                     }
-                    None => extra = true,
                 }
             }
             let [(s0, a0), (s1, a1), (s2, a2), (s3, a3)] = terms;
@@ -340,24 +341,10 @@ impl<T: Real> Condensing<T> {
                         *d = (a0 * s0[j] + a1 * s1[j]) + a2 * s2[j];
                     }
                 }
-                4 if !extra => {
+                _ => {
                     // wcet-bound: NV
                     for (j, d) in o.iter_mut().enumerate() {
                         *d = ((a0 * s0[j] + a1 * s1[j]) + a2 * s2[j]) + a3 * s3[j];
-                    }
-                }
-                _ => {
-                    // wcet-bound: NV * 4 bytes
-                    o.fill(T::ZERO);
-                    for l in 0..NX {
-                        let ail = lin.a[i][l];
-                        if ail == T::ZERO {
-                            continue;
-                        }
-                        // wcet-bound: NV
-                        for (d, s) in o.iter_mut().zip(old[l][..used].iter()) {
-                            *d += ail * *s;
-                        }
                     }
                 }
             }
@@ -370,9 +357,9 @@ impl<T: Real> Condensing<T> {
 
     /// `row = Σ coef · S_k[state]` over the first `ncols` columns (the rest zero);
     /// returns the row's constant `nominal − row·ū`.
-    fn lin_row(
+    fn lin_row<const K: usize>(
         &mut self,
-        terms: &[(usize, T)],
+        terms: &[(usize, T); K],
         nominal: T,
         u_bar: &[[T; NU]; HORIZON],
         ncols: usize,
@@ -677,22 +664,23 @@ fn add_square_root_rows<T: Real>(
     }
 }
 
-/// [`Condensing::lin_row`] into `row`, from the sensitivities `sens`.
-fn lin_row_into<T: Real>(
+/// [`Condensing::lin_row`] into `row`, from the sensitivities `sens`; at most three
+/// terms (`K ≤ 3`, checked at compile time).
+fn lin_row_into<T: Real, const K: usize>(
     sens: &[[T; NV]; NX],
     row: &mut [T; NV],
-    terms: &[(usize, T)],
+    terms: &[(usize, T); K],
     nominal: T,
     u_bar: &[[T; NU]; HORIZON],
     ncols: usize,
 ) -> T {
+    const { assert!(K <= 3, "lin_row_into sums at most three terms") };
     let n = ncols.min(NV);
-    // The terms with a nonzero coefficient (at most three are used), summed in their
-    // order in one pass per entry, with the dot product `row·ū` in the same pass
-    // (the same sums as adding one term after the other to a zero row).
+    // The terms with a nonzero coefficient (at most three), summed in their order
+    // in one pass per entry, with the dot product `row·ū` in the same pass (the
+    // same sums as adding one term after the other to a zero row).
     let mut used: [(&[T; NV], T); 3] = [(&sens[0], T::ZERO); 3];
     let mut cnt = 0;
-    let mut extra = false;
     // `terms` has 1 or 3 entries (the arrays of tracking_costs and obstacle_rows);
     // the compiler splits this loop, its parts at the two annotated lines below: 3 each.
     for &(state, coef) in terms {
@@ -702,12 +690,9 @@ fn lin_row_into<T: Real>(
         // wcet-bound: 3
         if let Some(srow) = sens.get(state) {
             // wcet-bound: 3
-            match used.get_mut(cnt) {
-                Some(t) => {
-                    *t = (srow, coef);
-                    cnt += 1;
-                }
-                None => extra = true,
+            if let Some(t) = used.get_mut(cnt) {
+                *t = (srow, coef);
+                cnt += 1;
             }
         }
     }
@@ -720,7 +705,7 @@ fn lin_row_into<T: Real>(
     let mut acc = T::ZERO;
     let [(s0, c0), (s1, c1), (s2, c2)] = used;
     match cnt {
-        1 if !extra => {
+        1 => {
             // wcet-bound: NV
             for j in 0..n {
                 let r = c0 * s0[j];
@@ -728,7 +713,7 @@ fn lin_row_into<T: Real>(
                 acc += r * u[j];
             }
         }
-        2 if !extra => {
+        2 => {
             // wcet-bound: NV
             for j in 0..n {
                 let r = c0 * s0[j] + c1 * s1[j];
@@ -736,7 +721,7 @@ fn lin_row_into<T: Real>(
                 acc += r * u[j];
             }
         }
-        3 if !extra => {
+        3 => {
             // wcet-bound: NV
             for j in 0..n {
                 let r = (c0 * s0[j] + c1 * s1[j]) + c2 * s2[j];
@@ -745,17 +730,12 @@ fn lin_row_into<T: Real>(
             }
         }
         _ => {
-            row.fill(T::ZERO);
-            for &(state, coef) in terms {
-                if coef == T::ZERO {
-                    continue;
-                }
-                if let Some(srow) = sens.get(state) {
-                    // wcet-bound: NV
-                    for j in 0..n {
-                        row[j] += coef * srow[j];
-                    }
-                }
+            // No nonzero term: a zero row (its tail is zero already), and its
+            // product with ū as the terms' loops would make it.
+            if let Some(head) = row.get_mut(..n) {
+                // WCET: `row` holds NV f32.
+                // wcet-bound: NV * 4 bytes
+                head.fill(T::ZERO);
             }
             acc = dot(row, u_bar, n);
         }

@@ -96,9 +96,12 @@ impl<T: Real> Mpc<T> {
                     let node = id.node as usize;
                     match (c.node_first.get(node), c.node_first.get(node + 1)) {
                         (Some(&first), Some(&end)) => {
-                            // A node's rows `node_first[node]..node_first[node + 1]`: row counts `qp.m` <= NC.
+                            // A node's rows `node_first[node]..node_first[node + 1]`: its
+                            // road and validity rows (ROWS_PER_NODE), a row per
+                            // obstacle relevant there and a `V ≥ 0` row
+                            // (`Mpc::condense`).
                             (first as usize..end as usize)
-                                .find(|&i| c.row_id.get(i) == Some(&id)) // wcet-bound: NC
+                                .find(|&i| c.row_id.get(i) == Some(&id)) // wcet-bound: ROWS_PER_NODE + MAX_OBSTACLES + 1
                                 .map(|i| ActiveConstraint {
                                     index: ConstraintIndex::Row(i as u16),
                                     side,

@@ -16,7 +16,10 @@ use firmware::Real;
 use crate::closed_loop::ecu::{ControlOutput, Ecu, SimulatedEcu};
 use crate::closed_loop::SimOptions;
 use crate::model::vehicle::{vehicle_config, VehicleParams};
-use crate::world::disturbance::{Disturbances, DropoutKind, SplitMix64, NOISE_UNIT};
+use crate::world::disturbance::{
+    estimate_biases, Disturbances, DropoutKind, EstimateBias, SplitMix64, LATERAL_NOISE_STREAM,
+    NOISE_STREAM, NOISE_UNIT,
+};
 use crate::world::route::Window;
 use crate::world::scenario::Scenario;
 
@@ -40,6 +43,10 @@ pub struct DisturbedEcu<T: Real> {
     inner: SimulatedEcu<T>,
     d: Disturbances,
     rng: SplitMix64,
+    /// The lateral speed's noise, a stream of its own.
+    rng_lateral: SplitMix64,
+    /// The run's biases on the lateral speed and the yaw rate.
+    bias: EstimateBias,
     history: VecDeque<StateEstimate<T>>,
     last_delivered: Option<StateEstimate<T>>,
     last_delta: Option<T>,
@@ -97,7 +104,9 @@ impl<T: Real> DisturbedEcu<T> {
         };
         Ok(Self {
             inner,
-            rng: SplitMix64::new(d.seed ^ 0x6E6F_6973_6521),
+            rng: SplitMix64::new(d.seed ^ NOISE_STREAM),
+            rng_lateral: SplitMix64::new(d.seed ^ LATERAL_NOISE_STREAM),
+            bias: estimate_biases(d.seed, d.noise_scale),
             d,
             history: VecDeque::new(),
             last_delivered: None,
@@ -118,15 +127,27 @@ impl<T: Real> DisturbedEcu<T> {
         let mut m = *truth;
         if self.d.noise_scale > 0.0 {
             let k = self.d.noise_scale;
-            let add = |x: T, sigma: f64, rng: &mut SplitMix64| {
-                T::from_f64(x.to_f64() + k * sigma * rng.gaussian())
+            // The truth plus a bias (m, rad, m/s or rad/s) plus a draw of `sigma`.
+            let add = |x: T, bias: f64, sigma: f64, rng: &mut SplitMix64| {
+                T::from_f64(x.to_f64() + bias + k * sigma * rng.gaussian())
             };
-            let n = NOISE_UNIT;
-            m.x_m = add(m.x_m, n.position_m, &mut self.rng);
-            m.y_m = add(m.y_m, n.position_m, &mut self.rng);
-            m.psi_rad = add(m.psi_rad, n.heading_rad, &mut self.rng);
-            m.vx_mps = add(m.vx_mps, n.speed_mps, &mut self.rng);
-            m.yaw_rate_radps = add(m.yaw_rate_radps, n.yaw_rate_radps, &mut self.rng);
+            let (n, b) = (NOISE_UNIT, self.bias);
+            m.x_m = add(m.x_m, 0.0, n.position_m, &mut self.rng);
+            m.y_m = add(m.y_m, 0.0, n.position_m, &mut self.rng);
+            m.psi_rad = add(m.psi_rad, 0.0, n.heading_rad, &mut self.rng);
+            m.vx_mps = add(m.vx_mps, 0.0, n.speed_mps, &mut self.rng);
+            m.yaw_rate_radps = add(
+                m.yaw_rate_radps,
+                b.yaw_rate_radps,
+                n.yaw_rate_radps,
+                &mut self.rng,
+            );
+            m.vy_mps = add(
+                m.vy_mps,
+                b.lateral_speed_mps,
+                n.lateral_speed_mps,
+                &mut self.rng_lateral,
+            );
         }
         let keep = self.d.delay_periods() + 1;
         self.history.push_back(m);
@@ -229,4 +250,84 @@ pub fn centroid(v: &[[f64; 2]]) -> [f64; 2] {
     let n = v.len().max(1) as f64;
     let (x, y) = v.iter().fold((0.0, 0.0), |(x, y), p| (x + p[0], y + p[1]));
     [x / n, y / n]
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::world::disturbance::run_seed;
+
+    /// The estimates the tasks see, `n` of them, for a car standing still at 10 m/s
+    /// straight ahead, at noise level `k` with the seed `seed`.
+    fn seen_at_level(k: f64, seed: u64, n: usize) -> (StateEstimate<f64>, Vec<StateEstimate<f64>>) {
+        let d = Disturbances {
+            noise_scale: k,
+            seed,
+            ..Disturbances::default()
+        };
+        let mut ecu = DisturbedEcu::<f64>::new(
+            &Scenario::paper(false),
+            &VehicleParams::default(),
+            &SimOptions::default(),
+            d,
+        )
+        .unwrap();
+        let truth = StateEstimate {
+            vx_mps: 10.0,
+            vy_mps: 0.1,
+            yaw_rate_radps: 0.05,
+            ..StateEstimate::zeroed()
+        };
+        let seen = (0..n)
+            .map(|i| ecu.seen(i as u64 * CONTROL_PERIOD_US, &truth))
+            .collect();
+        (truth, seen)
+    }
+
+    fn mean_and_sd(xs: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+        let n = xs.clone().count() as f64;
+        let mean = xs.clone().sum::<f64>() / n;
+        let var = xs.map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+        (mean, var.sqrt())
+    }
+
+    #[test]
+    fn the_lateral_speed_and_yaw_rate_the_tasks_see_carry_the_runs_bias_and_the_levels_noise() {
+        let (k, n) = (4.0, 20_000);
+        let seed = run_seed("paper", 3);
+        let bias = estimate_biases(seed, k);
+        let (truth, seen) = seen_at_level(k, seed, n);
+        let (vy_mean, vy_sd) = mean_and_sd(seen.iter().map(|m| m.vy_mps - truth.vy_mps));
+        let (r_mean, r_sd) =
+            mean_and_sd(seen.iter().map(|m| m.yaw_rate_radps - truth.yaw_rate_radps));
+        let (sv, sr) = (
+            k * NOISE_UNIT.lateral_speed_mps,
+            k * NOISE_UNIT.yaw_rate_radps,
+        );
+        // The mean is the bias within four standard errors; the spread the level's.
+        let se = 4.0 / (n as f64).sqrt();
+        assert!(
+            (vy_mean - bias.lateral_speed_mps).abs() < se * sv,
+            "{vy_mean} vs {bias:?}"
+        );
+        assert!(
+            (r_mean - bias.yaw_rate_radps).abs() < se * sr,
+            "{r_mean} vs {bias:?}"
+        );
+        assert!((vy_sd / sv - 1.0).abs() < 0.03, "σ {vy_sd}");
+        assert!((r_sd / sr - 1.0).abs() < 0.03, "σ {r_sd}");
+        // This seed's biases are large enough to tell from the noise's mean.
+        assert!(bias.lateral_speed_mps.abs() > 10.0 * se * sv, "{bias:?}");
+        assert!(bias.yaw_rate_radps.abs() > 10.0 * se * sr, "{bias:?}");
+        // The same seed, the same draws; level 0, the truth.
+        let (_, again) = seen_at_level(k, seed, 100);
+        assert_eq!(format!("{:?}", &seen[..100]), format!("{again:?}"));
+        let (truth, clean) = seen_at_level(0.0, seed, 100);
+        assert!(clean.iter().all(|m| *m
+            == StateEstimate {
+                stamp_us: m.stamp_us,
+                ..truth
+            }));
+    }
 }

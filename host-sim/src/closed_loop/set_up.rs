@@ -1,7 +1,7 @@
 //! The set-up of one run from one value of each of its factors ([`set_up`]): the
-//! scenario (the track, its friction patches, its obstacles, `random:N` ones
-//! included), the car the firmware is told of and the plant's, the closed loop's
-//! options and the disturbances of the run's fault. The same for `run`, `pil` and
+//! scenario (the track, its friction and grade patches, its obstacles, `random:N`
+//! ones included), the car the firmware is told of and the plant's (its load and
+//! actuators), the closed loop's options and the disturbances of the run's fault. The same for `run`, `pil` and
 //! every run of a sweep, so `run` with a sweep run's factors replays it.
 
 use std::fmt;
@@ -11,12 +11,14 @@ use std::str::FromStr;
 use anyhow::{anyhow, Result};
 
 use crate::closed_loop::SimOptions;
+use crate::model::actuator::ActuatorSetting;
 use crate::model::vehicle::VehicleParams;
 use crate::world::disturbance::{run_seed, Disturbances, Dropout, DropoutKind, LateObstacle};
 use crate::world::faults::{Fault, FAULT_START_S};
 use crate::world::obstacle_file::{load_obstacles_path, Obstacle};
 use crate::world::obstacle_placement::{box_at, random_obstacles, RoadCheck};
 use crate::world::road_friction::{MuPatch, RoadFriction};
+use crate::world::road_grade::{GradePatch, RoadGrade};
 use crate::world::scenario::{self, Scenario, ScenarioError};
 
 /// What `--obstacles` accepts.
@@ -142,6 +144,10 @@ pub struct Setting {
     pub initial_speed_mps: f64,
     /// Patches of road with their own friction.
     pub mu_patches: Vec<MuPatch>,
+    /// Stretches of road with a grade.
+    pub grade_patches: Vec<GradePatch>,
+    /// Actuator parameters of the plant's car over its vehicle file's.
+    pub actuators: Vec<ActuatorSetting>,
 }
 
 impl Default for Setting {
@@ -153,6 +159,8 @@ impl Default for Setting {
             duration_s: 900.0,
             initial_speed_mps: SimOptions::default().initial_speed_mps,
             mu_patches: Vec::new(),
+            grade_patches: Vec::new(),
+            actuators: Vec::new(),
         }
     }
 }
@@ -167,7 +175,7 @@ pub struct SetUp {
     pub placed_obstacles: usize,
     /// The car the firmware is told of.
     pub nominal: VehicleParams,
-    /// The plant's car (`--mass-scale`).
+    /// The plant's car (`--mass-scale`, `--actuator`).
     pub plant_car: VehicleParams,
     /// Friction, laps, time limit, initial speed, ECU clock.
     pub opts: SimOptions,
@@ -196,6 +204,8 @@ fn late_obstacle_box(scn: &Scenario, check: &RoadCheck) -> Result<Obstacle> {
 
 /// Sets up the run `spec` (module docs): the track and its patches, the cars, the
 /// options, the fault, the obstacles.
+///
+/// An actuator setting the plant's car refuses is an error naming `--actuator`.
 pub fn set_up(spec: &RunSpec, setting: &Setting) -> Result<SetUp> {
     let mut scn = scenario::resolve(&spec.track, "none", !setting.open)?;
     RoadFriction::new(
@@ -206,8 +216,27 @@ pub fn set_up(spec: &RunSpec, setting: &Setting) -> Result<SetUp> {
         scn.track.closed,
     )?;
     scn.mu_patches = setting.mu_patches.clone();
+    RoadGrade::new(
+        &setting.grade_patches,
+        &scn.track.name,
+        scn.track.length(),
+        scn.track.closed,
+    )?;
+    scn.grade_patches = setting.grade_patches.clone();
     let nominal = load_vehicle(spec.vehicle.as_deref())?;
-    let plant_car = nominal.with_mass_scale(spec.mass_scale);
+    let mut plant_car = nominal.with_mass_scale(spec.mass_scale);
+    plant_car.actuators = plant_car.actuators.with_settings(&setting.actuators);
+    plant_car.validate().map_err(|e| {
+        anyhow!(
+            "--actuator {}: the plant's car refuses them: {e}",
+            setting
+                .actuators
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join(" ")
+        )
+    })?;
     let mut opts = SimOptions {
         mu_road: spec.mu,
         mu_planner: spec.mu_planner,

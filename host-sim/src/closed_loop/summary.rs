@@ -96,6 +96,12 @@ pub struct Summary {
     /// The patches of road with their own friction, `START:LENGTH:MU` joined by `;`
     /// (empty without any).
     pub mu_patches: String,
+    /// The stretches of road with a grade, `START:LENGTH:PERCENT` joined by `;`
+    /// (empty on a level road).
+    pub grade_patches: String,
+    /// The plant's actuators where they are not ideal, `field=value` joined by `;`
+    /// as `--actuator` takes them (empty for ideal actuators).
+    pub actuators: String,
     /// Lowest road friction under the car over the run ([`LogRow::road_mu`](super::timeline::LogRow::road_mu)).
     pub road_mu_min: f64,
     /// `μ̂` fell below 0.9 × the lowest road μ under the car over the last 10 s at

@@ -27,7 +27,7 @@
 //! its plan is published is the ECU's to say ([`SimulatedEcu`]: see
 //! [`crate::closed_loop::ecu`]).
 //!
-//! # The road's friction
+//! # The road's friction and grade
 //!
 //! The plant steps on `SimOptions::mu_road`, or, with patches
 //! ([`Scenario::mu_patches`]), each wheel on the μ at its own arc length: the car's,
@@ -35,6 +35,13 @@
 //! between samples, plus `l_f` ahead for the front wheels and `l_r` behind for the
 //! rear ones ([`crate::world::road_friction`]). The log's `road_mu` is the lowest of the
 //! four at the sample; the summary judges the ECU's `μ̂` against it.
+//!
+//! With grade patches ([`Scenario::grade_patches`]) the plant steps on the grade
+//! under the car at the same arc length, the chord between its axles
+//! ([`crate::world::road_grade`]); the log's `road_grade_pct` is that grade at the
+//! sample, `specific_force_x_mps2` what an accelerometer on the car reads. The
+//! estimate the ECU receives carries no acceleration: the firmware sees a grade
+//! only through the speed it measures.
 //!
 //! # Deadlines and budgets
 //!
@@ -82,11 +89,12 @@ use crate::closed_loop::ecu::{ControlOutput, Ecu, SimulatedEcu};
 use crate::closed_loop::plan_activation::PlanActivation;
 use crate::closed_loop::summary::Summary;
 use crate::closed_loop::SimOptions;
-use crate::model::plant::{Inputs, Plant, State};
+use crate::model::plant::{Inputs, Plant, RoadUnder, State};
 use crate::model::vehicle::VehicleParams;
 use crate::model::vehicle::{vehicle_length_m, vehicle_width_m};
 use crate::world::obstacle_file;
 use crate::world::road_friction::{judge, patches_to_string, MuSample, RoadFriction};
+use crate::world::road_grade::{grades_to_string, RoadGrade};
 use crate::world::scenario::Scenario;
 
 /// One row of the 10 ms log.
@@ -108,6 +116,9 @@ pub struct LogRow {
     pub v_heur_mps: f64,
     /// Steering command `δ`, rad.
     pub delta_rad: f64,
+    /// Steering angle the actuator applied over the last plant step, rad (the
+    /// command itself with ideal actuators; the estimate's measured angle).
+    pub delta_applied_rad: f64,
     /// Open-loop steering `δ_ol`, rad.
     pub delta_ol_rad: f64,
     /// Closed-loop steering `δ_cl`, rad.
@@ -122,6 +133,13 @@ pub struct LogRow {
     pub torque_rr_nm: f64,
     /// Lateral acceleration, m/s².
     pub ay_mps2: f64,
+    /// Longitudinal specific force at the centre of gravity, m/s²: what an
+    /// accelerometer on the car reads along its `x` axis, the acceleration plus
+    /// `g·sin γ` on a grade ([`crate::model::plant::Outputs::specific_force_x_mps2`]).
+    pub specific_force_x_mps2: f64,
+    /// The road's grade under the car (the chord between its axles:
+    /// [`crate::world::road_grade`]), %.
+    pub road_grade_pct: f64,
     /// Lateral offset from the track's centre line (left positive), m.
     pub lateral_error_m: f64,
     /// Arc length driven along the track, m.
@@ -308,11 +326,18 @@ pub fn run_with<T: Real, E: Ecu<T>>(
 
     // The road the ECU holds: a window, the next one sent as the car moves on.
     let mut feeder = crate::world::route::RouteFeeder::new(&scenario.track)?;
-    // The road's friction along the track, and where the car was at the last sample:
-    // arc length (m), speed (m/s), time (µs), to place the wheels between samples.
+    // The road's friction and grade along the track, and where the car was at the
+    // last sample: arc length (m), speed (m/s), time (µs), to place the wheels
+    // between samples.
     let road = RoadFriction::new(
         opts.mu_road,
         &scenario.mu_patches,
+        &scenario.track.name,
+        scenario.track.length(),
+        scenario.track.closed,
+    )?;
+    let grade = RoadGrade::new(
+        &scenario.grade_patches,
         &scenario.track.name,
         scenario.track.length(),
         scenario.track.closed,
@@ -379,6 +404,10 @@ pub fn run_with<T: Real, E: Ecu<T>>(
             ));
             let mut row = meter.measure(t_us, &st, &out, &act, ecu.active_plan(), last_status);
             at_sample = (meter.s_prev, st.vx_mps, t_us);
+            row.road_grade_pct = 100.0
+                * grade
+                    .under_car_rad(meter.s_prev, vehicle.lf_m, vehicle.lr_m)
+                    .tan();
             row.road_mu = road
                 .wheels_mu(meter.s_prev, vehicle.lf_m, vehicle.lr_m)
                 .into_iter()
@@ -411,15 +440,18 @@ pub fn run_with<T: Real, E: Ecu<T>>(
             inputs = next;
             pending.pop_front();
         }
-        let mu = if road.is_uniform() {
-            [opts.mu_road; 4]
-        } else {
-            let (s, v, t0) = at_sample;
-            let s_now = s + v * (t_us - t0) as f64 * 1e-6;
-            road.wheels_mu(s_now, vehicle.lf_m, vehicle.lr_m)
+        let (s, v, t0) = at_sample;
+        let s_now = s + v * (t_us - t0) as f64 * 1e-6;
+        let under = RoadUnder {
+            mu: if road.is_uniform() {
+                [opts.mu_road; 4]
+            } else {
+                road.wheels_mu(s_now, vehicle.lf_m, vehicle.lr_m)
+            },
+            grade_rad: grade.under_car_rad(s_now, vehicle.lf_m, vehicle.lr_m),
         };
         plant
-            .step_on(&inputs, mu)
+            .step_on_road(&inputs, &under)
             .with_context(|| format!("plant step at t = {:.3} s", t_us as f64 * 1e-6))?;
         t_us += step_us;
         step += 1;
@@ -427,6 +459,8 @@ pub fn run_with<T: Real, E: Ecu<T>>(
 
     let mut sum = meter.finish(t_us, stop_reason, &res);
     sum.mu_patches = patches_to_string(&scenario.mu_patches);
+    sum.grade_patches = grades_to_string(&scenario.grade_patches);
+    sum.actuators = vehicle.actuators.to_settings_string();
     let samples: Vec<MuSample> = res
         .log
         .iter()
@@ -627,6 +661,7 @@ impl<'a> Meter<'a> {
             v_ref_mps: g(|x| x.v_ref_mps),
             v_heur_mps: plan.v_heur_mps[0].to_f64(),
             delta_rad: g(|x| x.delta_rad),
+            delta_applied_rad: out.delta_rad,
             delta_ol_rad: g(|x| x.delta_ol_rad),
             delta_cl_rad: g(|x| x.delta_cl_rad),
             torque_fl_nm: act.wheel_torque_nm[0].to_f64(),
@@ -634,6 +669,8 @@ impl<'a> Meter<'a> {
             torque_rl_nm: act.wheel_torque_nm[2].to_f64(),
             torque_rr_nm: act.wheel_torque_nm[3].to_f64(),
             ay_mps2: out.ay_mps2,
+            specific_force_x_mps2: out.specific_force_x_mps2,
+            road_grade_pct: 0.0,
             lateral_error_m: lat,
             progress_m: self.progress_m,
             kappa_fl: out.kappa[0],

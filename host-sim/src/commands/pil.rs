@@ -16,7 +16,7 @@ use crate::closed_loop::plan_activation::PlanActivation;
 use crate::closed_loop::set_up::SetUp;
 use crate::closed_loop::timeline;
 use crate::closed_loop::{Precision, DEFAULT_CPI_BOUND};
-use crate::commands::run::{friction_line, prepare, summary_line, RunArgs, RunCommand};
+use crate::commands::run::{friction_line, plant_line, prepare, summary_line, RunArgs, RunCommand};
 use crate::output::run_files::write_outputs;
 use crate::pil::comparison::compare;
 use crate::pil::deadlines::count_mismatches;
@@ -374,6 +374,9 @@ pub fn run(args: &PilArgs) -> Result<()> {
     let s = &result.summary;
     println!("{}", summary_line(&scenario, s));
     println!("{}", friction_line(s));
+    if let Some(line) = plant_line(s) {
+        println!("{line}");
+    }
     if !s.completed {
         println!("stopped: {}", s.stop_reason);
     }

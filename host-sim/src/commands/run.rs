@@ -13,11 +13,13 @@ use crate::commands::scenario_args::{
     check_mu, check_obstacles_arg, check_run_length, check_track_arg, check_vehicle_arg,
     ScenarioArgs,
 };
+use crate::model::actuator::ActuatorSetting;
 use crate::model::vehicle::check_mass_scale;
 use crate::output::run_files::write_outputs;
 use crate::world::disturbance::{check_delay_ms, NoiseLevel};
 use crate::world::faults::Fault;
 use crate::world::road_friction::MuPatch;
+use crate::world::road_grade::GradePatch;
 use crate::world::scenario::Scenario;
 
 /// `host-sim run`'s command line: the scenario options `run`, `pil` and `sweep`
@@ -65,6 +67,8 @@ impl RunCommand {
             out: self.out.clone(),
             conditions: ConditionArgs {
                 mu_patches: sc.mu_patches.clone(),
+                grade_patches: sc.grade_patches.clone(),
+                actuators: sc.actuators.clone(),
                 mass_scale: one.mass_scale,
                 noise: one.noise,
                 delay_ms: one.delay_ms,
@@ -106,7 +110,7 @@ pub struct RunArgs {
     pub no_plots: bool,
     /// Output directory (created).
     pub out: PathBuf,
-    /// Road patches, load, noise, delay, fault and seed.
+    /// Road patches and grades, actuators, load, noise, delay, fault and seed.
     pub conditions: ConditionArgs,
 }
 
@@ -116,6 +120,10 @@ pub struct RunArgs {
 pub struct ConditionArgs {
     /// Patches of road with their own friction (`--mu-patch`).
     pub mu_patches: Vec<MuPatch>,
+    /// Stretches of road with a grade (`--grade`).
+    pub grade_patches: Vec<GradePatch>,
+    /// Actuator parameters of the plant's car over its vehicle file's (`--actuator`).
+    pub actuators: Vec<ActuatorSetting>,
     /// Scale of the plant's mass and inertias (the firmware is told the nominal car).
     pub mass_scale: f64,
     /// Noise on the state estimate.
@@ -132,6 +140,8 @@ impl Default for ConditionArgs {
     fn default() -> Self {
         Self {
             mu_patches: Vec::new(),
+            grade_patches: Vec::new(),
+            actuators: Vec::new(),
             mass_scale: 1.0,
             noise: NoiseLevel(0.0),
             delay_ms: 0.0,
@@ -142,8 +152,8 @@ impl Default for ConditionArgs {
 }
 
 impl ConditionArgs {
-    /// Checks the load and the delay (the patches are checked against the track
-    /// by [`prepare`]).
+    /// Checks the load and the delay (the patches and grades are checked against
+    /// the track, the actuators against the car, by [`prepare`]).
     pub fn check(&self) -> Result<()> {
         check_mass_scale(self.mass_scale).map_err(|e| anyhow!(e))?;
         check_delay_ms(self.delay_ms).map_err(|e| anyhow!(e))?;
@@ -202,6 +212,8 @@ pub fn prepare(args: &RunArgs) -> Result<SetUp> {
         duration_s: args.duration,
         initial_speed_mps: args.initial_speed,
         mu_patches: c.mu_patches.clone(),
+        grade_patches: c.grade_patches.clone(),
+        actuators: c.actuators.clone(),
     };
     let mut s = set_up(&spec, &setting)?;
     if !overrun {
@@ -258,6 +270,25 @@ pub fn friction_line(s: &Summary) -> String {
     )
 }
 
+/// The line `run` and `pil` print on the plant's road grades and actuators, when
+/// the run has either.
+pub fn plant_line(s: &Summary) -> Option<String> {
+    let or_none = |x: &str, none: &str| {
+        if x.is_empty() {
+            none.to_string()
+        } else {
+            x.to_string()
+        }
+    };
+    (!(s.grade_patches.is_empty() && s.actuators.is_empty())).then(|| {
+        format!(
+            "plant: grades {} | actuators {}",
+            or_none(&s.grade_patches, "none (level)"),
+            or_none(&s.actuators, "ideal")
+        )
+    })
+}
+
 /// `host-sim run` from its command line.
 pub fn command(cmd: &RunCommand) -> Result<()> {
     run(&cmd.resolve("run")?)
@@ -279,6 +310,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let sum = &result.summary;
     println!("{}", summary_line(&s.scenario, sum));
     println!("{}", friction_line(sum));
+    if let Some(line) = plant_line(sum) {
+        println!("{line}");
+    }
     if !sum.completed {
         println!("stopped: {}", sum.stop_reason);
     }

@@ -16,10 +16,12 @@ use anyhow::{anyhow, bail, Result};
 use clap::Args;
 
 use crate::closed_loop::set_up::{ObstacleSpec, Setting, OBSTACLE_FORMS};
+use crate::model::actuator::{actuator_help, ActuatorSetting};
 use crate::model::vehicle::check_mass_scale;
 use crate::world::disturbance::{check_delay_ms, NoiseLevel};
 use crate::world::faults::{fault_help, Fault};
 use crate::world::road_friction::MuPatch;
+use crate::world::road_grade::GradePatch;
 use crate::world::scenario::ScenarioError;
 
 /// What `--track` accepts.
@@ -81,6 +83,20 @@ pub struct ScenarioArgs {
     /// Repeatable; wraps over laps; the same in every run of a sweep.
     #[arg(long = "mu-patch", value_name = "START_M:LENGTH_M:MU")]
     pub mu_patches: Vec<MuPatch>,
+    /// A stretch of road with a grade, `START_M:LENGTH_M:PERCENT`: from START_M
+    /// metres along the lap, LENGTH_M metres long, rising PERCENT % (100 × rise
+    /// over run, negative downhill, within ±30) in the direction of travel (the
+    /// rest of the road is level). Repeatable; wraps over laps; the same in every
+    /// run of a sweep.
+    #[arg(
+        long = "grade",
+        value_name = "START_M:LENGTH_M:PERCENT",
+        allow_hyphen_values = true
+    )]
+    pub grade_patches: Vec<GradePatch>,
+    /// An actuator parameter of the plant's car, KEY=VALUE (`--help` lists them).
+    #[arg(long = "actuator", value_name = "KEY=VALUE", long_help = actuator_help())]
+    pub actuators: Vec<ActuatorSetting>,
     /// Laps to drive on a closed track (per run).
     #[arg(long, default_value_t = 1)]
     pub laps: u32,
@@ -210,6 +226,8 @@ impl ScenarioArgs {
             duration_s: self.duration,
             initial_speed_mps: self.initial_speed,
             mu_patches: self.mu_patches.clone(),
+            grade_patches: self.grade_patches.clone(),
+            actuators: self.actuators.clone(),
         }
     }
 

@@ -18,6 +18,7 @@ use crate::sweep::execute::{run_all, Common, LogRuns};
 use crate::sweep::figures;
 use crate::sweep::table::{header, parse_rows, write_csv, Row, FACTOR_COLUMNS};
 use crate::world::road_friction::RoadFriction;
+use crate::world::road_grade::RoadGrade;
 use crate::world::scenario;
 
 /// Arguments of `host-sim sweep`.
@@ -191,11 +192,12 @@ fn check_args(args: &SweepArgs) -> Result<()> {
     Ok(())
 }
 
-/// Checks that the patches fit every track and road friction of `specs` before any
-/// run starts (a patch past a lap's end is the command's mistake, not a run's).
+/// Checks that the friction and grade patches fit every track and road friction of
+/// `specs` before any run starts (a patch past a lap's end is the command's
+/// mistake, not a run's).
 fn check_patches(specs: &[RunSpec], setting: &Setting) -> Result<()> {
     let patches = &setting.mu_patches;
-    if patches.is_empty() {
+    if patches.is_empty() && setting.grade_patches.is_empty() {
         return Ok(());
     }
     let mut seen: Vec<&str> = Vec::new();
@@ -206,6 +208,12 @@ fn check_patches(specs: &[RunSpec], setting: &Setting) -> Result<()> {
         seen.push(&spec.track);
         let track = scenario::resolve(&spec.track, "none", !setting.open)?.track;
         RoadFriction::new(spec.mu, patches, &track.name, track.length(), track.closed)?;
+        RoadGrade::new(
+            &setting.grade_patches,
+            &track.name,
+            track.length(),
+            track.closed,
+        )?;
     }
     Ok(())
 }

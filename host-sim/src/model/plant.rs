@@ -6,7 +6,9 @@
 //! `ω_i` (`i` = fl, fr, rl, rr). Inputs: the four wheel torques and the front steering
 //! angle (both front wheels). Vehicle frame x forward, y left, z up; yaw, roll and
 //! pitch right-handed (yaw counter-clockwise, roll positive when the left side rises,
-//! pitch positive nose down).
+//! pitch positive nose down). The commands go through the car's actuators
+//! ([`crate::model::actuator`]: delay, lag, rate limit; ideal by default) before
+//! the plant applies them, held over each step.
 //!
 //! # Equations (the paper's, with these choices)
 //!
@@ -24,6 +26,11 @@
 //! * The pitch equation subtracts the moment of the static loads, which is zero
 //!   analytically, so that a car at rest is an exact equilibrium in floating point.
 //! * Aerodynamic drag `½·ρ·C_x·S·V_x·|V_x|` (the paper's `V_x²`, opposing reversing too).
+//! * Rolling resistance (not in the paper): each tyre's rolling-resistance moment
+//!   `C_rr·F_zi·r_eff` on its wheel, against the wheel's rotation (see *Wheel
+//!   torques* below); at steady rolling the tyre then pushes back on the car with
+//!   `C_rr·F_zi`.
+//! * The road's grade (not in the paper; see *The road's grade* below).
 //! * Tyre forces from [`crate::model::tire`], turned from the tyre frame to the vehicle frame
 //!   by the steering angle only (derived below; the paper's last equation of Section
 //!   IV is not used as printed). The right-hand wheels carry the mirror image of the
@@ -48,8 +55,9 @@
 //!                  a·cos θ·sin φ − b·sin θ          + c·cos θ·cos φ ).
 //! ```
 //!
-//! The road is flat and level (the paper's assumption), so each tyre's contact force
-//! is `(a_i, b_i, F_zi)` in the vehicle frame, its in-plane part turned by the wheel's
+//! The road is a plane (level in the paper; see *The road's grade* for a road that
+//! rises along the car) and the vehicle frame lies in it, so each tyre's contact
+//! force is `(a_i, b_i, F_zi)` in the vehicle frame, its in-plane part turned by the wheel's
 //! steering angle `δ_i` (`δ` front, 0 rear): `a_i = F_xpi·cos δ_i − F_ypi·sin δ_i`,
 //! `b_i = F_xpi·sin δ_i + F_ypi·cos δ_i`. The paper's rotation equation is
 //! `Rᵀ·(a_i, b_i, F_zi)`: the tyre forces in the body frame. The weight `(0, 0, −M_T·g)`
@@ -83,6 +91,31 @@
 //! tyres' friction allows, and a pitched car coasting on the level speed up or slow
 //! down by `g·sin φ`.
 //!
+//! # The road's grade
+//!
+//! On a road that rises ahead of the car at the grade angle `γ` (a grade of
+//! `100·tan γ` %, positive uphill), the vehicle frame is the road's plane: `x` along
+//! the road, tilted up by `γ`, `y` across it (horizontal), `z` normal to the road.
+//! The weight there is `M_T·g·(−sin γ, 0, −cos γ)`, so
+//!
+//! * its component along the road, `−M_T·g·sin γ`, acts on `V_x`, at the centre of
+//!   gravity (no moment: the body's pitch and roll are unchanged by it);
+//! * the loads carry its normal component: the static loads are `F_z0,i·cos γ` (and
+//!   so is the static pitch moment subtracted, zero analytically);
+//! * the longitudinal load transfer of a car held or driven on the slope comes from
+//!   the tyre forces' pitch moment `−h·ΣF_x`, as on the level: standing on an uphill
+//!   grade on its brakes, the tyres push up the slope with `M_T·g·sin γ` and the
+//!   load moves to the rear axle;
+//! * the centre of gravity moves over the ground at `V_x·cos γ` along the heading:
+//!   `Ẋ = V_x·cos γ·cos ψ − V_y·sin ψ`, `Ẏ = V_x·cos γ·sin ψ + V_y·cos ψ`.
+//!
+//! `γ` is the grade along the car's `x` axis, an input of each step like the road's
+//! friction: the road's slope seen across the car (`sin` of the car's heading off
+//! the road's direction) and the heading's distortion on the slope (`1 − cos γ`,
+//! 0.18 % at 6 %) are left out. [`Outputs::specific_force_x_mps2`] is what an
+//! accelerometer on the car reads along `x`, the non-gravitational force per unit
+//! mass: the acceleration [`Outputs::ax_mps2`] plus `g·sin γ`.
+//!
 //! # Slip near standstill
 //!
 //! `V_xp`, `V_yp` are the wheel-centre velocity components along and across the wheel
@@ -112,14 +145,17 @@
 //! Both floors are continuous in the state (a `max`), so the derivative stays
 //! continuous; no division by zero or NaN can occur for finite states.
 //!
-//! # Wheel torques: drive and friction brakes
+//! # Wheel torques: drive, friction brakes and rolling resistance
 //!
 //! A positive wheel torque drives. A negative one is a brake torque of that
 //! magnitude: friction that opposes the wheel's rotation and cannot spin it
-//! backwards. It is applied as `T·clamp(ω/ω_lock, −1, 1)` with `ω_lock` from
-//! [`brake_lock_radps`]: the full torque against the rotation above `ω_lock`, and a
-//! stiff viscous lock below, so a locked wheel stays (nearly) still instead of
-//! reversing, and the derivative stays continuous for RK4.
+//! backwards. The tyre's rolling-resistance moment `C_rr·F_zi·r_eff` is friction of
+//! the same kind. Their sum `T_f` is applied as `−T_f·clamp(ω/ω_lock, −1, 1)` with
+//! `ω_lock` from [`brake_lock_radps`] of `T_f`: the full torque against the
+//! rotation above `ω_lock`, and a stiff viscous lock below, so a locked wheel stays
+//! (nearly) still instead of reversing, a wheel at rest feels no rolling
+//! resistance (a car at rest on the level stays exactly at rest), and the
+//! derivative stays continuous for RK4.
 //!
 //! # Speed
 //!
@@ -131,8 +167,9 @@
 //! independent calls. `PLANT_BENCH_STEPS=N cargo bench -p host-sim --bench plant`
 //! runs a fixed number of steps (for instruction counters).
 
+use crate::model::actuator::Actuators;
 use crate::model::tire;
-use crate::model::vehicle::{InvalidField, VehicleParams};
+use crate::model::vehicle::{InvalidField, VehicleParams, G};
 
 /// Index of the front-left wheel in the per-wheel arrays.
 pub const FL: usize = 0;
@@ -151,22 +188,42 @@ pub const DEFAULT_DT_S: f64 = 1e-3;
 pub const BRAKE_LOCK_RADPS: f64 = 2.0;
 
 /// Wheel speed under which the brake torque `torque_nm` (N·m) fades, rad/s: the
-/// larger of [`BRAKE_LOCK_RADPS`] and `|T|·dt/(1.5·I_r)`. The fade is a viscous
-/// lock of rate `|T|/(ω_lock·I_r)`; keeping that rate times the step `dt_s` under
-/// 1.5 keeps RK4 (stable to 2.78) well damped whatever the torque and the step.
+/// larger of [`BRAKE_LOCK_RADPS`] and `|T|·dt/(BRAKE_LOCK_RATE_DT·I_r)`. The fade
+/// is a viscous lock of rate `|T|/(ω_lock·I_r)`, at most `BRAKE_LOCK_RATE_DT/dt`.
 pub fn brake_lock_radps(torque_nm: f64, dt_s: f64, wheel_inertia_kg_m2: f64) -> f64 {
-    BRAKE_LOCK_RADPS.max(torque_nm.abs() * dt_s / (1.5 * wheel_inertia_kg_m2))
+    BRAKE_LOCK_RADPS.max(torque_nm.abs() * dt_s / (BRAKE_LOCK_RATE_DT * wheel_inertia_kg_m2))
 }
 
-/// Torque acting on a wheel spinning at `omega_radps` for the commanded torque
-/// `torque_nm` (N·m): drive torque as is, brake torque (negative) against the
-/// rotation, fading linearly below `lock_radps`.
-pub fn wheel_torque_nm(torque_nm: f64, omega_radps: f64, lock_radps: f64) -> f64 {
-    if torque_nm >= 0.0 {
-        torque_nm
-    } else {
-        torque_nm * (omega_radps / lock_radps).clamp(-1.0, 1.0)
-    }
+/// Largest rate of the brakes' viscous lock times the step (see
+/// [`brake_lock_radps`]). At a standstill the wheel's spin mode has the tyre's
+/// rate too: the slip ratio's floor `v_κ` puts it at `2/dt` (`2.07/dt` with the
+/// car's own inertia, default car), and the two add. RK4 is stable to 2.78/dt on
+/// the real axis: with the lock's 0.5 on top the sum stays under it, so a car held
+/// on its brakes on a slope settles (a larger lock rate let the RK4 step sit at a
+/// spurious fixed point whose forces were not the car's).
+pub const BRAKE_LOCK_RATE_DT: f64 = 0.5;
+
+/// Torque acting on a wheel spinning at `omega_radps` (rad/s) for the commanded
+/// torque `torque_nm` (N·m) and the tyre's rolling-resistance moment `rolling_nm`
+/// (N·m, ≥ 0), with the step `dt_s` (s) and the wheel's inertia (kg·m²): a drive
+/// torque as is; a brake torque (negative) and the rolling resistance against the
+/// rotation, fading linearly below the lock speed of their sum
+/// ([`brake_lock_radps`]). Returns the net torque and the rolling resistance's
+/// part of it (≤ 0 rolling forward), N·m.
+pub fn wheel_torque_nm(
+    torque_nm: f64,
+    rolling_nm: f64,
+    omega_radps: f64,
+    dt_s: f64,
+    wheel_inertia_kg_m2: f64,
+) -> (f64, f64) {
+    let friction_nm = rolling_nm + (-torque_nm).max(0.0);
+    let lock = brake_lock_radps(friction_nm, dt_s, wheel_inertia_kg_m2);
+    let against = (omega_radps / lock).clamp(-1.0, 1.0);
+    (
+        torque_nm.max(0.0) - friction_nm * against,
+        -rolling_nm * against,
+    )
 }
 
 /// Number of scalar states.
@@ -261,16 +318,37 @@ impl State {
     }
 }
 
-/// Inputs of the plant, held constant over a step.
+/// Inputs of the plant, held constant over a step: the commands to its actuators.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Inputs {
     /// Torque commanded on each wheel `[fl, fr, rl, rr]`, N·m: positive drives forward,
     /// negative is a brake torque of that magnitude, acting against the wheel's
     /// rotation (it stops a wheel, it never spins it backwards; see the module doc).
     pub torque_nm: [f64; 4],
-    /// Steering angle of both front wheels, rad (positive to the left). Clamped to
-    /// the vehicle's `max_steer_rad`.
+    /// Steering angle of both front wheels, rad (positive to the left). The
+    /// steering actuator holds it within the vehicle's `max_steer_rad`.
     pub delta_rad: f64,
+}
+
+/// The road under the car over a step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RoadUnder {
+    /// Road friction under each wheel `[fl, fr, rl, rr]`, dimensionless, ≥ 0.
+    pub mu: [f64; 4],
+    /// The road's grade angle `γ` along the vehicle's `x` axis, rad, in
+    /// `(−π/4, π/4)` (positive: the road rises ahead of the car; a grade of
+    /// `100·tan γ` %).
+    pub grade_rad: f64,
+}
+
+impl RoadUnder {
+    /// A level road of friction `mu` under every wheel.
+    pub fn level(mu: f64) -> Self {
+        Self {
+            mu: [mu; 4],
+            grade_rad: 0.0,
+        }
+    }
 }
 
 /// Quantities of the plant at the current state (with the last inputs).
@@ -278,8 +356,12 @@ pub struct Inputs {
 pub struct Outputs {
     /// Simulated time, s.
     pub time_s: f64,
-    /// Steering angle applied (after the mechanical limit), rad.
+    /// Steering angle applied over the last step (the steering actuator's output,
+    /// within the mechanical limit), rad.
     pub delta_rad: f64,
+    /// Wheel torques applied over the last step `[fl, fr, rl, rr]` (the torque
+    /// actuators' outputs), N·m.
+    pub torque_nm: [f64; 4],
     /// Normal loads `F_zi`, N (never negative).
     pub fz_n: [f64; 4],
     /// Wheels whose load would be negative or zero (lifted off the road).
@@ -298,8 +380,22 @@ pub struct Outputs {
     pub fy_n: [f64; 4],
     /// Aerodynamic drag force (positive opposes forward motion), N.
     pub aero_drag_n: f64,
-    /// Longitudinal acceleration at the centre of gravity, `(ΣF_x − F_aero)/M_T`, m/s².
+    /// Rolling resistance of each tyre `[fl, fr, rl, rr]`: its wheel's
+    /// rolling-resistance moment over `r_eff` (positive opposes rolling forward), N;
+    /// `C_rr·F_zi` while the wheel turns, fading to 0 as it stops.
+    pub rolling_resistance_n: [f64; 4],
+    /// The road's grade angle `γ` along the vehicle's `x` axis over the last step,
+    /// rad (positive: the road rises ahead).
+    pub grade_rad: f64,
+    /// Longitudinal acceleration of the centre of gravity along the vehicle's `x`
+    /// axis, `(ΣF_x − F_aero)/M_T − g·sin γ`, m/s² (the rate of change of `V_x` less
+    /// `ψ̇·V_y`).
     pub ax_mps2: f64,
+    /// Longitudinal specific force at the centre of gravity, `(ΣF_x − F_aero)/M_T`,
+    /// m/s²: what an accelerometer on the car reads along its `x` axis, the
+    /// acceleration [`Outputs::ax_mps2`] plus `g·sin γ` (zero for a car at rest on
+    /// the level, `g·sin γ` for one held at rest on a grade).
+    pub specific_force_x_mps2: f64,
     /// Lateral acceleration at the centre of gravity, `V̇_y + ψ̇·V_x = ΣF_y/M_T`, m/s²
     /// (positive to the left).
     pub ay_mps2: f64,
@@ -328,6 +424,11 @@ pub enum PlantError {
     /// The road friction is not a finite number ≥ 0.
     #[error("road friction mu = {0}: must be a finite number, zero or positive")]
     Mu(f64),
+    /// The road's grade angle is not a finite number of magnitude under π/4.
+    #[error(
+        "road grade angle {0} rad: must be a finite number in (-pi/4, pi/4) (a grade under 100 %)"
+    )]
+    Grade(f64),
     /// The state stopped being finite.
     #[error(
         "the simulation diverged (non-finite state) at t = {0} s; use a smaller step or \
@@ -352,6 +453,8 @@ struct Derived {
     alpha_floor_mps: f64,
     kappa_floor_per_k: f64,
     aero: f64,
+    /// `C_rr·r_eff`: the rolling-resistance moment per unit load, m.
+    rolling_m: f64,
 }
 
 /// What the derivative needs from the inputs, computed once per step (the inputs
@@ -362,12 +465,14 @@ struct StepInputs {
     delta_rad: f64,
     /// `sin δ_i`, `cos δ_i` of each wheel (`δ` front, 0 rear).
     sin_cos_delta: [(f64, f64); 4],
-    /// Commanded wheel torques, N·m.
+    /// Wheel torques applied, N·m.
     torque_nm: [f64; 4],
-    /// Brake-lock speed of each wheel's torque, rad/s.
-    lock_radps: [f64; 4],
     /// Road friction under each wheel `[fl, fr, rl, rr]`.
     mu: [f64; 4],
+    /// The road's grade angle `γ`, rad.
+    grade_rad: f64,
+    /// `sin γ`, `cos γ`.
+    sin_cos_grade: (f64, f64),
 }
 
 /// Wheel lift seen by the plant since it started.
@@ -393,8 +498,10 @@ pub struct Plant {
     state: State,
     dt_s: f64,
     time_s: f64,
+    /// What the actuators applied over the last step.
     last_inputs: Inputs,
-    mu: [f64; 4],
+    actuators: Actuators,
+    road: RoadUnder,
     lift: WheelLift,
 }
 
@@ -425,6 +532,7 @@ impl Plant {
             alpha_floor_mps: p.low_speed_mps.max(alpha_stab),
             kappa_floor_per_k: dt_s * p.r_eff_m * p.r_eff_m / (2.0 * p.wheel_inertia_kg_m2),
             aero: 0.5 * p.rho_air_kg_per_m3 * p.cx * p.frontal_area_m2,
+            rolling_m: p.crr * p.r_eff_m,
         };
         Ok(Self {
             params,
@@ -433,7 +541,8 @@ impl Plant {
             dt_s,
             time_s: 0.0,
             last_inputs: Inputs::default(),
-            mu: [1.0; 4],
+            actuators: Actuators::new(&p.actuators, p.max_steer_rad, dt_s),
+            road: RoadUnder::level(1.0),
             lift: WheelLift::default(),
         })
     }
@@ -445,8 +554,15 @@ impl Plant {
     }
 
     /// As [`Plant::step`], each wheel `[fl, fr, rl, rr]` on a road of its own
-    /// friction `mu` (friction that changes along the road).
+    /// friction `mu` (friction that changes along the road), level.
     pub fn step_on(&mut self, inputs: &Inputs, mu: [f64; 4]) -> Result<(), PlantError> {
+        self.step_on_road(inputs, &RoadUnder { mu, grade_rad: 0.0 })
+    }
+
+    /// As [`Plant::step`] on the road `road`: each wheel's friction and the road's
+    /// grade along the car.
+    pub fn step_on_road(&mut self, inputs: &Inputs, road: &RoadUnder) -> Result<(), PlantError> {
+        let mu = road.mu;
         for (i, t) in inputs.torque_nm.iter().enumerate() {
             if !t.is_finite() {
                 return Err(PlantError::Input(
@@ -465,12 +581,16 @@ impl Plant {
         if let Some(&bad) = mu.iter().find(|m| !(**m >= 0.0 && m.is_finite())) {
             return Err(PlantError::Mu(bad));
         }
-        let max = self.params.max_steer_rad;
+        if !road.grade_rad.is_finite() || road.grade_rad.abs() >= core::f64::consts::FRAC_PI_4 {
+            return Err(PlantError::Grade(road.grade_rad));
+        }
+        let command = (inputs.delta_rad, inputs.torque_nm);
+        let applied = self.actuators.peek(command.0, command.1);
         let inp = Inputs {
-            torque_nm: inputs.torque_nm,
-            delta_rad: inputs.delta_rad.clamp(-max, max),
+            torque_nm: applied.1,
+            delta_rad: applied.0,
         };
-        let si = self.step_inputs(&inp, mu);
+        let si = self.step_inputs(&inp, road);
         let h = self.dt_s;
         let y0 = self.state.to_array();
         let (k1, l1) = self.derivative(&y0, &si);
@@ -488,7 +608,8 @@ impl Plant {
         self.state = State::from_array(&y);
         self.time_s += h;
         self.last_inputs = inp;
-        self.mu = mu;
+        self.actuators.commit(command, applied);
+        self.road = *road;
         Ok(())
     }
 
@@ -553,11 +674,12 @@ impl Plant {
             .max(self.derived.kappa_floor_per_k * k_n)
     }
 
-    /// Loads, slips, forces and accelerations at the current state with the inputs
-    /// and frictions of the last step (zero torque, straight, `μ = 1` before any step).
+    /// Loads, slips, forces and accelerations at the current state with what the
+    /// actuators applied and the road of the last step (zero torque, straight,
+    /// `μ = 1`, level before any step).
     pub fn outputs(&self) -> Outputs {
         let y = self.state.to_array();
-        let si = self.step_inputs(&self.last_inputs, self.mu);
+        let si = self.step_inputs(&self.last_inputs, &self.road);
         let mut o = Outputs::default();
         self.eval(&y, &si, Some(&mut o));
         o.time_s = self.time_s;
@@ -565,16 +687,16 @@ impl Plant {
     }
 
     /// The per-step part of the derivative for the (clamped) inputs `inp`.
-    fn step_inputs(&self, inp: &Inputs, mu: [f64; 4]) -> StepInputs {
+    fn step_inputs(&self, inp: &Inputs, road: &RoadUnder) -> StepInputs {
         let front = inp.delta_rad.sin_cos();
         let rear = (0.0, 1.0);
-        let (dt, ir) = (self.dt_s, self.params.wheel_inertia_kg_m2);
         StepInputs {
             delta_rad: inp.delta_rad,
             sin_cos_delta: [front, front, rear, rear],
             torque_nm: inp.torque_nm,
-            lock_radps: inp.torque_nm.map(|t| brake_lock_radps(t, dt, ir)),
-            mu,
+            mu: road.mu,
+            grade_rad: road.grade_rad,
+            sin_cos_grade: road.grade_rad.sin_cos(),
         }
     }
 
@@ -597,6 +719,7 @@ impl Plant {
         let (st, ct) = s.roll_rad.sin_cos();
         let (sp, cp) = s.pitch_rad.sin_cos();
         let r = s.yaw_rate_radps;
+        let (s_grade, c_grade) = si.sin_cos_grade;
         let mut w = [Wheel::default(); 4];
         for i in 0..4 {
             let side = if d.y_w[i] > 0.0 { 1.0 } else { -1.0 };
@@ -604,7 +727,7 @@ impl Plant {
             let zeta = side * p.lw_m * st - d.x_w[i] * sp;
             let zeta_dot =
                 side * p.lw_m * ct * s.roll_rate_radps - d.x_w[i] * cp * s.pitch_rate_radps;
-            let fz_spring = d.fz0[i] - p.ks_n_per_m * zeta - p.ds_n_s_per_m * zeta_dot;
+            let fz_spring = d.fz0[i] * c_grade - p.ks_n_per_m * zeta - p.ds_n_s_per_m * zeta_dot;
             // Wheel-centre velocity, vehicle frame then tyre frame.
             let vxw = s.vx_mps - d.y_w[i] * r;
             let vyw = s.vy_mps + d.x_w[i] * r;
@@ -617,7 +740,9 @@ impl Plant {
         let m = p.mass_kg;
         let sum_fx = w[0].fx + w[1].fx + w[2].fx + w[3].fx;
         let sum_fy = w[0].fy + w[1].fy + w[2].fy + w[3].fy;
-        let dvx = r * s.vy_mps + (sum_fx - aero) / m;
+        let specific_x = (sum_fx - aero) / m;
+        let ax = specific_x - G * s_grade;
+        let dvx = r * s.vy_mps + ax;
         let dvy = -r * s.vx_mps + sum_fy / m;
         let dr = (p.lf_m * (w[FL].fy + w[FR].fy) - p.lr_m * (w[RL].fy + w[RR].fy)
             + p.lw_m * ((w[FR].fx - w[FL].fx) + (w[RR].fx - w[RL].fx)))
@@ -629,13 +754,13 @@ impl Plant {
         let dpitch = (cp
             * (p.lr_m * (w[RL].fz + w[RR].fz)
                 - p.lf_m * (w[FL].fz + w[FR].fz)
-                - d.pitch_static_nm)
+                - d.pitch_static_nm * c_grade)
             - p.h_m * sum_fx)
             / p.iy_kg_m2;
         let (spsi, cpsi) = s.psi_rad.sin_cos();
         let dy = [
-            s.vx_mps * cpsi - s.vy_mps * spsi,
-            s.vx_mps * spsi + s.vy_mps * cpsi,
+            s.vx_mps * c_grade * cpsi - s.vy_mps * spsi,
+            s.vx_mps * c_grade * spsi + s.vy_mps * cpsi,
             r,
             dvx,
             dvy,
@@ -654,6 +779,7 @@ impl Plant {
             *o = Outputs {
                 time_s: o.time_s,
                 delta_rad: si.delta_rad,
+                torque_nm: si.torque_nm,
                 fz_n: w.map(|x| x.fz),
                 wheel_lifted: lifted,
                 kappa: w.map(|x| x.kappa),
@@ -663,7 +789,10 @@ impl Plant {
                 fx_n: w.map(|x| x.fx),
                 fy_n: w.map(|x| x.fy),
                 aero_drag_n: aero,
-                ax_mps2: (sum_fx - aero) / m,
+                rolling_resistance_n: w.map(|x| x.rolling_nm / -p.r_eff_m),
+                grade_rad: si.grade_rad,
+                ax_mps2: ax,
+                specific_force_x_mps2: specific_x,
                 ay_mps2: sum_fy / m,
                 speed_mps: s.speed_mps(),
                 beta_rad: s.vy_mps.atan2(s.vx_mps),
@@ -718,8 +847,14 @@ impl Plant {
         let (sdi, cdi) = si.sin_cos_delta[i];
         let fx = fxp * cdi - fyp * sdi;
         let fy = fyp * cdi + fxp * sdi;
-        let domega = (wheel_torque_nm(si.torque_nm[i], omega, si.lock_radps[i]) - p.r_eff_m * fxp)
-            / p.wheel_inertia_kg_m2;
+        let (torque, rolling_nm) = wheel_torque_nm(
+            si.torque_nm[i],
+            d.rolling_m * fz,
+            omega,
+            self.dt_s,
+            p.wheel_inertia_kg_m2,
+        );
+        let domega = (torque - p.r_eff_m * fxp) / p.wheel_inertia_kg_m2;
         Wheel {
             fz,
             lifted,
@@ -730,6 +865,7 @@ impl Plant {
             fx,
             fy,
             domega,
+            rolling_nm,
         }
     }
 }
@@ -764,6 +900,8 @@ struct Wheel {
     fy: f64,
     /// Spin acceleration, rad/s².
     domega: f64,
+    /// The rolling resistance's part of the wheel's torque, N·m (≤ 0 rolling forward).
+    rolling_nm: f64,
 }
 
 /// `y + h·k`.

@@ -11,6 +11,7 @@ use firmware::vehicle_config::VehicleConfig;
 use firmware::Real;
 use serde::Deserialize;
 
+use crate::model::actuator::ActuatorParams;
 use crate::model::tire::{self, TireParams};
 
 /// Parameters of the vehicle (the notations of the paper's Table I). SI units.
@@ -47,6 +48,11 @@ pub struct VehicleParams {
     pub frontal_area_m2: f64,
     /// Air density `ρ_air`, kg/m³.
     pub rho_air_kg_per_m3: f64,
+    /// Rolling-resistance coefficient `C_rr` of the tyres, dimensionless, in
+    /// `[0, MAX_CRR]`: each tyre resists rolling with `C_rr·F_z` (see `plant`).
+    /// Optional in a vehicle file: 0 (no rolling resistance) when absent.
+    #[serde(default)]
+    pub crr: f64,
     /// Mechanical limit of the front wheels' steering angle (both ways), rad.
     pub max_steer_rad: f64,
     /// Low-speed threshold, m/s: the floor of the slip-angle denominator, the least
@@ -55,14 +61,20 @@ pub struct VehicleParams {
     pub low_speed_mps: f64,
     /// Tyre (the same on the four wheels; right-hand wheels mirrored).
     pub tyre: TireParams,
+    /// The steering and torque actuators' dynamics (the optional `[actuators]`
+    /// table; ideal when absent: see [`crate::model::actuator`]).
+    #[serde(default)]
+    pub actuators: ActuatorParams,
 }
 
 impl Default for VehicleParams {
     /// A typical C-segment passenger car (VW Golf / Peugeot 308 class: about 1500 kg,
     /// 2.65 m wheelbase with 58 % of the weight on the front axle, 1.55 m track),
     /// inertias from the usual estimates for that class (`I_z ≈ m·l_f·l_r`), wheel
-    /// rates that give about 4° of roll per g, and the 205/60R15 PAC2002 tyre of
-    /// Pacejka's book (Table A3.1), whose peak friction is about 1 at `μ = 1`.
+    /// rates that give about 4° of roll per g, the 205/60R15 PAC2002 tyre of
+    /// Pacejka's book (Table A3.1), whose peak friction is about 1 at `μ = 1`, and a
+    /// passenger-car tyre's rolling resistance on a paved road (`C_rr` 0.012; the
+    /// sources are in `host-sim/vehicles/default.toml`); ideal actuators.
     fn default() -> Self {
         Self {
             mass_kg: 1500.0,
@@ -80,9 +92,11 @@ impl Default for VehicleParams {
             cx: 0.31,
             frontal_area_m2: 2.2,
             rho_air_kg_per_m3: 1.225,
+            crr: 0.012,
             max_steer_rad: 0.6,
             low_speed_mps: 0.5,
             tyre: TireParams::default(),
+            actuators: ActuatorParams::default(),
         }
     }
 }
@@ -165,8 +179,9 @@ impl VehicleParams {
         Ok(params)
     }
 
-    /// Checks every field: finite, positive where the model divides by it, and a
-    /// tyre whose forces have the signs of this project's convention.
+    /// Checks every field: finite, positive where the model divides by it, the
+    /// actuators' ranges, and a tyre whose forces have the signs of this project's
+    /// convention.
     pub fn validate(&self) -> Result<(), InvalidField> {
         let positive = [
             ("mass_kg", self.mass_kg),
@@ -188,6 +203,7 @@ impl VehicleParams {
             ("cx", self.cx),
             ("frontal_area_m2", self.frontal_area_m2),
             ("rho_air_kg_per_m3", self.rho_air_kg_per_m3),
+            ("crr", self.crr),
         ];
         for (name, v) in positive.iter().chain(non_negative.iter()) {
             if !v.is_finite() {
@@ -208,6 +224,17 @@ impl VehicleParams {
             if v < 0.0 {
                 return Err(bad(name, format!("must be zero or positive, got {v}")));
             }
+        }
+        self.actuators.validate()?;
+        if self.crr > MAX_CRR {
+            return Err(bad(
+                "crr",
+                format!(
+                    "the rolling-resistance coefficient must be at most {MAX_CRR} (passenger-car \
+                     tyres on a paved road: about 0.01), got {}",
+                    self.crr
+                ),
+            ));
         }
         if self.max_steer_rad >= core::f64::consts::FRAC_PI_2 {
             return Err(bad(
@@ -289,6 +316,11 @@ pub fn check_mass_scale(k: f64) -> Result<(), String> {
     }
     Ok(())
 }
+
+/// Largest rolling-resistance coefficient a vehicle file may give: ten times a
+/// passenger-car tyre's on a paved road (soft ground, which this model does not
+/// describe, is where larger ones are found).
+pub const MAX_CRR: f64 = 0.1;
 
 /// Standard gravity used by the plant, m/s² (the value of `firmware::G`).
 pub const G: f64 = 9.81;

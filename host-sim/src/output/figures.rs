@@ -11,6 +11,7 @@ use plotters::prelude::*;
 use crate::closed_loop::timeline::{LogRow, RunResult};
 use crate::output::plot::{draw_error, draw_legend, register_font, FONT};
 use crate::world::road_friction::RoadFriction;
+use crate::world::road_grade::{RoadGrade, MAX_GRADE_PCT};
 use crate::world::scenario::Scenario;
 
 const W: u32 = 1400;
@@ -107,7 +108,13 @@ pub fn draw_all(dir: &Path, scenario: &Scenario, r: &RunResult) -> Result<()> {
             },
             Line {
                 y: column(log, |l| l.delta_rad),
-                label: "δ: applied",
+                label: "δ: commanded",
+                color: RED,
+                stroke: Stroke::Dashed(2),
+            },
+            Line {
+                y: column(log, |l| l.delta_applied_rad),
+                label: "δ: applied (the steering actuator's)",
                 color: BLUE,
                 stroke: Stroke::Solid(2),
             },
@@ -223,10 +230,11 @@ fn trajectory(path: &Path, sc: &Scenario, r: &RunResult) -> Result<()> {
             format!(
                 "{}: actual (blue), plans (green), obstacles (red){}",
                 tr.name,
-                if sc.mu_patches.is_empty() {
-                    ""
-                } else {
-                    ", road patches (shaded)"
+                match (sc.mu_patches.is_empty(), sc.grade_patches.is_empty()) {
+                    (true, true) => "",
+                    (false, true) => ", road patches (shaded)",
+                    (true, false) => ", grades (thick edges)",
+                    (false, false) => ", road patches (shaded), grades (thick edges)",
                 }
             ),
             (FONT, 24),
@@ -282,8 +290,11 @@ fn trajectory(path: &Path, sc: &Scenario, r: &RunResult) -> Result<()> {
     Ok(())
 }
 
-/// Shades the road's patches of their own friction (`--mu-patch`) between the
-/// edges `left`, `right` (one point per track point) and lists them in a legend.
+/// Marks the road's patches on the trajectory figure between the edges `left`,
+/// `right` (one point per track point) and lists them in a legend: the patches of
+/// their own friction (`--mu-patch`) shaded blue, the darker the lower their μ;
+/// the stretches with a grade (`--grade`) as thick edges, orange uphill and purple
+/// downhill, the stronger the steeper.
 fn draw_patches<'a, DB: DrawingBackend + 'a>(
     chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     path: &Path,
@@ -293,10 +304,11 @@ fn draw_patches<'a, DB: DrawingBackend + 'a>(
     right: &[(f64, f64)],
 ) -> Result<()> {
     let tr = &sc.track;
-    if sc.mu_patches.is_empty() || left.len() < 2 {
+    if (sc.mu_patches.is_empty() && sc.grade_patches.is_empty()) || left.len() < 2 {
         return Ok(());
     }
     let road = RoadFriction::new(base_mu, &sc.mu_patches, &tr.name, tr.length(), tr.closed)?;
+    let grade = RoadGrade::new(&sc.grade_patches, &tr.name, tr.length(), tr.closed)?;
     // Arc length of each edge point, the first point again at the lap's end.
     let mut s_pts = tr.arc_lengths();
     let (mut l, mut r) = (left.to_vec(), right.to_vec());
@@ -316,21 +328,26 @@ fn draw_patches<'a, DB: DrawingBackend + 'a>(
         let (a, b) = (edge[k - 1], edge[k]);
         (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1))
     };
+    // An edge from arc length a to b, through the track's points between.
+    let along = |edge: &[(f64, f64)], a: f64, b: f64| -> Vec<(f64, f64)> {
+        let mut pts = vec![at(edge, a)];
+        pts.extend(
+            s_pts
+                .iter()
+                .filter(|&&x| x > a && x < b)
+                .map(|&x| at(edge, x)),
+        );
+        pts.push(at(edge, b));
+        pts
+    };
     let blue = RGBColor(30, 110, 230);
     for (i, p) in sc.mu_patches.iter().enumerate() {
         // The spans of this patch (two when it runs over the lap line).
         let spans: Vec<(f64, f64)> = road.patch_spans(i).collect();
         let shade = blue.mix((0.15 + 0.5 * (1.0 - p.mu / base_mu.max(p.mu))).min(0.65));
         for (n, &(a, b)) in spans.iter().enumerate() {
-            let inner = s_pts.iter().filter(|&&x| x > a && x < b);
-            let mut poly = vec![at(&l, a)];
-            poly.extend(inner.clone().map(|&x| at(&l, x)));
-            poly.push(at(&l, b));
-            poly.push(at(&r, b));
-            let mut back: Vec<(f64, f64)> = inner.map(|&x| at(&r, x)).collect();
-            back.reverse();
-            poly.extend(back);
-            poly.push(at(&r, a));
+            let mut poly = along(&l, a, b);
+            poly.extend(along(&r, a, b).into_iter().rev());
             let series = chart
                 .draw_series(std::iter::once(Polygon::new(poly, shade.filled())))
                 .map_err(|e| draw_error(path, e))?;
@@ -346,6 +363,32 @@ fn draw_patches<'a, DB: DrawingBackend + 'a>(
                     .legend(move |(x, y)| {
                         Rectangle::new([(x, y - 6), (x + 16, y + 6)], shade.filled())
                     });
+            }
+        }
+    }
+    let (uphill, downhill) = (RGBColor(235, 120, 0), RGBColor(140, 40, 180));
+    for (i, p) in sc.grade_patches.iter().enumerate() {
+        let base = if p.percent >= 0.0 { uphill } else { downhill };
+        let color = base.mix((0.4 + 0.6 * p.percent.abs() / MAX_GRADE_PCT).min(1.0));
+        let style = color.stroke_width(5);
+        for (n, (a, b)) in grade.patch_spans(i).enumerate() {
+            for edge in [&l, &r] {
+                let series = chart
+                    .draw_series(LineSeries::new(along(edge, a, b), style))
+                    .map_err(|e| draw_error(path, e))?;
+                if n == 0 && std::ptr::eq(edge, &l) {
+                    series
+                        .label(format!(
+                            "grade {}: {:+} % from {} m, {} m long",
+                            i + 1,
+                            p.percent,
+                            p.start_m,
+                            p.length_m
+                        ))
+                        .legend(move |(x, y)| {
+                            PathElement::new([(x, y), (x + 16, y)], color.stroke_width(5))
+                        });
+                }
             }
         }
     }

@@ -21,7 +21,8 @@ pub const ECU_TASKS: [(&str, &str); 3] = [
 pub const ECU_SECTIONS: [(&str, &str, &str, Option<u64>); 5] = [
     (
         "control_job",
-        "ecu::control_job",
+        // Its symbol's fixed name (`#[export_name]`: placed first in `.text`).
+        "ecu_control_job",
         "control",
         Some(firmware::deadline::CONTROL_BUDGET_CYCLES),
     ),

@@ -8,8 +8,13 @@
 //! 1. **Noise** (measured at the instant): independent Gaussian draws added to the
 //!    true state, standard deviations `scale ×` [`NOISE_UNIT`]: position X and Y
 //!    0.05 m each, heading 0.005 rad (0.29°), longitudinal speed 0.05 m/s, yaw rate
-//!    0.005 rad/s (an RTK-GNSS/INS estimate). Lateral speed and the measured
-//!    steering angle are not disturbed.
+//!    0.005 rad/s, lateral speed 0.02 m/s (an RTK-GNSS/INS estimate). The lateral
+//!    speed and the yaw rate (what the plan task's sideslip learner reads) also
+//!    carry a **bias**, constant over the run and drawn once from its seed
+//!    ([`estimate_biases`]), of standard deviation `scale ×` 0.02 m/s and
+//!    0.002 rad/s (0.11°/s, a MEMS gyro's after its start-up calibration; 0.46°/s
+//!    at `high`, one without it). The measured steering angle is not disturbed.
+//!    Level 0 (`--noise none`, the default) draws nothing.
 //! 2. **Delay**: the tasks see the (noisy) estimate measured `delay` ago, rounded
 //!    to whole control periods (10 ms), stamped with its measurement time, as an
 //!    estimator with latency would deliver it. Before that much history exists they
@@ -48,6 +53,12 @@ pub struct NoiseSigmas {
     pub speed_mps: f64,
     /// Yaw rate, rad/s.
     pub yaw_rate_radps: f64,
+    /// Lateral speed, m/s.
+    pub lateral_speed_mps: f64,
+    /// The lateral speed's bias over a run, m/s.
+    pub lateral_speed_bias_mps: f64,
+    /// The yaw rate's bias over a run, rad/s.
+    pub yaw_rate_bias_radps: f64,
 }
 
 /// Noise level 1: an RTK-GNSS/INS-grade estimate.
@@ -56,7 +67,42 @@ pub const NOISE_UNIT: NoiseSigmas = NoiseSigmas {
     heading_rad: 0.005,
     speed_mps: 0.05,
     yaw_rate_radps: 0.005,
+    lateral_speed_mps: 0.02,
+    lateral_speed_bias_mps: 0.02,
+    yaw_rate_bias_radps: 0.002,
 };
+
+/// The biases of a run's estimate (see the module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EstimateBias {
+    /// Added to the lateral speed, m/s.
+    pub lateral_speed_mps: f64,
+    /// Added to the yaw rate, rad/s.
+    pub yaw_rate_radps: f64,
+}
+
+/// The biases of a run of seed `seed` at noise level `scale` (0: none, nothing
+/// drawn): Gaussian, of standard deviation `scale ×` the level-1 biases, from a
+/// stream of their own (the other channels' draws are not moved by them).
+pub fn estimate_biases(seed: u64, scale: f64) -> EstimateBias {
+    if scale <= 0.0 {
+        return EstimateBias::default();
+    }
+    let mut rng = SplitMix64::new(seed ^ BIAS_STREAM);
+    EstimateBias {
+        lateral_speed_mps: scale * NOISE_UNIT.lateral_speed_bias_mps * rng.gaussian(),
+        yaw_rate_radps: scale * NOISE_UNIT.yaw_rate_bias_radps * rng.gaussian(),
+    }
+}
+
+/// Mixed into a run's seed for the estimate's noise (the first channels').
+pub const NOISE_STREAM: u64 = 0x6E6F_6973_6521;
+
+/// Mixed into a run's seed for the lateral speed's noise.
+pub const LATERAL_NOISE_STREAM: u64 = 0x6C61_7465_7261_6C21;
+
+/// Mixed into a run's seed for the biases.
+pub const BIAS_STREAM: u64 = 0x6269_6173_6573_2121;
 
 /// A noise level: a multiple of [`NOISE_UNIT`] (`--noise`: `none` 0, `low` 1,
 /// `medium` 2, `high` 4, or a number ≥ 0).
@@ -221,6 +267,47 @@ mod tests {
         let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
         assert!(mean.abs() < 0.03, "mean {mean}");
         assert!((var - 1.0).abs() < 0.05, "variance {var}");
+    }
+
+    #[test]
+    fn biases_are_drawn_once_per_seed_with_the_levels_spread() {
+        let a = estimate_biases(run_seed("Spielberg", 3), 4.0);
+        assert_eq!(a, estimate_biases(run_seed("Spielberg", 3), 4.0));
+        assert_ne!(a, estimate_biases(run_seed("Spielberg", 4), 4.0));
+        assert_ne!(a.lateral_speed_mps, 0.0);
+        assert_eq!(
+            estimate_biases(run_seed("Spielberg", 3), 0.0),
+            EstimateBias::default()
+        );
+        // Twice the level, twice the bias: the same draw scaled.
+        let half = estimate_biases(run_seed("Spielberg", 3), 2.0);
+        assert_eq!(a.yaw_rate_radps, 2.0 * half.yaw_rate_radps);
+        // Over many seeds: zero mean, the level's standard deviation.
+        let n = 20_000;
+        let draws: Vec<EstimateBias> = (0..n).map(|k| estimate_biases(k, 1.0)).collect();
+        for (name, xs, sigma) in [
+            (
+                "lateral speed",
+                draws
+                    .iter()
+                    .map(|b| b.lateral_speed_mps)
+                    .collect::<Vec<_>>(),
+                NOISE_UNIT.lateral_speed_bias_mps,
+            ),
+            (
+                "yaw rate",
+                draws.iter().map(|b| b.yaw_rate_radps).collect::<Vec<_>>(),
+                NOISE_UNIT.yaw_rate_bias_radps,
+            ),
+        ] {
+            let mean = xs.iter().sum::<f64>() / n as f64;
+            let sd = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
+            assert!(mean.abs() < 0.03 * sigma, "{name}: mean {mean}");
+            assert!(
+                (sd / sigma - 1.0).abs() < 0.03,
+                "{name}: σ {sd} for {sigma}"
+            );
+        }
     }
 
     #[test]

@@ -5,13 +5,9 @@
 //! # Patches
 //!
 //! A patch covers the arc lengths `[START_M, START_M + LENGTH_M)` of the track's
-//! centre line (m, from its first point), with the road friction `MU` there; the rest
-//! of the road has the run's `--mu`. On a closed track positions are taken modulo the
-//! lap length, so a patch recurs every lap and one that runs past the lap line goes
-//! on from the start of the lap. A patch must start inside the lap
-//! (`0 ≤ START_M < lap`), be no longer than it (`0 < LENGTH_M ≤ lap`), have
-//! `0 < MU ≤ 2`, and overlap no other patch; on an open track it must also end by
-//! the track's end.
+//! centre line with the road friction `MU` there, `0 < MU ≤ 2`; the rest of the
+//! road has the run's `--mu`. Patches wrap over laps and must fit the lap as
+//! [`crate::world::lap_patches`] says.
 //!
 //! # What the plant sees
 //!
@@ -46,6 +42,9 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::world::lap_patches::PatchError;
+use crate::world::lap_patches::{LapSpans, PatchKind, PatchPlace};
+
 /// `μ̂` below this fraction of the road's lowest recent μ is a false drop.
 pub const FALSE_DROP_RATIO: f64 = 0.9;
 
@@ -72,42 +71,21 @@ impl fmt::Display for MuPatch {
     }
 }
 
+/// `--mu-patch`: its name, what it gives the road, its third number.
+pub const MU_PATCH: PatchKind = PatchKind {
+    option: "--mu-patch",
+    quantity: "friction",
+    value: ("MU", "friction"),
+    example: "300:200:0.5",
+};
+
 impl FromStr for MuPatch {
     type Err = String;
     /// `START_M:LENGTH_M:MU`, each a finite number, `START_M ≥ 0`, `LENGTH_M > 0`,
     /// `0 < MU ≤ 2` (what needs the track, its length, is checked by
     /// [`RoadFriction::new`]).
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let usage =
-            "wants START_M:LENGTH_M:MU (metres along the lap, metres, friction), e.g. 300:200:0.5";
-        let parts: Vec<&str> = s.split(':').map(str::trim).collect();
-        if parts.len() != 3 {
-            return Err(format!("--mu-patch {s:?}: {usage}"));
-        }
-        let mut v = [0.0; 3];
-        for (x, (p, name)) in v
-            .iter_mut()
-            .zip(parts.iter().zip(["START_M", "LENGTH_M", "MU"]))
-        {
-            *x = p
-                .parse::<f64>()
-                .ok()
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| {
-                    format!("--mu-patch {s:?}: {name} {p:?} is not a finite number; {usage}")
-                })?;
-        }
-        let [start_m, length_m, mu] = v;
-        if start_m < 0.0 {
-            return Err(format!(
-                "--mu-patch {s:?}: START_M must be ≥ 0 m along the lap, got {start_m}"
-            ));
-        }
-        if length_m <= 0.0 {
-            return Err(format!(
-                "--mu-patch {s:?}: LENGTH_M must be a positive length in m, got {length_m}"
-            ));
-        }
+        let [start_m, length_m, mu] = MU_PATCH.parse(s)?;
         if !(mu > 0.0 && mu <= MAX_MU) {
             return Err(format!(
                 "--mu-patch {s:?}: MU must be a friction coefficient in (0, {MAX_MU}], got {mu}"
@@ -130,68 +108,13 @@ pub fn patches_to_string(patches: &[MuPatch]) -> String {
         .join(";")
 }
 
-/// Why patches do not fit a track.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum PatchError {
-    /// The road's own friction is out of range.
-    #[error("road friction {0}: must be a friction coefficient in (0, 2]")]
-    Road(f64),
-    /// A patch's numbers are out of range (see [`MuPatch::from_str`]).
-    #[error("{0}")]
-    Value(String),
-    /// A patch starts at or past the end of the lap.
-    #[error("--mu-patch {patch}: starts at {start_m} m, past the end of the lap of track `{track}` ({lap_m:.1} m long); START_M must be in [0, {lap_m:.1})")]
-    StartPastLap {
-        /// The patch, as given.
-        patch: String,
-        /// Its start, m.
-        start_m: f64,
-        /// The track's name.
-        track: String,
-        /// The lap's length, m.
-        lap_m: f64,
-    },
-    /// A patch is longer than the lap (or, on an open track, runs past its end).
-    #[error("--mu-patch {patch}: {length_m} m long from {start_m} m does not fit track `{track}` ({lap_m:.1} m long, {kind})")]
-    TooLong {
-        /// The patch, as given.
-        patch: String,
-        /// Its start, m.
-        start_m: f64,
-        /// Its length, m.
-        length_m: f64,
-        /// The track's name.
-        track: String,
-        /// The lap's length, m.
-        lap_m: f64,
-        /// What the limit is.
-        kind: &'static str,
-    },
-    /// Two patches cover the same stretch of road.
-    #[error("--mu-patch {a} and {b} overlap on track `{track}` (lap {lap_m:.1} m): give each stretch of road one friction")]
-    Overlap {
-        /// The first patch.
-        a: String,
-        /// The second patch.
-        b: String,
-        /// The track's name.
-        track: String,
-        /// The lap's length, m.
-        lap_m: f64,
-    },
-}
-
 /// The road's friction along a track: its μ and its patches.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RoadFriction {
     base_mu: f64,
-    /// The patches as intervals `[a, b)` of `[0, lap)` (a wrapping patch in two),
-    /// with their μ.
-    spans: Vec<(f64, f64, f64)>,
-    /// The index of each span's patch in the patches given.
-    owner: Vec<usize>,
-    lap_m: f64,
-    closed: bool,
+    /// Each patch's μ, in the order given.
+    mus: Vec<f64>,
+    spans: LapSpans,
 }
 
 impl RoadFriction {
@@ -207,65 +130,22 @@ impl RoadFriction {
         if !(base_mu.is_finite() && base_mu > 0.0 && base_mu <= MAX_MU) {
             return Err(PatchError::Road(base_mu));
         }
-        let mut spans = Vec::new();
-        let mut owner = Vec::new();
-        for (k, p) in patches.iter().enumerate() {
+        let mut places = Vec::new();
+        for p in patches {
             // The same checks as parsing, for patches built in code.
             p.to_string()
                 .parse::<MuPatch>()
                 .map_err(PatchError::Value)?;
-            if p.start_m >= lap_m {
-                return Err(PatchError::StartPastLap {
-                    patch: p.to_string(),
-                    start_m: p.start_m,
-                    track: track.to_string(),
-                    lap_m,
-                });
-            }
-            let too_long = |kind| PatchError::TooLong {
-                patch: p.to_string(),
+            places.push(PatchPlace {
                 start_m: p.start_m,
                 length_m: p.length_m,
-                track: track.to_string(),
-                lap_m,
-                kind,
-            };
-            let end = p.start_m + p.length_m;
-            if closed {
-                if p.length_m > lap_m {
-                    return Err(too_long("a patch may be at most one lap long"));
-                }
-                if end > lap_m {
-                    spans.push((p.start_m, lap_m, p.mu));
-                    spans.push((0.0, end - lap_m, p.mu));
-                    owner.extend([k, k]);
-                    continue;
-                }
-            } else if end > lap_m {
-                return Err(too_long("on an open track a patch must end by its end"));
-            }
-            spans.push((p.start_m, end, p.mu));
-            owner.push(k);
-        }
-        for i in 0..spans.len() {
-            for j in i + 1..spans.len() {
-                let (a, b) = (spans[i], spans[j]);
-                if owner[i] != owner[j] && a.0 < b.1 && b.0 < a.1 {
-                    return Err(PatchError::Overlap {
-                        a: patches[owner[i]].to_string(),
-                        b: patches[owner[j]].to_string(),
-                        track: track.to_string(),
-                        lap_m,
-                    });
-                }
-            }
+                shown: p.to_string(),
+            });
         }
         Ok(Self {
             base_mu,
-            spans,
-            owner,
-            lap_m,
-            closed,
+            mus: patches.iter().map(|p| p.mu).collect(),
+            spans: LapSpans::new(&MU_PATCH, &places, track, lap_m, closed)?,
         })
     }
 
@@ -273,10 +153,8 @@ impl RoadFriction {
     pub fn uniform(mu: f64) -> Self {
         Self {
             base_mu: mu,
-            spans: Vec::new(),
-            owner: Vec::new(),
-            lap_m: f64::INFINITY,
-            closed: false,
+            mus: Vec::new(),
+            spans: LapSpans::none(),
         }
     }
 
@@ -293,36 +171,23 @@ impl RoadFriction {
     /// The `k`-th patch given as intervals `[a, b)` of the lap's arc length (m): one,
     /// or two when it runs over the lap line.
     pub fn patch_spans(&self, k: usize) -> impl Iterator<Item = (f64, f64)> + '_ {
-        self.spans
-            .iter()
-            .zip(&self.owner)
-            .filter(move |(_, &o)| o == k)
-            .map(|(&(a, b, _), _)| (a, b))
+        self.spans.of_patch(k)
     }
 
     /// The friction at arc length `s_m` (m along the centre line from its first
     /// point; any number of laps on a closed track, before the start or past the end
     /// of an open one: the road's μ).
     pub fn mu_at(&self, s_m: f64) -> f64 {
-        if self.spans.is_empty() || !s_m.is_finite() {
-            return self.base_mu;
-        }
-        let s = if self.closed {
-            s_m.rem_euclid(self.lap_m)
-        } else {
-            s_m
-        };
         self.spans
-            .iter()
-            .find(|(a, b, _)| *a <= s && s < *b)
-            .map_or(self.base_mu, |&(_, _, mu)| mu)
+            .patch_at(s_m)
+            .map_or(self.base_mu, |k| self.mus[k])
     }
 
     /// The friction under each wheel `[fl, fr, rl, rr]` of a car whose centre of
     /// gravity is at arc length `s_m` (m), front axle `lf_m` ahead of it and rear
     /// axle `lr_m` behind (module docs).
     pub fn wheels_mu(&self, s_m: f64, lf_m: f64, lr_m: f64) -> [f64; 4] {
-        if self.spans.is_empty() {
+        if self.is_uniform() {
             return [self.base_mu; 4];
         }
         let (front, rear) = (self.mu_at(s_m + lf_m), self.mu_at(s_m - lr_m));

@@ -27,6 +27,7 @@ use crate::world::obstacle_file::{
     load_obstacles_path, obstacles_to_csv_string, vehicle_footprint, Obstacle, ObstacleError,
 };
 use crate::world::road_friction::MuPatch;
+use crate::world::road_grade::GradePatch;
 use crate::world::track::{pose_along, Track, TrackError, TrackPiece};
 
 /// Half-width of the `paper` track on each side of the centre line (m).
@@ -265,6 +266,9 @@ pub struct Scenario {
     /// Patches of road with their own friction (`--mu-patch`; see
     /// [`crate::world::road_friction`]); none by default.
     pub mu_patches: Vec<MuPatch>,
+    /// Stretches of road that rise or fall (`--grade`; see
+    /// [`crate::world::road_grade`]); level by default.
+    pub grade_patches: Vec<GradePatch>,
     /// Initial longitudinal speed (m/s).
     pub initial_speed_mps: f64,
     /// Initial pose `[x (m), y (m), heading (rad)]`: on the centre line at
@@ -306,6 +310,7 @@ impl Scenario {
             },
             mu: PAPER_MU,
             mu_patches: Vec::new(),
+            grade_patches: Vec::new(),
             initial_speed_mps: PAPER_INITIAL_SPEED_MPS,
             start_pose: [0.0, 0.0, 0.0],
         }
@@ -349,6 +354,7 @@ pub fn resolve(
         obstacles,
         mu: PAPER_MU,
         mu_patches: Vec::new(),
+        grade_patches: Vec::new(),
         initial_speed_mps: PAPER_INITIAL_SPEED_MPS,
     })
 }
