@@ -548,7 +548,8 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
         // The actuation leaves when the modelled activation ends.
         let sent_us = t_us + (cycles / self.ecu_clock_hz * 1e6).ceil() as u64;
         let mut skipped_releases = 0;
-        self.route.period(t_us, !std::mem::take(&mut self.route_unheard));
+        self.route
+            .period(t_us, !std::mem::take(&mut self.route_unheard));
         if t_us.is_multiple_of(PLAN_PERIOD_US) {
             self.releases += 1;
             if self.busy_until_us > t_us {

@@ -751,9 +751,7 @@ fn solve_relaxation(
         let d = variable().min(lo[k]);
         let _ = bounded.add(if hi[k].is_finite() { d.max(hi[k]) } else { d });
     }
-    let mut problem = bounded
-        .maximise(objective.clone())
-        .using(good_lp::microlp);
+    let mut problem = bounded.maximise(objective.clone()).using(good_lp::microlp);
     for c in constraints {
         problem = problem.with(c.clone());
     }
@@ -777,9 +775,9 @@ fn solve_mixed_integer(
     }
     match problem.solve() {
         Ok(s) => Ok((s, "integer")),
-        Err(good_lp::ResolutionError::Infeasible | good_lp::ResolutionError::Unbounded) => {
-            Err(IpetError::Solver("the IPET program is infeasible or unbounded".into()))
-        }
+        Err(good_lp::ResolutionError::Infeasible | good_lp::ResolutionError::Unbounded) => Err(
+            IpetError::Solver("the IPET program is infeasible or unbounded".into()),
+        ),
         Err(_) => branch_and_bound(relaxed, objective, constraints, integers),
     }
 }
