@@ -590,8 +590,8 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
     );
 }
 
-/// One source loop the compiler split into nested binary loops (the QP's main
-/// loop: a path that skips its head) shares its bound only where the source says
+/// One source loop the compiler split into nested binary loops (the control
+/// link's frame reader in `USART2`: a path that skips its head) shares its bound only where the source says
 /// so (`// wcet-bound: same loop`): without it the inner loop is refused, with a
 /// message that names the lines it may be written on.
 #[test]
@@ -604,9 +604,9 @@ fn a_split_loop_without_its_own_annotation_is_refused() {
         .source
         .as_deref()
         .unwrap_or("")
-        .contains("qp/src/active_set.rs")
+        .contains("firmware/src/bin/ecu.rs")
         && l.source.as_deref().unwrap_or("").contains("`same loop`")));
-    let (_dir, edited) = edited_sources("qp/src/active_set.rs", |t| {
+    let (_dir, edited) = edited_sources("firmware/src/bin/ecu.rs", |t| {
         t.replace("// wcet-bound: same loop", "// (removed by a test)")
     });
     let after = host_sim::wcet::analysis::analyse(elf, &edited, &[]).unwrap();
@@ -616,7 +616,7 @@ fn a_split_loop_without_its_own_annotation_is_refused() {
     assert!(
         why.contains("enclosing loop's")
             && why.contains("same loop")
-            && why.contains("qp/src/active_set.rs:"),
+            && why.contains("firmware/src/bin/ecu.rs:"),
         "{why}"
     );
 }

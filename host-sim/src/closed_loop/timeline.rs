@@ -92,9 +92,10 @@ use crate::closed_loop::SimOptions;
 use crate::model::plant::{Inputs, Plant, RoadUnder, State};
 use crate::model::vehicle::VehicleParams;
 use crate::model::vehicle::{vehicle_length_m, vehicle_width_m};
+use crate::world::lap_patches;
 use crate::world::obstacle_file;
-use crate::world::road_friction::{judge, patches_to_string, MuSample, RoadFriction};
-use crate::world::road_grade::{grades_to_string, RoadGrade};
+use crate::world::road_friction::{judge, MuSample, RoadFriction};
+use crate::world::road_grade::RoadGrade;
 use crate::world::scenario::Scenario;
 
 /// One row of the 10 ms log.
@@ -458,8 +459,8 @@ pub fn run_with<T: Real, E: Ecu<T>>(
     }
 
     let mut sum = meter.finish(t_us, stop_reason, &res);
-    sum.mu_patches = patches_to_string(&scenario.mu_patches);
-    sum.grade_patches = grades_to_string(&scenario.grade_patches);
+    sum.mu_patches = lap_patches::join(&scenario.mu_patches);
+    sum.grade_patches = lap_patches::join(&scenario.grade_patches);
     sum.actuators = vehicle.actuators.to_settings_string();
     let samples: Vec<MuSample> = res
         .log

@@ -52,6 +52,12 @@ impl FlowFact {
     }
 }
 
+/// A fact's name from the annotation that states it (`file:line: `expression``):
+/// its `file:line`.
+fn stated_name(stated: &str) -> String {
+    stated.split(": `").next().unwrap_or(stated).to_string()
+}
+
 /// The counted edges of one loop fact: its back edges, and its entries where
 /// the bound counts the header's runs.
 fn loop_edges(
@@ -174,7 +180,7 @@ pub fn flow_facts(
             // are a flow fact per entry of this loop.
             Per::Entry if shared.is_empty() => {}
             Per::Entry => out.push(FlowFact {
-                name: stated.split(": `").next().unwrap_or(&stated).to_string(),
+                name: stated_name(&stated),
                 per: format!("entry of a loop of `{}`", name_of(f)),
                 counts: format!(
                     "iterations of one source loop split into {n} binary loops (`same loop`)"
@@ -206,7 +212,7 @@ pub fn flow_facts(
                     _ => ("activation".to_string(), CounterScope::Activation),
                 };
                 out.push(FlowFact {
-                    name: stated.split(": `").next().unwrap_or(&stated).to_string(),
+                    name: stated_name(&stated),
                     per,
                     counts: format!("iterations of a loop of `{}`", name_of(f)),
                     bound: fact.bound,
@@ -240,7 +246,7 @@ pub fn flow_facts(
                 };
                 let stated = cap.annotation.map_or_else(String::new, source);
                 out.push(FlowFact {
-                    name: stated.split(": `").next().unwrap_or(&stated).to_string(),
+                    name: stated_name(&stated),
                     per: match cap.loop_index {
                         Some(_) => format!("loop entry in `{}`", name_of(cap.function)),
                         None => format!("call of `{}`", name_of(cap.function)),

@@ -79,7 +79,7 @@ pub struct StaticTiming {
     pub static_bound_instructions: Option<u64>,
     /// The same in worst-case cycles of the processor and memory model.
     pub static_bound_cycles: Option<u64>,
-    /// IPET bound on the task's own job (`ecu::plan_job`, `ecu::control_job`), the
+    /// IPET bound on the task's own job (`ecu::plan_job`, `ecu_control_job`), the
     /// part the budget limits, in cycles.
     pub job_static_bound_cycles: Option<u64>,
     /// Response-time bound (static C, blocking, interference), in µs; `None` when
@@ -105,7 +105,7 @@ pub struct StaticTiming {
 pub struct StaticSummary {
     /// The plan task (`USART1`, its job `ecu::plan_job`).
     pub plan: StaticTiming,
-    /// The control task (`USART2`, its job `ecu::control_job`).
+    /// The control task (`USART2`, its job `ecu_control_job`).
     pub control: StaticTiming,
     /// IPET bound on the plan task's adoption of a window of the road
     /// (`ecu::window_job`, in place of its job), in cycles.

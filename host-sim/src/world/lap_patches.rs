@@ -129,6 +129,26 @@ pub enum PatchError {
     },
 }
 
+/// A patch of one option (`--mu-patch`, `--grade`): shown as the option spells it
+/// (`START:LENGTH:VALUE`) and read back from that form with every check of the
+/// option's.
+pub trait LapPatch: std::fmt::Display + std::str::FromStr<Err = String> {
+    /// Start along the lap, m.
+    fn start_m(&self) -> f64;
+    /// Length along the road, m.
+    fn length_m(&self) -> f64;
+}
+
+/// The patches as one string, each as its option spells it, joined by `;` (empty
+/// without any).
+pub fn join<P: std::fmt::Display>(patches: &[P]) -> String {
+    patches
+        .iter()
+        .map(P::to_string)
+        .collect::<Vec<_>>()
+        .join(";")
+}
+
 /// One patch as [`LapSpans::new`] takes it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PatchPlace {
@@ -158,6 +178,28 @@ impl LapSpans {
             lap_m: f64::INFINITY,
             closed: false,
         }
+    }
+
+    /// [`Self::new`] on patches built in code: each is first read back from the
+    /// form its option spells (the same checks as parsing the command line).
+    pub fn of<P: LapPatch>(
+        kind: &PatchKind,
+        patches: &[P],
+        track: &str,
+        lap_m: f64,
+        closed: bool,
+    ) -> Result<Self, PatchError> {
+        let mut places = Vec::new();
+        for p in patches {
+            let shown = p.to_string();
+            shown.parse::<P>().map_err(PatchError::Value)?;
+            places.push(PatchPlace {
+                start_m: p.start_m(),
+                length_m: p.length_m(),
+                shown,
+            });
+        }
+        Self::new(kind, &places, track, lap_m, closed)
     }
 
     /// Fits `patches` of option `kind` to the lap of track `track` (name, for

@@ -43,7 +43,7 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 pub use crate::world::lap_patches::PatchError;
-use crate::world::lap_patches::{LapSpans, PatchKind, PatchPlace};
+use crate::world::lap_patches::{LapPatch, LapSpans, PatchKind};
 
 /// `μ̂` below this fraction of the road's lowest recent μ is a false drop.
 pub const FALSE_DROP_RATIO: f64 = 0.9;
@@ -63,6 +63,15 @@ pub struct MuPatch {
     pub length_m: f64,
     /// Road friction on the patch, dimensionless.
     pub mu: f64,
+}
+
+impl LapPatch for MuPatch {
+    fn start_m(&self) -> f64 {
+        self.start_m
+    }
+    fn length_m(&self) -> f64 {
+        self.length_m
+    }
 }
 
 impl fmt::Display for MuPatch {
@@ -99,15 +108,6 @@ impl FromStr for MuPatch {
     }
 }
 
-/// The patches as one string, `START:LENGTH:MU` joined by `;` (empty without any).
-pub fn patches_to_string(patches: &[MuPatch]) -> String {
-    patches
-        .iter()
-        .map(MuPatch::to_string)
-        .collect::<Vec<_>>()
-        .join(";")
-}
-
 /// The road's friction along a track: its μ and its patches.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RoadFriction {
@@ -130,22 +130,10 @@ impl RoadFriction {
         if !(base_mu.is_finite() && base_mu > 0.0 && base_mu <= MAX_MU) {
             return Err(PatchError::Road(base_mu));
         }
-        let mut places = Vec::new();
-        for p in patches {
-            // The same checks as parsing, for patches built in code.
-            p.to_string()
-                .parse::<MuPatch>()
-                .map_err(PatchError::Value)?;
-            places.push(PatchPlace {
-                start_m: p.start_m,
-                length_m: p.length_m,
-                shown: p.to_string(),
-            });
-        }
         Ok(Self {
             base_mu,
             mus: patches.iter().map(|p| p.mu).collect(),
-            spans: LapSpans::new(&MU_PATCH, &places, track, lap_m, closed)?,
+            spans: LapSpans::of(&MU_PATCH, patches, track, lap_m, closed)?,
         })
     }
 

@@ -28,7 +28,7 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::world::lap_patches::{LapSpans, PatchError, PatchKind, PatchPlace};
+use crate::world::lap_patches::{LapPatch, LapSpans, PatchError, PatchKind};
 
 /// Steepest grade a patch may have, %: a steep public road (the steepest streets
 /// are about 35 %; motorways keep under 6–8 %).
@@ -51,6 +51,15 @@ pub struct GradePatch {
     pub length_m: f64,
     /// Its grade `100·tan γ`, % (positive: the road rises in the direction of travel).
     pub percent: f64,
+}
+
+impl LapPatch for GradePatch {
+    fn start_m(&self) -> f64 {
+        self.start_m
+    }
+    fn length_m(&self) -> f64 {
+        self.length_m
+    }
 }
 
 impl fmt::Display for GradePatch {
@@ -79,16 +88,6 @@ impl FromStr for GradePatch {
     }
 }
 
-/// The patches as one string, `START:LENGTH:PERCENT` joined by `;` (empty without
-/// any).
-pub fn grades_to_string(patches: &[GradePatch]) -> String {
-    patches
-        .iter()
-        .map(GradePatch::to_string)
-        .collect::<Vec<_>>()
-        .join(";")
-}
-
 /// The road's grade along a track.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RoadGrade {
@@ -106,21 +105,9 @@ impl RoadGrade {
         lap_m: f64,
         closed: bool,
     ) -> Result<Self, PatchError> {
-        let mut places = Vec::new();
-        for p in patches {
-            // The same checks as parsing, for patches built in code.
-            p.to_string()
-                .parse::<GradePatch>()
-                .map_err(PatchError::Value)?;
-            places.push(PatchPlace {
-                start_m: p.start_m,
-                length_m: p.length_m,
-                shown: p.to_string(),
-            });
-        }
         Ok(Self {
             slopes: patches.iter().map(|p| p.percent / 100.0).collect(),
-            spans: LapSpans::new(&GRADE, &places, track, lap_m, closed)?,
+            spans: LapSpans::of(&GRADE, patches, track, lap_m, closed)?,
         })
     }
 

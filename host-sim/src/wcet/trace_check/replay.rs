@@ -580,15 +580,7 @@ impl<'a> Replay<'a> {
                 if self.instruction(last).is_some_and(|i| i.target.is_none()) {
                     *self.indirect.entry((last_address, f)).or_insert(0) += 1;
                 }
-                if let Some(fr) = self.stack.last_mut().and_then(|c| c.frames.pop()) {
-                    let mut fr = self.end_frame_scopes(fr, false);
-                    fr.function = f;
-                    fr.block = None;
-                    fr.active.clear();
-                    if let Some(c) = self.stack.last_mut() {
-                        c.frames.push(fr);
-                    }
-                }
+                self.replace_top_frame(f);
                 break;
             }
             let from = self.instruction(last).map_or(0, |i| i.address);
@@ -619,6 +611,20 @@ impl<'a> Replay<'a> {
         }
     }
 
+    /// The top context's innermost frame, its scopes ended, goes on in function
+    /// `f` (a tail call, or a transfer the graphs do not explain).
+    fn replace_top_frame(&mut self, f: usize) {
+        if let Some(fr) = self.stack.last_mut().and_then(|c| c.frames.pop()) {
+            let mut fr = self.end_frame_scopes(fr, false);
+            fr.function = f;
+            fr.block = None;
+            fr.active.clear();
+            if let Some(c) = self.stack.last_mut() {
+                c.frames.push(fr);
+            }
+        }
+    }
+
     /// Starts the top context's innermost frame over in function `f` (the first
     /// instruction of a context, or after a transfer the graphs do not explain).
     fn restart_frame(&mut self, f: usize) {
@@ -627,17 +633,7 @@ impl<'a> Replay<'a> {
         };
         match c.frames.last() {
             Some(fr) if fr.function == f => {}
-            Some(_) => {
-                if let Some(fr) = self.stack.last_mut().and_then(|c| c.frames.pop()) {
-                    let mut fr = self.end_frame_scopes(fr, false);
-                    fr.function = f;
-                    fr.block = None;
-                    fr.active.clear();
-                    if let Some(c) = self.stack.last_mut() {
-                        c.frames.push(fr);
-                    }
-                }
-            }
+            Some(_) => self.replace_top_frame(f),
             None => c.frames.push(Frame::new(f, None)),
         }
     }
