@@ -756,7 +756,7 @@ impl Ecu<f32> for QemuEcu {
         // sensor frame after it. A window that comes while another is still on
         // its way replaces the frames not yet sent (its first chunk restarts the
         // ECU's staging).
-        self.route_queue = path_chunks(&w.rows).into_iter().collect();
+        self.route_queue = path_chunks(&w.rows).collect();
         self.route_queue.push_back(Down::Window(link::WindowFrame {
             rows: w.rows.len() as u16,
             origin_m: w.origin_m as f32,

@@ -723,33 +723,29 @@ pub fn task_bound(
 pub const MAX_NODES: usize = 24;
 
 /// The linear program `max objective` under `constraints`, over `count`
-/// continuous variables `≥ 0` (the IPET's, in the order they were made), those in
-/// `bounds` `(variable, low, high)` within their bounds, by `microlp`.
+/// continuous variables `≥ 0` (the IPET's, in the order they were made), those at
+/// the positions in `bounds` `(position, low, high)` within their bounds, by
+/// `microlp`. The branching bounds are variable bounds (no extra row): a fresh
+/// set of `count` variables has the IPET's handles, so `objective` and
+/// `constraints` apply to it as they are.
 fn solve_relaxation(
     count: usize,
     objective: &Expression,
     constraints: &[good_lp::Constraint],
-    bounds: &[(Variable, f64, f64)],
+    bounds: &[(usize, f64, f64)],
 ) -> Result<good_lp::solvers::microlp::MicroLpSolution, good_lp::ResolutionError> {
-    let mut vars = ProblemVariables::new();
-    let mut made = Vec::with_capacity(count);
-    for _ in 0..count {
-        made.push(vars.add(variable().min(0.0)));
-    }
-    // Branching bounds as variable bounds (no extra row): the handles are
-    // positions, the same as the IPET's.
     let mut lo = vec![0.0f64; count];
     let mut hi = vec![f64::INFINITY; count];
-    for &(v, l, h) in bounds {
-        if let Some(k) = made.iter().position(|&m| m == v) {
-            lo[k] = lo[k].max(l);
-            hi[k] = hi[k].min(h);
+    for &(k, l, h) in bounds {
+        if let (Some(lo), Some(hi)) = (lo.get_mut(k), hi.get_mut(k)) {
+            *lo = lo.max(l);
+            *hi = hi.min(h);
         }
     }
     let mut bounded = ProblemVariables::new();
-    for k in 0..count {
-        let d = variable().min(lo[k]);
-        let _ = bounded.add(if hi[k].is_finite() { d.max(hi[k]) } else { d });
+    for (&l, &h) in lo.iter().zip(&hi) {
+        let d = variable().min(l);
+        let _ = bounded.add(if h.is_finite() { d.max(h) } else { d });
     }
     let mut problem = bounded.maximise(objective.clone()).using(good_lp::microlp);
     for c in constraints {
@@ -796,7 +792,17 @@ fn branch_and_bound(
 ) -> Result<(good_lp::solvers::microlp::MicroLpSolution, &'static str), IpetError> {
     // A count within this of a whole number is that number.
     const WHOLE: f64 = 1e-6;
-    type Bounds = Vec<(Variable, f64, f64)>;
+    type Bounds = Vec<(usize, f64, f64)>;
+    // Each integer variable's position among the `count` (handles compare by
+    // position: a fresh set made the same way has the same handles).
+    let positions: Vec<(Variable, usize)> = {
+        let mut fresh = ProblemVariables::new();
+        let made: Vec<Variable> = (0..count).map(|_| fresh.add(variable())).collect();
+        integers
+            .iter()
+            .filter_map(|&x| made.iter().position(|&m| m == x).map(|k| (x, k)))
+            .collect()
+    };
     // Open nodes: their relaxation's value, solution and bounds.
     let mut open: Vec<(f64, good_lp::solvers::microlp::MicroLpSolution, Bounds)> = Vec::new();
     let root = solve_relaxation(count, objective, constraints, &[])
@@ -810,11 +816,11 @@ fn branch_and_bound(
             ));
         };
         let (_, s, bounds) = open.swap_remove(k);
-        let fractional = integers.iter().copied().find(|&x| {
+        let fractional = positions.iter().copied().find(|&(x, _)| {
             let y = s.value(x);
             (y - y.round()).abs() > WHOLE
         });
-        let Some(x) = fractional else {
+        let Some((x, position)) = fractional else {
             return Ok((s, "integer"));
         };
         if nodes + 2 > MAX_NODES {
@@ -822,9 +828,9 @@ fn branch_and_bound(
         }
         let y = s.value(x);
         let mut down = bounds.clone();
-        down.push((x, 0.0, y.floor()));
+        down.push((position, 0.0, y.floor()));
         let mut up = bounds;
-        up.push((x, y.ceil(), f64::INFINITY));
+        up.push((position, y.ceil(), f64::INFINITY));
         for b in [down, up] {
             nodes += 1;
             match solve_relaxation(count, objective, constraints, &b) {
