@@ -89,14 +89,14 @@ pub fn encode<M: Serialize + ?Sized>(
     tx: &mut Authenticator,
     out: &mut [u8],
 ) -> Result<usize, FrameError> {
-    use postcard::ser_flavors::{crc::CrcModifier, Cobs};
+    use postcard::ser_flavors::Cobs;
     let freshness = tx.next()?;
     let cobs = Cobs::try_new(FrameBuffer::new(out)).map_err(|_| FrameError::BufferTooSmall)?;
-    let crc = CrcModifier::new(cobs, CRC32.digest());
     mac.begin(tx.stream());
     let flavor = SecOcModifier {
-        inner: crc,
+        inner: cobs,
         mac,
+        crc: CRC32.digest(),
         freshness,
     };
     // postcard writes a `u8` as its one byte: the tuple is the version byte, then
@@ -111,15 +111,23 @@ pub fn encode<M: Serialize + ?Sized>(
     }
 }
 
-/// The flavour that authenticates a frame as postcard writes it: each byte (the
-/// version, then the message) goes through the CMAC (begun on the stream by
-/// [`encode`]) and on to `inner` (the CRC, then COBS); at the end the freshness
-/// value, also through the CMAC, then the tag.
+/// The flavour that authenticates and checksums a frame as postcard writes it:
+/// each byte (the version, then the message) goes through the CMAC (begun on the
+/// stream by [`encode`]) and the CRC, and on to `inner` (COBS, into the frame's
+/// buffer); at the end the freshness value (through the CMAC and the CRC), the
+/// tag (through the CRC), then the CRC. postcard hands most fields over as
+/// slices ([`Flavor::try_extend`]): the CRC takes each slice at once, the CMAC and
+/// COBS a byte at a time (one pass over the bytes, not a chain of per-byte calls
+/// through three flavours).
+///
+/// [`Flavor::try_extend`]: postcard::ser_flavors::Flavor::try_extend
 struct SecOcModifier<'m, B> {
-    /// The CRC and COBS flavours, into the frame's buffer.
+    /// COBS, into the frame's buffer.
     inner: B,
     /// The CMAC, begun on the frame's stream.
     mac: &'m mut LinkMac,
+    /// The CRC of the bytes so far.
+    crc: crc::Digest<'static, u32>,
     /// The frame's freshness value.
     freshness: u32,
 }
@@ -129,13 +137,30 @@ impl<B: postcard::ser_flavors::Flavor> postcard::ser_flavors::Flavor for SecOcMo
 
     fn try_push(&mut self, data: u8) -> postcard::Result<()> {
         self.mac.push(data);
+        self.crc.update(&[data]);
         self.inner.try_push(data)
+    }
+
+    fn try_extend(&mut self, data: &[u8]) -> postcard::Result<()> {
+        // The bytes of every slice of the frame: at most a frame's (the output
+        // buffer refuses the bytes past it), and the control task encodes one
+        // frame (an `Up`) per activation; the plan task encodes none.
+        // wcet-bound: MAX_UP_FRAME_BYTES per activation
+        self.crc.update(data);
+        // As above: a byte of the frame per pass.
+        // wcet-bound: MAX_UP_FRAME_BYTES per activation
+        for &b in data {
+            self.mac.push(b);
+            self.inner.try_push(b)?;
+        }
+        Ok(())
     }
 
     fn finalize(self) -> postcard::Result<B::Output> {
         let Self {
             mut inner,
             mac,
+            mut crc,
             freshness,
         } = self;
         let freshness = freshness.to_le_bytes();
@@ -145,12 +170,17 @@ impl<B: postcard::ser_flavors::Flavor> postcard::ser_flavors::Flavor for SecOcMo
             mac.push(b);
         }
         let tag = mac.finish();
-        let mut trailer = [0u8; SECURED_BYTES];
-        let (f, t) = trailer.split_at_mut(FRESHNESS_BYTES);
+        let mut trailer = [0u8; SECURED_BYTES + CRC_BYTES];
+        let (secured, check) = trailer.split_at_mut(SECURED_BYTES);
+        let (f, t) = secured.split_at_mut(FRESHNESS_BYTES);
         f.copy_from_slice(&freshness);
         t.copy_from_slice(&tag);
         // The freshness value and the tag (SECURED_BYTES).
         // wcet-bound: 12
+        crc.update(secured);
+        check.copy_from_slice(&crc.finalize().to_le_bytes());
+        // The freshness value, the tag and the CRC (SECURED_BYTES + CRC_BYTES).
+        // wcet-bound: 16
         for b in trailer {
             inner.try_push(b)?;
         }
