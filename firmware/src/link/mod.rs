@@ -616,6 +616,20 @@ pub const MAX_DRIVING_DOWN_FRAME_BYTES: usize =
 /// Largest encoded [`Up`] frame, bytes, delimiter included.
 pub const MAX_UP_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_UP_PAYLOAD_BYTES);
 
+/// Bytes through the CMAC for a frame of `payload` bytes: the stream's Data ID,
+/// the version byte, the payload and the freshness value (the tag's input, see
+/// [`secoc`]).
+pub const fn mac_input_bytes(payload: usize) -> usize {
+    1 + 1 + payload + FRESHNESS_BYTES
+}
+/// Largest CMAC input of an [`Up`] frame, bytes.
+pub const MAX_UP_MAC_INPUT_BYTES: usize = mac_input_bytes(MAX_UP_PAYLOAD_BYTES);
+/// Largest CMAC input of a [`Down`] frame, bytes.
+pub const MAX_DOWN_MAC_INPUT_BYTES: usize = mac_input_bytes(MAX_DOWN_PAYLOAD_BYTES);
+/// Largest CMAC input of a frame of the control link while driving (a
+/// [`Down::Sensor`]), bytes.
+pub const MAX_DRIVING_DOWN_MAC_INPUT_BYTES: usize = mac_input_bytes(MAX_DRIVING_DOWN_PAYLOAD_BYTES);
+
 const _: () = assert!(MAX_DOWN_FRAME_BYTES <= MAX_FRAME_BYTES);
 const _: () = assert!(MAX_DRIVING_DOWN_FRAME_BYTES <= MAX_DOWN_FRAME_BYTES);
 const _: () = assert!(MAX_UP_FRAME_BYTES <= MAX_FRAME_BYTES);

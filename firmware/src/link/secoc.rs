@@ -119,9 +119,12 @@ impl Aes {
     /// fixsliced implementation). Not inlined: the one place the cipher runs.
     #[inline(never)]
     fn encrypt(&self, block: &mut Block<Aes128>) {
-        // The aes crate's fixsliced AES-128 loop runs rounds 1–4, 5–8, then round 9
-        // and leaves (round 10 follows it): 3 iterations.
-        // wcet-bound: 3
+        // The aes crate's fixsliced AES-128 loop, as the ECU builds it (`--cfg
+        // aes_compact`, .cargo/config.toml): two rounds a pass (1–2, 3–4, 5–6, 7–8),
+        // then round 9 and it leaves (round 10 follows): 5 passes, 4 back edges.
+        // Without `aes_compact` it runs four rounds a pass: 2 back edges, within
+        // this bound.
+        // wcet-bound: 4
         self.0.encrypt_block(block);
     }
 }
@@ -213,9 +216,12 @@ impl LinkMac {
     #[inline(always)]
     pub(super) fn push(&mut self, byte: u8) {
         if usize::from(self.len) >= AES_BLOCK_BYTES {
-            // One block per 16 bytes of the frame, and the control task encodes one
-            // frame (an `Up`) per activation; the plan task encodes none.
-            // wcet-bound: MAX_UP_FRAME_BYTES / 16 times per activation
+            // A block goes through the cipher when a byte follows 16 held: with the
+            // Data ID held from `begin`, at most (M − 1) / 16 times for a MAC input
+            // of M bytes (the last block goes in `finish`). The control task
+            // encodes one frame (an `Up`) per activation; the plan task encodes
+            // none.
+            // wcet-bound: (MAX_UP_MAC_INPUT_BYTES - 1) / 16 times per activation
             self.process_block();
         }
         if let Some(slot) = self.block.get_mut(usize::from(self.len)) {
@@ -244,12 +250,14 @@ impl LinkMac {
             for (slot, &b) in free.iter_mut().zip(now) {
                 *slot = b;
             }
-            // A pass per block of the frame (the binary's back edge is on this line):
-            // frames below MAX_FRAME_BYTES, and in the ECU's tasks at most theirs
-            // (decode's bounds), plus the first, partial block.
+            // A pass per block of the MAC input (the binary's back edge is on this
+            // line): with the Data ID held from `begin`, the first pass fills the
+            // block, each next one takes 16 bytes, so ⌈M / 16⌉ passes for a MAC
+            // input of M bytes. Frames below MAX_FRAME_BYTES, and in the ECU's
+            // tasks at most theirs (decode's bounds).
             // wcet-bound: MAX_FRAME_BYTES / 16 + 1
-            // wcet-bound in USART2: MAX_DRIVING_DOWN_FRAME_BYTES / 16 + 1
-            // wcet-bound in receive: MAX_DOWN_FRAME_BYTES / 16 + 1
+            // wcet-bound in USART2: (MAX_DRIVING_DOWN_MAC_INPUT_BYTES + 15) / 16
+            // wcet-bound in receive: (MAX_DOWN_MAC_INPUT_BYTES + 15) / 16
             self.len += take as u8;
             bytes = later;
         }

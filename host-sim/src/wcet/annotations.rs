@@ -176,6 +176,18 @@ pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
         ("MAX_DOWN_FRAME_BYTES", link::MAX_DOWN_FRAME_BYTES as u64),
         ("MAX_UP_FRAME_BYTES", link::MAX_UP_FRAME_BYTES as u64),
         (
+            "MAX_UP_MAC_INPUT_BYTES",
+            link::MAX_UP_MAC_INPUT_BYTES as u64,
+        ),
+        (
+            "MAX_DOWN_MAC_INPUT_BYTES",
+            link::MAX_DOWN_MAC_INPUT_BYTES as u64,
+        ),
+        (
+            "MAX_DRIVING_DOWN_MAC_INPUT_BYTES",
+            link::MAX_DRIVING_DOWN_MAC_INPUT_BYTES as u64,
+        ),
+        (
             "MAX_DRIVING_DOWN_FRAME_BYTES",
             link::MAX_DRIVING_DOWN_FRAME_BYTES as u64,
         ),
