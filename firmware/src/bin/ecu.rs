@@ -283,15 +283,19 @@ fn sh_open(name: &[u8], mode: usize) -> Option<usize> {
     }
 }
 
-/// Writes `bytes` to the host file `fd`; false when the host took none of a
-/// write. No slicing that can panic: the panic path uses it.
+/// Writes `bytes` to the host file `fd` in at most four writes (a host takes a
+/// frame in one; a short write is retried for the rest); false when the host
+/// took none of a write or the bytes are not all written after four. No slicing
+/// that can panic: the panic path uses it.
 fn sh_write(fd: usize, mut bytes: &[u8]) -> bool {
-    while !bytes.is_empty() {
+    // A host that has not taken the frame in four writes is not keeping up: the
+    // frame is given up (the caller counts it) rather than retried byte by byte.
+    // wcet-bound: 4
+    for _ in 0..4 {
+        if bytes.is_empty() {
+            return true;
+        }
         let left = unsafe { syscall!(WRITE, fd, bytes.as_ptr(), bytes.len()) };
-        // WCET: each pass returns or drops at least one byte (left < len), so at most
-        // bytes.len() passes: an `Up` frame (`Link::send`'s buffer holds
-        // MAX_UP_FRAME_BYTES) or `safe_stop`'s line (< 30 bytes).
-        // wcet-bound: MAX_UP_FRAME_BYTES
         if left >= bytes.len() {
             return false;
         }
@@ -300,7 +304,7 @@ fn sh_write(fd: usize, mut bytes: &[u8]) -> bool {
             None => return false,
         };
     }
-    true
+    bytes.is_empty()
 }
 
 /// Reads up to `buf.len()` bytes of the host file `fd`; the count, 0 at its end.
