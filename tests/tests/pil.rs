@@ -383,8 +383,10 @@ fn forged_replayed_and_corrupted_sensor_frames_are_refused_by_reason_and_never_a
     // announces reach the ECU only in the first frame it accepts after the fault).
     let scenario = Scenario::paper(true);
     let vehicle = VehicleParams::default();
+    // A window goes a frame per plan release (14 for the paper track's): the
+    // first one sent while driving is adopted within 12 s.
     let probe = SimOptions {
-        max_duration_s: 6.0,
+        max_duration_s: 12.0,
         ..SimOptions::default()
     };
     let mut modelled = SimulatedEcu::<f32>::new(&scenario, &vehicle, &probe).unwrap();
@@ -393,7 +395,7 @@ fn forged_replayed_and_corrupted_sensor_frames_are_refused_by_reason_and_never_a
         .plan_activations
         .iter()
         .find(|a| a.window)
-        .expect("a window of the road within 6 s")
+        .expect("a window of the road within 12 s")
         .release_us;
     const FRAMES: u32 = 20;
     let start_us = first_window_us - 100_000;
