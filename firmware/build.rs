@@ -16,7 +16,7 @@ const KEY_VAR: &str = "ECU_LINK_KEY";
 /// The development link key, for the simulator only: the ASCII bytes of
 /// `DEV-ONLY-SIM-KEY`, so that it reads as what it is wherever it shows. It is
 /// public (it is in this repository): a vehicle's key is never this one, nor in
-/// a build or a repository (README, "Authenticated frames").
+/// a build or a repository (docs/pil-and-hil.md, "Authenticated frames").
 const DEV_KEY_HEX: &str = "4445562d4f4e4c592d53494d2d4b4559";
 
 /// The 16 bytes of a key written as 32 hexadecimal digits, or what is wrong with

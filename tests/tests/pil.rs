@@ -201,7 +201,7 @@ fn an_ecu_too_slow_for_its_plans_counts_the_misses_as_the_host_does_and_keeps_th
     // the control task, the authentication of its frames included, completes
     // within its 10 ms. (At 2^7 the control task no longer does, and after
     // CONTROL_MISS_LIMIT misses the safe actuation takes the car off the road:
-    // see the README's known limitations.)
+    // see docs/limitations.md.)
     let (r, _, _, ticks) = drive(&Scenario::paper(true), 6, 12.0, "slow");
     let s = &r.summary;
     println!("{}", serde_json::to_string_pretty(s).unwrap());

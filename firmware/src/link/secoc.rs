@@ -42,7 +42,7 @@
 //!
 //! [`LINK_KEY`] is set at build time by `ECU_LINK_KEY` (32 hexadecimal digits),
 //! else the development key `DEV-ONLY-SIM-KEY` (ASCII), for the simulator only
-//! (the firmware's `build.rs`; the README says how a vehicle's key would be
+//! (the firmware's `build.rs`; docs/pil-and-hil.md says how a vehicle's key would be
 //! provisioned instead).
 //!
 //! # Cost

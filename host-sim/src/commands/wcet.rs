@@ -185,8 +185,8 @@ fn cap_trace(args: &WcetArgs) -> Result<PathBuf> {
 /// iteration cap, the activations nearest the bound's worst case (which charges
 /// every iteration a working set of `WS`). The heaviest traced activation of a
 /// grid of such runs (radii 15–25 m, 12–18 m/s, half-widths 2.5–5 m:
-/// `docs/tuning.md`, *The plan task signed*; re-measured with the sideslip lag of
-/// stop 35, which moved it from 22 m at 15 m/s).
+/// `docs/tuning.md`, *The plan task within its budget*; re-measured with the
+/// sideslip lag, which moved it from 22 m at 15 m/s).
 const FULL_SET_CIRCLE: (f64, f64, f64) = (20.0, 3.5, 14.0);
 
 /// Runs a short PIL run on [`FULL_SET_CIRCLE`], with QEMU's execution trace

@@ -7,7 +7,7 @@
 // drops bytes; QEMU holds them back), so its interference is bounded whatever
 // the other end sends; the control task re-arms it at each release.
 //
-// On a car the same frames would go over CAN-FD (README, "The ECU application"):
+// On a car the same frames would go over CAN-FD (docs/pil-and-hil.md, "The ECU application"):
 // a 64-byte data field per CAN-FD frame, the link's COBS frames cut into
 // segments by ISO 15765-2 (ISO-TP) on two identifiers (control, route), the
 // FDCAN's receive FIFOs standing for the two queues here.
