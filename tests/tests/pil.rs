@@ -193,16 +193,20 @@ fn the_ecu_in_the_loop_drives_round_the_obstacles_within_its_deadlines() {
 
 #[test]
 #[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
-fn an_ecu_too_slow_for_its_plans_counts_the_misses_as_the_host_does_and_keeps_the_car_safe() {
-    // 2^6 = 64 ns per instruction (an ECU ~11× slower than the 168 MHz part at the
-    // CPI bound): a plan activation over ~1.56 M instructions (100 ms) finishes
-    // past its deadline on the ECU's own clock (the cold start, the slowest warm
-    // steps), and an activation that runs past the next release skips it, while
-    // the control task, the authentication of its frames included, completes
-    // within its 10 ms. (At 2^7 the control task no longer does, and after
-    // CONTROL_MISS_LIMIT misses the safe actuation takes the car off the road:
-    // see docs/limitations.md.)
-    let (r, _, _, ticks) = drive(&Scenario::paper(true), 6, 12.0, "slow");
+fn an_ecu_too_slow_for_its_tasks_counts_the_misses_as_the_host_does_and_latches_the_safe_actuation()
+{
+    // 2^7 = 128 ns per instruction (an ECU ~21× slower than the 168 MHz part at
+    // the CPI bound): a plan activation over ~0.78 M instructions (100 ms),
+    // control interference included, finishes past its deadline on the ECU's own
+    // clock, and one that runs past the next release skips it. The control
+    // activations that send a plan event with its CMAC (up to ~89 k instructions,
+    // 11.4 ms here) overrun their 10 ms period too: after CONTROL_MISS_LIMIT
+    // consecutive misses the control task latches the safe actuation (zero
+    // torque, steering held). The car is not kept on the road by that (see
+    // docs/limitations.md); the test holds the ECU to counting what happened as
+    // the host does and to latching the safe actuation. (At 2^6 the paper
+    // track's plans, ≤ 0.75 M instructions, are on time.)
+    let (r, _, _, ticks) = drive(&Scenario::paper(true), 7, 12.0, "slow");
     let s = &r.summary;
     println!("{}", serde_json::to_string_pretty(s).unwrap());
     // The ECU counted misses and skipped releases itself, as many as the host.
@@ -214,28 +218,26 @@ fn an_ecu_too_slow_for_its_plans_counts_the_misses_as_the_host_does_and_keeps_th
     );
     assert!(s.ecu_skipped_releases.unwrap() >= 1);
     assert!(r.plan_activations.iter().any(|a| a.deadline_miss));
-    // The control activations that follow a plan are over their 5,000-cycle
-    // budget on this clock (an instruction is 10.75 of its cycles); none misses
-    // its 10 ms deadline.
+    // The control activations are over their 5,000-cycle budget on this clock
+    // (an instruction is 21.5 of its cycles), and some miss their deadline.
     assert!(
         s.ecu_control_budget_overruns.unwrap() > s.control_activations / 2,
         "{:?} of {}",
         s.ecu_control_budget_overruns,
         s.control_activations
     );
-    assert_eq!(s.ecu_control_deadline_misses, Some(0));
-    // The late plans are followed (the policy): no collision, on the road.
-    assert_eq!(s.collisions, 0);
     assert!(
-        s.max_abs_lateral_error_m < 3.5,
-        "{} m",
-        s.max_abs_lateral_error_m
+        s.ecu_control_deadline_misses.unwrap() >= u64::from(firmware::deadline::CONTROL_MISS_LIMIT),
+        "{:?}",
+        s.ecu_control_deadline_misses
     );
+    // The consecutive misses latched the safe actuation, which the host applied.
     assert!(
-        s.stop_reason == "time limit reached" || s.stop_reason.starts_with("stood still"),
+        s.control_safe_actuations >= 1,
         "{}",
-        s.stop_reason
+        s.control_safe_actuations
     );
+    assert_eq!(s.collisions, 0);
 }
 
 #[test]
