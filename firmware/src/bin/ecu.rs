@@ -1021,7 +1021,7 @@ mod app {
                 Ok(Down::Start) => match setup.finish(planner) {
                     Ok(control) => break control,
                     Err(f) => {
-                        defmt::error!("ecu: set-up refused: {} ({})", f.error.name(), f.detail);
+                        defmt::error!("ecu: set-up refused: {} ({})", f.error, f.detail);
                         link.send(UpRef::Ready(&ReadyFrame {
                             status: f.error.code(),
                             detail: f.detail,
@@ -1033,7 +1033,7 @@ mod app {
                 // A set-up with a frame refused is incomplete: refused at once,
                 // saying why (a forged frame: most likely another link key).
                 Err(Some(reason)) => {
-                    defmt::error!("ecu: set-up frame refused: {}", reason.name());
+                    defmt::error!("ecu: set-up frame refused: {}", reason);
                     link.send(UpRef::Ready(&ReadyFrame {
                         status: link::SetupError::FrameRefused.code(),
                         detail: u16::from(reason.code()),

@@ -84,7 +84,10 @@ macro_rules! wire_codes {
 }
 
 /// Why the ECU refused the set-up (the [`ReadyFrame::status`] codes, 1..=13).
+/// On the ECU its log names the variant through defmt (the name interned in the
+/// `.defmt` section, not in static RAM as `name()`'s strings would be).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "ecu", derive(defmt::Format))]
 pub enum SetupError {
     /// `Start`, a `PathChunk` or an `Obstacle` came before any `Config` (detail 0).
     NoConfig,

@@ -418,6 +418,7 @@ impl Verifier {
 /// Why a receiver refused a frame, as counted and reported: the three reasons
 /// of the link's security ([`FrameError::refusal`] sorts the errors).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "ecu", derive(defmt::Format))]
 pub enum Refusal {
     /// The frame's CRC held but its tag did not verify: forged (or sent under
     /// another key).
