@@ -113,7 +113,7 @@ pub(super) fn goals(
     vec![
         goal(
             "plan-warm-observed",
-            "plan warm-start observed max (a warm step's 0.5 M instructions and a route frame's static bound)",
+            "plan warm-start observed max",
             tasks.plan.observed_warm_max_instructions,
             GOAL_PLAN_WARM_MAX_INSTRUCTIONS
                 + statics.route_job_static_bound_instructions.unwrap_or(0) as f64,
