@@ -105,8 +105,8 @@ pub const WS: usize = 48;
 /// ([`MpcSettings::qp_max_iter`] of [`MpcSettings::paper`], the ECU's settings):
 /// the flow fact that bounds the plan task's worst case. 56: with [`WS`] 48, one
 /// cold pass and one refactorization, the largest cap measured whose static
-/// response-time bound leaves 4 ms of the plan task's 100 ms period (README,
-/// *The worst-case timing and memory report*). A step stopped at the cap gives no
+/// response-time bound leaves 4 ms of the plan task's 100 ms period
+/// (docs/timing.md, *How the plan task fits its budget*). A step stopped at the cap gives no
 /// plan (the control task follows the last one) and the next goes on from its
 /// working set.
 pub const QP_MAX_ITER: u32 = 56;
@@ -115,7 +115,8 @@ pub const QP_MAX_ITER: u32 = 56;
 /// with [`QP_MAX_ITER`], the flow fact that bounds the plan task's worst case. A
 /// refactorization rebuilds the factor of up to [`WS`] rows (about `WS³/6`
 /// multiply-adds, 0.93 M model cycles at 48 rows); past the cap the pass ends as a
-/// numerical error (1 step of 384 stress runs, README).
+/// numerical error (1 step of 384 stress runs,
+/// docs/tuning.md, *The plan task within its budget*).
 pub const QP_MAX_REFACTORIZATIONS: u32 = 1;
 /// A node's row `V ≥ 0` (the car does not reverse: the plant only brakes) is
 /// added where the linearised speed is under this, m/s (only slow nodes need it,

@@ -574,7 +574,7 @@ fn build_inner<T: Real, const CAP: usize>(
     let mut best_abs = T::INFINITY;
     let mut best_s = pc.s_m;
     // Every vertex on the one search window of the centroid's projection.
-    let each: [Option<(T, T)>; MAX_VERTICES] = path.project_each(verts, Some(pc.s_m));
+    let each: [Option<(T, T)>; MAX_VERTICES] = path.project_each(verts, pc.s_m);
     // wcet-bound: MAX_VERTICES
     for &(s_m, lateral_m) in each.iter().take(verts.len()).flatten() {
         all_left &= lateral_m > T::ZERO;

@@ -95,6 +95,14 @@ pub const MAX_CURVATURE_WINDOW_STEPS: usize = 32;
 /// length overflow to infinity, and every query after them garbage (found by
 /// `firmware/tests/fuzz.rs`).
 pub const MAX_COORDINATE_M: f32 = 1.0e7;
+/// Most segments a projection with a hint scans in the plan task
+/// ([`ReferencePath::with_search_segments`]): its path is refused
+/// ([`PathError::TooDense`]) where `MAX_SEARCH_SEGMENTS − 1` or more of its points
+/// lie within the search's span ([`DEFAULT_SEARCH_BEHIND_M`] +
+/// [`DEFAULT_SEARCH_AHEAD_M`], 60 m) from one of them: points at least 0.63 m
+/// apart on average there. The projections of the car and of the obstacles'
+/// vertices then each scan at most this many segments, not the whole path.
+pub const MAX_SEARCH_SEGMENTS: usize = 96;
 /// Default length of path searched behind the hint by [`ReferencePath::project`], m.
 pub const DEFAULT_SEARCH_BEHIND_M: f32 = 20.0;
 /// Default length of path searched ahead of the hint by [`ReferencePath::project`], m.
@@ -163,6 +171,14 @@ pub enum PathError {
     },
     /// The configured curvature half-window is not a positive finite length.
     InvalidCurvatureWindow,
+    /// From point `index` on, as many points as a projection near a hint may scan
+    /// segments ([`ReferencePath::with_search_segments`], [`MAX_SEARCH_SEGMENTS`]
+    /// in the plan task) or more lie within the search's span (60 m): the path is
+    /// too dense there for the bounded search. Resample it.
+    TooDense {
+        /// Index of the first point of the dense span.
+        index: usize,
+    },
 }
 
 /// Result of [`ReferencePath::project`]: the path point closest to a query point.
@@ -237,6 +253,9 @@ pub struct ReferencePath<T, const CAP: usize> {
     curvature_half_window_m: f32,
     search_behind_m: f32,
     search_ahead_m: f32,
+    /// Most segments a projection near a hint scans (`CAP`: no limit of its
+    /// own); a path denser than that allows is refused at load.
+    search_segments: usize,
 }
 
 impl<T: Real, const CAP: usize> Default for ReferencePath<T, CAP> {
@@ -273,7 +292,20 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             curvature_half_window_m: DEFAULT_CURVATURE_HALF_WINDOW_M,
             search_behind_m: DEFAULT_SEARCH_BEHIND_M,
             search_ahead_m: DEFAULT_SEARCH_AHEAD_M,
+            search_segments: CAP,
         }
+    }
+
+    /// An empty path whose projections near a hint scan at most `segments`
+    /// segments (at least 2; [`MAX_SEARCH_SEGMENTS`] in the plan task): a path on
+    /// which the search's span (behind + ahead the hint) could hold more is
+    /// refused at load ([`PathError::TooDense`]), so the limit never cuts a
+    /// search short. The plan task's projections then cost a bounded scan, not
+    /// one of the whole path. A valid `const` initialiser.
+    pub const fn with_search_segments(segments: usize) -> Self {
+        let mut p = Self::new();
+        p.search_segments = if segments < 2 { 2 } else { segments };
+        p
     }
 
     /// Number of vertices loaded (0 when empty).

@@ -54,6 +54,26 @@ impl<T: Real> StateEstimate<T> {
         }
     }
 
+    /// The estimate of a control period that has none, stamped `stamp_us` (µs):
+    /// every quantity NaN. Both tasks refuse it (the control task applies the safe
+    /// actuation, fault `NonFiniteEstimate`; the plan task does not plan): the
+    /// dropout policy. The ECU runs a period whose sensor frame it refused on it,
+    /// and the simulator's `dropout-nan` fault delivers it.
+    pub fn unavailable(stamp_us: u64) -> Self {
+        let nan = T::from_f64(f64::NAN);
+        Self {
+            stamp_us,
+            x_m: nan,
+            y_m: nan,
+            psi_rad: nan,
+            vx_mps: nan,
+            vy_mps: nan,
+            yaw_rate_radps: nan,
+            delta_rad: nan,
+            wheel_speed_mps: [nan; 4],
+        }
+    }
+
     /// Speed over ground `V = sqrt(vx² + vy²)`, m/s, signed by `vx`.
     pub fn speed_mps(&self) -> T {
         let v = self.vx_mps.hypot(self.vy_mps);

@@ -44,7 +44,7 @@ use crate::low_level::{
 use crate::mpc::{Mpc, MpcError, MpcReport, MpcSettings};
 use crate::obstacles::{Obstacle, ObstacleManager, ObstacleSettings, MAX_OBSTACLES};
 use crate::plan::{Plan, HORIZON};
-use crate::reference_path::{PathError, ReferencePath};
+use crate::reference_path::{PathError, ReferencePath, MAX_SEARCH_SEGMENTS};
 use crate::sideslip::SideslipLag;
 use crate::state_estimate::StateEstimate;
 use crate::Real;
@@ -172,7 +172,9 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             settings,
             mu,
             friction_limit: T::INFINITY,
-            path: ReferencePath::new(),
+            // Its projections near a hint (the car's, the obstacles' vertices')
+            // scan a bounded number of segments, not the window.
+            path: ReferencePath::with_search_segments(MAX_SEARCH_SEGMENTS),
             obstacles: ObstacleManager::new(),
             mpc: Mpc::new(),
             working: Plan::zeroed(),

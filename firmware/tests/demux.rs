@@ -9,11 +9,30 @@ use firmware::state_estimate::StateEstimate;
 use firmware::vehicle_config::VehicleConfig;
 use proptest::prelude::*;
 
-/// The whole frame of `msg`, delimiter included.
+/// The frames of `msgs`, delimiters included, each on its channel's stream (the
+/// control channel's `Down`, the route channel's `Route`), as the host sends them.
+fn frames_of(msgs: &[Down]) -> Vec<u8> {
+    let mut mac = LinkMac::new(&LINK_KEY);
+    let (mut down, mut route) = (
+        Authenticator::new(Stream::Down),
+        Authenticator::new(Stream::Route),
+    );
+    let mut out = Vec::new();
+    for msg in msgs {
+        let tx = match channel_of_message(msg) {
+            Channel::Control => &mut down,
+            Channel::Route => &mut route,
+        };
+        let mut buf = [0u8; MAX_FRAME_BYTES];
+        let n = encode(msg, &mut mac, tx, &mut buf).unwrap();
+        out.extend_from_slice(&buf[..n]);
+    }
+    out
+}
+
+/// The whole frame of `msg` alone, delimiter included.
 fn frame_of(msg: &Down) -> Vec<u8> {
-    let mut buf = [0u8; MAX_FRAME_BYTES];
-    let n = encode(msg, &mut buf).unwrap();
-    buf[..n].to_vec()
+    frames_of(std::slice::from_ref(msg))
 }
 
 /// The stream sorted: each channel's bytes.
@@ -32,13 +51,18 @@ fn sort(stream: &[u8]) -> (Vec<u8>, Vec<u8>) {
 }
 
 /// The messages a channel's bytes decode to (refused frames left out).
-fn messages(bytes: &[u8]) -> (Vec<Down>, usize) {
+fn messages(bytes: &[u8], channel: Channel) -> (Vec<Down>, usize) {
+    let mut mac = LinkMac::new(&LINK_KEY);
+    let mut rx = Verifier::new(match channel {
+        Channel::Control => Stream::Down,
+        Channel::Route => Stream::Route,
+    });
     let mut reader: FrameReader<MAX_FRAME_BYTES> = FrameReader::new();
     let (mut out, mut refused) = (Vec::new(), 0);
     for &b in bytes {
         match reader.push(b) {
             None => {}
-            Some(Ok(frame)) => match decode::<Down>(frame) {
+            Some(Ok(frame)) => match decode::<Down>(frame, &mut mac, &mut rx) {
                 Ok(m) => out.push(m),
                 Err(_) => refused += 1,
             },
@@ -97,7 +121,7 @@ fn message(kind: u8, k: u32, v: f32) -> Down {
         4 => Down::Sensor(SensorFrame {
             seq: k,
             estimate: estimate(u64::from(k) * 10_000, v),
-            route_frames: (k % 3) as u16,
+            route_frames: k % 3,
         }),
         5 => Down::Stop,
         _ => Down::Window(WindowFrame {
@@ -126,16 +150,15 @@ fn a_frame_shorter_than_its_head_goes_to_control_and_the_stream_goes_on() {
     let mut stream = vec![5, 7, 0, 0, 1, 0];
     let sensor = message(4, 9, 2.0);
     let chunk = message(1, 9, 2.0);
-    stream.extend(frame_of(&sensor));
-    stream.extend(frame_of(&chunk));
+    stream.extend(frames_of(&[sensor, chunk]));
     let (control, route) = sort(&stream);
-    let (got, refused) = messages(&control);
+    let (got, refused) = messages(&control, Channel::Control);
     assert_eq!(got, vec![sensor]);
     assert_eq!(
         refused, 2,
         "the two short frames are refused, the empty one idle"
     );
-    assert_eq!(messages(&route), (vec![chunk], 0));
+    assert_eq!(messages(&route, Channel::Route), (vec![chunk], 0));
 }
 
 proptest! {
@@ -145,13 +168,13 @@ proptest! {
         kinds in prop::collection::vec((0u8..7, any::<u32>(), -1.0e6f32..1.0e6), 1..40),
     ) {
         let msgs: Vec<Down> = kinds.iter().map(|&(kind, k, v)| message(kind, k, v)).collect();
-        let stream: Vec<u8> = msgs.iter().flat_map(frame_of).collect();
+        let stream = frames_of(&msgs);
         let (control, route) = sort(&stream);
         let want = |c: Channel| -> Vec<Down> {
             msgs.iter().filter(|m| channel_of_message(m) == c).copied().collect()
         };
-        prop_assert_eq!(messages(&control), (want(Channel::Control), 0));
-        prop_assert_eq!(messages(&route), (want(Channel::Route), 0));
+        prop_assert_eq!(messages(&control, Channel::Control), (want(Channel::Control), 0));
+        prop_assert_eq!(messages(&route, Channel::Route), (want(Channel::Route), 0));
         // No byte is lost or made up: the channels hold the stream's bytes.
         prop_assert_eq!(control.len() + route.len(), stream.len());
     }
@@ -165,10 +188,10 @@ proptest! {
         let msgs: Vec<Down> = kinds.iter().map(|&(kind, k)| message(kind, k, 0.5)).collect();
         let mut stream = garbage.clone();
         stream.push(0);
-        stream.extend(msgs.iter().flat_map(frame_of));
+        stream.extend(frames_of(&msgs));
         let (control, route) = sort(&stream);
-        let (got_control, _) = messages(&control);
-        let (got_route, refused_route) = messages(&route);
+        let (got_control, _) = messages(&control, Channel::Control);
+        let (got_route, refused_route) = messages(&route, Channel::Route);
         let want = |c: Channel| -> Vec<Down> {
             msgs.iter().filter(|m| channel_of_message(m) == c).copied().collect()
         };

@@ -16,19 +16,64 @@ use serde::Serialize;
 // Helpers
 // ---------------------------------------------------------------------------
 
-/// The whole frame of `msg`, delimiter included.
+/// The key the tests authenticate with: the documented development key, spelt
+/// out here (not `LINK_KEY`, which a build may set otherwise).
+const KEY: LinkKey = *b"DEV-ONLY-SIM-KEY";
+
+/// The whole frame of `msg`, delimiter included: the first frame (freshness 1)
+/// of a sender on the down stream.
 fn frame_of<M: Serialize>(msg: &M) -> Vec<u8> {
+    frame_on(msg, &mut Authenticator::new(Stream::Down))
+}
+
+/// The whole frame of `msg` from `tx` (its next freshness), under [`KEY`].
+fn frame_on<M: Serialize>(msg: &M, tx: &mut Authenticator) -> Vec<u8> {
     let mut buf = [0u8; MAX_FRAME_BYTES];
-    let n = encode(msg, &mut buf).expect("encode");
+    let n = encode(msg, &mut LinkMac::new(&KEY), tx, &mut buf).expect("encode");
     assert_eq!(buf[n - 1], 0, "frame ends with the delimiter");
     assert!(!buf[..n - 1].contains(&0), "no 0x00 inside a frame");
     buf[..n].to_vec()
 }
 
-/// `frame` without its delimiter, decoded as `M`.
+/// `body` (no delimiter) decoded as `M` by a receiver on the down stream that
+/// has accepted nothing yet, under [`KEY`].
+fn decode_fresh<M: for<'a> serde::Deserialize<'a>>(body: &mut [u8]) -> Result<M, FrameError> {
+    decode::<M>(
+        body,
+        &mut LinkMac::new(&KEY),
+        &mut Verifier::new(Stream::Down),
+    )
+}
+
+/// `frame` without its delimiter, decoded as `M` ([`decode_fresh`]).
 fn decode_body<M: for<'a> serde::Deserialize<'a>>(frame: &[u8]) -> Result<M, FrameError> {
     let mut body = frame.strip_suffix(&[0]).unwrap_or(frame).to_vec();
-    decode::<M>(&mut body)
+    decode_fresh::<M>(&mut body)
+}
+
+/// CMAC-AES-128 of `data` under `key`, truncated to the link's tag: the RustCrypto
+/// crates' own buffered interface, independent of `LinkMac`'s block feeding.
+fn ref_tag(key: &LinkKey, data: &[u8]) -> [u8; MAC_BYTES] {
+    use cmac::Mac;
+    let mut mac = <cmac::Cmac<aes::Aes128> as cmac::digest::KeyInit>::new(key.into());
+    mac.update(data);
+    let full = mac.finalize().into_bytes();
+    full[..MAC_BYTES].try_into().unwrap()
+}
+
+/// The raw frame (no COBS) built by hand: `version ++ payload ++ freshness ++ tag`
+/// with the tag under `key` on `stream`, then the CRC of all that.
+fn hand_raw(key: &LinkKey, stream: Stream, freshness: u32, version: u8, payload: &[u8]) -> Vec<u8> {
+    let mut raw = vec![version];
+    raw.extend_from_slice(payload);
+    raw.extend_from_slice(&freshness.to_le_bytes());
+    let mut input = vec![stream.data_id()];
+    input.extend_from_slice(&raw);
+    raw.extend_from_slice(&ref_tag(key, &input));
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+    let sum = crc.checksum(&raw);
+    raw.extend_from_slice(&sum.to_le_bytes());
+    raw
 }
 
 /// A reference COBS encoder (textbook form), independent of the one under test.
@@ -57,13 +102,35 @@ fn ref_cobs(data: &[u8]) -> Vec<u8> {
     out
 }
 
-/// A frame built by hand: COBS(version ++ payload ++ crc32(version ++ payload)), no delimiter.
+/// A frame built by hand, no delimiter: COBS of [`hand_raw`] under [`KEY`] on the
+/// down stream, freshness 1 (what [`frame_of`] makes).
 fn hand_frame(version: u8, payload: &[u8]) -> Vec<u8> {
+    ref_cobs(&hand_raw(&KEY, Stream::Down, 1, version, payload))
+}
+
+/// COBS-decodes a frame without its delimiter (the reference, for tests that
+/// alter the raw bytes).
+fn ref_uncobs(body: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < body.len() {
+        let code = body[i] as usize;
+        out.extend_from_slice(&body[i + 1..i + code]);
+        i += code;
+        if code < 0xFF && i < body.len() {
+            out.push(0);
+        }
+    }
+    out
+}
+
+/// `raw` with its CRC recomputed (what anyone can do: the CRC is no secret),
+/// COBS-encoded, no delimiter.
+fn reseal(mut raw: Vec<u8>) -> Vec<u8> {
+    let n = raw.len() - CRC_BYTES;
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
-    let mut raw = vec![version];
-    raw.extend_from_slice(payload);
-    let sum = crc.checksum(&raw);
-    raw.extend_from_slice(&sum.to_le_bytes());
+    let sum = crc.checksum(&raw[..n]);
+    raw[n..].copy_from_slice(&sum.to_le_bytes());
     ref_cobs(&raw)
 }
 
@@ -149,7 +216,17 @@ fn actuation(big: u64, v: f32, plan: Option<PlanEventFrame>) -> ActuationFrame {
         previous_response_us: big as u32,
         control: timing(big),
         watchdog_trips: big as u32,
+        sensor: big as u8,
+        refused: refusals(big),
         plan,
+    }
+}
+
+fn refusals(big: u64) -> RefusalCounts {
+    RefusalCounts {
+        auth: big as u32,
+        replay: (big as u32).rotate_left(1),
+        corrupt: big as u32,
     }
 }
 
@@ -179,7 +256,7 @@ fn all_down(big: u64, v: f32) -> Vec<Down> {
         Down::Sensor(SensorFrame {
             seq: big as u32,
             estimate: estimate(big, v),
-            route_frames: big as u16,
+            route_frames: big as u32,
         }),
         Down::Stop,
         Down::Window(WindowFrame {
@@ -203,6 +280,7 @@ fn all_up(big: u64, v: f32) -> Vec<Up> {
             stack_high_water_bytes: big as u32,
             stack_size_bytes: big as u32,
             rejected_frames: big as u32,
+            refused: refusals(big),
         }),
     ]
 }
@@ -268,7 +346,7 @@ fn nan_round_trips_bit_for_bit() {
 }
 
 #[test]
-fn frame_layout_is_version_postcard_crc_cobs() {
+fn frame_layout_is_version_postcard_freshness_tag_crc_cobs() {
     // Independent construction of the same frame for every kind of message.
     for msg in all_down(300, 1.5) {
         let mut expected = hand_frame(LINK_VERSION, &postcard_bytes(&msg));
@@ -283,11 +361,31 @@ fn frame_layout_is_version_postcard_crc_cobs() {
     // The CRC is CRC-32/ISO-HDLC (check value of "123456789").
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
     assert_eq!(crc.checksum(b"123456789"), 0xCBF4_3926);
-    // Pinned bytes: `Down::Start` is version 8, tag 3, then its CRC (zlib.crc32(b"\x08\x03")
-    // = 0x1009C94D, little-endian, no zero byte), stuffed: one COBS block of 6 bytes.
+    // The CMAC is AES-128-CMAC: NIST SP 800-38B, example 2 (AES-128, a 16-byte
+    // message), its tag's first 8 bytes.
+    let nist_key = [
+        0x2b, 0x7e, 0x15, 0x16, 0x28, 0xae, 0xd2, 0xa6, 0xab, 0xf7, 0x15, 0x88, 0x09, 0xcf, 0x4f,
+        0x3c,
+    ];
+    let nist_msg = [
+        0x6b, 0xc1, 0xbe, 0xe2, 0x2e, 0x40, 0x9f, 0x96, 0xe9, 0x3d, 0x7e, 0x11, 0x73, 0x93, 0x17,
+        0x2a,
+    ];
+    assert_eq!(
+        ref_tag(&nist_key, &nist_msg),
+        [0x07, 0x0a, 0x16, 0xb4, 0x6b, 0x4d, 0x41, 0x44]
+    );
+    // Pinned bytes, computed apart (Python's `cryptography` CMAC and `zlib.crc32`):
+    // `Down::Start` under the development key is version 9, tag 3, freshness 1
+    // (01 00 00 00), the tag 81 75 11 27 f7 ac d7 9b (AES-128-CMAC of
+    // 01 09 03 01 00 00 00: the down stream's Data ID first), the CRC ca 6d 5f a1;
+    // stuffed: COBS blocks of 4, 1, 1 and 13 bytes.
     assert_eq!(
         frame_of(&Down::Start),
-        [0x07, 0x08, 0x03, 0x4D, 0xC9, 0x09, 0x10, 0x00]
+        [
+            0x04, 0x09, 0x03, 0x01, 0x01, 0x01, 0x0d, 0x81, 0x75, 0x11, 0x27, 0xf7, 0xac, 0xd7,
+            0x9b, 0xca, 0x6d, 0x5f, 0xa1, 0x00
+        ]
     );
 }
 
@@ -319,6 +417,12 @@ fn cobs_long_runs_without_zero_round_trip() {
     assert_eq!(decode_body::<Down>(&frame), Ok(msg));
 }
 
+/// The frame of `msg` with the largest freshness value (`u32::MAX`, no zero byte
+/// in it: COBS's worst case), bytes.
+fn largest<M: Serialize>(msg: &M, stream: Stream) -> Vec<u8> {
+    frame_on(msg, &mut Authenticator::resumed(stream, u32::MAX - 1))
+}
+
 /// The largest value of each message kind: every varint at its maximum and every
 /// byte non-zero (COBS's worst case).
 fn maximal_down() -> Vec<Down> {
@@ -346,7 +450,7 @@ fn largest_frames_fit_max_frame_bytes() {
     let mut largest_down_payload = 0;
     let mut largest_up_payload = 0;
     for (msg, name) in downs.iter().zip(names_down) {
-        let n = frame_of(msg).len();
+        let n = largest(msg, Stream::Down).len();
         let p = postcard_bytes(msg).len();
         println!("Down::{name}: payload {p} bytes, frame {n} bytes");
         assert!(n <= frame_bytes_for_payload(p));
@@ -354,7 +458,7 @@ fn largest_frames_fit_max_frame_bytes() {
         largest_down_payload = largest_down_payload.max(p);
     }
     for (msg, name) in ups.iter().zip(names_up) {
-        let n = frame_of(msg).len();
+        let n = largest(msg, Stream::Up).len();
         let p = postcard_bytes(msg).len();
         println!("Up::{name}: payload {p} bytes, frame {n} bytes");
         assert!(n <= frame_bytes_for_payload(p));
@@ -364,17 +468,21 @@ fn largest_frames_fit_max_frame_bytes() {
     // The compile-time bounds are exact, not loose.
     assert_eq!(largest_down_payload, MAX_DOWN_PAYLOAD_BYTES);
     assert_eq!(largest_up_payload, MAX_UP_PAYLOAD_BYTES);
-    assert_eq!(MAX_DOWN_FRAME_BYTES, 269);
+    // Version 8: a freshness value and a tag in every frame (12 bytes; 269
+    // before).
+    assert_eq!(MAX_DOWN_FRAME_BYTES, 281);
     // Version 3: release and send instants, the two tasks' deadline counts, the
     // watchdog's trips and the plan's end (249 bytes in version 2); version 7:
     // the previous control activation's response time (336 bytes in version 6).
-    assert_eq!(MAX_UP_FRAME_BYTES, 341);
-    assert_eq!(frame_of(&downs[1]).len(), MAX_DOWN_FRAME_BYTES);
+    // Version 8: the freshness value and the tag, this period's sensor frame's
+    // refusal and the refusal counts (341 bytes in version 7).
+    assert_eq!(MAX_UP_FRAME_BYTES, 369);
+    assert_eq!(largest(&downs[1], Stream::Down).len(), MAX_DOWN_FRAME_BYTES);
     // What the control link carries while driving: `Sensor`, `Stop`; the largest
     // sensor frame is exactly the bound the ECU's receive loop stops at.
-    let sensor = frame_of(&downs[4]);
+    let sensor = largest(&downs[4], Stream::Down);
     assert_eq!(sensor.len(), MAX_DRIVING_DOWN_FRAME_BYTES);
-    assert!(frame_of(&downs[5]).len() < MAX_DRIVING_DOWN_FRAME_BYTES);
+    assert!(largest(&downs[5], Stream::Down).len() < MAX_DRIVING_DOWN_FRAME_BYTES);
     assert_eq!(
         postcard_bytes(&downs[4]).len(),
         MAX_DRIVING_DOWN_PAYLOAD_BYTES
@@ -384,18 +492,23 @@ fn largest_frames_fit_max_frame_bytes() {
 
 #[test]
 fn encode_into_a_small_buffer_is_refused() {
+    let mut mac = LinkMac::new(&KEY);
     for msg in maximal_up() {
         let n = frame_of(&msg).len();
-        let mut buf = vec![0u8; n];
-        assert_eq!(encode(&msg, &mut buf), Ok(n));
+        let mut tx = Authenticator::new(Stream::Up);
         for short in 0..n {
             let mut buf = vec![0u8; short];
             assert_eq!(
-                encode(&msg, &mut buf),
+                encode(&msg, &mut mac, &mut tx, &mut buf),
                 Err(FrameError::BufferTooSmall),
                 "{short}"
             );
+            // A frame not encoded takes no freshness value.
+            assert_eq!(tx.last_sent(), 0);
         }
+        let mut buf = vec![0u8; n];
+        assert_eq!(encode(&msg, &mut mac, &mut tx, &mut buf), Ok(n));
+        assert_eq!(tx.last_sent(), 1);
     }
 }
 
@@ -405,42 +518,78 @@ fn encode_into_a_small_buffer_is_refused() {
 
 #[test]
 fn each_refusal_has_its_error() {
-    assert_eq!(decode::<Down>(&mut []), Err(FrameError::Empty));
+    assert_eq!(decode_fresh::<Down>(&mut []), Err(FrameError::Empty));
     assert_eq!(
-        decode::<Down>(&mut vec![1u8; MAX_FRAME_BYTES]),
+        decode_fresh::<Down>(&mut vec![1u8; MAX_FRAME_BYTES]),
         Err(FrameError::TooLong)
     );
     // A 0x00 inside, a block past the end.
-    assert_eq!(decode::<Down>(&mut [3, 1, 0, 1]), Err(FrameError::Cobs));
-    assert_eq!(decode::<Down>(&mut [5, 1, 2]), Err(FrameError::Cobs));
-    // Shorter than version + CRC.
     assert_eq!(
-        decode::<Down>(&mut [5, 1, 2, 3, 4]),
+        decode_fresh::<Down>(&mut [3, 1, 0, 1]),
+        Err(FrameError::Cobs)
+    );
+    assert_eq!(decode_fresh::<Down>(&mut [5, 1, 2]), Err(FrameError::Cobs));
+    // Shorter than version + freshness + tag + CRC (17 bytes).
+    assert_eq!(
+        decode_fresh::<Down>(&mut [5, 1, 2, 3, 4]),
         Err(FrameError::TooShort)
     );
-    // Another version, with its own valid CRC.
+    let mut short = ref_cobs(&[LINK_VERSION; 16]);
+    assert_eq!(decode_fresh::<Down>(&mut short), Err(FrameError::TooShort));
+    // Another version, with its own valid CRC and tag.
     let mut v1 = hand_frame(1, &postcard_bytes(&Down::Start));
-    assert_eq!(decode::<Down>(&mut v1), Err(FrameError::Version { got: 1 }));
+    assert_eq!(
+        decode_fresh::<Down>(&mut v1),
+        Err(FrameError::Version { got: 1 })
+    );
     // A wrong CRC.
     let mut frame = frame_of(&Down::Stop);
     frame.pop();
     frame[3] ^= 0x10;
-    assert_eq!(decode::<Down>(&mut frame), Err(FrameError::Checksum));
-    // A valid CRC around an invalid message (unknown variant 9), trailing bytes,
-    // a truncated message, and a `Down` read as an `Up`.
+    assert_eq!(decode_fresh::<Down>(&mut frame), Err(FrameError::Checksum));
+    // A valid CRC around a tag under another key, or of another stream.
+    let other_key = *b"not-the-link-key";
+    let payload = postcard_bytes(&Down::Stop);
+    let mut forged = ref_cobs(&hand_raw(
+        &other_key,
+        Stream::Down,
+        1,
+        LINK_VERSION,
+        &payload,
+    ));
     assert_eq!(
-        decode::<Down>(&mut hand_frame(LINK_VERSION, &[9])),
+        decode_fresh::<Down>(&mut forged),
+        Err(FrameError::Authentication)
+    );
+    let mut other_stream = ref_cobs(&hand_raw(&KEY, Stream::Route, 1, LINK_VERSION, &payload));
+    assert_eq!(
+        decode_fresh::<Down>(&mut other_stream),
+        Err(FrameError::Authentication)
+    );
+    // An authentic frame of freshness 0: never newer than a receiver's start.
+    let mut stale = ref_cobs(&hand_raw(&KEY, Stream::Down, 0, LINK_VERSION, &payload));
+    assert_eq!(
+        decode_fresh::<Down>(&mut stale),
+        Err(FrameError::Replay {
+            freshness: 0,
+            last: 0
+        })
+    );
+    // Authentic frames around an invalid message (unknown variant 9), trailing
+    // bytes, a truncated message, and a `Down` read as an `Up`.
+    assert_eq!(
+        decode_fresh::<Down>(&mut hand_frame(LINK_VERSION, &[9])),
         Err(FrameError::Malformed)
     );
     let mut trailing = postcard_bytes(&Down::Stop);
     trailing.push(0);
     assert_eq!(
-        decode::<Down>(&mut hand_frame(LINK_VERSION, &trailing)),
+        decode_fresh::<Down>(&mut hand_frame(LINK_VERSION, &trailing)),
         Err(FrameError::Malformed)
     );
     let sensor = postcard_bytes(&all_down(5, 1.0)[4]);
     assert_eq!(
-        decode::<Down>(&mut hand_frame(LINK_VERSION, &sensor[..sensor.len() - 1])),
+        decode_fresh::<Down>(&mut hand_frame(LINK_VERSION, &sensor[..sensor.len() - 1])),
         Err(FrameError::Malformed)
     );
     assert_eq!(
@@ -448,8 +597,30 @@ fn each_refusal_has_its_error() {
         Err(FrameError::Malformed)
     );
     assert_eq!(
-        decode::<Down>(&mut hand_frame(LINK_VERSION, &[])),
+        decode_fresh::<Down>(&mut hand_frame(LINK_VERSION, &[])),
         Err(FrameError::Malformed)
+    );
+    // Each refusal counts under its reason.
+    let corrupt = [
+        FrameError::Empty,
+        FrameError::TooLong,
+        FrameError::Cobs,
+        FrameError::TooShort,
+        FrameError::Version { got: 1 },
+        FrameError::Checksum,
+        FrameError::Malformed,
+    ];
+    for e in corrupt {
+        assert_eq!(e.refusal(), Refusal::Corrupt, "{e:?}");
+    }
+    assert_eq!(FrameError::Authentication.refusal(), Refusal::Auth);
+    assert_eq!(
+        FrameError::Replay {
+            freshness: 3,
+            last: 4
+        }
+        .refusal(),
+        Refusal::Replay
     );
 }
 
@@ -472,7 +643,7 @@ fn frame_reader_drops_an_over_long_frame_then_recovers() {
     let mut got = None;
     for &b in &frame {
         if let Some(r) = reader.push(b) {
-            got = Some(decode::<Down>(r.unwrap()));
+            got = Some(decode_fresh::<Down>(r.unwrap()));
         }
     }
     assert_eq!(got, Some(Ok(Down::Stop)));
@@ -524,8 +695,17 @@ fn sequence_check_refuses_stale_and_counts_gaps() {
     let mut stats = LinkStats::default();
     stats.record::<()>(&Ok(()));
     stats.record::<()>(&Err(FrameError::Checksum));
+    stats.record::<()>(&Err(FrameError::Authentication));
     stats.record::<()>(&Err(FrameError::Cobs));
-    assert_eq!((stats.accepted, stats.rejected), (1, 2));
+    assert_eq!((stats.accepted, stats.rejected), (1, 3));
+    assert_eq!(
+        stats.refused,
+        RefusalCounts {
+            auth: 1,
+            replay: 0,
+            corrupt: 2
+        }
+    );
     assert_eq!(stats.last_error, Some(FrameError::Cobs));
 }
 
@@ -697,7 +877,7 @@ fn any_down() -> impl Strategy<Value = Down> {
         any::<u32>(),
         any::<u64>(),
         prop::array::uniform11(any_f32()),
-        any::<u16>(),
+        any::<u32>(),
     )
         .prop_map(|(seq, stamp_us, v, route_frames)| {
             Down::Sensor(SensorFrame {
@@ -796,7 +976,7 @@ fn any_up() -> impl Strategy<Value = Up> {
         any::<(u32, u8, u8, u32)>(),
         prop::array::uniform8(any_f32()),
         (any::<u64>(), any::<u64>(), any_timing(), any::<u32>()),
-        any::<u32>(),
+        (any::<u32>(), any::<u8>(), any_refusals()),
         prop::option::of(any_plan_event()),
     )
         .prop_map(
@@ -804,7 +984,7 @@ fn any_up() -> impl Strategy<Value = Up> {
                 (seq, mode, fault, control_ticks),
                 f,
                 (release_us, sent_us, control, watchdog_trips),
-                previous_response_us,
+                (previous_response_us, sensor, refused),
                 plan,
             )| {
                 Up::Actuation(ActuationFrame {
@@ -822,6 +1002,8 @@ fn any_up() -> impl Strategy<Value = Up> {
                     previous_response_us,
                     control,
                     watchdog_trips,
+                    sensor,
+                    refused,
                     plan,
                 })
             },
@@ -829,12 +1011,23 @@ fn any_up() -> impl Strategy<Value = Up> {
     prop_oneof![
         any::<(u8, u16)>().prop_map(|(status, detail)| Up::Ready(ReadyFrame { status, detail })),
         actuation,
-        any::<(u32, u32, u32)>().prop_map(|(a, b, c)| Up::Done(DoneFrame {
-            stack_high_water_bytes: a,
-            stack_size_bytes: b,
-            rejected_frames: c,
-        })),
+        (any::<(u32, u32, u32)>(), any_refusals()).prop_map(|((a, b, c), refused)| {
+            Up::Done(DoneFrame {
+                stack_high_water_bytes: a,
+                stack_size_bytes: b,
+                rejected_frames: c,
+                refused,
+            })
+        }),
     ]
+}
+
+fn any_refusals() -> impl Strategy<Value = RefusalCounts> {
+    any::<(u32, u32, u32)>().prop_map(|(auth, replay, corrupt)| RefusalCounts {
+        auth,
+        replay,
+        corrupt,
+    })
 }
 
 /// A frame (with delimiter) of any message, `Down` or `Up`, and a decoder that
@@ -863,8 +1056,8 @@ impl AnyMsg {
     /// Decodes `body` (no delimiter) as this message's type; re-encodes it.
     fn decode_like(&self, body: &mut [u8]) -> Result<Vec<u8>, FrameError> {
         match self {
-            AnyMsg::Down(_) => decode::<Down>(body).map(|m| frame_of(&m)),
-            AnyMsg::Up(_) => decode::<Up>(body).map(|m| frame_of(&m)),
+            AnyMsg::Down(_) => decode_fresh::<Down>(body).map(|m| frame_of(&m)),
+            AnyMsg::Up(_) => decode_fresh::<Up>(body).map(|m| frame_of(&m)),
         }
     }
 }
@@ -883,8 +1076,8 @@ proptest! {
     #[test]
     fn arbitrary_bytes_never_decode(mut bytes in prop::collection::vec(any::<u8>(), 0..700)) {
         let mut copy = bytes.clone();
-        prop_assert!(decode::<Down>(&mut bytes).is_err());
-        prop_assert!(decode::<Up>(&mut copy).is_err());
+        prop_assert!(decode_fresh::<Down>(&mut bytes).is_err());
+        prop_assert!(decode_fresh::<Up>(&mut copy).is_err());
     }
 
     #[test]
@@ -893,8 +1086,8 @@ proptest! {
     ) {
         // No 0x00: only the COBS structure, version, length and CRC stand in the way.
         let mut copy = bytes.clone();
-        prop_assert!(decode::<Down>(&mut bytes).is_err());
-        prop_assert!(decode::<Up>(&mut copy).is_err());
+        prop_assert!(decode_fresh::<Down>(&mut bytes).is_err());
+        prop_assert!(decode_fresh::<Up>(&mut copy).is_err());
     }
 
     #[test]
@@ -903,7 +1096,7 @@ proptest! {
         let mut stats = LinkStats::new();
         for b in bytes {
             if let Some(frame) = reader.push(b) {
-                let r = frame.and_then(decode::<Down>);
+                let r = frame.and_then(decode_fresh::<Down>);
                 stats.record(&r);
             }
         }
@@ -984,9 +1177,9 @@ proptest! {
                 // Try both message types: a frame decodes as at most one of them.
                 let r = r.and_then(|f| {
                     let mut copy = f.to_vec();
-                    match decode::<Down>(f) {
+                    match decode_fresh::<Down>(f) {
                         Ok(m) => Ok(frame_of(&m)),
-                        Err(_) => decode::<Up>(&mut copy).map(|m| frame_of(&m)),
+                        Err(_) => decode_fresh::<Up>(&mut copy).map(|m| frame_of(&m)),
                     }
                 });
                 stats.record(&r);
@@ -1016,5 +1209,307 @@ proptest! {
             prop_assert_eq!(check.accept(s), expected);
         }
         prop_assert_eq!(check.last(), last);
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Authentication (SecOC style): the tag, the freshness, the key, the streams
+// ---------------------------------------------------------------------------
+
+/// The raw frame (COBS undone, no delimiter) of `frame`.
+fn raw_of(frame: &[u8]) -> Vec<u8> {
+    ref_uncobs(frame.strip_suffix(&[0]).unwrap_or(frame))
+}
+
+#[test]
+fn a_frame_with_one_flipped_mac_bit_is_refused() {
+    let sensor = all_down(12, 3.5)[4];
+    let frame = frame_of(&sensor);
+    let raw = raw_of(&frame);
+    // The tag: the 8 bytes before the CRC.
+    let tag_at = raw.len() - CRC_BYTES - MAC_BYTES;
+    for bit in 0..MAC_BYTES * 8 {
+        let mut flipped = raw.clone();
+        flipped[tag_at + bit / 8] ^= 1 << (bit % 8);
+        // The CRC made to match again (anyone can): the tag alone refuses it.
+        let mut resealed = reseal(flipped.clone());
+        assert_eq!(
+            decode_fresh::<Down>(&mut resealed),
+            Err(FrameError::Authentication),
+            "bit {bit}"
+        );
+        // The CRC left as it was: a frame damaged on the way, corrupt.
+        let mut damaged = ref_cobs(&flipped);
+        assert_eq!(
+            decode_fresh::<Down>(&mut damaged),
+            Err(FrameError::Checksum),
+            "bit {bit}"
+        );
+    }
+    // Untouched, it is accepted: the refusals above are the bit's.
+    assert_eq!(decode_body::<Down>(&frame), Ok(sensor));
+}
+
+#[test]
+fn a_replayed_frame_is_refused() {
+    let mut tx = Authenticator::new(Stream::Down);
+    let mut rx = Verifier::new(Stream::Down);
+    let mut mac = LinkMac::new(&KEY);
+    let msgs = all_down(9, -1.25);
+    let frames: Vec<Vec<u8>> = msgs.iter().map(|m| frame_on(m, &mut tx)).collect();
+    let mut decode_in = |frame: &[u8], rx: &mut Verifier| {
+        let mut body = frame[..frame.len() - 1].to_vec();
+        decode::<Down>(&mut body, &mut mac, rx)
+    };
+    assert_eq!(decode_in(&frames[0], &mut rx), Ok(msgs[0]));
+    assert_eq!(decode_in(&frames[1], &mut rx), Ok(msgs[1]));
+    assert_eq!(rx.last_accepted(), 2);
+    // The same frame again, and an older one: authentic, not newer.
+    assert_eq!(
+        decode_in(&frames[1], &mut rx),
+        Err(FrameError::Replay {
+            freshness: 2,
+            last: 2
+        })
+    );
+    assert_eq!(
+        decode_in(&frames[0], &mut rx),
+        Err(FrameError::Replay {
+            freshness: 1,
+            last: 2
+        })
+    );
+    assert_eq!(rx.last_accepted(), 2);
+    // A gap (frames 3 and 4 lost) is accepted; then 3 and 4 are old.
+    assert_eq!(decode_in(&frames[4], &mut rx), Ok(msgs[4]));
+    assert_eq!(
+        decode_in(&frames[3], &mut rx),
+        Err(FrameError::Replay {
+            freshness: 4,
+            last: 5
+        })
+    );
+    assert_eq!(decode_in(&frames[5], &mut rx), Ok(msgs[5]));
+}
+
+#[test]
+fn the_receiver_takes_a_freshness_only_from_a_frame_it_accepts() {
+    let mut mac = LinkMac::new(&KEY);
+    let mut rx = Verifier::new(Stream::Down);
+    // Authentic and fresh, but not a message: refused, the freshness not taken.
+    let mut bad = ref_cobs(&hand_raw(&KEY, Stream::Down, 7, LINK_VERSION, &[9]));
+    assert_eq!(
+        decode::<Down>(&mut bad, &mut mac, &mut rx),
+        Err(FrameError::Malformed)
+    );
+    // Forged with a freshness far ahead: refused, not taken either (a forger
+    // cannot push the receiver's freshness past the sender's).
+    let payload = postcard_bytes(&Down::Stop);
+    let mut forged = ref_cobs(&hand_raw(
+        b"not-the-link-key",
+        Stream::Down,
+        u32::MAX,
+        LINK_VERSION,
+        &payload,
+    ));
+    assert_eq!(
+        decode::<Down>(&mut forged, &mut mac, &mut rx),
+        Err(FrameError::Authentication)
+    );
+    assert_eq!(rx.last_accepted(), 0);
+    let mut good = ref_cobs(&hand_raw(&KEY, Stream::Down, 7, LINK_VERSION, &payload));
+    assert_eq!(decode::<Down>(&mut good, &mut mac, &mut rx), Ok(Down::Stop));
+    assert_eq!(rx.last_accepted(), 7);
+}
+
+#[test]
+fn frames_of_one_stream_do_not_verify_on_another() {
+    let msg = Down::Stop;
+    for from in [Stream::Down, Stream::Route, Stream::Up] {
+        let frame = frame_on(&msg, &mut Authenticator::new(from));
+        for to in [Stream::Down, Stream::Route, Stream::Up] {
+            let mut body = frame[..frame.len() - 1].to_vec();
+            let r = decode::<Down>(&mut body, &mut LinkMac::new(&KEY), &mut Verifier::new(to));
+            if from == to {
+                assert_eq!(r, Ok(msg));
+            } else {
+                assert_eq!(r, Err(FrameError::Authentication), "{from:?} on {to:?}");
+            }
+        }
+    }
+    let ids = [Stream::Down, Stream::Route, Stream::Up].map(Stream::data_id);
+    assert!(ids[0] != ids[1] && ids[1] != ids[2] && ids[0] != ids[2]);
+}
+
+#[test]
+fn a_sender_refuses_to_wrap_its_freshness() {
+    let mut mac = LinkMac::new(&KEY);
+    let mut buf = [0u8; MAX_FRAME_BYTES];
+    let mut tx = Authenticator::resumed(Stream::Up, u32::MAX - 1);
+    assert!(encode(
+        &Up::Ready(ReadyFrame {
+            status: 0,
+            detail: 0
+        }),
+        &mut mac,
+        &mut tx,
+        &mut buf
+    )
+    .is_ok());
+    assert_eq!(tx.last_sent(), u32::MAX);
+    assert_eq!(
+        encode(
+            &Up::Ready(ReadyFrame {
+                status: 0,
+                detail: 0
+            }),
+            &mut mac,
+            &mut tx,
+            &mut buf
+        ),
+        Err(FrameError::FreshnessExhausted)
+    );
+    assert_eq!(tx.last_sent(), u32::MAX);
+    // A receiver resumed at the last value refuses that frame again.
+    let frame = largest(&Down::Stop, Stream::Down);
+    let mut body = frame[..frame.len() - 1].to_vec();
+    let mut rx = Verifier::resumed(Stream::Down, u32::MAX);
+    assert_eq!(
+        decode::<Down>(&mut body, &mut mac, &mut rx),
+        Err(FrameError::Replay {
+            freshness: u32::MAX,
+            last: u32::MAX
+        })
+    );
+}
+
+#[test]
+fn the_build_key_is_the_documented_development_key_unless_set() {
+    if !LINK_KEY_FROM_ENV {
+        assert_eq!(LINK_KEY, *b"DEV-ONLY-SIM-KEY");
+    }
+    // Either way, the frames of this build verify under its key and not under
+    // another.
+    let mut tx = Authenticator::new(Stream::Up);
+    let mut buf = [0u8; MAX_FRAME_BYTES];
+    let n = encode(
+        &Up::Ready(ReadyFrame {
+            status: 3,
+            detail: 4,
+        }),
+        &mut LinkMac::new(&LINK_KEY),
+        &mut tx,
+        &mut buf,
+    )
+    .unwrap();
+    let mut a = buf[..n - 1].to_vec();
+    let mut b = a.clone();
+    assert!(decode::<Up>(
+        &mut a,
+        &mut LinkMac::new(&LINK_KEY),
+        &mut Verifier::new(Stream::Up)
+    )
+    .is_ok());
+    let mut other = LINK_KEY;
+    other[15] ^= 1;
+    assert_eq!(
+        decode::<Up>(
+            &mut b,
+            &mut LinkMac::new(&other),
+            &mut Verifier::new(Stream::Up)
+        ),
+        Err(FrameError::Authentication)
+    );
+}
+
+#[test]
+fn refusal_codes_round_trip_and_counts_add_up() {
+    let mut names = std::collections::HashSet::new();
+    for r in Refusal::ALL {
+        assert_eq!(Refusal::from_code(r.code()), Some(r));
+        assert_ne!(r.code(), 0, "0 is an accepted frame");
+        assert_ne!(r.code(), SENSOR_UNEXPECTED);
+        assert!(names.insert(r.name()));
+    }
+    assert_eq!(Refusal::from_code(0), None);
+    assert_eq!(Refusal::from_code(SENSOR_UNEXPECTED), None);
+    let mut c = RefusalCounts::new();
+    c.count(Refusal::Auth);
+    c.count(Refusal::Auth);
+    c.count(Refusal::Corrupt);
+    assert_eq!(
+        (
+            c.of(Refusal::Auth),
+            c.of(Refusal::Replay),
+            c.of(Refusal::Corrupt)
+        ),
+        (2, 0, 1)
+    );
+    assert_eq!(c.total(), 3);
+    let sum = c.plus(RefusalCounts {
+        auth: u32::MAX,
+        replay: 5,
+        corrupt: 0,
+    });
+    assert_eq!(
+        sum,
+        RefusalCounts {
+            auth: u32::MAX,
+            replay: 5,
+            corrupt: 1
+        }
+    );
+    assert_eq!(sum.total(), u32::MAX);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// `LinkMac`'s tags, fed a block at a time (decode) or a byte at a time
+    /// (encode), are the CMAC of the RustCrypto crates' own interface, for every
+    /// length (whole last blocks included).
+    #[test]
+    fn link_mac_tags_are_the_reference_cmac(
+        input in prop::collection::vec(any::<u8>(), 0..700),
+        key in any::<[u8; 16]>(),
+    ) {
+        for stream in [Stream::Down, Stream::Route, Stream::Up] {
+            let mut reference = vec![stream.data_id()];
+            reference.extend_from_slice(&input);
+            let expected = ref_tag(&key, &reference);
+            let mut mac = LinkMac::new(&key);
+            prop_assert_eq!(mac.tag(stream, &input), expected);
+            prop_assert!(mac.verify(stream, &input, &expected));
+            let mut wrong = expected;
+            wrong[0] ^= 0x80;
+            prop_assert!(!mac.verify(stream, &input, &wrong));
+        }
+    }
+
+    /// Frames encoded one after the other (a byte at a time through the CMAC) are
+    /// those built by hand with the reference CMAC, freshness counting up.
+    #[test]
+    fn encoded_frames_are_the_hand_built_ones(msgs in prop::collection::vec(any_msg(), 1..6)) {
+        let mut tx = Authenticator::new(Stream::Up);
+        for (k, msg) in msgs.iter().enumerate() {
+            let (frame, payload) = match msg {
+                AnyMsg::Down(m) => (frame_on(m, &mut tx), postcard_bytes(m)),
+                AnyMsg::Up(m) => (frame_on(m, &mut tx), postcard_bytes(m)),
+            };
+            let mut expected = ref_cobs(&hand_raw(&KEY, Stream::Up, k as u32 + 1, LINK_VERSION, &payload));
+            expected.push(0);
+            prop_assert_eq!(frame, expected);
+        }
+    }
+
+    /// Any bit of the tag flipped, the CRC made to match: refused as forged.
+    #[test]
+    fn any_flipped_tag_bit_is_refused_as_forged(msg in any_msg(), bit in 0..MAC_BYTES * 8) {
+        let frame = msg.frame();
+        let mut raw = raw_of(&frame);
+        let tag_at = raw.len() - CRC_BYTES - MAC_BYTES;
+        raw[tag_at + bit / 8] ^= 1 << (bit % 8);
+        let mut body = reseal(raw);
+        prop_assert_eq!(msg.decode_like(&mut body), Err(FrameError::Authentication));
     }
 }

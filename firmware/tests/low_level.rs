@@ -804,8 +804,8 @@ fn a_paused_yaw_loop_releases_its_output_to_the_plans_steering() {
 }
 
 // ---------------------------------------------------------------------------
-// Each rule at its edge (the mutation pass, README "Tests that notice a wrong
-// line").
+// Each rule at its edge (the mutation pass, docs/testing.md, "Tests that notice a
+// wrong line").
 
 #[test]
 fn each_setting_out_of_its_range_is_refused_with_its_reason() {

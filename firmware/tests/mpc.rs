@@ -385,7 +385,7 @@ fn f32_agrees_with_f64() {
     let obs32 = ObstacleManager::new();
     // From a realistic start: entering the circle at 12 m/s with its kinematic
     // steering. (A brutal cold start, 15 m/s into the circle with straight wheels,
-    // can end a QP in f32 with NumericalError: see the README's limitations.)
+    // can end a QP in f32 with NumericalError: see docs/limitations.md.)
     let d0 = kinematic_steering_for_radius(&geometry::<f64>(), r).unwrap();
     let a = drive(&s64, &p64, &obs64, est(0.0, 0.0, 0.0, 12.0, d0, 0), 1.0, 30);
     let b = drive(

@@ -423,13 +423,14 @@ proptest! {
 
 proptest! {
     /// `project_each` gives, bit for bit, what one `project` per point gives with
-    /// the same hint (or none, or one not finite), on the hairpin (open: the end
-    /// segments extended) and on a circle (closed: `s` unwrapped to the hint's lap),
-    /// in f32 as on the ECU; a point not finite gives `None` and leaves the others.
+    /// the same hint, on the hairpin (open: the end segments extended) and on a
+    /// circle (closed: `s` unwrapped to the hint's lap), in f32 as on the ECU; a
+    /// point not finite gives `None` and leaves the others; a hint not finite
+    /// gives `None` for every point (it requires one).
     #[test]
     fn project_each_equals_one_projection_per_point(
         pts in proptest::collection::vec((-20.0f32..130.0, -30.0f32..30.0), 1..8),
-        hint in prop_oneof![Just(None), Just(Some(f32::NAN)), (-50.0f32..700.0).prop_map(Some)],
+        hint in -50.0f32..700.0,
         nan_at in 0usize..10,
         closed in any::<bool>(),
     ) {
@@ -452,13 +453,15 @@ proptest! {
         }
         let each: [Option<(f32, f32)>; 8] = p.project_each(&q, hint);
         for (k, v) in q.iter().enumerate() {
-            let one = p.project(*v, hint).map(|r| (r.s_m.to_bits(), r.lateral_m.to_bits()));
+            let one = p.project(*v, Some(hint)).map(|r| (r.s_m.to_bits(), r.lateral_m.to_bits()));
             prop_assert_eq!(each[k].map(|(s, l)| (s.to_bits(), l.to_bits())), one, "point {}", k);
         }
         prop_assert!(each[q.len()..].iter().all(Option::is_none));
         // Points beyond K are not projected.
         let two: [Option<(f32, f32)>; 1] = p.project_each(&q, hint);
         prop_assert_eq!(two[0].map(|(s, _)| s.to_bits()), each[0].map(|(s, _)| s.to_bits()));
+        let none: [Option<(f32, f32)>; 8] = p.project_each(&q, f32::NAN);
+        prop_assert!(none.iter().all(Option::is_none));
     }
 }
 
@@ -513,4 +516,64 @@ fn a_dense_path_ends_the_curvature_window_after_max_steps() {
         (got - capped).abs() < 1e-6,
         "{got} vs capped {capped}, whole {whole}"
     );
+}
+
+/// A path limited to `MAX_SEARCH_SEGMENTS` segments per search near a hint (the
+/// plan task's) loads a road as dense as the limit allows and refuses one point
+/// more within the search's 60 m, naming where; a path without a limit loads
+/// both; on the path both load, every projection near a hint is the same bit for
+/// bit with and without the limit (the limit never cuts a search short).
+#[test]
+fn a_path_with_a_search_limit_refuses_a_road_denser_than_it_and_projects_the_same() {
+    use firmware::reference_path::MAX_SEARCH_SEGMENTS;
+    // Points `d` m apart on a gentle curve, 300 of them.
+    let road = |d: f32| -> Vec<[f32; 2]> {
+        (0..300)
+            .map(|i| {
+                let x = i as f32 * d;
+                [x, 10.0 * (x / 50.0).sin()]
+            })
+            .collect()
+    };
+    // 60 m of search span: at 0.7 m about 86 points in it, within 96; at 0.55 m
+    // about 110, past it.
+    let (fits, dense) = (road(0.7), road(0.55));
+    let mut limited: ReferencePath<f32, 512> =
+        ReferencePath::with_search_segments(MAX_SEARCH_SEGMENTS);
+    let mut free: ReferencePath<f32, 512> = ReferencePath::new();
+    limited.load(&fits, None, false).unwrap();
+    free.load(&fits, None, false).unwrap();
+    for k in 0..200 {
+        let s = k as f32;
+        let q = [s * 0.7, 10.0 * (s * 0.7 / 50.0).sin() + 1.5];
+        for hint in [s * 0.7, s * 0.7 - 15.0, s * 0.7 + 30.0] {
+            let a = limited.project(q, Some(hint)).unwrap();
+            let b = free.project(q, Some(hint)).unwrap();
+            assert_eq!(
+                (a.s_m.to_bits(), a.lateral_m.to_bits(), a.segment),
+                (b.s_m.to_bits(), b.lateral_m.to_bits(), b.segment)
+            );
+        }
+    }
+    let e = limited.load(&dense, None, false).unwrap_err();
+    assert!(matches!(e, PathError::TooDense { index: 0 }), "{e:?}");
+    assert!(limited.is_empty());
+    free.load(&dense, None, false).unwrap();
+    // The same rule on a closed path, across its start.
+    let ring = |n: usize, r: f32| -> Vec<[f32; 2]> {
+        (0..n)
+            .map(|i| {
+                let a = core::f32::consts::TAU * i as f32 / n as f32;
+                [r * a.cos(), r * a.sin()]
+            })
+            .collect()
+    };
+    // r = 100 m: 628 m round; 600 points 1.05 m apart fit, 1,200 (0.52 m) do not.
+    let mut limited: ReferencePath<f32, 1280> =
+        ReferencePath::with_search_segments(MAX_SEARCH_SEGMENTS);
+    limited.load(&ring(600, 100.0), None, true).unwrap();
+    assert!(matches!(
+        limited.load(&ring(1200, 100.0), None, true),
+        Err(PathError::TooDense { .. })
+    ));
 }

@@ -118,3 +118,27 @@ fn a_track_too_dense_for_the_window_is_refused_with_what_to_change() {
     assert!(e.contains("resample"), "{e}");
     assert!(e.contains("test"), "names the track: {e}");
 }
+
+/// A track dense only in one place (a 30 m stretch of points 0.25 m apart on a
+/// road sampled every 2 m, so the window's span is met): the ECU's projections
+/// search a bounded number of segments, so it is refused, naming the place and
+/// the spacing to resample to; a road sampled every 0.8 m passes.
+#[test]
+fn a_track_too_dense_for_the_projections_search_is_refused_where_it_is_dense() {
+    let mut csv = String::new();
+    let mut x = 0.0;
+    while x < 600.0 {
+        csv.push_str(&format!("{x},0,4,4\n"));
+        x += if (200.0..230.0).contains(&x) {
+            0.25
+        } else {
+            2.0
+        };
+    }
+    let t = Track::from_csv_reader(csv.as_bytes(), "test", false).unwrap();
+    let e = RouteFeeder::new(&t).unwrap_err().to_string();
+    assert!(e.contains("too dense near (1"), "{e}");
+    assert!(e.contains("resample the track to at least 0.64 m"), "{e}");
+    let even = track(2000, 0.8, false);
+    RouteFeeder::new(&even).unwrap();
+}

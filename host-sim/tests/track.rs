@@ -41,7 +41,7 @@ fn budapest_loads_closed_with_its_known_length() {
     assert!((t.points[0][0] + 2.447973).abs() < 1e-12);
     assert!((t.w_right[0] - 6.187).abs() < 1e-12);
     assert!((t.w_left[0] - 6.476).abs() < 1e-12);
-    // The README says the tightest radius is 12-14 m depending on smoothing;
+    // The tightest radius is 12-14 m depending on smoothing (an earlier README's figure);
     // the raw three-point estimate gives 14.19 m (computed independently).
     let r = t.min_radius();
     assert!((r - 14.19).abs() < 0.01, "min radius {r}");

@@ -10,14 +10,18 @@
 
 use std::path::PathBuf;
 
+use firmware::link::{Refusal, RefusalCounts};
 use host_sim::closed_loop::cost_model::CostModel;
+use host_sim::closed_loop::disturbed_ecu::DisturbedEcu;
 use host_sim::closed_loop::ecu::SimulatedEcu;
 use host_sim::closed_loop::timeline::{run_with, RunResult};
 use host_sim::closed_loop::SimOptions;
 use host_sim::model::vehicle::VehicleParams;
 use host_sim::pil::comparison::compare;
 use host_sim::pil::deadlines::{count_mismatches, TickOverruns};
-use host_sim::pil::qemu::{LinkCounters, PilOptions, QemuEcu};
+use host_sim::pil::link_fault::{LinkFault, LinkFaultKind, LinkFaultSpec};
+use host_sim::pil::qemu::{InjectedFrames, LinkCounters, PilOptions, QemuEcu};
+use host_sim::world::disturbance::Disturbances;
 use host_sim::world::obstacle_file::{load_obstacles_reader, Obstacle};
 use host_sim::world::scenario::{paper_pose_at, Scenario};
 use host_sim::world::track::Track;
@@ -42,6 +46,8 @@ fn pil_options(name: &str, shift: u32) -> PilOptions {
         frame_timeout_s: 60.0,
         cycles_per_instruction: SimOptions::default().cycles_per_instruction,
         trace: None,
+        link_key: firmware::link::LINK_KEY,
+        link_fault: None,
     }
 }
 
@@ -77,13 +83,30 @@ fn drive_with(
     LinkCounters,
     TickOverruns,
 ) {
-    let vehicle = VehicleParams::default();
-    let mut ecu = QemuEcu::start(scenario, &vehicle, opts, &pil_options(name, shift)).unwrap();
-    let r = run_with(scenario, &vehicle, opts, &mut ecu, |_, _| {}).unwrap();
-    let counters = ecu.counters;
-    let ticks = ecu.tick_overruns;
-    let done = ecu.stop().unwrap();
+    let (r, done, counters, ticks, _) = drive_pil(scenario, opts, &pil_options(name, shift));
     (r, done, counters, ticks)
+}
+
+/// The run of `scenario` with the ECU in QEMU as `pil` says; with what the ECU
+/// reported at the end, the link's counters and the link fault's frames.
+fn drive_pil(
+    scenario: &Scenario,
+    opts: &SimOptions,
+    pil: &PilOptions,
+) -> (
+    RunResult,
+    firmware::link::DoneFrame,
+    LinkCounters,
+    TickOverruns,
+    InjectedFrames,
+) {
+    let vehicle = VehicleParams::default();
+    let mut ecu = QemuEcu::start(scenario, &vehicle, opts, pil).unwrap();
+    let r = run_with(scenario, &vehicle, opts, &mut ecu, |_, _| {}).unwrap();
+    let ticks = ecu.tick_overruns;
+    let injected = ecu.injected;
+    let (done, counters) = ecu.stop().unwrap();
+    (r, done, counters, ticks, injected)
 }
 
 /// The ECU's own deadline counts are there and equal the host's.
@@ -170,14 +193,20 @@ fn the_ecu_in_the_loop_drives_round_the_obstacles_within_its_deadlines() {
 
 #[test]
 #[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
-fn an_ecu_too_slow_for_its_plans_counts_the_misses_as_the_host_does_and_keeps_the_car_safe() {
-    // 2^8 = 256 ns per instruction (an ECU ~40× slower than the 168 MHz part): a
-    // plan activation over ~0.39 M instructions (100 ms) finishes past its deadline
-    // on the ECU's own clock: the cold start and some warm steps, and an activation
-    // that runs past the next release skips it.
-    // (At 2^9 the plans fail and the car stops under control: see the README's
-    // known limitations.)
-    let (r, _, _, ticks) = drive(&Scenario::paper(true), 8, 12.0, "slow");
+fn an_ecu_too_slow_for_its_tasks_counts_the_misses_as_the_host_does_and_latches_the_safe_actuation()
+{
+    // 2^7 = 128 ns per instruction (an ECU ~21× slower than the 168 MHz part at
+    // the CPI bound): a plan activation over ~0.78 M instructions (100 ms),
+    // control interference included, finishes past its deadline on the ECU's own
+    // clock, and one that runs past the next release skips it. The control
+    // activations that send a plan event with its CMAC (up to ~89 k instructions,
+    // 11.4 ms here) overrun their 10 ms period too: after CONTROL_MISS_LIMIT
+    // consecutive misses the control task latches the safe actuation (zero
+    // torque, steering held). The car is not kept on the road by that (see
+    // docs/limitations.md); the test holds the ECU to counting what happened as
+    // the host does and to latching the safe actuation. (At 2^6 the paper
+    // track's plans, ≤ 0.75 M instructions, are on time.)
+    let (r, _, _, ticks) = drive(&Scenario::paper(true), 7, 12.0, "slow");
     let s = &r.summary;
     println!("{}", serde_json::to_string_pretty(s).unwrap());
     // The ECU counted misses and skipped releases itself, as many as the host.
@@ -189,26 +218,26 @@ fn an_ecu_too_slow_for_its_plans_counts_the_misses_as_the_host_does_and_keeps_th
     );
     assert!(s.ecu_skipped_releases.unwrap() >= 1);
     assert!(r.plan_activations.iter().any(|a| a.deadline_miss));
-    // Every control activation is over its 5,000-cycle budget on this clock (an
-    // instruction is 43 of its cycles), none misses its 10 ms deadline. Each is
-    // counted with its completion, which the next frame reports: all but the last.
-    assert_eq!(
+    // The control activations are over their 5,000-cycle budget on this clock
+    // (an instruction is 21.5 of its cycles), and some miss their deadline.
+    assert!(
+        s.ecu_control_budget_overruns.unwrap() > s.control_activations / 2,
+        "{:?} of {}",
         s.ecu_control_budget_overruns,
-        Some(s.control_activations - 1)
-    );
-    assert_eq!(s.ecu_control_deadline_misses, Some(0));
-    // The late plans are followed (the policy): no collision, on the road.
-    assert_eq!(s.collisions, 0);
-    assert!(
-        s.max_abs_lateral_error_m < 3.5,
-        "{} m",
-        s.max_abs_lateral_error_m
+        s.control_activations
     );
     assert!(
-        s.stop_reason == "time limit reached" || s.stop_reason.starts_with("stood still"),
+        s.ecu_control_deadline_misses.unwrap() >= u64::from(firmware::deadline::CONTROL_MISS_LIMIT),
+        "{:?}",
+        s.ecu_control_deadline_misses
+    );
+    // The consecutive misses latched the safe actuation, which the host applied.
+    assert!(
+        s.control_safe_actuations >= 1,
         "{}",
-        s.stop_reason
+        s.control_safe_actuations
     );
+    assert_eq!(s.collisions, 0);
 }
 
 #[test]
@@ -346,4 +375,110 @@ fn a_cold_start_into_braking_is_the_in_process_run_bit_for_bit_from_the_first_ac
     assert!(pil.log.len() >= 300);
     assert_counts_agree(&pil, &ticks);
     assert_eq!((link.rejected, link.stale), (0, 0));
+}
+
+#[test]
+#[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
+fn forged_replayed_and_corrupted_sensor_frames_are_refused_by_reason_and_never_acted_on() {
+    // The paper scenario with its obstacles; the link fault covers the instant the
+    // first window of the road after the start is handed over (the route frames it
+    // announces reach the ECU only in the first frame it accepts after the fault).
+    let scenario = Scenario::paper(true);
+    let vehicle = VehicleParams::default();
+    // A window goes a frame per plan release (14 for the paper track's): the
+    // first one sent while driving is adopted within 12 s.
+    let probe = SimOptions {
+        max_duration_s: 12.0,
+        ..SimOptions::default()
+    };
+    let mut modelled = SimulatedEcu::<f32>::new(&scenario, &vehicle, &probe).unwrap();
+    let clean = run_with(&scenario, &vehicle, &probe, &mut modelled, |_, _| {}).unwrap();
+    let first_window_us = clean
+        .plan_activations
+        .iter()
+        .find(|a| a.window)
+        .expect("a window of the road within 12 s")
+        .release_us;
+    const FRAMES: u32 = 20;
+    let start_us = first_window_us - 100_000;
+    let opts = SimOptions {
+        max_duration_s: (first_window_us as f64 * 1e-6 + 1.5).ceil(),
+        ..SimOptions::default()
+    };
+    for kind in LinkFaultKind::ALL {
+        let fault = LinkFault {
+            spec: LinkFaultSpec {
+                kind,
+                frames: FRAMES,
+            },
+            start_us,
+        };
+        let pil = PilOptions {
+            link_fault: Some(fault),
+            ..pil_options(kind.name(), 4)
+        };
+        let (r, done, link, ticks, injected) = drive_pil(&scenario, &opts, &pil);
+        let s = &r.summary;
+        println!("{}: {injected:?}, ECU {:?}", kind.name(), done.refused);
+        // Each injected frame refused for its reason, counted by the ECU (its
+        // Done frame and its last actuation frame, in summary.json), none acted on.
+        let mut expected = RefusalCounts::new();
+        for _ in 0..FRAMES {
+            expected.count(kind.refusal());
+        }
+        assert_eq!(injected.injected, expected);
+        assert_eq!(injected.refused_as_expected, u64::from(FRAMES));
+        assert_eq!(injected.acted_on, 0);
+        assert_eq!(injected.legitimate_refused, 0);
+        assert_eq!(done.refused, expected);
+        assert_eq!(done.rejected_frames, FRAMES);
+        let of = |r: Refusal| Some(u64::from(expected.of(r)));
+        assert_eq!(s.ecu_frames_refused_auth, of(Refusal::Auth));
+        assert_eq!(s.ecu_frames_refused_replay, of(Refusal::Replay));
+        assert_eq!(s.ecu_frames_refused_corrupt, of(Refusal::Corrupt));
+        // The host refused none of the ECU's frames; none answered another.
+        assert_eq!((link.rejected, link.stale), (0, 0));
+        assert_eq!(link.refused, RefusalCounts::new());
+        // The refused periods ran the dropout policy, the safe actuation (the rows
+        // are the control instants), and the control task followed again from the
+        // first frame after them.
+        let at_us = |t_s: f64| (t_s * 1e6).round() as u64;
+        let safe: Vec<bool> = r
+            .log
+            .iter()
+            .filter(|row| fault.covers(at_us(row.t_s)))
+            .map(|row| row.control_mode == "safe")
+            .collect();
+        assert_eq!(safe, vec![true; FRAMES as usize]);
+        assert!(r
+            .log
+            .iter()
+            .filter(|row| at_us(row.t_s) >= fault.end_us())
+            .all(|row| row.control_mode != "safe"));
+        // The window announced during the fault was adopted after it.
+        let adopted = r
+            .plan_activations
+            .iter()
+            .find(|a| a.window)
+            .expect("the window adopted");
+        assert!(adopted.release_us >= fault.end_us(), "{adopted:?}");
+        // Bit for bit the in-process run with no estimate in the same periods and
+        // the window withheld until after them: nothing else of the injected
+        // frames reached the control or the plan.
+        let d = Disturbances {
+            dropout: Some(fault.dropout()),
+            ..Disturbances::default()
+        };
+        let mut modelled = DisturbedEcu::<f32>::new(&scenario, &vehicle, &opts, d).unwrap();
+        let host = run_with(&scenario, &vehicle, &opts, &mut modelled, |_, _| {}).unwrap();
+        let c = compare(&r, &host);
+        assert!(c.identical, "{}: {c:?}", kind.name());
+        assert_eq!(
+            s.control_safe_actuations,
+            host.summary.control_safe_actuations
+        );
+        assert!(s.control_safe_actuations >= u64::from(FRAMES));
+        assert_counts_agree(&r, &ticks);
+        assert_eq!(s.collisions, 0);
+    }
 }

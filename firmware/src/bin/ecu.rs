@@ -40,8 +40,24 @@
 //! come from the sensor fusion and go to the actuators over CAN; the frames
 //! ([`firmware::link`]) are the same.
 //!
+//! **Authenticated frames** ([`firmware::link::secoc`]): every frame, both ways,
+//! carries a freshness value and a truncated AES-128-CMAC under the build's link
+//! key. The control task verifies the sensor frame of its release before it acts
+//! and authenticates its actuation frame; the plan task verifies the route
+//! frames it reads. A frame refused (forged, replayed, corrupt) is counted by
+//! reason and never acted on. A refused sensor frame is this release's: the
+//! period runs on no estimate
+//! ([`firmware::state_estimate::StateEstimate::unavailable`]: the dropout policy,
+//! the control task's safe actuation, the plan task does not plan) and its
+//! actuation frame says so ([`link::ActuationFrame::sensor`]); a run of them is a
+//! run of dropout periods (the car brakes to a stop under the safe actuation, the
+//! watchdog counts the plans missed) until a frame is accepted again. The counts
+//! go in every actuation frame and the `Done` frame. A refused set-up frame
+//! refuses the set-up ([`link::SetupError::FrameRefused`]).
+//!
 //! **Route**: the next window of the road comes on a channel of its own
-//! (`ecu.route`), announced by the count in the sensor frame; the plan task
+//! (`ecu.route`), announced by the sensor frames (the host's total of route
+//! frames: a refused sensor frame loses no announcement); the plan task
 //! receives it after it publishes (it is the planner's input), so a window never
 //! delays an actuation, and the next activation adopts it instead of planning
 //! (the control task follows the last plan 100 ms longer): an activation plans
@@ -77,15 +93,16 @@
 #[path = "support/qemu_exit.rs"]
 mod qemu_exit;
 
-use core::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicPtr, AtomicU32, AtomicUsize, Ordering};
 
 use cortex_m_semihosting::syscall;
 use defmt_semihosting as _;
 use firmware::clock_tree::{self, ClockError, ClockRegisters, ClockSource, Register};
 use firmware::deadline::{self, DeadlineMonitor, PlanWatchdog};
 use firmware::link::{
-    self, ActuationFrame, Down, FrameReader, Up, MAX_DOWN_FRAME_BYTES,
-    MAX_DRIVING_DOWN_FRAME_BYTES, MAX_UP_FRAME_BYTES,
+    self, ActuationFrame, Authenticator, Down, FrameReader, LinkMac, Refusal, RefusalCounts,
+    Stream, UpRef, Verifier, LINK_KEY, MAX_DOWN_FRAME_BYTES, MAX_DRIVING_DOWN_FRAME_BYTES,
+    MAX_UP_FRAME_BYTES,
 };
 use firmware::low_level::Actuation;
 use firmware::tasks::{ControlTask, PlanTask};
@@ -106,8 +123,10 @@ const TICKS_PER_MONO: u32 = SYSCLK_HZ / MONO_HZ;
 
 systick_monotonic!(Mono, MONO_HZ);
 
-/// Host file descriptor of the up-link (0: not open), for the panic handler.
-static UP_FD: AtomicUsize = AtomicUsize::new(0);
+/// The control channel (null: not open yet), for the panic handler's frame:
+/// its up stream's CMAC and freshness counter authenticate it as any other.
+/// Taken only on the path that never returns (see [`safe_stop_work`]).
+static PANIC_LINK: AtomicPtr<Link> = AtomicPtr::new(core::ptr::null_mut());
 /// Host file descriptor of the semihosting stderr (0: not open), for the panic
 /// handler's fixed line.
 static ERR_FD: AtomicUsize = AtomicUsize::new(0);
@@ -182,37 +201,76 @@ fn instant_at(t_us: u64) -> <Mono as rtic_monotonics::Monotonic>::Instant {
     )
 }
 
-/// Frames the control task reads from the down-link per release at most: the
-/// sensor frame, and one before it (the rest of a garbled one, or another frame).
+/// Byte runs the control task reads from the down-link per release at most: the
+/// sensor frame, and, before it, the part of a frame longer than a sensor frame
+/// (refused). The first whole frame ends the release's receiving, accepted or
+/// refused: the host writes one frame per release.
 const RECEIVE_FRAMES: usize = 2;
 
-/// Frames of one window of the road on the route channel: the most the plan task
-/// reads per activation.
-const ROUTE_FRAMES: u32 = link::route_frames(PATH_CAP) as u32;
+/// Route frames the plan task reads per activation at most: one (the host sends
+/// at most one per plan period, before the sensor frame of the plan's release),
+/// so a window of the road arrives over `link::route_frames(PATH_CAP)` plan
+/// periods and no activation verifies a whole window.
+const ROUTE_FRAMES: u32 = 1;
 
-/// Why the control task got no sensor frame.
+/// Why the control task got no sensor frame to act on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LinkEnd {
     /// The host asked to stop.
     Stop,
     /// The host closed the link.
     Closed,
-    /// [`RECEIVE_FRAMES`] frames without a sensor frame.
+    /// [`RECEIVE_FRAMES`] runs of bytes without a whole frame: the byte stream is
+    /// out of step with the host's frames.
     Garbled,
+    /// This release's frame was refused (counted): the period runs as a dropout.
+    Refused {
+        /// [`link::ActuationFrame::sensor`]: the [`Refusal::code`], or
+        /// [`link::SENSOR_UNEXPECTED`].
+        code: u8,
+        /// The sequence number the ECU expected of it: the answer's.
+        seq: u32,
+    },
 }
 
-/// The two FIFOs to the simulator, through semihosting.
+/// The control channel to the simulator (`ecu.down`, `ecu.up`), through
+/// semihosting, and the authentication of its frames: one CMAC engine for both
+/// directions (the control task is the only one that uses it), the freshness of
+/// the down stream and the counter of the up stream.
 pub struct Link {
     down: usize,
     up: usize,
-    /// Every `Down` frame fits (`MAX_DOWN_FRAME_BYTES` is the largest); a longer
-    /// one is dropped and counted as refused.
-    reader: FrameReader<MAX_DOWN_FRAME_BYTES>,
+    /// The frame being received while driving: a sensor frame fits
+    /// (`MAX_DRIVING_DOWN_FRAME_BYTES`); a longer one is dropped and counted as
+    /// refused. The set-up's larger frames go through a reader of their own, on
+    /// the stack of `init` ([`Link::receive`]), not in static RAM for the run.
+    reader: FrameReader<MAX_DRIVING_DOWN_FRAME_BYTES>,
     rx: [u8; 64],
     rx_len: usize,
     rx_pos: usize,
-    /// Frames refused (garbled, short, wrong version, unexpected).
+    /// AES-128-CMAC under the link key (its key schedule built once, at
+    /// [`Link::open`]).
+    mac: LinkMac,
+    /// The down stream's last accepted freshness.
+    down_rx: Verifier,
+    /// The up stream's freshness counter.
+    up_tx: Authenticator,
+    /// The frame being sent: the largest `Up` frame fits (`MAX_UP_FRAME_BYTES`).
+    /// In the link's static storage, not on the stack: the control task's
+    /// frames and the safe stop's (which takes the link over) are sent one at a
+    /// time, and the stack bound counts a buffer on the stack once for the
+    /// control task and once more for the safe stop on top of it.
+    tx: [u8; MAX_UP_FRAME_BYTES],
+    /// The `seq` the next sensor frame should carry (the last accepted + 1; the
+    /// answer to a refused one carries it).
+    next_seq: u32,
+    /// Route frames announced so far (the sensor frames carry the host's total).
+    route_announced: u32,
+    /// Frames refused (garbled, short, wrong version, forged, replayed,
+    /// unexpected), frames.
     pub rejected: u32,
+    /// The refused frames by reason, frames.
+    pub refused: RefusalCounts,
 }
 
 fn sh_open(name: &[u8], mode: usize) -> Option<usize> {
@@ -225,15 +283,19 @@ fn sh_open(name: &[u8], mode: usize) -> Option<usize> {
     }
 }
 
-/// Writes `bytes` to the host file `fd`; false when the host took none of a
-/// write. No slicing that can panic: the panic path uses it.
+/// Writes `bytes` to the host file `fd` in at most four writes (a host takes a
+/// frame in one; a short write is retried for the rest); false when the host
+/// took none of a write or the bytes are not all written after four. No slicing
+/// that can panic: the panic path uses it.
 fn sh_write(fd: usize, mut bytes: &[u8]) -> bool {
-    while !bytes.is_empty() {
+    // A host that has not taken the frame in four writes is not keeping up: the
+    // frame is given up (the caller counts it) rather than retried byte by byte.
+    // wcet-bound: 4
+    for _ in 0..4 {
+        if bytes.is_empty() {
+            return true;
+        }
         let left = unsafe { syscall!(WRITE, fd, bytes.as_ptr(), bytes.len()) };
-        // WCET: each pass returns or drops at least one byte (left < len), so at most
-        // bytes.len() passes: an `Up` frame (`Link::send`'s buffer holds
-        // MAX_UP_FRAME_BYTES) or `safe_stop`'s line (< 30 bytes).
-        // wcet-bound: MAX_UP_FRAME_BYTES
         if left >= bytes.len() {
             return false;
         }
@@ -242,7 +304,7 @@ fn sh_write(fd: usize, mut bytes: &[u8]) -> bool {
             None => return false,
         };
     }
-    true
+    bytes.is_empty()
 }
 
 /// Reads up to `buf.len()` bytes of the host file `fd`; the count, 0 at its end.
@@ -255,14 +317,14 @@ fn sh_read(fd: usize, buf: &mut [u8]) -> usize {
 impl Link {
     /// Opens `ecu.down` for reading, `ecu.up` for writing and `ecu.route` for
     /// reading, in that order (the simulator opens them in the same order), and
-    /// the semihosting stderr (`:tt`, append) for the panic handler's line.
+    /// the semihosting stderr (`:tt`, append) for the panic handler's line;
+    /// builds the CMAC's key schedule from the build's link key.
     pub fn open() -> Option<(Self, RouteLink)> {
         const R_BINARY: usize = 1;
         const W_TRUNC_BINARY: usize = 5;
         const APPEND: usize = 8;
         let down = sh_open(b"ecu.down\0", R_BINARY)?;
         let up = sh_open(b"ecu.up\0", W_TRUNC_BINARY)?;
-        UP_FD.store(up, Ordering::Relaxed);
         let route = sh_open(b"ecu.route\0", R_BINARY)?;
         if let Some(err) = sh_open(b":tt\0", APPEND) {
             ERR_FD.store(err, Ordering::Relaxed);
@@ -275,30 +337,62 @@ impl Link {
                 rx: [0; 64],
                 rx_len: 0,
                 rx_pos: 0,
+                mac: LinkMac::new(&LINK_KEY),
+                down_rx: Verifier::new(Stream::Down),
+                up_tx: Authenticator::new(Stream::Up),
+                tx: [0; MAX_UP_FRAME_BYTES],
+                next_seq: 0,
+                route_announced: 0,
                 rejected: 0,
+                refused: RefusalCounts::new(),
             },
-            RouteLink { fd: route },
+            RouteLink {
+                fd: route,
+                rx: Verifier::new(Stream::Route),
+            },
         ))
     }
 
-    /// The next well-formed host frame (refused frames are counted and skipped);
-    /// `None` when the host closed the link. For the set-up, before the tasks run.
-    pub fn receive(&mut self) -> Option<Down> {
-        loop {
-            match self.next_frame() {
-                Err(()) => return None,
-                Ok(None) => {}
-                Ok(Some(Ok(msg))) => return Some(msg),
-                Ok(Some(Err(()))) => self.rejected = self.rejected.wrapping_add(1),
-            }
+    /// Counts a refused frame (`Some(reason)`; `None`: an authentic frame not
+    /// expected here).
+    fn count_refused(&mut self, reason: Option<Refusal>) {
+        self.rejected = self.rejected.wrapping_add(1);
+        if let Some(r) = reason {
+            self.refused.count(r);
         }
     }
 
-    /// The sensor frame of this release: at most [`RECEIVE_FRAMES`] frames of at
-    /// most [`MAX_DRIVING_DOWN_FRAME_BYTES`] bytes each (a `Sensor` frame; `Stop` is
-    /// shorter). The host writes one frame per release, so more without a sensor
-    /// frame is a broken link, not something to wait out. Other frames, and bytes
-    /// that run past that length without a delimiter, are counted as refused.
+    /// The next host frame of the set-up, read with `reader` (every `Down`
+    /// frame fits); `Err(Some(reason))` for a frame refused (counted), `Err(None)`
+    /// when the host closed the link. Before the tasks run.
+    pub fn receive(
+        &mut self,
+        reader: &mut FrameReader<MAX_DOWN_FRAME_BYTES>,
+    ) -> Result<Down, Option<Refusal>> {
+        loop {
+            let byte = self.next_byte().ok_or(None)?;
+            let decoded = match reader.push(byte) {
+                None => continue,
+                Some(Ok(frame)) => link::decode::<Down>(frame, &mut self.mac, &mut self.down_rx),
+                Some(Err(e)) => Err(e),
+            };
+            return decoded.map_err(|e| {
+                self.count_refused(Some(e.refusal()));
+                Some(e.refusal())
+            });
+        }
+    }
+
+    /// The sensor frame of this release: the first whole frame within at most
+    /// [`RECEIVE_FRAMES`] runs of at most [`MAX_DRIVING_DOWN_FRAME_BYTES`] bytes
+    /// each (a `Sensor` frame; `Stop` is shorter). The host writes one frame per
+    /// release, so a refused frame (forged, replayed, corrupt, or an authentic
+    /// frame of another kind) is this release's: it is counted and answered as a
+    /// dropout ([`LinkEnd::Refused`]), never acted on. Bytes that run past that
+    /// length without a delimiter are counted as refused and the next run read;
+    /// no whole frame in [`RECEIVE_FRAMES`] runs is a broken link
+    /// ([`LinkEnd::Garbled`]). A frame is decoded (CRC, CMAC) at most once per
+    /// release.
     pub fn receive_sensor(&mut self) -> Result<link::SensorFrame, LinkEnd> {
         // WCET: RECEIVE_FRAMES (2; an ECU constant, not the library's).
         // wcet-bound: 2
@@ -322,20 +416,42 @@ impl Link {
                 // loop of its own nested in the loop: their back edges together are
                 // the loop's iterations.
                 // wcet-bound: same loop
-                self.rejected = self.rejected.wrapping_add(1);
+                self.count_refused(Some(Refusal::Corrupt));
                 continue;
             }
-            match self.reader.push(0) {
-                None => {}
-                Some(Ok(frame)) => match link::decode::<Down>(frame) {
-                    Ok(Down::Sensor(f)) => return Ok(f),
-                    Ok(Down::Stop) => return Err(LinkEnd::Stop),
-                    _ => self.rejected = self.rejected.wrapping_add(1),
-                },
-                Some(Err(_)) => self.rejected = self.rejected.wrapping_add(1),
-            }
+            let reason = match self.reader.push(0) {
+                // Two delimiters in a row: idle, no frame.
+                None => continue,
+                Some(Ok(frame)) => {
+                    match link::decode::<Down>(frame, &mut self.mac, &mut self.down_rx) {
+                        Ok(Down::Sensor(f)) => {
+                            self.next_seq = f.seq.wrapping_add(1);
+                            return Ok(f);
+                        }
+                        Ok(Down::Stop) => return Err(LinkEnd::Stop),
+                        Ok(_) => None,
+                        Err(e) => Some(e.refusal()),
+                    }
+                }
+                Some(Err(e)) => Some(e.refusal()),
+            };
+            self.count_refused(reason);
+            let seq = self.next_seq;
+            self.next_seq = seq.wrapping_add(1);
+            return Err(LinkEnd::Refused {
+                code: reason.map_or(link::SENSOR_UNEXPECTED, Refusal::code),
+                seq,
+            });
         }
         Err(LinkEnd::Garbled)
+    }
+
+    /// The route frames the host announced in an accepted sensor frame (its
+    /// total, `route_frames`) that were not announced before, frames.
+    fn newly_announced(&mut self, total: u32) -> u32 {
+        let new = total.saturating_sub(self.route_announced);
+        self.route_announced = self.route_announced.max(total);
+        new
     }
 
     /// The next byte of the down-link; `None` when the host closed it.
@@ -353,54 +469,67 @@ impl Link {
         Some(byte)
     }
 
-    /// Consumes one byte of the down-link: `Ok(None)` inside a frame, `Ok(Some(_))`
-    /// at a frame's end (the message, or `Err` for a frame refused), `Err(())` when
-    /// the host closed the link.
-    #[allow(clippy::result_unit_err)]
-    fn next_frame(&mut self) -> Result<Option<Result<Down, ()>>, ()> {
-        let byte = self.next_byte().ok_or(())?;
-        Ok(match self.reader.push(byte) {
-            None => None,
-            Some(Ok(frame)) => Some(link::decode::<Down>(frame).map_err(|_| ())),
-            Some(Err(_)) => Some(Err(())),
-        })
-    }
-
-    /// Sends one frame to the host. Not inlined: its frame buffer then lives on the
-    /// stack only while a frame is sent, not for the whole of the caller's activation.
-    /// The buffer holds the largest `Up` frame (`MAX_UP_FRAME_BYTES`, tested on the
-    /// largest message), not the largest of either direction.
+    /// Sends one frame to the host, authenticated on the up stream, through the
+    /// link's frame buffer (`tx`: the largest `Up` frame, `MAX_UP_FRAME_BYTES`,
+    /// tested on the largest message). Not inlined: the encoder's frames are on
+    /// the stack only while a frame is sent. The message comes by reference
+    /// ([`UpRef`]): no copy of it in an `Up` on the caller's stack.
     #[inline(never)]
-    pub fn send(&mut self, msg: &Up) -> bool {
-        // The buffer's clearing (a block copy of its size).
-        // wcet-bound: MAX_UP_FRAME_BYTES bytes
-        let mut buf = [0u8; MAX_UP_FRAME_BYTES];
-        match link::encode(msg, &mut buf) {
-            Ok(n) => sh_write(self.up, &buf[..n]),
+    pub fn send(&mut self, msg: UpRef<'_>) -> bool {
+        match link::encode(&msg, &mut self.mac, &mut self.up_tx, &mut self.tx) {
+            // No slicing that can panic: the panic path sends through it.
+            Ok(n) => self
+                .tx
+                .get(..n)
+                .is_some_and(|bytes| sh_write(self.up, bytes)),
             Err(_) => false,
         }
     }
 }
 
 /// The route channel (`ecu.route`): the frames of the next window of the road,
-/// read by the plan task (one byte at a time: they are few).
+/// read by the plan task (one byte at a time: they are few), and the route
+/// stream's last accepted freshness.
 pub struct RouteLink {
     fd: usize,
+    rx: Verifier,
+}
+
+/// Route frames the plan task refused, by reason (the control task reports them
+/// with its own), frames.
+static ROUTE_REFUSED_AUTH: AtomicU32 = AtomicU32::new(0);
+/// See [`ROUTE_REFUSED_AUTH`].
+static ROUTE_REFUSED_REPLAY: AtomicU32 = AtomicU32::new(0);
+/// See [`ROUTE_REFUSED_AUTH`].
+static ROUTE_REFUSED_CORRUPT: AtomicU32 = AtomicU32::new(0);
+
+/// The route channel's refusals by reason so far.
+fn route_refused() -> RefusalCounts {
+    RefusalCounts {
+        auth: ROUTE_REFUSED_AUTH.load(Ordering::Relaxed),
+        replay: ROUTE_REFUSED_REPLAY.load(Ordering::Relaxed),
+        corrupt: ROUTE_REFUSED_CORRUPT.load(Ordering::Relaxed),
+    }
 }
 
 impl RouteLink {
     /// Reads `frames` frames of the road into `staging` (at most [`ROUTE_FRAMES`],
     /// each at most [`MAX_DOWN_FRAME_BYTES`] bytes; refused ones are counted in
-    /// [`ROUTE_REJECTED`]); stops early when the host closed the channel. Not
-    /// inlined: its decoded frame lives on the stack only while it runs, not beside
-    /// the MPC step's frames in the plan task's. Its frame buffer is on the stack
-    /// too (no static RAM): the host writes whole frames and announces them, so
-    /// no frame is left half read between two calls.
+    /// [`ROUTE_REJECTED`] and by reason); stops early when the host closed the
+    /// channel. Not inlined: its decoded frame and its CMAC engine live on the
+    /// stack only while it runs, not beside the MPC step's frames in the plan
+    /// task's. Its frame buffer is on the stack too (no static RAM): the host
+    /// writes whole frames and announces them, so no frame is left half read
+    /// between two calls. The CMAC's key schedule is built here, once per window
+    /// (the control task's engine is its own, in its link: no lock between the
+    /// tasks).
     #[inline(never)]
     fn receive(&mut self, frames: u32, staging: &mut Staging) {
         let mut reader: FrameReader<MAX_DOWN_FRAME_BYTES> = FrameReader::new();
+        let mut mac = LinkMac::new(&LINK_KEY);
         let mut byte = [0u8; 1];
-        // wcet-bound: ROUTE_FRAMES
+        // WCET: ROUTE_FRAMES, this application's one frame per activation.
+        // wcet-bound: 1
         for _ in 0..frames.min(ROUTE_FRAMES) {
             // One frame's bytes up to its delimiter; decoded after the loop, once
             // per frame.
@@ -417,21 +546,34 @@ impl RouteLink {
                 // A byte inside a frame: the reader only stores it.
                 let _ = reader.push(byte[0]);
             }
-            let ok = ended
-                && match reader.push(0) {
-                    Some(Ok(frame)) => match link::decode::<Down>(frame) {
-                        Ok(Down::PathChunk(c)) => staging.chunk(&c),
+            let outcome = if ended {
+                match reader.push(0) {
+                    Some(Ok(frame)) => match link::decode::<Down>(frame, &mut mac, &mut self.rx) {
+                        Ok(Down::PathChunk(c)) => Ok(staging.chunk(&c)),
                         Ok(Down::Window(w)) => {
                             staging.complete(&w);
-                            true
+                            Ok(true)
                         }
-                        _ => false,
+                        Ok(_) => Ok(false),
+                        Err(e) => Err(e.refusal()),
                     },
-                    _ => false,
-                };
-            if !ok {
+                    Some(Err(e)) => Err(e.refusal()),
+                    None => Ok(false),
+                }
+            } else {
+                Err(Refusal::Corrupt)
+            };
+            if outcome != Ok(true) {
                 reader.reset();
                 ROUTE_REJECTED.fetch_add(1, Ordering::Relaxed);
+            }
+            if let Err(reason) = outcome {
+                let count = match reason {
+                    Refusal::Auth => &ROUTE_REFUSED_AUTH,
+                    Refusal::Replay => &ROUTE_REFUSED_REPLAY,
+                    Refusal::Corrupt => &ROUTE_REFUSED_CORRUPT,
+                };
+                count.fetch_add(1, Ordering::Relaxed);
             }
         }
     }
@@ -448,10 +590,12 @@ fn stop(link: &mut Link, ok: bool) -> ! {
     let rejected = link
         .rejected
         .wrapping_add(ROUTE_REJECTED.load(Ordering::Relaxed));
-    link.send(&Up::Done(link::DoneFrame {
+    let refused = link.refused.plus(route_refused());
+    link.send(UpRef::Done(&link::DoneFrame {
         stack_high_water_bytes: used,
         stack_size_bytes: size,
         rejected_frames: rejected,
+        refused,
     }));
     exit(ok)
 }
@@ -590,22 +734,26 @@ fn plan_job(
     planner.run(est)
 }
 
-/// The plan task's adoption of a window of the road, in place of [`plan_job`]:
-/// the `frames` frames announced since the last activation read from the route
-/// channel (at most [`ROUTE_FRAMES`]), and the window they complete adopted: its
-/// rows copied into the path's storage, the path computed, the MPC's warm start
-/// moved, the obstacles' parabolas rebuilt ([`PlanTask::adopt_window`]). False
-/// when the planner refused it (then without a path); true when adopted or when
-/// the frames completed no window. Not inlined: the timing analysis bounds it
-/// alone, against [`deadline::PLAN_BUDGET_CYCLES`].
+/// The plan task's reception of the frames of the road announced since its last
+/// activation: at most [`ROUTE_FRAMES`], verified and staged. True when the
+/// staged window is complete: this activation adopts it ([`window_job`]) instead
+/// of planning. Not inlined: the timing analysis bounds it alone; an activation
+/// runs it, then one of the two jobs.
 #[inline(never)]
-fn window_job(
-    route: &mut RouteLink,
-    frames: u32,
-    planner: &mut PlanTask<f32, PATH_CAP>,
-    staging: &mut Staging,
-) -> bool {
+fn route_job(route: &mut RouteLink, frames: u32, staging: &mut Staging) -> bool {
     route.receive(frames.min(ROUTE_FRAMES), staging);
+    staging.ready.is_some()
+}
+
+/// The plan task's adoption of a window of the road, in place of [`plan_job`]:
+/// the staged window ([`route_job`]) copied into the path's storage, the path
+/// computed, the MPC's warm start moved, the obstacles' parabolas rebuilt
+/// ([`PlanTask::adopt_window`]). False when the planner refused it (then without
+/// a path); true when adopted or when no window was complete. Not inlined: the
+/// timing analysis bounds it alone, against [`deadline::PLAN_BUDGET_CYCLES`]
+/// with [`route_job`] before it.
+#[inline(never)]
+fn window_job(planner: &mut PlanTask<f32, PATH_CAP>, staging: &mut Staging) -> bool {
     staging.take_into(planner).is_none_or(|w| {
         planner
             .adopt_window(w.rows as usize, w.origin_m, w.closed)
@@ -667,6 +815,8 @@ fn actuation_frame(seq: u32, a: &Actuation<f32>, fault: u8, ticks: u32) -> Actua
         previous_response_us: 0,
         control: link::TaskTimingFrame::default(),
         watchdog_trips: 0,
+        sensor: 0,
+        refused: RefusalCounts::new(),
         plan: None,
     }
 }
@@ -821,7 +971,9 @@ mod app {
             );
             exit(false)
         };
-        (link.insert(l), route.insert(r))
+        let link = link.insert(l);
+        PANIC_LINK.store(&raw mut *link, Ordering::Relaxed);
+        (link, route.insert(r))
     }
 
     /// The set-up from the simulator's frames (car, first window, obstacles), then
@@ -852,36 +1004,47 @@ mod app {
             ),
         }
         let mut setup = Setup::new();
+        let mut reader = FrameReader::<MAX_DOWN_FRAME_BYTES>::new();
         let control = loop {
-            match link.receive() {
-                Some(Down::Config(c)) => setup.config(&c, planner),
-                Some(Down::PathChunk(c)) => setup.path_chunk(&c, planner),
-                Some(Down::Obstacle(o)) => setup.obstacle(&o),
-                Some(Down::Start) if clock.is_err() => {
+            match link.receive(&mut reader) {
+                Ok(Down::Config(c)) => setup.config(&c, planner),
+                Ok(Down::PathChunk(c)) => setup.path_chunk(&c, planner),
+                Ok(Down::Obstacle(o)) => setup.obstacle(&o),
+                Ok(Down::Start) if clock.is_err() => {
                     let detail = clock.err().map_or(0, ClockError::code);
-                    link.send(&Up::Ready(ReadyFrame {
+                    link.send(UpRef::Ready(&ReadyFrame {
                         status: link::SetupError::ClockFailed.code(),
                         detail,
                     }));
                     exit(false)
                 }
-                Some(Down::Start) => match setup.finish(planner) {
+                Ok(Down::Start) => match setup.finish(planner) {
                     Ok(control) => break control,
                     Err(f) => {
-                        defmt::error!("ecu: set-up refused: {} ({})", f.error.name(), f.detail);
-                        link.send(&Up::Ready(ReadyFrame {
+                        defmt::error!("ecu: set-up refused: {} ({})", f.error, f.detail);
+                        link.send(UpRef::Ready(&ReadyFrame {
                             status: f.error.code(),
                             detail: f.detail,
                         }));
                         exit(false)
                     }
                 },
-                Some(_) => link.rejected = link.rejected.wrapping_add(1),
-                None => exit(false),
+                Ok(_) => link.count_refused(None),
+                // A set-up with a frame refused is incomplete: refused at once,
+                // saying why (a forged frame: most likely another link key).
+                Err(Some(reason)) => {
+                    defmt::error!("ecu: set-up frame refused: {}", reason);
+                    link.send(UpRef::Ready(&ReadyFrame {
+                        status: link::SetupError::FrameRefused.code(),
+                        detail: u16::from(reason.code()),
+                    }));
+                    exit(false)
+                }
+                Err(None) => exit(false),
             }
         };
         defmt::info!("ecu: set-up done, {} path points", planner.path.len());
-        link.send(&Up::Ready(ReadyFrame {
+        link.send(UpRef::Ready(&ReadyFrame {
             status: 0,
             detail: 0,
         }));
@@ -921,18 +1084,31 @@ mod app {
             Mono::delay_until(instant_at(monitor.release_us())).await;
             let release_us = monitor.start();
             let t0 = core_ticks();
-            let est = match cx.local.link.receive_sensor() {
-                Ok(f) => f,
+            // A refused sensor frame is never acted on: the period runs on no
+            // estimate (the dropout policy: both tasks refuse it, the control task
+            // applies the safe actuation) and still answers, saying so. A run of
+            // refused frames is a run of such periods: the car brakes to a stop
+            // under the safe actuation, the plan task plans nothing (its watchdog
+            // counts the plans missed), and the first accepted frame resumes
+            // following; the link is stopped only when no whole frame arrives.
+            let (seq, e, sensor) = match cx.local.link.receive_sensor() {
+                Ok(f) => {
+                    // A window of the road sent on the route channel: the plan task
+                    // reads it.
+                    let new = cx.local.link.newly_announced(f.route_frames);
+                    if new > 0 {
+                        ROUTE_PENDING.fetch_add(new, Ordering::Relaxed);
+                    }
+                    (f.seq, f.estimate, 0)
+                }
+                Err(LinkEnd::Refused { code, seq }) => {
+                    (seq, StateEstimate::unavailable(release_us), code)
+                }
                 Err(end) => stop(cx.local.link, end == LinkEnd::Stop),
             };
-            // A window of the road sent on the route channel: the plan task reads it.
-            if est.route_frames > 0 {
-                ROUTE_PENDING.fetch_add(u32::from(est.route_frames), Ordering::Relaxed);
-            }
             // The task's own work: the PIL link's frame decoding and encoding stand
             // in for the vehicle's bus drivers and are measured apart.
             let t1 = core_ticks();
-            let e = est.estimate;
             cx.shared.estimate.lock(|s| *s = e);
             let control = &mut *cx.local.control;
             let act = cx.shared.plan.lock(|plan| control_job(control, &e, plan));
@@ -949,7 +1125,9 @@ mod app {
             } else {
                 LAST_DELTA_BITS.store(act.delta_rad.to_bits(), Ordering::Relaxed);
             }
-            let mut frame = actuation_frame(est.seq, &act, fault, ticks);
+            let mut frame = actuation_frame(seq, &act, fault, ticks);
+            frame.sensor = sensor;
+            frame.refused = cx.local.link.refused.plus(route_refused());
             frame.release_us = release_us;
             frame.previous_response_us = previous_response_us;
             frame.control = monitor.counts().into();
@@ -965,7 +1143,7 @@ mod app {
             //   time runs to here, so the link's encoding counts in it; the next
             //   frame reports it, with the counts that include it.
             frame.sent_us = now_us();
-            cx.local.link.send(&Up::Actuation(frame));
+            cx.local.link.send(UpRef::Actuation(&frame));
             let end_us = now_us();
             let done = monitor.complete(end_us, u64::from(ticks));
             previous_response_us = done.response_us.min(u64::from(u32::MAX)) as u32;
@@ -994,22 +1172,22 @@ mod app {
             let planner = &mut *cx.local.planner;
             // The frames of the road announced since the last activation (by the
             // control task's sensor frames: at a common release it runs first). At
-            // most a window's frames per activation; the rest wait for the next.
+            // most ROUTE_FRAMES per activation; the rest wait for the next.
             let frames = ROUTE_PENDING.swap(0, Ordering::Relaxed);
             if frames > ROUTE_FRAMES {
                 ROUTE_PENDING.fetch_add(frames - ROUTE_FRAMES, Ordering::Relaxed);
             }
-            // An activation with frames of the road to read receives them and adopts
-            // the window they complete instead of planning (the control task follows
-            // the last plan meanwhile): an activation adopts or plans, never both, so
-            // the plan task's worst case is the larger of the two, not their sum.
             let t0 = core_ticks();
             let c0 = CONTROL_TICKS.load(Ordering::Relaxed);
-            // One of the two jobs per activation, the window's or the plan's, on
-            // two branches of one test (the task's static bound is then the larger
-            // of the two: a job called on both paths would be charged on both).
-            let mut event = if frames > 0 {
-                if !window_job(cx.local.route, frames, planner, cx.local.staging) {
+            // The frame of the road first; when it completes a window, the
+            // activation adopts it instead of planning (the control task follows
+            // the last plan meanwhile): an activation adopts or plans, never both,
+            // on two branches of one test (the task's static bound is then the
+            // larger of the two: a job called on both paths would be charged on
+            // both).
+            let complete = frames > 0 && route_job(cx.local.route, frames, cx.local.staging);
+            let mut event = if complete {
+                if !window_job(planner, cx.local.staging) {
                     // Counted with the refused route frames (the Done frame's
                     // `rejected_frames`); no logging in a task.
                     ROUTE_REJECTED.fetch_add(1, Ordering::Relaxed);
@@ -1123,23 +1301,28 @@ fn safe_stop(fault: u8) -> ! {
 }
 
 /// The safe stop's work, reached only through [`safe_stop`]'s guard: zero torque
-/// on every wheel, the steering held where it was, sent as an actuator frame; a
-/// fixed line on the semihosting stderr; then the ECU stops. It neither formats nor
-/// panics. Not inlined: its frame (the frame buffer) is allocated only past the
-/// guard.
+/// on every wheel, the steering held where it was, sent as an actuator frame
+/// (authenticated on the up stream, as every frame); a fixed line on the
+/// semihosting stderr; then the ECU stops. It neither formats nor panics. Not
+/// inlined: its frame is allocated only past the guard.
+///
+/// The frame goes through the control task's [`Link`] ([`PANIC_LINK`]): its
+/// CMAC and the up stream's next freshness value (a second engine would cost
+/// its key schedule in RAM). The control task may hold the link, interrupted
+/// (a panic inside it, or a fault at any point): this path never returns and
+/// ends the ECU, so that borrow is never used again, and [`Link::send`] starts
+/// its tag afresh, whatever an interrupted one left.
 #[inline(never)]
 fn safe_stop_work(fault: u8) -> ! {
     let delta = f32::from_bits(LAST_DELTA_BITS.load(Ordering::Relaxed));
-    let fd = UP_FD.load(Ordering::Relaxed);
-    if fd != 0 {
+    let link = PANIC_LINK.load(Ordering::Relaxed);
+    // SAFETY: non-null only once `open_link` stored the link, in a static that
+    // lives for the rest of the run; interrupts are disabled and this path ends
+    // the ECU (above), so this is the only use of the link from here on.
+    if let Some(link) = unsafe { link.as_mut() } {
         let a = Actuation::safe(delta, 0.0);
         let frame = actuation_frame(u32::MAX, &a, fault, 0);
-        let mut buf = [0u8; MAX_UP_FRAME_BYTES];
-        if let Ok(n) = link::encode(&Up::Actuation(frame), &mut buf) {
-            if let Some(bytes) = buf.get(..n) {
-                sh_write(fd, bytes);
-            }
-        }
+        link.send(UpRef::Actuation(&frame));
     }
     let err = ERR_FD.load(Ordering::Relaxed);
     if err != 0 {

@@ -154,7 +154,7 @@ fn main() -> ! {
         let ticks = ticks_between(t0, t1);
         match result {
             Ok(report) => {
-                // One line per step, for the cost model's calibration (README).
+                // One line per step, for the cost model's calibration (docs/architecture.md).
                 hprintln!(
                     "step {} instructions={} passes={} iterations={} added={} removed={} refactorizations={} rows={}",
                     step,

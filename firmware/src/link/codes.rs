@@ -84,7 +84,10 @@ macro_rules! wire_codes {
 }
 
 /// Why the ECU refused the set-up (the [`ReadyFrame::status`] codes, 1..=13).
+/// On the ECU its log names the variant through defmt (the name interned in the
+/// `.defmt` section, not in static RAM as `name()`'s strings would be).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "ecu", derive(defmt::Format))]
 pub enum SetupError {
     /// `Start`, a `PathChunk` or an `Obstacle` came before any `Config` (detail 0).
     NoConfig,
@@ -118,6 +121,10 @@ pub enum SetupError {
     /// not at its clock, and the control loop does not start (detail: the
     /// [`crate::clock_tree::ClockError`]'s code).
     ClockFailed,
+    /// A set-up frame was refused (detail: the [`Refusal::code`], `Auth` 1 when
+    /// the ECU and the simulator hold different link keys; version 8): a set-up
+    /// with a frame missing is not completed.
+    FrameRefused,
 }
 
 wire_codes!(impl SetupError {
@@ -134,6 +141,7 @@ wire_codes!(impl SetupError {
     InvalidObstacle = 11,
     ObstacleBlocksRoad = 12,
     ClockFailed = 13,
+    FrameRefused = 14,
 });
 
 /// Name of a [`ReadyFrame::status`]: `"Accepted"` for 0, the [`SetupError`]'s

@@ -1,9 +1,10 @@
 //! A frame on the wire (see [`super`]'s *Wire format*): [`encode`] and
-//! [`decode`] of one frame, the stream's splitting into frames ([`FrameReader`]),
-//! the sequence check and the counts of refused frames.
+//! [`decode`] of one authenticated frame ([`secoc`]), the stream's splitting into
+//! frames ([`FrameReader`]), the sequence check and the counts of refused frames.
 
 use super::*;
-/// Why a frame was refused (each counted by the receiver, never a panic).
+/// Why a frame was refused (each counted by the receiver, never a panic), or
+/// could not be encoded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FrameError {
     /// [`decode`] was given no bytes.
@@ -13,7 +14,8 @@ pub enum FrameError {
     TooLong,
     /// The COBS encoding is invalid (a 0x00 inside, or a block past the end).
     Cobs,
-    /// The decoded frame is shorter than a version byte and a CRC.
+    /// The decoded frame is shorter than a version byte, a freshness value, a tag
+    /// and a CRC.
     TooShort,
     /// The frame is of another version of this format.
     Version {
@@ -22,10 +24,24 @@ pub enum FrameError {
     },
     /// The CRC does not match.
     Checksum,
+    /// The tag does not verify: the frame was not sent under the receiver's key
+    /// on this stream ([`secoc`]).
+    Authentication,
+    /// The frame is authentic but its freshness is not newer than the last one
+    /// the receiver accepted on this stream: a replay ([`secoc`]).
+    Replay {
+        /// The frame's freshness value.
+        freshness: u32,
+        /// The last freshness value accepted.
+        last: u32,
+    },
     /// postcard could not decode the message, or bytes trail it.
     Malformed,
     /// [`encode`]'s output buffer is too small (see [`MAX_FRAME_BYTES`]).
     BufferTooSmall,
+    /// [`encode`]: the stream's freshness counter is at `u32::MAX`; a new key
+    /// (and counters) is needed to send more.
+    FreshnessExhausted,
 }
 
 impl FrameError {
@@ -38,27 +54,137 @@ impl FrameError {
             FrameError::TooShort => "TooShort",
             FrameError::Version { .. } => "Version",
             FrameError::Checksum => "Checksum",
+            FrameError::Authentication => "Authentication",
+            FrameError::Replay { .. } => "Replay",
             FrameError::Malformed => "Malformed",
             FrameError::BufferTooSmall => "BufferTooSmall",
+            FrameError::FreshnessExhausted => "FreshnessExhausted",
+        }
+    }
+
+    /// The reason a receiver counts this refusal under: [`Refusal::Auth`] for
+    /// [`FrameError::Authentication`], [`Refusal::Replay`] for
+    /// [`FrameError::Replay`], [`Refusal::Corrupt`] for the others (the frame was
+    /// not a well-formed frame of this version; [`encode`]'s own two errors, which
+    /// no receiver sees, are sorted there too).
+    pub const fn refusal(self) -> Refusal {
+        match self {
+            FrameError::Authentication => Refusal::Auth,
+            FrameError::Replay { .. } => Refusal::Replay,
+            _ => Refusal::Corrupt,
         }
     }
 }
 
 /// Encodes `msg` as one whole frame (see the module docs) into `out`, the 0x00
-/// delimiter included; returns the frame's length, bytes. A buffer of
-/// [`MAX_FRAME_BYTES`] holds any [`Down`] or [`Up`]. postcard's flavours do the
-/// work in one pass: the version byte and the message through the CRC (appended
-/// little-endian) and COBS, into `out`.
-pub fn encode<M: Serialize + ?Sized>(msg: &M, out: &mut [u8]) -> Result<usize, FrameError> {
-    use postcard::ser_flavors::{crc::CrcModifier, Cobs};
+/// delimiter included, authenticated on `tx`'s stream with `mac` and the stream's
+/// next freshness value (taken only when the frame is encoded); returns the
+/// frame's length, bytes. A buffer of [`MAX_FRAME_BYTES`] holds any [`Down`] or
+/// [`Up`]. postcard's flavours do the work in one pass: the version byte and the
+/// message through the CMAC ([`SecOcModifier`], which appends the freshness and
+/// the tag), the CRC (appended little-endian) and COBS, into `out`.
+pub fn encode<M: Serialize + ?Sized>(
+    msg: &M,
+    mac: &mut LinkMac,
+    tx: &mut Authenticator,
+    out: &mut [u8],
+) -> Result<usize, FrameError> {
+    use postcard::ser_flavors::Cobs;
+    let freshness = tx.next()?;
     let cobs = Cobs::try_new(FrameBuffer::new(out)).map_err(|_| FrameError::BufferTooSmall)?;
-    let flavor = CrcModifier::new(cobs, CRC32.digest());
+    mac.begin(tx.stream());
+    let flavor = SecOcModifier {
+        inner: cobs,
+        mac,
+        crc: CRC32.digest(),
+        freshness,
+    };
     // postcard writes a `u8` as its one byte: the tuple is the version byte, then
     // the message.
     match postcard::serialize_with_flavor(&(LINK_VERSION, msg), flavor) {
-        Ok(len) => Ok(len),
+        Ok(len) => {
+            tx.commit(freshness);
+            Ok(len)
+        }
         Err(postcard::Error::SerializeBufferFull) => Err(FrameError::BufferTooSmall),
         Err(_) => Err(FrameError::Malformed),
+    }
+}
+
+/// The flavour that authenticates and checksums a frame as postcard writes it:
+/// each byte (the version, then the message) goes through the CMAC (begun on the
+/// stream by [`encode`]) and the CRC, and on to `inner` (COBS, into the frame's
+/// buffer); at the end the freshness value (through the CMAC and the CRC), the
+/// tag (through the CRC), then the CRC. postcard hands most fields over as
+/// slices ([`Flavor::try_extend`]): the CRC takes each slice at once, the CMAC and
+/// COBS a byte at a time (one pass over the bytes, not a chain of per-byte calls
+/// through three flavours).
+///
+/// [`Flavor::try_extend`]: postcard::ser_flavors::Flavor::try_extend
+struct SecOcModifier<'m, B> {
+    /// COBS, into the frame's buffer.
+    inner: B,
+    /// The CMAC, begun on the frame's stream.
+    mac: &'m mut LinkMac,
+    /// The CRC of the bytes so far.
+    crc: crc::Digest<'static, u32>,
+    /// The frame's freshness value.
+    freshness: u32,
+}
+
+impl<B: postcard::ser_flavors::Flavor> postcard::ser_flavors::Flavor for SecOcModifier<'_, B> {
+    type Output = B::Output;
+
+    fn try_push(&mut self, data: u8) -> postcard::Result<()> {
+        self.mac.push(data);
+        self.crc.update(&[data]);
+        self.inner.try_push(data)
+    }
+
+    fn try_extend(&mut self, data: &[u8]) -> postcard::Result<()> {
+        // The bytes of every slice of the frame: at most a frame's (the output
+        // buffer refuses the bytes past it), and the control task encodes one
+        // frame (an `Up`) per activation; the plan task encodes none.
+        // wcet-bound: MAX_UP_FRAME_BYTES per activation
+        self.crc.update(data);
+        // As above: a byte of the frame per pass.
+        // wcet-bound: MAX_UP_FRAME_BYTES per activation
+        for &b in data {
+            self.mac.push(b);
+            self.inner.try_push(b)?;
+        }
+        Ok(())
+    }
+
+    fn finalize(self) -> postcard::Result<B::Output> {
+        let Self {
+            mut inner,
+            mac,
+            mut crc,
+            freshness,
+        } = self;
+        let freshness = freshness.to_le_bytes();
+        // The freshness value's bytes (FRESHNESS_BYTES).
+        // wcet-bound: 4
+        for b in freshness {
+            mac.push(b);
+        }
+        let tag = mac.finish();
+        let mut trailer = [0u8; SECURED_BYTES + CRC_BYTES];
+        let (secured, check) = trailer.split_at_mut(SECURED_BYTES);
+        let (f, t) = secured.split_at_mut(FRESHNESS_BYTES);
+        f.copy_from_slice(&freshness);
+        t.copy_from_slice(&tag);
+        // The freshness value and the tag (SECURED_BYTES).
+        // wcet-bound: 12
+        crc.update(secured);
+        check.copy_from_slice(&crc.finalize().to_le_bytes());
+        // The freshness value, the tag and the CRC (SECURED_BYTES + CRC_BYTES).
+        // wcet-bound: 16
+        for b in trailer {
+            inner.try_push(b)?;
+        }
+        inner.finalize()
     }
 }
 
@@ -162,8 +288,17 @@ fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, FrameError> {
 
 /// Decodes one frame: `frame` is the bytes between two delimiters (no 0x00).
 /// Undoes COBS in place (so `frame` is overwritten), then checks the length, the
-/// version, the CRC, and that postcard consumes the payload exactly.
-pub fn decode<'a, M: Deserialize<'a>>(frame: &'a mut [u8]) -> Result<M, FrameError> {
+/// version, the CRC, the tag (with `mac` on `rx`'s stream), the freshness (newer
+/// than the last `rx` accepted), and that postcard consumes the payload exactly;
+/// `rx` takes the frame's freshness only when all hold. Always inlined: each of
+/// the ECU's callers has its own largest frame, which bounds the loops in the
+/// timing analysis (the `wcet-bound in` annotations below).
+#[inline(always)]
+pub fn decode<'a, M: Deserialize<'a>>(
+    frame: &'a mut [u8],
+    mac: &mut LinkMac,
+    rx: &mut Verifier,
+) -> Result<M, FrameError> {
     if frame.is_empty() {
         return Err(FrameError::Empty);
     }
@@ -173,13 +308,13 @@ pub fn decode<'a, M: Deserialize<'a>>(frame: &'a mut [u8]) -> Result<M, FrameErr
     let n = cobs_decode_in_place(frame)?;
     let frame: &'a [u8] = frame;
     let raw = frame.get(..n).ok_or(FrameError::Cobs)?;
-    if raw.len() < 1 + CRC_BYTES {
+    if raw.len() < 1 + SECURED_BYTES + CRC_BYTES {
         return Err(FrameError::TooShort);
     }
     let (body, crc) = raw
         .split_at_checked(raw.len() - CRC_BYTES)
         .ok_or(FrameError::TooShort)?;
-    let (&version, payload) = body.split_first().ok_or(FrameError::TooShort)?;
+    let version = *body.first().ok_or(FrameError::TooShort)?;
     if version != LINK_VERSION {
         return Err(FrameError::Version { got: version });
     }
@@ -192,8 +327,27 @@ pub fn decode<'a, M: Deserialize<'a>>(frame: &'a mut [u8]) -> Result<M, FrameErr
     if CRC32.checksum(body) != u32::from_le_bytes(crc) {
         return Err(FrameError::Checksum);
     }
+    // body = version ++ payload ++ freshness ++ tag; the MAC input is all but the tag.
+    let (input, tag) = body
+        .split_at_checked(body.len() - MAC_BYTES)
+        .ok_or(FrameError::TooShort)?;
+    let tag: &[u8; MAC_BYTES] = tag.try_into().map_err(|_| FrameError::TooShort)?;
+    if !mac.verify(rx.stream(), input, tag) {
+        return Err(FrameError::Authentication);
+    }
+    let (versioned, freshness) = input
+        .split_at_checked(input.len() - FRESHNESS_BYTES)
+        .ok_or(FrameError::TooShort)?;
+    let freshness: [u8; FRESHNESS_BYTES] =
+        freshness.try_into().map_err(|_| FrameError::TooShort)?;
+    let freshness = u32::from_le_bytes(freshness);
+    rx.check(freshness)?;
+    let payload = versioned.get(1..).ok_or(FrameError::TooShort)?;
     match postcard::take_from_bytes::<M>(payload) {
-        Ok((msg, [])) => Ok(msg),
+        Ok((msg, [])) => {
+            rx.commit(freshness);
+            Ok(msg)
+        }
         _ => Err(FrameError::Malformed),
     }
 }
@@ -326,6 +480,8 @@ pub struct LinkStats {
     pub stale: u32,
     /// Gaps in the sequence (each jump counts once, whatever its size), gaps.
     pub gaps: u32,
+    /// The refused frames by reason ([`FrameError::refusal`]), frames.
+    pub refused: RefusalCounts,
     /// The last refusal, if any.
     pub last_error: Option<FrameError>,
 }
@@ -338,6 +494,7 @@ impl LinkStats {
             rejected: 0,
             stale: 0,
             gaps: 0,
+            refused: RefusalCounts::new(),
             last_error: None,
         }
     }
@@ -348,6 +505,7 @@ impl LinkStats {
             Ok(_) => self.accepted = self.accepted.saturating_add(1),
             Err(e) => {
                 self.rejected = self.rejected.saturating_add(1);
+                self.refused.count(e.refusal());
                 self.last_error = Some(*e);
             }
         }

@@ -19,24 +19,33 @@
 //! publishing). Version 7: the control task completes when its actuation frame
 //! has been written, so each [`ActuationFrame`] reports the previous
 //! activation's response time ([`ActuationFrame::previous_response_us`]) and
-//! counts up to it. Version 8: the state estimate carries the four wheel
-//! speeds ([`StateEstimate::wheel_speed_mps`], 16 bytes more in a
-//! [`SensorFrame`]). Everything here works on fixed buffers: no heap, no `alloc`,
-//! no panic; every refused frame is a [`FrameError`] value the receiver counts.
+//! counts up to it. Version 8: every frame is authenticated ([`secoc`], AUTOSAR
+//! SecOC style: a freshness value and a truncated AES-128-CMAC); a receiver
+//! refuses a forged, replayed or corrupt frame, counts it by reason
+//! ([`Refusal`]) and never acts on it; the ECU reports its counts
+//! ([`ActuationFrame::refused`], [`DoneFrame::refused`]) and whether this
+//! period's sensor frame was refused ([`ActuationFrame::sensor`]). Version 9:
+//! the state estimate carries the four wheel speeds
+//! ([`StateEstimate::wheel_speed_mps`], 16 bytes more in a [`SensorFrame`]).
+//! Everything here works on fixed buffers: no heap, no `alloc`, no panic; every
+//! refused frame is a [`FrameError`] value the receiver counts.
 //!
 //! # Wire format
 //!
 //! ```text
-//! raw   = [ LINK_VERSION ] ++ postcard(message) ++ crc32_le(LINK_VERSION ++ postcard(message))
-//!           1 byte           n bytes               4 bytes, little-endian
+//! body  = [ LINK_VERSION ] ++ postcard(message) ++ freshness ++ tag
+//!           1 byte           n bytes               4 bytes      8 bytes
+//! raw   = body ++ crc32_le(body)
+//!                4 bytes, little-endian
 //!
-//!         ┌─────────┬──────────────────────────────┬──────┬──────┬──────┬──────┐
-//! raw     │ version │ postcard payload (n bytes)   │ crc0 │ crc1 │ crc2 │ crc3 │
-//!         └─────────┴──────────────────────────────┴──────┴──────┴──────┴──────┘
-//!           └──────────── covered by the CRC ──────┘  crc0 = least significant
+//!         ┌─────────┬────────────────────────────┬───────────┬─────────┬──────────┐
+//! raw     │ version │ postcard payload (n bytes) │ freshness │   tag   │ crc32_le │
+//!         └─────────┴────────────────────────────┴───────────┴─────────┴──────────┘
+//!           └───────────── MAC input (after the stream's Data ID) ───┘
+//!           └──────────────────────── covered by the CRC ────────────────┘
 //!
 //!         ┌──────────────────────────────────────────────────────────┬──────┐
-//! frame   │ COBS(raw): n + 5 + 1 + ⌊(n + 5) / 254⌋ bytes at most, no 0x00 │ 0x00 │
+//! frame   │ COBS(raw): n + 17 + 1 + ⌊(n + 17) / 254⌋ bytes at most, no 0x00 │ 0x00 │
 //!         └──────────────────────────────────────────────────────────┴──────┘
 //! ```
 //!
@@ -48,19 +57,38 @@
 //!   (NaN bits are kept), `u8`/`bool` as one byte, `u16`/`u32`/`u64` as LEB128
 //!   varints (at most 3/5/10 bytes), `Option` as a 0/1 byte then the value,
 //!   arrays as their elements back to back (no length).
+//! * **Freshness** ([`FRESHNESS_BYTES`]): the stream's counter ([`Authenticator`]),
+//!   a `u32` little-endian, 1 for a stream's first frame, +1 for each frame sent.
+//!   Three streams, each with its own counter: host → ECU on the control channel
+//!   ([`Stream::Down`]), host → ECU on the route channel ([`Stream::Route`]),
+//!   ECU → host ([`Stream::Up`]).
+//! * **Tag** ([`MAC_BYTES`]): the first 8 bytes of AES-128-CMAC under the link key
+//!   ([`LINK_KEY`], set at build time) of the stream's Data ID
+//!   ([`Stream::data_id`], one byte, not sent) ++ version ++ payload ++
+//!   freshness ([`secoc`] says why these sizes).
 //! * **CRC**: CRC-32/ISO-HDLC (the zlib/Ethernet CRC, [`crc::CRC_32_ISO_HDLC`])
-//!   of the version byte and the payload, appended little-endian.
+//!   of the version byte, the payload, the freshness and the tag, appended
+//!   little-endian. It tells a frame damaged on the way (*corrupt*) from one
+//!   whose tag was made without the key (*forged*), which the tag alone cannot.
 //! * **Framing**: consistent-overhead byte stuffing (COBS) of the whole raw frame,
 //!   so the encoded frame holds no 0x00, then one 0x00 delimiter. [`encode`] is
-//!   postcard's `Cobs` and `CrcModifier` flavours, [`decode`] the `cobs` crate's
-//!   decoder and the `crc` crate's checksum before postcard reads the payload. A receiver that
-//!   lost sync skips to the next 0x00 ([`FrameReader`]); empty frames (two
-//!   delimiters in a row) are idle and ignored.
+//!   postcard's `Cobs` and `CrcModifier` flavours under the CMAC's, [`decode`]
+//!   the `cobs` crate's decoder, the `crc` crate's checksum and the CMAC before
+//!   postcard reads the payload. A receiver that lost sync skips to the next
+//!   0x00 ([`FrameReader`]); empty frames (two delimiters in a row) are idle and
+//!   ignored.
 //!
-//! The largest frames: [`MAX_DOWN_FRAME_BYTES`] (a `PathChunk`, 269 bytes) and
-//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event, 341 bytes), both
-//! including the delimiter and checked at compile time against
-//! [`MAX_FRAME_BYTES`].
+//! A receiver ([`decode`], with the stream's [`Verifier`]) refuses, in this order:
+//! a frame that is not a well-formed frame of this version (COBS, length,
+//! version, CRC: [`Refusal::Corrupt`]), one whose tag does not verify
+//! ([`FrameError::Authentication`], [`Refusal::Auth`]), one whose freshness is
+//! not newer than the last it accepted on the stream ([`FrameError::Replay`],
+//! [`Refusal::Replay`]), one whose message postcard cannot read
+//! ([`Refusal::Corrupt`]).
+//!
+//! The largest frames: [`MAX_DOWN_FRAME_BYTES`] (a `PathChunk`) and
+//! [`MAX_UP_FRAME_BYTES`] (an `Actuation` with a plan event), both including the
+//! delimiter and checked at compile time against [`MAX_FRAME_BYTES`].
 //!
 //! # Status codes (the `u8` fields)
 //!
@@ -76,6 +104,8 @@
 //!   `InvalidInput` 7, `WorkingSetFull` 8), or [`PLAN_WINDOW`] (0x20) for an
 //!   activation that adopted a window of the road instead of planning.
 //! * [`ReadyFrame::status`]: 0 accepted, else a [`SetupError`] code.
+//! * [`ActuationFrame::sensor`]: 0 accepted, else [`Refusal::code`] (`Auth` 1,
+//!   `Replay` 2, `Corrupt` 3) or [`SENSOR_UNEXPECTED`] (4).
 //!
 //! Each has a `*_from_code` inverse and a `*_name` for logs.
 //!
@@ -84,7 +114,8 @@
 //! * [`SequenceCheck::accept`] returns `Result<u32, SequenceError>`: `Ok(missed)`
 //!   with the count of skipped sequence numbers (0 in order), so a gap is
 //!   accepted *and* reported.
-//! * [`encode`] takes `M: Serialize + ?Sized`.
+//! * [`encode`] takes `M: Serialize + ?Sized`, the [`LinkMac`] and the stream's
+//!   [`Authenticator`]; [`decode`] the [`LinkMac`] and the stream's [`Verifier`].
 //! * [`decode`] reports trailing bytes after the message as
 //!   [`FrameError::Malformed`], and a frame longer than [`MAX_FRAME_BYTES`] − 1
 //!   bytes as [`FrameError::TooLong`].
@@ -104,7 +135,7 @@ use crate::vehicle_config::VehicleConfig;
 use qp::QpStatus;
 
 /// Version of this wire format, the first byte of every raw frame.
-pub const LINK_VERSION: u8 = 8;
+pub const LINK_VERSION: u8 = 9;
 /// The largest encoded frame, bytes, including its 0x00 delimiter.
 pub const MAX_FRAME_BYTES: usize = 512;
 /// Track rows per [`PathChunkFrame`].
@@ -119,7 +150,11 @@ pub const fn route_frames(rows: usize) -> usize {
 pub const PLAN_NODES: usize = crate::plan::HORIZON + 1;
 
 /// Bytes of the CRC at the end of a raw frame.
-const CRC_BYTES: usize = 4;
+pub const CRC_BYTES: usize = 4;
+/// [`ActuationFrame::sensor`] of an authentic, fresh frame on the control channel
+/// that was neither `Sensor` nor `Stop` while driving (a host bug): not acted
+/// on, the period a dropout.
+pub const SENSOR_UNEXPECTED: u8 = 4;
 /// The CRC of every frame (CRC-32/ISO-HDLC, table in flash: 1 KiB).
 static CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
 
@@ -215,10 +250,13 @@ pub struct SensorFrame {
     pub seq: u32,
     /// The state estimate (its `stamp_us` is the simulated time, µs; SI units).
     pub estimate: StateEstimate<f32>,
-    /// Frames of the road (`PathChunk`s then a `Window`) the host wrote on the
-    /// route channel since the last sensor frame, frames (version 3): the plan
-    /// task's next activation reads them (and adopts the window they complete).
-    pub route_frames: u16,
+    /// Frames of the road (`PathChunk`s then a `Window`) the host has written on
+    /// the route channel since `Start`, in all, frames (version 8: a total, no
+    /// longer those since the last sensor frame, so that a sensor frame refused
+    /// loses no announcement; version 3 added it): the plan task's next
+    /// activation reads those not yet announced (and adopts the window they
+    /// complete).
+    pub route_frames: u32,
 }
 
 /// ECU → host.
@@ -234,6 +272,30 @@ pub enum Up {
     Actuation(ActuationFrame),
     /// Answer to `Down::Stop`.
     Done(DoneFrame),
+}
+
+/// An [`Up`] to encode, by reference: the same variants in the same order, so
+/// the same bytes, without the message copied into an enum the size of the
+/// largest variant (an actuation frame with its plan event) on the sender's
+/// stack.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub enum UpRef<'a> {
+    /// [`Up::Ready`].
+    Ready(&'a ReadyFrame),
+    /// [`Up::Actuation`].
+    Actuation(&'a ActuationFrame),
+    /// [`Up::Done`].
+    Done(&'a DoneFrame),
+}
+
+impl<'a> From<&'a Up> for UpRef<'a> {
+    fn from(up: &'a Up) -> Self {
+        match up {
+            Up::Ready(r) => UpRef::Ready(r),
+            Up::Actuation(a) => UpRef::Actuation(a),
+            Up::Done(d) => UpRef::Done(d),
+        }
+    }
 }
 
 /// Answer to `Down::Start`.
@@ -291,6 +353,17 @@ pub struct ActuationFrame {
     /// Times the control task's watchdog saw no new plan for more than
     /// [`crate::deadline::PLAN_WATCHDOG_PERIODS`] plan periods, trips.
     pub watchdog_trips: u32,
+    /// This period's sensor frame: 0 accepted, else the [`Refusal::code`] of its
+    /// refusal (`Auth` 1, `Replay` 2, `Corrupt` 3) or [`SENSOR_UNEXPECTED`] for an
+    /// authentic frame that was neither `Sensor` nor `Stop`. A refused frame is
+    /// never acted on: the period ran on [`StateEstimate::unavailable`] (the
+    /// dropout policy: the safe actuation, [`fault_code`] `NonFiniteEstimate`),
+    /// and [`ActuationFrame::seq`] is then the one the ECU expected, the last
+    /// accepted `seq` plus the periods since (version 8).
+    pub sensor: u8,
+    /// Frames the ECU refused since `Start`, by reason, on both its channels
+    /// (the control channel's and the route channel's), frames (version 8).
+    pub refused: RefusalCounts,
     /// The plan activation that finished since the last actuation frame, if any.
     pub plan: Option<PlanEventFrame>,
 }
@@ -458,8 +531,11 @@ pub struct DoneFrame {
     pub stack_high_water_bytes: u32,
     /// Size of the stack region, bytes.
     pub stack_size_bytes: u32,
-    /// Frames the ECU refused over the run (all [`FrameError`]s), frames.
+    /// Frames the ECU refused over the run (all [`FrameError`]s, and authentic
+    /// frames it did not expect), frames.
     pub rejected_frames: u32,
+    /// Of those, the ones refused by reason (version 8), frames.
+    pub refused: RefusalCounts,
 }
 
 // ---------------------------------------------------------------------------
@@ -483,6 +559,8 @@ const VEHICLE_MAX_BYTES: usize = 8 * F32_BYTES;
 const ESTIMATE_MAX_BYTES: usize = U64_MAX_BYTES + 11 * F32_BYTES;
 /// Largest postcard encoding of a [`TaskTimingFrame`] (5 `u32`), bytes.
 const TIMING_MAX_BYTES: usize = 5 * U32_MAX_BYTES;
+/// Largest postcard encoding of a [`RefusalCounts`] (3 `u32`), bytes.
+const REFUSALS_MAX_BYTES: usize = 3 * U32_MAX_BYTES;
 /// Largest postcard encoding of a [`PlanEventFrame`], bytes.
 const PLAN_EVENT_MAX_BYTES: usize = U32_MAX_BYTES
     + 3 * U64_MAX_BYTES
@@ -494,7 +572,7 @@ const PLAN_EVENT_MAX_BYTES: usize = U32_MAX_BYTES
     + (PLAN_NODES * 2 + 1) * F32_BYTES;
 
 /// Largest postcard encoding of a [`Down::Sensor`], bytes.
-const SENSOR_MAX_BYTES: usize = U32_MAX_BYTES + ESTIMATE_MAX_BYTES + U16_MAX_BYTES;
+const SENSOR_MAX_BYTES: usize = U32_MAX_BYTES + ESTIMATE_MAX_BYTES + U32_MAX_BYTES;
 
 /// Largest postcard encoding of a [`Down`] the control link carries while driving,
 /// bytes: a `Sensor` (the only other one, `Stop`, is its tag alone).
@@ -515,7 +593,7 @@ pub const MAX_DOWN_PAYLOAD_BYTES: usize = TAG_BYTES
 /// Largest postcard encoding of an [`Up`], bytes (an `Actuation` with a plan event).
 pub const MAX_UP_PAYLOAD_BYTES: usize = TAG_BYTES
     + max(
-        max(1 + U16_MAX_BYTES, 3 * U32_MAX_BYTES), // Ready, Done
+        max(1 + U16_MAX_BYTES, 3 * U32_MAX_BYTES + REFUSALS_MAX_BYTES), // Ready, Done
         U32_MAX_BYTES
             + 8 * F32_BYTES
             + 2
@@ -524,6 +602,8 @@ pub const MAX_UP_PAYLOAD_BYTES: usize = TAG_BYTES
             + U32_MAX_BYTES
             + TIMING_MAX_BYTES
             + U32_MAX_BYTES
+            + 1
+            + REFUSALS_MAX_BYTES
             + 1
             + PLAN_EVENT_MAX_BYTES,
     );
@@ -537,6 +617,20 @@ pub const MAX_DRIVING_DOWN_FRAME_BYTES: usize =
     frame_bytes_for_payload(MAX_DRIVING_DOWN_PAYLOAD_BYTES);
 /// Largest encoded [`Up`] frame, bytes, delimiter included.
 pub const MAX_UP_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_UP_PAYLOAD_BYTES);
+
+/// Bytes through the CMAC for a frame of `payload` bytes: the stream's Data ID,
+/// the version byte, the payload and the freshness value (the tag's input, see
+/// [`secoc`]).
+pub const fn mac_input_bytes(payload: usize) -> usize {
+    1 + 1 + payload + FRESHNESS_BYTES
+}
+/// Largest CMAC input of an [`Up`] frame, bytes.
+pub const MAX_UP_MAC_INPUT_BYTES: usize = mac_input_bytes(MAX_UP_PAYLOAD_BYTES);
+/// Largest CMAC input of a [`Down`] frame, bytes.
+pub const MAX_DOWN_MAC_INPUT_BYTES: usize = mac_input_bytes(MAX_DOWN_PAYLOAD_BYTES);
+/// Largest CMAC input of a frame of the control link while driving (a
+/// [`Down::Sensor`]), bytes.
+pub const MAX_DRIVING_DOWN_MAC_INPUT_BYTES: usize = mac_input_bytes(MAX_DRIVING_DOWN_PAYLOAD_BYTES);
 
 const _: () = assert!(MAX_DOWN_FRAME_BYTES <= MAX_FRAME_BYTES);
 const _: () = assert!(MAX_DRIVING_DOWN_FRAME_BYTES <= MAX_DOWN_FRAME_BYTES);
@@ -554,15 +648,20 @@ const fn max(a: usize, b: usize) -> usize {
 }
 
 /// Largest encoded frame, bytes with the delimiter, of a postcard payload of
-/// `payload` bytes: version + payload + CRC, plus COBS's worst case of one code
-/// byte and one more per 254 bytes, plus the 0x00.
+/// `payload` bytes: version + payload + freshness + tag + CRC, plus COBS's worst
+/// case of one code byte and one more per 254 bytes, plus the 0x00.
 pub const fn frame_bytes_for_payload(payload: usize) -> usize {
-    let raw = 1 + payload + CRC_BYTES;
+    let raw = 1 + payload + SECURED_BYTES + CRC_BYTES;
     raw + 1 + raw / 254 + 1
 }
 
 mod codes;
 pub mod demux;
 mod framing;
+pub mod secoc;
 pub use codes::*;
 pub use framing::*;
+pub use secoc::{
+    Authenticator, LinkKey, LinkMac, Refusal, RefusalCounts, Stream, Verifier, FRESHNESS_BYTES,
+    LINK_KEY, LINK_KEY_FROM_ENV, MAC_BYTES, SECURED_BYTES,
+};

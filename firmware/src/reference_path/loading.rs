@@ -159,7 +159,11 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             *wd = if has_widths { w } else { [T::ZERO; 2] };
         }
         self.compute(n, closed, has_widths);
-        Ok(())
+        let r = self.check_search_density();
+        if r.is_err() {
+            self.clear();
+        }
+        r
     }
 
     /// Writes track row `i` (`[x_m, y_m, w_right_m, w_left_m]`) into the path's own
@@ -195,13 +199,60 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                 |i| (self.xy[i.min(CAP - 1)], self.widths[i.min(CAP - 1)]),
                 closed,
             )
-            .map(|n| {
+            .and_then(|n| {
                 self.compute(n, closed, true);
+                self.check_search_density()
             });
         if r.is_err() {
             self.clear();
         }
         r
+    }
+
+    /// Refuses a path on which a projection's search near a hint would scan more
+    /// segments than its limit ([`Self::with_search_segments`]): from some point,
+    /// that many or more
+    /// points lie within the search's span (behind + ahead) of it. A search from
+    /// a hint covers the segment holding `hint − behind` and the segments that
+    /// start before `hint + ahead`: those start within the span of the first of
+    /// them, so at most `MAX_SEARCH_SEGMENTS` when this holds. One pass with two
+    /// indices (the end of each point's span only moves forward), over one lap
+    /// past the end of a closed path. Not inlined: its inner loop's bound is per
+    /// call.
+    #[inline(never)]
+    fn check_search_density(&self) -> Result<(), PathError> {
+        let m = self.segment_count();
+        if self.search_segments >= CAP {
+            // No limit of its own: a search scans at most the path's m < CAP.
+            return Ok(());
+        }
+        let n = self.n;
+        let span = T::lit(self.search_behind_m + self.search_ahead_m);
+        // The start of segment `j`, counted past the end of a closed path
+        // (unwrapped by its length).
+        let start = |j: usize| {
+            if j < m {
+                self.s[j]
+            } else {
+                self.s[(j - m).min(n - 1)] + self.length
+            }
+        };
+        let end = |i: usize| if self.closed { i + m } else { m };
+        let mut j = 0;
+        // WCET: m <= CAP (= ECU_PATH_ROWS in the ECU).
+        // wcet-bound: ECU_PATH_ROWS
+        for i in 0..m {
+            j = j.max(i + 1);
+            // `j` only moves forward, to at most 2·m over the call.
+            // wcet-bound: 2 * ECU_PATH_ROWS per call
+            while j < end(i) && start(j) - self.s[i] < span {
+                j += 1;
+            }
+            if j - i >= self.search_segments {
+                return Err(PathError::TooDense { index: i });
+            }
+        }
+        Ok(())
     }
 
     /// Derives segments, arc length, headings and curvatures from the `n` points

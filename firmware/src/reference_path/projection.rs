@@ -35,19 +35,20 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
     /// the points, then scanned per point: the segments a call of `project` per
     /// point searches, in the same order and with the same arithmetic, so the same
     /// results bit for bit, without a window search (and the heading and curvature
-    /// lookups) per point.
+    /// lookups) per point. The hint is required (a search near it, never a scan of
+    /// the whole path): with one not finite, every point gives `None`.
     pub fn project_each<const K: usize>(
         &self,
         points: &[[T; 2]],
-        s_hint_m: Option<T>,
+        s_hint_m: T,
     ) -> [Option<(T, T)>; K] {
         let mut out = [None; K];
         let m = self.segment_count();
-        if m == 0 {
+        if m == 0 || !s_hint_m.is_finite() {
             return out;
         }
         let n = points.len().min(K);
-        let hint = s_hint_m.filter(|h| h.is_finite());
+        let hint = Some(s_hint_m);
         let (first, count) = self.search_window(hint);
         // One scan per point (a scan of all the points per segment, unrolled by the
         // compiler, is longer than the instruction cache holds).
@@ -57,7 +58,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
             let p = points[k];
             // No `continue`: one path back to the loop's head keeps it one loop.
             let found = if p[0].is_finite() && p[1].is_finite() {
-                self.closest_in(p, first, count, true)
+                self.closest(p, first, count, true, true)
             } else {
                 None
             };
@@ -85,10 +86,12 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
                     self.s[i0]
                 };
                 let mut count = 0;
-                // WCET: m <= CAP (= ECU_PATH_ROWS in the ECU); the search window is in metres,
-                // not in segments (segments may be short), so only m caps it.
-                // wcet-bound: ECU_PATH_ROWS
-                for step in 0..m {
+                // The search window is in metres; the load's density rule
+                // (`check_search_density`) keeps it within the path's limit of
+                // segments, which the loop's range states. WCET: the plan task's
+                // path has the limit MAX_SEARCH_SEGMENTS (`PlanTask::new`).
+                // wcet-bound: MAX_SEARCH_SEGMENTS
+                for step in 0..m.min(self.search_segments) {
                     let seg = (i0 + step) % m;
                     if step > 0 && pos > end {
                         break;
@@ -107,31 +110,57 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
 
     /// The segment of the `count` from `first` (wrapping) closest to `p`, the first
     /// of equals: `(dist², segment, t)` (m², index, m along it); `None` when
-    /// `count` is 0.
+    /// `count` is 0. `near`: a search near a hint ([`Self::search_window`]), at
+    /// most the path's limit of segments (which the load's density rule keeps
+    /// from cutting it short); else a scan of the whole path. Two loops, each
+    /// with its own bound.
     #[inline(always)]
-    fn closest_in(
+    fn closest(
         &self,
         p: [T; 2],
         first: usize,
         count: usize,
+        near: bool,
         extend: bool,
     ) -> Option<(T, usize, T)> {
         let m = self.segment_count();
         let mut best: Option<(T, usize, T)> = None;
-        // WCET: count <= m <= CAP (= ECU_PATH_ROWS in the ECU).
-        // wcet-bound: ECU_PATH_ROWS
-        for step in 0..count {
-            let i = (first + step) % m;
-            let (d2, t) = self.segment_distance(p, i, m, extend);
-            let better = match best {
-                None => true,
-                Some((bd, _, _)) => d2 < bd,
-            };
-            if better {
-                best = Some((d2, i, t));
+        if near {
+            // WCET: the plan task's path has the limit MAX_SEARCH_SEGMENTS
+            // (`PlanTask::new`).
+            // wcet-bound: MAX_SEARCH_SEGMENTS
+            for step in 0..count.min(self.search_segments) {
+                self.closer(p, (first + step) % m, m, extend, &mut best);
+            }
+        } else {
+            // WCET: count <= m <= CAP (= ECU_PATH_ROWS in the ECU).
+            // wcet-bound: ECU_PATH_ROWS
+            for step in 0..count {
+                self.closer(p, (first + step) % m, m, extend, &mut best);
             }
         }
         best
+    }
+
+    /// Keeps segment `i` in `best` when it is closer to `p` than `best` (the first
+    /// of equals stays).
+    #[inline(always)]
+    fn closer(
+        &self,
+        p: [T; 2],
+        i: usize,
+        m: usize,
+        extend: bool,
+        best: &mut Option<(T, usize, T)>,
+    ) {
+        let (d2, t) = self.segment_distance(p, i, m, extend);
+        let better = match *best {
+            None => true,
+            Some((bd, _, _)) => d2 < bd,
+        };
+        if better {
+            *best = Some((d2, i, t));
+        }
     }
 
     /// The squared distance from `p` to segment `i` of the `m` segments, m², and
@@ -181,7 +210,7 @@ impl<T: Real, const CAP: usize> ReferencePath<T, CAP> {
         }
         let hint = s_hint_m.filter(|h| h.is_finite());
         let (first, count) = self.search_window(hint);
-        let (_, i, t) = self.closest_in(p, first, count, extend)?;
+        let (_, i, t) = self.closest(p, first, count, hint.is_some(), extend)?;
         let (s, lateral, foot) = self.foot(p, i, t, hint);
         Some(Projection {
             s_m: s,

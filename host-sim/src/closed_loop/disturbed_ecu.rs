@@ -163,20 +163,7 @@ impl<T: Real> DisturbedEcu<T> {
         let delayed = self.history.front().copied().unwrap_or(m);
         let out = match self.d.dropout {
             Some(dr) if dr.covers(t_us) => match dr.kind {
-                DropoutKind::Nan => {
-                    let nan = T::from_f64(f64::NAN);
-                    StateEstimate {
-                        stamp_us: t_us,
-                        x_m: nan,
-                        y_m: nan,
-                        psi_rad: nan,
-                        vx_mps: nan,
-                        vy_mps: nan,
-                        yaw_rate_radps: nan,
-                        delta_rad: nan,
-                        wheel_speed_mps: [nan; 4],
-                    }
-                }
+                DropoutKind::Nan => StateEstimate::unavailable(t_us),
                 DropoutKind::Hold => self.last_delivered.unwrap_or(delayed),
             },
             _ => delayed,
@@ -185,6 +172,15 @@ impl<T: Real> DisturbedEcu<T> {
             self.last_delivered = Some(out);
         }
         out
+    }
+
+    /// Whether the sensor frame of the control instant `t_us` (µs) is refused, so
+    /// that the control task does not learn of the frames of the road sent with
+    /// it ([`crate::world::disturbance::Dropout::withholds_route`]).
+    fn refused(&self, t_us: u64) -> bool {
+        self.d
+            .dropout
+            .is_some_and(|dr| dr.withholds_route && dr.covers(t_us))
     }
 
     /// Gives the late obstacle to the planner once the car is close enough.
@@ -237,6 +233,9 @@ impl<T: Real> DisturbedEcu<T> {
 impl<T: Real> Ecu<T> for DisturbedEcu<T> {
     fn control(&mut self, t_us: u64, est: &StateEstimate<T>) -> Result<ControlOutput<T>> {
         self.maybe_reveal(t_us, est)?;
+        if self.refused(t_us) {
+            self.inner.refuse_sensor_frame();
+        }
         let seen = self.seen(t_us, est);
         let mut c = self.inner.control(t_us, &seen)?;
         self.limit_steering(&mut c, est);
@@ -362,6 +361,7 @@ mod tests {
                     start_us: 10 * CONTROL_PERIOD_US,
                     periods: 3,
                     kind,
+                    withholds_route: false,
                 }),
                 ..Disturbances::default()
             };

@@ -90,6 +90,9 @@ pub struct EcuCounts {
     pub control: EcuTaskCounts,
     /// Times the control task's watchdog saw no new plan for too long.
     pub watchdog_trips: u64,
+    /// Frames the ECU refused, by reason (forged, replayed, corrupt), on both
+    /// its channels.
+    pub frames_refused: firmware::link::RefusalCounts,
 }
 
 /// A control activation's completion, as the ECU timed it: the instant its
@@ -212,11 +215,104 @@ pub struct SimulatedEcu<T: Real> {
     in_flight: Option<InFlight>,
     busy_until_us: u64,
     releases: u32,
-    /// The next window of the road, announced by the control activation at the
-    /// instant it arrived: the first plan release not skipped from then on (at a
-    /// common release the control task reads the announcement first) receives and
-    /// adopts it instead of planning.
-    pending_window: Option<Window>,
+    /// The windows of the road on their way to the plan task, frame by frame.
+    route: RouteChannel,
+    /// This period's sensor frame is refused (a link fault): the control task
+    /// does not learn of the frames of the road sent before it.
+    route_unheard: bool,
+}
+
+/// A frame of the road: the window it belongs to (an index into
+/// [`RouteChannel::windows`]) and its place in it (the `PathChunk`s from 0, then the
+/// `Window` frame).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct RouteFrame {
+    window: usize,
+    index: usize,
+}
+
+/// The route channel as the ECU sees it: the host sends one frame of the road
+/// before the sensor frame of each plan release, the control task learns of it
+/// from that sensor frame (not from a refused one: then from the next it
+/// accepts), and the plan task reads at most one announced frame per activation,
+/// adopting the window its `Window` frame completes instead of planning (the
+/// ECU application's `route_job`).
+#[derive(Clone, Debug, Default)]
+struct RouteChannel {
+    /// Every window given so far.
+    windows: Vec<Window>,
+    /// Frames not yet sent (the newest window's; a newer one replaces them).
+    unsent: std::collections::VecDeque<RouteFrame>,
+    /// Frames sent, not yet read by the plan task, in order.
+    in_channel: std::collections::VecDeque<RouteFrame>,
+    /// Frames sent, in all.
+    sent: u32,
+    /// Frames the control task has learnt of, in all.
+    announced: u32,
+    /// Frames the plan task has read, in all.
+    read: u32,
+    /// The window being staged and how many of its frames arrived in order.
+    staged: Option<(usize, usize)>,
+}
+
+impl RouteChannel {
+    /// Frames of a window of `rows` rows: its chunks and its `Window` frame.
+    fn frames_of(w: &Window) -> usize {
+        firmware::link::route_frames(w.rows.len())
+    }
+
+    /// A new window: its frames replace the ones not yet sent.
+    fn give(&mut self, w: &Window) {
+        let window = self.windows.len();
+        self.windows.push(w.clone());
+        self.unsent = (0..Self::frames_of(w))
+            .map(|index| RouteFrame { window, index })
+            .collect();
+    }
+
+    /// The control period at `t_us`: at a plan release one frame is sent before
+    /// the sensor frame; the control task learns of the frames sent so far unless
+    /// its sensor frame is refused (`heard`).
+    fn period(&mut self, t_us: u64, heard: bool) {
+        if t_us.is_multiple_of(PLAN_PERIOD_US) {
+            if let Some(f) = self.unsent.pop_front() {
+                self.in_channel.push_back(f);
+                self.sent += 1;
+            }
+        }
+        if heard {
+            self.announced = self.sent;
+        }
+    }
+
+    /// Whether a plan activation now has an announced frame to read.
+    fn has_frame(&self) -> bool {
+        self.announced > self.read && !self.in_channel.is_empty()
+    }
+
+    /// A plan activation reads one announced frame, if any: the window it
+    /// completes, if it does.
+    fn read_one(&mut self) -> Option<Window> {
+        if !self.has_frame() {
+            return None;
+        }
+        let f = self.in_channel.pop_front()?;
+        self.read += 1;
+        let total = self.windows.get(f.window).map_or(0, Self::frames_of);
+        // The first chunk restarts the staging; a frame out of order is refused.
+        self.staged = match self.staged {
+            _ if f.index == 0 => Some((f.window, 1)),
+            Some((w, n)) if w == f.window && n == f.index => Some((w, n + 1)),
+            _ => None,
+        };
+        match self.staged {
+            Some((w, n)) if n == total => {
+                self.staged = None;
+                self.windows.get(w).cloned()
+            }
+            _ => None,
+        }
+    }
 }
 
 impl<T: Real> SimulatedEcu<T> {
@@ -284,7 +380,8 @@ impl<T: Real> SimulatedEcu<T> {
             in_flight: None,
             busy_until_us: 0,
             releases: 0,
-            pending_window: None,
+            route: RouteChannel::default(),
+            route_unheard: false,
         })
     }
 
@@ -310,14 +407,22 @@ impl<T: Real> SimulatedEcu<T> {
         (cycles, finish_us)
     }
 
-    /// Runs the plan task released at `t_us` on `est` on the host; its record waits
-    /// in flight until its modelled finish.
-    fn release_plan(&mut self, t_us: u64, est: &StateEstimate<T>) {
+    /// This period's sensor frame is refused (a link fault, before
+    /// [`Ecu::control`]): the control task does not learn of the frames of the
+    /// road sent with it, until a sensor frame it accepts.
+    pub fn refuse_sensor_frame(&mut self) {
+        self.route_unheard = true;
+    }
+
+    /// Runs the plan task released at `t_us` on `est` on the host, after a frame
+    /// of the road that cost `route_instructions`; its record waits in flight
+    /// until its modelled finish.
+    fn release_plan(&mut self, t_us: u64, est: &StateEstimate<T>, route_instructions: f64) {
         self.planner.set_friction_limit(self.control.friction_mu());
         let outcome = self.planner.run(est);
         // Charged from the activation's own counters, a failed one's included.
         let report = *self.planner.last_report();
-        let instructions = self.cost_model.plan_instructions(&report);
+        let instructions = self.cost_model.plan_instructions(&report) + route_instructions;
         let (cycles, finish_us) = self.occupy(t_us, instructions);
         // The late-plan policy: published at its finish unless older than
         // MAX_PLAN_AGE_US by then (`PlanTask::publish_at`).
@@ -335,19 +440,21 @@ impl<T: Real> SimulatedEcu<T> {
                 cycles,
                 &report,
             )
-            .with_outcome(status, published),
+            .with_outcome(status, published)
+            .with_route_frames(route_instructions),
         });
     }
 }
 
 impl<T: Real> SimulatedEcu<T> {
-    /// The activation released at `t_us` receives and adopts the window `w` instead
-    /// of planning; the task stays busy for the adoption's modelled time.
-    fn adopt_window(&mut self, t_us: u64, w: &Window) {
+    /// The activation released at `t_us` adopts the window `w` its frame of the
+    /// road (`route_instructions`) completed, instead of planning; the task stays
+    /// busy for the adoption's modelled time.
+    fn adopt_window(&mut self, t_us: u64, w: &Window, route_instructions: f64) {
         // A path the planner refuses leaves it without one: its steps then fail
         // with `NoPath` and are reported as such.
         let _ = load_window(&mut self.planner, w);
-        let instructions = self.cost_model.window_instructions();
+        let instructions = self.cost_model.window_instructions() + route_instructions;
         let (cycles, finish_us) = self.occupy(t_us, instructions);
         let mut record = activation_record(
             self.releases,
@@ -357,7 +464,8 @@ impl<T: Real> SimulatedEcu<T> {
             cycles,
             &MpcReport::<T>::default(),
         )
-        .with_outcome(WINDOW_STATUS, false);
+        .with_outcome(WINDOW_STATUS, false)
+        .with_route_frames(route_instructions);
         record.window = true;
         record.window_instructions = instructions;
         self.in_flight = Some(InFlight { record });
@@ -414,11 +522,19 @@ fn activation_record<T: Real>(
         active_constraints: r.active_constraints,
         window: false,
         window_instructions: 0.0,
+        route_frames: 0,
         max_validity_slack_rad: Some(r.max_validity_slack_rad.to_f64()),
     }
 }
 
 impl PlanActivation {
+    /// The record of an activation that received a frame of the road first (its
+    /// cost `route_instructions` > 0).
+    fn with_route_frames(mut self, route_instructions: f64) -> Self {
+        self.route_frames = u32::from(route_instructions > 0.0);
+        self
+    }
+
     fn with_outcome(mut self, status: &'static str, published: bool) -> Self {
         self.status = status;
         self.published = published;
@@ -452,15 +568,26 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
         // The actuation leaves when the modelled activation ends.
         let sent_us = t_us + (cycles / self.ecu_clock_hz * 1e6).ceil() as u64;
         let mut skipped_releases = 0;
+        self.route
+            .period(t_us, !std::mem::take(&mut self.route_unheard));
         if t_us.is_multiple_of(PLAN_PERIOD_US) {
             self.releases += 1;
             if self.busy_until_us > t_us {
                 // Still running: this release is lost (RTIC cannot spawn a busy task).
                 skipped_releases = 1;
-            } else if let Some(w) = self.pending_window.take() {
-                self.adopt_window(t_us, &w);
             } else {
-                self.release_plan(t_us, est);
+                // A frame of the road first (`route_job`), then the adoption of the
+                // window it completes or the plan.
+                let frame = self.route.has_frame();
+                let route_instructions = if frame {
+                    self.cost_model.route_frame_instructions()
+                } else {
+                    0.0
+                };
+                match self.route.read_one() {
+                    Some(w) => self.adopt_window(t_us, &w, route_instructions),
+                    None => self.release_plan(t_us, est, route_instructions),
+                }
             }
         }
         Ok(ControlOutput {
@@ -488,7 +615,7 @@ impl<T: Real> Ecu<T> for SimulatedEcu<T> {
     }
 
     fn set_window(&mut self, w: &Window) -> Result<()> {
-        self.pending_window = Some(w.clone());
+        self.route.give(w);
         Ok(())
     }
 }

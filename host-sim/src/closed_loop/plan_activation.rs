@@ -59,6 +59,10 @@ pub struct PlanActivation {
     /// window.
     #[serde(default)]
     pub window_instructions: f64,
+    /// Frames of the road the activation received before planning or adopting
+    /// (0 or 1), frames.
+    #[serde(default)]
+    pub route_frames: u32,
     /// Largest validity slack of the plan, rad (0 if none or not optimal); `None`
     /// (an empty cell) where it is not measured (the ECU does not send it).
     #[serde(default)]

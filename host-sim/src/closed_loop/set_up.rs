@@ -264,6 +264,7 @@ pub fn set_up(spec: &RunSpec, setting: &Setting) -> Result<SetUp> {
                 start_us,
                 periods: n,
                 kind,
+                withholds_route: false,
             });
         }
         Fault::Overrun(mhz) => opts.ecu_clock_hz = mhz * 1e6,

@@ -170,6 +170,21 @@ pub struct Summary {
     /// Times the ECU's watchdog saw no new plan for more than
     /// `firmware::deadline::PLAN_WATCHDOG_PERIODS` plan periods, null without an ECU.
     pub ecu_watchdog_trips: Option<u64>,
+    /// Frames the ECU refused as forged (their tag did not verify), null without
+    /// an ECU.
+    pub ecu_frames_refused_auth: Option<u64>,
+    /// Frames the ECU refused as replayed (authentic, not newer than the last
+    /// accepted), null without an ECU.
+    pub ecu_frames_refused_replay: Option<u64>,
+    /// Frames the ECU refused as corrupt (not well-formed frames of this
+    /// version: CRC, COBS, length, version), null without an ECU.
+    pub ecu_frames_refused_corrupt: Option<u64>,
+    /// The ECU's frames the host refused as forged, null without an ECU.
+    pub host_frames_refused_auth: Option<u64>,
+    /// The ECU's frames the host refused as replayed, null without an ECU.
+    pub host_frames_refused_replay: Option<u64>,
+    /// The ECU's frames the host refused as corrupt, null without an ECU.
+    pub host_frames_refused_corrupt: Option<u64>,
 }
 
 /// The control task's estimate of the car's longitudinal dynamics
@@ -236,6 +251,8 @@ mod tests {
             mu_false_drop: Some(false),
             mu_unrecovered_exits: Some(0),
             ecu_watchdog_trips: Some(3),
+            ecu_frames_refused_auth: Some(20),
+            host_frames_refused_corrupt: Some(0),
             ..Summary::default()
         };
         let back: Summary = serde_json::from_str(&serde_json::to_string_pretty(&summary)?)?;

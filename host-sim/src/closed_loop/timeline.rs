@@ -627,6 +627,9 @@ impl<'a> Meter<'a> {
             sum.ecu_control_skipped_releases = Some(e.control.skipped_releases);
             sum.ecu_control_budget_overruns = Some(e.control.budget_overruns);
             sum.ecu_watchdog_trips = Some(e.watchdog_trips);
+            sum.ecu_frames_refused_auth = Some(e.frames_refused.auth.into());
+            sum.ecu_frames_refused_replay = Some(e.frames_refused.replay.into());
+            sum.ecu_frames_refused_corrupt = Some(e.frames_refused.corrupt.into());
         }
         if c.cycles > opts.control_budget_cycles {
             sum.control_budget_overruns += 1;

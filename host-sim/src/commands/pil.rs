@@ -6,9 +6,11 @@ use std::fs;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use firmware::link::DoneFrame;
+use firmware::link::{DoneFrame, LinkKey, RefusalCounts};
+use firmware::tasks::CONTROL_PERIOD_US;
 
 use crate::closed_loop::cost_model::CostModel;
+use crate::closed_loop::disturbed_ecu::DisturbedEcu;
 use crate::closed_loop::ecu::SimulatedEcu;
 use crate::closed_loop::plan_activation::PlanActivation;
 use crate::closed_loop::set_up::SetUp;
@@ -18,10 +20,12 @@ use crate::commands::run::{friction_line, plant_line, prepare, summary_line, Run
 use crate::output::run_files::write_outputs;
 use crate::pil::comparison::compare;
 use crate::pil::deadlines::count_mismatches;
+use crate::pil::link_fault::{LinkFault, LinkFaultSpec};
 use crate::pil::qemu::{PilOptions, QemuEcu, ECU_CLOCK_HZ};
-use crate::pil::report::PilReport;
+use crate::pil::report::{LinkFaultReport, PilReport};
 use crate::stats::percentile;
-use crate::world::faults::FAULT_KINDS;
+use crate::world::disturbance::Disturbances;
+use crate::world::faults::{FAULT_KINDS, FAULT_START_S};
 
 /// `host-sim pil`'s command line: `run`'s ([`crate::commands::run::RunCommand`]: the same
 /// scenario options, refused where PIL cannot apply them), and how to run the ECU.
@@ -66,6 +70,78 @@ pub struct PilEcuArgs {
     /// activation by more than this, % (CI's check that the model stays honest).
     #[arg(long)]
     pub max_model_underestimate_pct: Option<f64>,
+    /// Replace sensor frames, from the link fault's start: `forge` (a tag under
+    /// another key), `replay` (frames sent before the fault, again) or `corrupt`
+    /// (a bit flipped), each `[:N]` frames (default 20). The ECU must refuse
+    /// each, count it by reason and never act on it (a dropout: the safe
+    /// actuation), and the lap go on; `host-sim pil` fails otherwise.
+    #[arg(long, value_name = "forge|replay|corrupt[:N]")]
+    pub link_fault: Option<LinkFaultSpec>,
+    /// When the link fault starts, s of simulated time (rounded down to a 10 ms
+    /// control period).
+    #[arg(long, default_value_t = FAULT_START_S, value_name = "S")]
+    pub link_fault_at: f64,
+    /// The link key, 32 hexadecimal digits: the one the ECU application was built
+    /// with (`ECU_LINK_KEY` at its build). Default: the environment variable
+    /// `ECU_LINK_KEY`, else this simulator's build's key (the development key
+    /// unless it was built with `ECU_LINK_KEY`).
+    #[arg(long, value_name = "HEX")]
+    pub link_key: Option<String>,
+}
+
+/// The environment variable that gives the link key (as at the firmware's build).
+pub const LINK_KEY_VAR: &str = "ECU_LINK_KEY";
+
+/// The link key of 32 hexadecimal digits `hex` (`what` says where it came from,
+/// for the error; the digits are never repeated: the key is a secret).
+pub fn parse_link_key(hex: &str, what: &str) -> Result<LinkKey> {
+    let hex = hex.trim();
+    if hex.len() != 32 || !hex.is_ascii() {
+        bail!(
+            "{what}: a link key is 32 hexadecimal digits (AES-128), got {} characters",
+            hex.chars().count()
+        );
+    }
+    let mut key = [0u8; 16];
+    for (i, b) in key.iter_mut().enumerate() {
+        *b = u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).map_err(|_| {
+            anyhow::anyhow!(
+                "{what}: characters {}-{} are not hexadecimal digits (0-9, a-f)",
+                2 * i + 1,
+                2 * i + 2
+            )
+        })?;
+    }
+    Ok(key)
+}
+
+impl PilEcuArgs {
+    /// The link key: `--link-key`, else `ECU_LINK_KEY`, else the build's.
+    pub fn link_key(&self) -> Result<LinkKey> {
+        if let Some(hex) = &self.link_key {
+            return parse_link_key(hex, "--link-key");
+        }
+        match std::env::var(LINK_KEY_VAR) {
+            Ok(hex) => parse_link_key(&hex, LINK_KEY_VAR),
+            Err(_) => Ok(firmware::link::LINK_KEY),
+        }
+    }
+
+    /// The link fault with its start, if any.
+    pub fn link_fault(&self) -> Result<Option<LinkFault>> {
+        let Some(spec) = self.link_fault else {
+            return Ok(None);
+        };
+        if !(self.link_fault_at.is_finite() && self.link_fault_at >= 0.0) {
+            bail!(
+                "--link-fault-at must be a time in seconds, at least 0, got {}",
+                self.link_fault_at
+            );
+        }
+        let period = CONTROL_PERIOD_US as f64 * 1e-6;
+        let start_us = (self.link_fault_at / period).floor() as u64 * CONTROL_PERIOD_US;
+        Ok(Some(LinkFault { spec, start_us }))
+    }
 }
 
 impl PilCommand {
@@ -74,6 +150,8 @@ impl PilCommand {
         let e = self.ecu.clone();
         Ok(PilArgs {
             run: self.run.resolve("pil")?,
+            link_key: e.link_key()?,
+            link_fault: e.link_fault()?,
             elf: e.elf,
             icount_shift: e.icount_shift,
             qemu: e.qemu,
@@ -109,6 +187,10 @@ pub struct PilArgs {
     pub frame_timeout: f64,
     /// Largest underestimate of the cost model allowed, %.
     pub max_model_underestimate_pct: Option<f64>,
+    /// The link key.
+    pub link_key: LinkKey,
+    /// The link fault, if any.
+    pub link_fault: Option<LinkFault>,
 }
 
 /// Refuses what a PIL run cannot apply, saying why and where it applies: the
@@ -179,6 +261,8 @@ pub fn run(args: &PilArgs) -> Result<()> {
         frame_timeout_s: args.frame_timeout,
         cycles_per_instruction: args.cpi,
         trace: args.trace.clone(),
+        link_key: args.link_key,
+        link_fault: args.link_fault,
     };
     let wall = std::time::Instant::now();
     let mut ecu = QemuEcu::start(&scenario, &vehicle, &opts, &pil_opts)?;
@@ -192,19 +276,34 @@ pub fn run(args: &PilArgs) -> Result<()> {
         bar.set_message(format!("{d:.0} m driven"));
     });
     bar.finish_and_clear();
-    let counters = ecu.counters;
     let tick_overruns = ecu.tick_overruns;
     let ecu_counts = ecu.ecu_counts;
-    let done = match &result {
-        Ok(_) => Some(ecu.stop()?),
-        Err(_) => None,
+    let injected = ecu.injected;
+    let (done, counters) = match &result {
+        Ok(_) => {
+            let (done, counters) = ecu.stop()?;
+            (Some(done), counters)
+        }
+        Err(_) => (None, ecu.counters),
     };
-    let result = result?;
+    let mut result = result?;
     let done = done.unwrap_or(DoneFrame {
         stack_high_water_bytes: 0,
         stack_size_bytes: 0,
         rejected_frames: 0,
+        refused: RefusalCounts::new(),
     });
+    // The ECU's refusals at its end (the Done frame's: the last word), and the
+    // host's of the ECU's frames.
+    {
+        let s = &mut result.summary;
+        s.ecu_frames_refused_auth = Some(done.refused.auth.into());
+        s.ecu_frames_refused_replay = Some(done.refused.replay.into());
+        s.ecu_frames_refused_corrupt = Some(done.refused.corrupt.into());
+        s.host_frames_refused_auth = Some(counters.refused.auth.into());
+        s.host_frames_refused_replay = Some(counters.refused.replay.into());
+        s.host_frames_refused_corrupt = Some(counters.refused.corrupt.into());
+    }
     let wall_s = wall.elapsed().as_secs_f64();
     write_outputs(&args.run.out, &scenario, &result, !args.run.no_plots)?;
 
@@ -219,8 +318,22 @@ pub fn run(args: &PilArgs) -> Result<()> {
     let comparison = if args.no_compare {
         None
     } else {
-        let mut host_ecu = SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts)?;
-        let host = timeline::run_with(&scenario, &plant_car, &opts, &mut host_ecu, |_, _| {})?;
+        // The link fault's refused frames are, to the ECU, periods without an
+        // estimate: the in-process run has them as a dropout of the same periods.
+        let host = match args.link_fault {
+            None => {
+                let mut host_ecu = SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts)?;
+                timeline::run_with(&scenario, &plant_car, &opts, &mut host_ecu, |_, _| {})?
+            }
+            Some(f) => {
+                let d = Disturbances {
+                    dropout: Some(f.dropout()),
+                    ..Disturbances::default()
+                };
+                let mut host_ecu = DisturbedEcu::<f32>::new(&scenario, &vehicle, &opts, d)?;
+                timeline::run_with(&scenario, &plant_car, &opts, &mut host_ecu, |_, _| {})?
+            }
+        };
         // The in-process run beside it, for a look at any divergence.
         write_outputs(&args.run.out.join("host"), &scenario, &host, false)?;
         Some(compare(&result, &host))
@@ -232,7 +345,14 @@ pub fn run(args: &PilArgs) -> Result<()> {
         stack_high_water_bytes: done.stack_high_water_bytes,
         stack_size_bytes: done.stack_size_bytes,
         ecu_rejected_frames: done.rejected_frames,
+        ecu_refused_frames: done.refused,
         host_rejected_frames: counters.rejected,
+        host_refused_frames: counters.refused,
+        link_fault: args.link_fault.map(|f| LinkFaultReport {
+            fault: f.spec.to_string(),
+            start_s: f.start_us as f64 * 1e-6,
+            frames: injected,
+        }),
         stale_frames: counters.stale,
         control_max_instructions: percentile(&result.control_instructions, 1.0),
         control_p50_instructions: percentile(&result.control_instructions, 0.5),
@@ -307,11 +427,58 @@ pub fn run(args: &PilArgs) -> Result<()> {
         opt(ecu_counts.map(|c| c.plan.max_response_us)),
         opt(ecu_counts.map(|c| c.control.max_response_us)),
     );
+    let r = |c: RefusalCounts| {
+        format!(
+            "auth {}, replay {}, corrupt {}",
+            c.auth, c.replay, c.corrupt
+        )
+    };
+    println!(
+        "frames refused by reason: ECU {}; host {}",
+        r(done.refused),
+        r(counters.refused)
+    );
+    if let Some(f) = args.link_fault {
+        println!(
+            "link fault {} from {:.2} s: {} frames injected, {} refused for their reason by the ECU, {} acted on; {} legitimate frames refused",
+            f.spec,
+            f.start_us as f64 * 1e-6,
+            injected.injected.total(),
+            injected.refused_as_expected,
+            injected.acted_on,
+            injected.legitimate_refused
+        );
+    }
     println!(
         "PIL wall time {:.1} s; wrote {}",
         wall_s,
         args.run.out.display()
     );
+    if let Some(f) = args.link_fault {
+        let expected = u64::from(injected.injected.total());
+        if injected.acted_on > 0
+            || injected.refused_as_expected != expected
+            || injected.legitimate_refused > 0
+            || done.refused.of(f.spec.kind.refusal()) < injected.injected.total()
+        {
+            bail!(
+                "link fault {}: of {expected} frames injected, the ECU refused {} for their reason ({} in its own count) and acted on {}; it refused {} legitimate frames (pil.json: link_fault)",
+                f.spec,
+                injected.refused_as_expected,
+                done.refused.of(f.spec.kind.refusal()),
+                injected.acted_on,
+                injected.legitimate_refused
+            );
+        }
+        if !s.completed {
+            bail!(
+                "link fault {}: the lap did not complete ({}): the dropout policy should carry the car through {} refused frames",
+                f.spec,
+                s.stop_reason,
+                f.spec.frames
+            );
+        }
+    }
     if !report.count_mismatches.is_empty() {
         bail!(
             "the ECU's own deadline counts differ from the host's: {} (pil.json: count_mismatches)",

@@ -124,6 +124,8 @@ pub(crate) fn pil_args(
         no_compare: true,
         frame_timeout: 60.0,
         max_model_underestimate_pct: None,
+        link_key: firmware::link::LINK_KEY,
+        link_fault: None,
     }
 }
 
@@ -183,8 +185,8 @@ fn cap_trace(args: &WcetArgs) -> Result<PathBuf> {
 /// iteration cap, the activations nearest the bound's worst case (which charges
 /// every iteration a working set of `WS`). The heaviest traced activation of a
 /// grid of such runs (radii 15–25 m, 12–18 m/s, half-widths 2.5–5 m:
-/// `docs/tuning.md`, *The plan task signed*; re-measured with the sideslip lag of
-/// stop 35, which moved it from 22 m at 15 m/s).
+/// `docs/tuning.md`, *The plan task within its budget*; re-measured with the
+/// sideslip lag, which moved it from 22 m at 15 m/s).
 const FULL_SET_CIRCLE: (f64, f64, f64) = (20.0, 3.5, 14.0);
 
 /// Runs a short PIL run on [`FULL_SET_CIRCLE`], with QEMU's execution trace
@@ -220,8 +222,8 @@ const WINDOW_STRAIGHT: (f64, f64, f64) = (480.0, 3.5, 25.0);
 const WINDOW_BOX: (f64, f64) = (230.0, 2.5);
 
 /// Runs a PIL run on [`WINDOW_STRAIGHT`] until just after the plan task adopted
-/// the first window sent while driving (the feeder sends it when the car is
-/// `BEHIND_M + ADVANCE_M` into the first window), with QEMU's execution trace
+/// the first window sent while driving (the feeder starts sending it when the car
+/// is `BEHIND_M + ADVANCE_M` into the first window, a frame per plan release), with QEMU's execution trace
 /// written to a file, and returns the file: the route frames received by the
 /// control and plan tasks, the window's adoption (`window_job`), the obstacle
 /// placed on the new window.
@@ -249,9 +251,13 @@ fn window_trace(args: &WcetArgs) -> Result<PathBuf> {
     }
     let obstacles = dir.join("box_beside.csv");
     fs::write(&obstacles, boxes)?;
-    // The window is due after BEHIND_M + ADVANCE_M at about `speed`, adopted by
-    // the plan activation after it; half a second more leaves a plan on it.
-    let seconds = (BEHIND_M + ADVANCE_M) / speed + 0.6;
+    // The window is due after BEHIND_M + ADVANCE_M at about `speed`; its frames
+    // go one per plan release on the route channel (at most `route_frames` of a
+    // full window), and the plan activation after the last adopts it; half a
+    // second more leaves a plan on it.
+    let frames = firmware::link::route_frames(crate::world::route::WINDOW_ROWS) as f64;
+    let plan_period_s = firmware::timing::PLAN_PERIOD_US as f64 * 1e-6;
+    let seconds = (BEHIND_M + ADVANCE_M) / speed + frames * plan_period_s + 0.6;
     let mut a = pil_args(
         dir.join("run"),
         &obstacles.to_string_lossy(),

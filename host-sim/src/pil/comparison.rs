@@ -294,6 +294,7 @@ mod tests {
             active_constraints: 5,
             window: false,
             window_instructions: 0.0,
+            route_frames: 0,
             max_validity_slack_rad: None,
         };
         pil.plan_activations.push(activation(12_000));

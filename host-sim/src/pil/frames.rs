@@ -74,6 +74,11 @@ pub fn setup_refusal(status: u8, detail: u16) -> String {
             "its clock set-up failed ({}): it runs on its internal oscillator and does not start the control loop",
             firmware::clock_tree::ClockError::from_code(detail).map_or("unknown clock error", |e| e.name())
         ),
+        Some(E::FrameRefused) => match u8::try_from(detail).ok().and_then(firmware::link::Refusal::from_code) {
+            Some(firmware::link::Refusal::Auth) => "it refused a set-up frame as forged: the ECU application was built with another link key than the simulator's (build both with the same ECU_LINK_KEY, or give the ECU's key with --link-key)".into(),
+            Some(r) => format!("it refused a set-up frame ({}): the link damaged or repeated a frame; run again", r.name()),
+            None => format!("it refused a set-up frame (reason {detail}): is the ECU application of another version?"),
+        },
         None => format!("unknown status {status} (detail {detail}): is the ECU application of another version?"),
     }
 }

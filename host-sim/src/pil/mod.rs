@@ -23,10 +23,13 @@
 //!
 //! # Frames
 //!
-//! See [`firmware::link`]: versioned, CRC-32, COBS-delimited postcard frames.
-//! Set-up: `Config`, `PathChunk`s, `Obstacle`s, `Start` → `Ready`; then `Sensor`
-//! → `Actuation` every period; `Stop` → `Done`. Garbled, short, wrong-version,
-//! stale or out-of-order frames are refused and counted on both sides. The next
+//! See [`firmware::link`]: versioned, authenticated (a freshness value and a
+//! truncated AES-128-CMAC, [`firmware::link::secoc`]), CRC-32, COBS-delimited
+//! postcard frames. Set-up: `Config`, `PathChunk`s, `Obstacle`s, `Start` →
+//! `Ready`; then `Sensor` → `Actuation` every period; `Stop` → `Done`. Forged,
+//! replayed, garbled, short, wrong-version, stale or out-of-order frames are
+//! refused and counted on both sides; the ECU answers a sensor frame it refused
+//! as a dropout (the safe actuation), saying so in its answer. The next
 //! window of the road goes on a third FIFO (`ecu.route`), announced by the count
 //! in the next sensor frame: the ECU's plan task reads it after it publishes.
 //!
@@ -48,6 +51,7 @@
 //! |---|---|
 //! | [`qemu`] | the ECU application in QEMU: process, FIFO link, set-up, exchange; [`QemuEcu`](qemu::QemuEcu) as the closed loop's ECU |
 //! | [`frames`] | the link's frames to and from the simulator's types |
+//! | [`link_fault`] | forged, replayed and corrupted sensor frames (`--link-fault`), and the in-process run's model of them |
 //! | [`deadlines`] | the host's count of the ECU's skipped releases and budget overruns, against the ECU's own |
 //! | [`comparison`] | the PIL run against the in-process one: the first divergence and its cause |
 //! | [`report`] | `pil.json`: what `host-sim pil` adds to `run`'s outputs |
@@ -57,5 +61,6 @@
 pub mod comparison;
 pub mod deadlines;
 pub mod frames;
+pub mod link_fault;
 pub mod qemu;
 pub mod report;

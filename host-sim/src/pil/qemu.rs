@@ -14,8 +14,9 @@ use std::time::Duration;
 use anyhow::{anyhow, bail, Context, Result};
 use firmware::deadline::{CONTROL_BUDGET_CYCLES, PLAN_BUDGET_CYCLES};
 use firmware::link::{
-    self, ConfigFrame, DoneFrame, Down, FrameReader, ObstacleFrame, PlanEventFrame, SensorFrame,
-    Up, MAX_FRAME_BYTES,
+    self, Authenticator, ConfigFrame, DoneFrame, Down, FrameError, FrameReader, LinkKey, LinkMac,
+    ObstacleFrame, PlanEventFrame, Refusal, RefusalCounts, SensorFrame, Stream, Up, Verifier,
+    MAX_FRAME_BYTES,
 };
 use firmware::obstacles::MAX_VERTICES;
 use firmware::plan::Plan;
@@ -30,6 +31,7 @@ use crate::closed_loop::SimOptions;
 use crate::model::vehicle::VehicleParams;
 use crate::pil::deadlines::{skipped_between, TickOverruns};
 use crate::pil::frames::{actuation_of, path_chunks, plan_of, setup_refusal};
+use crate::pil::link_fault::{flip_bit, LinkFault, LinkFaultKind};
 use crate::world::route::{RouteFeeder, Window};
 use crate::world::scenario::Scenario;
 
@@ -55,6 +57,12 @@ pub struct PilOptions {
     /// Write QEMU's execution trace (`-d in_asm,exec,nochain`) to this file, for the
     /// cycles-per-instruction analysis (large: about 14 bytes per instruction).
     pub trace: Option<PathBuf>,
+    /// The link key the frames are authenticated with: the ECU application's
+    /// (`firmware::link::LINK_KEY` of the build, unless it was built with another
+    /// `ECU_LINK_KEY`).
+    pub link_key: LinkKey,
+    /// Sensor frames to replace by forged, replayed or corrupted ones, if any.
+    pub link_fault: Option<LinkFault>,
 }
 
 impl PilOptions {
@@ -72,17 +80,41 @@ impl PilOptions {
 /// Counters of the link, host side.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct LinkCounters {
-    /// Frames the host refused (garbled, short, wrong version, unexpected).
+    /// Frames the host refused (garbled, short, wrong version, forged, replayed,
+    /// unexpected).
     pub rejected: u64,
+    /// Of those, the ones refused by reason (the ECU's frames), frames.
+    pub refused: RefusalCounts,
     /// Actuation frames answering another sensor frame than the one sent.
     pub stale: u64,
 }
 
+/// The link fault's frames, host side: what was injected and what the ECU did
+/// with it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct InjectedFrames {
+    /// Sensor frames replaced by forged, replayed or corrupted ones, by the reason
+    /// the ECU must refuse them for, frames.
+    pub injected: RefusalCounts,
+    /// Of those, the ones the ECU answered as refused for that reason
+    /// (`ActuationFrame::sensor`), frames.
+    pub refused_as_expected: u64,
+    /// Of those, the ones the ECU answered as accepted: acted on (must be 0),
+    /// frames.
+    pub acted_on: u64,
+    /// Legitimate sensor frames the ECU answered as refused (must be 0), frames.
+    pub legitimate_refused: u64,
+}
+
 enum Incoming {
     Frame(Box<Up>),
-    Bad,
+    Bad(FrameError),
     Closed,
 }
+
+/// Bytes of the legitimate sensor frames sent in the last second, kept for the
+/// `replay` link fault: at most this many frames.
+const REPLAY_HISTORY_FRAMES: usize = 100;
 
 /// The ECU application running in QEMU, in the loop.
 pub struct QemuEcu {
@@ -97,8 +129,15 @@ pub struct QemuEcu {
     pub active: Plan<f32>,
     /// The route channel (`ecu.route`): the next window of the road.
     route: BufWriter<File>,
-    /// Route frames written since the last sensor frame (announced in the next).
-    route_frames: u16,
+    /// Route frames written since the start, in all (announced in each sensor
+    /// frame: a refused one loses no announcement).
+    route_frames: u32,
+    /// Frames of the road not yet sent: one goes before the sensor frame of each
+    /// plan release (the ECU's plan task reads one per activation).
+    route_queue: std::collections::VecDeque<Down>,
+    /// The plan releases (µs) before whose sensor frame a frame of the road went:
+    /// the activations that received one (the records' `route_frames`).
+    route_releases: std::collections::BTreeSet<u64>,
     /// The last control release the ECU reported, µs.
     last_release_us: Option<u64>,
     /// That activation's own ticks: its budget overrun is counted with its
@@ -110,6 +149,22 @@ pub struct QemuEcu {
     pub tick_overruns: TickOverruns,
     /// The ECU's own counts in the last actuation frame (response times included).
     pub ecu_counts: Option<EcuCounts>,
+    /// AES-128-CMAC under the link key, for the frames the host sends.
+    mac: LinkMac,
+    /// The control channel's down stream (the set-up, the sensor frames, `Stop`).
+    down_tx: Authenticator,
+    /// The route channel's stream.
+    route_tx: Authenticator,
+    /// A forger's CMAC: under a key that is not the link's (`forge`).
+    forger: LinkMac,
+    /// The legitimate sensor frames of the last second, oldest first (`replay`).
+    history: std::collections::VecDeque<Vec<u8>>,
+    /// Sensor frames replaced so far by the link fault.
+    faulted: u32,
+    /// The link fault's frames and what the ECU did with them.
+    pub injected: InjectedFrames,
+    /// The ECU accepted the set-up (its `Ready` arrived).
+    ready: bool,
 }
 
 impl Drop for QemuEcu {
@@ -133,10 +188,13 @@ fn mkfifo(path: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Reads frames from the up-link FIFO on a thread of its own.
-fn spawn_reader(mut file: File) -> Receiver<Incoming> {
+/// Reads frames from the up-link FIFO on a thread of its own, verifying them
+/// with `key` on the up stream.
+fn spawn_reader(mut file: File, key: LinkKey) -> Receiver<Incoming> {
     let (tx, rx) = mpsc::channel();
     thread::spawn(move || {
+        let mut mac = LinkMac::new(&key);
+        let mut up = Verifier::new(Stream::Up);
         let mut reader: FrameReader<MAX_FRAME_BYTES> = FrameReader::new();
         let mut buf = [0u8; 4096];
         loop {
@@ -150,11 +208,11 @@ fn spawn_reader(mut file: File) -> Receiver<Incoming> {
             for &b in &buf[..n] {
                 let msg = match reader.push(b) {
                     None => continue,
-                    Some(Ok(frame)) => match link::decode::<Up>(frame) {
+                    Some(Ok(frame)) => match link::decode::<Up>(frame, &mut mac, &mut up) {
                         Ok(m) => Incoming::Frame(Box::new(m)),
-                        Err(_) => Incoming::Bad,
+                        Err(e) => Incoming::Bad(e),
                     },
-                    Some(Err(_)) => Incoming::Bad,
+                    Some(Err(e)) => Incoming::Bad(e),
                 };
                 if tx.send(msg).is_err() {
                     return;
@@ -258,33 +316,70 @@ impl QemuEcu {
                 opts.elf.display()
             );
         };
+        let mut forger_key = opts.link_key;
+        for b in &mut forger_key {
+            *b ^= 0x5a;
+        }
         let mut ecu = Self {
             child,
             down: BufWriter::new(down),
-            up: spawn_reader(up),
+            up: spawn_reader(up, opts.link_key),
             opts: opts.clone(),
             seq: 0,
             counters: LinkCounters::default(),
             active: Plan::zeroed(),
             route: BufWriter::new(route),
             route_frames: 0,
+            route_queue: Default::default(),
+            route_releases: Default::default(),
             last_release_us: None,
             last_control_ticks: None,
             plan_counts: Default::default(),
             tick_overruns: TickOverruns::default(),
             ecu_counts: None,
+            mac: LinkMac::new(&opts.link_key),
+            down_tx: Authenticator::new(Stream::Down),
+            route_tx: Authenticator::new(Stream::Route),
+            forger: LinkMac::new(&forger_key),
+            history: std::collections::VecDeque::new(),
+            faulted: 0,
+            injected: InjectedFrames::default(),
+            ready: false,
         };
         ecu.set_up(scenario, vehicle, sim)?;
         Ok(ecu)
     }
 
-    fn send(&mut self, msg: &Down) -> Result<()> {
+    /// A frame of the control channel's down stream, encoded and authenticated.
+    fn frame(&mut self, msg: &Down) -> Result<Vec<u8>> {
         let mut buf = [0u8; MAX_FRAME_BYTES];
-        let n = link::encode(msg, &mut buf).map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
+        let n = link::encode(msg, &mut self.mac, &mut self.down_tx, &mut buf)
+            .map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
+        Ok(buf[..n].to_vec())
+    }
+
+    fn send(&mut self, msg: &Down) -> Result<()> {
+        let frame = self.frame(msg)?;
+        self.write_down(&frame)
+    }
+
+    fn write_down(&mut self, frame: &[u8]) -> Result<()> {
         self.down
-            .write_all(&buf[..n])
-            .context("the ECU closed its link")?;
-        Ok(())
+            .write_all(frame)
+            .context("the ECU closed its link")
+    }
+
+    /// What the ECU's frames the host refused say, if anything: refused as
+    /// forged, they were sent under another key than the host's.
+    fn refusal_hint(&self) -> String {
+        if self.counters.refused.auth > 0 {
+            format!(
+                "; the host refused {} of the ECU's frames as forged: the ECU application was built with another link key than the simulator's (build both with the same ECU_LINK_KEY, or give the ECU's key with --link-key)",
+                self.counters.refused.auth
+            )
+        } else {
+            String::new()
+        }
     }
 
     fn receive(&mut self) -> Result<Up> {
@@ -295,19 +390,33 @@ impl QemuEcu {
                 .recv_timeout(Duration::from_secs_f64(self.opts.frame_timeout_s))
             {
                 Ok(Incoming::Frame(m)) => return Ok(*m),
-                Ok(Incoming::Bad) => self.counters.rejected += 1,
+                Ok(Incoming::Bad(e)) => {
+                    self.counters.rejected += 1;
+                    self.counters.refused.count(e.refusal());
+                    // Before the set-up is accepted a forged frame is most likely a
+                    // key that differs from the ECU's: said at once, not after a
+                    // timeout.
+                    if !self.ready && e.refusal() == Refusal::Auth {
+                        bail!(
+                            "the ECU's frames fail authentication{}",
+                            self.refusal_hint()
+                        );
+                    }
+                }
                 Ok(Incoming::Closed) | Err(RecvTimeoutError::Disconnected) => {
                     let defmt = self.opts.work_dir.join("ecu.defmt");
                     bail!(
-                        "the ECU stopped (QEMU exited); its log: {} (decode with `defmt-print -e {}`), QEMU's: {}",
+                        "the ECU stopped (QEMU exited); its log: {} (decode with `defmt-print -e {}`), QEMU's: {}{}",
                         defmt.display(),
                         self.opts.elf.display(),
-                        self.opts.work_dir.join("qemu.log").display()
+                        self.opts.work_dir.join("qemu.log").display(),
+                        self.refusal_hint()
                     )
                 }
                 Err(RecvTimeoutError::Timeout) => bail!(
-                    "no frame from the ECU within {} s of wall time: the firmware hangs",
-                    self.opts.frame_timeout_s
+                    "no frame from the ECU within {} s of wall time: the firmware hangs{}",
+                    self.opts.frame_timeout_s,
+                    self.refusal_hint()
                 ),
             }
         }
@@ -361,7 +470,10 @@ impl QemuEcu {
         self.send(&Down::Start)?;
         loop {
             match self.receive()? {
-                Up::Ready(r) if r.status == 0 => return Ok(()),
+                Up::Ready(r) if r.status == 0 => {
+                    self.ready = true;
+                    return Ok(());
+                }
                 Up::Ready(r) => bail!(
                     "the ECU refused the set-up: {}",
                     setup_refusal(r.status, r.detail)
@@ -374,7 +486,8 @@ impl QemuEcu {
     /// Writes a frame on the route channel.
     fn send_route(&mut self, msg: &Down) -> Result<()> {
         let mut buf = [0u8; MAX_FRAME_BYTES];
-        let n = link::encode(msg, &mut buf).map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
+        let n = link::encode(msg, &mut self.mac, &mut self.route_tx, &mut buf)
+            .map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
         self.route
             .write_all(&buf[..n])
             .context("the ECU closed its route channel")?;
@@ -390,18 +503,79 @@ impl QemuEcu {
         Ok(())
     }
 
-    /// One control period: sends the estimate at `t_us`, returns the ECU's answer.
+    /// The frame the ECU receives for this period's sensor frame `msg`: the
+    /// frame itself, or, while the link fault lasts, a forged, replayed or
+    /// corrupted one in its place (`Some(kind)`).
+    fn sensor_frame(&mut self, msg: &Down, t_us: u64) -> Result<(Vec<u8>, Option<LinkFaultKind>)> {
+        let fault = self
+            .opts
+            .link_fault
+            .filter(|f| f.covers(t_us))
+            .map(|f| f.spec.kind);
+        let frame = match fault {
+            None => {
+                let frame = self.frame(msg)?;
+                if self.history.len() == REPLAY_HISTORY_FRAMES {
+                    self.history.pop_front();
+                }
+                self.history.push_back(frame.clone());
+                frame
+            }
+            Some(LinkFaultKind::Forge) => {
+                // Fresh (the next freshness value of the stream, not taken), its
+                // tag under the forger's key.
+                let mut tx = self.down_tx;
+                let mut buf = [0u8; MAX_FRAME_BYTES];
+                let n = link::encode(msg, &mut self.forger, &mut tx, &mut buf)
+                    .map_err(|e| anyhow!("encoding a forged frame: {e:?}"))?;
+                buf[..n].to_vec()
+            }
+            Some(LinkFaultKind::Replay) => {
+                let k = self.faulted as usize;
+                match self.history.len() {
+                    0 => bail!(
+                        "--link-fault replay: no sensor frame was sent before the fault to replay; start it later (--link-fault-at)"
+                    ),
+                    n => self.history[k % n].clone(),
+                }
+            }
+            Some(LinkFaultKind::Corrupt) => {
+                let mut frame = self.frame(msg)?;
+                flip_bit(&mut frame, self.faulted);
+                frame
+            }
+        };
+        if let Some(kind) = fault {
+            self.faulted += 1;
+            self.injected.injected.count(kind.refusal());
+        }
+        Ok((frame, fault))
+    }
+
+    /// One control period: sends the estimate at `t_us` (after a frame of the
+    /// road at a plan release, if one waits), returns the ECU's answer.
     pub fn exchange(&mut self, est: &StateEstimate<f32>) -> Result<link::ActuationFrame> {
+        if est.stamp_us.is_multiple_of(PLAN_PERIOD_US) {
+            if let Some(f) = self.route_queue.pop_front() {
+                self.route_releases.insert(est.stamp_us);
+                self.send_route(&f)?;
+                self.route
+                    .flush()
+                    .context("the ECU closed its route channel")?;
+            }
+        }
         self.seq = self.seq.wrapping_add(1);
-        let route_frames = std::mem::take(&mut self.route_frames);
-        self.send(&Down::Sensor(SensorFrame {
+        let msg = Down::Sensor(SensorFrame {
             seq: self.seq,
             estimate: *est,
-            route_frames,
-        }))?;
+            route_frames: self.route_frames,
+        });
+        let (frame, fault) = self.sensor_frame(&msg, est.stamp_us)?;
+        self.write_down(&frame)?;
         loop {
             match self.receive()? {
                 Up::Actuation(a) if a.seq == self.seq => {
+                    self.judge_answer(&a, fault);
                     if let Some(p) = &a.plan {
                         if p.published {
                             self.active = plan_of(p);
@@ -434,8 +608,23 @@ impl QemuEcu {
         }
     }
 
-    /// Ends the run: the ECU reports its stack high-water mark and exits.
-    pub fn stop(mut self) -> Result<DoneFrame> {
+    /// Counts what the ECU said of this period's sensor frame against what was
+    /// sent: a replaced frame must be refused for its reason, a legitimate one
+    /// accepted.
+    fn judge_answer(&mut self, a: &link::ActuationFrame, fault: Option<LinkFaultKind>) {
+        let refused = Refusal::from_code(a.sensor);
+        match fault {
+            Some(kind) if refused == Some(kind.refusal()) => self.injected.refused_as_expected += 1,
+            Some(_) if a.sensor == 0 => self.injected.acted_on += 1,
+            Some(_) => {}
+            None if a.sensor != 0 => self.injected.legitimate_refused += 1,
+            None => {}
+        }
+    }
+
+    /// Ends the run: the ECU reports its stack high-water mark and its refused
+    /// frames and exits; with the link's counters, host side, at the end.
+    pub fn stop(mut self) -> Result<(DoneFrame, LinkCounters)> {
         self.send(&Down::Stop)?;
         let done = loop {
             match self.receive()? {
@@ -449,7 +638,7 @@ impl QemuEcu {
             }
             thread::sleep(Duration::from_millis(20));
         }
-        Ok(done)
+        Ok((done, self.counters))
     }
 
     /// The run's options.
@@ -485,6 +674,7 @@ impl QemuEcu {
             } else {
                 0.0
             },
+            route_frames: u32::from(self.route_releases.contains(&p.release_us)),
             max_validity_slack_rad: None,
         }
     }
@@ -534,6 +724,7 @@ impl Ecu<f32> for QemuEcu {
             plan: self.plan_counts,
             control: frame.control.into(),
             watchdog_trips: frame.watchdog_trips.into(),
+            frames_refused: frame.refused,
         });
         Ok(ControlOutput {
             actuation: actuation_of(&frame),
@@ -562,17 +753,16 @@ impl Ecu<f32> for QemuEcu {
     }
 
     fn set_window(&mut self, w: &Window) -> Result<()> {
-        // On the route channel, announced by the next sensor frame.
-        for f in path_chunks(&w.rows) {
-            self.send_route(&f)?;
-        }
-        self.send_route(&Down::Window(link::WindowFrame {
+        // On the route channel, one frame per plan release, each announced by the
+        // sensor frame after it. A window that comes while another is still on
+        // its way replaces the frames not yet sent (its first chunk restarts the
+        // ECU's staging).
+        self.route_queue = path_chunks(&w.rows).collect();
+        self.route_queue.push_back(Down::Window(link::WindowFrame {
             rows: w.rows.len() as u16,
             origin_m: w.origin_m as f32,
             closed: w.closed,
-        }))?;
-        self.route
-            .flush()
-            .context("the ECU closed its route channel")
+        }));
+        Ok(())
     }
 }

@@ -5,6 +5,19 @@ use crate::closed_loop::cost_model::{CostModel, ModelError};
 use crate::closed_loop::ecu::EcuCounts;
 use crate::pil::comparison::Comparison;
 use crate::pil::deadlines::TickOverruns;
+use crate::pil::qemu::InjectedFrames;
+use firmware::link::RefusalCounts;
+
+/// A link fault of the run, in `pil.json`.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LinkFaultReport {
+    /// The fault, `KIND:N`.
+    pub fault: String,
+    /// Its first replaced sensor frame's instant, s.
+    pub start_s: f64,
+    /// The frames injected and what the ECU did with them.
+    pub frames: InjectedFrames,
+}
 
 /// What `host-sim pil` adds to `run`'s outputs (`pil.json`).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -21,8 +34,15 @@ pub struct PilReport {
     pub stack_size_bytes: u32,
     /// Frames the ECU refused.
     pub ecu_rejected_frames: u32,
+    /// Of those, the ones refused by reason (forged, replayed, corrupt), frames.
+    pub ecu_refused_frames: RefusalCounts,
     /// Frames the host refused.
     pub host_rejected_frames: u64,
+    /// Of those (the ECU's frames), the ones refused by reason, frames.
+    pub host_refused_frames: RefusalCounts,
+    /// The link fault injected (`--link-fault`), and what the ECU did with its
+    /// frames; null without one.
+    pub link_fault: Option<LinkFaultReport>,
     /// Actuation frames answering an older sensor frame.
     pub stale_frames: u64,
     /// Largest control activation, instructions.
@@ -81,6 +101,23 @@ mod tests {
             },
             count_mismatches: vec!["plan deadline misses: ECU 1, host 0".into()],
             ecu_counts: Some(EcuCounts::default()),
+            ecu_refused_frames: RefusalCounts {
+                auth: 20,
+                replay: 0,
+                corrupt: 1,
+            },
+            link_fault: Some(LinkFaultReport {
+                fault: "forge:20".into(),
+                start_s: 20.0,
+                frames: InjectedFrames {
+                    injected: RefusalCounts {
+                        auth: 20,
+                        ..RefusalCounts::default()
+                    },
+                    refused_as_expected: 20,
+                    ..InjectedFrames::default()
+                },
+            }),
             ..PilReport::default()
         };
         let back: PilReport = serde_json::from_str(&serde_json::to_string_pretty(&report)?)?;

@@ -11,7 +11,7 @@ use crate::sweep::table::{Row, FACTOR_COLUMNS};
 use crate::world::faults::{Fault, Outcome};
 
 /// The bounds the benchmark checks: lateral error, lateral acceleration over μg and
-/// plan–trajectory consistency (the README's sweep goals).
+/// plan–trajectory consistency (the sweep goals, docs/sweeps.md).
 pub const BOUNDS: Bounds = Bounds {
     lateral_error_m: 0.4,
     ay_over_mu_g: 0.55,

@@ -171,10 +171,26 @@ pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
             firmware::reference_path::MAX_CURVATURE_WINDOW_STEPS as u64,
         ),
         ("ECU_PATH_ROWS", tasks::ECU_PATH_ROWS as u64),
+        (
+            "MAX_SEARCH_SEGMENTS",
+            firmware::reference_path::MAX_SEARCH_SEGMENTS as u64,
+        ),
         ("PATH_CHUNK_ROWS", link::PATH_CHUNK_ROWS as u64),
         ("MAX_FRAME_BYTES", link::MAX_FRAME_BYTES as u64),
         ("MAX_DOWN_FRAME_BYTES", link::MAX_DOWN_FRAME_BYTES as u64),
         ("MAX_UP_FRAME_BYTES", link::MAX_UP_FRAME_BYTES as u64),
+        (
+            "MAX_UP_MAC_INPUT_BYTES",
+            link::MAX_UP_MAC_INPUT_BYTES as u64,
+        ),
+        (
+            "MAX_DOWN_MAC_INPUT_BYTES",
+            link::MAX_DOWN_MAC_INPUT_BYTES as u64,
+        ),
+        (
+            "MAX_DRIVING_DOWN_MAC_INPUT_BYTES",
+            link::MAX_DRIVING_DOWN_MAC_INPUT_BYTES as u64,
+        ),
         (
             "MAX_DRIVING_DOWN_FRAME_BYTES",
             link::MAX_DRIVING_DOWN_FRAME_BYTES as u64,

@@ -18,7 +18,7 @@ pub const ECU_TASKS: [(&str, &str); 3] = [
 /// The tasks' own work, bounded apart (the ECU app keeps them out of line):
 /// section name, symbol, the task it runs in, its budget in cycles (what the ECU's
 /// deadline monitor holds it to; `None`: no budget of its own).
-pub const ECU_SECTIONS: [(&str, &str, &str, Option<u64>); 4] = [
+pub const ECU_SECTIONS: [(&str, &str, &str, Option<u64>); 5] = [
     (
         "control_job",
         // Its symbol's fixed name (`#[export_name]`: placed first in `.text`).
@@ -41,6 +41,9 @@ pub const ECU_SECTIONS: [(&str, &str, &str, Option<u64>); 4] = [
     ),
     // The plan swap inside the `plan` lock: what blocks the control task.
     ("publish_plan", "ecu::publish_plan", "plan", None),
+    // A frame of the road received before the plan or the adoption: part of the
+    // activation's budget with either (the report adds it to both jobs).
+    ("route_job", "ecu::route_job", "plan", None),
 ];
 
 /// The ECU's schedule: task name, priority (higher preempts), period = deadline

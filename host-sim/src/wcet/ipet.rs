@@ -217,6 +217,11 @@ pub struct IpetBound {
     pub variables: usize,
     /// Constraints of the linear program.
     pub constraints: usize,
+    /// How the optimum was reached: `"integer"` (the functions' entry counts
+    /// whole, the mixed-integer optimum), or `"relaxation"` (the branch and bound
+    /// stopped at [`MAX_NODES`]; the bound is the largest relaxation left open,
+    /// which is at or above the integer optimum: sound, possibly pessimistic).
+    pub optimum: &'static str,
 }
 
 /// One block's share of a bound.
@@ -333,12 +338,16 @@ pub fn task_bound(
 
     let persistence = Persistence::new(program, loops);
     let mut vars = ProblemVariables::new();
+    // Every variable is `≥ 0`: the relaxation rebuilds them from their count.
+    let mut relaxed = 0usize;
     let mut constraints = Vec::new();
     let mut objective = Expression::from(0.0);
     let mut n_entry: HashMap<usize, Variable> = HashMap::new();
     for &f in &reach {
-        // Integer: see the module's documentation.
+        // Integer: see the module's documentation. `relaxed` counts the same
+        // variables, for the branch and bound if the solver's own fails.
         n_entry.insert(f, vars.add(variable().integer().min(0.0)));
+        relaxed += 1;
     }
     // Incoming calls per function.
     let mut calls_into: HashMap<usize, Expression> = HashMap::new();
@@ -387,6 +396,7 @@ pub fn task_bound(
         let mut x: HashMap<usize, Variable> = HashMap::new();
         for &b in &live {
             x.insert(b, vars.add(variable().min(0.0)));
+            relaxed += 1;
         }
         let mut edges: HashMap<(usize, usize), Variable> = HashMap::new();
         let mut inflow: HashMap<usize, Expression> = HashMap::new();
@@ -397,6 +407,7 @@ pub fn task_bound(
             let mut out = Expression::from(0.0);
             for &s in &block.successors {
                 let e = vars.add(variable().min(0.0));
+                relaxed += 1;
                 if cost == Cost::Cycles {
                     let saving = persistence.edge_saving(program, f, b, s) as f64;
                     if saving > 0.0 {
@@ -417,6 +428,7 @@ pub fn task_bound(
                 Exit::NoReturn => constraints.push(constraint!(xb == 0.0)),
                 _ if exits => {
                     let r = vars.add(variable().min(0.0));
+                    relaxed += 1;
                     out += r;
                     match &block.exit {
                         Exit::TailCall(t) => {
@@ -664,13 +676,9 @@ pub fn task_bound(
     }
     let variables = vars.len();
     let n_constraints = constraints.len();
-    let mut problem = vars.maximise(objective.clone()).using(good_lp::microlp);
-    for c in constraints {
-        problem = problem.with(c);
-    }
-    let solution = problem
-        .solve()
-        .map_err(|e| IpetError::Solver(e.to_string()))?;
+    let integers: Vec<Variable> = reach.iter().map(|f| n_entry[f]).collect();
+    let (solution, optimum) =
+        solve_mixed_integer(vars, relaxed, &objective, &constraints, &integers)?;
     let value = solution.eval(&objective);
     // Cost and entries per function, kept by index (two instances of a generic
     // function can demangle alike).
@@ -706,7 +714,132 @@ pub fn task_bound(
         by_block,
         variables,
         constraints: n_constraints,
+        optimum,
     })
+}
+
+/// Linear programs the branch and bound solves at most for one bound (each a
+/// fresh simplex over the whole program: seconds on a task as large as `plan`).
+pub const MAX_NODES: usize = 24;
+
+/// The linear program `max objective` under `constraints`, over `count`
+/// continuous variables `≥ 0` (the IPET's, in the order they were made), those at
+/// the positions in `bounds` `(position, low, high)` within their bounds, by
+/// `microlp`. The branching bounds are variable bounds (no extra row): a fresh
+/// set of `count` variables has the IPET's handles, so `objective` and
+/// `constraints` apply to it as they are.
+fn solve_relaxation(
+    count: usize,
+    objective: &Expression,
+    constraints: &[good_lp::Constraint],
+    bounds: &[(usize, f64, f64)],
+) -> Result<good_lp::solvers::microlp::MicroLpSolution, good_lp::ResolutionError> {
+    let mut lo = vec![0.0f64; count];
+    let mut hi = vec![f64::INFINITY; count];
+    for &(k, l, h) in bounds {
+        if let (Some(lo), Some(hi)) = (lo.get_mut(k), hi.get_mut(k)) {
+            *lo = lo.max(l);
+            *hi = hi.min(h);
+        }
+    }
+    let mut bounded = ProblemVariables::new();
+    for (&l, &h) in lo.iter().zip(&hi) {
+        let d = variable().min(l);
+        let _ = bounded.add(if h.is_finite() { d.max(h) } else { d });
+    }
+    let mut problem = bounded.maximise(objective.clone()).using(good_lp::microlp);
+    for c in constraints {
+        problem = problem.with(c.clone());
+    }
+    problem.solve()
+}
+
+/// The mixed-integer optimum: `microlp`'s own branch and bound on `vars`, whose
+/// `integers` are declared integer, and should it fail numerically (a singular
+/// basis in one of its nodes), [`branch_and_bound`] over the `relaxed` variables
+/// of the same program, continuous.
+fn solve_mixed_integer(
+    vars: ProblemVariables,
+    relaxed: usize,
+    objective: &Expression,
+    constraints: &[good_lp::Constraint],
+    integers: &[Variable],
+) -> Result<(good_lp::solvers::microlp::MicroLpSolution, &'static str), IpetError> {
+    let mut problem = vars.maximise(objective.clone()).using(good_lp::microlp);
+    for c in constraints {
+        problem = problem.with(c.clone());
+    }
+    match problem.solve() {
+        Ok(s) => Ok((s, "integer")),
+        Err(good_lp::ResolutionError::Infeasible | good_lp::ResolutionError::Unbounded) => Err(
+            IpetError::Solver("the IPET program is infeasible or unbounded".into()),
+        ),
+        Err(_) => branch_and_bound(relaxed, objective, constraints, integers),
+    }
+}
+
+/// The mixed-integer optimum, `integers` whole, by branch and bound over the
+/// linear relaxations, best first (the open node with the largest relaxation is
+/// split next, so the first whole solution reached is optimal): each node a
+/// fresh simplex, so no numerical state carries from one to the next. Past
+/// [`MAX_NODES`] it returns the open node with the largest relaxation: every
+/// whole solution lies in some open node, so that value bounds them all.
+fn branch_and_bound(
+    count: usize,
+    objective: &Expression,
+    constraints: &[good_lp::Constraint],
+    integers: &[Variable],
+) -> Result<(good_lp::solvers::microlp::MicroLpSolution, &'static str), IpetError> {
+    // A count within this of a whole number is that number.
+    const WHOLE: f64 = 1e-6;
+    type Bounds = Vec<(usize, f64, f64)>;
+    // Each integer variable's position among the `count` (handles compare by
+    // position: a fresh set made the same way has the same handles).
+    let positions: Vec<(Variable, usize)> = {
+        let mut fresh = ProblemVariables::new();
+        let made: Vec<Variable> = (0..count).map(|_| fresh.add(variable())).collect();
+        integers
+            .iter()
+            .filter_map(|&x| made.iter().position(|&m| m == x).map(|k| (x, k)))
+            .collect()
+    };
+    // Open nodes: their relaxation's value, solution and bounds.
+    let mut open: Vec<(f64, good_lp::solvers::microlp::MicroLpSolution, Bounds)> = Vec::new();
+    let root = solve_relaxation(count, objective, constraints, &[])
+        .map_err(|e| IpetError::Solver(e.to_string()))?;
+    open.push((root.eval(objective), root, Vec::new()));
+    let mut nodes = 1;
+    loop {
+        let Some(k) = (0..open.len()).max_by(|&a, &b| open[a].0.total_cmp(&open[b].0)) else {
+            return Err(IpetError::Solver(
+                "no whole solution: the functions' entry counts admit none".into(),
+            ));
+        };
+        let (_, s, bounds) = open.swap_remove(k);
+        let fractional = positions.iter().copied().find(|&(x, _)| {
+            let y = s.value(x);
+            (y - y.round()).abs() > WHOLE
+        });
+        let Some((x, position)) = fractional else {
+            return Ok((s, "integer"));
+        };
+        if nodes + 2 > MAX_NODES {
+            return Ok((s, "relaxation"));
+        }
+        let y = s.value(x);
+        let mut down = bounds.clone();
+        down.push((position, 0.0, y.floor()));
+        let mut up = bounds;
+        up.push((position, y.ceil(), f64::INFINITY));
+        for b in [down, up] {
+            nodes += 1;
+            match solve_relaxation(count, objective, constraints, &b) {
+                Ok(s) => open.push((s.eval(objective), s, b)),
+                Err(good_lp::ResolutionError::Infeasible) => {}
+                Err(e) => return Err(IpetError::Solver(e.to_string())),
+            }
+        }
+    }
 }
 
 /// The optimum as an integer: a value within the simplex's tolerance (1e-7

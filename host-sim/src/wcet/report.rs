@@ -110,6 +110,9 @@ pub struct StaticSummary {
     /// IPET bound on the plan task's adoption of a window of the road
     /// (`ecu::window_job`, in place of its job), in cycles.
     pub window_job_static_bound_cycles: Option<u64>,
+    /// IPET bound on a route frame's reception in a plan activation
+    /// (`ecu::route_job`, before the plan or the adoption), in instructions.
+    pub route_job_static_bound_instructions: Option<u64>,
     /// The loops and what the analysis could not bound.
     #[serde(flatten)]
     pub coverage: Coverage,
@@ -177,6 +180,11 @@ impl StaticSummary {
             plan: task("plan", "plan_job"),
             control: task("control", "control_job"),
             window_job_static_bound_cycles: bound_cycles("window_job"),
+            route_job_static_bound_instructions: analysis
+                .tasks
+                .iter()
+                .find(|t| t.name == "route_job")
+                .and_then(|t| t.static_bound_instructions),
             coverage: Coverage {
                 loops: analysis.loops.clone(),
                 unbounded_loops: analysis.unbounded_loops,

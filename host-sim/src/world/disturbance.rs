@@ -210,6 +210,11 @@ pub struct Dropout {
     pub periods: u32,
     /// NaN or no update.
     pub kind: DropoutKind,
+    /// The windows of the road given during the dropout reach the planner only
+    /// after it, at its first period: a link fault's refused sensor frames (the
+    /// ECU learns of the route frames from the frames it accepts); false for the
+    /// estimator's dropouts (`--fault dropout-*`), where the road arrives on time.
+    pub withholds_route: bool,
 }
 
 impl Dropout {

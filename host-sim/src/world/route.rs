@@ -9,6 +9,7 @@
 //! [`WINDOW_ROWS`] rows is sent whole, once, as a closed path.
 
 use anyhow::{bail, Result};
+use firmware::reference_path::MAX_SEARCH_SEGMENTS;
 
 use crate::world::track::Track;
 
@@ -25,6 +26,31 @@ pub const ADVANCE_M: f64 = 60.0;
 /// Road a window must reach ahead of the car when the next one is due, m: the
 /// MPC's horizon at the top speed (~80 m) and the velocity planner's preview.
 pub const AHEAD_M: f64 = 150.0;
+
+/// The span of road a projection near a hint searches on the ECU (behind and
+/// ahead of the hint), m.
+const SEARCH_SPAN_M: f64 = (firmware::reference_path::DEFAULT_SEARCH_BEHIND_M
+    + firmware::reference_path::DEFAULT_SEARCH_AHEAD_M) as f64;
+/// The first row from which more than `MAX_SEARCH_SEGMENTS − 2` rows (that one
+/// included) lie within [`SEARCH_SPAN_M`] of road ahead, and how many: `rows`
+/// at the arc lengths `s` (m), of a track `length_m` long, wrapping when
+/// `closed`. `None` when there is none.
+fn too_dense(rows: &[[f64; 4]], s: &[f64], length_m: f64, closed: bool) -> Option<(usize, usize)> {
+    let n = rows.len();
+    let start = |j: usize| if j < n { s[j] } else { s[j - n] + length_m };
+    let end = |i: usize| if closed { i + n } else { n };
+    let mut j = 0;
+    for (i, &si) in s.iter().enumerate().take(n) {
+        j = j.max(i + 1);
+        while j < end(i) && start(j) - si < SEARCH_SPAN_M {
+            j += 1;
+        }
+        if j - i > MAX_SEARCH_SEGMENTS - 2 {
+            return Some((i, j - i));
+        }
+    }
+    None
+}
 
 /// One window of the road.
 #[derive(Clone, Debug, PartialEq)]
@@ -64,6 +90,21 @@ impl RouteFeeder {
             if i + 1 < n || closed {
                 acc += (rows[j][0] - rows[i][0]).hypot(rows[j][1] - rows[i][1]);
             }
+        }
+        // The ECU's projections near a hint scan a bounded number of segments
+        // (`firmware::reference_path::MAX_SEARCH_SEGMENTS`): its path refuses a
+        // window whose search span holds more points. Said here, for the whole
+        // track, with a point to find it by (one point stricter than the ECU, whose
+        // arithmetic is f32).
+        if let Some((i, count)) = too_dense(&rows, &s, acc, closed) {
+            bail!(
+                "track {}: its points are too dense near ({:.1}, {:.1}) m (row {i}): {count} points within {SEARCH_SPAN_M} m of it, where the ECU's projections search at most {}: resample the track to at least {:.2} m between points",
+                track.name,
+                rows[i][0],
+                rows[i][1],
+                MAX_SEARCH_SEGMENTS - 2,
+                SEARCH_SPAN_M / (MAX_SEARCH_SEGMENTS - 2) as f64
+            );
         }
         // A track that fits the window is sent whole, once.
         let whole = n <= WINDOW_ROWS;
