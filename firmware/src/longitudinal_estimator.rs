@@ -92,7 +92,8 @@
 //!   nothing.
 //! * **Bounds**: `θ` is clamped to `[k_min, k_max] × [−r₀,max, r₀,max] ×
 //!   [0, r₂,max]`, `b` to [`LongitudinalConfig::brake_gain_bounds`]; the trace of
-//!   `P` is held at most its prior's (scaled down when above), `P_b` at most its
+//!   `P` is held at most its prior's (scaled by `2 − x` when above it by the
+//!   ratio `x`: no division, at most `(Δt/memory)²` under it), `P_b` at most its
 //!   prior; a non-finite or non-positive diagonal resets `P` (`P_b`) to its prior.
 //! * **Uncertainty** of the mass ratio, used by the friction check as a tolerance
 //!   on the relative shortfall when driving: `u = u_max·sqrt(P₀₀/P₀₀,prior)` (at
@@ -109,9 +110,10 @@
 //! Per period about 100 floating-point operations, two divisions (the RLS gain,
 //! and the inverse of the parameter updated: mass ratio or brake gain; the
 //! braking and the driving updates exclusive) and one square root (on the FPU,
-//! the updated parameter's uncertainty: kept, so that reading it costs none); no
-//! loop, no branch on data but the gate and the choice of update; 116 bytes of
-//! state in `f32`.
+//! the updated parameter's uncertainty: kept, so that reading it costs none);
+//! the settings' inverses are taken once, at [`LongitudinalEstimator::start`];
+//! no loop, no branch on data but the gate and the choice of update; 136 bytes
+//! of state in `f32`.
 
 use crate::Real;
 use qp::real::smaller;
@@ -335,6 +337,10 @@ pub struct LongitudinalEstimator<T> {
     clean_s: T,
     /// Samples that counted (wrapping).
     updates: u32,
+    /// `[1/τ, 1/memory, 1/P₀₀,prior, 1/P_b,prior, 1/tr(P_prior)]` of the settings
+    /// given to [`LongitudinalEstimator::start`] (zero before: nothing moves), so
+    /// that a period divides only where the data does.
+    inverses: [T; 5],
 }
 
 impl<T: Real> Default for LongitudinalEstimator<T> {
@@ -359,17 +365,27 @@ impl<T: Real> LongitudinalEstimator<T> {
             yb_f: [T::ZERO; 2],
             clean_s: T::NEG_INFINITY,
             updates: 0,
+            inverses: [T::ZERO; 5],
         }
     }
 
     /// Forgets everything: the configured car, no resistance, brakes as
     /// commanded, the prior covariances of `cfg` (valid:
-    /// [`LongitudinalConfig::validate`]).
+    /// [`LongitudinalConfig::validate`]; [`LongitudinalEstimator::update`] must
+    /// be given the same settings).
     pub fn start(&mut self, cfg: &LongitudinalConfig<T>) {
         *self = Self::new();
         self.reset_covariance(cfg);
         self.brake[2] = cfg.brake_prior_variance;
         self.u = [cfg.mass_uncertainty_max, cfg.brake_uncertainty_max];
+        let [v0, v1, v2] = cfg.prior_variance;
+        self.inverses = [
+            T::ONE / cfg.filter_time_s,
+            T::ONE / cfg.memory_s,
+            T::ONE / v0,
+            T::ONE / cfg.brake_prior_variance,
+            T::ONE / (v0 + v1 + v2),
+        ];
     }
 
     fn reset_covariance(&mut self, cfg: &LongitudinalConfig<T>) {
@@ -450,9 +466,10 @@ impl<T: Real> LongitudinalEstimator<T> {
         }
     }
 
-    /// `u_max·sqrt(p/prior)`, `p/prior` within `[0, 1]` (module docs).
-    fn uncertainty_of(p: T, prior: T, max: T) -> T {
-        max * (p / prior).clamp(T::ZERO, T::ONE).sqrt()
+    /// `u_max·sqrt(p/prior)`, `p/prior` within `[0, 1]` (module docs), from
+    /// `inv_prior = 1/prior`.
+    fn uncertainty_of(p: T, inv_prior: T, max: T) -> T {
+        max * (p * inv_prior).clamp(T::ZERO, T::ONE).sqrt()
     }
 
     /// The force per configured mass the torque `torque_nm` (N·m) gives through
@@ -478,7 +495,8 @@ impl<T: Real> LongitudinalEstimator<T> {
     }
 
     /// One period (module docs). `inv_mr` is `1/(m₀·r)` (1/(kg·m)), precomputed by
-    /// the caller. Returns true when the sample counted.
+    /// the caller; `cfg` the settings given to [`LongitudinalEstimator::start`].
+    /// Returns true when the sample counted.
     pub fn update(
         &mut self,
         cfg: &LongitudinalConfig<T>,
@@ -505,7 +523,7 @@ impl<T: Real> LongitudinalEstimator<T> {
             return false;
         }
         // Two first-order stages; H·V̇ = (v₁ − v₂)/τ after stage 1, before stage 2.
-        let inv_tau = T::ONE / cfg.filter_time_s;
+        let [inv_tau, inv_memory, ..] = self.inverses;
         let kf = (s.dt_s * inv_tau).min(T::ONE);
         let v1 = self.v_f[0] + kf * (s.v_mps - self.v_f[0]);
         let accel = (v1 - self.v_f[1]) * inv_tau;
@@ -545,7 +563,7 @@ impl<T: Real> LongitudinalEstimator<T> {
             // the filtered braking commanded.
             let [k, r0, r2] = self.theta;
             let z = k * accel + r0 + r2 * q2 - yd2;
-            self.brake_rls(cfg, b2, z, s.dt_s / cfg.memory_s);
+            self.brake_rls(cfg, b2, z, s.dt_s * inv_memory);
             return true;
         }
         if b1 < -cfg.brake_idle_mps2 || b2 < -cfg.brake_idle_mps2 {
@@ -559,7 +577,7 @@ impl<T: Real> LongitudinalEstimator<T> {
         let excited =
             ((y2 - self.theta[1] - self.theta[2] * q2) * self.inv_k).abs() >= cfg.excitation_mps2;
         if excited {
-            self.rls(cfg, [accel, T::ONE, q2], y2, s.dt_s / cfg.memory_s);
+            self.rls(cfg, [accel, T::ONE, q2], y2, s.dt_s * inv_memory);
         } else {
             // Steady: the resistances only (the acceleration's share, from the
             // mass ratio as it stands, taken out), nothing forgotten.
@@ -593,7 +611,7 @@ impl<T: Real> LongitudinalEstimator<T> {
         };
         self.u[1] = Self::uncertainty_of(
             self.brake[2],
-            cfg.brake_prior_variance,
+            self.inverses[3],
             cfg.brake_uncertainty_max,
         );
         self.updates = self.updates.wrapping_add(1);
@@ -634,20 +652,22 @@ impl<T: Real> LongitudinalEstimator<T> {
             (p12 - g[1] * pf[2]) * inv_lambda,
             (p22 - g[2] * pf[2]) * inv_lambda,
         ];
-        let trace = p[0] + p[3] + p[5];
-        let [v0, v1, v2] = cfg.prior_variance;
-        let trace_max = v0 + v1 + v2;
-        if !(trace.is_finite() && p[0] > T::ZERO && p[3] > T::ZERO && p[5] > T::ZERO) {
+        // The trace held at most the prior's: over it (by at most the forgetting,
+        // from a trace within it), `P` is scaled by `2 − x`, `x` = trace / the
+        // prior's, which leaves `1 − (x − 1)²` of the prior's trace (within
+        // `(Δt/memory)²` of it, no division); a scale not positive (`x ≥ 2`: no
+        // such step) is refused with the rest below.
+        let x = (p[0] + p[3] + p[5]) * self.inverses[4];
+        if x > T::ONE {
+            let f = T::TWO - x;
+            p = [p[0] * f, p[1] * f, p[2] * f, p[3] * f, p[4] * f, p[5] * f];
+        }
+        if !(x.is_finite() && p[0] > T::ZERO && p[3] > T::ZERO && p[5] > T::ZERO) {
             self.reset_covariance(cfg);
         } else {
-            if trace > trace_max {
-                let f = trace_max / trace;
-                p = [p[0] * f, p[1] * f, p[2] * f, p[3] * f, p[4] * f, p[5] * f];
-            }
             self.p = p;
         }
-        self.u[0] =
-            Self::uncertainty_of(self.p[0], cfg.prior_variance[0], cfg.mass_uncertainty_max);
+        self.u[0] = Self::uncertainty_of(self.p[0], self.inverses[2], cfg.mass_uncertainty_max);
         self.updates = self.updates.wrapping_add(1);
     }
 }
