@@ -564,6 +564,10 @@ pub struct ControlTask<T> {
     front_sliding: bool,
     /// Distance from the centre of gravity to the front axle `l_f`, m (0: none).
     front_axle_m: T,
+    /// `1/max(s, 0.01)` of the brake balance's front share `s` and of its rear
+    /// share `1 − s` ([`LowLevelConfig::brake_front_share`]): the anti-lock
+    /// limit's axle loads per brake share without a division per period.
+    inv_brake_shares: [T; 2],
 }
 
 impl<T: Real> ControlTask<T> {
@@ -596,7 +600,6 @@ impl<T: Real> ControlTask<T> {
         let mut friction = FrictionEstimator::new();
         friction.start(&friction_config);
         Ok(Self {
-            config,
             state: LowLevelState::new(),
             friction_config,
             friction,
@@ -611,6 +614,11 @@ impl<T: Real> ControlTask<T> {
             },
             front_sliding: false,
             front_axle_m: friction_config.wheelbase_m * (T::ONE - friction_config.front_load_share),
+            inv_brake_shares: [
+                T::ONE / larger(config.brake_front_share, T::lit(0.01)),
+                T::ONE / larger(T::ONE - config.brake_front_share, T::lit(0.01)),
+            ],
+            config,
         })
     }
 
@@ -742,20 +750,20 @@ impl<T: Real> ControlTask<T> {
         let traction_half = half(self.friction.wheel_spinning());
         let braking_half = half(self.friction.wheel_locking());
         // The friction ellipse: what the lateral acceleration leaves, at least 0.3
-        // of it (a car sliding sideways still brakes).
-        let lat = lateral_mps2 / grip;
-        let ellipse = larger(T::ONE - lat * lat, T::lit(0.09)).sqrt();
-        let grip = grip * ellipse;
+        // of it (a car sliding sideways still brakes): `grip·sqrt(1 − (a_y/grip)²)`
+        // as `sqrt(grip² − a_y²)`, no division (`grip > 0`).
+        let grip2 = grip * grip;
+        let grip = larger(grip2 - lateral_mps2 * lateral_mps2, T::lit(0.09) * grip2).sqrt();
         // Braking at that grip, the front axle carries `l_r/L + (h/L)·a/g` of the
         // weight and gets `brake_front_share` of the torque: neither axle may be
         // asked more than its share of the grip (an anti-lock limit).
         let front_load =
             fc.front_load_share + fc.cg_height_over_wheelbase * mu * T::lit(TORQUE_GRIP_FRACTION);
-        let front_brake = self.config.brake_front_share;
+        let [inv_front_brake, inv_rear_brake] = self.inv_brake_shares;
         let axle = smaller(
             smaller(
-                front_load / larger(front_brake, T::lit(0.01)),
-                (T::ONE - front_load) / larger(T::ONE - front_brake, T::lit(0.01)),
+                front_load * inv_front_brake,
+                (T::ONE - front_load) * inv_rear_brake,
             ),
             T::ONE,
         );
