@@ -442,12 +442,13 @@ struct Sample<T> {
 
 /// The plan's references at `tau_s` ≥ 0 s after its stamp (module doc: linear
 /// interpolation inside the plan, controlled stop past it); `None` when a value
-/// it reads is NaN or ±∞. Requires a finite `dt_s > 0`.
+/// it reads is NaN or ±∞. Requires a finite `dt_s > 0`; `inv_dt` is
+/// `1/plan.dt_s` (one division for the period's two samples).
 // Two calls per period, inlined: each is a few interpolations.
 #[inline(always)]
-fn sample<T: Real>(plan: &Plan<T>, tau_s: T, stop_decel_mps2: T) -> Option<Sample<T>> {
+fn sample<T: Real>(plan: &Plan<T>, inv_dt: T, tau_s: T, stop_decel_mps2: T) -> Option<Sample<T>> {
     let n = T::from_usize(HORIZON);
-    let x = tau_s / plan.dt_s;
+    let x = tau_s * inv_dt;
     let last = &plan.nodes[HORIZON];
     if x <= n {
         // `as usize` saturates (NaN → 0); `k ≤ HORIZON − 1` keeps `k + 1` in range.
@@ -473,7 +474,7 @@ fn sample<T: Real>(plan: &Plan<T>, tau_s: T, stop_decel_mps2: T) -> Option<Sampl
         if !all_finite([last.v_mps, last.psi_rad, prev.psi_rad, last.delta_rad]) {
             return None;
         }
-        let yaw_rate = (last.psi_rad - prev.psi_rad) / plan.dt_s;
+        let yaw_rate = (last.psi_rad - prev.psi_rad) * inv_dt;
         // ∫V^r/V_N over the stop: the time the last yaw rate acts for.
         let t_eff = if v > T::ZERO {
             s - a * s * s / (T::TWO * v_n)
@@ -626,9 +627,10 @@ pub fn control_with_model<T: Real>(
     };
     let new_plan = state.plan_stamp_us != Some(plan.stamp_us);
 
+    let inv_dt = T::ONE / plan.dt_s;
     let (Some(now_ref), Some(ahead_ref)) = (
-        sample(plan, t, cfg.stop_decel_mps2),
-        sample(plan, t + plan.dt_s, cfg.stop_decel_mps2),
+        sample(plan, inv_dt, t, cfg.stop_decel_mps2),
+        sample(plan, inv_dt, t + plan.dt_s, cfg.stop_decel_mps2),
     ) else {
         return Err(ControlFault::NonFinitePlan);
     };

@@ -38,7 +38,7 @@
 //!
 //! # Cost
 //!
-//! One [`update`] is about 25 floating-point operations and two divisions (three
+//! One [`update`] is about 25 floating-point operations and one division (two
 //! with back-calculation), no transcendental function: about 230 Thumb-2
 //! instructions in `f32` (static count, many of them the checks), of the order of
 //! 150 cycles on the Cortex-M4F.
@@ -299,11 +299,12 @@ pub fn update_within<T: Real>(
 
     let e = measurement - setpoint;
 
-    // Derivative of the measurement, filtered.
+    // Derivative of the measurement, filtered: `α·((y − y₋₁)/Δt − ẏ_f)` with
+    // `α = Δt/(T_f + Δt)` is `(y − y₋₁ − ẏ_f·Δt)/(T_f + Δt)`, one division.
     let derivative = if state.initialised {
-        let raw = (measurement - state.prev_measurement) / dt_s;
-        let alpha = dt_s / (cfg.derivative_filter_s + dt_s);
-        state.derivative + alpha * (raw - state.derivative)
+        let change = measurement - state.prev_measurement;
+        state.derivative
+            + (change - state.derivative * dt_s) / (cfg.derivative_filter_s + dt_s)
     } else {
         T::ZERO
     };
