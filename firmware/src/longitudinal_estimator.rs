@@ -116,7 +116,14 @@
 //! of state in `f32`.
 
 use crate::Real;
-use qp::real::smaller;
+use qp::real::{at_most, clamp_within, larger, smaller};
+
+/// `x` within `[lo, hi]` (not NaN, `lo <= hi`), a NaN `x` passed through, for
+/// the caller to refuse (`Real::clamp` gives `lo`); one comparison per bound.
+#[inline(always)]
+fn clamp_nan<T: Real>(x: T, lo: T, hi: T) -> T {
+    smaller(larger(x, lo), hi)
+}
 
 /// Reference speed of the drag term `r₂·(V/V_ref)²`, m/s.
 pub const V_REF_MPS: f32 = 30.0;
@@ -469,7 +476,7 @@ impl<T: Real> LongitudinalEstimator<T> {
     /// `u_max·sqrt(p/prior)`, `p/prior` within `[0, 1]` (module docs), from
     /// `inv_prior = 1/prior`.
     fn uncertainty_of(p: T, inv_prior: T, max: T) -> T {
-        max * (p * inv_prior).clamp(T::ZERO, T::ONE).sqrt()
+        max * clamp_within(p * inv_prior, T::ZERO, T::ONE).sqrt()
     }
 
     /// The force per configured mass the torque `torque_nm` (N·m) gives through
@@ -524,7 +531,7 @@ impl<T: Real> LongitudinalEstimator<T> {
         }
         // Two first-order stages; H·V̇ = (v₁ − v₂)/τ after stage 1, before stage 2.
         let [inv_tau, inv_memory, ..] = self.inverses;
-        let kf = (s.dt_s * inv_tau).min(T::ONE);
+        let kf = at_most(s.dt_s * inv_tau, T::ONE);
         let v1 = self.v_f[0] + kf * (s.v_mps - self.v_f[0]);
         let accel = (v1 - self.v_f[1]) * inv_tau;
         self.v_f = [v1, self.v_f[1] + kf * (v1 - self.v_f[1])];
@@ -598,7 +605,8 @@ impl<T: Real> LongitudinalEstimator<T> {
         let pf = p * phi;
         let g = pf / (lambda + pf * phi);
         let [lo, hi] = cfg.brake_gain_bounds;
-        let b = (b + g * (z - b * phi)).clamp(lo, hi);
+        // A NaN passes the bounds (`clamp_nan`) and is refused below.
+        let b = clamp_nan(b + g * (z - b * phi), lo, hi);
         let p = smaller((p - g * pf) * inv_lambda, cfg.brake_prior_variance);
         if b.is_finite() {
             self.brake[0] = b;
@@ -636,10 +644,11 @@ impl<T: Real> LongitudinalEstimator<T> {
         let [k, r0, r2] = self.theta;
         let e = y - (k * a + r0 * b + r2 * c);
         let [lo, hi] = cfg.mass_ratio_bounds;
-        let k = (k + g[0] * e).clamp(lo, hi);
-        let r0 = (r0 + g[1] * e).clamp(-cfg.r0_max_mps2, cfg.r0_max_mps2);
-        let r2 = (r2 + g[2] * e).clamp(T::ZERO, cfg.r2_max_mps2);
-        // A NaN from a degenerate P keeps the last parameters (clamp passes NaN).
+        let k = clamp_nan(k + g[0] * e, lo, hi);
+        let r0 = clamp_nan(r0 + g[1] * e, -cfg.r0_max_mps2, cfg.r0_max_mps2);
+        let r2 = clamp_nan(r2 + g[2] * e, T::ZERO, cfg.r2_max_mps2);
+        // A NaN from a degenerate P keeps the last parameters (`clamp_nan` passes
+        // it; `Real::clamp` would give the lower bound).
         if (k + r0 + r2).is_finite() {
             self.theta = [k, r0, r2];
             self.inv_k = T::ONE / k;

@@ -110,7 +110,7 @@ use crate::pid::{self, PidConfig, PidConfigError, PidState};
 use crate::plan::{Plan, HORIZON};
 use crate::state_estimate::StateEstimate;
 use crate::Real;
-use qp::real::{all_finite, larger, smaller};
+use qp::real::{all_finite, at_least, at_most, clamp_within, larger, smaller};
 
 /// Time constant with which a paused yaw loop's output `δ_cl` and its integrator
 /// are released towards 0, s (below [`LowLevelConfig::lateral_min_speed_mps`]:
@@ -467,7 +467,7 @@ fn sample<T: Real>(plan: &Plan<T>, inv_dt: T, tau_s: T, stop_decel_mps2: T) -> O
         })
     } else {
         let s = tau_s - n * plan.dt_s;
-        let v_n = last.v_mps.max(T::ZERO);
+        let v_n = at_least(last.v_mps, T::ZERO);
         let a = stop_decel_mps2;
         let v = v_n - a * s;
         let prev = &plan.nodes[HORIZON - 1];
@@ -482,7 +482,7 @@ fn sample<T: Real>(plan: &Plan<T>, inv_dt: T, tau_s: T, stop_decel_mps2: T) -> O
             v_n / (T::TWO * a)
         };
         Some(Sample {
-            v_mps: v.max(T::ZERO),
+            v_mps: at_least(v, T::ZERO),
             psi_rad: last.psi_rad + yaw_rate * t_eff,
             delta_rad: last.delta_rad,
             accel_mps2: if v > T::ZERO { -a } else { T::ZERO },
@@ -616,7 +616,7 @@ pub fn control_with_model<T: Real>(
     };
 
     let plan_age_s = signed_seconds::<T>(now_us, plan.stamp_us);
-    let t = plan_age_s.max(T::ZERO);
+    let t = at_least(plan_age_s, T::ZERO);
     let horizon_s = plan.dt_s * T::from_usize(HORIZON);
     let mode = if t > horizon_s {
         Mode::Stopping
@@ -660,11 +660,17 @@ pub fn control_with_model<T: Real>(
     };
     let r = cfg.wheel_radius_m;
     // Within the grip (`min` keeps the configured limit for +∞ or NaN grip).
-    let t_grip = ((mass * car.traction_grip_mps2 + resistance.max(T::ZERO)) * r).max(T::ZERO);
-    let t_max = cfg.max_traction_torque_nm.min(t_grip);
-    let b_max = cfg
-        .max_braking_torque_nm
-        .min((mass * car.braking_grip_mps2 * r * inv_b).max(T::ZERO));
+    // (`at_least(x, 0)` is 0 for a NaN `x`, as `Real::max`; the limits below are
+    // not NaN, so one comparison per bound.)
+    let t_grip = at_least(
+        (mass * car.traction_grip_mps2 + at_least(resistance, T::ZERO)) * r,
+        T::ZERO,
+    );
+    let t_max = at_most(cfg.max_traction_torque_nm, t_grip);
+    let b_max = at_most(
+        cfg.max_braking_torque_nm,
+        at_least(mass * car.braking_grip_mps2 * r * inv_b, T::ZERO),
+    );
     let torque_ff = if cfg.accel_feedforward {
         let needed = (mass * now_ref.accel_mps2 + resistance) * r;
         let commanded = if needed < T::ZERO {
@@ -672,7 +678,7 @@ pub fn control_with_model<T: Real>(
         } else {
             needed
         };
-        commanded.clamp(-b_max, t_max)
+        clamp_within(commanded, -b_max, t_max)
     } else {
         T::ZERO
     };
@@ -687,7 +693,7 @@ pub fn control_with_model<T: Real>(
         t_max - torque_ff,
     )
     .map_err(|_| ControlFault::Numerical)?;
-    let torque = (torque_fb + torque_ff).clamp(-b_max, t_max);
+    let torque = clamp_within(torque_fb + torque_ff, -b_max, t_max);
     let wheel_torque_nm = if torque > T::ZERO {
         let h = torque * T::HALF;
         [h, h, T::ZERO, T::ZERO]
@@ -702,7 +708,7 @@ pub fn control_with_model<T: Real>(
     let (mut lo, mut hi) = (-lim, lim);
     if let Some(prev) = state.last_delta_rad {
         let step = cfg.steer_rate_limit_radps * dt;
-        let prev = prev.clamp(-lim, lim);
+        let prev = clamp_within(prev, -lim, lim);
         // All finite (a validated configuration, a clamped command): plain
         // comparisons.
         lo = larger(lo, prev - step);
@@ -745,7 +751,7 @@ pub fn control_with_model<T: Real>(
         yaw_pid.last_output *= keep;
         yaw_pid.last_output
     };
-    let delta = (delta_ol + delta_cl).clamp(lo, hi);
+    let delta = clamp_within(delta_ol + delta_cl, lo, hi);
 
     state.speed_pid = speed_pid;
     state.yaw_pid = yaw_pid;

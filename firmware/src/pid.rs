@@ -50,7 +50,7 @@
 //! safe state.
 
 use crate::Real;
-use qp::real::all_finite;
+use qp::real::{all_finite, at_least, at_most, clamp_within};
 
 /// How the integrator is kept from winding up while the output saturates.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -294,8 +294,9 @@ pub fn update_within<T: Real>(
     if !ordered(out_lo, out_hi) {
         return Err(PidError::InvalidLimits);
     }
-    let lo = cfg.output_min.max(out_lo).min(out_hi);
-    let hi = cfg.output_max.min(out_hi).max(out_lo);
+    // `out_lo`, `out_hi` not NaN (ordered): one comparison per bound.
+    let lo = at_most(at_least(cfg.output_min, out_lo), out_hi);
+    let hi = at_least(at_most(cfg.output_max, out_hi), out_lo);
 
     let e = measurement - setpoint;
 
@@ -327,13 +328,13 @@ pub fn update_within<T: Real>(
         }
         AntiWindup::BackCalculation { tracking_time_s } => {
             let u_unsat = p + i_old + d;
-            let u_sat = u_unsat.clamp(lo, hi);
+            let u_sat = clamp_within(u_unsat, lo, hi);
             i_old + di + (u_sat - u_unsat) * dt_s / tracking_time_s
         }
-    }
-    .clamp(cfg.integral_min, cfg.integral_max);
+    };
+    let integral = clamp_within(integral, cfg.integral_min, cfg.integral_max);
 
-    let u = (p + integral + d).clamp(lo, hi);
+    let u = clamp_within(p + integral + d, lo, hi);
     if !all_finite([u, integral, derivative]) {
         return Err(PidError::NonFiniteOutput);
     }

@@ -291,6 +291,38 @@ pub fn larger<T: Real>(a: T, b: T) -> T {
     }
 }
 
+/// [`Real::max`]`(x, lo)` for a bound `lo` that is not NaN (a NaN `x` gives
+/// `lo`, as there), with one comparison: `Real::max` takes two, caring for a NaN
+/// in either argument.
+#[inline(always)]
+pub fn at_least<T: Real>(x: T, lo: T) -> T {
+    // `x >= lo` is false for a NaN `x`.
+    if x >= lo {
+        x
+    } else {
+        lo
+    }
+}
+
+/// [`Real::min`]`(x, hi)` for a bound `hi` that is not NaN (a NaN `x` gives
+/// `hi`), with one comparison ([`at_least`]).
+#[inline(always)]
+pub fn at_most<T: Real>(x: T, hi: T) -> T {
+    if x <= hi {
+        x
+    } else {
+        hi
+    }
+}
+
+/// [`Real::clamp`]`(x, lo, hi)` for bounds that are not NaN, `lo <= hi` (a NaN
+/// `x` gives `lo`, as there), with one comparison per bound where `Real::clamp`
+/// takes two ([`at_least`], [`at_most`]). The same value, bit for bit.
+#[inline(always)]
+pub fn clamp_within<T: Real>(x: T, lo: T, hi: T) -> T {
+    at_most(at_least(x, lo), hi)
+}
+
 /// Single-precision sine, cosine, tangent, arc sine and hypotenuse computed in
 /// `f32` only (no `f64` arithmetic, so no software double precision on the M4F).
 ///
@@ -509,6 +541,39 @@ mod tests {
         assert_eq!(Real::min(f32::NAN, 2.0), 2.0);
         assert_eq!(Real::max(3.0f64, f64::NAN), 3.0);
         assert_eq!(Real::clamp(5.0f32, -1.0, 1.0), 1.0);
+    }
+
+    /// `at_least`, `at_most` and `clamp_within` give `Real::max`, `Real::min` and
+    /// `Real::clamp`'s value bit for bit (zeros' signs, NaN, infinities) for any
+    /// `x` and bounds that are not NaN.
+    #[test]
+    fn one_comparison_bounds_are_the_real_ones_bit_for_bit() {
+        use super::{at_least, at_most, clamp_within};
+        let xs = [
+            f32::NAN,
+            f32::NEG_INFINITY,
+            -2.0,
+            -1.0,
+            -0.0,
+            0.0,
+            0.5,
+            1.0,
+            3.0,
+            f32::INFINITY,
+        ];
+        let bounds = &xs[1..];
+        for &x in &xs {
+            for &lo in bounds {
+                let max = Real::max(x, lo);
+                assert_eq!(at_least(x, lo).to_bits(), max.to_bits(), "{x} {lo}");
+                let min = Real::min(x, lo);
+                assert_eq!(at_most(x, lo).to_bits(), min.to_bits(), "{x} {lo}");
+                for &hi in bounds.iter().filter(|&&hi| hi >= lo) {
+                    let c = Real::clamp(x, lo, hi);
+                    assert_eq!(clamp_within(x, lo, hi).to_bits(), c.to_bits());
+                }
+            }
+        }
     }
 
     #[test]
