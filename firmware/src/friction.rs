@@ -575,17 +575,22 @@ impl<T: Real> FrictionEstimator<T> {
         let diff = [fl - left * steer, fr - right * steer, rl - left, rr - right];
         let ok = all_finite(diff);
         let limit = cfg.wheel_slip_ratio * vx.abs() + cfg.wheel_slip_margin_mps;
-        let spin = larger(diff[0], diff[1]);
-        let high = larger(spin, larger(diff[2], diff[3]));
-        let low = smaller(smaller(diff[0], diff[1]), smaller(diff[2], diff[3]));
-        self.wheel_spin = ok && spin > limit;
-        self.wheel_lock = ok && low < -limit;
-        let locked = u8::from(diff[0] < -limit)
-            + u8::from(diff[1] < -limit)
-            + u8::from(diff[2] < -limit)
-            + u8::from(diff[3] < -limit);
+        let lock = -limit;
+        // One comparison per wheel and bound: a driven wheel over the limit
+        // spins; the count of wheels under it, one or more, lock.
+        let spin = u8::from(diff[0] > limit) | u8::from(diff[1] > limit);
+        let locked = u8::from(diff[0] < lock)
+            + u8::from(diff[1] < lock)
+            + u8::from(diff[2] < lock)
+            + u8::from(diff[3] < lock);
+        self.wheel_spin = ok && spin != 0;
+        self.wheel_lock = ok && locked >= 1;
         self.wheels_lock = ok && locked >= 2;
-        self.wheel_slip_mps = if ok { larger(high, -low) } else { T::ZERO };
+        let high = larger(
+            larger(diff[0].abs(), diff[1].abs()),
+            larger(diff[2].abs(), diff[3].abs()),
+        );
+        self.wheel_slip_mps = if ok { high } else { T::ZERO };
     }
 
     /// The patience of the recovery (module docs), in `[1, patience_max]`.
