@@ -790,7 +790,7 @@ impl<T: Real> FrictionEstimator<T> {
                 } else {
                     self.peak.0
                 };
-                let obs = best.sqrt() / g;
+                let obs = best.sqrt() * (T::ONE / g);
                 let floor = larger(self.mu_before * cfg.max_drop, cfg.mu_min);
                 let mu = smaller(self.mu_before, larger(obs, floor));
                 self.mu = if new_event { mu } else { larger(self.mu, mu) };

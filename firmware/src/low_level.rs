@@ -493,7 +493,8 @@ fn sample<T: Real>(plan: &Plan<T>, inv_dt: T, tau_s: T, stop_decel_mps2: T) -> O
 /// Angle wrapped to `(−π, π]`, rad.
 pub fn wrap_pi<T: Real>(x: T) -> T {
     let two_pi = T::TWO * T::PI;
-    let r = x - two_pi * ((x + T::PI) / two_pi).floor();
+    // `1/2π` folded by the compiler: a product, not a division.
+    let r = x - two_pi * ((x + T::PI) * (T::ONE / two_pi)).floor();
     if r <= -T::PI {
         r + two_pi
     } else if r > T::PI {
@@ -505,18 +506,19 @@ pub fn wrap_pi<T: Real>(x: T) -> T {
 
 /// A duration of `d_us` µs in seconds (saturates beyond 71 min).
 fn seconds<T: Real>(d_us: u64) -> T {
-    T::from_usize(d_us.min(u64::from(u32::MAX)) as usize) / T::lit(1.0e6)
+    T::from_usize(d_us.min(u64::from(u32::MAX)) as usize) * (T::ONE / T::lit(1.0e6))
 }
 
 /// Signed time `a − b` in seconds from two µs stamps (saturates beyond ±71 min).
 fn signed_seconds<T: Real>(a_us: u64, b_us: u64) -> T {
-    // The sign given to the count of µs before the one division by a positive
-    // constant (a sign chosen after it, the compiler divides by ±1e6 taken from
-    // a constant island in flash, which the timing analysis must then charge as
-    // flash reads for every load of the control job).
+    // The sign given to the count of µs before the one product by a positive
+    // constant, 1e-6 as the compiler folds `1/1e6` in `T` (a sign chosen after
+    // it, the compiler takes ±1e6 from a constant island in flash, which the
+    // timing analysis must then charge as flash reads for every load of the
+    // control job).
     let magnitude = T::from_usize(a_us.abs_diff(b_us).min(u64::from(u32::MAX)) as usize);
     let us = if a_us < b_us { -magnitude } else { magnitude };
-    us / T::lit(1.0e6)
+    us * (T::ONE / T::lit(1.0e6))
 }
 
 /// The car the feed-forward torque is computed for:
