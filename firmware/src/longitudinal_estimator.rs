@@ -40,8 +40,12 @@
 //! the brakes off. So `θ` is learnt from the samples whose filter memory holds no
 //! braking (`|H·y_b|` at most [`LongitudinalConfig::brake_idle_mps2`]), `b` from
 //! those with braking (`H·y_b` at least [`LongitudinalConfig::brake_excitation_mps2`]
-//! in magnitude) given `θ`: the braking's own evidence, the shortfall of the
-//! deceleration the brakes give on what the learnt car needs. Slip is kept out
+//! in magnitude) given `θ`, once `θ` has learnt from a sample: the braking's
+//! own evidence, the shortfall of the deceleration the brakes give on what the
+//! learnt car needs (before any such sample, a grade braked onto would be read
+//! as the brakes: a 6 % climb as brakes 28 % stronger). The grade is in `r₀`,
+//! learnt only without braking: a grade that changes under the brakes (a
+//! descent held by braking) is still read as the brakes' gain. Slip is kept out
 //! of both by the gate below (no slip flagged, the demand within a fraction of
 //! the grip, the wheels' slip ratio small when they are measured).
 //!
@@ -112,7 +116,7 @@
 //! braking and the driving updates exclusive) and one square root (on the FPU,
 //! the updated parameter's uncertainty: kept, so that reading it costs none);
 //! the settings' inverses are taken once, at [`LongitudinalEstimator::start`];
-//! no loop, no branch on data but the gate and the choice of update; 136 bytes
+//! no loop, no branch on data but the gate and the choice of update; 124 bytes
 //! of state in `f32`.
 
 use crate::Real;
@@ -344,6 +348,9 @@ pub struct LongitudinalEstimator<T> {
     clean_s: T,
     /// Samples that counted (wrapping).
     updates: u32,
+    /// True once `θ` has learnt from a sample (the brakes' gain learns only
+    /// then).
+    theta_learnt: bool,
     /// `[1/τ, 1/memory, 1/P₀₀,prior, 1/P_b,prior, 1/tr(P_prior)]` of the settings
     /// given to [`LongitudinalEstimator::start`] (zero before: nothing moves), so
     /// that a period divides only where the data does.
@@ -372,6 +379,7 @@ impl<T: Real> LongitudinalEstimator<T> {
             yb_f: [T::ZERO; 2],
             clean_s: T::NEG_INFINITY,
             updates: 0,
+            theta_learnt: false,
             inverses: [T::ZERO; 5],
         }
     }
@@ -567,7 +575,14 @@ impl<T: Real> LongitudinalEstimator<T> {
         let yd2 = y2 - b2;
         if b2 <= -cfg.brake_excitation_mps2 {
             // Braking: what the brakes gave, z = k·H·V̇ + r(·) − H·y_d, against
-            // the filtered braking commanded.
+            // the filtered braking commanded; only once `θ` has learnt from a
+            // sample without braking: before, `z` holds whatever resistance
+            // the road has (a climb braked onto before any such sample read as
+            // brakes 28 % stronger than they were, and their next braking as
+            // slip).
+            if !self.theta_learnt {
+                return false;
+            }
             let [k, r0, r2] = self.theta;
             let z = k * accel + r0 + r2 * q2 - yd2;
             self.brake_rls(cfg, b2, z, s.dt_s * inv_memory);
@@ -678,6 +693,7 @@ impl<T: Real> LongitudinalEstimator<T> {
         }
         self.u[0] = Self::uncertainty_of(self.p[0], self.inverses[2], cfg.mass_uncertainty_max);
         self.updates = self.updates.wrapping_add(1);
+        self.theta_learnt = true;
     }
 }
 
