@@ -632,11 +632,8 @@ impl<T: Real> LongitudinalEstimator<T> {
         } else {
             cfg.brake_prior_variance
         };
-        self.u[1] = Self::uncertainty_of(
-            self.brake[2],
-            self.inverses[3],
-            cfg.brake_uncertainty_max,
-        );
+        self.u[1] =
+            Self::uncertainty_of(self.brake[2], self.inverses[3], cfg.brake_uncertainty_max);
         self.updates = self.updates.wrapping_add(1);
     }
 

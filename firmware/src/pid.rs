@@ -304,8 +304,7 @@ pub fn update_within<T: Real>(
     // `α = Δt/(T_f + Δt)` is `(y − y₋₁ − ẏ_f·Δt)/(T_f + Δt)`, one division.
     let derivative = if state.initialised {
         let change = measurement - state.prev_measurement;
-        state.derivative
-            + (change - state.derivative * dt_s) / (cfg.derivative_filter_s + dt_s)
+        state.derivative + (change - state.derivative * dt_s) / (cfg.derivative_filter_s + dt_s)
     } else {
         T::ZERO
     };
