@@ -20,7 +20,9 @@ struct Exclusion {
 /// The regex of an entry as the plain mutant name it matches (the entries escape
 /// `.`, `+`, `*` only).
 fn unescape(s: &str) -> String {
-    s.replace("\\.", ".").replace("\\+", "+").replace("\\*", "*")
+    s.replace("\\.", ".")
+        .replace("\\+", "+")
+        .replace("\\*", "*")
 }
 
 fn parse(entry: &str) -> Exclusion {
@@ -98,7 +100,11 @@ fn every_excluded_mutant_still_names_its_operator_in_its_function() {
 fn a_moved_operator_is_reported_as_stale() {
     let lines = ["fn f(a: u8) -> bool {", "    a > 1", "}"];
     let e = parse("x.rs:2:7: replace > with >= in f");
-    let at: String = lines[e.line - 1].chars().skip(e.column - 1).take(1).collect();
+    let at: String = lines[e.line - 1]
+        .chars()
+        .skip(e.column - 1)
+        .take(1)
+        .collect();
     assert_eq!(at, ">");
     assert_eq!(enclosing_fn(&lines, e.line).as_deref(), Some("f"));
     let moved = parse("x.rs:2:8: replace > with >= in f");
