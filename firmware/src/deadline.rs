@@ -56,10 +56,13 @@ use crate::Real;
 /// Budget of one `control` activation, ECU core clock cycles (its own work,
 /// preemption excluded; its deadline is its 10 ms period).
 pub const CONTROL_BUDGET_CYCLES: u64 = 5_000;
-/// Budget of one `plan` activation, ECU core clock cycles: 95 ms at 168 MHz, the
-/// 100 ms deadline less 5 ms kept for the ten preempting `control` activations and
-/// timer jitter.
-pub const PLAN_BUDGET_CYCLES: u64 = 15_960_000;
+/// Time of the `plan` period kept for the preempting `control` activations and
+/// timer jitter, µs: the plan activation's own work has the rest.
+pub const PLAN_RESERVE_US: u64 = 5_000;
+/// Budget of one `plan` activation, ECU core clock cycles: the plan period less
+/// [`PLAN_RESERVE_US`] at the core clock (95 ms at 168 MHz: 15,960,000).
+pub const PLAN_BUDGET_CYCLES: u64 =
+    (PLAN_PERIOD_US - PLAN_RESERVE_US) * crate::timing::ECU_CLOCK_HZ as u64 / 1_000_000;
 /// Consecutive `control` deadline misses (late completions or skipped releases)
 /// after which the control task latches the safe actuation, misses. Three: 30 ms
 /// without an actuation computed in time, twice the longest a yaw loop at 100 Hz is

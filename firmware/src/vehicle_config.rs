@@ -36,6 +36,24 @@ pub struct VehicleConfig<T> {
 }
 
 impl<T: Real> VehicleConfig<T> {
+    /// The reference car: the simulator's built-in car (`host-sim/vehicles/default.toml`,
+    /// a 1,500 kg C-segment car) as the firmware is told about it; the tests'
+    /// fixture, pinned to the simulator's by `tests/tests/reference_car.rs`.
+    pub fn reference() -> Self {
+        Self {
+            l_f_m: T::from_f64(1.1),
+            l_r_m: T::from_f64(1.55),
+            cg_height_m: T::from_f64(0.55),
+            // Track (2 × 0.775 m) plus a tyre width (0.25 m).
+            width_m: T::from_f64(1.8),
+            // Wheelbase plus 1.8 m of overhangs.
+            length_m: T::from_f64(4.45),
+            mass_kg: T::from_f64(1500.0),
+            wheel_radius_m: T::from_f64(0.3),
+            max_steer_rad: T::from_f64(0.6),
+        }
+    }
+
     /// True when every field is finite and positive (the height may be 0).
     pub fn is_valid(&self) -> bool {
         let pos = |x: T| x.is_finite() && x > T::ZERO;

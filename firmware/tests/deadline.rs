@@ -295,3 +295,15 @@ fn the_counts_are_the_same_for_the_same_stamps() {
     assert!(c.deadline_misses >= c.skipped_releases);
     assert!(c.max_response_us < 130_000);
 }
+
+#[test]
+fn the_plan_budget_is_the_period_less_its_reserve_at_the_core_clock() {
+    // 95 ms of the 100 ms period at 168 MHz: the figure the timing report and
+    // .ci/expected/wcet.json judge the plan job against.
+    assert_eq!(PLAN_BUDGET_CYCLES, 15_960_000);
+    let clock = u64::from(firmware::timing::ECU_CLOCK_HZ);
+    assert_eq!(
+        PLAN_BUDGET_CYCLES * 1_000_000 / clock,
+        PLAN_PERIOD_US - PLAN_RESERVE_US
+    );
+}

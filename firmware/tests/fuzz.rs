@@ -39,16 +39,7 @@ const CAP: usize = 256;
 
 /// The built-in car as the firmware is told of it.
 fn car() -> VehicleConfig<f32> {
-    VehicleConfig {
-        l_f_m: 1.1,
-        l_r_m: 1.6,
-        cg_height_m: 0.55,
-        width_m: 1.85,
-        length_m: 4.5,
-        mass_kg: 1500.0,
-        wheel_radius_m: 0.31,
-        max_steer_rad: 0.6,
-    }
+    VehicleConfig::reference()
 }
 
 /// Any `f32`: mostly ordinary magnitudes, often a special value.

@@ -13,16 +13,7 @@ use firmware::vehicle_config::VehicleConfig;
 const CAP: usize = 256;
 
 fn car() -> VehicleConfig<f32> {
-    VehicleConfig {
-        l_f_m: 1.1,
-        l_r_m: 1.55,
-        cg_height_m: 0.5,
-        width_m: 1.8,
-        length_m: 4.45,
-        mass_kg: 1500.0,
-        wheel_radius_m: 0.3,
-        max_steer_rad: 0.6,
-    }
+    VehicleConfig::reference()
 }
 
 /// A closed loop of 100 noisy points round a 40 m circle, 4 m half-widths.

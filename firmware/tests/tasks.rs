@@ -43,16 +43,7 @@ impl Car {
 
 /// The built-in car as the firmware is told of it (the control tasks' tests).
 fn vehicle() -> firmware::vehicle_config::VehicleConfig<f64> {
-    firmware::vehicle_config::VehicleConfig {
-        l_f_m: 1.1,
-        l_r_m: 1.6,
-        cg_height_m: 0.55,
-        width_m: 1.85,
-        length_m: 4.5,
-        mass_kg: 1500.0,
-        wheel_radius_m: 0.31,
-        max_steer_rad: 0.6,
-    }
+    firmware::vehicle_config::VehicleConfig::reference()
 }
 
 fn setup() -> (Box<PlanTask<f64, CAP>>, ControlTask<f64>, Car) {

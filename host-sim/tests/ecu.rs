@@ -598,8 +598,8 @@ fn the_host_counts_skipped_releases_from_the_end_of_an_activation() {
 // ---------------------------------------------------------------------------
 
 fn real_ecu_elf() -> std::path::PathBuf {
-    let elf = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../target/thumbv7em-none-eabihf/release/ecu");
+    let elf =
+        host_sim::pil::built_ecu_elf(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
     assert!(
         elf.is_file(),
         "build the ECU application first: cargo ecu ({} is missing)",

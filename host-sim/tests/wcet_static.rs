@@ -306,15 +306,15 @@ fn recursion_is_refused() {
     ));
 }
 
-/// The ECU application (built by `cargo ecu`; CI runs this after building it).
-const ECU_ELF: &str = "../target/thumbv7em-none-eabihf/release/ecu";
-
-/// [`ECU_ELF`], failing the test when it was not built.
-fn ecu_elf() -> &'static std::path::Path {
-    let elf = std::path::Path::new(ECU_ELF);
+/// The ECU application (built by `cargo ecu`; CI runs this after building it),
+/// failing the test when it was not built.
+fn ecu_elf() -> std::path::PathBuf {
+    let elf =
+        host_sim::pil::built_ecu_elf(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
     assert!(
         elf.is_file(),
-        "{ECU_ELF} is missing: build it with `cargo ecu`"
+        "{} is missing: build it with `cargo ecu`",
+        elf.display()
     );
     elf
 }
@@ -322,7 +322,7 @@ fn ecu_elf() -> &'static std::path::Path {
 #[test]
 #[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
-    let elf = ecu_elf();
+    let elf = &ecu_elf();
     let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
     assert!(
         a.unresolved_indirect_calls.is_empty(),
@@ -412,7 +412,7 @@ fn edited_sources(
 #[test]
 #[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_loop_whose_annotation_is_removed_is_refused() {
-    let elf = ecu_elf();
+    let elf = &ecu_elf();
     let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
     let (_dir, edited) = edited_sources("firmware/src/mpc.rs", |t| {
         t.replace(
@@ -453,7 +453,7 @@ fn a_loop_whose_annotation_is_removed_is_refused() {
 #[test]
 #[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
-    let elf = ecu_elf();
+    let elf = &ecu_elf();
     let cycles = |a: &host_sim::wcet::analysis::StaticAnalysis, name: &str| {
         a.tasks
             .iter()
@@ -489,7 +489,7 @@ fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
 #[test]
 #[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_qp_loop_whose_annotation_is_removed_is_refused() {
-    let elf = ecu_elf();
+    let elf = &ecu_elf();
     let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
     let unbounded_in_qp = |a: &host_sim::wcet::analysis::StaticAnalysis| {
         a.loops
@@ -515,7 +515,7 @@ fn a_qp_loop_whose_annotation_is_removed_is_refused() {
 #[test]
 #[ignore = "needs the ECU binary and QEMU: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
-    let elf = ecu_elf();
+    let elf = &ecu_elf();
     let out = tempfile::tempdir().unwrap();
     let trace = out.path().join("trace.log");
     // One simulated second of the paper lap: the cold start walks the whole
@@ -602,7 +602,7 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
 #[test]
 #[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_split_loop_without_its_own_annotation_is_refused() {
-    let elf = ecu_elf();
+    let elf = &ecu_elf();
     let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
     assert_eq!(before.unbounded_loops, 0);
     assert!(before.loops.iter().any(|l| l
@@ -634,7 +634,7 @@ fn a_split_loop_without_its_own_annotation_is_refused() {
 #[test]
 #[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn an_inlined_library_loop_takes_no_bound_of_the_line_it_is_inlined_on() {
-    let elf = ecu_elf();
+    let elf = &ecu_elf();
     let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
     let cycle = a
         .loops

@@ -28,7 +28,7 @@ use host_sim::world::track::Track;
 
 fn elf() -> PathBuf {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
-    let elf = root.join("target/thumbv7em-none-eabihf/release/ecu");
+    let elf = host_sim::pil::built_ecu_elf(&root);
     assert!(
         elf.exists(),
         "build the ECU application first: cargo ecu ({} is missing)",

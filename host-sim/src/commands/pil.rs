@@ -44,7 +44,7 @@ pub struct PilCommand {
 #[derive(Debug, Clone, clap::Args)]
 pub struct PilEcuArgs {
     /// The ECU application (build it with `cargo ecu`).
-    #[arg(long, default_value = "target/thumbv7em-none-eabihf/release/ecu")]
+    #[arg(long, default_value = crate::pil::ECU_ELF)]
     pub elf: PathBuf,
     /// QEMU's `-icount shift`: an instruction takes 2^shift ns of the ECU's virtual
     /// time (4: 16 ns, 2.69 cycles at 168 MHz, above the CPI bound).

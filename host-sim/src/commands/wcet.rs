@@ -24,7 +24,7 @@ pub struct WcetArgs {
     #[arg(long, num_args = 1..)]
     pub pil: Vec<PathBuf>,
     /// The ECU application (build it with `cargo ecu`).
-    #[arg(long, default_value = "target/thumbv7em-none-eabihf/release/ecu")]
+    #[arg(long, default_value = crate::pil::ECU_ELF)]
     pub elf: PathBuf,
     /// Simulated seconds of each of the two traced PIL runs: the `paper` lap's start
     /// (its cycles per instruction are reported) and the run towards a box ahead,

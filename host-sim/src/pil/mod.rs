@@ -58,6 +58,22 @@
 //!
 //! The `pil` command is [`crate::commands::pil`].
 
+use std::path::{Path, PathBuf};
+
+/// Where `cargo ecu` puts the ECU application, relative to the workspace root,
+/// with the default target directory (`host-sim pil` and `wcet`'s `--elf`).
+pub const ECU_ELF: &str = "target/thumbv7em-none-eabihf/release/ecu";
+
+/// The ECU application `cargo ecu` built for the workspace at `root`: under
+/// `$CARGO_TARGET_DIR` when it is set (relative to `root` unless absolute), else
+/// [`ECU_ELF`].
+pub fn built_ecu_elf(root: &Path) -> PathBuf {
+    match std::env::var_os("CARGO_TARGET_DIR") {
+        Some(dir) => root.join(dir).join("thumbv7em-none-eabihf/release/ecu"),
+        None => root.join(ECU_ELF),
+    }
+}
+
 pub mod comparison;
 pub mod deadlines;
 pub mod frames;

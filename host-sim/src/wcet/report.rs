@@ -1139,8 +1139,7 @@ active_constraints,max_validity_slack_rad";
     /// runs them after `cargo ecu` (`cargo test -p host-sim --lib -- --ignored
     /// real_ecu_elf`).
     fn real_elf() -> PathBuf {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../target/thumbv7em-none-eabihf/release/ecu");
+        let path = crate::pil::built_ecu_elf(&Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
         assert!(
             path.is_file(),
             "the ECU binary {} is missing: build it first (cargo ecu)",

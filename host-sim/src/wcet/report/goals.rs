@@ -535,8 +535,8 @@ mod tests {
 
     /// The real ECU ELF (`cargo ecu`); fails when it has not been built.
     fn real_elf() -> std::path::PathBuf {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../target/thumbv7em-none-eabihf/release/ecu");
+        let path =
+            crate::pil::built_ecu_elf(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
         assert!(
             path.is_file(),
             "the ECU binary {} is missing: build it first (cargo ecu)",
