@@ -451,6 +451,8 @@ pub struct FrictionEstimator<T> {
     /// unloaded by the load transfer in a bend).
     wheels_lock: bool,
     wheel_slip_mps: T,
+    /// The last estimate carried the four wheel speeds (all finite).
+    wheels_measured: bool,
     /// Time a wheel has spun or locked, s.
     wheel_s: T,
     /// `1/(m·r_eff)` (1/(kg·m)), `1/τ_o` and `1/τ_f` (1/s), set by
@@ -491,6 +493,7 @@ impl<T: Real> FrictionEstimator<T> {
             wheel_lock: false,
             wheels_lock: false,
             wheel_slip_mps: T::ZERO,
+            wheels_measured: false,
             wheel_s: T::ZERO,
             inverses: [T::ZERO; 3],
         }
@@ -591,6 +594,7 @@ impl<T: Real> FrictionEstimator<T> {
             larger(diff[2].abs(), diff[3].abs()),
         );
         self.wheel_slip_mps = if ok { high } else { T::ZERO };
+        self.wheels_measured = ok;
     }
 
     /// The patience of the recovery (module docs), in `[1, patience_max]`.
@@ -825,6 +829,7 @@ impl<T: Real> FrictionEstimator<T> {
             driven_share: cfg.driven_load_share,
             slipping: self.slipping || short,
             slip_mps: self.wheel_slip_mps,
+            wheels_measured: self.wheels_measured,
         };
         self.longitudinal.update(&cfg.longitudinal, inv_mr, &sample);
     }

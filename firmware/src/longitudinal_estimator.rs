@@ -151,6 +151,9 @@ pub struct LongitudinalConfig<T> {
     /// Largest demand of a sample as a fraction of `μ̂·g` (of the driven axle's
     /// share when driving), in `(0, 1]`.
     pub demand_fraction: T,
+    /// The same when the wheel speeds are measured, in `(0, 1]`: the slip
+    /// ratio then shows a tyre past its linear range directly (module docs).
+    pub measured_demand_fraction: T,
     /// Largest lateral acceleration of a sample as a fraction of `μ̂·g`, in `(0, 1]`.
     pub lateral_fraction: T,
     /// Filtered demand under which a sample informs the resistances only and
@@ -235,6 +238,7 @@ impl<T: Real> LongitudinalConfig<T> {
             settle_s: T::lit(1.2),
             min_speed_mps: T::lit(3.0),
             demand_fraction: T::HALF,
+            measured_demand_fraction: T::lit(0.9),
             lateral_fraction: T::lit(0.3),
             excitation_mps2: T::lit(0.2),
             mass_ratio_bounds: [T::lit(0.6), T::lit(1.8)],
@@ -242,7 +246,7 @@ impl<T: Real> LongitudinalConfig<T> {
             r2_max_mps2: T::ONE,
             prior_variance: [T::HALF, T::lit(0.1), T::lit(0.1)],
             mass_uncertainty_max: T::lit(0.25),
-            max_slip_ratio: T::lit(0.03),
+            max_slip_ratio: T::lit(0.06),
             brake_idle_mps2: T::lit(0.05),
             brake_excitation_mps2: T::lit(0.3),
             brake_gain_bounds: [T::HALF, T::lit(1.5)],
@@ -264,6 +268,7 @@ impl<T: Real> LongitudinalConfig<T> {
         }
         if !(nonneg(self.min_speed_mps)
             && fraction(self.demand_fraction)
+            && fraction(self.measured_demand_fraction)
             && fraction(self.lateral_fraction)
             && nonneg(self.excitation_mps2)
             && pos(self.max_slip_ratio)
@@ -322,6 +327,9 @@ pub struct LongitudinalSample<T> {
     /// it, m/s (0 when the wheel speeds are not measured): its slip ratio times
     /// the speed.
     pub slip_mps: T,
+    /// True when the wheel speeds were measured (`slip_mps` read from them):
+    /// the demand gate is then [`LongitudinalConfig::measured_demand_fraction`].
+    pub wheels_measured: bool,
 }
 
 /// The estimator's state (module docs): filters, parameters, covariance.
@@ -562,10 +570,15 @@ impl<T: Real> LongitudinalEstimator<T> {
         } else {
             T::ONE
         };
+        let fraction = if s.wheels_measured {
+            cfg.measured_demand_fraction
+        } else {
+            cfg.demand_fraction
+        };
         let open = !s.slipping
             && s.slip_mps.abs() <= cfg.max_slip_ratio * s.v_mps.abs()
             && s.v_mps >= cfg.min_speed_mps
-            && demand.abs() <= cfg.demand_fraction * s.grip_mps2 * share
+            && demand.abs() <= fraction * s.grip_mps2 * share
             && s.lateral_mps2.abs() <= cfg.lateral_fraction * s.grip_mps2;
         self.clean_s = if open { self.clean_s + s.dt_s } else { T::ZERO };
         if self.clean_s < cfg.settle_s {
@@ -806,6 +819,7 @@ mod tests {
                         } else {
                             0.0
                         }),
+                        wheels_measured: self.slip_ratio > 0.0,
                     },
                 );
             }
@@ -968,6 +982,7 @@ mod tests {
                 driven_share: 0.6,
                 slipping: false,
                 slip_mps: 0.0,
+                wheels_measured: false,
             };
             assert!(!e.update(&cfg(), inv, &s));
             assert_eq!(e.mass_ratio(), before.mass_ratio());
@@ -1111,7 +1126,7 @@ mod tests {
                     let s = LongitudinalSample {
                         dt_s: dt, v_mps: v, torque_nm: t, lateral_mps2: lat,
                         grip_mps2: grip, driven_share: share, slipping: slip,
-                        slip_mps: kappa,
+                        slip_mps: kappa, wheels_measured: kappa > 0.0,
                     };
                     e.update(&c, inv, &s);
                     let [k, r0, r2] = e.theta;
