@@ -187,6 +187,10 @@ use qp::real::{all_finite, larger, smaller};
 /// car.
 pub const TORQUE_HISTORY: usize = 16;
 
+/// Rate at which the time the wheels spun or locked is forgotten, per s of
+/// time without (module docs, *Wheel speeds*).
+pub const WHEEL_FORGET: f32 = 0.1;
+
 /// Settings of the friction check (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrictionConfig<T> {
@@ -742,13 +746,21 @@ impl<T: Real> FrictionEstimator<T> {
         let u = self
             .longitudinal
             .uncertainty(&cfg.longitudinal, cmd < T::ZERO);
-        let limit = base + u * demand;
+        let limit = base + u * demand + self.longitudinal.resistance_terms_mps2()[0].abs();
         // Standing, a brake holds the car without decelerating it: no slip. A
         // driven wheel that spins, or two wheels that lock, is slip whatever the
         // shortfall.
         let moving = v.abs() >= cfg.standstill_mps;
         let wheel = (self.wheel_spin || self.wheels_lock) && moving;
-        self.wheel_s = if wheel { self.wheel_s + dt } else { T::ZERO };
+        // The wheels' time is kept between interventions, forgotten at a tenth
+        // of the rate it grows: the traction control and the anti-lock limit
+        // end a spin or a lock within a period or two, and their repeating is
+        // the evidence (module docs, *Wheel speeds*).
+        self.wheel_s = if wheel {
+            self.wheel_s + dt
+        } else {
+            larger(self.wheel_s - dt * T::lit(WHEEL_FORGET), T::ZERO)
+        };
         let short = wheel || (demand >= cfg.min_demand_mps2 && shortfall > limit && moving);
         self.shortfall_s = if short {
             self.shortfall_s + dt
