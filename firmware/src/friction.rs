@@ -46,7 +46,7 @@
 //! slip) and `sign(a_cmd)·s` exceeds
 //!
 //! ```text
-//! limit = s₀ + u·|a_cmd|,   s₀ = shortfall_mps2_limit (× vigilance while μ̂ < μ_nominal)
+//! limit = s₀ + u·|a_cmd| + |r₀|,   s₀ = shortfall_mps2_limit (× vigilance while μ̂ < μ_nominal)
 //! ```
 //!
 //! for [`FrictionConfig::confirm_s`]: `u` is the mass ratio's uncertainty when
@@ -149,9 +149,15 @@
 //! braking, and the anti-lock limit it triggers ends it (`docs/tuning.md`,
 //! *Wheel speeds*). Their largest difference from the ground's `|ω·r − V|`
 //! goes to the estimator of the car, whose samples count only under
-//! `0.03·|V|` ([`crate::longitudinal_estimator`]: a wheel slipping too little
-//! to flag is not learnt as mass). Without wheel speeds (not finite), slip is
+//! `0.06·|V|` ([`crate::longitudinal_estimator`]: a wheel slipping too little
+//! to flag is not learnt as mass; the default tyre gives 0.8 of its peak force
+//! at 0.06 at μ 1, its linear range). Without wheel speeds (not finite), slip is
 //! read from the shortfall alone.
+//!
+//! The time the wheels spun or locked is kept between interventions and
+//! forgotten at [`WHEEL_FORGET`] (a tenth of the rate it grows): the traction
+//! control and the anti-lock limit below end a spin within a period or two,
+//! and their repeating (three periods within about 0.3 s) is the event.
 //!
 //! The control task limits the torque by them too
 //! ([`crate::tasks::ControlTask::car_model`]): while a driven wheel spins, half

@@ -82,7 +82,9 @@
 //!   peak loses little force at first: its shortfall, too small to flag, would
 //!   read as mass), the demand `|y_d + b̂·y_b − r̂|/k̂` was at most
 //!   [`LongitudinalConfig::demand_fraction`] of `μ̂·g` (of the driven axle's share
-//!   when driving), and the lateral acceleration `|V·ψ̇|` at most
+//!   when driving; [`LongitudinalConfig::measured_demand_fraction`] when the
+//!   wheel speeds are measured: their slip ratio then shows a tyre past its
+//!   linear range directly), and the lateral acceleration `|V·ψ̇|` at most
 //!   [`LongitudinalConfig::lateral_fraction`] of `μ̂·g` (cornering drag is not in
 //!   the model).
 //! * **Excitation**: a sample whose filtered demand `|H·y − r₀ − r₂·H·q|/k̂` (the
@@ -210,7 +212,8 @@ impl<T: Real> LongitudinalConfig<T> {
     /// * memory 10 s of excited samples (the mass is learnt from the driving
     ///   alone, about a quarter of a lap's time: a load changed at a stop is
     ///   followed within about two laps' accelerations);
-    /// * gate: above 3 m/s, demand at most 0.5 of `μ̂·g` (a tyre at half its
+    /// * gate: above 3 m/s, demand at most 0.5 of `μ̂·g` (0.9 with the wheel
+    ///   speeds measured: their slip ratio gates the tyre's range; a tyre at half its
     ///   friction gives its force at a few % of slip), lateral at most 0.3;
     /// * excitation 0.2 m/s² of filtered demand;
     /// * `k ∈ [0.6, 1.8]` (a car 40 % lighter to 80 % heavier than configured),
@@ -221,8 +224,10 @@ impl<T: Real> LongitudinalConfig<T> {
     ///   (a car 1.33 times heavier gives a relative shortfall of 0.25; more
     ///   would hide the front wheels spinning at a planner friction 1.5 times
     ///   the road's: a shortfall of 0.49 of 3.5 m/s² asked);
-    /// * wheel slip ratio at most 0.03 (a tyre gives half its peak force at
-    ///   about 0.02 of slip; spinning or locking, 0.1 and more);
+    /// * wheel slip ratio at most 0.06 (the default tyre gives half its peak
+    ///   force at 0.031 of slip, 0.8 of it at 0.061, its peak at 0.145 at μ 1:
+    ///   its linear range, where the torque turns into force; spinning or
+    ///   locking, 0.15 and more);
     /// * brakes idle under 0.05 m/s² of filtered braking (a gain wrong by 0.5
     ///   then errs by 0.025 m/s² on `θ`'s samples), excited from 0.3 m/s²;
     /// * `b ∈ [0.5, 1.5]`, prior variance 0.1 (`u_b` halves after about 1 s of
