@@ -40,6 +40,20 @@
 //! come from the sensor fusion and go to the actuators over CAN; the frames
 //! ([`firmware::link`]) are the same.
 //!
+//! **Two builds, one application** (docs/board.md). The board layer (the link's
+//! transport, the log's, the end of a run and the fault paths' output) is
+//! chosen by the cargo feature `board-usart`; the tasks, the library calls and
+//! the frames are the same in both:
+//! * without it (`cargo ecu`), the lock-step build above: semihosting, `defmt`
+//!   over semihosting, RTIC's dispatchers `USART1` and `USART2` (the timing
+//!   analysis reads this build);
+//! * with it (`cargo ecu-board`, profile `board`), the binary you flash:
+//!   USART1 (`support/usart_link.rs`), polled during the set-up, then
+//!   interrupt-driven into bounded queues that [`firmware::link::demux`] sorts
+//!   for the two tasks; `defmt` over RTT; no semihosting instruction anywhere;
+//!   the dispatchers `SPI1` and `SPI2`. A release with no whole sensor frame yet
+//!   runs as a dropout ([`link::SENSOR_MISSING`]).
+//!
 //! **Authenticated frames** ([`firmware::link::secoc`]): every frame, both ways,
 //! carries a freshness value and a truncated AES-128-CMAC under the build's link
 //! key. The control task verifies the sensor frame of its release before it acts
@@ -79,12 +93,15 @@
 //! failed and the hardware switched the core to its internal oscillator) command
 //! zero torque with the steering held, send it as an actuator frame with the
 //! fault code ([`link::FAULT_PANIC`], [`link::FAULT_HARDFAULT`],
-//! [`link::FAULT_NMI`]), write a fixed line to the semihosting stderr and stop.
+//! [`link::FAULT_NMI`]), write a fixed line to the semihosting stderr and stop
+//! (the flashed build: the queued bytes and the fault frame written by polling
+//! USART1, every wait bounded, then the core parks).
 //! Nothing on that path formats (no `defmt`, no `core::fmt`) or can panic, and a
 //! static guard sends a second entry straight to the exit: the handlers cannot
 //! re-enter themselves.
 //!
-//! Build: `cargo ecu`; run in the loop with the simulator: `host-sim pil`.
+//! Build: `cargo ecu` (lock-step), `cargo ecu-board` (flashed); run in the loop
+//! with the simulator: `host-sim pil` (the lock-step build).
 #![no_std]
 #![no_main]
 // Semihosting calls, painting the stack and the panic handler's actuator frame.
