@@ -232,15 +232,14 @@ fn the_flashed_binary_exchanges_authenticated_frames_over_usart1_in_qemu() {
         ecu.send(&chunk);
     }
     ecu.send(&Down::Start);
-    let ready = loop {
-        match ecu.next(Duration::from_secs(30)) {
-            FromEcu::Frame(m) => match *m {
-                Up::Ready(r) => break r,
-                other => panic!("before Ready the ECU sent {other:?}"),
-            },
-            FromEcu::Refused(e) => panic!("a frame of the ECU was refused before Ready: {e:?}"),
-            FromEcu::Listening => unreachable!("one Listening"),
-        }
+    // Its first frame: Ready.
+    let ready = match ecu.next(Duration::from_secs(30)) {
+        FromEcu::Frame(m) => match *m {
+            Up::Ready(r) => r,
+            other => panic!("before Ready the ECU sent {other:?}"),
+        },
+        FromEcu::Refused(e) => panic!("a frame of the ECU was refused before Ready: {e:?}"),
+        FromEcu::Listening => unreachable!("one Listening"),
     };
     // Status 0: the set-up accepted, and the clock set-up did not fail (QEMU's
     // RCC reads 0: the no-RCC path, `ClockSource::Fixed`).
