@@ -534,7 +534,7 @@ impl Link {
     /// wait in the reader for the next release.
     #[cfg(feature = "board-usart")]
     pub fn receive_sensor(&mut self) -> Result<link::SensorFrame, LinkEnd> {
-        // wcet-bound: usart_link::CONTROL_RX_BYTES
+        // wcet-bound: 2 * MAX_DRIVING_DOWN_FRAME_BYTES
         for _ in 0..usart_link::CONTROL_RX_BYTES {
             let Some(byte) = self.next_byte() else {
                 break;

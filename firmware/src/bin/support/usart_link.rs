@@ -353,7 +353,7 @@ impl UsartIsr {
         // Transmission: up to TX_BYTES_PER_ENTRY while the transmitter takes
         // them (on silicon one or two: the data register and the shift register;
         // in QEMU every write is sent at once).
-        // wcet-bound: TX_BYTES_PER_ENTRY
+        // wcet-bound: 4
         for _ in 0..TX_BYTES_PER_ENTRY {
             if !u.sr.read().txe().bit_is_set() {
                 break;
@@ -413,7 +413,7 @@ fn flush() {
     // a static (or null before `open`). A fault inside the handler leaves at
     // most its last byte half taken (sent twice: the host refuses that frame).
     if let Some(isr) = unsafe { ISR.load(Ordering::Relaxed).as_mut() } {
-        // wcet-bound: TX_BYTES
+        // wcet-bound: MAX_UP_FRAME_BYTES + 1
         while let Some(b) = isr.tx.dequeue() {
             if !write_polled(&[b]) {
                 break;
