@@ -8,7 +8,9 @@
 //!   bounded.
 //! * **Driving**: interrupt-driven both ways into bounded `heapless` SPSC queues.
 //!   The USART1 interrupt (NVIC priority above both tasks, [`USART1_PRIORITY`])
-//!   takes at most one received byte and sends at most one byte per entry. It
+//!   takes at most one received byte and sends at most four per entry (QEMU
+//!   7.2's USART raises no transmit-empty interrupt, so the handler pends itself
+//!   again while bytes wait and the transmitter takes them). It
 //!   sorts the received bytes into the control task's queue and the plan task's
 //!   by [`firmware::link::demux`] (sensor and stop frames to the control task, the
 //!   windows of the road to the plan task), as the lock-step build's two host
@@ -17,7 +19,7 @@
 //!   silicon the peripheral then drops bytes, with an overrun; QEMU holds them
 //!   back), so its load is bounded whatever the other end sends; the control
 //!   task re-arms it at each release ([`rearm_receive`]).
-//! * **Faults and the end of a run** ([`take_over`], [`exit`]): interrupts off,
+//! * **Faults and the end of a run** ([`Port::take_over`], [`exit`]): interrupts off,
 //!   the bytes still queued sent by polling, then the caller's frame by polling,
 //!   every wait bounded; no semihosting, nothing that can trap; then the core
 //!   parks.
