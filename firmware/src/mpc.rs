@@ -132,6 +132,30 @@ pub const SPEED_ROW_WEIGHT: f32 = 2.0e5;
 /// factor rebuilt from scratch) to the activation's.
 pub const COLD_START_PASSES: u8 = 1;
 
+/// `append`'s trips over the rows already in the QP's factor, summed over one
+/// activation (each of its loops over the rows; `qp::work`): the rows a budget of
+/// [`QP_MAX_ITER`] iterations, [`QP_MAX_REFACTORIZATIONS`] retries and
+/// [`COLD_START_PASSES`] solves can find, each append at most [`WS`]` − 1` and a
+/// full working set a removal, an iteration, before each append. The timing
+/// analysis's flow fact (`qp/src/factor.rs`), checked on the traces.
+pub const QP_APPEND_ROWS: u64 = qp::work::append_work_bound(
+    QP_MAX_ITER,
+    QP_MAX_REFACTORIZATIONS,
+    COLD_START_PASSES as u32,
+    WS,
+    false,
+);
+/// The trips of `append`'s forward solve (groups of four entries) summed over one
+/// activation, as [`QP_APPEND_ROWS`] (`qp::work`).
+pub const QP_APPEND_GROUPS: u64 = qp::work::append_work_bound(
+    QP_MAX_ITER,
+    QP_MAX_REFACTORIZATIONS,
+    COLD_START_PASSES as u32,
+    WS,
+    true,
+);
+const _: () = assert!(QP_MAX_ITER <= qp::work::MAX_BUDGET);
+
 /// The QP solver sized for the MPC.
 pub type MpcQp<T> = QpSolver<T, NV, NC, WS, { ldl_len(WS) }>;
 /// The condensed QP, as handed to the solver.

@@ -125,6 +125,7 @@
 //! | `factor.rs` | the working set's `LDLᵀ` factor: append, remove, rebuild, solve |
 //! | `active_set.rs` | the dual active-set iteration |
 //! | `real.rs` | the scalar trait [`Real`]; `f32` trigonometry in `f32` only |
+//! | `work.rs` | flow facts: the most work of `append` a budget of iterations buys |
 //!
 //! # Timing annotations
 //!
@@ -159,6 +160,7 @@ mod solution;
 mod solver;
 #[cfg(test)]
 mod tests;
+pub mod work;
 
 pub use problem::{ActiveConstraint, ConstraintIndex, QpProblem, Side};
 pub use real::Real;
