@@ -103,13 +103,14 @@ pub const NC: usize = ROWS_PER_NODE * HORIZON + MAX_OBSTACLE_ROWS;
 pub const WS: usize = 48;
 /// QP iterations one activation may run, summed over its passes
 /// ([`MpcSettings::qp_max_iter`] of [`MpcSettings::paper`], the ECU's settings):
-/// the flow fact that bounds the plan task's worst case. 56: with [`WS`] 48, one
-/// cold pass and one refactorization, the largest cap measured whose static
-/// response-time bound leaves 4 ms of the plan task's 100 ms period
-/// (docs/timing.md, *How the plan task fits its budget*). A step stopped at the cap gives no
-/// plan (the control task follows the last one) and the next goes on from its
-/// working set.
-pub const QP_MAX_ITER: u32 = 56;
+/// the flow fact that bounds the plan task's worst case. 67: with [`WS`] 48, one
+/// cold pass and one refactorization, the largest cap whose static bound of the
+/// plan job stays within 75 % of its budget (11.97 M model cycles; about
+/// 0.1 M a further iteration once the solver's flow facts, [`QP_APPEND_ROWS`],
+/// bound its work: docs/timing.md, *How the plan task fits its budget*). A step
+/// stopped at the cap gives no plan (the control task follows the last one) and
+/// the next goes on from its working set.
+pub const QP_MAX_ITER: u32 = 67;
 /// QP refactorizations one activation may make, summed over its passes (each
 /// pass gets what is left as its [`qp::QpSettings::max_refactorizations`]):
 /// with [`QP_MAX_ITER`], the flow fact that bounds the plan task's worst case. A
