@@ -134,7 +134,11 @@
 //! name the firmware's constants: on the ECU the solver is the MPC's, `N = NV`,
 //! `M = NC`, `W = WS`, its caps `QP_MAX_ITER` and `QP_MAX_REFACTORIZATIONS` per
 //! plan activation. The `#[inline(never)]` on the factor updates keeps their
-//! per-call bounds (`... per call`) attached to one function each.
+//! per-call bounds (`... per call`) attached to one function each. Where the
+//! work of a loop depends on the working set's size, a bound per activation
+//! that follows from the algorithm replaces the product of the caps: `append`'s
+//! loops over the rows ([`work`], `QP_APPEND_ROWS`), the bounds' rows of `R⁻¹`
+//! and the rows' transformations (once per solve).
 //!
 //! # Features
 //!
