@@ -1627,9 +1627,24 @@ impl StaticAnalysis {
         )
     }
 
-    /// The Markdown report.
+    /// The Markdown report: the tasks' bounds and the gaps, what the bounds are
+    /// made of, the flow facts, the coverage, the critical sections, the model
+    /// and the loops.
     pub fn markdown(&self) -> String {
         let mut s = String::new();
+        self.write_summary(&mut s);
+        self.write_contributors(&mut s);
+        self.write_flow_facts(&mut s);
+        self.write_coverage(&mut s);
+        self.write_critical_sections(&mut s);
+        self.write_model_and_loops(&mut s);
+        s
+    }
+
+    /// The report's head: the table of the tasks' and sections' bounds, then the
+    /// gaps (unbounded loops, unresolved calls, recursions, irreducible cycles) and
+    /// the violations the traces showed.
+    fn write_summary(&self, s: &mut String) {
         let _ = writeln!(s, "# Static worst-case timing analysis of `{}`\n", self.elf);
         let _ = writeln!(
             s,
@@ -1700,6 +1715,11 @@ impl StaticAnalysis {
                 let _ = writeln!(s, "- irreducible ({}): {i}", t.name);
             }
         }
+    }
+
+    /// What the bounds are made of: per task or section, its costliest functions
+    /// and blocks on the worst path.
+    fn write_contributors(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "\n## What the bounds are made of\n\nPer task or section, the functions whose \
@@ -1748,6 +1768,10 @@ impl StaticAnalysis {
                 let _ = writeln!(s);
             }
         }
+    }
+
+    /// The flow facts, with their traced maxima.
+    fn write_flow_facts(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "\n## Flow facts\n\nThe bounds over more than one loop entry, each counted in the \
@@ -1781,6 +1805,10 @@ impl StaticAnalysis {
                 f.sources.join("; ")
             );
         }
+    }
+
+    /// The loops no trace ran, and why (with traces only).
+    fn write_coverage(&self, s: &mut String) {
         if let Some(c) = &self.coverage {
             let _ = writeln!(
                 s,
@@ -1806,6 +1834,10 @@ impl StaticAnalysis {
                 );
             }
         }
+    }
+
+    /// The critical sections, with what they mask and their bounds.
+    fn write_critical_sections(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "\n## Critical sections\n\nThe code the tasks run with interrupts disabled or a \
@@ -1836,6 +1868,10 @@ impl StaticAnalysis {
                 )
             );
         }
+    }
+
+    /// The processor and memory model's assumptions, and every loop with its bound.
+    fn write_model_and_loops(&self, s: &mut String) {
         let _ = writeln!(s, "\n## Processor and memory model\n");
         for a in &self.assumptions {
             let _ = writeln!(s, "- {a}");
@@ -1859,7 +1895,6 @@ impl StaticAnalysis {
                     .unwrap_or("")
             );
         }
-        s
     }
 
     /// Writes `static.json` and `static.md` into `dir`.
