@@ -7,7 +7,9 @@
 //! * the workspace's `memory.x` on the linker search path for the ECU build (in a
 //!   workspace the linker runs in the package directory, so the root `memory.x`
 //!   would not be found by `cortex-m-rt`'s `link.x` without this), and the control
-//!   job first in the ECU's `.text` (a symbol ordering file).
+//!   job first in the ECU's `.text` (a symbol ordering file);
+//! * the flashed build (feature `board-usart`) refused outside its profile
+//!   `board`, so that its ELF never replaces the lock-step one.
 use std::{env, fs, path::PathBuf};
 
 /// The environment variable that sets the link key at build time.
@@ -72,6 +74,20 @@ fn main() -> Result<(), String> {
     println!("cargo:rerun-if-changed=../memory.x");
     if !target.starts_with("thumb") {
         return Ok(());
+    }
+    // The flashed build (feature `board-usart`) has its own profile, `board`, so
+    // its ELF (`<target dir>/thumbv7em-none-eabihf/board/ecu`) never replaces the
+    // lock-step one (`.../release/ecu`) that the processor in the loop and the
+    // timing analysis read. OUT_DIR is `<profile dir>/build/<package>-<hash>/out`.
+    if env::var_os("CARGO_FEATURE_BOARD_USART").is_some() {
+        let profile_dir = out.ancestors().nth(3).and_then(|p| p.file_name());
+        if profile_dir.is_none_or(|d| d != "board") {
+            return Err(
+                "the feature `board-usart` builds the flashed ECU binary: build it with `cargo ecu-board` \
+                 (--profile board), so that it does not replace the lock-step binary in release/"
+                    .into(),
+            );
+        }
     }
     let memory =
         fs::read("../memory.x").map_err(|e| format!("memory.x at the workspace root: {e}"))?;

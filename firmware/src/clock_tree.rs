@@ -510,3 +510,31 @@ fn turn_off_pll_and_hse<R: ClockRegisters>(regs: &mut R) {
     regs.write(Register::RccCr, cr & !PLLON);
     regs.write(Register::RccCr, cr & !(PLLON | HSEON));
 }
+
+/// The APB2 clock (PCLK2, USART1's kernel clock) that the bits of `RCC_CFGR`
+/// `cfgr` give, Hz: the system clock in use (`SWS`: the HSI, the crystal
+/// [`HSE_HZ`], or the PLL's [`SYSCLK_HZ`]), divided by the AHB (`HPRE`) and APB2
+/// (`PPRE2`) prescalers (RM0090 §7.3.3). After [`configure`] succeeded it is
+/// [`SYSCLK_HZ`] / [`AHB_DIV`] / [`APB2_DIV`], 84 MHz; after a failure it is what
+/// the sequence left (the HSI, with the prescalers it may already have set), so a
+/// peripheral's baud rate can follow the clock the core actually runs on.
+pub const fn apb2_hz(cfgr: u32) -> u32 {
+    let sysclk = match (cfgr & bits::SWS_MASK) >> 2 {
+        0 => HSI_HZ,
+        1 => HSE_HZ,
+        2 => SYSCLK_HZ,
+        // Not allowed (RM0090): taken as the HSI, the clock from reset.
+        _ => HSI_HZ,
+    };
+    let hpre = (cfgr & bits::HPRE_MASK) >> 4;
+    // HPRE 0xxx: ÷1; 1000..1111: ÷2, 4, 8, 16, 64, 128, 256, 512 (no ÷32).
+    let ahb_shift = match hpre {
+        0..=7 => 0,
+        8..=11 => hpre - 7,
+        _ => hpre - 6,
+    };
+    let ppre2 = (cfgr & bits::PPRE2_MASK) >> 13;
+    // PPRE2 0xx: ÷1; 100..111: ÷2, 4, 8, 16.
+    let apb_shift = if ppre2 < 4 { 0 } else { ppre2 - 3 };
+    (sysclk >> ahb_shift) >> apb_shift
+}

@@ -103,13 +103,14 @@ pub const NC: usize = ROWS_PER_NODE * HORIZON + MAX_OBSTACLE_ROWS;
 pub const WS: usize = 48;
 /// QP iterations one activation may run, summed over its passes
 /// ([`MpcSettings::qp_max_iter`] of [`MpcSettings::paper`], the ECU's settings):
-/// the flow fact that bounds the plan task's worst case. 56: with [`WS`] 48, one
-/// cold pass and one refactorization, the largest cap measured whose static
-/// response-time bound leaves 4 ms of the plan task's 100 ms period
-/// (docs/timing.md, *How the plan task fits its budget*). A step stopped at the cap gives no
-/// plan (the control task follows the last one) and the next goes on from its
-/// working set.
-pub const QP_MAX_ITER: u32 = 56;
+/// the flow fact that bounds the plan task's worst case. 67: with [`WS`] 48, one
+/// cold pass and one refactorization, the largest cap whose static bound of the
+/// plan job stays within 75 % of its budget (11.97 M model cycles; about
+/// 0.1 M a further iteration once the solver's flow facts, [`QP_APPEND_ROWS`],
+/// bound its work: docs/timing.md, *How the plan task fits its budget*). A step
+/// stopped at the cap gives no plan (the control task follows the last one) and
+/// the next goes on from its working set.
+pub const QP_MAX_ITER: u32 = 67;
 /// QP refactorizations one activation may make, summed over its passes (each
 /// pass gets what is left as its [`qp::QpSettings::max_refactorizations`]):
 /// with [`QP_MAX_ITER`], the flow fact that bounds the plan task's worst case. A
@@ -131,6 +132,30 @@ pub const SPEED_ROW_WEIGHT: f32 = 2.0e5;
 /// instant), and every further pass would add its worst case (a linearisation, a
 /// factor rebuilt from scratch) to the activation's.
 pub const COLD_START_PASSES: u8 = 1;
+
+/// `append`'s trips over the rows already in the QP's factor, summed over one
+/// activation (each of its loops over the rows; `qp::work`): the rows a budget of
+/// [`QP_MAX_ITER`] iterations, [`QP_MAX_REFACTORIZATIONS`] retries and
+/// [`COLD_START_PASSES`] solves can find, each append at most [`WS`]` − 1` and a
+/// full working set a removal, an iteration, before each append. The timing
+/// analysis's flow fact (`qp/src/factor.rs`), checked on the traces.
+pub const QP_APPEND_ROWS: u64 = qp::work::append_work_bound(
+    QP_MAX_ITER,
+    QP_MAX_REFACTORIZATIONS,
+    COLD_START_PASSES as u32,
+    WS,
+    false,
+);
+/// The trips of `append`'s forward solve (groups of four entries) summed over one
+/// activation, as [`QP_APPEND_ROWS`] (`qp::work`).
+pub const QP_APPEND_GROUPS: u64 = qp::work::append_work_bound(
+    QP_MAX_ITER,
+    QP_MAX_REFACTORIZATIONS,
+    COLD_START_PASSES as u32,
+    WS,
+    true,
+);
+const _: () = assert!(QP_MAX_ITER <= qp::work::MAX_BUDGET);
 
 /// The QP solver sized for the MPC.
 pub type MpcQp<T> = QpSolver<T, NV, NC, WS, { ldl_len(WS) }>;

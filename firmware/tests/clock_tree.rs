@@ -674,3 +674,54 @@ fn clock_error_codes_round_trip_and_are_distinct() {
     assert_eq!(ClockError::from_code(0), None);
     assert_eq!(ClockError::from_code(7), None);
 }
+
+#[test]
+fn the_apb2_clock_follows_the_bits_of_cfgr() {
+    use firmware::clock_tree::{apb2_hz, bits, APB2_MAX_HZ, CFGR_PRESCALERS};
+    // From reset (and QEMU's RCC, which reads 0): the HSI, no division.
+    assert_eq!(apb2_hz(0), HSI_HZ);
+    // The configured tree: the PLL, AHB ÷1, APB2 ÷2.
+    assert_eq!(apb2_hz(bits::SWS_PLL | CFGR_PRESCALERS), 84_000_000);
+    assert_eq!(apb2_hz(bits::SWS_PLL | CFGR_PRESCALERS), APB2_MAX_HZ);
+    // A failed switch with the prescalers already set: the HSI ÷2.
+    assert_eq!(apb2_hz(bits::SWS_HSI | CFGR_PRESCALERS), HSI_HZ / 2);
+    // The crystal directly.
+    assert_eq!(apb2_hz(1 << 2), HSE_HZ);
+    // Every AHB division (RM0090: no ÷32) and every APB2 division.
+    let ahb = [
+        (0b1000, 2),
+        (0b1001, 4),
+        (0b1010, 8),
+        (0b1011, 16),
+        (0b1100, 64),
+    ];
+    for (hpre, div) in ahb
+        .into_iter()
+        .chain([(0b1101, 128), (0b1110, 256), (0b1111, 512)])
+    {
+        assert_eq!(
+            apb2_hz(bits::SWS_PLL | (hpre << 4)),
+            168_000_000 / div,
+            "HPRE {hpre:04b}"
+        );
+    }
+    for hpre in 0..8 {
+        assert_eq!(apb2_hz(bits::SWS_PLL | (hpre << 4)), 168_000_000);
+    }
+    for (ppre2, div) in [
+        (0b000, 1),
+        (0b011, 1),
+        (0b100, 2),
+        (0b101, 4),
+        (0b110, 8),
+        (0b111, 16),
+    ] {
+        assert_eq!(
+            apb2_hz(bits::SWS_PLL | (ppre2 << 13)),
+            168_000_000 / div,
+            "PPRE2 {ppre2:03b}"
+        );
+    }
+    // Not APB1's prescaler.
+    assert_eq!(apb2_hz(bits::SWS_PLL | bits::PPRE1_DIV4), 168_000_000);
+}

@@ -225,7 +225,11 @@ pub(crate) fn store_inverse_row<T: Real, const N: usize>(h: &mut [[T; N]; N], j:
     // bit `inverse_row`'s (the test `store_inverse_row_is_inverse_row`).
     let dst = N - 1 - j;
     let xj = (T::ONE - T::ZERO) / h[j][j];
-    // wcet-bound: NV
+    // A bound's row is stored once per solve (`Workspace::prepare`: only while its
+    // `rinv` is 0, which `start` sets and the row's `1/R_jj` ends), so over the
+    // MPC's solves of one activation the rows of all `N` bounds at most, each
+    // `N − 1 − j` entries after its diagonal: `N(N − 1)/2` per solve.
+    // wcet-bound: COLD_START_PASSES * NV * (NV - 1) / 2 per activation
     for l in j + 1..N {
         let mut acc = [T::ZERO; 4];
         let mut k = j;
@@ -238,8 +242,10 @@ pub(crate) fn store_inverse_row<T: Real, const N: usize>(h: &mut [[T; N]; N], j:
             }
             k += 4;
         }
-        // As `solve_transposed`'s: Σ_{l<N} (l − j)/4 ≤ N(N − 1)/8 over the call.
-        // wcet-bound: NV * (NV - 1) / 8 per call
+        // As `solve_transposed`'s: Σ_{l<N} (l − j)/4 ≤ N(N − 1)/8 over the call;
+        // over the rows of all N bounds, once each per solve (above),
+        // Σ_j Σ_{l>j} (l − j)/4 = N(N² − 1)/24.
+        // wcet-bound: COLD_START_PASSES * NV * (NV * NV - 1) / 24 per activation
         while k + 4 <= l {
             for (q, a) in acc.iter_mut().enumerate() {
                 *a += h[dst][k + q - j - 1] * h[k + q][l];

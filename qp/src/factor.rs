@@ -195,6 +195,9 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             return;
         };
         if *code != ROW_TRANSFORMED {
+            // Once per row and solve (`validate` writes every used row's code at
+            // the solve's start): at most NC per solve, over the MPC's solves.
+            // wcet-bound: COLD_START_PASSES * NC times per activation
             solve_transposed(&p.h, row, 0);
             *code = ROW_TRANSFORMED;
         }
@@ -238,6 +241,8 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         e: ActiveConstraint,
         tols: Tols<T>,
     ) -> Result<(), AppendError> {
+        #[cfg(test)]
+        crate::work::tests::APPEND_ROWS.with(|c| c.set(c.get() + self.n.min(W - 1) as u64));
         self.append_row(p, e, tols)
     }
 
@@ -259,14 +264,15 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         let s = row_start(n);
         let re = con_row(p, &self.rinv, e.index);
-        // b_l = M_{l,e}
-        // wcet-bound: WS
+        // b_l = M_{l,e}. Over an activation, `append`'s loops over the rows run
+        // at most the rows its appends can find (`qp::work`): QP_APPEND_ROWS.
+        // wcet-bound: QP_APPEND_ROWS per activation
         // wcet-bound in rebuild: WS * (WS - 1) / 2 per call
         for l in 0..n {
             self.ldl[s + l] = con_row(p, &self.rinv, self.ws[l].index).dot_row::<N>(&re);
         }
         // Forward solve with the unit lower L: y = L⁻¹ b.
-        // wcet-bound: WS
+        // wcet-bound: QP_APPEND_ROWS per activation
         // wcet-bound in rebuild: WS * (WS - 1) / 2 per call
         for l in 0..n {
             let sl = row_start(l);
@@ -282,7 +288,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
         }
         let diag = re.dot_row::<N>(&re) + delta(p, e.index);
         let mut dn = diag;
-        // wcet-bound: WS
+        // wcet-bound: QP_APPEND_ROWS per activation
         // wcet-bound in rebuild: WS * (WS - 1) / 2 per call
         for l in 0..n {
             let dl = self.ldl[row_start(l) + l];

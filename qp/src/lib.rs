@@ -125,6 +125,7 @@
 //! | `factor.rs` | the working set's `LDLᵀ` factor: append, remove, rebuild, solve |
 //! | `active_set.rs` | the dual active-set iteration |
 //! | `real.rs` | the scalar trait [`Real`]; `f32` trigonometry in `f32` only |
+//! | `work.rs` | flow facts: the most work of `append` a budget of iterations buys |
 //!
 //! # Timing annotations
 //!
@@ -133,7 +134,11 @@
 //! name the firmware's constants: on the ECU the solver is the MPC's, `N = NV`,
 //! `M = NC`, `W = WS`, its caps `QP_MAX_ITER` and `QP_MAX_REFACTORIZATIONS` per
 //! plan activation. The `#[inline(never)]` on the factor updates keeps their
-//! per-call bounds (`... per call`) attached to one function each.
+//! per-call bounds (`... per call`) attached to one function each. Where the
+//! work of a loop depends on the working set's size, a bound per activation
+//! that follows from the algorithm replaces the product of the caps: `append`'s
+//! loops over the rows ([`work`], `QP_APPEND_ROWS`), the bounds' rows of `R⁻¹`
+//! and the rows' transformations (once per solve).
 //!
 //! # Features
 //!
@@ -159,6 +164,7 @@ mod solution;
 mod solver;
 #[cfg(test)]
 mod tests;
+pub mod work;
 
 pub use problem::{ActiveConstraint, ConstraintIndex, QpProblem, Side};
 pub use real::Real;

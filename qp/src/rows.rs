@@ -196,9 +196,10 @@ pub(crate) fn sub_products<T: Real>(mut acc: T, a: &[T], b: &[T]) -> T {
     // A row of the factor against the entries before it: fewer than W entries
     // (`commit`'s row of `y`); Σ r/4 over the rows r < n ≤ W of one `append` or
     // one `ldl_solve_tmp`; over one `rebuild`'s appends Σ n(n − 1)/8 and its
-    // commits' rows Σ n/4.
+    // commits' rows Σ n/4; over an activation's appends at most what its
+    // iterations can buy (`qp::work`, QP_APPEND_GROUPS).
     // wcet-bound: WS / 4
-    // wcet-bound in append: WS * (WS - 1) / 8 per call
+    // wcet-bound in append: QP_APPEND_GROUPS per activation
     // wcet-bound in ldl_solve_tmp: WS * (WS - 1) / 8 per call
     // wcet-bound in rebuild: WS * (WS - 1) * (WS - 2) / 24 + WS * (WS - 1) / 8 per call
     for (x, y) in ca.zip(cb) {

@@ -40,6 +40,20 @@
 //! come from the sensor fusion and go to the actuators over CAN; the frames
 //! ([`firmware::link`]) are the same.
 //!
+//! **Two builds, one application** (docs/board.md). The board layer (the link's
+//! transport, the log's, the end of a run and the fault paths' output) is
+//! chosen by the cargo feature `board-usart`; the tasks, the library calls and
+//! the frames are the same in both:
+//! * without it (`cargo ecu`), the lock-step build above: semihosting, `defmt`
+//!   over semihosting, RTIC's dispatchers `USART1` and `USART2` (the timing
+//!   analysis reads this build);
+//! * with it (`cargo ecu-board`, profile `board`), the binary you flash:
+//!   USART1 (`support/usart_link.rs`), polled during the set-up, then
+//!   interrupt-driven into bounded queues that [`firmware::link::demux`] sorts
+//!   for the two tasks; `defmt` over RTT; no semihosting instruction anywhere;
+//!   the dispatchers `SPI1` and `SPI2`. A release with no whole sensor frame yet
+//!   runs as a dropout ([`link::SENSOR_MISSING`]).
+//!
 //! **Authenticated frames** ([`firmware::link::secoc`]): every frame, both ways,
 //! carries a freshness value and a truncated AES-128-CMAC under the build's link
 //! key. The control task verifies the sensor frame of its release before it acts
@@ -79,23 +93,36 @@
 //! failed and the hardware switched the core to its internal oscillator) command
 //! zero torque with the steering held, send it as an actuator frame with the
 //! fault code ([`link::FAULT_PANIC`], [`link::FAULT_HARDFAULT`],
-//! [`link::FAULT_NMI`]), write a fixed line to the semihosting stderr and stop.
+//! [`link::FAULT_NMI`]), write a fixed line to the semihosting stderr and stop
+//! (the flashed build: the queued bytes and the fault frame written by polling
+//! USART1, every wait bounded, then the core parks).
 //! Nothing on that path formats (no `defmt`, no `core::fmt`) or can panic, and a
 //! static guard sends a second entry straight to the exit: the handlers cannot
 //! re-enter themselves.
 //!
-//! Build: `cargo ecu`; run in the loop with the simulator: `host-sim pil`.
+//! Build: `cargo ecu` (lock-step), `cargo ecu-board` (flashed); run in the loop
+//! with the simulator: `host-sim pil` (the lock-step build).
 #![no_std]
 #![no_main]
 // Semihosting calls, painting the stack and the panic handler's actuator frame.
 #![allow(unsafe_code)]
 
+#[cfg(not(feature = "board-usart"))]
 #[path = "support/qemu_exit.rs"]
 mod qemu_exit;
+#[cfg(feature = "board-usart")]
+#[path = "support/usart_link.rs"]
+mod usart_link;
 
-use core::sync::atomic::{AtomicBool, AtomicPtr, AtomicU32, AtomicUsize, Ordering};
+#[cfg(not(feature = "board-usart"))]
+use core::sync::atomic::AtomicUsize;
+use core::sync::atomic::{AtomicBool, AtomicPtr, AtomicU32, Ordering};
 
+#[cfg(not(feature = "board-usart"))]
 use cortex_m_semihosting::syscall;
+#[cfg(feature = "board-usart")]
+use defmt_rtt as _;
+#[cfg(not(feature = "board-usart"))]
 use defmt_semihosting as _;
 use firmware::clock_tree::{self, ClockError, ClockRegisters, ClockSource, Register};
 use firmware::deadline::{self, DeadlineMonitor, PlanWatchdog};
@@ -106,8 +133,11 @@ use firmware::link::{
 };
 use firmware::low_level::Actuation;
 use firmware::tasks::{ControlTask, PlanTask};
+#[cfg(not(feature = "board-usart"))]
 use qemu_exit::exit;
 use rtic_monotonics::systick::prelude::*;
+#[cfg(feature = "board-usart")]
+use usart_link::exit;
 
 /// Rows of the window of the road the ECU holds (not the whole circuit: its RAM
 /// does not grow with the track; the simulator sends the next window as the car
@@ -129,6 +159,7 @@ systick_monotonic!(Mono, MONO_HZ);
 static PANIC_LINK: AtomicPtr<Link> = AtomicPtr::new(core::ptr::null_mut());
 /// Host file descriptor of the semihosting stderr (0: not open), for the panic
 /// handler's fixed line.
+#[cfg(not(feature = "board-usart"))]
 static ERR_FD: AtomicUsize = AtomicUsize::new(0);
 /// Set by the first entry into [`safe_stop`]: a second entry (a fault inside the
 /// handler) goes straight to the exit.
@@ -205,6 +236,7 @@ fn instant_at(t_us: u64) -> <Mono as rtic_monotonics::Monotonic>::Instant {
 /// sensor frame, and, before it, the part of a frame longer than a sensor frame
 /// (refused). The first whole frame ends the release's receiving, accepted or
 /// refused: the host writes one frame per release.
+#[cfg(not(feature = "board-usart"))]
 const RECEIVE_FRAMES: usize = 2;
 
 /// Route frames the plan task reads per activation at most: one (the host sends
@@ -231,6 +263,14 @@ pub enum LinkEnd {
         /// The sequence number the ECU expected of it: the answer's.
         seq: u32,
     },
+    /// No whole frame had arrived at this release (the flashed build's USART
+    /// link, not in lock-step with the host): the period runs as a dropout,
+    /// answered with [`link::SENSOR_MISSING`].
+    #[cfg(feature = "board-usart")]
+    Missing {
+        /// The sequence number the ECU expected: the answer's.
+        seq: u32,
+    },
 }
 
 /// The control channel to the simulator (`ecu.down`, `ecu.up`), through
@@ -238,15 +278,23 @@ pub enum LinkEnd {
 /// directions (the control task is the only one that uses it), the freshness of
 /// the down stream and the counter of the up stream.
 pub struct Link {
+    #[cfg(not(feature = "board-usart"))]
     down: usize,
+    #[cfg(not(feature = "board-usart"))]
     up: usize,
+    /// The USART: the control task's receive queue and the transmit queue.
+    #[cfg(feature = "board-usart")]
+    port: usart_link::Port,
     /// The frame being received while driving: a sensor frame fits
     /// (`MAX_DRIVING_DOWN_FRAME_BYTES`); a longer one is dropped and counted as
     /// refused. The set-up's larger frames go through a reader of their own, on
     /// the stack of `init` ([`Link::receive`]), not in static RAM for the run.
     reader: FrameReader<MAX_DRIVING_DOWN_FRAME_BYTES>,
+    #[cfg(not(feature = "board-usart"))]
     rx: [u8; 64],
+    #[cfg(not(feature = "board-usart"))]
     rx_len: usize,
+    #[cfg(not(feature = "board-usart"))]
     rx_pos: usize,
     /// AES-128-CMAC under the link key (its key schedule built once, at
     /// [`Link::open`]).
@@ -273,6 +321,7 @@ pub struct Link {
     pub refused: RefusalCounts,
 }
 
+#[cfg(not(feature = "board-usart"))]
 fn sh_open(name: &[u8], mode: usize) -> Option<usize> {
     // `name` ends with a NUL; the length excludes it.
     let fd = unsafe { syscall!(OPEN, name.as_ptr(), mode, name.len() - 1) };
@@ -287,6 +336,7 @@ fn sh_open(name: &[u8], mode: usize) -> Option<usize> {
 /// frame in one; a short write is retried for the rest); false when the host
 /// took none of a write or the bytes are not all written after four. No slicing
 /// that can panic: the panic path uses it.
+#[cfg(not(feature = "board-usart"))]
 fn sh_write(fd: usize, mut bytes: &[u8]) -> bool {
     // A host that has not taken the frame in four writes is not keeping up: the
     // frame is given up (the caller counts it) rather than retried byte by byte.
@@ -308,6 +358,7 @@ fn sh_write(fd: usize, mut bytes: &[u8]) -> bool {
 }
 
 /// Reads up to `buf.len()` bytes of the host file `fd`; the count, 0 at its end.
+#[cfg(not(feature = "board-usart"))]
 fn sh_read(fd: usize, buf: &mut [u8]) -> usize {
     let n = buf.len();
     let left = unsafe { syscall!(READ, fd, buf.as_mut_ptr(), n) };
@@ -319,6 +370,7 @@ impl Link {
     /// reading, in that order (the simulator opens them in the same order), and
     /// the semihosting stderr (`:tt`, append) for the panic handler's line;
     /// builds the CMAC's key schedule from the build's link key.
+    #[cfg(not(feature = "board-usart"))]
     pub fn open() -> Option<(Self, RouteLink)> {
         const R_BINARY: usize = 1;
         const W_TRUNC_BINARY: usize = 5;
@@ -351,6 +403,31 @@ impl Link {
                 rx: Verifier::new(Stream::Route),
             },
         ))
+    }
+
+    /// The link over the USART's two ends (`port`: the control task's, `route`:
+    /// the plan task's; [`usart_link::open`]); builds the CMAC's key schedule
+    /// from the build's link key.
+    #[cfg(feature = "board-usart")]
+    pub fn over(port: usart_link::Port, route: usart_link::RoutePort) -> (Self, RouteLink) {
+        (
+            Self {
+                port,
+                reader: FrameReader::new(),
+                mac: LinkMac::new(&LINK_KEY),
+                down_rx: Verifier::new(Stream::Down),
+                up_tx: Authenticator::new(Stream::Up),
+                tx: [0; MAX_UP_FRAME_BYTES],
+                next_seq: 0,
+                route_announced: 0,
+                rejected: 0,
+                refused: RefusalCounts::new(),
+            },
+            RouteLink {
+                port: route,
+                rx: Verifier::new(Stream::Route),
+            },
+        )
     }
 
     /// Counts a refused frame (`Some(reason)`; `None`: an authentic frame not
@@ -393,6 +470,7 @@ impl Link {
     /// no whole frame in [`RECEIVE_FRAMES`] runs is a broken link
     /// ([`LinkEnd::Garbled`]). A frame is decoded (CRC, CMAC) at most once per
     /// release.
+    #[cfg(not(feature = "board-usart"))]
     pub fn receive_sensor(&mut self) -> Result<link::SensorFrame, LinkEnd> {
         // WCET: RECEIVE_FRAMES (2; an ECU constant, not the library's).
         // wcet-bound: 2
@@ -446,6 +524,48 @@ impl Link {
         Err(LinkEnd::Garbled)
     }
 
+    /// The sensor frame of this release, from the bytes the USART interrupt
+    /// queued for the control task since the last release (at most the queue's
+    /// capacity): the first whole frame, decoded (CRC, CMAC) once, as the
+    /// lock-step build does. A refused frame (forged, replayed, corrupt, too long,
+    /// or an authentic frame of another kind) is counted and answered as a
+    /// dropout ([`LinkEnd::Refused`]), never acted on. No whole frame yet is
+    /// [`LinkEnd::Missing`], a dropout too; the bytes of a frame still arriving
+    /// wait in the reader for the next release.
+    #[cfg(feature = "board-usart")]
+    pub fn receive_sensor(&mut self) -> Result<link::SensorFrame, LinkEnd> {
+        // wcet-bound: 2 * MAX_DRIVING_DOWN_FRAME_BYTES
+        for _ in 0..usart_link::CONTROL_RX_BYTES {
+            let Some(byte) = self.next_byte() else {
+                break;
+            };
+            let reason = match self.reader.push(byte) {
+                // Inside a frame, or two delimiters in a row (idle).
+                None => continue,
+                Some(Ok(frame)) => {
+                    match link::decode::<Down>(frame, &mut self.mac, &mut self.down_rx) {
+                        Ok(Down::Sensor(f)) => {
+                            self.next_seq = f.seq.wrapping_add(1);
+                            return Ok(f);
+                        }
+                        Ok(Down::Stop) => return Err(LinkEnd::Stop),
+                        Ok(_) => None,
+                        Err(e) => Some(e.refusal()),
+                    }
+                }
+                Some(Err(e)) => Some(e.refusal()),
+            };
+            self.count_refused(reason);
+            let seq = self.next_seq;
+            self.next_seq = seq.wrapping_add(1);
+            return Err(LinkEnd::Refused {
+                code: reason.map_or(link::SENSOR_UNEXPECTED, Refusal::code),
+                seq,
+            });
+        }
+        Err(LinkEnd::Missing { seq: self.next_seq })
+    }
+
     /// The route frames the host announced in an accepted sensor frame (its
     /// total, `route_frames`) that were not announced before, frames.
     fn newly_announced(&mut self, total: u32) -> u32 {
@@ -455,6 +575,7 @@ impl Link {
     }
 
     /// The next byte of the down-link; `None` when the host closed it.
+    #[cfg(not(feature = "board-usart"))]
     fn next_byte(&mut self) -> Option<u8> {
         if self.rx_pos == self.rx_len {
             let got = sh_read(self.down, &mut self.rx);
@@ -469,12 +590,20 @@ impl Link {
         Some(byte)
     }
 
+    /// The next byte of the down-link: during the set-up the next on the line
+    /// (waiting for it), then the next the interrupt queued (`None`: none yet).
+    #[cfg(feature = "board-usart")]
+    fn next_byte(&mut self) -> Option<u8> {
+        self.port.next_byte()
+    }
+
     /// Sends one frame to the host, authenticated on the up stream, through the
     /// link's frame buffer (`tx`: the largest `Up` frame, `MAX_UP_FRAME_BYTES`,
     /// tested on the largest message). Not inlined: the encoder's frames are on
     /// the stack only while a frame is sent. The message comes by reference
     /// ([`UpRef`]): no copy of it in an `Up` on the caller's stack.
     #[inline(never)]
+    #[cfg(not(feature = "board-usart"))]
     pub fn send(&mut self, msg: UpRef<'_>) -> bool {
         match link::encode(&msg, &mut self.mac, &mut self.up_tx, &mut self.tx) {
             // No slicing that can panic: the panic path sends through it.
@@ -485,13 +614,33 @@ impl Link {
             Err(_) => false,
         }
     }
+
+    /// [`Link::send`] over the USART: the frame polled out during the set-up
+    /// and after [`usart_link::Port::take_over`], else queued for the interrupt
+    /// (false, nothing queued, when the previous frame has not left yet).
+    #[inline(never)]
+    #[cfg(feature = "board-usart")]
+    pub fn send(&mut self, msg: UpRef<'_>) -> bool {
+        match link::encode(&msg, &mut self.mac, &mut self.up_tx, &mut self.tx) {
+            // No slicing that can panic: the panic path sends through it.
+            Ok(n) => match self.tx.get(..n) {
+                Some(bytes) => self.port.write(bytes),
+                None => false,
+            },
+            Err(_) => false,
+        }
+    }
 }
 
 /// The route channel (`ecu.route`): the frames of the next window of the road,
 /// read by the plan task (one byte at a time: they are few), and the route
 /// stream's last accepted freshness.
 pub struct RouteLink {
+    #[cfg(not(feature = "board-usart"))]
     fd: usize,
+    /// The USART's queue of the road's frames (sorted by its interrupt).
+    #[cfg(feature = "board-usart")]
+    port: usart_link::RoutePort,
     rx: Verifier,
 }
 
@@ -536,8 +685,17 @@ impl RouteLink {
             let mut ended = false;
             // wcet-bound: MAX_DOWN_FRAME_BYTES
             for _ in 0..MAX_DOWN_FRAME_BYTES {
+                #[cfg(not(feature = "board-usart"))]
                 if sh_read(self.fd, &mut byte) == 0 {
                     return;
+                }
+                // The host writes a route frame whole before the sensor frame that
+                // announces it, and the interrupt queues bytes in order: an
+                // announced frame is in the queue whole.
+                #[cfg(feature = "board-usart")]
+                match self.port.next_byte() {
+                    Some(b) => byte[0] = b,
+                    None => return,
                 }
                 if byte[0] == 0 {
                     ended = true;
@@ -859,7 +1017,18 @@ impl ClockRegisters for DeviceClockRegisters<'_> {
     }
 }
 
-#[rtic::app(device = stm32f4::stm32f405, dispatchers = [USART1, USART2])]
+// The lock-step build dispatches its tasks on the USART1 and USART2 vectors
+// (the timing analysis maps them so: host-sim/src/wcet/ecu_app.rs); the flashed
+// build's link owns USART1's interrupt, so its dispatchers are the unused SPI1
+// and SPI2 vectors.
+#[cfg_attr(
+    not(feature = "board-usart"),
+    rtic::app(device = stm32f4::stm32f405, dispatchers = [USART1, USART2])
+)]
+#[cfg_attr(
+    feature = "board-usart",
+    rtic::app(device = stm32f4::stm32f405, dispatchers = [SPI1, SPI2])
+)]
 mod app {
     use super::*;
     use firmware::link::{PlanEventFrame, ReadyFrame};
@@ -911,9 +1080,23 @@ mod app {
         // The set-up's work runs in functions of their own, so their frames are gone
         // when `init` returns and the tasks it spawned run on this stack (RTIC
         // enables interrupts before `init`'s caller returns).
+        #[cfg(not(feature = "board-usart"))]
         let (link, route) = open_link(cx.local.link_storage, cx.local.route_storage);
+        #[cfg(feature = "board-usart")]
+        let (link, route) = open_usart_link(
+            cx.local.link_storage,
+            cx.local.route_storage,
+            &cx.device,
+            clock.is_ok(),
+        );
         let planner = cx.local.planner_storage;
         let control = set_up(link, planner, clock);
+        // The set-up was polled; from here the USART's interrupt moves the bytes.
+        #[cfg(feature = "board-usart")]
+        {
+            let mut nvic = cx.core.NVIC;
+            link.port.start(&mut nvic);
+        }
         // The timeline starts at the beginning of the monotonic's next tick: the
         // first release of both tasks, which then run at a tick as every later
         // release does. The set-up ends anywhere within a tick: a timeline started
@@ -960,6 +1143,7 @@ mod app {
     /// Opens the link to the simulator into its storage (so `init`'s own frame
     /// holds no link), or stops the ECU saying why.
     #[inline(never)]
+    #[cfg(not(feature = "board-usart"))]
     fn open_link(
         link: &'static mut Option<Link>,
         route: &'static mut Option<RouteLink>,
@@ -971,6 +1155,30 @@ mod app {
             );
             exit(false)
         };
+        let link = link.insert(l);
+        PANIC_LINK.store(&raw mut *link, Ordering::Relaxed);
+        (link, route.insert(r))
+    }
+
+    /// Opens the USART link ([`usart_link::open`]: USART1 at its baud rate for
+    /// the clock the core runs on, `clock_ok` when the clock tree's set-up did
+    /// not fail) into its storage (so `init`'s own frame holds no link). Polled
+    /// until the set-up is done.
+    #[inline(never)]
+    #[cfg(feature = "board-usart")]
+    fn open_usart_link(
+        link: &'static mut Option<Link>,
+        route: &'static mut Option<RouteLink>,
+        device: &stm32f4::stm32f405::Peripherals,
+        clock_ok: bool,
+    ) -> (&'static mut Link, &'static mut RouteLink) {
+        defmt::info!("ecu: waiting for the set-up on USART1");
+        let Some((port, route_port)) =
+            usart_link::open(&device.RCC, &device.GPIOA, &device.USART1, clock_ok)
+        else {
+            exit(false)
+        };
+        let (l, r) = Link::over(port, route_port);
         let link = link.insert(l);
         PANIC_LINK.store(&raw mut *link, Ordering::Relaxed);
         (link, route.insert(r))
@@ -1084,6 +1292,9 @@ mod app {
             Mono::delay_until(instant_at(monitor.release_us())).await;
             let release_us = monitor.start();
             let t0 = core_ticks();
+            // A new period's receive budget for the USART's interrupt.
+            #[cfg(feature = "board-usart")]
+            usart_link::rearm_receive();
             // A refused sensor frame is never acted on: the period runs on no
             // estimate (the dropout policy: both tasks refuse it, the control task
             // applies the safe actuation) and still answers, saying so. A run of
@@ -1104,6 +1315,14 @@ mod app {
                 Err(LinkEnd::Refused { code, seq }) => {
                     (seq, StateEstimate::unavailable(release_us), code)
                 }
+                // No frame yet (the flashed build's link is not in lock-step with
+                // the host): a dropout, as a refused frame.
+                #[cfg(feature = "board-usart")]
+                Err(LinkEnd::Missing { seq }) => (
+                    seq,
+                    StateEstimate::unavailable(release_us),
+                    link::SENSOR_MISSING,
+                ),
                 Err(end) => stop(cx.local.link, end == LinkEnd::Stop),
             };
             // The task's own work: the PIL link's frame decoding and encoding stand
@@ -1322,16 +1541,23 @@ fn safe_stop_work(fault: u8) -> ! {
     if let Some(link) = unsafe { link.as_mut() } {
         let a = Actuation::safe(delta, 0.0);
         let frame = actuation_frame(u32::MAX, &a, fault, 0);
+        // The USART polled from here: the frame in flight sent whole first, then
+        // this one, every wait bounded (no interrupt, no semihosting).
+        #[cfg(feature = "board-usart")]
+        link.port.take_over();
         link.send(UpRef::Actuation(&frame));
     }
-    let err = ERR_FD.load(Ordering::Relaxed);
-    if err != 0 {
-        let line: &[u8] = match fault {
-            link::FAULT_HARDFAULT => b"ecu: HardFault: safe stop\n",
-            link::FAULT_NMI => b"ecu: NMI (clock security): safe stop\n",
-            _ => b"ecu: panic: safe stop\n",
-        };
-        sh_write(err, line);
+    #[cfg(not(feature = "board-usart"))]
+    {
+        let err = ERR_FD.load(Ordering::Relaxed);
+        if err != 0 {
+            let line: &[u8] = match fault {
+                link::FAULT_HARDFAULT => b"ecu: HardFault: safe stop\n",
+                link::FAULT_NMI => b"ecu: NMI (clock security): safe stop\n",
+                _ => b"ecu: panic: safe stop\n",
+            };
+            sh_write(err, line);
+        }
     }
     exit(false)
 }

@@ -105,7 +105,8 @@
 //!   activation that adopted a window of the road instead of planning.
 //! * [`ReadyFrame::status`]: 0 accepted, else a [`SetupError`] code.
 //! * [`ActuationFrame::sensor`]: 0 accepted, else [`Refusal::code`] (`Auth` 1,
-//!   `Replay` 2, `Corrupt` 3) or [`SENSOR_UNEXPECTED`] (4).
+//!   `Replay` 2, `Corrupt` 3), [`SENSOR_UNEXPECTED`] (4) or [`SENSOR_MISSING`] (5,
+//!   the flashed build's only).
 //!
 //! Each has a `*_from_code` inverse and a `*_name` for logs.
 //!
@@ -155,6 +156,10 @@ pub const CRC_BYTES: usize = 4;
 /// that was neither `Sensor` nor `Stop` while driving (a host bug): not acted
 /// on, the period a dropout.
 pub const SENSOR_UNEXPECTED: u8 = 4;
+/// [`ActuationFrame::sensor`] of a release at which no whole frame had arrived
+/// (the flashed build's USART link, which does not run in lock-step with the
+/// host: a frame may be late): no estimate, the period a dropout.
+pub const SENSOR_MISSING: u8 = 5;
 /// The CRC of every frame (CRC-32/ISO-HDLC, table in flash: 1 KiB).
 static CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
 
@@ -355,7 +360,8 @@ pub struct ActuationFrame {
     pub watchdog_trips: u32,
     /// This period's sensor frame: 0 accepted, else the [`Refusal::code`] of its
     /// refusal (`Auth` 1, `Replay` 2, `Corrupt` 3) or [`SENSOR_UNEXPECTED`] for an
-    /// authentic frame that was neither `Sensor` nor `Stop`. A refused frame is
+    /// authentic frame that was neither `Sensor` nor `Stop`, or [`SENSOR_MISSING`]
+    /// when no whole frame had arrived (the flashed build's USART link). A refused frame is
     /// never acted on: the period ran on [`StateEstimate::unavailable`] (the
     /// dropout policy: the safe actuation, [`fault_code`] `NonFiniteEstimate`),
     /// and [`ActuationFrame::seq`] is then the one the ECU expected, the last

@@ -330,7 +330,8 @@ pub(crate) fn given_cpi(c: f64) -> CpiReport {
     }
 }
 
-/// `host-sim wcet`.
+/// `host-sim wcet`: the PIL laps and traced runs, the cost model, the static
+/// analysis checked against the traces, then the report and its goals.
 pub fn run(args: &WcetArgs) -> Result<()> {
     if !(args.trace_seconds.is_finite() && args.trace_seconds > 0.0) {
         bail!("--trace-seconds must be a positive number of seconds");
@@ -346,68 +347,14 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     if args.static_only {
         return static_analysis(args, &args.check_trace);
     }
-    let run_dirs = if args.pil.is_empty() {
-        let mut dirs = Vec::new();
-        for (obstacles, mu) in [("none", 1.0), ("paper", 1.0), ("none", 0.5), ("paper", 0.5)] {
-            let dir = args.out.join(format!("pil-{obstacles}-mu{mu}"));
-            println!("PIL lap: obstacles {obstacles}, μ = {mu}");
-            pil::run(&pil_args(
-                dir.clone(),
-                obstacles,
-                mu,
-                args.duration,
-                &args.elf,
-            ))?;
-            dirs.push(dir);
-        }
-        dirs
-    } else {
-        args.pil.clone()
-    };
+    let run_dirs = pil_laps(args)?;
     // The given traces, then the ones this command records (removed at the end).
     let mut traces = args.check_trace.clone();
-    let cpi = match args.cpi_bound {
-        Some(c) if c.is_finite() && c >= 1.0 => given_cpi(c),
-        Some(c) => bail!("--cpi-bound must be at least 1 cycle per instruction, got {c}"),
-        None => {
-            println!(
-                "PIL run with QEMU's execution trace ({} s) for the CPI bound",
-                args.trace_seconds
-            );
-            let (report, log) = cpi_from_trace(args)?;
-            traces.push(log);
-            report
-        }
-    };
-    println!(
-        "PIL run with QEMU's execution trace ({} s) towards a box {CAP_BOX_AHEAD_M} m ahead: the QP at its iteration cap",
-        args.trace_seconds
-    );
-    traces.push(cap_trace(args)?);
-    let (radius, _, speed) = FULL_SET_CIRCLE;
-    println!(
-        "PIL run with QEMU's execution trace ({} s) at {speed} m/s on a circle of {radius} m: the QP's working set near full at its cap",
-        args.trace_seconds
-    );
-    traces.push(full_set_trace(args)?);
-    println!(
-        "PIL run with QEMU's execution trace on a straight until the first window of the road sent while driving is adopted"
-    );
-    traces.push(window_trace(args)?);
+    let cpi = record_traces(args, &mut traces)?;
 
     // The cost model refitted on every measured activation, kept for the
     // simulator's timeline (an estimate, not a bound).
-    let runs = run_dirs
-        .iter()
-        .map(|d| report::pil_runs::load_pil_run(d))
-        .collect::<Result<Vec<_>>>()?;
-    let plans: Vec<_> = runs.iter().flat_map(|r| r.plan.iter().cloned()).collect();
-    let control_max = runs
-        .iter()
-        .map(|r| r.summary.control_max_instructions)
-        .fold(0.0f64, f64::max);
-    let model = CostModel::fit(&plans, control_max)
-        .ok_or_else(|| anyhow!("too few plan activations to fit the cost model"))?;
+    let model = fit_cost_model(&run_dirs)?;
     // The static analysis of the binary, checked against the traced run: the
     // report's bounds.
     let analysis = crate::wcet::analysis::analyse(&args.elf, &args.sources(), &traces)
@@ -441,6 +388,98 @@ pub fn run(args: &WcetArgs) -> Result<()> {
         args.out.join("cost_model.json"),
         serde_json::to_string_pretty(&model)?,
     )?;
+    print_summary(&r, &args.out);
+    let missed = report::goals::missed_required(&r.goals, &args.require).map_err(|e| anyhow!(e))?;
+    if !missed.is_empty() {
+        bail!("required goals missed:\n  {}", missed.join("\n  "));
+    }
+    if let Some(e) = &args.expected {
+        report::expected::check_file(&r, e, args.margin)?;
+    }
+    if let Some(e) = &args.write_expected {
+        // Figures from an analysis that failed are no reference to bless.
+        analysis_errors(&analysis, &args.out)?;
+        report::expected::write_file(&r, e, args.margin, args.accept_growth.as_deref())?;
+    }
+    analysis_errors(&analysis, &args.out)
+}
+
+/// The PIL runs the report reads: the given ones (`--pil`), else four laps
+/// recorded now (no obstacle and the paper's, at μ = 1 and 0.5).
+fn pil_laps(args: &WcetArgs) -> Result<Vec<PathBuf>> {
+    if args.pil.is_empty() {
+        let mut dirs = Vec::new();
+        for (obstacles, mu) in [("none", 1.0), ("paper", 1.0), ("none", 0.5), ("paper", 0.5)] {
+            let dir = args.out.join(format!("pil-{obstacles}-mu{mu}"));
+            println!("PIL lap: obstacles {obstacles}, μ = {mu}");
+            pil::run(&pil_args(
+                dir.clone(),
+                obstacles,
+                mu,
+                args.duration,
+                &args.elf,
+            ))?;
+            dirs.push(dir);
+        }
+        Ok(dirs)
+    } else {
+        Ok(args.pil.clone())
+    }
+}
+
+/// The CPI bound (given, else from a traced run) and the QEMU traces the
+/// analysis is checked against, each recorded now and added to `traces`: the QP
+/// at its iteration cap, its working set near full, a window adopted.
+fn record_traces(args: &WcetArgs, traces: &mut Vec<PathBuf>) -> Result<CpiReport> {
+    let cpi = match args.cpi_bound {
+        Some(c) if c.is_finite() && c >= 1.0 => given_cpi(c),
+        Some(c) => bail!("--cpi-bound must be at least 1 cycle per instruction, got {c}"),
+        None => {
+            println!(
+                "PIL run with QEMU's execution trace ({} s) for the CPI bound",
+                args.trace_seconds
+            );
+            let (report, log) = cpi_from_trace(args)?;
+            traces.push(log);
+            report
+        }
+    };
+    println!(
+        "PIL run with QEMU's execution trace ({} s) towards a box {CAP_BOX_AHEAD_M} m ahead: the QP at its iteration cap",
+        args.trace_seconds
+    );
+    traces.push(cap_trace(args)?);
+    let (radius, _, speed) = FULL_SET_CIRCLE;
+    println!(
+        "PIL run with QEMU's execution trace ({} s) at {speed} m/s on a circle of {radius} m: the QP's working set near full at its cap",
+        args.trace_seconds
+    );
+    traces.push(full_set_trace(args)?);
+    println!(
+        "PIL run with QEMU's execution trace on a straight until the first window of the road sent while driving is adopted"
+    );
+    traces.push(window_trace(args)?);
+    Ok(cpi)
+}
+
+/// The cost model refitted on every activation the PIL runs in `run_dirs`
+/// measured.
+fn fit_cost_model(run_dirs: &[PathBuf]) -> Result<CostModel> {
+    let runs = run_dirs
+        .iter()
+        .map(|d| report::pil_runs::load_pil_run(d))
+        .collect::<Result<Vec<_>>>()?;
+    let plans: Vec<_> = runs.iter().flat_map(|r| r.plan.iter().cloned()).collect();
+    let control_max = runs
+        .iter()
+        .map(|r| r.summary.control_max_instructions)
+        .fold(0.0f64, f64::max);
+    CostModel::fit(&plans, control_max)
+        .ok_or_else(|| anyhow!("too few plan activations to fit the cost model"))
+}
+
+/// Prints the plan's and control's figures and every goal, met or missed.
+fn print_summary(r: &report::WcetReport, out: &Path) {
     let bound = |t: &report::TaskTiming| {
         let st = &t.statics;
         format!(
@@ -466,20 +505,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
             g.figures()
         );
     }
-    println!("wrote {}", args.out.display());
-    let missed = report::goals::missed_required(&r.goals, &args.require).map_err(|e| anyhow!(e))?;
-    if !missed.is_empty() {
-        bail!("required goals missed:\n  {}", missed.join("\n  "));
-    }
-    if let Some(e) = &args.expected {
-        report::expected::check_file(&r, e, args.margin)?;
-    }
-    if let Some(e) = &args.write_expected {
-        // Figures from an analysis that failed are no reference to bless.
-        analysis_errors(&analysis, &args.out)?;
-        report::expected::write_file(&r, e, args.margin, args.accept_growth.as_deref())?;
-    }
-    analysis_errors(&analysis, &args.out)
+    println!("wrote {}", out.display());
 }
 
 /// The static analysis of the ELF (control-flow graphs, loops, IPET), written as

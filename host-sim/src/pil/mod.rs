@@ -74,6 +74,22 @@ pub fn built_ecu_elf(root: &Path) -> PathBuf {
     }
 }
 
+/// Where `cargo ecu-board` puts the binary you flash (the same application over
+/// USART1, `defmt` over RTT, no semihosting; its own profile, `board`), relative
+/// to the workspace root, with the default target directory. The processor in
+/// the loop and the timing analysis run the lock-step build, [`ECU_ELF`].
+pub const ECU_BOARD_ELF: &str = "target/thumbv7em-none-eabihf/board/ecu";
+
+/// The flashed ECU binary `cargo ecu-board` built for the workspace at `root`:
+/// under `$CARGO_TARGET_DIR` when it is set (relative to `root` unless absolute),
+/// else [`ECU_BOARD_ELF`].
+pub fn built_ecu_board_elf(root: &Path) -> PathBuf {
+    match std::env::var_os("CARGO_TARGET_DIR") {
+        Some(dir) => root.join(dir).join("thumbv7em-none-eabihf/board/ecu"),
+        None => root.join(ECU_BOARD_ELF),
+    }
+}
+
 pub mod comparison;
 pub mod deadlines;
 pub mod frames;

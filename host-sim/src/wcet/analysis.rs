@@ -225,31 +225,142 @@ pub(super) fn frames(loader: &addr2line::Loader, address: u32) -> Vec<(String, u
 
 /// Runs the analysis on `elf`, with the loop annotations of `sources` (the
 /// firmware crates' source folders, [`annotations::SourceDir::workspace`]).
+///
+/// The phases, in order: load the program, find its loops, read and index the
+/// annotations, bound every loop, derive the flow facts, bound each task and
+/// section (IPET), bound the critical sections and the response times, then
+/// check every bound against the QEMU `traces` and measure their coverage.
 pub fn analyse(
     elf: &Path,
     sources: &[annotations::SourceDir],
     traces: &[PathBuf],
 ) -> Result<StaticAnalysis> {
-    let text = super::stack::disassemble_with_bytes(elf)?;
-    let raw = cfg::parse_disassembly(&text);
-    let data = super::read_elf(elf)?;
-    let file = super::parse_elf(elf, &data)?;
-    let memory = MemoryModel {
-        flash_data: FlashData::classify(&file, &raw, MemoryModel::STM32F405.flash, demangle),
-        ..MemoryModel::STM32F405
+    let binary = Binary::load(elf)?;
+    let (all_loops, irreducible) = find_loops(&binary.program);
+    let (annotations, dependency_facts) = read_annotations(sources)?;
+    let index = AnnotationIndex::new(&annotations, &dependency_facts)?;
+    let copies = copy_sizes(
+        &binary.program,
+        &binary.ctx,
+        &annotations,
+        &index.counter_groups,
+    );
+    check_activation_caps(&annotations, &copies)?;
+    let bounds = LoopBinder::new(&binary, &index, &copies).bind_all(&all_loops)?;
+    let (per_preemption, retries) = retries_per_activation(&annotations);
+    let mut flow_facts = super::flow_facts::flow_facts(
+        &binary.program,
+        &all_loops,
+        &bounds.facts,
+        &copies,
+        &annotations,
+        &bounds.origin,
+        &retries,
+    );
+    let model = Model {
+        program: &binary.program,
+        memory: &binary.memory,
+        ctx: &binary.ctx,
+        all_loops: &all_loops,
+        facts: &bounds.facts,
+        copies: &copies,
     };
-    // Indirect calls and jumps may reach every function whose address the binary
-    // holds or builds (its data sections, literal pools, movw/movt pairs).
-    let taken = super::indirect::address_taken(&raw, &super::indirect::data_sections(&file));
-    let program: Program = cfg::build_program(
-        &raw,
-        &super::indirect::targets(&raw, &taken, demangle),
-        &memory,
-        demangle,
+    let mut units = Units::default();
+    units.bound_all(elf, &model, &irreducible, &bounds, per_preemption)?;
+    let (critical_sections, task_reach) = bound_critical_sections(&model, &retries);
+    bound_response_times(
+        model.program,
+        &mut units.tasks,
+        &critical_sections,
+        &task_reach,
+    );
+    let mut observed = Observed::default();
+    TraceReplay::new(elf, &model, &flow_facts)?.check_all(
+        traces,
+        &mut units,
+        &mut flow_facts,
+        &mut observed,
     )?;
-    let ctx = addr2line::Loader::new(elf)
-        .map_err(|e| anyhow::anyhow!("DWARF line table of {}: {e}", elf.display()))?;
+    observed
+        .violations
+        .extend(check_tightness(&mut units.tasks));
+    let coverage =
+        (!traces.is_empty()).then(|| loop_coverage(&model, &units.loop_rows, &observed.blocks_run));
+    let Units {
+        loop_rows,
+        tasks,
+        unresolved,
+        recursions,
+    } = units;
+    let loops: Vec<LoopEntry> = loop_rows.into_values().collect();
+    Ok(StaticAnalysis {
+        traces: traces.iter().map(|t| t.display().to_string()).collect(),
+        violations: observed.violations,
+        flow_facts,
+        coverage,
+        critical_sections,
+        indirect_targets: binary.taken.into_values().flatten().collect(),
+        indirect_calls_traced: observed.indirect_calls_traced,
+        elf: elf.display().to_string(),
+        assumptions: binary.memory.assumptions(),
+        unbounded_loops: loops.iter().filter(|l| l.bound.is_none()).count(),
+        tasks,
+        loops,
+        unresolved_indirect_calls: unresolved,
+        recursions,
+    })
+}
 
+/// The ECU program as the analysis reads it from the ELF: its functions' graphs,
+/// the memory model its cycles assume, the functions whose address it takes and
+/// its DWARF line table.
+struct Binary {
+    /// The functions' control-flow graphs.
+    program: Program,
+    /// The STM32F405's memory model, with the flash data this binary reads.
+    memory: MemoryModel,
+    /// The functions indirect calls and jumps may reach, by function.
+    taken: BTreeMap<usize, Vec<super::indirect::Taken>>,
+    /// The DWARF line table, for the source lines of addresses.
+    ctx: addr2line::Loader,
+}
+
+impl Binary {
+    /// Loads the program: disassembles `elf`, classifies its flash data, finds the
+    /// targets of its indirect calls and builds the control-flow graphs.
+    fn load(elf: &Path) -> Result<Self> {
+        let text = super::stack::disassemble_with_bytes(elf)?;
+        let raw = cfg::parse_disassembly(&text);
+        let data = super::read_elf(elf)?;
+        let file = super::parse_elf(elf, &data)?;
+        let memory = MemoryModel {
+            flash_data: FlashData::classify(&file, &raw, MemoryModel::STM32F405.flash, demangle),
+            ..MemoryModel::STM32F405
+        };
+        // Indirect calls and jumps may reach every function whose address the binary
+        // holds or builds (its data sections, literal pools, movw/movt pairs).
+        let taken = super::indirect::address_taken(&raw, &super::indirect::data_sections(&file));
+        let program: Program = cfg::build_program(
+            &raw,
+            &super::indirect::targets(&raw, &taken, demangle),
+            &memory,
+            demangle,
+        )?;
+        let ctx = addr2line::Loader::new(elf)
+            .map_err(|e| anyhow::anyhow!("DWARF line table of {}: {e}", elf.display()))?;
+        Ok(Self {
+            program,
+            memory,
+            taken,
+            ctx,
+        })
+    }
+}
+
+/// Finds every function's natural loops; a function with an irreducible cycle
+/// gets none, and its cycle's blocks are returned by function instead (a cycle
+/// with two entries has no header to bound).
+fn find_loops(program: &Program) -> (Vec<Vec<Loop>>, BTreeMap<usize, Vec<usize>>) {
     let mut all_loops: Vec<Vec<Loop>> = Vec::with_capacity(program.functions.len());
     let mut irreducible: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
     for (k, f) in program.functions.iter().enumerate() {
@@ -261,8 +372,14 @@ pub fn analyse(
             }
         }
     }
-    // Bounds: recognised from the binary, else the source's annotation at the
-    // loop's line (DWARF), never the one an enclosing loop took.
+    (all_loops, irreducible)
+}
+
+/// Reads the loop annotations of the firmware's `sources`, and the facts stated
+/// about the dependencies' code (which the firmware's sources cannot carry).
+fn read_annotations(
+    sources: &[annotations::SourceDir],
+) -> Result<(Vec<annotations::Annotation>, Vec<annotations::Annotation>)> {
     let annotations = annotations::scan_sources(sources).map_err(|e| {
         let dirs: Vec<String> = sources
             .iter()
@@ -270,32 +387,79 @@ pub fn analyse(
             .collect();
         anyhow::anyhow!("loop annotations in {}: {e}", dirs.join(", "))
     })?;
-    let dependency_facts = annotations::dependency_facts();
-    let by_line: BTreeMap<(String, u32), &annotations::Annotation> = annotations
-        .iter()
-        .chain(dependency_facts.iter())
-        .filter(|a| {
-            !matches!(
-                a.scope,
-                annotations::Scope::Bytes
-                    | annotations::Scope::LoopEntry
-                    | annotations::Scope::Runs
-            )
+    Ok((annotations, annotations::dependency_facts()))
+}
+
+/// The loop annotations indexed by the source line they bound, the way the loop
+/// bounding looks them up.
+struct AnnotationIndex<'a> {
+    /// The annotations of a line (the firmware's and the dependencies'), except
+    /// those of one caller's copy and those that bound no loop (`bytes`, loop
+    /// entries, runs).
+    by_line: BTreeMap<(String, u32), &'a annotations::Annotation>,
+    /// `// wcet-bound in NAME:`: for the copies of a line inlined into `NAME`.
+    within_line: BTreeMap<(String, u32, String), &'a annotations::Annotation>,
+    /// The counters of the `per activation` annotations, each with its group.
+    counter_groups: BTreeMap<String, usize>,
+}
+
+impl<'a> AnnotationIndex<'a> {
+    /// Indexes the firmware's `annotations` and the `dependency_facts`; refuses
+    /// counters grouped inconsistently.
+    fn new(
+        annotations: &'a [annotations::Annotation],
+        dependency_facts: &'a [annotations::Annotation],
+    ) -> Result<Self> {
+        // Bounds: recognised from the binary, else the source's annotation at the
+        // loop's line (DWARF), never the one an enclosing loop took.
+        let by_line = annotations
+            .iter()
+            .chain(dependency_facts.iter())
+            .filter(|a| {
+                !matches!(
+                    a.scope,
+                    annotations::Scope::Bytes
+                        | annotations::Scope::LoopEntry
+                        | annotations::Scope::Runs
+                )
+            })
+            .filter(|a| a.within.is_none())
+            .map(|a| ((a.file.clone(), a.line), a))
+            .collect();
+        let within_line = annotations
+            .iter()
+            .filter_map(|a| Some(((a.file.clone(), a.line, a.within.clone()?), a)))
+            .collect();
+        let counter_groups = annotations::counter_groups(annotations)
+            .map_err(|e| anyhow::anyhow!("loop annotations: {e}"))?;
+        Ok(Self {
+            by_line,
+            within_line,
+            counter_groups,
         })
-        .filter(|a| a.within.is_none())
-        .map(|a| ((a.file.clone(), a.line), a))
-        .collect();
-    // `// wcet-bound in NAME:`: for the copies of a line inlined into `NAME`.
-    let within_line: BTreeMap<(String, u32, String), &annotations::Annotation> = annotations
-        .iter()
-        .filter_map(|a| Some(((a.file.clone(), a.line, a.within.clone()?), a)))
-        .collect();
-    let mut within_used: std::collections::BTreeSet<(String, u32, String)> = Default::default();
-    let counter_groups = annotations::counter_groups(&annotations)
-        .map_err(|e| anyhow::anyhow!("loop annotations: {e}"))?;
-    let copies = copy_sizes(&program, &ctx, &annotations, &counter_groups);
-    // A cap per activation that matches no call is stale (the code moved or was
-    // inlined away): the bound it was meant to give would be missing.
+    }
+
+    /// The annotation of a line for the function named `fname` (its last path
+    /// segment): its own copy's, else the line's.
+    fn annotation_of(
+        &self,
+        key: &(String, u32),
+        fname: &str,
+    ) -> Option<&'a annotations::Annotation> {
+        self.within_line
+            .get(&(key.0.clone(), key.1, fname.to_string()))
+            .or_else(|| self.by_line.get(key))
+            .copied()
+    }
+}
+
+/// Refuses a cap per activation that matches no call: it is stale (the code
+/// moved or was inlined away), and the bound it was meant to give would be
+/// missing.
+fn check_activation_caps(
+    annotations: &[annotations::Annotation],
+    copies: &ipet::CopySizes,
+) -> Result<()> {
     for (k, a) in annotations.iter().enumerate() {
         if a.scope == annotations::Scope::Runs
             && !copies.caps.iter().any(|c| c.activation_group == Some(k))
@@ -309,26 +473,101 @@ pub fn analyse(
             );
         }
     }
-    let mut facts: Vec<LoopFact> = Vec::new();
-    let mut origin: BTreeMap<(usize, usize), String> = BTreeMap::new();
-    let mut notes: BTreeMap<(usize, usize), String> = BTreeMap::new();
-    let mut source_line: BTreeMap<(usize, usize), (String, u32)> = BTreeMap::new();
-    for (k, ls) in all_loops.iter().enumerate() {
-        let func = &program.functions[k];
+    Ok(())
+}
+
+/// Every loop's bound, where it comes from, or why it has none.
+#[derive(Default)]
+struct LoopBounds {
+    /// The bounds found, for the IPET.
+    facts: Vec<LoopFact>,
+    /// Per `(function, loop)`, where its bound comes from.
+    origin: BTreeMap<(usize, usize), String>,
+    /// Per `(function, loop)` without a bound, why.
+    notes: BTreeMap<(usize, usize), String>,
+    /// Per `(function, loop)`, its source line (for the report).
+    source_line: BTreeMap<(usize, usize), (String, u32)>,
+}
+
+/// Bounds the loops of the program, one function at a time: from the block
+/// copies' call sites, the exclusive retries, the binary's counted loops, else
+/// the annotations of the loops' source lines.
+struct LoopBinder<'a> {
+    program: &'a Program,
+    ctx: &'a addr2line::Loader,
+    index: &'a AnnotationIndex<'a>,
+    copies: &'a ipet::CopySizes,
+    /// The annotations of one caller's copy some loop took.
+    within_used: std::collections::BTreeSet<(String, u32, String)>,
+    /// What was found so far.
+    out: LoopBounds,
+}
+
+/// The state of bounding one function's loops.
+struct FunctionLoops<'a> {
+    /// The function's index.
+    k: usize,
+    func: &'a Function,
+    /// Its name's last path segment (what `wcet-bound in NAME:` names).
+    fname: String,
+    /// Its loops.
+    ls: &'a [Loop],
+    /// Per loop, the annotated line it took.
+    matched: Vec<Option<(String, u32)>>,
+    /// Per loop, whether it is a dependency's code ([`is_library_loop`]).
+    library_loops: Vec<bool>,
+    /// The lines a firmware loop of the function took.
+    firmware_taken: std::collections::BTreeSet<(String, u32)>,
+}
+
+impl<'a> LoopBinder<'a> {
+    fn new(
+        binary: &'a Binary,
+        index: &'a AnnotationIndex<'a>,
+        copies: &'a ipet::CopySizes,
+    ) -> Self {
+        Self {
+            program: &binary.program,
+            ctx: &binary.ctx,
+            index,
+            copies,
+            within_used: Default::default(),
+            out: LoopBounds::default(),
+        }
+    }
+
+    /// Bounds every loop of `all_loops` (per function); refuses an annotation of
+    /// one caller's copy that no loop took.
+    fn bind_all(mut self, all_loops: &'a [Vec<Loop>]) -> Result<LoopBounds> {
+        for (k, ls) in all_loops.iter().enumerate() {
+            self.bind_function(k, ls);
+        }
+        // An annotation for one caller's copy that no loop took is stale: the function
+        // was renamed, or the line is no longer inlined there.
+        if let Some((file, line, w)) = self
+            .index
+            .within_line
+            .keys()
+            .find(|key| !self.within_used.contains(*key))
+        {
+            anyhow::bail!(
+                "{file}:{line}: `{}{w}:` matches no loop of a function named `{w}`: \
+                 the function was renamed or the line is no longer inlined into it",
+                annotations::WITHIN_MARKER
+            );
+        }
+        Ok(self.out)
+    }
+
+    /// Bounds the loops `ls` of function `k`, outer loops first.
+    fn bind_function(&mut self, k: usize, ls: &'a [Loop]) {
+        let func = &self.program.functions[k];
         let fname = func
             .demangled
             .rsplit("::")
             .next()
             .unwrap_or(&func.demangled)
             .to_string();
-        // The annotation of a line for this function: its own copy's, else the line's.
-        let annotation_of = |key: &(String, u32)| -> Option<&annotations::Annotation> {
-            within_line
-                .get(&(key.0.clone(), key.1, fname.clone()))
-                .or_else(|| by_line.get(key))
-                .copied()
-        };
-        let mut matched: Vec<Option<(String, u32)>> = vec![None; ls.len()];
         // Outer loops first: an inner loop does not take an annotation one of its
         // enclosing loops took (the compiler may put both back edges on one line);
         // it takes the next of its lines that has one, or none.
@@ -336,309 +575,404 @@ pub fn analyse(
         // into a firmware line takes the line's annotation only if no firmware loop
         // of the function took it: it is the line's own loop's otherwise; a library
         // loop nests no firmware loop, so every parent still comes first).
-        let library_loops: Vec<bool> = ls.iter().map(|l| is_library_loop(func, l, &ctx)).collect();
-        let mut firmware_taken: std::collections::BTreeSet<(String, u32)> = Default::default();
+        let library_loops: Vec<bool> = ls
+            .iter()
+            .map(|l| is_library_loop(func, l, self.ctx))
+            .collect();
+        let mut fl = FunctionLoops {
+            k,
+            func,
+            fname,
+            ls,
+            matched: vec![None; ls.len()],
+            library_loops,
+            firmware_taken: Default::default(),
+        };
         let mut order: Vec<usize> = (0..ls.len()).collect();
-        order.sort_by_key(|&x| (library_loops[x], loops::depth(ls, x)));
+        order.sort_by_key(|&x| (fl.library_loops[x], loops::depth(ls, x)));
         for x in order {
-            let l = &ls[x];
-            // The loop's telling instructions, and their lines (innermost frame in
-            // the firmware's sources): for the annotation and for the report.
-            let candidates = candidate_addresses(func, l);
-            let keys: Vec<(String, u32)> = candidates
-                .iter()
-                .map(|&a| {
-                    let (file, line) = location(&ctx, a);
-                    (short_path(&file), line)
-                })
-                .collect();
-            if let Some(key) = keys.iter().find(|(_, line)| *line > 0) {
-                source_line.insert((k, x), key.clone());
-            }
-            let mut taken: Vec<(String, u32)> = Vec::new();
-            let mut p = l.parent;
-            while let Some(q) = p {
-                taken.extend(matched[q].iter().cloned());
-                p = ls[q].parent;
-            }
-            if copies.family.contains(&k) {
-                // A block copy or fill: one back edge per byte, the bytes at its
-                // call sites (the IPET's copy constraint); per entry, the largest.
-                let sizes: Vec<Option<u64>> = copies.sites.iter().map(|c| c.bytes).collect();
-                match sizes.iter().copied().collect::<Option<Vec<u64>>>() {
-                    Some(v) => {
-                        let most = v.into_iter().max().unwrap_or(0);
-                        facts.push(LoopFact {
-                            function: k,
-                            loop_index: x,
-                            bound: most,
-                            per: Per::Entry,
-                            group: None,
-                            iterations: false,
-                        });
-                        origin.insert(
-                            (k, x),
-                            format!(
-                                "block copy: one back edge per byte, Σ bytes over its {} call sites (the largest {most})",
-                                copies.sites.len()
-                            ),
-                        );
-                    }
-                    None => {
-                        let unknown: Vec<&str> = copies
-                            .sites
-                            .iter()
-                            .filter(|c| c.bytes.is_none())
-                            .map(|c| c.at.as_str())
-                            .collect();
-                        notes.insert(
-                            (k, x),
-                            format!(
-                                "block copy: sizes unknown at {} (annotate `// wcet-bound: EXPR bytes`)",
-                                unknown.join(", ")
-                            ),
-                        );
-                    }
-                }
-                continue;
-            }
-            if is_exclusive_retry(func, l) {
-                facts.push(LoopFact {
+            self.bind_loop(&mut fl, x);
+        }
+    }
+
+    /// Records loop `x` of function `k`'s bound and where it comes from.
+    fn record(&mut self, k: usize, x: usize, fact: LoopFact, origin: String) {
+        self.out.facts.push(fact);
+        self.out.origin.insert((k, x), origin);
+    }
+
+    /// Bounds loop `x` of `fl`'s function, or notes why it cannot.
+    fn bind_loop(&mut self, fl: &mut FunctionLoops<'a>, x: usize) {
+        let (k, func, ls) = (fl.k, fl.func, fl.ls);
+        let l = &ls[x];
+        // The loop's telling instructions, and their lines (innermost frame in
+        // the firmware's sources): for the annotation and for the report.
+        let candidates = candidate_addresses(func, l);
+        let keys: Vec<(String, u32)> = candidates
+            .iter()
+            .map(|&a| {
+                let (file, line) = location(self.ctx, a);
+                (short_path(&file), line)
+            })
+            .collect();
+        if let Some(key) = keys.iter().find(|(_, line)| *line > 0) {
+            self.out.source_line.insert((k, x), key.clone());
+        }
+        let mut taken: Vec<(String, u32)> = Vec::new();
+        let mut p = l.parent;
+        while let Some(q) = p {
+            taken.extend(fl.matched[q].iter().cloned());
+            p = ls[q].parent;
+        }
+        if self.copies.family.contains(&k) {
+            self.bind_copy_loop(k, x);
+            return;
+        }
+        if is_exclusive_retry(func, l) {
+            self.record(
+                k,
+                x,
+                LoopFact {
                     function: k,
                     loop_index: x,
                     bound: 1,
                     per: Per::Preemption,
                     group: None,
                     iterations: false,
-                });
-                origin.insert(
-                    (k, x),
-                    "load/store-exclusive retry: 1 per preemption (an exception clears the monitor)"
-                        .into(),
-                );
-                continue;
-            }
-            if !l.irreducible {
-                if let Some(b) = bounds::constant_bound(func, l) {
-                    facts.push(LoopFact {
+                },
+                "load/store-exclusive retry: 1 per preemption (an exception clears the monitor)"
+                    .into(),
+            );
+            return;
+        }
+        if !l.irreducible {
+            if let Some(b) = bounds::constant_bound(func, l) {
+                self.record(
+                    k,
+                    x,
+                    LoopFact {
                         function: k,
                         loop_index: x,
                         bound: b,
                         per: Per::Entry,
                         group: None,
                         iterations: false,
-                    });
-                    origin.insert((k, x), "binary".into());
-                    continue;
-                }
+                    },
+                    "binary".into(),
+                );
+                return;
             }
-            // A loop of a dependency's code inlined into a firmware line takes no
-            // annotation of the firmware's: those bound the line's own loop.
-            let library = library_loops[x];
-            let firmware_key = keys
-                .iter()
-                .filter(|key| !library || !firmware_taken.contains(*key))
-                .find(|key| annotation_of(key).is_some() && !taken.contains(*key))
-                .cloned();
-            if let (false, Some(key)) = (library, &firmware_key) {
-                firmware_taken.insert(key.clone());
+        }
+        let hit = self.annotated_line(fl, x, &keys, &candidates, &taken);
+        let same_loop = hit
+            .as_ref()
+            .and_then(|key| self.index.annotation_of(key, &fl.fname))
+            .is_some_and(|a| a.scope == annotations::Scope::SameLoop);
+        let Some(key) = hit.clone().filter(|_| !same_loop) else {
+            if same_loop {
+                self.share_enclosing_bound(fl, x, hit);
+            } else {
+                self.note_unbounded(fl, x, &keys, &candidates, &taken);
             }
-            let hit = firmware_key.or_else(|| {
-                // A dependency's loop, inlined or not: the facts about its code
-                // (at any frame of the inlining chain, innermost first).
-                candidates
-                    .iter()
-                    .flat_map(|&a| frames(&ctx, a))
-                    .map(|(file, line)| (short_path(&file), line))
-                    .filter(|key| !library || !firmware_taken.contains(key))
-                    .find(|key| annotation_of(key).is_some() && !taken.contains(key))
-            });
-            let same_loop = hit
-                .as_ref()
-                .and_then(&annotation_of)
-                .is_some_and(|a| a.scope == annotations::Scope::SameLoop);
-            let Some(key) = hit.clone().filter(|_| !same_loop) else {
-                if !same_loop {
-                    let shares = keys.iter().any(|key| taken.contains(key));
-                    let own: Vec<String> = keys
-                        .iter()
-                        .filter(|k| k.1 > 0 && !taken.contains(*k))
-                        .map(|(f, l)| format!("{f}:{l}"))
-                        .collect::<std::collections::BTreeSet<_>>()
-                        .into_iter()
-                        .collect();
-                    notes.insert(
-                        (k, x),
-                        if library {
-                            let inner = candidates
-                                .first()
-                                .and_then(|&a| frames(&ctx, a).into_iter().next())
-                                .map(|(f, l)| format!("{}:{l}", short_path(&f)))
-                                .unwrap_or_default();
-                            format!(
-                                "a loop of a dependency's code ({inner}) inlined into a firmware line whose \
-                                 annotation bounds a loop of the firmware's: state its bound as a dependency \
-                                 fact about its own line (host_sim::wcet::annotations::dependency_facts), or \
-                                 annotate a line of its own"
-                            )
-                        } else if shares {
-                            format!(
-                                "its only annotated line is its enclosing loop's: if the compiler split that \
-                                 source loop into these nested binary loops, write `// wcet-bound: same loop` \
-                                 on one of its own lines ({}), else annotate it there",
-                                own.join(", ")
-                            )
-                        } else {
-                            bounds::why_not(func, l)
-                        },
-                    );
-                    continue;
-                }
-                // `same loop`: one source loop the compiler split into nested binary
-                // loops (a `continue` path). It shares the bound of the nearest
-                // enclosing loop that has one: their back edges together, against
-                // that loop's entries.
-                let mut q = l.parent;
-                while let Some(p) = q {
-                    if facts.iter().any(|f| f.function == k && f.loop_index == p) {
-                        break;
-                    }
-                    q = ls[p].parent;
-                }
-                let host = q.and_then(|p| {
-                    facts
-                        .iter()
-                        .find(|f| f.function == k && f.loop_index == p)
-                        .cloned()
-                        .map(|f| (p, f))
-                });
-                if let Some((p, hf)) = host {
-                    let rep = hf.group.unwrap_or(p);
-                    matched[x] = hit.clone();
-                    facts.push(LoopFact {
+            return;
+        };
+        fl.matched[x] = Some(key.clone());
+        let Some(a) = self.index.annotation_of(&key, &fl.fname) else {
+            return;
+        };
+        self.bind_annotated(fl, x, &key, &candidates, a);
+    }
+
+    /// A block copy or fill: one back edge per byte, the bytes at its call sites
+    /// (the IPET's copy constraint); per entry, the largest.
+    fn bind_copy_loop(&mut self, k: usize, x: usize) {
+        let sizes: Vec<Option<u64>> = self.copies.sites.iter().map(|c| c.bytes).collect();
+        match sizes.iter().copied().collect::<Option<Vec<u64>>>() {
+            Some(v) => {
+                let most = v.into_iter().max().unwrap_or(0);
+                let origin = format!(
+                    "block copy: one back edge per byte, Σ bytes over its {} call sites (the largest {most})",
+                    self.copies.sites.len()
+                );
+                self.record(
+                    k,
+                    x,
+                    LoopFact {
                         function: k,
                         loop_index: x,
-                        group: Some(rep),
-                        ..hf
-                    });
-                    origin.insert(
-                        (k, x),
-                        format!(
-                            "{}:{}: `same loop`: shares the bound of the loop at {:#x}: {}",
-                            hit.as_ref().map_or("?", |h| h.0.as_str()),
-                            hit.as_ref().map_or(0, |h| h.1),
-                            func.blocks.get(ls[rep].header).map_or(0, |b| b.start),
-                            origin.get(&(k, rep)).cloned().unwrap_or_default()
-                        ),
-                    );
-                    continue;
-                }
-                notes.insert(
-                    (k, x),
-                    "`same loop`, but no enclosing binary loop has a bound to share: \
-                     the loop is not nested in the one it was split from"
-                        .into(),
-                );
-                continue;
-            };
-            matched[x] = Some(key.clone());
-            let Some(a) = annotation_of(&key) else {
-                continue;
-            };
-            if let Some(w) = &a.within {
-                within_used.insert((a.file.clone(), a.line, w.clone()));
-            }
-            // Per call of the function that holds the loop: for an annotation of
-            // one caller's copy, that function is the caller named (this one).
-            if a.scope == annotations::Scope::Call && a.within.is_none() {
-                // Per call of the function that holds the loop: sound only if the
-                // binary function is that function, not a caller it was inlined into.
-                let inlined = candidates.iter().any(|&addr| {
-                    let fr = frames(&ctx, addr);
-                    fr.iter()
-                        .position(|(file, line)| (short_path(file), *line) == key)
-                        .is_some_and(|at| at + 1 < fr.len())
-                });
-                if inlined {
-                    notes.insert(
-                        (k, x),
-                        format!(
-                            "{}:{}: a bound `per call` in code inlined into `{}`: mark its function #[inline(never)]",
-                            a.file, a.line, func.demangled
-                        ),
-                    );
-                    continue;
-                }
-            }
-            facts.push(LoopFact {
-                function: k,
-                loop_index: x,
-                bound: a.bound,
-                per: match a.scope {
-                    // (`bytes` annotations are not in `by_line`.)
-                    annotations::Scope::Entry
-                    | annotations::Scope::Bytes
-                    | annotations::Scope::LoopEntry
-                    | annotations::Scope::Runs
-                    | annotations::Scope::SameLoop => Per::Entry,
-                    annotations::Scope::Call => Per::Call,
-                    annotations::Scope::Activation => {
-                        match a.counter.as_deref().and_then(|c| counter_groups.get(c)) {
-                            Some(&g) => Per::Counted(g),
-                            None => Per::Activation,
-                        }
-                    }
-                    annotations::Scope::Preemption => Per::Preemption,
-                },
-                group: None,
-                iterations: matches!(
-                    a.scope,
-                    annotations::Scope::Entry
-                        | annotations::Scope::Call
-                        | annotations::Scope::Activation
-                ),
-            });
-            origin.insert(
-                (k, x),
-                format!(
-                    "{}:{}: `{}`{}{}{}",
-                    a.file,
-                    a.line,
-                    a.expression,
-                    a.within
-                        .as_ref()
-                        .map(|w| format!(" (its copy in `{w}`)"))
-                        .unwrap_or_default(),
-                    match a.scope {
-                        annotations::Scope::Activation => " per activation",
-                        annotations::Scope::Preemption => " per preemption",
-                        annotations::Scope::Call => " per call",
-                        annotations::Scope::Entry
-                        | annotations::Scope::Bytes
-                        | annotations::Scope::LoopEntry
-                        | annotations::Scope::Runs
-                        | annotations::Scope::SameLoop => "",
+                        bound: most,
+                        per: Per::Entry,
+                        group: None,
+                        iterations: false,
                     },
-                    a.counter
-                        .as_ref()
-                        .map(|c| format!(", counted in {c}"))
-                        .unwrap_or_default()
-                ),
-            );
+                    origin,
+                );
+            }
+            None => {
+                let unknown: Vec<&str> = self
+                    .copies
+                    .sites
+                    .iter()
+                    .filter(|c| c.bytes.is_none())
+                    .map(|c| c.at.as_str())
+                    .collect();
+                self.out.notes.insert(
+                    (k, x),
+                    format!(
+                        "block copy: sizes unknown at {} (annotate `// wcet-bound: EXPR bytes`)",
+                        unknown.join(", ")
+                    ),
+                );
+            }
         }
     }
-    // An annotation for one caller's copy that no loop took is stale: the function
-    // was renamed, or the line is no longer inlined there.
-    if let Some((file, line, w)) = within_line.keys().find(|key| !within_used.contains(*key)) {
-        anyhow::bail!(
-            "{file}:{line}: `{}{w}:` matches no loop of a function named `{w}`: \
-             the function was renamed or the line is no longer inlined into it",
-            annotations::WITHIN_MARKER
+
+    /// The annotated line loop `x` takes, if any: the first of its `keys` with an
+    /// annotation no enclosing loop `taken`, else a dependency's fact at any
+    /// frame of its candidates' inlining chains. A dependency's loop takes no
+    /// line a firmware loop of the function took; a firmware loop marks its line
+    /// taken.
+    fn annotated_line(
+        &self,
+        fl: &mut FunctionLoops<'a>,
+        x: usize,
+        keys: &[(String, u32)],
+        candidates: &[u32],
+        taken: &[(String, u32)],
+    ) -> Option<(String, u32)> {
+        // A loop of a dependency's code inlined into a firmware line takes no
+        // annotation of the firmware's: those bound the line's own loop.
+        let library = fl.library_loops[x];
+        let annotated = |key: &(String, u32)| self.index.annotation_of(key, &fl.fname).is_some();
+        let firmware_key = keys
+            .iter()
+            .filter(|key| !library || !fl.firmware_taken.contains(*key))
+            .find(|key| annotated(key) && !taken.contains(*key))
+            .cloned();
+        if let (false, Some(key)) = (library, &firmware_key) {
+            fl.firmware_taken.insert(key.clone());
+        }
+        firmware_key.or_else(|| {
+            // A dependency's loop, inlined or not: the facts about its code
+            // (at any frame of the inlining chain, innermost first).
+            candidates
+                .iter()
+                .flat_map(|&a| frames(self.ctx, a))
+                .map(|(file, line)| (short_path(&file), line))
+                .filter(|key| !library || !fl.firmware_taken.contains(key))
+                .find(|key| annotated(key) && !taken.contains(key))
+        })
+    }
+
+    /// Notes why loop `x`, neither recognised nor annotated, has no bound.
+    fn note_unbounded(
+        &mut self,
+        fl: &FunctionLoops<'a>,
+        x: usize,
+        keys: &[(String, u32)],
+        candidates: &[u32],
+        taken: &[(String, u32)],
+    ) {
+        let library = fl.library_loops[x];
+        let shares = keys.iter().any(|key| taken.contains(key));
+        let own: Vec<String> = keys
+            .iter()
+            .filter(|k| k.1 > 0 && !taken.contains(*k))
+            .map(|(f, l)| format!("{f}:{l}"))
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
+        let note = if library {
+            let inner = candidates
+                .first()
+                .and_then(|&a| frames(self.ctx, a).into_iter().next())
+                .map(|(f, l)| format!("{}:{l}", short_path(&f)))
+                .unwrap_or_default();
+            format!(
+                "a loop of a dependency's code ({inner}) inlined into a firmware line whose \
+                 annotation bounds a loop of the firmware's: state its bound as a dependency \
+                 fact about its own line (host_sim::wcet::annotations::dependency_facts), or \
+                 annotate a line of its own"
+            )
+        } else if shares {
+            format!(
+                "its only annotated line is its enclosing loop's: if the compiler split that \
+                 source loop into these nested binary loops, write `// wcet-bound: same loop` \
+                 on one of its own lines ({}), else annotate it there",
+                own.join(", ")
+            )
+        } else {
+            bounds::why_not(fl.func, &fl.ls[x])
+        };
+        self.out.notes.insert((fl.k, x), note);
+    }
+
+    /// `same loop` (annotated at `hit`): one source loop the compiler split into
+    /// nested binary loops (a `continue` path). It shares the bound of the
+    /// nearest enclosing loop that has one: their back edges together, against
+    /// that loop's entries.
+    fn share_enclosing_bound(
+        &mut self,
+        fl: &mut FunctionLoops<'a>,
+        x: usize,
+        hit: Option<(String, u32)>,
+    ) {
+        let (k, func, ls) = (fl.k, fl.func, fl.ls);
+        let facts = &self.out.facts;
+        let mut q = ls[x].parent;
+        while let Some(p) = q {
+            if facts.iter().any(|f| f.function == k && f.loop_index == p) {
+                break;
+            }
+            q = ls[p].parent;
+        }
+        let host = q.and_then(|p| {
+            facts
+                .iter()
+                .find(|f| f.function == k && f.loop_index == p)
+                .cloned()
+                .map(|f| (p, f))
+        });
+        let Some((p, hf)) = host else {
+            self.out.notes.insert(
+                (k, x),
+                "`same loop`, but no enclosing binary loop has a bound to share: \
+                 the loop is not nested in the one it was split from"
+                    .into(),
+            );
+            return;
+        };
+        let rep = hf.group.unwrap_or(p);
+        let origin = format!(
+            "{}:{}: `same loop`: shares the bound of the loop at {:#x}: {}",
+            hit.as_ref().map_or("?", |h| h.0.as_str()),
+            hit.as_ref().map_or(0, |h| h.1),
+            func.blocks.get(ls[rep].header).map_or(0, |b| b.start),
+            self.out.origin.get(&(k, rep)).cloned().unwrap_or_default()
+        );
+        fl.matched[x] = hit;
+        self.record(
+            k,
+            x,
+            LoopFact {
+                function: k,
+                loop_index: x,
+                group: Some(rep),
+                ..hf
+            },
+            origin,
         );
     }
-    // Retries per activation: each preemption can make the exclusive retry loop
-    // it interrupts retry once, and each `per preemption` annotation's loop
-    // retry its bound's times (one exception can do both).
+
+    /// Bounds loop `x` by the annotation `a` of its line `key`, unless it is a
+    /// bound `per call` in code inlined into a caller (then it notes why not).
+    fn bind_annotated(
+        &mut self,
+        fl: &FunctionLoops<'a>,
+        x: usize,
+        key: &(String, u32),
+        candidates: &[u32],
+        a: &annotations::Annotation,
+    ) {
+        let k = fl.k;
+        if let Some(w) = &a.within {
+            self.within_used.insert((a.file.clone(), a.line, w.clone()));
+        }
+        // Per call of the function that holds the loop: for an annotation of
+        // one caller's copy, that function is the caller named (this one).
+        if a.scope == annotations::Scope::Call && a.within.is_none() {
+            // Per call of the function that holds the loop: sound only if the
+            // binary function is that function, not a caller it was inlined into.
+            let inlined = candidates.iter().any(|&addr| {
+                let fr = frames(self.ctx, addr);
+                fr.iter()
+                    .position(|(file, line)| (short_path(file), *line) == *key)
+                    .is_some_and(|at| at + 1 < fr.len())
+            });
+            if inlined {
+                self.out.notes.insert(
+                    (k, x),
+                    format!(
+                        "{}:{}: a bound `per call` in code inlined into `{}`: mark its function #[inline(never)]",
+                        a.file, a.line, fl.func.demangled
+                    ),
+                );
+                return;
+            }
+        }
+        let fact = annotation_fact(a, &self.index.counter_groups, k, x);
+        self.record(k, x, fact, annotation_origin(a));
+    }
+}
+
+/// The loop fact annotation `a` states for loop `x` of function `k`.
+fn annotation_fact(
+    a: &annotations::Annotation,
+    counter_groups: &BTreeMap<String, usize>,
+    k: usize,
+    x: usize,
+) -> LoopFact {
+    LoopFact {
+        function: k,
+        loop_index: x,
+        bound: a.bound,
+        per: match a.scope {
+            // (`bytes` annotations are not in `by_line`.)
+            annotations::Scope::Entry
+            | annotations::Scope::Bytes
+            | annotations::Scope::LoopEntry
+            | annotations::Scope::Runs
+            | annotations::Scope::SameLoop => Per::Entry,
+            annotations::Scope::Call => Per::Call,
+            annotations::Scope::Activation => {
+                match a.counter.as_deref().and_then(|c| counter_groups.get(c)) {
+                    Some(&g) => Per::Counted(g),
+                    None => Per::Activation,
+                }
+            }
+            annotations::Scope::Preemption => Per::Preemption,
+        },
+        group: None,
+        iterations: matches!(
+            a.scope,
+            annotations::Scope::Entry | annotations::Scope::Call | annotations::Scope::Activation
+        ),
+    }
+}
+
+/// Where a bound from annotation `a` comes from, for the report.
+fn annotation_origin(a: &annotations::Annotation) -> String {
+    format!(
+        "{}:{}: `{}`{}{}{}",
+        a.file,
+        a.line,
+        a.expression,
+        a.within
+            .as_ref()
+            .map(|w| format!(" (its copy in `{w}`)"))
+            .unwrap_or_default(),
+        match a.scope {
+            annotations::Scope::Activation => " per activation",
+            annotations::Scope::Preemption => " per preemption",
+            annotations::Scope::Call => " per call",
+            annotations::Scope::Entry
+            | annotations::Scope::Bytes
+            | annotations::Scope::LoopEntry
+            | annotations::Scope::Runs
+            | annotations::Scope::SameLoop => "",
+        },
+        a.counter
+            .as_ref()
+            .map(|c| format!(", counted in {c}"))
+            .unwrap_or_default()
+    )
+}
+
+/// Retries per activation: each preemption can make the exclusive retry loop
+/// it interrupts retry once, and each `per preemption` annotation's loop
+/// retry its bound's times (one exception can do both). Returns the retries per
+/// preemption and, per task, per activation.
+fn retries_per_activation(annotations: &[annotations::Annotation]) -> (u64, Vec<(String, u64)>) {
     let per_preemption: u64 = 1 + annotations
         .iter()
         .filter(|a| a.scope == annotations::Scope::Preemption)
@@ -648,45 +982,150 @@ pub fn analyse(
         .iter()
         .map(|(n, _)| (n.to_string(), preemptions_of(n) * per_preemption))
         .collect();
-    let mut flow_facts = super::flow_facts::flow_facts(
-        &program,
-        &all_loops,
-        &facts,
-        &copies,
-        &annotations,
-        &origin,
-        &retries,
-    );
-    let mut loop_rows: BTreeMap<(usize, usize), LoopEntry> = BTreeMap::new();
-    let mut tasks = Vec::new();
-    let mut unresolved = Vec::new();
-    let mut recursions = Vec::new();
-    let units: Vec<(&str, &str, &str, Option<u64>)> = ECU_TASKS
-        .iter()
-        .map(|&(n, sym)| (n, sym, n, None))
-        .chain(ECU_SECTIONS.iter().copied())
-        .collect();
-    for (name, symbol, owner, budget) in units {
-        let roots = program.find(symbol);
-        let Some(&root) = roots.first() else {
-            anyhow::bail!(
-                "no function `{symbol}` (task `{name}`) in {}: is it the ECU application?",
-                elf.display()
-            );
-        };
-        // What a completing activation can run: the stop and fault paths excluded.
-        let reach = program.completing_reachable(&[root]);
+    (per_preemption, retries)
+}
+
+/// The bounded program the later phases read.
+struct Model<'a> {
+    program: &'a Program,
+    memory: &'a MemoryModel,
+    ctx: &'a addr2line::Loader,
+    all_loops: &'a [Vec<Loop>],
+    facts: &'a [LoopFact],
+    copies: &'a ipet::CopySizes,
+}
+
+/// The tasks' and sections' static figures, and what the loops and calls they
+/// reach show.
+#[derive(Default)]
+struct Units {
+    /// Every loop a task or section reaches, by `(function, loop)`.
+    loop_rows: BTreeMap<(usize, usize), LoopEntry>,
+    /// Per task and section.
+    tasks: Vec<TaskStatic>,
+    /// Indirect calls and jumps no rule resolves.
+    unresolved: Vec<String>,
+    /// Cycles of the call graph.
+    recursions: Vec<Vec<String>>,
+}
+
+/// What a task's reachable functions hold: its loops, counted.
+struct LoopCount {
+    loops: usize,
+    bounded: usize,
+    excluded: usize,
+    /// Irreducible cycles (function: blocks' addresses).
+    irreducible: Vec<String>,
+}
+
+/// A task's IPET bounds (instructions, then cycles with the costliest
+/// functions and blocks), or why there is none.
+#[derive(Default)]
+struct IpetFigures {
+    instructions: Option<u64>,
+    cycles: Option<u64>,
+    top: Vec<(String, f64)>,
+    top_entries: Vec<(String, f64)>,
+    top_blocks: Vec<TopBlock>,
+    refused: Vec<String>,
+}
+
+impl Units {
+    /// Bounds every task and section of the ECU application (each its root's
+    /// completing activation); refuses a root the ELF lacks.
+    fn bound_all(
+        &mut self,
+        elf: &Path,
+        model: &Model<'_>,
+        irreducible: &BTreeMap<usize, Vec<usize>>,
+        bounds: &LoopBounds,
+        per_preemption: u64,
+    ) -> Result<()> {
+        let units: Vec<(&str, &str, &str, Option<u64>)> = ECU_TASKS
+            .iter()
+            .map(|&(n, sym)| (n, sym, n, None))
+            .chain(ECU_SECTIONS.iter().copied())
+            .collect();
+        for (name, symbol, owner, budget) in units {
+            let roots = model.program.find(symbol);
+            let Some(&root) = roots.first() else {
+                anyhow::bail!(
+                    "no function `{symbol}` (task `{name}`) in {}: is it the ECU application?",
+                    elf.display()
+                );
+            };
+            // What a completing activation can run: the stop and fault paths excluded.
+            let reach = model.program.completing_reachable(&[root]);
+            let count = self.survey(model, irreducible, bounds, name, &reach);
+            let recs = model.program.recursions(&[root]);
+            for r in &recs {
+                if !self.recursions.contains(r) {
+                    self.recursions.push(r.clone());
+                }
+            }
+            let mut refused: Vec<String> = Vec::new();
+            if !count.irreducible.is_empty() {
+                refused.push(format!("{} irreducible cycle(s)", count.irreducible.len()));
+            }
+            let preemptions = preemptions_of(owner) * per_preemption;
+            let figures = if count.irreducible.is_empty() {
+                ipet_figures(model, root, preemptions)
+            } else {
+                IpetFigures::default()
+            };
+            refused.extend(figures.refused);
+            self.tasks.push(TaskStatic {
+                name: name.to_string(),
+                root: symbol.to_string(),
+                functions: reach.len(),
+                loops: count.loops,
+                bounded_loops: count.bounded,
+                excluded_loops: count.excluded,
+                irreducible: count.irreducible,
+                static_bound_instructions: figures.instructions,
+                static_bound_cycles: figures.cycles,
+                refused: (!refused.is_empty()).then(|| refused.join("; ")),
+                top_functions: figures.top,
+                top_functions_entries: figures.top_entries,
+                top_blocks: figures.top_blocks,
+                observed_activations: 0,
+                observed_max_instructions: None,
+                observed_max_cycles: None,
+                tightness: None,
+                budget_cycles: budget,
+                response_time_bound_us: None,
+                deadline_us: ECU_SCHEDULE
+                    .iter()
+                    .find(|t| t.0 == name)
+                    .map(|t| t.2 as f64),
+            });
+        }
+        Ok(())
+    }
+
+    /// Surveys the functions task `name` reaches (`reach`): collects their
+    /// unresolved indirect transfers and irreducible cycles, counts their loops
+    /// (those on paths that end the activation excluded) and adds each counted
+    /// loop to the loop rows.
+    fn survey(
+        &mut self,
+        model: &Model<'_>,
+        irreducible: &BTreeMap<usize, Vec<usize>>,
+        bounds: &LoopBounds,
+        name: &str,
+        reach: &[usize],
+    ) -> LoopCount {
         let mut n_loops = 0;
         let mut n_bounded = 0;
         let mut n_excluded = 0;
         let mut irr = Vec::new();
-        for &f in &reach {
-            let func = &program.functions[f];
+        for &f in reach {
+            let func = &model.program.functions[f];
             let live = reverse_post_order(func);
             for &b in &live {
                 for p in &func.blocks[b].problems {
-                    if !unresolved.contains(p) {
-                        unresolved.push(p.clone());
+                    if !self.unresolved.contains(p) {
+                        self.unresolved.push(p.clone());
                     }
                 }
             }
@@ -703,23 +1142,27 @@ pub fn analyse(
             }
             if !func.returns {
                 // Panic, fault and exit paths end the activation: excluded.
-                n_excluded += all_loops[f].len();
+                n_excluded += model.all_loops[f].len();
                 continue;
             }
             let live = func.completing();
-            for (x, l) in all_loops[f].iter().enumerate() {
+            for (x, l) in model.all_loops[f].iter().enumerate() {
                 if !live.get(l.header).copied().unwrap_or(false) {
                     // On a path that ends the activation: excluded.
                     n_excluded += 1;
                     continue;
                 }
                 n_loops += 1;
-                let fact = facts.iter().find(|q| q.function == f && q.loop_index == x);
+                let fact = model
+                    .facts
+                    .iter()
+                    .find(|q| q.function == f && q.loop_index == x);
                 if fact.is_some() {
                     n_bounded += 1;
                 }
-                let row = loop_rows.entry((f, x)).or_insert_with(|| {
-                    let (file, line) = source_line
+                let row = self.loop_rows.entry((f, x)).or_insert_with(|| {
+                    let (file, line) = bounds
+                        .source_line
                         .get(&(f, x))
                         .cloned()
                         .unwrap_or_else(|| ("?".into(), 0));
@@ -730,8 +1173,8 @@ pub fn analyse(
                         file,
                         line,
                         bound: fact.map(|q| q.bound),
-                        source: origin.get(&(f, x)).cloned(),
-                        why_unbounded: notes.get(&(f, x)).cloned(),
+                        source: bounds.origin.get(&(f, x)).cloned(),
+                        why_unbounded: bounds.notes.get(&(f, x)).cloned(),
                         irreducible: l.irreducible,
                         observed_max: None,
                     }
@@ -739,101 +1182,82 @@ pub fn analyse(
                 row.tasks.push(name.to_string());
             }
         }
-        let recs = program.recursions(&[root]);
-        for r in &recs {
-            if !recursions.contains(r) {
-                recursions.push(r.clone());
-            }
-        }
-        let mut refused: Vec<String> = Vec::new();
-        if !irr.is_empty() {
-            refused.push(format!("{} irreducible cycle(s)", irr.len()));
-        }
-        let preemptions = preemptions_of(owner) * per_preemption;
-        let (mut bi, mut bc, mut top, mut top_entries, mut top_blocks) =
-            (None, None, Vec::new(), Vec::new(), Vec::new());
-        if irr.is_empty() {
-            match ipet::task_bound(
-                &program,
-                &all_loops,
-                root,
-                &facts,
-                preemptions,
-                &copies,
-                Cost::Instructions,
-            ) {
-                Ok(b) => bi = Some(b.bound),
-                Err(e) => refused.push(match e {
-                    ipet::IpetError::Unbounded(l) => format!("{} loop(s) without a bound", l.len()),
-                    other => other.to_string(),
-                }),
-            }
-            if bi.is_some() {
-                match ipet::task_bound(
-                    &program,
-                    &all_loops,
-                    root,
-                    &facts,
-                    preemptions,
-                    &copies,
-                    Cost::Cycles,
-                ) {
-                    Ok(b) => {
-                        bc = Some(b.bound);
-                        top = b.by_function.into_iter().take(TOP_FUNCTIONS).collect();
-                        top_entries = b
-                            .entries_by_function
-                            .into_iter()
-                            .take(TOP_FUNCTIONS)
-                            .collect();
-                        top_blocks = b
-                            .by_block
-                            .into_iter()
-                            .map(|x| {
-                                let (file, line) = location(&ctx, x.address);
-                                TopBlock {
-                                    function: x.function,
-                                    address: x.address,
-                                    file: short_path(&file),
-                                    line,
-                                    count: x.count,
-                                    cycles: x.cost,
-                                }
-                            })
-                            .collect();
-                    }
-                    Err(e) => refused.push(e.to_string()),
-                }
-            }
-        }
-        tasks.push(TaskStatic {
-            name: name.to_string(),
-            root: symbol.to_string(),
-            functions: reach.len(),
+        LoopCount {
             loops: n_loops,
-            bounded_loops: n_bounded,
-            excluded_loops: n_excluded,
+            bounded: n_bounded,
+            excluded: n_excluded,
             irreducible: irr,
-            static_bound_instructions: bi,
-            static_bound_cycles: bc,
-            refused: (!refused.is_empty()).then(|| refused.join("; ")),
-            top_functions: top,
-            top_functions_entries: top_entries,
-            top_blocks,
-            observed_activations: 0,
-            observed_max_instructions: None,
-            observed_max_cycles: None,
-            tightness: None,
-            budget_cycles: budget,
-            response_time_bound_us: None,
-            deadline_us: ECU_SCHEDULE
-                .iter()
-                .find(|t| t.0 == name)
-                .map(|t| t.2 as f64),
-        });
+        }
     }
-    // The tasks' critical sections (interrupts disabled, RTIC locks), each with
-    // its bound: the blocking of the response-time analysis.
+}
+
+/// The IPET bounds of the activation entered at `root` with `preemptions`
+/// retries: in instructions, then (when that one exists) in cycles with the
+/// costliest functions and blocks.
+fn ipet_figures(model: &Model<'_>, root: usize, preemptions: u64) -> IpetFigures {
+    let mut out = IpetFigures::default();
+    let bound = |cost| {
+        ipet::task_bound(
+            model.program,
+            model.all_loops,
+            root,
+            model.facts,
+            preemptions,
+            model.copies,
+            cost,
+        )
+    };
+    match bound(Cost::Instructions) {
+        Ok(b) => out.instructions = Some(b.bound),
+        Err(e) => out.refused.push(match e {
+            ipet::IpetError::Unbounded(l) => format!("{} loop(s) without a bound", l.len()),
+            other => other.to_string(),
+        }),
+    }
+    if out.instructions.is_none() {
+        return out;
+    }
+    match bound(Cost::Cycles) {
+        Ok(b) => {
+            out.cycles = Some(b.bound);
+            out.top = b.by_function.into_iter().take(TOP_FUNCTIONS).collect();
+            out.top_entries = b
+                .entries_by_function
+                .into_iter()
+                .take(TOP_FUNCTIONS)
+                .collect();
+            out.top_blocks = b
+                .by_block
+                .into_iter()
+                .map(|x| {
+                    let (file, line) = location(model.ctx, x.address);
+                    TopBlock {
+                        function: x.function,
+                        address: x.address,
+                        file: short_path(&file),
+                        line,
+                        count: x.count,
+                        cycles: x.cost,
+                    }
+                })
+                .collect();
+        }
+        Err(e) => out.refused.push(e.to_string()),
+    }
+    out
+}
+
+/// The tasks' critical sections (interrupts disabled, RTIC locks), each with
+/// its bound: the blocking of the response-time analysis. Returned with each
+/// task's completing reach.
+fn bound_critical_sections(
+    model: &Model<'_>,
+    retries: &[(String, u64)],
+) -> (
+    Vec<super::critical::CriticalSection>,
+    Vec<(String, Vec<usize>)>,
+) {
+    let program = model.program;
     // A call inside a section that masks every interrupt retries nothing; inside a
     // lock, the higher priorities can preempt it: the retries of the task's
     // activation (the most preemptions of any task, a bound for every section).
@@ -845,9 +1269,17 @@ pub fn analyse(
             return b;
         }
         let r = if preemptible { most_retries } else { 0 };
-        let b = ipet::task_bound(&program, &all_loops, g, &facts, r, &copies, Cost::Cycles)
-            .ok()
-            .map(|b| b.bound);
+        let b = ipet::task_bound(
+            program,
+            model.all_loops,
+            g,
+            model.facts,
+            r,
+            model.copies,
+            Cost::Cycles,
+        )
+        .ok()
+        .map(|b| b.bound);
         callee_bounds.borrow_mut().insert((g, preemptible), b);
         b
     };
@@ -859,20 +1291,30 @@ pub fn analyse(
         })
         .collect();
     let locate = |a: u32| {
-        let (file, line) = location(&ctx, a);
+        let (file, line) = location(model.ctx, a);
         format!("{}:{line}", short_path(&file))
     };
     let critical_sections = super::critical::critical_sections(
-        &program,
-        &memory,
-        &all_loops,
-        &facts,
+        program,
+        model.memory,
+        model.all_loops,
+        model.facts,
         &task_reach,
         &callee,
         &locate,
     );
-    // Response times: each task's static bound, the SysTick above both, the
-    // critical sections of lower priorities as blocking.
+    (critical_sections, task_reach)
+}
+
+/// Response times: each task's static bound, the SysTick above both, the
+/// critical sections of lower priorities as blocking. Written into `tasks` only
+/// when every task and section has a bound.
+fn bound_response_times(
+    program: &Program,
+    tasks: &mut [TaskStatic],
+    critical_sections: &[super::critical::CriticalSection],
+    task_reach: &[(String, Vec<usize>)],
+) {
     let cycles_of = |n: &str| {
         tasks
             .iter()
@@ -885,7 +1327,7 @@ pub fn analyse(
             .iter()
             .find(|(t, _)| t == n)
             .map_or(super::cache::CACHE_LINES, |(_, reach)| {
-                super::cache::evicting_lines(&program, reach)
+                super::cache::evicting_lines(program, reach)
             });
         (lines * program.line_fetch_cycles) as f64
     };
@@ -921,61 +1363,112 @@ pub fn analyse(
             }
         }
     }
-    // Every bound checked against execution: per loop the largest back-edge count
-    // per entry seen, per task the largest activation with the same block costs.
-    let mut violations = Vec::new();
-    let handlers = super::trace_check::vector_table_handlers(elf, &program)?;
-    let roots: Vec<(String, usize)> = ECU_TASKS
-        .iter()
-        .filter_map(|(n, sym)| program.find(sym).first().map(|&r| (n.to_string(), r)))
-        .collect();
-    let counters: Vec<super::trace_check::CounterSpec> =
-        flow_facts.iter().map(|f| f.counter.clone()).collect();
-    let sections: Vec<(String, usize)> = ECU_SECTIONS
-        .iter()
-        .filter_map(|(n, sym, _, _)| program.find(sym).first().map(|&f| (n.to_string(), f)))
-        .collect();
-    let mut blocks_run: std::collections::BTreeSet<(usize, usize)> = Default::default();
-    let mut indirect_calls_traced: Vec<(String, String, String, u64)> = Vec::new();
-    for trace in traces {
+}
+
+/// What the traces showed, beyond the tasks' and loops' own figures.
+#[derive(Default)]
+struct Observed {
+    /// Bounds a trace exceeded, unexpected indirect targets.
+    violations: Vec<String>,
+    /// The `(function, block)` pairs the traces ran.
+    blocks_run: std::collections::BTreeSet<(usize, usize)>,
+    /// The indirect transfers taken: `(site, function, target, times)`.
+    indirect_calls_traced: Vec<(String, String, String, u64)>,
+}
+
+/// Replays QEMU traces against the bounded program: every bound checked against
+/// execution, per loop the largest back-edge count per entry seen, per task the
+/// largest activation with the same block costs.
+struct TraceReplay<'a> {
+    model: &'a Model<'a>,
+    /// The vector table's handlers.
+    handlers: Vec<usize>,
+    /// The tasks' roots.
+    roots: Vec<(String, usize)>,
+    /// The flow facts' counters.
+    counters: Vec<super::trace_check::CounterSpec>,
+    /// The sections' functions.
+    sections: Vec<(String, usize)>,
+}
+
+impl<'a> TraceReplay<'a> {
+    /// Finds what a replay follows: the handlers, the tasks' and sections'
+    /// functions and the flow facts' counters.
+    fn new(
+        elf: &Path,
+        model: &'a Model<'a>,
+        flow_facts: &[super::flow_facts::FlowFact],
+    ) -> Result<Self> {
+        let program = model.program;
+        let handlers = super::trace_check::vector_table_handlers(elf, program)?;
+        let roots: Vec<(String, usize)> = ECU_TASKS
+            .iter()
+            .filter_map(|(n, sym)| program.find(sym).first().map(|&r| (n.to_string(), r)))
+            .collect();
+        let counters: Vec<super::trace_check::CounterSpec> =
+            flow_facts.iter().map(|f| f.counter.clone()).collect();
+        let sections: Vec<(String, usize)> = ECU_SECTIONS
+            .iter()
+            .filter_map(|(n, sym, _, _)| program.find(sym).first().map(|&f| (n.to_string(), f)))
+            .collect();
+        Ok(Self {
+            model,
+            handlers,
+            roots,
+            counters,
+            sections,
+        })
+    }
+
+    /// Checks every trace of `traces` in turn.
+    fn check_all(
+        &self,
+        traces: &[PathBuf],
+        units: &mut Units,
+        flow_facts: &mut [super::flow_facts::FlowFact],
+        observed: &mut Observed,
+    ) -> Result<()> {
+        for trace in traces {
+            self.check(trace, units, flow_facts, observed)?;
+        }
+        Ok(())
+    }
+
+    /// Replays one trace: records the blocks it ran, its indirect transfers, its
+    /// activations and loops' counts, and every bound it exceeded.
+    fn check(
+        &self,
+        trace: &Path,
+        units: &mut Units,
+        flow_facts: &mut [super::flow_facts::FlowFact],
+        observed: &mut Observed,
+    ) -> Result<()> {
+        let program = self.model.program;
         let file = std::fs::File::open(trace)
             .with_context(|| format!("opening the QEMU trace {}", trace.display()))?;
         let check = super::trace_check::replay_trace(
             std::io::BufReader::with_capacity(1 << 20, file),
-            &program,
-            &all_loops,
-            &roots,
-            &handlers,
-            &counters,
-            &sections,
+            program,
+            self.model.all_loops,
+            &self.roots,
+            &self.handlers,
+            &self.counters,
+            &self.sections,
         )?;
-        blocks_run.extend(check.blocks_run.iter().copied());
-        for o in &check.indirect_calls {
-            let from = program
-                .functions
-                .get(o.from)
-                .map_or("?".to_string(), |f| f.demangled.clone());
-            let key = (format!("{:#x}", o.site), from, o.target_name.clone());
-            match indirect_calls_traced
-                .iter_mut()
-                .find(|(s, f, t, _)| (s, f, t) == (&key.0, &key.1, &key.2))
-            {
-                Some(row) => row.3 += o.count,
-                None => indirect_calls_traced.push((key.0, key.1, key.2, o.count)),
-            }
-        }
-        violations.extend(
-            super::indirect::unexpected_targets(&program, &check)
+        observed.blocks_run.extend(check.blocks_run.iter().copied());
+        record_indirect_calls(program, &check, &mut observed.indirect_calls_traced);
+        observed.violations.extend(
+            super::indirect::unexpected_targets(program, &check)
                 .into_iter()
                 .map(|v| format!("{}: {v}", trace.display())),
         );
-        violations.extend(super::flow_facts::observe(
-            &mut flow_facts,
+        observed.violations.extend(super::flow_facts::observe(
+            flow_facts,
             &check,
             &trace.display().to_string(),
         ));
         for sec in &check.sections {
-            if let Some(t) = tasks.iter_mut().find(|t| t.name == sec.name) {
+            if let Some(t) = units.tasks.iter_mut().find(|t| t.name == sec.name) {
                 t.observed_activations += sec.calls;
                 if sec.calls > 0 {
                     t.observed_max_instructions = Some(
@@ -989,46 +1482,18 @@ pub fn analyse(
             }
         }
         for o in &check.loops {
-            if let Some(row) = loop_rows.get_mut(&(o.function, o.loop_index)) {
+            if let Some(row) = units.loop_rows.get_mut(&(o.function, o.loop_index)) {
                 row.observed_max = Some(row.observed_max.unwrap_or(0).max(o.max_back_edges));
             }
         }
-        // A cap per activation is also a cap per entry (an entry is within one
-        // activation): both are checked against the largest count per entry.
-        let most_preemptions = ECU_TASKS
-            .iter()
-            .map(|(n, _)| preemptions_of(n))
-            .max()
-            .unwrap_or(0);
-        let entry_bounds: Vec<(usize, usize, u64)> = facts
-            .iter()
-            .map(|f| {
-                let shared = facts
-                    .iter()
-                    .any(|g| g.function == f.function && g.group == Some(f.loop_index));
-                let b = match f.per {
-                    Per::Preemption => f.bound.max(1) * most_preemptions * 2,
-                    _ => match (
-                        program.functions.get(f.function),
-                        all_loops
-                            .get(f.function)
-                            .and_then(|ls| ls.get(f.loop_index)),
-                    ) {
-                        (Some(func), Some(l)) => ipet::back_edges_per_entry(f, func, l, shared),
-                        _ => f.bound,
-                    },
-                };
-                (f.function, f.loop_index, b)
-            })
-            .collect();
-        violations.extend(
+        observed.violations.extend(
             check
-                .violations(&entry_bounds)
+                .violations(&entry_bounds(self.model))
                 .into_iter()
                 .map(|v| format!("{}: {v}", trace.display())),
         );
         for r in &check.roots {
-            if let Some(t) = tasks.iter_mut().find(|t| t.name == r.name) {
+            if let Some(t) = units.tasks.iter_mut().find(|t| t.name == r.name) {
                 t.observed_activations += r.activations;
                 t.observed_max_instructions = Some(
                     t.observed_max_instructions
@@ -1038,8 +1503,73 @@ pub fn analyse(
                 t.observed_max_cycles = Some(t.observed_max_cycles.unwrap_or(0).max(r.max_cycles));
             }
         }
+        Ok(())
     }
-    for t in &mut tasks {
+}
+
+/// Adds the indirect transfers of one trace's `check` to `traced`
+/// (`(site, function, target, times)`, one row per site, function and target).
+fn record_indirect_calls(
+    program: &Program,
+    check: &super::trace_check::TraceCheck,
+    traced: &mut Vec<(String, String, String, u64)>,
+) {
+    for o in &check.indirect_calls {
+        let from = program
+            .functions
+            .get(o.from)
+            .map_or("?".to_string(), |f| f.demangled.clone());
+        let key = (format!("{:#x}", o.site), from, o.target_name.clone());
+        match traced
+            .iter_mut()
+            .find(|(s, f, t, _)| (s, f, t) == (&key.0, &key.1, &key.2))
+        {
+            Some(row) => row.3 += o.count,
+            None => traced.push((key.0, key.1, key.2, o.count)),
+        }
+    }
+}
+
+/// Each loop fact's most back edges per entry, `(function, loop, bound)`, what a
+/// trace's counts are checked against. A cap per activation is also a cap per
+/// entry (an entry is within one activation): both are checked against the
+/// largest count per entry.
+fn entry_bounds(model: &Model<'_>) -> Vec<(usize, usize, u64)> {
+    let most_preemptions = ECU_TASKS
+        .iter()
+        .map(|(n, _)| preemptions_of(n))
+        .max()
+        .unwrap_or(0);
+    let facts = model.facts;
+    facts
+        .iter()
+        .map(|f| {
+            let shared = facts
+                .iter()
+                .any(|g| g.function == f.function && g.group == Some(f.loop_index));
+            let b = match f.per {
+                Per::Preemption => f.bound.max(1) * most_preemptions * 2,
+                _ => match (
+                    model.program.functions.get(f.function),
+                    model
+                        .all_loops
+                        .get(f.function)
+                        .and_then(|ls| ls.get(f.loop_index)),
+                ) {
+                    (Some(func), Some(l)) => ipet::back_edges_per_entry(f, func, l, shared),
+                    _ => f.bound,
+                },
+            };
+            (f.function, f.loop_index, b)
+        })
+        .collect()
+}
+
+/// Each task's tightness (its static bound over its largest traced activation),
+/// and a violation for each task a traced activation exceeded.
+fn check_tightness(tasks: &mut [TaskStatic]) -> Vec<String> {
+    let mut violations = Vec::new();
+    for t in tasks {
         if let (Some(b), Some(o)) = (t.static_bound_cycles, t.observed_max_cycles) {
             t.tightness = (o > 0).then(|| b as f64 / o as f64);
             if b < o {
@@ -1050,40 +1580,31 @@ pub fn analyse(
             }
         }
     }
-    let coverage = (!traces.is_empty()).then(|| {
-        let sites: Vec<super::coverage::LoopSite<'_>> = loop_rows
-            .iter()
-            .map(|(&key, row)| super::coverage::LoopSite {
-                key,
-                file: &row.file,
-                line: row.line,
-                tasks: &row.tasks,
-                traced: row.observed_max.is_some(),
-            })
-            .collect();
-        let locate = |a: u32| {
-            let (file, line) = location(&ctx, a);
-            (short_path(&file), line)
-        };
-        super::coverage::coverage(&program, &all_loops, &sites, &blocks_run, &locate)
-    });
-    let loops: Vec<LoopEntry> = loop_rows.into_values().collect();
-    Ok(StaticAnalysis {
-        traces: traces.iter().map(|t| t.display().to_string()).collect(),
-        violations,
-        flow_facts,
-        coverage,
-        critical_sections,
-        indirect_targets: taken.into_values().flatten().collect(),
-        indirect_calls_traced,
-        elf: elf.display().to_string(),
-        assumptions: memory.assumptions(),
-        unbounded_loops: loops.iter().filter(|l| l.bound.is_none()).count(),
-        tasks,
-        loops,
-        unresolved_indirect_calls: unresolved,
-        recursions,
-    })
+    violations
+}
+
+/// The loops the traces executed (`blocks_run`), and why each other one of
+/// `loop_rows` was not.
+fn loop_coverage(
+    model: &Model<'_>,
+    loop_rows: &BTreeMap<(usize, usize), LoopEntry>,
+    blocks_run: &std::collections::BTreeSet<(usize, usize)>,
+) -> super::coverage::Coverage {
+    let sites: Vec<super::coverage::LoopSite<'_>> = loop_rows
+        .iter()
+        .map(|(&key, row)| super::coverage::LoopSite {
+            key,
+            file: &row.file,
+            line: row.line,
+            tasks: &row.tasks,
+            traced: row.observed_max.is_some(),
+        })
+        .collect();
+    let locate = |a: u32| {
+        let (file, line) = location(model.ctx, a);
+        (short_path(&file), line)
+    };
+    super::coverage::coverage(model.program, model.all_loops, &sites, blocks_run, &locate)
 }
 
 impl StaticAnalysis {
@@ -1106,9 +1627,24 @@ impl StaticAnalysis {
         )
     }
 
-    /// The Markdown report.
+    /// The Markdown report: the tasks' bounds and the gaps, what the bounds are
+    /// made of, the flow facts, the coverage, the critical sections, the model
+    /// and the loops.
     pub fn markdown(&self) -> String {
         let mut s = String::new();
+        self.write_summary(&mut s);
+        self.write_contributors(&mut s);
+        self.write_flow_facts(&mut s);
+        self.write_coverage(&mut s);
+        self.write_critical_sections(&mut s);
+        self.write_model_and_loops(&mut s);
+        s
+    }
+
+    /// The report's head: the table of the tasks' and sections' bounds, then the
+    /// gaps (unbounded loops, unresolved calls, recursions, irreducible cycles) and
+    /// the violations the traces showed.
+    fn write_summary(&self, s: &mut String) {
         let _ = writeln!(s, "# Static worst-case timing analysis of `{}`\n", self.elf);
         let _ = writeln!(
             s,
@@ -1179,6 +1715,11 @@ impl StaticAnalysis {
                 let _ = writeln!(s, "- irreducible ({}): {i}", t.name);
             }
         }
+    }
+
+    /// What the bounds are made of: per task or section, its costliest functions
+    /// and blocks on the worst path.
+    fn write_contributors(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "\n## What the bounds are made of\n\nPer task or section, the functions whose \
@@ -1227,6 +1768,10 @@ impl StaticAnalysis {
                 let _ = writeln!(s);
             }
         }
+    }
+
+    /// The flow facts, with their traced maxima.
+    fn write_flow_facts(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "\n## Flow facts\n\nThe bounds over more than one loop entry, each counted in the \
@@ -1260,6 +1805,10 @@ impl StaticAnalysis {
                 f.sources.join("; ")
             );
         }
+    }
+
+    /// The loops no trace ran, and why (with traces only).
+    fn write_coverage(&self, s: &mut String) {
         if let Some(c) = &self.coverage {
             let _ = writeln!(
                 s,
@@ -1285,6 +1834,10 @@ impl StaticAnalysis {
                 );
             }
         }
+    }
+
+    /// The critical sections, with what they mask and their bounds.
+    fn write_critical_sections(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "\n## Critical sections\n\nThe code the tasks run with interrupts disabled or a \
@@ -1315,6 +1868,10 @@ impl StaticAnalysis {
                 )
             );
         }
+    }
+
+    /// The processor and memory model's assumptions, and every loop with its bound.
+    fn write_model_and_loops(&self, s: &mut String) {
         let _ = writeln!(s, "\n## Processor and memory model\n");
         for a in &self.assumptions {
             let _ = writeln!(s, "- {a}");
@@ -1338,7 +1895,6 @@ impl StaticAnalysis {
                     .unwrap_or("")
             );
         }
-        s
     }
 
     /// Writes `static.json` and `static.md` into `dir`.

@@ -164,6 +164,8 @@ pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
             "QP_MAX_REFACTORIZATIONS",
             u64::from(mpc::QP_MAX_REFACTORIZATIONS),
         ),
+        ("QP_APPEND_ROWS", mpc::QP_APPEND_ROWS),
+        ("QP_APPEND_GROUPS", mpc::QP_APPEND_GROUPS),
         ("MAX_OBSTACLES", obstacles::MAX_OBSTACLES as u64),
         ("MAX_VERTICES", obstacles::MAX_VERTICES as u64),
         (

@@ -581,6 +581,10 @@ fn table_targets(f: &RawFunction, at: usize) -> Vec<u32> {
 
 /// Builds every function's graph. `indirect` lists the targets of indirect calls;
 /// `demangle` gives the demangled name without hash.
+///
+/// Two passes: each function's block boundaries and control flow, then (once
+/// it is known which functions return) its blocks, a call of a function that
+/// never returns ending its block.
 pub fn build_program(
     raw: &[RawFunction],
     indirect: &IndirectTargets,
@@ -592,10 +596,175 @@ pub fn build_program(
         by_address.insert(f.address, k);
     }
     let demangled: Vec<String> = raw.iter().map(|f| demangle(&f.name)).collect();
-    // Indirect targets per caller.
-    let targets_of = |caller: usize, unresolved: &mut Vec<String>, what: String| -> Vec<usize> {
+    // First pass: per function, block boundaries and raw edges.
+    let pending: Vec<Pending> = raw.iter().map(find_leaders).collect();
+    let returns = which_return(raw, &pending, &by_address);
+    // Second pass: blocks, with calls to non-returning functions ending blocks.
+    let linker = Linker {
+        raw,
+        indirect,
+        memory,
+        demangled,
+        by_address,
+        returns,
+    };
+    let functions = raw
+        .iter()
+        .zip(&pending)
+        .enumerate()
+        .map(|(k, (f, p))| linker.build_function(k, f, p))
+        .collect();
+    Ok(Program {
+        functions,
+        line_fetch_cycles: memory.line_fetch_cycles(),
+        by_address: linker.by_address,
+    })
+}
+
+/// One function's first pass: where its blocks start and how each instruction
+/// transfers control.
+struct Pending {
+    leaders: BTreeSet<usize>,
+    /// Per instruction index: (flow, table targets).
+    flows: Vec<Flow>,
+    tables: BTreeMap<usize, Vec<u32>>,
+}
+
+/// Finds function `f`'s block leaders (the targets of its jumps and tables, the
+/// instructions after each transfer) and its instructions' flow.
+fn find_leaders(f: &RawFunction) -> Pending {
+    let mut leaders = BTreeSet::from([0usize]);
+    let index: HashMap<u32, usize> = f
+        .instructions
+        .iter()
+        .enumerate()
+        .map(|(k, i)| (i.address, k))
+        .collect();
+    let mut flows = Vec::with_capacity(f.instructions.len());
+    let mut tables = BTreeMap::new();
+    let mut it_left = 0usize;
+    for (k, i) in f.instructions.iter().enumerate() {
+        let in_it = it_left > 0;
+        it_left = it_left.saturating_sub(1);
+        if let Some(n) = it_length(i.base()) {
+            it_left = n;
+        }
+        let fl = flow(i, in_it);
+        match &fl {
+            Flow::Jump { target, .. } => {
+                if let Some(&t) = index.get(target) {
+                    leaders.insert(t);
+                }
+                leaders.insert(k + 1);
+            }
+            Flow::Return { .. } | Flow::IndirectJump { .. } | Flow::Trap => {
+                leaders.insert(k + 1);
+            }
+            Flow::Table => {
+                let ts = table_targets(f, k);
+                for t in &ts {
+                    if let Some(&x) = index.get(t) {
+                        leaders.insert(x);
+                    }
+                }
+                tables.insert(k, ts);
+                leaders.insert(k + 1);
+            }
+            Flow::Straight | Flow::Call(_) | Flow::IndirectCall => {}
+        }
+        flows.push(fl);
+    }
+    leaders.retain(|&l| l < f.instructions.len());
+    Pending {
+        leaders,
+        flows,
+        tables,
+    }
+}
+
+/// Which functions return: iterate to a fixed point (a function returns if some
+/// block returns, or tail-calls a function that returns).
+fn which_return(
+    raw: &[RawFunction],
+    pending: &[Pending],
+    by_address: &HashMap<u32, usize>,
+) -> Vec<bool> {
+    let mut returns = vec![false; raw.len()];
+    loop {
+        let mut changed = false;
+        for (k, f) in raw.iter().enumerate() {
+            if returns[k] {
+                continue;
+            }
+            let p = &pending[k];
+            let r = p.flows.iter().any(|fl| match fl {
+                Flow::Return { .. } => true,
+                Flow::Jump { target, .. } => {
+                    let inside = f.instructions.iter().any(|i| i.address == *target);
+                    !inside && by_address.get(target).is_some_and(|&t| returns[t])
+                }
+                Flow::IndirectJump { .. } => true,
+                _ => false,
+            });
+            if r {
+                returns[k] = true;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    returns
+}
+
+/// What the second pass links against: every function's address, demangled
+/// name and whether it returns, the indirect targets and the memory model.
+struct Linker<'a> {
+    raw: &'a [RawFunction],
+    indirect: &'a IndirectTargets,
+    memory: &'a MemoryModel,
+    demangled: Vec<String>,
+    by_address: HashMap<u32, usize>,
+    returns: Vec<bool>,
+}
+
+/// How one block's instructions transfer control.
+struct Transfers {
+    calls: Vec<usize>,
+    successors: Vec<usize>,
+    exit: Exit,
+    falls: bool,
+    /// The last transfer is conditional and, not taken, falls through.
+    conditional_transfer: bool,
+    jump_targets: Vec<usize>,
+    unresolved: Vec<String>,
+}
+
+/// One function's block structure in the second pass.
+struct Blocks<'p> {
+    /// Each block's first instruction.
+    starts: Vec<usize>,
+    /// Instruction index by address.
+    index: HashMap<u32, usize>,
+    /// The first pass.
+    pending: &'p Pending,
+}
+
+impl Blocks<'_> {
+    /// The block holding instruction `x`.
+    fn block_of_insn(&self, x: usize) -> usize {
+        self.starts.partition_point(|&s| s <= x) - 1
+    }
+}
+
+impl Linker<'_> {
+    /// Indirect targets of an indirect call or jump of `caller` (described by
+    /// `what`); an unlisted caller or target is noted in `unresolved`.
+    fn targets_of(&self, caller: usize, unresolved: &mut Vec<String>, what: String) -> Vec<usize> {
+        let (raw, demangled) = (self.raw, &self.demangled);
         let mut out = Vec::new();
-        let Some(callees) = indirect.callees_of(&demangled[caller]) else {
+        let Some(callees) = self.indirect.callees_of(&demangled[caller]) else {
             unresolved.push(what);
             return out;
         };
@@ -617,247 +786,190 @@ pub fn build_program(
         out.sort_unstable();
         out.dedup();
         out
-    };
-
-    // First pass: per function, block boundaries and raw edges.
-    struct Pending {
-        leaders: BTreeSet<usize>,
-        /// Per instruction index: (flow, table targets).
-        flows: Vec<Flow>,
-        tables: BTreeMap<usize, Vec<u32>>,
-    }
-    let mut pending = Vec::with_capacity(raw.len());
-    for f in raw {
-        let mut leaders = BTreeSet::from([0usize]);
-        let index: HashMap<u32, usize> = f
-            .instructions
-            .iter()
-            .enumerate()
-            .map(|(k, i)| (i.address, k))
-            .collect();
-        let mut flows = Vec::with_capacity(f.instructions.len());
-        let mut tables = BTreeMap::new();
-        let mut it_left = 0usize;
-        for (k, i) in f.instructions.iter().enumerate() {
-            let in_it = it_left > 0;
-            it_left = it_left.saturating_sub(1);
-            if let Some(n) = it_length(i.base()) {
-                it_left = n;
-            }
-            let fl = flow(i, in_it);
-            match &fl {
-                Flow::Jump { target, .. } => {
-                    if let Some(&t) = index.get(target) {
-                        leaders.insert(t);
-                    }
-                    leaders.insert(k + 1);
-                }
-                Flow::Return { .. } | Flow::IndirectJump { .. } | Flow::Trap => {
-                    leaders.insert(k + 1);
-                }
-                Flow::Table => {
-                    let ts = table_targets(f, k);
-                    for t in &ts {
-                        if let Some(&x) = index.get(t) {
-                            leaders.insert(x);
-                        }
-                    }
-                    tables.insert(k, ts);
-                    leaders.insert(k + 1);
-                }
-                Flow::Straight | Flow::Call(_) | Flow::IndirectCall => {}
-            }
-            flows.push(fl);
-        }
-        leaders.retain(|&l| l < f.instructions.len());
-        pending.push(Pending {
-            leaders,
-            flows,
-            tables,
-        });
     }
 
-    // Which functions return: iterate to a fixed point (a function returns if some
-    // block returns, or tail-calls a function that returns).
-    let mut returns = vec![false; raw.len()];
-    loop {
-        let mut changed = false;
-        for (k, f) in raw.iter().enumerate() {
-            if returns[k] {
-                continue;
-            }
-            let p = &pending[k];
-            let r = p.flows.iter().enumerate().any(|(x, fl)| match fl {
-                Flow::Return { .. } => true,
-                Flow::Jump { target, .. } => {
-                    let inside = f.instructions.iter().any(|i| i.address == *target);
-                    !inside && by_address.get(target).is_some_and(|&t| returns[t])
-                }
-                Flow::IndirectJump { .. } => true,
-                _ => {
-                    let _ = x;
-                    false
-                }
-            });
-            if r {
-                returns[k] = true;
-                changed = true;
-            }
-        }
-        if !changed {
-            break;
-        }
-    }
-
-    // Second pass: blocks, with calls to non-returning functions ending blocks.
-    let mut functions = Vec::with_capacity(raw.len());
-    for (k, f) in raw.iter().enumerate() {
-        let p = &pending[k];
+    /// Function `k`'s graph (`f` its instructions, `p` its first pass).
+    fn build_function(&self, k: usize, f: &RawFunction, p: &Pending) -> Function {
         let mut leaders = p.leaders.clone();
         for (x, fl) in p.flows.iter().enumerate() {
             if let Flow::Call(t) = fl {
-                if by_address.get(t).is_some_and(|&c| !returns[c]) {
+                if self.by_address.get(t).is_some_and(|&c| !self.returns[c]) {
                     leaders.insert(x + 1);
                 }
             }
         }
         leaders.retain(|&l| l < f.instructions.len());
-        let starts: Vec<usize> = leaders.iter().copied().collect();
-        let block_of_insn = |x: usize| starts.partition_point(|&s| s <= x) - 1;
-        let index: HashMap<u32, usize> = f
-            .instructions
-            .iter()
-            .enumerate()
-            .map(|(x, i)| (i.address, x))
+        let shape = Blocks {
+            starts: leaders.iter().copied().collect(),
+            index: f
+                .instructions
+                .iter()
+                .enumerate()
+                .map(|(x, i)| (i.address, x))
+                .collect(),
+            pending: p,
+        };
+        let blocks = (0..shape.starts.len())
+            .map(|b| self.build_block(k, f, &shape, b))
             .collect();
-        let mut blocks = Vec::with_capacity(starts.len());
-        for (b, &first) in starts.iter().enumerate() {
-            let end = starts.get(b + 1).copied().unwrap_or(f.instructions.len());
-            let mut calls = Vec::new();
-            let mut successors = Vec::new();
-            let mut exit = Exit::Internal;
-            let mut falls = true;
-            // The last transfer is conditional and, not taken, falls through.
-            let mut conditional_transfer = false;
-            let mut jump_targets: Vec<usize> = Vec::new();
-            let mut unresolved: Vec<String> = Vec::new();
-            for x in first..end {
-                let i = &f.instructions[x];
-                let here = || {
-                    format!(
-                        "{}: {:#x} {} {}",
-                        demangled[k], i.address, i.mnemonic, i.operands
-                    )
-                };
-                match &p.flows[x] {
-                    Flow::Call(t) => match by_address.get(t) {
-                        Some(&c) => {
-                            calls.push(c);
-                            if !returns[c] {
-                                exit = Exit::NoReturn;
-                                falls = false;
-                            }
-                        }
-                        None => unresolved.push(format!("{}: calls no function", here())),
-                    },
-                    Flow::IndirectCall => {
-                        calls.extend(targets_of(k, &mut unresolved, here()));
-                    }
-                    Flow::Jump {
-                        target,
-                        conditional,
-                    } => {
-                        if let Some(&t) = index.get(target) {
-                            successors.push(block_of_insn(t));
-                            jump_targets.push(block_of_insn(t));
-                        } else if let Some(&c) = by_address.get(target) {
-                            // A tail call of a function that never returns ends the
-                            // activation as a call of it does.
-                            exit = if returns[c] {
-                                Exit::TailCall(c)
-                            } else {
-                                calls.push(c);
-                                Exit::NoReturn
-                            };
-                        } else {
-                            unresolved.push(format!("{}: jumps to no function", here()));
-                        }
-                        falls = *conditional;
-                        conditional_transfer = *conditional;
-                    }
-                    Flow::Return { conditional } => {
-                        exit = Exit::Return;
-                        falls = *conditional;
-                        conditional_transfer = *conditional;
-                    }
-                    Flow::IndirectJump { conditional } => {
-                        exit = Exit::IndirectTail(targets_of(k, &mut unresolved, here()));
-                        falls = *conditional;
-                        conditional_transfer = *conditional;
-                    }
-                    Flow::Table => {
-                        let ts = p.tables.get(&x).cloned().unwrap_or_default();
-                        if ts.is_empty() {
-                            unresolved.push(format!("{} (jump table not found)", here()));
-                        }
-                        for t in ts {
-                            if let Some(&y) = index.get(&t) {
-                                successors.push(block_of_insn(y));
-                            }
-                        }
-                        falls = false;
-                    }
-                    Flow::Trap => {
-                        exit = Exit::NoReturn;
-                        falls = false;
-                    }
-                    Flow::Straight => {}
-                }
-            }
-            let fall_through = (falls && end < f.instructions.len()).then_some(b + 1);
-            if let Some(s) = fall_through {
-                successors.push(s);
-            }
-            successors.sort_unstable();
-            successors.dedup();
-            let insns = &f.instructions[first..end];
-            // A jump to the next block is the same edge taken or not: no saving.
-            let fall_through = fall_through.filter(|s| !jump_targets.contains(s));
-            let fall_through_saving = fall_through.map_or((0, 0), |_| {
-                let next = f.instructions.get(end);
-                memory.fall_through_saving(insns.last(), next, conditional_transfer)
-            });
-            let lines = memory.block_lines(insns);
-            blocks.push(Block {
-                start: insns.first().map_or(0, |i| i.address),
-                first,
-                end,
-                successors,
-                calls,
-                exit,
-                problems: unresolved,
-                instructions: insns.len() as u64,
-                cycles: memory.block_cycles(f.address, insns),
-                fetch_cycles: lines
-                    .map_or(0, |(lo, hi)| (hi - lo + 1) * memory.line_fetch_cycles()),
-                lines,
-                fall_through,
-                fall_through_saving,
-            });
-        }
-        functions.push(Function {
+        Function {
             name: f.name.clone(),
-            demangled: demangled[k].clone(),
+            demangled: self.demangled[k].clone(),
             aliases: f.aliases.clone(),
             address: f.address,
             instructions: f.instructions.clone(),
             blocks,
-            returns: returns[k],
-        });
+            returns: self.returns[k],
+        }
     }
-    Ok(Program {
-        functions,
-        line_fetch_cycles: memory.line_fetch_cycles(),
-        by_address,
-    })
+
+    /// Block `b` of function `k`: its edges, calls and exit, and its costs in
+    /// the memory model.
+    fn build_block(&self, k: usize, f: &RawFunction, shape: &Blocks<'_>, b: usize) -> Block {
+        let memory = self.memory;
+        let first = shape.starts[b];
+        let end = shape
+            .starts
+            .get(b + 1)
+            .copied()
+            .unwrap_or(f.instructions.len());
+        let Transfers {
+            calls,
+            mut successors,
+            exit,
+            falls,
+            conditional_transfer,
+            jump_targets,
+            unresolved,
+        } = self.transfers(k, f, shape, first, end);
+        let fall_through = (falls && end < f.instructions.len()).then_some(b + 1);
+        if let Some(s) = fall_through {
+            successors.push(s);
+        }
+        successors.sort_unstable();
+        successors.dedup();
+        let insns = &f.instructions[first..end];
+        // A jump to the next block is the same edge taken or not: no saving.
+        let fall_through = fall_through.filter(|s| !jump_targets.contains(s));
+        let fall_through_saving = fall_through.map_or((0, 0), |_| {
+            let next = f.instructions.get(end);
+            memory.fall_through_saving(insns.last(), next, conditional_transfer)
+        });
+        let lines = memory.block_lines(insns);
+        Block {
+            start: insns.first().map_or(0, |i| i.address),
+            first,
+            end,
+            successors,
+            calls,
+            exit,
+            problems: unresolved,
+            instructions: insns.len() as u64,
+            cycles: memory.block_cycles(f.address, insns),
+            fetch_cycles: lines.map_or(0, |(lo, hi)| (hi - lo + 1) * memory.line_fetch_cycles()),
+            lines,
+            fall_through,
+            fall_through_saving,
+        }
+    }
+
+    /// How instructions `first..end` of function `k` (one block) transfer
+    /// control: calls, successors within the function, exit, whether the block
+    /// falls through, and the transfers nothing resolves.
+    fn transfers(
+        &self,
+        k: usize,
+        f: &RawFunction,
+        shape: &Blocks<'_>,
+        first: usize,
+        end: usize,
+    ) -> Transfers {
+        let (by_address, returns) = (&self.by_address, &self.returns);
+        let mut t = Transfers {
+            calls: Vec::new(),
+            successors: Vec::new(),
+            exit: Exit::Internal,
+            falls: true,
+            conditional_transfer: false,
+            jump_targets: Vec::new(),
+            unresolved: Vec::new(),
+        };
+        for x in first..end {
+            let i = &f.instructions[x];
+            let here = || {
+                format!(
+                    "{}: {:#x} {} {}",
+                    self.demangled[k], i.address, i.mnemonic, i.operands
+                )
+            };
+            match &shape.pending.flows[x] {
+                Flow::Call(target) => match by_address.get(target) {
+                    Some(&c) => {
+                        t.calls.push(c);
+                        if !returns[c] {
+                            t.exit = Exit::NoReturn;
+                            t.falls = false;
+                        }
+                    }
+                    None => t.unresolved.push(format!("{}: calls no function", here())),
+                },
+                Flow::IndirectCall => {
+                    let ts = self.targets_of(k, &mut t.unresolved, here());
+                    t.calls.extend(ts);
+                }
+                Flow::Jump {
+                    target,
+                    conditional,
+                } => {
+                    if let Some(&y) = shape.index.get(target) {
+                        t.successors.push(shape.block_of_insn(y));
+                        t.jump_targets.push(shape.block_of_insn(y));
+                    } else if let Some(&c) = by_address.get(target) {
+                        // A tail call of a function that never returns ends the
+                        // activation as a call of it does.
+                        t.exit = if returns[c] {
+                            Exit::TailCall(c)
+                        } else {
+                            t.calls.push(c);
+                            Exit::NoReturn
+                        };
+                    } else {
+                        t.unresolved
+                            .push(format!("{}: jumps to no function", here()));
+                    }
+                    t.falls = *conditional;
+                    t.conditional_transfer = *conditional;
+                }
+                Flow::Return { conditional } => {
+                    t.exit = Exit::Return;
+                    t.falls = *conditional;
+                    t.conditional_transfer = *conditional;
+                }
+                Flow::IndirectJump { conditional } => {
+                    t.exit = Exit::IndirectTail(self.targets_of(k, &mut t.unresolved, here()));
+                    t.falls = *conditional;
+                    t.conditional_transfer = *conditional;
+                }
+                Flow::Table => {
+                    let ts = shape.pending.tables.get(&x).cloned().unwrap_or_default();
+                    if ts.is_empty() {
+                        t.unresolved
+                            .push(format!("{} (jump table not found)", here()));
+                    }
+                    for target in ts {
+                        if let Some(&y) = shape.index.get(&target) {
+                            t.successors.push(shape.block_of_insn(y));
+                        }
+                    }
+                    t.falls = false;
+                }
+                Flow::Trap => {
+                    t.exit = Exit::NoReturn;
+                    t.falls = false;
+                }
+                Flow::Straight => {}
+            }
+        }
+        t
+    }
 }

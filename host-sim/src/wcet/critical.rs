@@ -97,6 +97,10 @@ fn iterations(fact: &LoopFact, func: &super::cfg::Function, l: &Loop, shared: bo
 /// function `f` with `ceiling`, or why there is none. `callee(g, preemptible)`
 /// gives a called function's own bound in cycles: with the retries a preemption
 /// can cause when the section does not mask every interrupt.
+///
+/// The phases: find the section's blocks, repeat those of the loops wholly
+/// inside it, cost each block (its calls' bounds included), then take the
+/// longest path.
 #[allow(clippy::too_many_arguments)]
 fn section_bound(
     program: &Program,
@@ -109,89 +113,149 @@ fn section_bound(
     ceiling: u8,
     callee: &dyn Fn(usize, bool) -> Option<u64>,
 ) -> Result<u64, String> {
-    let func = &program.functions[f];
-    // The section's blocks: from `at` on, up to the instructions that end it
-    // (`ending`: the blocks it ends in, whose successors are not in it).
-    let mut inside: BTreeSet<usize> = BTreeSet::from([b0]);
-    let mut ending: BTreeSet<usize> = BTreeSet::new();
-    let mut stack = vec![b0];
-    while let Some(b) = stack.pop() {
-        let block = &func.blocks[b];
-        let from = if b == b0 { at + 1 } else { block.first };
-        if (from..block.end).any(|i| ends(func, i, ceiling)) {
-            ending.insert(b);
-            continue;
-        }
-        match &block.exit {
-            Exit::NoReturn => continue,
-            Exit::Return | Exit::TailCall(_) | Exit::IndirectTail(_) => {
-                return Err(format!(
-                    "it leaves `{}` at {:#x} before it ends",
-                    func.demangled, block.start
-                ))
-            }
-            Exit::Internal => {}
-        }
-        for &s in &block.successors {
-            if s == b0 {
-                return Err(format!(
-                    "it reaches its own start again at {:#x}: it spans a loop's iterations",
-                    block.start
-                ));
-            }
-            if inside.insert(s) {
-                stack.push(s);
-            }
-        }
-    }
-    // Loops wholly inside repeat their blocks; a back edge of another loop inside
-    // the section means it spans that loop's iterations.
-    let mut times: BTreeMap<usize, u64> = inside.iter().map(|&b| (b, 1)).collect();
-    let mut cut: BTreeSet<(usize, usize)> = BTreeSet::new();
-    for (x, l) in loops.iter().enumerate() {
-        let inner = l
-            .blocks
-            .iter()
-            .all(|b| inside.contains(b) && !ending.contains(b));
-        let crossing = l
-            .back_edges
-            .iter()
-            .any(|(t, h)| inside.contains(t) && !ending.contains(t) && inside.contains(h));
-        if !inner {
-            if crossing {
-                return Err(format!(
-                    "it spans iterations of the loop at {:#x} of `{}`",
-                    func.blocks[l.header].start, func.demangled
-                ));
-            }
-            continue;
-        }
-        let shared = facts.iter().any(|g| g.function == f && g.group == Some(x));
-        let Some(fact) = facts.iter().find(|q| q.function == f && q.loop_index == x) else {
-            return Err(format!(
-                "the loop at {:#x} inside it has no bound",
-                func.blocks[l.header].start
-            ));
-        };
-        let n = iterations(fact, func, l, shared);
-        for b in &l.blocks {
-            if let Some(t) = times.get_mut(b) {
-                *t = t.saturating_mul(n);
-            }
-        }
-        cut.extend(l.back_edges.iter().copied());
-    }
-    // Each block's cost: the cycles of its instructions inside the section (from
-    // the start, up to the end) and its calls' bounds there, times its repetitions.
+    let section = Section::find(&program.functions[f], b0, at, ceiling)?;
+    let (times, cut) = section.repetitions(loops, facts, f)?;
     let mut cost: BTreeMap<usize, u64> = BTreeMap::new();
-    for &b in &inside {
+    for &b in &section.inside {
+        let c = section.block_cost(program, memory, callee, b)?;
+        cost.insert(b, c.saturating_mul(times[&b]));
+    }
+    section.longest_path(&cost, &cut)
+}
+
+/// A critical section's blocks in its function.
+struct Section<'a> {
+    func: &'a super::cfg::Function,
+    /// The block it starts in.
+    b0: usize,
+    /// The instruction that starts it.
+    at: usize,
+    /// The priority it masks up to.
+    ceiling: u8,
+    /// Its blocks.
+    inside: BTreeSet<usize>,
+    /// The blocks it ends in, whose successors are not in it.
+    ending: BTreeSet<usize>,
+}
+
+impl<'a> Section<'a> {
+    /// The section's blocks: from `at` on, up to the instructions that end it;
+    /// refused if it leaves the function or reaches its own start again.
+    fn find(
+        func: &'a super::cfg::Function,
+        b0: usize,
+        at: usize,
+        ceiling: u8,
+    ) -> Result<Self, String> {
+        let mut inside: BTreeSet<usize> = BTreeSet::from([b0]);
+        let mut ending: BTreeSet<usize> = BTreeSet::new();
+        let mut stack = vec![b0];
+        while let Some(b) = stack.pop() {
+            let block = &func.blocks[b];
+            let from = if b == b0 { at + 1 } else { block.first };
+            if (from..block.end).any(|i| ends(func, i, ceiling)) {
+                ending.insert(b);
+                continue;
+            }
+            match &block.exit {
+                Exit::NoReturn => continue,
+                Exit::Return | Exit::TailCall(_) | Exit::IndirectTail(_) => {
+                    return Err(format!(
+                        "it leaves `{}` at {:#x} before it ends",
+                        func.demangled, block.start
+                    ))
+                }
+                Exit::Internal => {}
+            }
+            for &s in &block.successors {
+                if s == b0 {
+                    return Err(format!(
+                        "it reaches its own start again at {:#x}: it spans a loop's iterations",
+                        block.start
+                    ));
+                }
+                if inside.insert(s) {
+                    stack.push(s);
+                }
+            }
+        }
+        Ok(Self {
+            func,
+            b0,
+            at,
+            ceiling,
+            inside,
+            ending,
+        })
+    }
+
+    /// Loops wholly inside repeat their blocks; a back edge of another loop inside
+    /// the section means it spans that loop's iterations. Returns each block's
+    /// repetitions and the back edges of the loops inside (`loops` and `facts`:
+    /// function `f`'s loops and every loop bound).
+    #[allow(clippy::type_complexity)]
+    fn repetitions(
+        &self,
+        loops: &[Loop],
+        facts: &[LoopFact],
+        f: usize,
+    ) -> Result<(BTreeMap<usize, u64>, BTreeSet<(usize, usize)>), String> {
+        let (func, inside, ending) = (self.func, &self.inside, &self.ending);
+        let mut times: BTreeMap<usize, u64> = inside.iter().map(|&b| (b, 1)).collect();
+        let mut cut: BTreeSet<(usize, usize)> = BTreeSet::new();
+        for (x, l) in loops.iter().enumerate() {
+            let inner = l
+                .blocks
+                .iter()
+                .all(|b| inside.contains(b) && !ending.contains(b));
+            let crossing = l
+                .back_edges
+                .iter()
+                .any(|(t, h)| inside.contains(t) && !ending.contains(t) && inside.contains(h));
+            if !inner {
+                if crossing {
+                    return Err(format!(
+                        "it spans iterations of the loop at {:#x} of `{}`",
+                        func.blocks[l.header].start, func.demangled
+                    ));
+                }
+                continue;
+            }
+            let shared = facts.iter().any(|g| g.function == f && g.group == Some(x));
+            let Some(fact) = facts.iter().find(|q| q.function == f && q.loop_index == x) else {
+                return Err(format!(
+                    "the loop at {:#x} inside it has no bound",
+                    func.blocks[l.header].start
+                ));
+            };
+            let n = iterations(fact, func, l, shared);
+            for b in &l.blocks {
+                if let Some(t) = times.get_mut(b) {
+                    *t = t.saturating_mul(n);
+                }
+            }
+            cut.extend(l.back_edges.iter().copied());
+        }
+        Ok((times, cut))
+    }
+
+    /// Block `b`'s cost once: the cycles of its instructions inside the section
+    /// (from the start, up to the end) and its calls' bounds there.
+    fn block_cost(
+        &self,
+        program: &Program,
+        memory: &MemoryModel,
+        callee: &dyn Fn(usize, bool) -> Option<u64>,
+        b: usize,
+    ) -> Result<u64, String> {
+        let (func, at, ceiling) = (self.func, self.at, self.ceiling);
         let block = &func.blocks[b];
-        let (lo, from) = if b == b0 {
+        let (lo, from) = if b == self.b0 {
             (at, at + 1)
         } else {
             (block.first, block.first)
         };
-        let hi = if ending.contains(&b) {
+        let hi = if self.ending.contains(&b) {
             (from..block.end)
                 .find(|&i| ends(func, i, ceiling))
                 .map_or(block.end, |e| e + 1)
@@ -238,34 +302,43 @@ fn section_bound(
             };
             c = c.saturating_add(cost);
         }
-        cost.insert(b, c.saturating_mul(times[&b]));
+        Ok(c)
     }
-    // Longest path from the first block over the section's edges, the back edges
-    // of the loops inside cut (a DAG: any other cycle was refused above).
-    let next = |b: usize| -> Vec<usize> {
-        if ending.contains(&b) {
-            return Vec::new();
+
+    /// Longest path from the first block over the section's edges (each block
+    /// at its `cost`), the back edges of the loops inside (`cut`) cut: a DAG, any
+    /// other cycle was refused.
+    fn longest_path(
+        &self,
+        cost: &BTreeMap<usize, u64>,
+        cut: &BTreeSet<(usize, usize)>,
+    ) -> Result<u64, String> {
+        let (func, b0) = (self.func, self.b0);
+        let next = |b: usize| -> Vec<usize> {
+            if self.ending.contains(&b) {
+                return Vec::new();
+            }
+            func.blocks[b]
+                .successors
+                .iter()
+                .copied()
+                .filter(|s| self.inside.contains(s) && !cut.contains(&(b, *s)))
+                .collect()
+        };
+        let order = topological(func, &next, b0)?;
+        let mut memo: BTreeMap<usize, u64> = BTreeMap::new();
+        for &b in order.iter().rev() {
+            let best = next(b)
+                .iter()
+                .filter_map(|s| memo.get(s).copied())
+                .max()
+                .unwrap_or(0);
+            memo.insert(b, cost[&b].saturating_add(best));
         }
-        func.blocks[b]
-            .successors
-            .iter()
+        memo.get(&b0)
             .copied()
-            .filter(|s| inside.contains(s) && !cut.contains(&(b, *s)))
-            .collect()
-    };
-    let order = topological(func, &next, b0)?;
-    let mut memo: BTreeMap<usize, u64> = BTreeMap::new();
-    for &b in order.iter().rev() {
-        let best = next(b)
-            .iter()
-            .filter_map(|s| memo.get(s).copied())
-            .max()
-            .unwrap_or(0);
-        memo.insert(b, cost[&b].saturating_add(best));
+            .ok_or_else(|| "no path through it".to_string())
     }
-    memo.get(&b0)
-        .copied()
-        .ok_or_else(|| "no path through it".to_string())
 }
 
 /// The section's blocks in an order where each comes before its successors

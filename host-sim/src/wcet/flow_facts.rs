@@ -85,6 +85,9 @@ fn loop_edges(
 /// capped lines), `annotations` (for names and sources), `origin` (each loop
 /// fact's stated source) and `retries` (per task, the retries an activation can
 /// make, [`super::ecu_app::preemptions_of`] × the retries per preemption).
+///
+/// The loops' facts first (in `facts`' order), then the capped lines', then the
+/// shared counters (by group) and the retries.
 pub fn flow_facts(
     program: &Program,
     loops: &[Vec<Loop>],
@@ -94,59 +97,39 @@ pub fn flow_facts(
     origin: &BTreeMap<(usize, usize), String>,
     retries: &[(String, u64)],
 ) -> Vec<FlowFact> {
-    let name_of = |f: usize| {
-        program
-            .functions
-            .get(f)
-            .map_or("?".to_string(), |x| x.demangled.clone())
+    let mut b = FactBuilder {
+        program,
+        annotations,
+        out: Vec::new(),
+        groups: BTreeMap::new(),
+        retry: retry_fact(retries),
     };
-    let source = |k: usize| {
-        annotations.get(k).map_or("?".to_string(), |a| {
-            format!("{}:{}: `{}`", a.file, a.line, a.expression)
-        })
-    };
-    // Loops whose bound another loop of the same function shares.
-    let members_of = |f: usize, x: usize| -> Vec<&LoopFact> {
-        facts
-            .iter()
-            .filter(|g| g.function == f && g.group == Some(x))
-            .collect()
-    };
-    let mut out: Vec<FlowFact> = Vec::new();
-    // Counters shared by annotations (`counted in NAME`, and the caps per
-    // activation of a line), by their group's annotation index.
-    let mut groups: BTreeMap<usize, FlowFact> = BTreeMap::new();
-    let group_fact = |g: usize| {
-        let a = annotations.get(g);
-        let counter = a.and_then(|a| a.counter.clone());
-        let sources: Vec<String> = match &counter {
-            Some(c) => annotations
-                .iter()
-                .enumerate()
-                .filter(|(_, b)| b.counter.as_deref() == Some(c.as_str()))
-                .map(|(k, _)| source(k))
-                .collect(),
-            None => vec![source(g)],
-        };
-        FlowFact {
-            name: counter
-                .unwrap_or_else(|| a.map_or("?".to_string(), |a| format!("{}:{}", a.file, a.line))),
-            per: "activation".into(),
-            counts: String::new(),
-            bound: a.map_or(0, |a| a.bound),
-            bound_by_task: Vec::new(),
-            sources,
-            members: 0,
-            observed_max: None,
-            observed_scopes: 0,
-            counter: CounterSpec {
-                scope: CounterScope::Activation,
-                blocks: Vec::new(),
-                edges: Vec::new(),
-            },
-        }
-    };
-    let mut retry = FlowFact {
+    for fact in facts.iter().filter(|f| f.group.is_none()) {
+        b.add_loop_fact(loops, facts, origin, fact);
+    }
+    for cap in &copies.caps {
+        b.add_cap(copies, cap);
+    }
+    b.finish()
+}
+
+/// The flow facts found so far.
+struct FactBuilder<'a> {
+    program: &'a Program,
+    annotations: &'a [Annotation],
+    /// The facts of one loop or line each.
+    out: Vec<FlowFact>,
+    /// Counters shared by annotations (`counted in NAME`, and the caps per
+    /// activation of a line), by their group's annotation index.
+    groups: BTreeMap<usize, FlowFact>,
+    /// The retries an exception can cause, over every retry loop.
+    retry: FlowFact,
+}
+
+/// The fact over the retry loops (load/store-exclusive, `per preemption`), before
+/// any member: its bound is each task's `retries` per activation.
+fn retry_fact(retries: &[(String, u64)]) -> FlowFact {
+    FlowFact {
         name: "exception retries".into(),
         per: "activation".into(),
         counts: "back edges of the retry loops (load/store-exclusive, `per preemption`)".into(),
@@ -164,10 +147,81 @@ pub fn flow_facts(
             blocks: Vec::new(),
             edges: Vec::new(),
         },
+    }
+}
+
+/// Annotation `k` as a source (`file:line: `expression``).
+fn source(annotations: &[Annotation], k: usize) -> String {
+    annotations.get(k).map_or("?".to_string(), |a| {
+        format!("{}:{}: `{}`", a.file, a.line, a.expression)
+    })
+}
+
+/// The shared counter of group `g` (an annotation index), without members.
+fn group_fact(annotations: &[Annotation], g: usize) -> FlowFact {
+    let a = annotations.get(g);
+    let counter = a.and_then(|a| a.counter.clone());
+    let sources: Vec<String> = match &counter {
+        Some(c) => annotations
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| b.counter.as_deref() == Some(c.as_str()))
+            .map(|(k, _)| source(annotations, k))
+            .collect(),
+        None => vec![source(annotations, g)],
     };
-    for fact in facts.iter().filter(|f| f.group.is_none()) {
+    FlowFact {
+        name: counter
+            .unwrap_or_else(|| a.map_or("?".to_string(), |a| format!("{}:{}", a.file, a.line))),
+        per: "activation".into(),
+        counts: String::new(),
+        bound: a.map_or(0, |a| a.bound),
+        bound_by_task: Vec::new(),
+        sources,
+        members: 0,
+        observed_max: None,
+        observed_scopes: 0,
+        counter: CounterSpec {
+            scope: CounterScope::Activation,
+            blocks: Vec::new(),
+            edges: Vec::new(),
+        },
+    }
+}
+
+impl FactBuilder<'_> {
+    /// Function `f`'s demangled name.
+    fn name_of(&self, f: usize) -> String {
+        self.program
+            .functions
+            .get(f)
+            .map_or("?".to_string(), |x| x.demangled.clone())
+    }
+
+    /// The shared counter of group `g`, made on its first member.
+    fn group(&mut self, g: usize) -> &mut FlowFact {
+        let annotations = self.annotations;
+        self.groups
+            .entry(g)
+            .or_insert_with(|| group_fact(annotations, g))
+    }
+
+    /// The flow fact of one loop's bound `fact` (with the loops that share it),
+    /// unless it is a bound per entry alone; `origin` gives its stated source.
+    fn add_loop_fact(
+        &mut self,
+        loops: &[Vec<Loop>],
+        facts: &[LoopFact],
+        origin: &BTreeMap<(usize, usize), String>,
+        fact: &LoopFact,
+    ) {
+        let program = self.program;
         let (f, x) = (fact.function, fact.loop_index);
-        let shared = members_of(f, x);
+        // Loops whose bound another loop of the same function shares.
+        let shared: Vec<&LoopFact> = facts
+            .iter()
+            .filter(|g| g.function == f && g.group == Some(x))
+            .collect();
         let mut edges = loop_edges(program, loops, fact, !shared.is_empty());
         for m in &shared {
             edges.extend(loop_edges(program, loops, m, true));
@@ -179,9 +233,9 @@ pub fn flow_facts(
             // nested loops split from it (`same loop`), their back edges together
             // are a flow fact per entry of this loop.
             Per::Entry if shared.is_empty() => {}
-            Per::Entry => out.push(FlowFact {
+            Per::Entry => self.out.push(FlowFact {
                 name: stated_name(&stated),
-                per: format!("entry of a loop of `{}`", name_of(f)),
+                per: format!("entry of a loop of `{}`", self.name_of(f)),
                 counts: format!(
                     "iterations of one source loop split into {n} binary loops (`same loop`)"
                 ),
@@ -198,23 +252,26 @@ pub fn flow_facts(
                 },
             }),
             Per::Preemption => {
-                retry.counter.edges.extend(edges);
-                retry.members += n;
+                self.retry.counter.edges.extend(edges);
+                self.retry.members += n;
             }
             Per::Counted(g) => {
-                let e = groups.entry(g).or_insert_with(|| group_fact(g));
+                let e = self.group(g);
                 e.counter.edges.extend(edges);
                 e.members += n;
             }
             Per::Activation | Per::Call => {
                 let (per, scope) = match fact.per {
-                    Per::Call => (format!("call of `{}`", name_of(f)), CounterScope::Call(f)),
+                    Per::Call => (
+                        format!("call of `{}`", self.name_of(f)),
+                        CounterScope::Call(f),
+                    ),
                     _ => ("activation".to_string(), CounterScope::Activation),
                 };
-                out.push(FlowFact {
+                self.out.push(FlowFact {
                     name: stated_name(&stated),
                     per,
-                    counts: format!("iterations of a loop of `{}`", name_of(f)),
+                    counts: format!("iterations of a loop of `{}`", self.name_of(f)),
                     bound: fact.bound,
                     bound_by_task: Vec::new(),
                     sources: vec![stated],
@@ -230,12 +287,15 @@ pub fn flow_facts(
             }
         }
     }
-    for cap in &copies.caps {
+
+    /// The flow fact of one capped line `cap`: its own, or a member of its
+    /// activation group's counter.
+    fn add_cap(&mut self, copies: &CopySizes, cap: &ipet::BlockCap) {
         let blocks = cap.blocks.iter().map(|&b| (cap.function, b));
         match cap.activation_group {
             Some(g) => {
                 let g = copies.counters.get(&g).copied().unwrap_or(g);
-                let e = groups.entry(g).or_insert_with(|| group_fact(g));
+                let e = self.group(g);
                 e.counter.blocks.extend(blocks);
                 e.members += cap.blocks.len();
             }
@@ -244,12 +304,14 @@ pub fn flow_facts(
                     Some(l) => CounterScope::LoopEntry(cap.function, l),
                     None => CounterScope::Call(cap.function),
                 };
-                let stated = cap.annotation.map_or_else(String::new, source);
-                out.push(FlowFact {
+                let stated = cap
+                    .annotation
+                    .map_or_else(String::new, |k| source(self.annotations, k));
+                self.out.push(FlowFact {
                     name: stated_name(&stated),
                     per: match cap.loop_index {
-                        Some(_) => format!("loop entry in `{}`", name_of(cap.function)),
-                        None => format!("call of `{}`", name_of(cap.function)),
+                        Some(_) => format!("loop entry in `{}`", self.name_of(cap.function)),
+                        None => format!("call of `{}`", self.name_of(cap.function)),
                     },
                     counts: "runs of the line's calls".into(),
                     bound: cap.bound,
@@ -267,24 +329,31 @@ pub fn flow_facts(
             }
         }
     }
-    for mut g in groups.into_values() {
-        g.counts = match (g.counter.edges.is_empty(), g.counter.blocks.is_empty()) {
-            (false, false) => "loop iterations and runs of capped calls, summed".into(),
-            (false, true) => "loop iterations, summed over the loops".into(),
-            _ => "runs of the line's calls, every inlined copy".into(),
-        };
-        out.push(g);
+
+    /// The facts: each loop's and line's, then the shared counters (named for
+    /// what they count) and the retries if any loop retries; each counter's
+    /// edges and blocks sorted, once each.
+    fn finish(self) -> Vec<FlowFact> {
+        let mut out = self.out;
+        for mut g in self.groups.into_values() {
+            g.counts = match (g.counter.edges.is_empty(), g.counter.blocks.is_empty()) {
+                (false, false) => "loop iterations and runs of capped calls, summed".into(),
+                (false, true) => "loop iterations, summed over the loops".into(),
+                _ => "runs of the line's calls, every inlined copy".into(),
+            };
+            out.push(g);
+        }
+        if self.retry.members > 0 {
+            out.push(self.retry);
+        }
+        for f in &mut out {
+            f.counter.edges.sort_unstable();
+            f.counter.edges.dedup();
+            f.counter.blocks.sort_unstable();
+            f.counter.blocks.dedup();
+        }
+        out
     }
-    if retry.members > 0 {
-        out.push(retry);
-    }
-    for f in &mut out {
-        f.counter.edges.sort_unstable();
-        f.counter.edges.dedup();
-        f.counter.blocks.sort_unstable();
-        f.counter.blocks.dedup();
-    }
-    out
 }
 
 /// Folds one trace's counts into `facts` (whose counters were given to the

@@ -267,6 +267,11 @@ fn add_to_group(
 }
 
 /// The worst-case cost of one activation of the task entered at `root`.
+///
+/// The phases: refuse a recursion or a loop or copy without a bound, build the
+/// linear program function by function (flow, block caps, loop bounds), add the
+/// constraints over the whole activation (copies, caps per activation, retries,
+/// calls), then solve it and rank the functions and blocks by their share.
 pub fn task_bound(
     program: &Program,
     loops: &[Vec<Loop>],
@@ -280,97 +285,81 @@ pub fn task_bound(
         return Err(IpetError::Recursion(r));
     }
     let reach = program.completing_reachable(&[root]);
-    let completing: HashMap<usize, Vec<bool>> = reach
-        .iter()
-        .map(|&f| (f, program.functions[f].completing()))
-        .collect();
-    let fact_of: HashMap<(usize, usize), &LoopFact> = facts
-        .iter()
-        .map(|f| ((f.function, f.loop_index), f))
-        .collect();
-    let fact_ref = &fact_of;
-    let missing: Vec<String> = reach
-        .iter()
-        .flat_map(|&f| {
-            let func = &program.functions[f];
-            // A function that never returns is entered only from paths the
-            // program excludes (count 0): its loops need no bound.
-            let needed = if func.returns { loops.get(f) } else { None };
-            let live = &completing[&f];
-            needed
-                .map(|ls| ls.as_slice())
-                .unwrap_or(&[])
-                .iter()
-                .enumerate()
-                .filter(move |(_, l)| live.get(l.header).copied().unwrap_or(false))
-                .filter(move |(k, _)| !fact_ref.contains_key(&(f, *k)))
-                .map(move |(_, l)| {
-                    format!(
-                        "{} loop at {:#x}",
-                        func.demangled,
-                        func.blocks.get(l.header).map_or(0, |b| b.start)
-                    )
-                })
-        })
-        .collect();
-    let mut missing = missing;
-    let in_reach: std::collections::HashSet<usize> = reach.iter().copied().collect();
-    let sites: Vec<&CopySite> = copies
-        .sites
-        .iter()
-        .filter(|c| in_reach.contains(&c.function))
-        .filter(|c| {
-            completing[&c.function]
-                .get(c.block)
-                .copied()
-                .unwrap_or(false)
-        })
-        .collect();
-    missing.extend(
-        sites
-            .iter()
-            .filter(|c| c.bytes.is_none())
-            .map(|c| format!("block copy of unknown size at {}", c.at)),
-    );
-    if !missing.is_empty() {
-        return Err(IpetError::Unbounded(missing));
-    }
-
-    let persistence = Persistence::new(program, loops);
-    let mut vars = ProblemVariables::new();
-    // Every variable is `≥ 0`: the relaxation rebuilds them from their count.
-    let mut relaxed = 0usize;
-    let mut constraints = Vec::new();
-    let mut objective = Expression::from(0.0);
-    let mut n_entry: HashMap<usize, Variable> = HashMap::new();
+    let mut lp = Ipet::new(program, loops, root, facts, copies, cost, &reach);
+    let sites = lp.check_bounded(&reach)?;
     for &f in &reach {
-        // Integer: see the module's documentation. `relaxed` counts the same
-        // variables, for the branch and bound if the solver's own fails.
-        n_entry.insert(f, vars.add(variable().integer().min(0.0)));
-        relaxed += 1;
+        lp.add_function(f);
     }
-    // Incoming calls per function.
-    let mut calls_into: HashMap<usize, Expression> = HashMap::new();
-    let mut per_function: Vec<(usize, Expression)> = Vec::new();
-    // (function, block, count, cost per execution) of every costly block.
-    let mut per_block: Vec<(usize, usize, Variable, u64)> = Vec::new();
-    let mut count = 0usize;
-    // Retries per preemption: one constraint over all such loops.
-    let mut retry_edges = Expression::from(0.0);
-    let mut any_retry = false;
-    // Every block's count, for the copy sites; the copy functions' back edges.
-    let mut x_all: HashMap<(usize, usize), Variable> = HashMap::new();
-    // Per copy function: its loops' back edges weighted by the bytes a trip
-    // stores; and the calls it gets from the family's other functions: bytes
-    // known only for the hand-over of a word copy's remainder to `memcpy`
-    // ([`REMAINDER_BYTES`]) or a forwarder's call, else unknown.
-    let mut copy_loops: std::collections::BTreeMap<usize, Expression> =
-        std::collections::BTreeMap::new();
-    let mut handoffs: HashMap<usize, Expression> = HashMap::new();
-    let mut unknown_handoff: std::collections::HashSet<usize> = std::collections::HashSet::new();
-    // (to, from): `from` forwards its calls to `to` unchanged.
-    let mut forwards: Vec<(usize, usize)> = Vec::new();
-    let mut family_call = |from: usize, to: usize, count: Expression| {
+    lp.add_copy_budgets(&sites);
+    lp.add_activation_caps(retries);
+    lp.add_call_counts(&reach);
+    lp.solve(&reach)
+}
+
+/// The integer linear program of one task's activation, built one function at a
+/// time: its variables, constraints and objective, and what the report ranks.
+struct Ipet<'a> {
+    program: &'a Program,
+    loops: &'a [Vec<Loop>],
+    root: usize,
+    copies: &'a CopySizes,
+    cost: Cost,
+    /// Per reachable function, which of its blocks can complete the activation.
+    completing: HashMap<usize, Vec<bool>>,
+    /// The loop bounds by `(function, loop)`.
+    fact_of: HashMap<(usize, usize), &'a LoopFact>,
+    /// The loops that keep their lines cached.
+    persistence: Persistence,
+    vars: ProblemVariables,
+    /// Every variable is `≥ 0`: the relaxation rebuilds them from their count.
+    relaxed: usize,
+    constraints: Vec<good_lp::Constraint>,
+    objective: Expression,
+    /// Each reachable function's entry count.
+    n_entry: HashMap<usize, Variable>,
+    /// Incoming calls per function.
+    calls_into: HashMap<usize, Expression>,
+    /// Each function's own cost.
+    per_function: Vec<(usize, Expression)>,
+    /// (function, block, count, cost per execution) of every costly block.
+    per_block: Vec<(usize, usize, Variable, u64)>,
+    /// Retries per preemption: one constraint over all such loops.
+    retry_edges: Expression,
+    any_retry: bool,
+    /// Every block's count, for the copy sites.
+    x_all: HashMap<(usize, usize), Variable>,
+    /// Per copy function: its loops' back edges weighted by the bytes a trip
+    /// stores.
+    copy_loops: std::collections::BTreeMap<usize, Expression>,
+    /// The calls between the copy functions.
+    family: FamilyCalls,
+    /// Per activation group: its bound and the runs of its blocks.
+    group_runs: std::collections::BTreeMap<usize, (u64, Expression)>,
+}
+
+/// The calls a copy function gets from the family's other functions: bytes
+/// known only for the hand-over of a word copy's remainder to `memcpy`
+/// ([`REMAINDER_BYTES`]) or a forwarder's call, else unknown.
+#[derive(Default)]
+struct FamilyCalls {
+    /// Per function, the bytes handed over to it.
+    handoffs: HashMap<usize, Expression>,
+    /// The functions called with bytes unknown.
+    unknown_handoff: std::collections::HashSet<usize>,
+    /// (to, from): `from` forwards its calls to `to` unchanged.
+    forwards: Vec<(usize, usize)>,
+}
+
+impl FamilyCalls {
+    /// Notes a call (`count` times) from `from` to `to`, if both copy.
+    fn note(
+        &mut self,
+        program: &Program,
+        copies: &CopySizes,
+        from: usize,
+        to: usize,
+        count: Expression,
+    ) {
         if !copies.family.contains(&from) || !copies.family.contains(&to) {
             return;
         }
@@ -379,24 +368,189 @@ pub fn task_bound(
             base_name(&program.functions[to].demangled),
         );
         if is_word_copy(caller) && callee == "memcpy" {
-            *handoffs.entry(to).or_insert_with(|| Expression::from(0.0)) +=
-                REMAINDER_BYTES as f64 * count;
+            *self
+                .handoffs
+                .entry(to)
+                .or_insert_with(|| Expression::from(0.0)) += REMAINDER_BYTES as f64 * count;
         } else if is_forwarder(caller, callee) {
-            forwards.push((to, from));
+            self.forwards.push((to, from));
         } else {
-            unknown_handoff.insert(to);
+            self.unknown_handoff.insert(to);
         }
-    };
-    // Per activation group: its bound and the runs of its blocks.
-    let mut group_runs: std::collections::BTreeMap<usize, (u64, Expression)> =
-        std::collections::BTreeMap::new();
-    for &f in &reach {
+    }
+}
+
+/// One function's block and edge counts in the program.
+struct FunctionFlow {
+    f: usize,
+    /// Per live block, its count.
+    x: HashMap<usize, Variable>,
+    /// Per edge, its count.
+    edges: HashMap<(usize, usize), Variable>,
+    /// The function's own cost.
+    fcost: Expression,
+}
+
+impl FunctionFlow {
+    /// A loop's entries: its entry edges (the function's entry for a loop
+    /// headed at block 0).
+    fn entries_of(&self, l: &Loop, n_entry: &HashMap<usize, Variable>) -> Expression {
+        let mut entries = Expression::from(0.0);
+        for &(p, h) in &l.entry_edges {
+            if p == usize::MAX {
+                entries += n_entry[&self.f];
+            } else if let Some(&e) = self.edges.get(&(p, h)) {
+                entries += e;
+            }
+        }
+        entries
+    }
+}
+
+impl<'a> Ipet<'a> {
+    /// An empty program over the functions of `reach`, with their entry counts.
+    fn new(
+        program: &'a Program,
+        loops: &'a [Vec<Loop>],
+        root: usize,
+        facts: &'a [LoopFact],
+        copies: &'a CopySizes,
+        cost: Cost,
+        reach: &[usize],
+    ) -> Self {
+        let completing: HashMap<usize, Vec<bool>> = reach
+            .iter()
+            .map(|&f| (f, program.functions[f].completing()))
+            .collect();
+        let fact_of: HashMap<(usize, usize), &LoopFact> = facts
+            .iter()
+            .map(|f| ((f.function, f.loop_index), f))
+            .collect();
+        let mut lp = Self {
+            program,
+            loops,
+            root,
+            copies,
+            cost,
+            completing,
+            fact_of,
+            persistence: Persistence::new(program, loops),
+            vars: ProblemVariables::new(),
+            relaxed: 0,
+            constraints: Vec::new(),
+            objective: Expression::from(0.0),
+            n_entry: HashMap::new(),
+            calls_into: HashMap::new(),
+            per_function: Vec::new(),
+            per_block: Vec::new(),
+            retry_edges: Expression::from(0.0),
+            any_retry: false,
+            x_all: HashMap::new(),
+            copy_loops: Default::default(),
+            family: FamilyCalls::default(),
+            group_runs: Default::default(),
+        };
+        for &f in reach {
+            // Integer: see the module's documentation. `relaxed` counts the same
+            // variables, for the branch and bound if the solver's own fails.
+            lp.n_entry
+                .insert(f, lp.vars.add(variable().integer().min(0.0)));
+            lp.relaxed += 1;
+        }
+        lp
+    }
+
+    /// Refuses the task when a loop of a function that can complete has no
+    /// bound or a block copy it can make has no size; else returns the copy
+    /// sites on its completing paths.
+    fn check_bounded(&self, reach: &[usize]) -> Result<Vec<&'a CopySite>, IpetError> {
+        let (program, loops) = (self.program, self.loops);
+        let completing = &self.completing;
+        let fact_ref = &self.fact_of;
+        let mut missing: Vec<String> = reach
+            .iter()
+            .flat_map(|&f| {
+                let func = &program.functions[f];
+                // A function that never returns is entered only from paths the
+                // program excludes (count 0): its loops need no bound.
+                let needed = if func.returns { loops.get(f) } else { None };
+                let live = &completing[&f];
+                needed
+                    .map(|ls| ls.as_slice())
+                    .unwrap_or(&[])
+                    .iter()
+                    .enumerate()
+                    .filter(move |(_, l)| live.get(l.header).copied().unwrap_or(false))
+                    .filter(move |(k, _)| !fact_ref.contains_key(&(f, *k)))
+                    .map(move |(_, l)| {
+                        format!(
+                            "{} loop at {:#x}",
+                            func.demangled,
+                            func.blocks.get(l.header).map_or(0, |b| b.start)
+                        )
+                    })
+            })
+            .collect();
+        let in_reach: std::collections::HashSet<usize> = reach.iter().copied().collect();
+        let sites: Vec<&CopySite> = self
+            .copies
+            .sites
+            .iter()
+            .filter(|c| in_reach.contains(&c.function))
+            .filter(|c| {
+                completing[&c.function]
+                    .get(c.block)
+                    .copied()
+                    .unwrap_or(false)
+            })
+            .collect();
+        missing.extend(
+            sites
+                .iter()
+                .filter(|c| c.bytes.is_none())
+                .map(|c| format!("block copy of unknown size at {}", c.at)),
+        );
+        if !missing.is_empty() {
+            return Err(IpetError::Unbounded(missing));
+        }
+        Ok(sites)
+    }
+
+    /// Adds function `f`: its flow, its loops' cached lines, its block caps and
+    /// its loop bounds.
+    fn add_function(&mut self, f: usize) {
+        let mut flow = self.add_flow(f);
+        self.add_persistent_lines(&mut flow);
+        self.add_block_caps(&flow);
+        self.add_loop_bounds(&flow);
+        self.per_function.push((f, flow.fcost));
+    }
+
+    /// Adds a variable `≥ 0`.
+    fn add_var(&mut self) -> Variable {
+        self.relaxed += 1;
+        self.vars.add(variable().min(0.0))
+    }
+
+    /// Adds `count` calls into `to` from `from` (also a family call, if both copy).
+    fn add_call(&mut self, from: usize, to: usize, count: Expression) {
+        *self
+            .calls_into
+            .entry(to)
+            .or_insert_with(|| Expression::from(0.0)) += count.clone();
+        self.family.note(self.program, self.copies, from, to, count);
+    }
+
+    /// Adds function `f`'s block and edge counts, flow conservation, its exits
+    /// and calls, and its blocks' costs.
+    fn add_flow(&mut self, f: usize) -> FunctionFlow {
+        let (program, cost) = (self.program, self.cost);
         let func = &program.functions[f];
         let live = reverse_post_order(func);
         let mut x: HashMap<usize, Variable> = HashMap::new();
         for &b in &live {
-            x.insert(b, vars.add(variable().min(0.0)));
-            relaxed += 1;
+            let v = self.add_var();
+            x.insert(b, v);
         }
         let mut edges: HashMap<(usize, usize), Variable> = HashMap::new();
         let mut inflow: HashMap<usize, Expression> = HashMap::new();
@@ -406,12 +560,11 @@ pub fn task_bound(
             let xb = x[&b];
             let mut out = Expression::from(0.0);
             for &s in &block.successors {
-                let e = vars.add(variable().min(0.0));
-                relaxed += 1;
+                let e = self.add_var();
                 if cost == Cost::Cycles {
-                    let saving = persistence.edge_saving(program, f, b, s) as f64;
+                    let saving = self.persistence.edge_saving(program, f, b, s) as f64;
                     if saving > 0.0 {
-                        objective -= saving * e;
+                        self.objective -= saving * e;
                         fcost -= saving * e;
                     }
                 }
@@ -420,29 +573,20 @@ pub fn task_bound(
                 *inflow.entry(s).or_insert_with(|| Expression::from(0.0)) += e;
             }
             let exits = block.successors.is_empty() || block.exit != Exit::Internal;
-            let can_complete = completing[&f].get(b).copied().unwrap_or(false);
+            let can_complete = self.completing[&f].get(b).copied().unwrap_or(false);
             if !can_complete {
-                constraints.push(constraint!(xb == 0.0));
+                self.constraints.push(constraint!(xb == 0.0));
             }
             match &block.exit {
-                Exit::NoReturn => constraints.push(constraint!(xb == 0.0)),
+                Exit::NoReturn => self.constraints.push(constraint!(xb == 0.0)),
                 _ if exits => {
-                    let r = vars.add(variable().min(0.0));
-                    relaxed += 1;
+                    let r = self.add_var();
                     out += r;
                     match &block.exit {
-                        Exit::TailCall(t) => {
-                            *calls_into
-                                .entry(*t)
-                                .or_insert_with(|| Expression::from(0.0)) += r;
-                            family_call(f, *t, r.into());
-                        }
+                        Exit::TailCall(t) => self.add_call(f, *t, r.into()),
                         Exit::IndirectTail(ts) => {
                             for t in ts {
-                                *calls_into
-                                    .entry(*t)
-                                    .or_insert_with(|| Expression::from(0.0)) += r;
-                                family_call(f, *t, r.into());
+                                self.add_call(f, *t, r.into());
                             }
                         }
                         _ => {}
@@ -450,82 +594,89 @@ pub fn task_bound(
                 }
                 _ => {}
             }
-            constraints.push(constraint!(xb == out));
+            self.constraints.push(constraint!(xb == out));
             for &c in block.calls.iter().filter(|_| can_complete) {
-                *calls_into.entry(c).or_insert_with(|| Expression::from(0.0)) += xb;
-                family_call(f, c, xb.into());
+                self.add_call(f, c, xb.into());
             }
             let c = match cost {
                 Cost::Instructions => block.instructions,
-                Cost::Cycles => persistence.block_cycles(program, f, b),
+                Cost::Cycles => self.persistence.block_cycles(program, f, b),
             } as f64;
-            objective += c * xb;
+            self.objective += c * xb;
             fcost += c * xb;
             if c > 0.0 {
-                per_block.push((f, b, xb, c as u64));
+                self.per_block.push((f, b, xb, c as u64));
             }
-            count += 1;
         }
         for (&b, &v) in &x {
-            x_all.insert((f, b), v);
+            self.x_all.insert((f, b), v);
         }
         for &b in &live {
             let mut inn = inflow.remove(&b).unwrap_or_else(|| Expression::from(0.0));
             if b == 0 {
-                inn += n_entry[&f];
+                inn += self.n_entry[&f];
             }
-            constraints.push(constraint!(x[&b] == inn));
+            self.constraints.push(constraint!(x[&b] == inn));
         }
-        // A loop's entries: its entry edges (the function's entry for a loop
-        // headed at block 0).
-        let entries_of = |l: &Loop| {
-            let mut entries = Expression::from(0.0);
-            for &(p, h) in &l.entry_edges {
-                if p == usize::MAX {
-                    entries += n_entry[&f];
-                } else if let Some(&e) = edges.get(&(p, h)) {
-                    entries += e;
-                }
-            }
-            entries
-        };
-        // The lines of a loop that keeps them cached, once per entry.
-        if cost == Cost::Cycles {
-            for r in persistence.regions().iter().filter(|r| r.function == f) {
-                if let Some(l) = loops.get(f).and_then(|ls| ls.get(r.loop_index)) {
-                    let c = persistence.entry_cycles(r) as f64;
-                    let entries = entries_of(l);
-                    objective += c * entries.clone();
-                    fcost += c * entries;
-                }
+        FunctionFlow { f, x, edges, fcost }
+    }
+
+    /// In cycles: the lines of a loop that keeps them cached, once per entry.
+    fn add_persistent_lines(&mut self, flow: &mut FunctionFlow) {
+        if self.cost != Cost::Cycles {
+            return;
+        }
+        let f = flow.f;
+        for r in self
+            .persistence
+            .regions()
+            .iter()
+            .filter(|r| r.function == f)
+        {
+            if let Some(l) = self.loops.get(f).and_then(|ls| ls.get(r.loop_index)) {
+                let c = self.persistence.entry_cycles(r) as f64;
+                let entries = flow.entries_of(l, &self.n_entry);
+                self.objective += c * entries.clone();
+                flow.fcost += c * entries;
             }
         }
-        // Caps on blocks per loop entry, and the runs of the caps per activation.
-        for cap in copies.caps.iter().filter(|c| c.function == f) {
+    }
+
+    /// Caps on blocks per loop entry, and the runs of the caps per activation.
+    fn add_block_caps(&mut self, flow: &FunctionFlow) {
+        let f = flow.f;
+        for cap in self.copies.caps.iter().filter(|c| c.function == f) {
             let runs = cap
                 .blocks
                 .iter()
-                .filter_map(|b| x.get(b))
+                .filter_map(|b| flow.x.get(b))
                 .fold(Expression::from(0.0), |a, &v| a + v);
             if let Some(g) = cap.activation_group {
                 // Runs only in a call of `f`: at most the cap per entry of `f`
                 // (see the loops' caps per activation below).
                 let bound = cap.bound as f64;
-                constraints.push(constraint!(runs.clone() <= bound * n_entry[&f]));
-                let g = copies.counters.get(&g).copied().unwrap_or(g);
-                add_to_group(&mut group_runs, g, cap.bound, runs);
+                let n_f = self.n_entry[&f];
+                self.constraints
+                    .push(constraint!(runs.clone() <= bound * n_f));
+                let g = self.copies.counters.get(&g).copied().unwrap_or(g);
+                add_to_group(&mut self.group_runs, g, cap.bound, runs);
                 continue;
             }
-            let per = match cap.loop_index.and_then(|k| loops.get(f)?.get(k)) {
-                Some(l) => entries_of(l),
-                None => Expression::from(n_entry[&f]),
+            let per = match cap.loop_index.and_then(|k| self.loops.get(f)?.get(k)) {
+                Some(l) => flow.entries_of(l, &self.n_entry),
+                None => Expression::from(self.n_entry[&f]),
             };
             let bound = cap.bound as f64;
-            constraints.push(constraint!(runs <= bound * per));
+            self.constraints.push(constraint!(runs <= bound * per));
         }
-        // Loop bounds. The members of a shared bound first (they are nested in
-        // the loop they share it with, which comes first in `loops`), so walk
-        // the loops inner to outer.
+    }
+
+    /// Loop bounds. The members of a shared bound first (they are nested in
+    /// the loop they share it with, which comes first in `loops`), so walk
+    /// the loops inner to outer.
+    fn add_loop_bounds(&mut self, flow: &FunctionFlow) {
+        let (f, loops) = (flow.f, self.loops);
+        let func = &self.program.functions[f];
         let mut shared: HashMap<(usize, usize), Expression> = HashMap::new();
         let mut order: Vec<(usize, &Loop)> = loops
             .get(f)
@@ -541,15 +692,17 @@ pub fn task_bound(
             let back: Expression = l
                 .back_edges
                 .iter()
-                .filter_map(|e| edges.get(e))
+                .filter_map(|e| flow.edges.get(e))
                 .fold(Expression::from(0.0), |a, &v| a + v);
-            if copies.family.contains(&f) {
+            if self.copies.family.contains(&f) {
                 let all = loops.get(f).map_or(&[][..], |v| v.as_slice());
                 let per_trip = min_stored_bytes_per_trip(func, all, l).max(1) as f64;
-                *copy_loops.entry(f).or_insert_with(|| Expression::from(0.0)) +=
-                    per_trip * back.clone();
+                *self
+                    .copy_loops
+                    .entry(f)
+                    .or_insert_with(|| Expression::from(0.0)) += per_trip * back.clone();
             }
-            let Some(fact) = fact_of.get(&(f, k)) else {
+            let Some(&fact) = self.fact_of.get(&(f, k)) else {
                 continue;
             };
             if let Some(g) = fact.group {
@@ -560,53 +713,80 @@ pub fn task_bound(
                 continue;
             }
             let members = shared.remove(&(f, k));
-            // A bound on iterations of a loop whose header starts each of them
-            // bounds the header's runs (entries + back edges), not the back edges.
-            let runs_header = bounds_header_runs(fact, func, l, members.is_some());
-            let back = back + members.unwrap_or_else(|| Expression::from(0.0));
-            let back = if runs_header {
-                back + entries_of(l)
-            } else {
-                back
-            };
-            let bound = fact.bound as f64;
-            // A cap per activation also caps each entry's share. A loop runs only
-            // in a call of its function, and its back edges are taken only after
-            // one of its entry edges (an irreducible cycle's too: its entry edges
-            // are every edge into it from outside): in any execution that takes
-            // them, `back ≤ B ≤ B · n_f` and `≤ B · entries`. The relaxation, whose
-            // counts are fractions, needs both. Without them it enters the
-            // function a small fraction of the activation and still charges the
-            // whole cap (the plan task's QP iterations on the path that adopts a
-            // window), or carries flow round the cycle with no entry at all (a
-            // circulation: the async tasks' cycle ran a job that way, without the
-            // entry path of a real poll).
-            if matches!(fact.per, Per::Activation | Per::Counted(_)) {
-                constraints.push(constraint!(back.clone() <= bound * n_entry[&f]));
-                constraints.push(constraint!(back.clone() <= bound * entries_of(l)));
+            self.add_loop_bound(flow, fact, l, back, members);
+        }
+    }
+
+    /// The bound `fact` of loop `l` on its back edges `back` (with those of the
+    /// loops that share it, `members`).
+    fn add_loop_bound(
+        &mut self,
+        flow: &FunctionFlow,
+        fact: &LoopFact,
+        l: &Loop,
+        back: Expression,
+        members: Option<Expression>,
+    ) {
+        let f = flow.f;
+        let func = &self.program.functions[f];
+        // A bound on iterations of a loop whose header starts each of them
+        // bounds the header's runs (entries + back edges), not the back edges.
+        let runs_header = bounds_header_runs(fact, func, l, members.is_some());
+        let back = back + members.unwrap_or_else(|| Expression::from(0.0));
+        let back = if runs_header {
+            back + flow.entries_of(l, &self.n_entry)
+        } else {
+            back
+        };
+        let bound = fact.bound as f64;
+        let n_f = self.n_entry[&f];
+        // A cap per activation also caps each entry's share. A loop runs only
+        // in a call of its function, and its back edges are taken only after
+        // one of its entry edges (an irreducible cycle's too: its entry edges
+        // are every edge into it from outside): in any execution that takes
+        // them, `back ≤ B ≤ B · n_f` and `≤ B · entries`. The relaxation, whose
+        // counts are fractions, needs both. Without them it enters the
+        // function a small fraction of the activation and still charges the
+        // whole cap (the plan task's QP iterations on the path that adopts a
+        // window), or carries flow round the cycle with no entry at all (a
+        // circulation: the async tasks' cycle ran a job that way, without the
+        // entry path of a real poll).
+        if matches!(fact.per, Per::Activation | Per::Counted(_)) {
+            self.constraints
+                .push(constraint!(back.clone() <= bound * n_f));
+            self.constraints.push(constraint!(
+                back.clone() <= bound * flow.entries_of(l, &self.n_entry)
+            ));
+        }
+        match fact.per {
+            Per::Entry => {
+                self.constraints.push(constraint!(
+                    back <= bound * flow.entries_of(l, &self.n_entry)
+                ));
             }
-            match fact.per {
-                Per::Entry => {
-                    constraints.push(constraint!(back <= bound * entries_of(l)));
-                }
-                Per::Activation => {
-                    constraints.push(constraint!(back <= bound * n_entry[&root]));
-                }
-                Per::Counted(g) => add_to_group(&mut group_runs, g, fact.bound, back),
-                Per::Call => {
-                    constraints.push(constraint!(back <= bound * n_entry[&f]));
-                }
-                Per::Preemption => {
-                    retry_edges += back;
-                    any_retry = true;
-                }
+            Per::Activation => {
+                let n_root = self.n_entry[&self.root];
+                self.constraints.push(constraint!(back <= bound * n_root));
+            }
+            Per::Counted(g) => add_to_group(&mut self.group_runs, g, fact.bound, back),
+            Per::Call => {
+                self.constraints.push(constraint!(back <= bound * n_f));
+            }
+            Per::Preemption => {
+                self.retry_edges += back;
+                self.any_retry = true;
             }
         }
-        per_function.push((f, fcost));
     }
-    if !copy_loops.is_empty() {
+
+    /// The block copies' budgets (`sites`: the copy calls the task can make).
+    fn add_copy_budgets(&mut self, sites: &[&CopySite]) {
+        if self.copy_loops.is_empty() {
+            return;
+        }
+        let x_all = &self.x_all;
         let mut bytes = Expression::from(0.0);
-        for c in &sites {
+        for c in sites {
             if let (Some(n), Some(&v)) = (c.bytes, x_all.get(&(c.function, c.block))) {
                 bytes += n as f64 * v;
             }
@@ -618,10 +798,11 @@ pub fn task_bound(
         // remainder to `memcpy` hands over only the bytes it did not move): all
         // the family's trips, weighted by those bytes, take at most the bytes of
         // all the calls.
-        let all = copy_loops
+        let all = self
+            .copy_loops
             .values()
             .fold(Expression::from(0.0), |a, b| a + b.clone());
-        constraints.push(constraint!(all <= bytes));
+        self.constraints.push(constraint!(all <= bytes));
         // And each function's own share: its loops store at most the bytes of
         // the calls made to it, from outside the family (their sizes) and from
         // its other functions (a word copy's remainder); a function that another
@@ -635,87 +816,121 @@ pub fn task_bound(
             }
             e
         };
-        for (g, own) in copy_loops {
+        let family = &mut self.family;
+        for (g, own) in std::mem::take(&mut self.copy_loops) {
             // A forwarder's own callers must all be outside the family; each
             // forwarder counts once, however many of its blocks call `g`.
-            let forwarded: std::collections::BTreeSet<usize> =
-                forwards.iter().filter(|f| f.0 == g).map(|f| f.1).collect();
-            if unknown_handoff.contains(&g)
+            let forwarded: std::collections::BTreeSet<usize> = family
+                .forwards
+                .iter()
+                .filter(|f| f.0 == g)
+                .map(|f| f.1)
+                .collect();
+            if family.unknown_handoff.contains(&g)
                 || forwarded
                     .iter()
-                    .any(|h| unknown_handoff.contains(h) || handoffs.contains_key(h))
+                    .any(|h| family.unknown_handoff.contains(h) || family.handoffs.contains_key(h))
             {
                 continue;
             }
-            let mut given = handoffs.remove(&g).unwrap_or_else(|| Expression::from(0.0));
+            let mut given = family
+                .handoffs
+                .remove(&g)
+                .unwrap_or_else(|| Expression::from(0.0));
             given += sites_into(g);
             for h in forwarded {
                 given += sites_into(h);
             }
-            constraints.push(constraint!(own <= given));
+            self.constraints.push(constraint!(own <= given));
         }
     }
-    for (_, (bound, runs)) in group_runs {
-        let bound = bound as f64;
-        constraints.push(constraint!(runs <= bound * n_entry[&root]));
-    }
-    if any_retry {
-        let cap = retries as f64;
-        constraints.push(constraint!(retry_edges <= cap * n_entry[&root]));
-    }
-    for &f in &reach {
-        let n = n_entry[&f];
-        if f == root {
-            constraints.push(constraint!(n == 1.0));
-        } else {
-            let inn = calls_into
-                .remove(&f)
-                .unwrap_or_else(|| Expression::from(0.0));
-            constraints.push(constraint!(n == inn));
+
+    /// The caps over the whole activation: each activation group's, and the
+    /// retries' (`retries` per activation).
+    fn add_activation_caps(&mut self, retries: u64) {
+        let n_root = self.n_entry[&self.root];
+        for (_, (bound, runs)) in std::mem::take(&mut self.group_runs) {
+            let bound = bound as f64;
+            self.constraints.push(constraint!(runs <= bound * n_root));
+        }
+        if self.any_retry {
+            let cap = retries as f64;
+            let retry_edges = std::mem::replace(&mut self.retry_edges, Expression::from(0.0));
+            self.constraints
+                .push(constraint!(retry_edges <= cap * n_root));
         }
     }
-    let variables = vars.len();
-    let n_constraints = constraints.len();
-    let integers: Vec<Variable> = reach.iter().map(|f| n_entry[f]).collect();
-    let (solution, optimum) =
-        solve_mixed_integer(vars, relaxed, &objective, &constraints, &integers)?;
-    let value = solution.eval(&objective);
-    // Cost and entries per function, kept by index (two instances of a generic
-    // function can demangle alike).
-    let mut ranked: Vec<(usize, f64)> = per_function
-        .iter()
-        .map(|(f, e)| (*f, solution.eval(e)))
-        .filter(|(_, v)| *v > 0.5)
-        .collect();
-    ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
-    let name = |f: usize| program.functions[f].demangled.clone();
-    let by_function = ranked.iter().map(|&(f, v)| (name(f), v)).collect();
-    let entries_by_function = ranked
-        .iter()
-        .map(|&(f, _)| (name(f), solution.value(n_entry[&f])))
-        .collect();
-    let _ = count;
-    let mut by_block: Vec<BlockShare> = per_block
-        .iter()
-        .map(|&(f, b, x, c)| BlockShare {
-            function: name(f),
-            address: program.functions[f].blocks[b].start,
-            count: solution.value(x),
-            cost: c,
+
+    /// The entry counts: one for the root, the calls into it for every other
+    /// function.
+    fn add_call_counts(&mut self, reach: &[usize]) {
+        for &f in reach {
+            let n = self.n_entry[&f];
+            if f == self.root {
+                self.constraints.push(constraint!(n == 1.0));
+            } else {
+                let inn = self
+                    .calls_into
+                    .remove(&f)
+                    .unwrap_or_else(|| Expression::from(0.0));
+                self.constraints.push(constraint!(n == inn));
+            }
+        }
+    }
+
+    /// Solves the program; the bound, with the functions (cost and entries)
+    /// and blocks of the worst path that cost the most.
+    fn solve(self, reach: &[usize]) -> Result<IpetBound, IpetError> {
+        let program = self.program;
+        let variables = self.vars.len();
+        let n_constraints = self.constraints.len();
+        let integers: Vec<Variable> = reach.iter().map(|f| self.n_entry[f]).collect();
+        let (solution, optimum) = solve_mixed_integer(
+            self.vars,
+            self.relaxed,
+            &self.objective,
+            &self.constraints,
+            &integers,
+        )?;
+        let value = solution.eval(&self.objective);
+        // Cost and entries per function, kept by index (two instances of a generic
+        // function can demangle alike).
+        let mut ranked: Vec<(usize, f64)> = self
+            .per_function
+            .iter()
+            .map(|(f, e)| (*f, solution.eval(e)))
+            .filter(|(_, v)| *v > 0.5)
+            .collect();
+        ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let name = |f: usize| program.functions[f].demangled.clone();
+        let by_function = ranked.iter().map(|&(f, v)| (name(f), v)).collect();
+        let entries_by_function = ranked
+            .iter()
+            .map(|&(f, _)| (name(f), solution.value(self.n_entry[&f])))
+            .collect();
+        let mut by_block: Vec<BlockShare> = self
+            .per_block
+            .iter()
+            .map(|&(f, b, x, c)| BlockShare {
+                function: name(f),
+                address: program.functions[f].blocks[b].start,
+                count: solution.value(x),
+                cost: c,
+            })
+            .filter(|s| s.count > 0.5)
+            .collect();
+        by_block.sort_by(|a, b| (b.count * b.cost as f64).total_cmp(&(a.count * a.cost as f64)));
+        by_block.truncate(TOP_BLOCKS);
+        Ok(IpetBound {
+            bound: round_up(value),
+            by_function,
+            entries_by_function,
+            by_block,
+            variables,
+            constraints: n_constraints,
+            optimum,
         })
-        .filter(|s| s.count > 0.5)
-        .collect();
-    by_block.sort_by(|a, b| (b.count * b.cost as f64).total_cmp(&(a.count * a.cost as f64)));
-    by_block.truncate(TOP_BLOCKS);
-    Ok(IpetBound {
-        bound: round_up(value),
-        by_function,
-        entries_by_function,
-        by_block,
-        variables,
-        constraints: n_constraints,
-        optimum,
-    })
+    }
 }
 
 /// Linear programs the branch and bound solves at most for one bound (each a

@@ -1075,6 +1075,15 @@ fn counted_level_name(counted: Counted) -> &'static str {
 /// exception and interrupt the application does not bind.
 pub const DEFAULT_HANDLER: &str = "DefaultHandler";
 
+/// The stack bound of `program` with its priority `levels`, the `once` roots
+/// (entered once with interrupts disabled, never returning), the `masked` ones
+/// (run only before interrupts are enabled: left out of the levels' depths, in
+/// `init_bytes`) and the vector table's entries when known
+/// ([`stack_bound_once`], [`stack_bound_vectors`]).
+///
+/// The phases: the call depths (with and without the init-only roots), the
+/// levels placed (given, from the vector table, once, faults), each level's
+/// deepest root, what the bound cannot see, then the sum.
 fn bound(
     program: &Program,
     levels: &[PriorityLevel],
@@ -1082,24 +1091,87 @@ fn bound(
     masked: &[String],
     vectors: Option<&[VectorEntry]>,
 ) -> Result<StackReport, WcetError> {
-    let mark = |names: &[String], cut: &mut Vec<bool>| -> Result<(), WcetError> {
-        for root in names {
-            let found = program.resolve(root);
-            if found.is_empty() {
-                return Err(WcetError::UnknownRoot(root.clone()));
-            }
-            for i in found {
-                cut[i] = true;
-            }
-        }
-        Ok(())
-    };
     let mut cut = vec![false; program.functions.len()];
-    mark(once, &mut cut)?;
+    mark_roots(program, once, &mut cut)?;
     let init_depths = compute_depths(program, &cut);
-    mark(masked, &mut cut)?;
+    mark_roots(program, masked, &mut cut)?;
     let depths = compute_depths(program, &cut);
 
+    let (placed, unplaced_handlers) = place_levels(program, levels, once, vectors)?;
+    let init_bytes = placed
+        .first()
+        .filter(|l| !levels.is_empty() && l.counted == Counted::PriorityLevel)
+        .map(|l| {
+            l.roots
+                .iter()
+                .map(|r| init_depths.depth[r.index])
+                .max()
+                .unwrap_or(0)
+        })
+        .unwrap_or(0);
+    let mut all_roots = Vec::new();
+    let level_reports: Vec<LevelReport> = placed
+        .into_iter()
+        .map(|level| level_report(program, &depths, level, &mut all_roots))
+        .collect();
+    let gaps = StackGaps::find(program, &depths, &all_roots);
+    let sum = |which: &[Counted]| -> u32 {
+        level_reports
+            .iter()
+            .filter(|l| which.contains(&l.counted))
+            .map(|l| l.contribution_bytes)
+            .sum()
+    };
+    let chain = sum(&[
+        Counted::PriorityLevel,
+        Counted::UnboundOnTop,
+        Counted::OnTop,
+    ]);
+    let total_bytes = chain.max(init_bytes) + sum(&[Counted::Once]) + sum(&[Counted::FaultOnTop]);
+    let sound = gaps.is_empty() && unplaced_handlers.is_empty() && vectors.is_some();
+    let method = match vectors {
+        Some(_) => format!("{METHOD} {VECTOR_TABLE_METHOD}"),
+        None => format!("{METHOD} {NO_VECTOR_TABLE}"),
+    };
+    Ok(StackReport {
+        levels: level_reports,
+        total_bytes,
+        init_bytes,
+        sound,
+        unknown_frames: gaps.unknown_frames,
+        indirect_calls: gaps.indirect_calls,
+        unresolved_calls: gaps.unresolved_calls,
+        cycles: gaps.cycles,
+        vector_table: vectors.is_some(),
+        unplaced_handlers,
+        method,
+    })
+}
+
+/// Marks the functions of the roots `names` in `cut` (their calls not followed
+/// in the depths); refuses a name no function has.
+fn mark_roots(program: &Program, names: &[String], cut: &mut [bool]) -> Result<(), WcetError> {
+    for root in names {
+        let found = program.resolve(root);
+        if found.is_empty() {
+            return Err(WcetError::UnknownRoot(root.clone()));
+        }
+        for i in found {
+            cut[i] = true;
+        }
+    }
+    Ok(())
+}
+
+/// Every level, in the order they stack: the given `levels`, the vector table's
+/// handlers above them, the `once` roots, then the faults; with the handlers
+/// the vector table could not place.
+fn place_levels(
+    program: &Program,
+    levels: &[PriorityLevel],
+    once: &[String],
+    vectors: Option<&[VectorEntry]>,
+) -> Result<(Vec<Level>, Vec<String>), WcetError> {
     let mut placed = given_levels(program, levels)?;
     let mut unplaced_handlers = Vec::new();
     let (above_chain, faults) = match vectors {
@@ -1127,134 +1199,122 @@ fn bound(
         });
     }
     placed.extend(faults);
+    Ok((placed, unplaced_handlers))
+}
 
-    let init_bytes = placed
-        .first()
-        .filter(|l| !levels.is_empty() && l.counted == Counted::PriorityLevel)
-        .map(|l| {
-            l.roots
-                .iter()
-                .map(|r| init_depths.depth[r.index])
-                .max()
-                .unwrap_or(0)
-        })
-        .unwrap_or(0);
-    let mut all_roots = Vec::new();
-    let mut level_reports = Vec::new();
-    for level in placed {
-        let mut roots = Vec::new();
-        for root in level.roots {
-            all_roots.push(root.index);
-            let mut worst_path = Vec::new();
-            let mut at = Some(root.index);
-            let function = root
-                .symbol
-                .unwrap_or_else(|| demangle(&program.functions[root.index].name));
-            while let Some(f) = at {
-                let func = &program.functions[f];
-                worst_path.push(PathEntry {
-                    function: if f == root.index {
-                        function.clone()
-                    } else {
-                        demangle(&func.name)
-                    },
-                    frame_bytes: func.frame.bytes(),
-                });
-                at = depths.next[f];
-            }
-            roots.push(RootReport {
-                root: root.name,
-                function,
-                depth_bytes: depths.depth[root.index],
-                worst_path,
-                exceptions: root.exceptions,
+/// One level's report: each root's depth and worst path, the deepest with the
+/// exception frame its contribution; its roots added to `all_roots`.
+fn level_report(
+    program: &Program,
+    depths: &Depths,
+    level: Level,
+    all_roots: &mut Vec<usize>,
+) -> LevelReport {
+    let mut roots = Vec::new();
+    for root in level.roots {
+        all_roots.push(root.index);
+        let mut worst_path = Vec::new();
+        let mut at = Some(root.index);
+        let function = root
+            .symbol
+            .unwrap_or_else(|| demangle(&program.functions[root.index].name));
+        while let Some(f) = at {
+            let func = &program.functions[f];
+            worst_path.push(PathEntry {
+                function: if f == root.index {
+                    function.clone()
+                } else {
+                    demangle(&func.name)
+                },
+                frame_bytes: func.frame.bytes(),
             });
+            at = depths.next[f];
         }
-        let deepest = roots.iter().map(|r| r.depth_bytes).max().unwrap_or(0);
-        level_reports.push(LevelReport {
-            name: level.name,
-            counted: level.counted,
-            roots,
-            exception_frame_bytes: level.exception_frame_bytes,
-            contribution_bytes: deepest + level.exception_frame_bytes,
+        roots.push(RootReport {
+            root: root.name,
+            function,
+            depth_bytes: depths.depth[root.index],
+            worst_path,
+            exceptions: root.exceptions,
         });
     }
-    let seen = reachable(program, &all_roots);
-    let mut unknown_frames = Vec::new();
-    let mut indirect_calls = Vec::new();
-    for (f, func) in program.functions.iter().enumerate() {
-        if !seen[f] {
-            continue;
+    let deepest = roots.iter().map(|r| r.depth_bytes).max().unwrap_or(0);
+    LevelReport {
+        name: level.name,
+        counted: level.counted,
+        roots,
+        exception_frame_bytes: level.exception_frame_bytes,
+        contribution_bytes: deepest + level.exception_frame_bytes,
+    }
+}
+
+/// What the stack bound cannot see in the functions the roots reach.
+struct StackGaps {
+    unknown_frames: Vec<UnknownFrame>,
+    indirect_calls: Vec<IndirectCall>,
+    unresolved_calls: Vec<String>,
+    cycles: Vec<Vec<String>>,
+}
+
+impl StackGaps {
+    /// The gaps of the functions `all_roots` reach: frames of unknown size,
+    /// indirect calls, calls to no function, recursions.
+    fn find(program: &Program, depths: &Depths, all_roots: &[usize]) -> Self {
+        let seen = reachable(program, all_roots);
+        let mut unknown_frames = Vec::new();
+        let mut indirect_calls = Vec::new();
+        for (f, func) in program.functions.iter().enumerate() {
+            if !seen[f] {
+                continue;
+            }
+            if let Frame::Unknown {
+                known_bytes,
+                reason,
+            } = &func.frame
+            {
+                unknown_frames.push(UnknownFrame {
+                    function: demangle(&func.name),
+                    reason: format!("{reason} (counted {known_bytes} B)"),
+                });
+            }
+            for instruction in &func.indirect {
+                indirect_calls.push(IndirectCall {
+                    function: demangle(&func.name),
+                    instruction: instruction.clone(),
+                });
+            }
         }
-        if let Frame::Unknown {
-            known_bytes,
-            reason,
-        } = &func.frame
-        {
-            unknown_frames.push(UnknownFrame {
-                function: demangle(&func.name),
-                reason: format!("{reason} (counted {known_bytes} B)"),
-            });
-        }
-        for instruction in &func.indirect {
-            indirect_calls.push(IndirectCall {
-                function: demangle(&func.name),
-                instruction: instruction.clone(),
-            });
+        let unresolved_calls: Vec<String> = depths
+            .unresolved
+            .iter()
+            .filter(|(f, _)| seen[*f])
+            .map(|(f, callee)| format!("{} -> {}", demangle(&program.functions[*f].name), callee))
+            .collect();
+        let cycles: Vec<Vec<String>> = depths
+            .cycles
+            .iter()
+            .filter(|c| c.iter().any(|&f| seen[f]))
+            .map(|c| {
+                c.iter()
+                    .map(|&f| demangle(&program.functions[f].name))
+                    .collect()
+            })
+            .collect();
+        Self {
+            unknown_frames,
+            indirect_calls,
+            unresolved_calls,
+            cycles,
         }
     }
-    let unresolved_calls: Vec<String> = depths
-        .unresolved
-        .iter()
-        .filter(|(f, _)| seen[*f])
-        .map(|(f, callee)| format!("{} -> {}", demangle(&program.functions[*f].name), callee))
-        .collect();
-    let cycles: Vec<Vec<String>> = depths
-        .cycles
-        .iter()
-        .filter(|c| c.iter().any(|&f| seen[f]))
-        .map(|c| {
-            c.iter()
-                .map(|&f| demangle(&program.functions[f].name))
-                .collect()
-        })
-        .collect();
-    let sum = |which: &[Counted]| -> u32 {
-        level_reports
-            .iter()
-            .filter(|l| which.contains(&l.counted))
-            .map(|l| l.contribution_bytes)
-            .sum()
-    };
-    let chain = sum(&[
-        Counted::PriorityLevel,
-        Counted::UnboundOnTop,
-        Counted::OnTop,
-    ]);
-    let total_bytes = chain.max(init_bytes) + sum(&[Counted::Once]) + sum(&[Counted::FaultOnTop]);
-    let sound = unknown_frames.is_empty()
-        && indirect_calls.is_empty()
-        && unresolved_calls.is_empty()
-        && cycles.is_empty()
-        && unplaced_handlers.is_empty()
-        && vectors.is_some();
-    let method = match vectors {
-        Some(_) => format!("{METHOD} {VECTOR_TABLE_METHOD}"),
-        None => format!("{METHOD} {NO_VECTOR_TABLE}"),
-    };
-    Ok(StackReport {
-        levels: level_reports,
-        total_bytes,
-        init_bytes,
-        sound,
-        unknown_frames,
-        indirect_calls,
-        unresolved_calls,
-        cycles,
-        vector_table: vectors.is_some(),
-        unplaced_handlers,
-        method,
-    })
+
+    /// Whether there is none (the bound is sound as far as the program goes).
+    fn is_empty(&self) -> bool {
+        self.unknown_frames.is_empty()
+            && self.indirect_calls.is_empty()
+            && self.unresolved_calls.is_empty()
+            && self.cycles.is_empty()
+    }
 }
 
 impl StackReport {

@@ -87,29 +87,25 @@ fn goal(id: &'static str, name: &str, value: Option<f64>, goal: f64, unit: &str)
     }
 }
 
-/// Every goal, from the report's figures.
+/// Every goal, from the report's figures: the tasks' timing, the analysis'
+/// completeness, the footprint, then the PIL runs.
 pub(super) fn goals(
     tasks: &Tasks,
     memory: &MemoryReport,
     runs: &[RunEntry],
     statics: &StaticSummary,
 ) -> Vec<Goal> {
-    let misses: u64 = runs
-        .iter()
-        .map(|r| r.plan_deadline_misses + r.control_deadline_misses)
-        .sum();
-    let not_completed = runs.iter().filter(|r| !r.completed).count();
-    // A miss counts wherever it happened; "no miss" is claimed only over runs that
-    // reached the end of their scenario (a lap), not over a run cut short.
-    let (misses_name, misses_value) = if misses == 0 && not_completed > 0 {
-        (
-            "deadline misses over the runs (none counted, but a run did not complete: \
-             zero is claimed only over completed runs)",
-            None,
-        )
-    } else {
-        ("deadline misses over the runs", Some(misses as f64))
-    };
+    let mut out = timing_goals(tasks, statics);
+    out.extend(analysis_goals(memory, statics));
+    out.extend(footprint_goals(tasks, memory));
+    out.extend(run_goals(runs));
+    out
+}
+
+/// The tasks' timing goals: the plan's warm observed instructions, the jobs'
+/// static bounds within their budgets, the plan's tightness, the response times
+/// within the deadlines.
+fn timing_goals(tasks: &Tasks, statics: &StaticSummary) -> Vec<Goal> {
     vec![
         goal(
             "plan-warm-observed",
@@ -165,6 +161,13 @@ pub(super) fn goals(
             tasks.control.statics.deadline_us.unwrap_or(0.0),
             "µs",
         ),
+    ]
+}
+
+/// The analysis' completeness: no gap, no flow fact above its traced maximum,
+/// the loops and budgeted jobs traced, the stack bound covering everything.
+fn analysis_goals(memory: &MemoryReport, statics: &StaticSummary) -> Vec<Goal> {
+    vec![
         goal(
             "analysis-complete",
             "unbounded loops, unresolved calls, recursions",
@@ -214,6 +217,13 @@ pub(super) fn goals(
             0.0,
             "items",
         ),
+    ]
+}
+
+/// The footprint: the control task's observed instructions, static RAM, the
+/// stack bound and flash.
+fn footprint_goals(tasks: &Tasks, memory: &MemoryReport) -> Vec<Goal> {
+    vec![
         goal(
             "control-observed",
             "control observed max",
@@ -242,6 +252,29 @@ pub(super) fn goals(
             GOAL_FLASH_BYTES,
             "bytes",
         ),
+    ]
+}
+
+/// The PIL runs' goals: no deadline miss (claimed only over completed runs),
+/// every run completed.
+fn run_goals(runs: &[RunEntry]) -> Vec<Goal> {
+    let misses: u64 = runs
+        .iter()
+        .map(|r| r.plan_deadline_misses + r.control_deadline_misses)
+        .sum();
+    let not_completed = runs.iter().filter(|r| !r.completed).count();
+    // A miss counts wherever it happened; "no miss" is claimed only over runs that
+    // reached the end of their scenario (a lap), not over a run cut short.
+    let (misses_name, misses_value) = if misses == 0 && not_completed > 0 {
+        (
+            "deadline misses over the runs (none counted, but a run did not complete: \
+             zero is claimed only over completed runs)",
+            None,
+        )
+    } else {
+        ("deadline misses over the runs", Some(misses as f64))
+    };
+    vec![
         goal("deadline-misses", misses_name, misses_value, 0.0, "misses"),
         goal(
             "runs-completed",
