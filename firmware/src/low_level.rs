@@ -32,11 +32,16 @@
 //! acting on that total. Dispatch (front-wheel drive): `T > 0` goes half to each
 //! front wheel, the rear ones get 0; `T < 0` (braking) goes to the four wheels, a
 //! share [`LowLevelConfig::brake_front_share`] to the front axle and the rest to the
-//! rear, split equally between left and right. The paper dispatches braking equally
+//! rear, each axle's split between left and right by [`CarModel::brake_left_share`]
+//! (equally for the configured car). The paper dispatches braking equally
 //! on the four wheels (share 0.5, [`LowLevelConfig::default`]); a real car's brake
 //! balance puts more on the front, which carries more load when braking, so that
 //! the rear wheels do not lock first and spin the car (the simulator sets the share
-//! from the vehicle's geometry). The four torques always add up to `T`.
+//! from the vehicle's geometry), and its brake force distribution puts more on the
+//! outside wheels of a bend, which the lateral load transfer loads, so that the
+//! inside ones do not lock first (the `control` task sets the left share from the
+//! measured lateral acceleration, [`crate::tasks::ControlTask::car_model`]). The
+//! four torques always add up to `T`.
 //!
 //! # Lateral
 //!
@@ -543,6 +548,13 @@ pub struct CarModel<T> {
     /// braking feed-forward and the anti-lock limit are commanded as `1/b` of
     /// the torque the car needs (1: the brakes give what is asked).
     pub inverse_brake_gain: T,
+    /// Share of each axle's braking torque given to its left wheel,
+    /// dimensionless, in `[0.1, 0.9]` (0.5: left and right alike): the wheels'
+    /// loads under the lateral load transfer, so that the inside wheel of a
+    /// braked bend, unloaded, is not the first to lock (a brake force
+    /// distribution). The driving torque is always split equally (an open
+    /// differential).
+    pub brake_left_share: T,
     /// True when the steering may turn no further from straight ahead than the
     /// last command (it may turn back): the front tyres slide at a large angle
     /// ([`crate::tasks::ControlTask::steering_held`]).
@@ -560,6 +572,7 @@ impl<T: Real> CarModel<T> {
             traction_grip_mps2: T::INFINITY,
             braking_grip_mps2: T::INFINITY,
             inverse_brake_gain: T::ONE,
+            brake_left_share: T::HALF,
             hold_steering: false,
         }
     }
@@ -700,9 +713,13 @@ pub fn control_with_model<T: Real>(
         let h = torque * T::HALF;
         [h, h, T::ZERO, T::ZERO]
     } else {
-        let front = torque * cfg.brake_front_share * T::HALF;
-        let rear = torque * (T::ONE - cfg.brake_front_share) * T::HALF;
-        [front, front, rear, rear]
+        // Each axle's share by the brake balance, then left and right by their
+        // loads (`car.brake_left_share`).
+        let front = torque * cfg.brake_front_share;
+        let rear = torque - front;
+        let l = car.brake_left_share;
+        let (fl, rl) = (front * l, rear * l);
+        [fl, front - fl, rl, rear - rl]
     };
 
     // Lateral.

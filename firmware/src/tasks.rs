@@ -48,7 +48,7 @@ use crate::reference_path::{PathError, ReferencePath, MAX_SEARCH_SEGMENTS};
 use crate::sideslip::SideslipLag;
 use crate::state_estimate::StateEstimate;
 use crate::Real;
-use qp::real::{larger, smaller};
+use qp::real::{clamp_within, larger, smaller};
 
 pub use crate::reference_path::ECU_PATH_ROWS;
 pub use crate::timing::{CONTROL_PERIOD_US, PLAN_PERIOD_US};
@@ -729,10 +729,13 @@ impl<T: Real> ControlTask<T> {
     /// carries under the lateral load transfer and less the load the car's own
     /// acceleration moves off the driven front axle, for the lightest mass the
     /// estimate allows (`1 − u` of it); for braking, as much as the brake
-    /// balance lets each axle carry of it). `lateral_mps2` finite (a NaN gives
+    /// balance lets each axle carry of it); and each axle's braking torque
+    /// shared between left and right by the load the lateral acceleration
+    /// `transfer_mps2` (m/s², signed, to the left; [`ControlTask::run`] gives
+    /// the measured `V·ψ̇`) puts on them ([`CarModel::brake_left_share`]). Both finite (a NaN gives
     /// NaN limits: [`ControlTask::run`] uses the model only on a finite
     /// estimate).
-    pub fn car_model(&self, lateral_mps2: T) -> CarModel<T> {
+    pub fn car_model(&self, lateral_mps2: T, transfer_mps2: T) -> CarModel<T> {
         let lon = self.friction.longitudinal();
         let m0 = self.friction_config.longitudinal.mass_kg;
         let [r0, r2] = lon.resistance_terms_mps2();
@@ -801,6 +804,15 @@ impl<T: Real> ControlTask<T> {
             traction_grip_mps2: traction * traction_half,
             braking_grip_mps2: grip * larger(axle, T::ZERO) * braking_half,
             inverse_brake_gain: lon.inverse_brake_gain(),
+            // The left wheels carry `1/2 − (h/t)·a_y/g` of the car's weight
+            // (`a_y` to the left): each axle's braking torque is shared by it,
+            // within [0.1, 0.9] (a noisy or extreme `a_y` never leaves a wheel
+            // all or nothing).
+            brake_left_share: clamp_within(
+                T::HALF - fc.cg_height_over_track * T::lit(1.0 / crate::G) * transfer_mps2,
+                T::lit(0.1),
+                T::lit(0.9),
+            ),
             hold_steering: self.steering_held(),
         }
     }
@@ -813,7 +825,8 @@ impl<T: Real> ControlTask<T> {
         self.stats.activations = self.stats.activations.wrapping_add(1);
         self.friction.read_wheels(&self.friction_config, est);
         let lateral = self.lateral_demand(est);
-        let car = self.car_model(lateral);
+        // The brakes' left/right shares follow the measured `V·ψ̇`.
+        let car = self.car_model(lateral, est.vx_mps * est.yaw_rate_radps);
         match low_level::control_with_model(&self.config, &mut self.state, plan, est, now_us, &car)
         {
             Ok(a) => {

@@ -969,6 +969,53 @@ fn braking_is_shared_between_the_axles_as_configured() {
     assert!((rl - 0.15 * t).abs() < 1e-9 && rl == rr, "{rl} {rr} of {t}");
 }
 
+/// A brake force distribution: each axle's braking torque shared between left
+/// and right by `brake_left_share`, the four adding up to the total; the
+/// driving torque stays equal on the two front wheels.
+#[test]
+fn braking_is_shared_between_left_and_right_as_the_car_model_says() {
+    let mut cfg = cfg_no_ff();
+    cfg.brake_front_share = 0.7;
+    let car = CarModel {
+        brake_left_share: 0.3,
+        ..CarModel::configured(&cfg)
+    };
+    let mut st = LowLevelState::new();
+    let a = control_with_model(
+        &cfg,
+        &mut st,
+        &straight_plan(0, 10.0),
+        &est(11.0, 0.0),
+        0,
+        &car,
+    )
+    .unwrap();
+    let t = a.torque_total_nm;
+    assert!(t < 0.0);
+    let [fl, fr, rl, rr] = a.wheel_torque_nm;
+    assert!((fl - 0.7 * 0.3 * t).abs() < 1e-9, "{fl} of {t}");
+    assert!((fr - 0.7 * 0.7 * t).abs() < 1e-9, "{fr} of {t}");
+    assert!((rl - 0.3 * 0.3 * t).abs() < 1e-9, "{rl} of {t}");
+    assert!((rr - 0.3 * 0.7 * t).abs() < 1e-9, "{rr} of {t}");
+    assert!((fl + fr + rl + rr - t).abs() < 1e-9);
+    // Driving: the open differential's equal halves whatever the share.
+    let mut st = LowLevelState::new();
+    let a = control_with_model(
+        &cfg,
+        &mut st,
+        &straight_plan(0, 10.0),
+        &est(9.0, 0.0),
+        0,
+        &car,
+    )
+    .unwrap();
+    let [fl, fr, rl, rr] = a.wheel_torque_nm;
+    assert!(
+        a.torque_total_nm > 0.0 && fl == fr && rl == 0.0 && rr == 0.0,
+        "{fl} {fr}"
+    );
+}
+
 /// Brakes that give 0.7 of the torque commanded: the braking feed-forward and
 /// the anti-lock limit are commanded as 1/0.7 of what the car needs; driving is
 /// not touched.
@@ -1039,6 +1086,7 @@ fn the_feedforward_holds_the_cars_model_and_the_torque_its_grip() {
         traction_grip_mps2: f64::INFINITY,
         braking_grip_mps2: f64::INFINITY,
         inverse_brake_gain: 1.0,
+        brake_left_share: 0.5,
         hold_steering: false,
     };
     // On the planned speed: (m·a + F₀ + c₂·V²)·r.

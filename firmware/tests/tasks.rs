@@ -376,7 +376,7 @@ fn the_traction_limit_counts_the_load_the_cars_own_acceleration_takes_off_the_fr
         // transfer counted at the inside wheel's grip.
         let y = inside * fc.cg_height_over_wheelbase / g;
         let exact = inside * (1.0 - u) * fc.driven_load_share / (1.0 + y);
-        let limit = control.car_model(ay).traction_grip_mps2;
+        let limit = control.car_model(ay, ay).traction_grip_mps2;
         assert!(limit <= exact, "a_y {ay}: {limit} over {exact}");
         assert!(
             limit >= exact * (1.0 - y.powi(4)) - 1e-12,
@@ -394,6 +394,36 @@ fn the_traction_limit_counts_the_load_the_cars_own_acceleration_takes_off_the_fr
     }
 }
 
+/// The brake force distribution follows the lateral load transfer: in a left
+/// bend (`a_y > 0`) the right (outside) wheels get more of each axle's braking
+/// torque, `1/2 + (h/t)·a_y/g`; in a right bend the left ones; on a straight
+/// both alike; never less than 0.1 or more than 0.9 of it, whatever `a_y`.
+#[test]
+fn the_outside_wheels_of_a_bend_get_more_of_the_braking() {
+    let car = vehicle();
+    let control = car.control_task(1.0).unwrap();
+    let k = control.friction_config().cg_height_over_track / f64::from(firmware::G);
+    assert!(k > 0.0);
+    assert_eq!(control.car_model(0.0, 0.0).brake_left_share, 0.5);
+    for ay in [2.0, 5.0] {
+        let left = control.car_model(ay, ay).brake_left_share;
+        assert!((left - (0.5 - k * ay)).abs() < 1e-6, "a_y {ay}: {left}");
+        let right_bend = control.car_model(ay, -ay).brake_left_share;
+        assert!(
+            (right_bend - (0.5 + k * ay)).abs() < 1e-6,
+            "a_y {ay}: {right_bend}"
+        );
+    }
+    assert_eq!(
+        control.car_model(0.0, 1.0e3).brake_left_share,
+        f64::from(0.1f32)
+    );
+    assert_eq!(
+        control.car_model(0.0, -1.0e3).brake_left_share,
+        f64::from(0.9f32)
+    );
+}
+
 /// Traction control and an anti-lock limit from the wheel speeds: a driven
 /// front wheel that spins halves the traction grip, a wheel that locks halves
 /// the braking grip, from the activation that sees it; wheels that roll (or are
@@ -409,7 +439,7 @@ fn a_spinning_wheel_halves_the_traction_and_a_locked_one_the_braking() {
     };
     let mut limits = |wheels: [f64; 4]| {
         control.run(&at(wheels), &plan, 0);
-        let m = control.car_model(0.0);
+        let m = control.car_model(0.0, 0.0);
         (m.traction_grip_mps2, m.braking_grip_mps2)
     };
     let (t0, b0) = limits([f64::NAN; 4]);
@@ -463,7 +493,7 @@ fn a_spinning_or_locked_wheel_halves_the_torque_commanded_at_once() {
         };
         let a = control.run(&e, &plan_asking(accel), 0);
         assert_eq!(a.mode, Mode::Following);
-        let m = control.car_model(0.0);
+        let m = control.car_model(0.0, 0.0);
         let res = m.resistance_n + m.drag_n_per_mps2 * 400.0;
         let traction = (m.mass_kg * m.traction_grip_mps2 + res.max(0.0)) * r;
         let braking = m.mass_kg * m.braking_grip_mps2 * r * m.inverse_brake_gain;

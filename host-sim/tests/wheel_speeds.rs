@@ -1,9 +1,10 @@
 //! Wheel speeds in the state estimate, end to end: a planner told 1.5 times the
 //! road's friction (`mu-high`) asks more than the tyres give. With the wheel
 //! speeds the traction control and anti-lock limit keep the wheels' slip near
-//! the tyres' peak (without them, on Oschersleben: slip ratio 0.82), also when
-//! the wheel speeds are noisy and late like the rest of the estimate; and on a
-//! dry road the noisy, late wheels lower μ̂ nowhere.
+//! the tyres' peak (without them, on Oschersleben: slip ratio 0.82); when the
+//! wheel speeds are noisy and late like the rest of the estimate, the brakes'
+//! left/right distribution keeps the inside wheels of braked bends from
+//! locking; and on a dry road the noisy, late wheels lower μ̂ nowhere.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use host_sim::closed_loop::set_up::{RunSpec, Setting};
@@ -13,11 +14,22 @@ use host_sim::world::faults::Fault;
 
 /// One lap of `track` (a file of `tests/data`) at μ 1 under `fault`, at the
 /// noise level `noise` with the estimate `delay_ms` late (ms), as the sweep
-/// runs it; the cells of `names`.
+/// runs it (seed 0); the cells of `names`.
 fn lap<const N: usize>(
     track: &str,
     fault: Fault,
     (noise, delay_ms): (f64, f64),
+    names: [&str; N],
+) -> [String; N] {
+    lap_seeded(track, fault, (noise, delay_ms), 0, names)
+}
+
+/// [`lap`] with the noise drawn from `seed`.
+fn lap_seeded<const N: usize>(
+    track: &str,
+    fault: Fault,
+    (noise, delay_ms): (f64, f64),
+    seed: u32,
     names: [&str; N],
 ) -> [String; N] {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -33,7 +45,7 @@ fn lap<const N: usize>(
         noise,
         delay_ms,
         fault,
-        seed: 0,
+        seed,
     };
     let common = Common {
         setting: Setting::default(),
@@ -73,21 +85,40 @@ fn a_planner_asking_too_much_spins_no_wheel_far_past_its_peak() {
 }
 
 /// The same with the estimate at noise level 4 (`--noise high`: each wheel's
-/// speed 0.12 m/s of noise) and 100 ms late, wheel speeds included: the limits
-/// act on what the wheels did 100 ms before, so the slip goes further past the
-/// peak than with the wheels seen at once, but is still held, far under the
-/// 0.82 reached without the wheel speeds.
+/// speed 0.12 m/s of noise) and 100 ms late, wheel speeds included, on five
+/// circuits and two seeds. The limits act on what the wheels did 100 ms before:
+/// a wheel is seen locking only 100 ms after it passed `0.15·V + 1 m/s`, so
+/// its slip goes further past the peak than with the wheels seen at once. What
+/// keeps it short of locking is the brakes' left/right distribution by the
+/// lateral load transfer: with the torque split equally, the inside wheel of a
+/// braked bend locked first, the laps' peak slip ratios' median 0.76 (0.50 to
+/// 0.98); with it 0.45 (0.33 to 0.75).
 #[test]
 fn noisy_late_wheel_speeds_still_hold_the_slip_of_a_planner_asking_too_much() {
-    let [outcome, slip] = lap(
+    let mut peaks = Vec::new();
+    for track in [
         "Oschersleben.csv",
-        Fault::MuHigh(1.5),
-        (4.0, 100.0),
-        ["outcome", "max_abs_slip_ratio"],
-    );
-    assert_eq!(outcome, "ok");
-    let slip: f64 = slip.parse().unwrap();
-    assert!(slip < 0.4, "slip ratio {slip}");
+        "Budapest.csv",
+        "BrandsHatch.csv",
+        "MoscowRaceway.csv",
+        "Shanghai.csv",
+    ] {
+        for seed in 0..2 {
+            let [outcome, slip] = lap_seeded(
+                track,
+                Fault::MuHigh(1.5),
+                (4.0, 100.0),
+                seed,
+                ["outcome", "max_abs_slip_ratio"],
+            );
+            assert_eq!(outcome, "ok", "{track} seed {seed}");
+            peaks.push(slip.parse::<f64>().unwrap());
+        }
+    }
+    peaks.sort_by(f64::total_cmp);
+    let median = 0.5 * (peaks[4] + peaks[5]);
+    assert!(median < 0.55, "median peak slip ratio {median}: {peaks:?}");
+    assert!(peaks[9] < 0.9, "peak slip ratios {peaks:?}");
 }
 
 /// On a dry road with the planner's friction, a noisy estimate 100 ms late:

@@ -22,7 +22,7 @@
 //! first `control` release), completions (`control`: its actuation frame
 //! written, reported by the next frame; `plan`: the plan published, stamped
 //! under the lock), response times, deadline misses, budget
-//! overruns (its own core clock cycles, preemption excluded, over 5,000 /
+//! overruns (its own core clock cycles, preemption excluded, over 6,000 /
 //! 15.96 M) and skipped releases are counted on its own clock and sent in every
 //! actuation frame (`plan`'s with its plan event). A `control` overrun is not
 //! absorbed: the releases that fell during it are skipped and counted, and after

@@ -45,7 +45,7 @@
 //!
 //! # Deadlines and budgets
 //!
-//! Budgets are in ECU cycles (control 5,000, plan 15.96 M); deadlines are times: a
+//! Budgets are in ECU cycles (control 6,000, plan 15.96 M); deadlines are times: a
 //! plan activation whose response time exceeds its 100 ms period, and a control
 //! activation that completes more than its 10 ms period after its release
 //! ([`ControlOutput::completion`]: when its answer has left it, which may follow
