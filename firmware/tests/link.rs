@@ -1513,3 +1513,19 @@ proptest! {
         prop_assert_eq!(msg.decode_like(&mut body), Err(FrameError::Authentication));
     }
 }
+
+/// The frames' CRC, four bits a step: CRC-32/ISO-HDLC's check value, and the
+/// `crc` crate's byte-table CRC on any bytes.
+#[test]
+fn the_frames_crc_is_crc32_iso_hdlc() {
+    assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+    assert_eq!(crc32(b""), 0);
+}
+
+proptest! {
+    #[test]
+    fn the_frames_crc_matches_the_crc_crate(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+        let reference = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+        prop_assert_eq!(crc32(&bytes), reference.checksum(&bytes));
+    }
+}

@@ -96,7 +96,7 @@ pub fn encode<M: Serialize + ?Sized>(
     let flavor = SecOcModifier {
         inner: cobs,
         mac,
-        crc: CRC32.digest(),
+        crc: CRC32_INIT,
         freshness,
     };
     // postcard writes a `u8` as its one byte: the tuple is the version byte, then
@@ -127,7 +127,7 @@ struct SecOcModifier<'m, B> {
     /// The CMAC, begun on the frame's stream.
     mac: &'m mut LinkMac,
     /// The CRC of the bytes so far.
-    crc: crc::Digest<'static, u32>,
+    crc: u32,
     /// The frame's freshness value.
     freshness: u32,
 }
@@ -137,7 +137,7 @@ impl<B: postcard::ser_flavors::Flavor> postcard::ser_flavors::Flavor for SecOcMo
 
     fn try_push(&mut self, data: u8) -> postcard::Result<()> {
         self.mac.push(data);
-        self.crc.update(&[data]);
+        self.crc = crc32_byte(self.crc, data);
         self.inner.try_push(data)
     }
 
@@ -146,7 +146,7 @@ impl<B: postcard::ser_flavors::Flavor> postcard::ser_flavors::Flavor for SecOcMo
         // buffer refuses the bytes past it), and the control task encodes one
         // frame (an `Up`) per activation; the plan task encodes none.
         // wcet-bound: MAX_UP_FRAME_BYTES per activation
-        self.crc.update(data);
+        crc32_update!(self.crc, data);
         // As above: a byte of the frame per pass.
         // wcet-bound: MAX_UP_FRAME_BYTES per activation
         for &b in data {
@@ -177,8 +177,8 @@ impl<B: postcard::ser_flavors::Flavor> postcard::ser_flavors::Flavor for SecOcMo
         t.copy_from_slice(&tag);
         // The freshness value and the tag (SECURED_BYTES).
         // wcet-bound: 12
-        crc.update(secured);
-        check.copy_from_slice(&crc.finalize().to_le_bytes());
+        crc32_update!(crc, secured.iter());
+        check.copy_from_slice(&(!crc).to_le_bytes());
         // The freshness value, the tag and the CRC (SECURED_BYTES + CRC_BYTES).
         // wcet-bound: 16
         for b in trailer {
@@ -319,12 +319,14 @@ pub fn decode<'a, M: Deserialize<'a>>(
         return Err(FrameError::Version { got: version });
     }
     let crc: [u8; CRC_BYTES] = crc.try_into().map_err(|_| FrameError::TooShort)?;
-    // The CRC's loop takes at least a byte of `body` (< MAX_FRAME_BYTES, and in the
-    // ECU's tasks at most what `cobs_decode_in_place` states) per iteration.
+    let mut register = CRC32_INIT;
+    // The CRC's loop takes a byte of `body` (< MAX_FRAME_BYTES, and in the ECU's
+    // tasks at most what `cobs_decode_in_place` states) per iteration.
     // wcet-bound: MAX_FRAME_BYTES
     // wcet-bound in USART2: MAX_DRIVING_DOWN_FRAME_BYTES
     // wcet-bound in receive: MAX_DOWN_FRAME_BYTES
-    if CRC32.checksum(body) != u32::from_le_bytes(crc) {
+    crc32_update!(register, body);
+    if !register != u32::from_le_bytes(crc) {
         return Err(FrameError::Checksum);
     }
     // body = version ++ payload ++ freshness ++ tag; the MAC input is all but the tag.

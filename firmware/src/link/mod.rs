@@ -66,7 +66,7 @@
 //!   ([`LINK_KEY`], set at build time) of the stream's Data ID
 //!   ([`Stream::data_id`], one byte, not sent) ++ version ++ payload ++
 //!   freshness ([`secoc`] says why these sizes).
-//! * **CRC**: CRC-32/ISO-HDLC (the zlib/Ethernet CRC, [`crc::CRC_32_ISO_HDLC`])
+//! * **CRC**: CRC-32/ISO-HDLC (the zlib/Ethernet CRC, [`crc32`]; four bits a step, a 64-byte table)
 //!   of the version byte, the payload, the freshness and the tag, appended
 //!   little-endian. It tells a frame damaged on the way (*corrupt*) from one
 //!   whose tag was made without the key (*forged*), which the tag alone cannot.
@@ -124,7 +124,6 @@
 //!   row: idle line or resynchronisation); [`FrameError::Empty`] is what [`decode`]
 //!   says of an empty slice.
 
-use crc::{Crc, CRC_32_ISO_HDLC};
 use serde::{Deserialize, Serialize};
 
 use crate::low_level::{ControlFault, Mode};
@@ -160,8 +159,66 @@ pub const SENSOR_UNEXPECTED: u8 = 4;
 /// (the flashed build's USART link, which does not run in lock-step with the
 /// host: a frame may be late): no estimate, the period a dropout.
 pub const SENSOR_MISSING: u8 = 5;
-/// The CRC of every frame (CRC-32/ISO-HDLC, table in flash: 1 KiB).
-static CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
+/// CRC-32/ISO-HDLC (the zlib/Ethernet CRC) of every frame: its reflected
+/// polynomial.
+const CRC32_POLY: u32 = 0xEDB8_8320;
+/// The CRC's initial register and final XOR.
+const CRC32_INIT: u32 = 0xFFFF_FFFF;
+/// The CRC register's step over four bits, by those bits (64 B). The `crc`
+/// crate's byte table is 1 KiB, and every constant of the ECU lives in its RAM
+/// (`memory.x`: no wait states for the timing analysis to charge): two steps of
+/// four bits per byte cost a few instructions more than one of eight and keep
+/// 960 B of RAM. `firmware/tests/link.rs` checks it against the `crc` crate.
+const CRC32_NIBBLES: [u32; 16] = {
+    let mut table = [0u32; 16];
+    let mut i = 0;
+    while i < 16 {
+        let mut c = i as u32;
+        let mut bit = 0;
+        while bit < 4 {
+            c = if c & 1 != 0 {
+                (c >> 1) ^ CRC32_POLY
+            } else {
+                c >> 1
+            };
+            bit += 1;
+        }
+        table[i] = c;
+        i += 1;
+    }
+    table
+};
+
+/// The CRC register `register` after the byte `b`: two steps of four bits.
+#[inline(always)]
+pub(crate) const fn crc32_byte(register: u32, b: u8) -> u32 {
+    let c = register ^ b as u32;
+    let c = (c >> 4) ^ CRC32_NIBBLES[(c & 15) as usize];
+    (c >> 4) ^ CRC32_NIBBLES[(c & 15) as usize]
+}
+
+/// Feeds the bytes `$data` (an iterator of `&u8`) into the CRC register
+/// `$register` (a `u32` place, started at [`CRC32_INIT`]). A macro, not a
+/// function: its loop is then the caller's line, where the timing analysis'
+/// annotation of how many bytes that caller feeds sits (as the `crc` crate's
+/// loop, a dependency's, was).
+macro_rules! crc32_update {
+    ($register:expr, $data:expr) => {{
+        let mut c: u32 = $register;
+        for &b in $data {
+            c = $crate::link::crc32_byte(c, b);
+        }
+        $register = c;
+    }};
+}
+
+/// CRC-32/ISO-HDLC of `data` (the check value of `b"123456789"` is
+/// `0xCBF4_3926`).
+pub fn crc32(data: &[u8]) -> u32 {
+    let mut register = CRC32_INIT;
+    crc32_update!(register, data);
+    !register
+}
 
 // ---------------------------------------------------------------------------
 // Messages
