@@ -228,10 +228,18 @@ fn addition_formulas_match_plain_rk4_including_fallbacks() {
     ] {
         let ours = g.discretize(&x, &u, 0.2).x_next;
         let theirs = reference_rk4(&g, x, u, 0.2);
+        // The MPC's map at a zero sideslip lag, against the same independent
+        // RK4 of the paper's Equation 1 (not against `discretize`, which calls
+        // it): the λ = 0 path is the paper's model.
+        let lag0 = g.discretize_lagged(&x, &u, 0.2, x[DELTA].tan(), 0.0).x_next;
         for i in 0..NX {
             assert!(
                 (ours[i] - theirs[i]).abs() < 1e-10 * (1.0 + theirs[i].abs()),
                 "{i}: {ours:?} {theirs:?}"
+            );
+            assert!(
+                (lag0[i] - theirs[i]).abs() < 1e-10 * (1.0 + theirs[i].abs()),
+                "{i}: {lag0:?} {theirs:?}"
             );
         }
         assert_jacobians_match(x, u, 0.2, 1);

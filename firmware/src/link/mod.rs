@@ -168,7 +168,7 @@ const CRC32_INIT: u32 = 0xFFFF_FFFF;
 /// crate's byte table is 1 KiB, and every constant of the ECU lives in its RAM
 /// (`memory.x`: no wait states for the timing analysis to charge): two steps of
 /// four bits per byte cost a few instructions more than one of eight and keep
-/// 960 B of RAM. `firmware/tests/link.rs` checks it against the `crc` crate.
+/// 984 B of RAM. `firmware/tests/link.rs` checks it against the `crc` crate.
 const CRC32_NIBBLES: [u32; 16] = {
     let mut table = [0u32; 16];
     let mut i = 0;
