@@ -46,6 +46,31 @@ pub struct FlowFact {
 }
 
 impl FlowFact {
+    /// A fact no trace has been checked against yet (no count observed), its
+    /// bound the same for every task.
+    fn unobserved(
+        name: String,
+        per: String,
+        counts: String,
+        bound: u64,
+        sources: Vec<String>,
+        members: usize,
+        counter: CounterSpec,
+    ) -> Self {
+        Self {
+            name,
+            per,
+            counts,
+            bound,
+            bound_by_task: Vec::new(),
+            sources,
+            members,
+            observed_max: None,
+            observed_scopes: 0,
+            counter,
+        }
+    }
+
     /// Whether a trace exercised the fact.
     pub fn exercised(&self) -> bool {
         self.observed_max.is_some()
@@ -130,23 +155,28 @@ struct FactBuilder<'a> {
 /// any member: its bound is each task's `retries` per activation.
 fn retry_fact(retries: &[(String, u64)]) -> FlowFact {
     FlowFact {
-        name: "exception retries".into(),
-        per: "activation".into(),
-        counts: "back edges of the retry loops (load/store-exclusive, `per preemption`)".into(),
-        bound: retries.iter().map(|r| r.1).max().unwrap_or(0),
         bound_by_task: retries.to_vec(),
-        sources: vec![
-            "one retry per preemption of the activation (an exception clears the exclusive monitor; `wcet-bound: N per preemption`)"
-                .into(),
-        ],
-        members: 0,
-        observed_max: None,
-        observed_scopes: 0,
-        counter: CounterSpec {
-            scope: CounterScope::Activation,
-            blocks: Vec::new(),
-            edges: Vec::new(),
-        },
+        ..FlowFact::unobserved(
+            "exception retries".into(),
+            "activation".into(),
+            "back edges of the retry loops (load/store-exclusive, `per preemption`)".into(),
+            retries.iter().map(|r| r.1).max().unwrap_or(0),
+            vec![
+                "one retry per preemption of the activation (an exception clears the exclusive monitor; `wcet-bound: N per preemption`)"
+                    .into(),
+            ],
+            0,
+            activation_counter(),
+        )
+    }
+}
+
+/// An empty counter per activation (its members added as they are found).
+fn activation_counter() -> CounterSpec {
+    CounterSpec {
+        scope: CounterScope::Activation,
+        blocks: Vec::new(),
+        edges: Vec::new(),
     }
 }
 
@@ -170,23 +200,15 @@ fn group_fact(annotations: &[Annotation], g: usize) -> FlowFact {
             .collect(),
         None => vec![source(annotations, g)],
     };
-    FlowFact {
-        name: counter
-            .unwrap_or_else(|| a.map_or("?".to_string(), |a| format!("{}:{}", a.file, a.line))),
-        per: "activation".into(),
-        counts: String::new(),
-        bound: a.map_or(0, |a| a.bound),
-        bound_by_task: Vec::new(),
+    FlowFact::unobserved(
+        counter.unwrap_or_else(|| a.map_or("?".to_string(), |a| format!("{}:{}", a.file, a.line))),
+        "activation".into(),
+        String::new(),
+        a.map_or(0, |a| a.bound),
         sources,
-        members: 0,
-        observed_max: None,
-        observed_scopes: 0,
-        counter: CounterSpec {
-            scope: CounterScope::Activation,
-            blocks: Vec::new(),
-            edges: Vec::new(),
-        },
-    }
+        0,
+        activation_counter(),
+    )
 }
 
 impl FactBuilder<'_> {
@@ -233,24 +255,19 @@ impl FactBuilder<'_> {
             // nested loops split from it (`same loop`), their back edges together
             // are a flow fact per entry of this loop.
             Per::Entry if shared.is_empty() => {}
-            Per::Entry => self.out.push(FlowFact {
-                name: stated_name(&stated),
-                per: format!("entry of a loop of `{}`", self.name_of(f)),
-                counts: format!(
-                    "iterations of one source loop split into {n} binary loops (`same loop`)"
-                ),
-                bound: fact.bound,
-                bound_by_task: Vec::new(),
-                sources: vec![stated],
-                members: n,
-                observed_max: None,
-                observed_scopes: 0,
-                counter: CounterSpec {
+            Per::Entry => self.out.push(FlowFact::unobserved(
+                stated_name(&stated),
+                format!("entry of a loop of `{}`", self.name_of(f)),
+                format!("iterations of one source loop split into {n} binary loops (`same loop`)"),
+                fact.bound,
+                vec![stated],
+                n,
+                CounterSpec {
                     scope: CounterScope::LoopEntry(f, x),
                     blocks: Vec::new(),
                     edges,
                 },
-            }),
+            )),
             Per::Preemption => {
                 self.retry.counter.edges.extend(edges);
                 self.retry.members += n;
@@ -268,22 +285,19 @@ impl FactBuilder<'_> {
                     ),
                     _ => ("activation".to_string(), CounterScope::Activation),
                 };
-                self.out.push(FlowFact {
-                    name: stated_name(&stated),
+                self.out.push(FlowFact::unobserved(
+                    stated_name(&stated),
                     per,
-                    counts: format!("iterations of a loop of `{}`", self.name_of(f)),
-                    bound: fact.bound,
-                    bound_by_task: Vec::new(),
-                    sources: vec![stated],
-                    members: n,
-                    observed_max: None,
-                    observed_scopes: 0,
-                    counter: CounterSpec {
+                    format!("iterations of a loop of `{}`", self.name_of(f)),
+                    fact.bound,
+                    vec![stated],
+                    n,
+                    CounterSpec {
                         scope,
                         blocks: Vec::new(),
                         edges,
                     },
-                });
+                ));
             }
         }
     }
@@ -307,25 +321,23 @@ impl FactBuilder<'_> {
                 let stated = cap
                     .annotation
                     .map_or_else(String::new, |k| source(self.annotations, k));
-                self.out.push(FlowFact {
-                    name: stated_name(&stated),
-                    per: match cap.loop_index {
-                        Some(_) => format!("loop entry in `{}`", self.name_of(cap.function)),
-                        None => format!("call of `{}`", self.name_of(cap.function)),
-                    },
-                    counts: "runs of the line's calls".into(),
-                    bound: cap.bound,
-                    bound_by_task: Vec::new(),
-                    sources: vec![stated],
-                    members: cap.blocks.len(),
-                    observed_max: None,
-                    observed_scopes: 0,
-                    counter: CounterSpec {
+                let per = match cap.loop_index {
+                    Some(_) => format!("loop entry in `{}`", self.name_of(cap.function)),
+                    None => format!("call of `{}`", self.name_of(cap.function)),
+                };
+                self.out.push(FlowFact::unobserved(
+                    stated_name(&stated),
+                    per,
+                    "runs of the line's calls".into(),
+                    cap.bound,
+                    vec![stated],
+                    cap.blocks.len(),
+                    CounterSpec {
                         scope,
                         blocks: blocks.collect(),
                         edges: Vec::new(),
                     },
-                });
+                ));
             }
         }
     }
