@@ -45,8 +45,8 @@
 //! chosen by the cargo feature `board-usart`; the tasks, the library calls and
 //! the frames are the same in both:
 //! * without it (`cargo ecu`), the lock-step build above: semihosting, `defmt`
-//!   over semihosting, RTIC's dispatchers `USART1` and `USART2` (the timing
-//!   analysis reads this build);
+//!   over semihosting, RTIC's dispatchers `USART1` and `USART2` (the processor
+//!   in the loop runs this build; the timing analysis reads either);
 //! * with it (`cargo ecu-board`, profile `board`), the binary you flash:
 //!   USART1 (`support/usart_link.rs`), polled during the set-up, then
 //!   interrupt-driven into bounded queues that [`firmware::link::demux`] sorts
@@ -197,8 +197,9 @@ fn core_ticks() -> u64 {
         let a = Mono::now().ticks();
         let cvr = cortex_m::peripheral::SYST::get_current();
         let b = Mono::now().ticks();
-        // A retry needs a SysTick between the two reads: one per preemption.
-        // wcet-bound: 1 per preemption
+        // A retry needs a SysTick between the two reads (no other interrupt
+        // changes the tick count): one per tick that preempts the task.
+        // wcet-bound: 1 per tick
         if a == b {
             let within = (TICKS_PER_MONO - 1).saturating_sub(cvr);
             return a as u64 * TICKS_PER_MONO as u64 + within as u64;
@@ -447,7 +448,7 @@ impl Link {
         reader: &mut FrameReader<MAX_DOWN_FRAME_BYTES>,
     ) -> Result<Down, Option<Refusal>> {
         loop {
-            let byte = self.next_byte().ok_or(None)?;
+            let byte = self.next_setup_byte().ok_or(None)?;
             let decoded = match reader.push(byte) {
                 None => continue,
                 Some(Ok(frame)) => link::decode::<Down>(frame, &mut self.mac, &mut self.down_rx),
@@ -590,11 +591,25 @@ impl Link {
         Some(byte)
     }
 
-    /// The next byte of the down-link: during the set-up the next on the line
-    /// (waiting for it), then the next the interrupt queued (`None`: none yet).
+    /// The next byte the interrupt queued for the control task (`None`: none
+    /// yet).
     #[cfg(feature = "board-usart")]
     fn next_byte(&mut self) -> Option<u8> {
         self.port.next_byte()
+    }
+
+    /// The next byte of the set-up, waiting for it; `None` when the host closed
+    /// the link.
+    #[cfg(not(feature = "board-usart"))]
+    fn next_setup_byte(&mut self) -> Option<u8> {
+        self.next_byte()
+    }
+
+    /// The next byte of the set-up: polled, waiting for it (the interrupt takes
+    /// over only when the tasks start).
+    #[cfg(feature = "board-usart")]
+    fn next_setup_byte(&mut self) -> Option<u8> {
+        Some(self.port.next_byte_polled())
     }
 
     /// Sends one frame to the host, authenticated on the up stream, through the
@@ -615,9 +630,21 @@ impl Link {
         }
     }
 
-    /// [`Link::send`] over the USART: the frame polled out during the set-up
-    /// and after [`usart_link::Port::take_over`], else queued for the interrupt
-    /// (false, nothing queued, when the previous frame has not left yet).
+    /// [`Link::send`] outside the tasks (the set-up's answers, the end of the
+    /// run, the fault paths): the same in this build.
+    #[cfg(not(feature = "board-usart"))]
+    pub fn send_polled(&mut self, msg: UpRef<'_>) -> bool {
+        self.send(msg)
+    }
+
+    /// The end of the run or a fault, interrupts off: nothing to hand over in
+    /// this build (semihosting writes are synchronous).
+    #[cfg(not(feature = "board-usart"))]
+    fn take_over(&mut self) {}
+
+    /// [`Link::send`] over the USART, the tasks' path: the frame queued for the
+    /// interrupt (false, nothing queued, when the previous frame has not left
+    /// yet); it never waits.
     #[inline(never)]
     #[cfg(feature = "board-usart")]
     pub fn send(&mut self, msg: UpRef<'_>) -> bool {
@@ -629,6 +656,31 @@ impl Link {
             },
             Err(_) => false,
         }
+    }
+
+    /// [`Link::send`] outside the tasks, written by polling, every wait bounded:
+    /// the set-up's answers (before the interrupt takes over) and, after
+    /// [`Link::take_over`], the end of the run's and the fault paths' frames.
+    /// Apart from [`Link::send`], so that no task's path holds a polled wait.
+    #[inline(never)]
+    #[cfg(feature = "board-usart")]
+    pub fn send_polled(&mut self, msg: UpRef<'_>) -> bool {
+        match link::encode(&msg, &mut self.mac, &mut self.up_tx, &mut self.tx) {
+            // No slicing that can panic: the panic path sends through it.
+            Ok(n) => match self.tx.get(..n) {
+                Some(bytes) => self.port.write_polled(bytes),
+                None => false,
+            },
+            Err(_) => false,
+        }
+    }
+
+    /// The end of the run or a fault: interrupts off, the frame in flight sent
+    /// whole by polling ([`usart_link::Port::take_over`]); then
+    /// [`Link::send_polled`].
+    #[cfg(feature = "board-usart")]
+    fn take_over(&mut self) {
+        self.port.take_over();
     }
 }
 
@@ -749,7 +801,8 @@ fn stop(link: &mut Link, ok: bool) -> ! {
         .rejected
         .wrapping_add(ROUTE_REJECTED.load(Ordering::Relaxed));
     let refused = link.refused.plus(route_refused());
-    link.send(UpRef::Done(&link::DoneFrame {
+    link.take_over();
+    link.send_polled(UpRef::Done(&link::DoneFrame {
         stack_high_water_bytes: used,
         stack_size_bytes: size,
         rejected_frames: rejected,
@@ -1220,7 +1273,7 @@ mod app {
                 Ok(Down::Obstacle(o)) => setup.obstacle(&o),
                 Ok(Down::Start) if clock.is_err() => {
                     let detail = clock.err().map_or(0, ClockError::code);
-                    link.send(UpRef::Ready(&ReadyFrame {
+                    link.send_polled(UpRef::Ready(&ReadyFrame {
                         status: link::SetupError::ClockFailed.code(),
                         detail,
                     }));
@@ -1230,7 +1283,7 @@ mod app {
                     Ok(control) => break control,
                     Err(f) => {
                         defmt::error!("ecu: set-up refused: {} ({})", f.error, f.detail);
-                        link.send(UpRef::Ready(&ReadyFrame {
+                        link.send_polled(UpRef::Ready(&ReadyFrame {
                             status: f.error.code(),
                             detail: f.detail,
                         }));
@@ -1242,7 +1295,7 @@ mod app {
                 // saying why (a forged frame: most likely another link key).
                 Err(Some(reason)) => {
                     defmt::error!("ecu: set-up frame refused: {}", reason);
-                    link.send(UpRef::Ready(&ReadyFrame {
+                    link.send_polled(UpRef::Ready(&ReadyFrame {
                         status: link::SetupError::FrameRefused.code(),
                         detail: u16::from(reason.code()),
                     }));
@@ -1252,7 +1305,7 @@ mod app {
             }
         };
         defmt::info!("ecu: set-up done, {} path points", planner.path.len());
-        link.send(UpRef::Ready(&ReadyFrame {
+        link.send_polled(UpRef::Ready(&ReadyFrame {
             status: 0,
             detail: 0,
         }));
@@ -1543,9 +1596,8 @@ fn safe_stop_work(fault: u8) -> ! {
         let frame = actuation_frame(u32::MAX, &a, fault, 0);
         // The USART polled from here: the frame in flight sent whole first, then
         // this one, every wait bounded (no interrupt, no semihosting).
-        #[cfg(feature = "board-usart")]
-        link.port.take_over();
-        link.send(UpRef::Actuation(&frame));
+        link.take_over();
+        link.send_polled(UpRef::Actuation(&frame));
     }
     #[cfg(not(feature = "board-usart"))]
     {

@@ -256,11 +256,11 @@ fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, FrameError> {
     let mut write = 0;
     // len < MAX_FRAME_BYTES: decode, the only caller, refuses longer frames. The
     // ECU's tasks decode what their frame readers return: the control task's sensor
-    // frames, in its dispatcher USART2, at most MAX_DRIVING_DOWN_FRAME_BYTES (its
+    // frames, in its handler (`in control`), at most MAX_DRIVING_DOWN_FRAME_BYTES (its
     // `Link::receive_sensor` stops a frame there); the plan task's window, in
     // `RouteLink::receive`, at most MAX_DOWN_FRAME_BYTES (its reader's size).
     // wcet-bound: MAX_FRAME_BYTES
-    // wcet-bound in USART2: MAX_DRIVING_DOWN_FRAME_BYTES
+    // wcet-bound in control: MAX_DRIVING_DOWN_FRAME_BYTES
     // wcet-bound in receive: MAX_DOWN_FRAME_BYTES
     for read in 0..buf.len() {
         let byte = match buf.get(read) {
@@ -323,7 +323,7 @@ pub fn decode<'a, M: Deserialize<'a>>(
     // The CRC's loop takes a byte of `body` (< MAX_FRAME_BYTES, and in the ECU's
     // tasks at most what `cobs_decode_in_place` states) per iteration.
     // wcet-bound: MAX_FRAME_BYTES
-    // wcet-bound in USART2: MAX_DRIVING_DOWN_FRAME_BYTES
+    // wcet-bound in control: MAX_DRIVING_DOWN_FRAME_BYTES
     // wcet-bound in receive: MAX_DOWN_FRAME_BYTES
     crc32_update!(register, body);
     if !register != u32::from_le_bytes(crc) {

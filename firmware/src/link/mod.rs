@@ -722,6 +722,7 @@ mod codes;
 pub mod demux;
 mod framing;
 pub mod secoc;
+pub mod usart;
 pub use codes::*;
 pub use framing::*;
 pub use secoc::{

@@ -256,7 +256,7 @@ impl LinkMac {
             // input of M bytes. Frames below MAX_FRAME_BYTES, and in the ECU's
             // tasks at most theirs (decode's bounds).
             // wcet-bound: MAX_FRAME_BYTES / 16 + 1
-            // wcet-bound in USART2: (MAX_DRIVING_DOWN_MAC_INPUT_BYTES + 15) / 16
+            // wcet-bound in control: (MAX_DRIVING_DOWN_MAC_INPUT_BYTES + 15) / 16
             // wcet-bound in receive: (MAX_DOWN_MAC_INPUT_BYTES + 15) / 16
             self.len += take as u8;
             bytes = later;

@@ -364,7 +364,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     let inputs = ReportInputs {
         run_dirs: run_dirs.clone(),
         elf: args.elf.clone(),
-        stack_levels: crate::wcet::ecu_app::ecu_priority_levels(),
+        stack_levels: crate::wcet::ecu_app::EcuBuild::of_elf(&args.elf)?.priority_levels(),
         cpi,
         statics: report::StaticSummary::of(&analysis),
         plan_period_cycles: firmware::timing::PLAN_PERIOD_US as f64
@@ -515,14 +515,54 @@ fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
         .with_context(|| format!("static analysis of {}", args.elf.display()))?;
     analysis.write(&args.out)?;
     print_static(&analysis, &args.out);
+    // The stack bound of the same build: every priority level its schedule has
+    // (the flashed build's link interrupt among them) and every fault handler.
+    let stack = crate::wcet::stack::analyse_elf_once(
+        &args.elf,
+        &analysis.build.priority_levels(),
+        &crate::wcet::ecu_app::ecu_once(),
+        &analysis.build.masked(),
+        &crate::wcet::indirect::targets_of_elf(&args.elf)?,
+    )
+    .with_context(|| format!("stack bound of {}", args.elf.display()))?;
+    let path = args.out.join("stack.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&stack)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!(
+        "stack bound: {} B ({}; levels: {}); wrote {}",
+        stack.total_bytes,
+        if stack.sound { "sound" } else { "NOT sound" },
+        stack
+            .levels
+            .iter()
+            .map(|l| l.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", "),
+        path.display()
+    );
     analysis_errors(&analysis, &args.out)
 }
 
 /// A line per task of the static analysis, and its totals.
 fn print_static(analysis: &crate::wcet::analysis::StaticAnalysis, out: &std::path::Path) {
     for t in &analysis.tasks {
+        let response = match (
+            t.deadline_us,
+            t.response_time_bound_us,
+            t.response_time_past_deadline_us,
+        ) {
+            (Some(d), Some(r), _) => format!("; response time {r:.2} of {d:.2} µs"),
+            (Some(d), None, Some(p)) => {
+                format!("; response time MISSED: {p:.2} µs against a deadline of {d:.2}")
+            }
+            (Some(d), None, None) => format!(
+                "; response time MISSED: none within {} × its deadline of {d:.2} µs",
+                crate::wcet::rta::PAST_DEADLINE_FACTOR
+            ),
+            _ => String::new(),
+        };
         println!(
-            "static analysis, {}: {} functions, {} loops ({} bounded), {}",
+            "static analysis, {}: {} functions, {} loops ({} bounded), {}{response}",
             t.name,
             t.functions,
             t.loops,

@@ -12,7 +12,7 @@ use super::cfg::Function;
 use super::cfg::{self, FlashData, MemoryModel, Program};
 pub use super::copies::copy_size_register;
 use super::copies::copy_sizes;
-pub use super::ecu_app::{preemptions_of, ECU_SCHEDULE, ECU_SECTIONS, ECU_TASKS};
+pub use super::ecu_app::{EcuBuild, ECU_SECTIONS};
 use super::ipet::{self, Cost, LoopFact, Per};
 use super::loops::{self, reverse_post_order, Loop};
 use super::{annotations, bounds, demangle};
@@ -121,6 +121,9 @@ pub struct TaskStatic {
     /// higher priorities' interference; `None` when a bound is missing or the
     /// iteration passed the deadline.
     pub response_time_bound_us: Option<f64>,
+    /// When the response-time bound passes the deadline: the fixed point past it
+    /// (how far it misses), µs; `None` otherwise.
+    pub response_time_past_deadline_us: Option<f64>,
     /// Deadline (= period) of a task, µs; `None` for a section.
     pub deadline_us: Option<f64>,
 }
@@ -130,6 +133,8 @@ pub struct TaskStatic {
 pub struct StaticAnalysis {
     /// The ELF analysed.
     pub elf: String,
+    /// Which build of the ECU application it is (its tasks and schedule).
+    pub build: EcuBuild,
     /// The processor and memory model the cycles assume.
     pub assumptions: Vec<String>,
     /// Per task.
@@ -236,18 +241,20 @@ pub fn analyse(
     traces: &[PathBuf],
 ) -> Result<StaticAnalysis> {
     let binary = Binary::load(elf)?;
+    let build = EcuBuild::of_elf(elf)?;
     let (all_loops, irreducible) = find_loops(&binary.program);
     let (annotations, dependency_facts) = read_annotations(sources)?;
     let index = AnnotationIndex::new(&annotations, &dependency_facts)?;
     let copies = copy_sizes(
+        build,
         &binary.program,
         &binary.ctx,
         &annotations,
         &index.counter_groups,
     );
     check_activation_caps(&annotations, &copies)?;
-    let bounds = LoopBinder::new(&binary, &index, &copies).bind_all(&all_loops)?;
-    let (per_preemption, retries) = retries_per_activation(&annotations);
+    let bounds = LoopBinder::new(&binary, &index, &copies, build).bind_all(&all_loops)?;
+    let retries = retries_per_activation(build, &annotations);
     let mut flow_facts = super::flow_facts::flow_facts(
         &binary.program,
         &all_loops,
@@ -264,16 +271,12 @@ pub fn analyse(
         all_loops: &all_loops,
         facts: &bounds.facts,
         copies: &copies,
+        build,
     };
     let mut units = Units::default();
-    units.bound_all(elf, &model, &irreducible, &bounds, per_preemption)?;
+    units.bound_all(elf, &model, &irreducible, &bounds, &retries)?;
     let (critical_sections, task_reach) = bound_critical_sections(&model, &retries);
-    bound_response_times(
-        model.program,
-        &mut units.tasks,
-        &critical_sections,
-        &task_reach,
-    );
+    bound_response_times(&model, &mut units.tasks, &critical_sections, &task_reach);
     let mut observed = Observed::default();
     TraceReplay::new(elf, &model, &flow_facts)?.check_all(
         traces,
@@ -294,6 +297,7 @@ pub fn analyse(
     } = units;
     let loops: Vec<LoopEntry> = loop_rows.into_values().collect();
     Ok(StaticAnalysis {
+        build,
         traces: traces.iter().map(|t| t.display().to_string()).collect(),
         violations: observed.violations,
         flow_facts,
@@ -497,6 +501,8 @@ struct LoopBinder<'a> {
     ctx: &'a addr2line::Loader,
     index: &'a AnnotationIndex<'a>,
     copies: &'a ipet::CopySizes,
+    /// The build: its tasks' handlers are named by their tasks.
+    build: EcuBuild,
     /// The annotations of one caller's copy some loop took.
     within_used: std::collections::BTreeSet<(String, u32, String)>,
     /// What was found so far.
@@ -508,7 +514,8 @@ struct FunctionLoops<'a> {
     /// The function's index.
     k: usize,
     func: &'a Function,
-    /// Its name's last path segment (what `wcet-bound in NAME:` names).
+    /// What `wcet-bound in NAME:` names it by: its task's name for a task's
+    /// handler, else its name's last path segment.
     fname: String,
     /// Its loops.
     ls: &'a [Loop],
@@ -525,12 +532,14 @@ impl<'a> LoopBinder<'a> {
         binary: &'a Binary,
         index: &'a AnnotationIndex<'a>,
         copies: &'a ipet::CopySizes,
+        build: EcuBuild,
     ) -> Self {
         Self {
             program: &binary.program,
             ctx: &binary.ctx,
             index,
             copies,
+            build,
             within_used: Default::default(),
             out: LoopBounds::default(),
         }
@@ -551,8 +560,9 @@ impl<'a> LoopBinder<'a> {
             .find(|key| !self.within_used.contains(*key))
         {
             anyhow::bail!(
-                "{file}:{line}: `{}{w}:` matches no loop of a function named `{w}`: \
-                 the function was renamed or the line is no longer inlined into it",
+                "{file}:{line}: `{}{w}:` matches no loop of a function named `{w}` \
+                 (or of the handler of the task `{w}`): the function was renamed or \
+                 the line is no longer inlined into it",
                 annotations::WITHIN_MARKER
             );
         }
@@ -562,12 +572,24 @@ impl<'a> LoopBinder<'a> {
     /// Bounds the loops `ls` of function `k`, outer loops first.
     fn bind_function(&mut self, k: usize, ls: &'a [Loop]) {
         let func = &self.program.functions[k];
-        let fname = func
-            .demangled
-            .rsplit("::")
-            .next()
-            .unwrap_or(&func.demangled)
-            .to_string();
+        // A task's handler (the interrupt RTIC runs it in, which differs between
+        // the builds) by its task's name; any other function by its last path
+        // segment.
+        let fname = self
+            .build
+            .tasks()
+            .iter()
+            .find(|(_, handler)| func.demangled == *handler || func.name == *handler)
+            .map_or_else(
+                || {
+                    func.demangled
+                        .rsplit("::")
+                        .next()
+                        .unwrap_or(&func.demangled)
+                        .to_string()
+                },
+                |(task, _)| task.to_string(),
+            );
         // Outer loops first: an inner loop does not take an annotation one of its
         // enclosing loops took (the compiler may put both back edges on one line);
         // it takes the next of its lines that has one, or none.
@@ -931,6 +953,7 @@ fn annotation_fact(
                 }
             }
             annotations::Scope::Preemption => Per::Preemption,
+            annotations::Scope::Tick => Per::Tick,
         },
         group: None,
         iterations: matches!(
@@ -954,6 +977,7 @@ fn annotation_origin(a: &annotations::Annotation) -> String {
         match a.scope {
             annotations::Scope::Activation => " per activation",
             annotations::Scope::Preemption => " per preemption",
+            annotations::Scope::Tick => " per tick",
             annotations::Scope::Call => " per call",
             annotations::Scope::Entry
             | annotations::Scope::Bytes
@@ -969,20 +993,37 @@ fn annotation_origin(a: &annotations::Annotation) -> String {
 }
 
 /// Retries per activation: each preemption can make the exclusive retry loop
-/// it interrupts retry once, and each `per preemption` annotation's loop
-/// retry its bound's times (one exception can do both). Returns the retries per
-/// preemption and, per task, per activation.
-fn retries_per_activation(annotations: &[annotations::Annotation]) -> (u64, Vec<(String, u64)>) {
-    let per_preemption: u64 = 1 + annotations
+/// it interrupts retry once and each `per preemption` annotation's loop retry
+/// its bound's times; each preemption by the monotonic's tick can in addition
+/// make each `per tick` annotation's loop retry its bound's times (one exception
+/// can do all). Returns, per task, the retries per activation: the caps the
+/// retry loops' back edges share, by cause.
+fn retries_per_activation(
+    build: EcuBuild,
+    annotations: &[annotations::Annotation],
+) -> Vec<(String, ipet::Retries)> {
+    let sum = |scope| {
+        annotations
+            .iter()
+            .filter(|a| a.scope == scope)
+            .map(|a| a.bound)
+            .sum::<u64>()
+    };
+    let per_preemption = 1 + sum(annotations::Scope::Preemption);
+    let per_tick = sum(annotations::Scope::Tick);
+    build
+        .tasks()
         .iter()
-        .filter(|a| a.scope == annotations::Scope::Preemption)
-        .map(|a| a.bound)
-        .sum::<u64>();
-    let retries: Vec<(String, u64)> = ECU_TASKS
-        .iter()
-        .map(|(n, _)| (n.to_string(), preemptions_of(n) * per_preemption))
-        .collect();
-    (per_preemption, retries)
+        .map(|(n, _)| {
+            (
+                n.to_string(),
+                ipet::Retries {
+                    preemption: build.preemptions_of(n) * per_preemption,
+                    tick: build.ticks_of(n) * per_tick,
+                },
+            )
+        })
+        .collect()
 }
 
 /// The bounded program the later phases read.
@@ -993,6 +1034,8 @@ struct Model<'a> {
     all_loops: &'a [Vec<Loop>],
     facts: &'a [LoopFact],
     copies: &'a ipet::CopySizes,
+    /// Which build of the application the ELF is: its tasks and schedule.
+    build: EcuBuild,
 }
 
 /// The tasks' and sections' static figures, and what the loops and calls they
@@ -1039,9 +1082,11 @@ impl Units {
         model: &Model<'_>,
         irreducible: &BTreeMap<usize, Vec<usize>>,
         bounds: &LoopBounds,
-        per_preemption: u64,
+        retries: &[(String, ipet::Retries)],
     ) -> Result<()> {
-        let units: Vec<(&str, &str, &str, Option<u64>)> = ECU_TASKS
+        let build = model.build;
+        let units: Vec<(&str, &str, &str, Option<u64>)> = build
+            .tasks()
             .iter()
             .map(|&(n, sym)| (n, sym, n, None))
             .chain(ECU_SECTIONS.iter().copied())
@@ -1067,7 +1112,10 @@ impl Units {
             if !count.irreducible.is_empty() {
                 refused.push(format!("{} irreducible cycle(s)", count.irreducible.len()));
             }
-            let preemptions = preemptions_of(owner) * per_preemption;
+            let preemptions = retries
+                .iter()
+                .find(|(t, _)| t == owner)
+                .map_or_else(ipet::Retries::default, |r| r.1);
             let figures = if count.irreducible.is_empty() {
                 ipet_figures(model, root, preemptions)
             } else {
@@ -1094,10 +1142,12 @@ impl Units {
                 tightness: None,
                 budget_cycles: budget,
                 response_time_bound_us: None,
-                deadline_us: ECU_SCHEDULE
+                response_time_past_deadline_us: None,
+                deadline_us: build
+                    .schedule()
                     .iter()
-                    .find(|t| t.0 == name)
-                    .map(|t| t.2 as f64),
+                    .find(|t| t.name == name)
+                    .map(|t| t.deadline_us),
             });
         }
         Ok(())
@@ -1194,7 +1244,7 @@ impl Units {
 /// The IPET bounds of the activation entered at `root` with `preemptions`
 /// retries: in instructions, then (when that one exists) in cycles with the
 /// costliest functions and blocks.
-fn ipet_figures(model: &Model<'_>, root: usize, preemptions: u64) -> IpetFigures {
+fn ipet_figures(model: &Model<'_>, root: usize, retries: ipet::Retries) -> IpetFigures {
     let mut out = IpetFigures::default();
     let bound = |cost| {
         ipet::task_bound(
@@ -1202,7 +1252,7 @@ fn ipet_figures(model: &Model<'_>, root: usize, preemptions: u64) -> IpetFigures
             model.all_loops,
             root,
             model.facts,
-            preemptions,
+            retries,
             model.copies,
             cost,
         )
@@ -1252,7 +1302,7 @@ fn ipet_figures(model: &Model<'_>, root: usize, preemptions: u64) -> IpetFigures
 /// task's completing reach.
 fn bound_critical_sections(
     model: &Model<'_>,
-    retries: &[(String, u64)],
+    retries: &[(String, ipet::Retries)],
 ) -> (
     Vec<super::critical::CriticalSection>,
     Vec<(String, Vec<usize>)>,
@@ -1261,14 +1311,21 @@ fn bound_critical_sections(
     // A call inside a section that masks every interrupt retries nothing; inside a
     // lock, the higher priorities can preempt it: the retries of the task's
     // activation (the most preemptions of any task, a bound for every section).
-    let most_retries = retries.iter().map(|r| r.1).max().unwrap_or(0);
+    let most_retries = retries
+        .iter()
+        .map(|r| r.1)
+        .fold(ipet::Retries::default(), ipet::Retries::max);
     let callee_bounds: std::cell::RefCell<BTreeMap<(usize, bool), Option<u64>>> =
         Default::default();
     let callee = |g: usize, preemptible: bool| -> Option<u64> {
         if let Some(&b) = callee_bounds.borrow().get(&(g, preemptible)) {
             return b;
         }
-        let r = if preemptible { most_retries } else { 0 };
+        let r = if preemptible {
+            most_retries
+        } else {
+            ipet::Retries::default()
+        };
         let b = ipet::task_bound(
             program,
             model.all_loops,
@@ -1283,7 +1340,9 @@ fn bound_critical_sections(
         callee_bounds.borrow_mut().insert((g, preemptible), b);
         b
     };
-    let task_reach: Vec<(String, Vec<usize>)> = ECU_TASKS
+    let task_reach: Vec<(String, Vec<usize>)> = model
+        .build
+        .tasks()
         .iter()
         .filter_map(|&(n, sym)| {
             let root = *program.find(sym).first()?;
@@ -1306,15 +1365,17 @@ fn bound_critical_sections(
     (critical_sections, task_reach)
 }
 
-/// Response times: each task's static bound, the SysTick above both, the
-/// critical sections of lower priorities as blocking. Written into `tasks` only
-/// when every task and section has a bound.
+/// Response times: each task's and interrupt's static bound at its place in the
+/// build's schedule ([`EcuBuild::schedule`]), the critical sections of lower
+/// priorities as blocking. Written into `tasks` only when every task and section
+/// has a bound.
 fn bound_response_times(
-    program: &Program,
+    model: &Model<'_>,
     tasks: &mut [TaskStatic],
     critical_sections: &[super::critical::CriticalSection],
     task_reach: &[(String, Vec<usize>)],
 ) {
+    let program = model.program;
     let cycles_of = |n: &str| {
         tasks
             .iter()
@@ -1333,7 +1394,8 @@ fn bound_response_times(
     };
     let mut activities = Vec::new();
     let mut complete = true;
-    for &(n, prio, period) in &ECU_SCHEDULE {
+    for scheduled in model.build.schedule() {
+        let n = scheduled.name;
         let Some(c) = cycles_of(n) else {
             complete = false;
             break;
@@ -1347,12 +1409,12 @@ fn bound_response_times(
         }
         activities.push(super::rta::Activity {
             name: n.to_string(),
-            priority: prio,
-            period_us: period as f64,
-            deadline_us: period as f64,
+            priority: scheduled.priority,
+            period_us: scheduled.period_us,
+            deadline_us: scheduled.deadline_us,
             wcet_cycles: c as f64,
             refill_cycles: refill_of(n),
-            burst: None,
+            burst: scheduled.burst,
             critical_sections: sections,
         });
     }
@@ -1360,6 +1422,7 @@ fn bound_response_times(
         for r in super::rta::response_times(&activities, f64::from(super::CLOCK_HZ)) {
             if let Some(t) = tasks.iter_mut().find(|t| t.name == r.name) {
                 t.response_time_bound_us = r.response_time_bound_us;
+                t.response_time_past_deadline_us = r.past_deadline_us;
             }
         }
     }
@@ -1401,7 +1464,9 @@ impl<'a> TraceReplay<'a> {
     ) -> Result<Self> {
         let program = model.program;
         let handlers = super::trace_check::vector_table_handlers(elf, program)?;
-        let roots: Vec<(String, usize)> = ECU_TASKS
+        let roots: Vec<(String, usize)> = model
+            .build
+            .tasks()
             .iter()
             .filter_map(|(n, sym)| program.find(sym).first().map(|&r| (n.to_string(), r)))
             .collect();
@@ -1535,9 +1600,18 @@ fn record_indirect_calls(
 /// entry (an entry is within one activation): both are checked against the
 /// largest count per entry.
 fn entry_bounds(model: &Model<'_>) -> Vec<(usize, usize, u64)> {
-    let most_preemptions = ECU_TASKS
+    let most_preemptions = model
+        .build
+        .tasks()
         .iter()
-        .map(|(n, _)| preemptions_of(n))
+        .map(|(n, _)| model.build.preemptions_of(n))
+        .max()
+        .unwrap_or(0);
+    let most_ticks = model
+        .build
+        .tasks()
+        .iter()
+        .map(|(n, _)| model.build.ticks_of(n))
         .max()
         .unwrap_or(0);
     let facts = model.facts;
@@ -1549,6 +1623,7 @@ fn entry_bounds(model: &Model<'_>) -> Vec<(usize, usize, u64)> {
                 .any(|g| g.function == f.function && g.group == Some(f.loop_index));
             let b = match f.per {
                 Per::Preemption => f.bound.max(1) * most_preemptions * 2,
+                Per::Tick => f.bound.max(1) * most_ticks * 2,
                 _ => match (
                     model.program.functions.get(f.function),
                     model
@@ -1646,6 +1721,7 @@ impl StaticAnalysis {
     /// the violations the traces showed.
     fn write_summary(&self, s: &mut String) {
         let _ = writeln!(s, "# Static worst-case timing analysis of `{}`\n", self.elf);
+        let _ = writeln!(s, "Build: {}.\n", self.build.name());
         let _ = writeln!(
             s,
             "Control-flow graphs from the Thumb-2 disassembly, natural loops, loop bounds \
@@ -1662,8 +1738,15 @@ impl StaticAnalysis {
                 _ => "",
             };
             let rt = match (t.deadline_us, t.response_time_bound_us) {
+                // A deadline under 100 µs (the link interrupt's byte time) with
+                // its decimals.
+                (Some(d), Some(r)) if d < 100.0 => format!("{r:.2} / {d:.2}"),
                 (Some(d), Some(r)) => format!("{r:.0} / {d:.0}"),
-                (Some(d), None) => format!("**none within** / {d:.0}"),
+                (Some(d), None) => match t.response_time_past_deadline_us {
+                    Some(p) if d < 100.0 => format!("**none within** ({p:.2}) / {d:.2}"),
+                    Some(p) => format!("**none within** ({p:.0}) / {d:.0}"),
+                    None => format!("**none within** / {d:.0}"),
+                },
                 _ => "–".to_string(),
             };
             let _ = writeln!(

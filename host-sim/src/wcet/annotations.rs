@@ -56,7 +56,9 @@
 //!
 //! With `// wcet-bound in NAME: EXPR` (a loop's scopes only), the annotation holds
 //! for the copy of the line inlined into the binary function `NAME` (the last
-//! segment of its path), and the line's plain annotation for every other copy: a
+//! segment of its path; a task's handler, the interrupt RTIC runs it in, which
+//! differs between the ECU's builds, by the task's name: `control`, `plan`,
+//! `link`), and the line's plain annotation for every other copy: a
 //! loop whose bound depends on its caller. `per call` then counts the calls of
 //! `NAME`. A factor rebuilt row by row appends rows to a factor of `0, 1, ...`
 //! rows, so the loops of one append, `n` iterations each, sum to `W(W − 1)/2`
@@ -97,8 +99,13 @@ pub enum Scope {
     Activation,
     /// Iterations per preemption of the task's activation, summed over every such
     /// loop the task runs: a retry loop whose retry needs an interrupt between
-    /// two reads (a load-exclusive/store-exclusive pair, a counter read twice).
+    /// two reads (a load-exclusive/store-exclusive pair).
     Preemption,
+    /// Iterations per preemption of the task's activation by the monotonic's
+    /// tick (`SysTick`), summed like [`Scope::Preemption`]: a retry loop whose
+    /// retry needs the tick counter to change between two reads, which no other
+    /// interrupt does.
+    Tick,
     /// Not a loop's: the most bytes a block copy or fill called from the line
     /// moves.
     Bytes,
@@ -456,6 +463,8 @@ pub fn parse_source(
             (e.trim(), Scope::Activation)
         } else if let Some(e) = spec.strip_suffix("per preemption") {
             (e.trim(), Scope::Preemption)
+        } else if let Some(e) = spec.strip_suffix("per tick") {
+            (e.trim(), Scope::Tick)
         } else if let Some(e) = spec.strip_suffix("per loop entry") {
             (e.trim(), Scope::LoopEntry)
         } else if let Some(e) = spec.strip_suffix("bytes") {
@@ -688,6 +697,8 @@ mod tests {
             (4, 3, Scope::Activation)
         );
         assert!(parse_source("x.rs", "// wcet-bound: NOPE\nloop {}\n", &c).is_err());
+        let t = parse_source("x.rs", "loop { // wcet-bound: 2 per tick\n", &c).unwrap_or_default();
+        assert_eq!((t[0].bound, t[0].scope), (2, Scope::Tick));
         let r = parse_source("x.rs", "loop { // wcet-bound: 1 per preemption\n", &c)
             .unwrap_or_default();
         assert_eq!((r[0].bound, r[0].scope), (1, Scope::Preemption));

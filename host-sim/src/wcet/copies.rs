@@ -5,7 +5,7 @@
 
 use super::analysis::{frames, location, short_path};
 use super::cfg::{Exit, Program};
-use super::ecu_app::ECU_TASKS;
+use super::ecu_app::EcuBuild;
 use super::{annotations, bounds, ipet, loops};
 use std::collections::BTreeMap;
 
@@ -31,6 +31,7 @@ pub fn copy_size_register(name: &str) -> Option<&'static str> {
 /// sizes: a constant move into the size register before the call, else the
 /// `bytes` annotation at the call's source line.
 pub(super) fn copy_sizes(
+    build: EcuBuild,
     program: &Program,
     ctx: &addr2line::Loader,
     annotations: &[annotations::Annotation],
@@ -56,7 +57,8 @@ pub(super) fn copy_sizes(
         .collect();
     // The tasks' completing activations: the sites elsewhere (init, the stop and
     // fault paths) do not matter.
-    let roots: Vec<usize> = ECU_TASKS
+    let roots: Vec<usize> = build
+        .tasks()
         .iter()
         .filter_map(|(_, sym)| program.find(sym).first().copied())
         .collect();

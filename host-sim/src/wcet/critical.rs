@@ -88,7 +88,7 @@ fn ends(f: &super::cfg::Function, i: usize, ceiling: u8) -> bool {
 fn iterations(fact: &LoopFact, func: &super::cfg::Function, l: &Loop, shared: bool) -> u64 {
     match fact.per {
         Per::Entry => back_edges_per_entry(fact, func, l, shared) + 1,
-        Per::Preemption => 2,
+        Per::Preemption | Per::Tick => 2,
         Per::Activation | Per::Counted(_) | Per::Call => fact.bound + 1,
     }
 }

@@ -1,19 +1,212 @@
-//! What the analyses know of the ECU's RTIC application (`firmware/src/bin/ecu.rs`):
-//! its tasks and the interrupts they run in, the sections bounded apart (the jobs,
+//! What the analyses know of the ECU's RTIC application (`firmware/src/bin/ecu.rs`)
+//! in its two builds ([`EcuBuild`]): its tasks and the interrupts they run in, the sections bounded apart (the jobs,
 //! the plan swap) with their budgets, the schedule, and for the stack bound its
 //! priority levels and the functions that run once or with interrupts masked. The
 //! numbers come from the firmware's own constants. The targets of its indirect
 //! calls are read from the binary ([`super::indirect`]).
 
+use super::rta::Burst;
 use super::stack::PriorityLevel;
-/// The ECU's tasks as the RTIC application binds them: name and handler symbol.
-/// `plan` runs in the priority-1 dispatcher, `control` in the priority-2 one, the
-/// monotonic's timer queue in `SysTick`.
-pub const ECU_TASKS: [(&str, &str); 3] = [
-    ("control", "USART2"),
-    ("plan", "USART1"),
-    ("systick", "SysTick"),
-];
+use firmware::link::usart;
+use serde::Serialize;
+use std::path::Path;
+
+/// The two builds of the ECU application: the same tasks, library calls and
+/// frames over two transports (`firmware/src/bin/ecu.rs`, "Two builds, one
+/// application"). The analyses tell them apart by the symbols of the ELF.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EcuBuild {
+    /// `cargo ecu-lockstep` (= `cargo ecu`): frames over semihosting, in
+    /// lock-step with the simulator; the processor in the loop runs it. RTIC's
+    /// dispatchers are `USART1` (plan) and `USART2` (control).
+    LockStep,
+    /// `cargo ecu-board`: the binary you flash, frames over USART1's interrupt;
+    /// the dispatchers are `SPI1` (plan) and `SPI2` (control).
+    Board,
+}
+
+/// One activity of the schedule: a task or an interrupt.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scheduled {
+    /// Name (a task of [`EcuBuild::tasks`]).
+    pub name: &'static str,
+    /// RTIC logical priority (higher preempts).
+    pub priority: u8,
+    /// Period, or minimum inter-arrival time, µs.
+    pub period_us: f64,
+    /// Relative deadline, µs.
+    pub deadline_us: f64,
+    /// A cap on its activations in a window besides the period (an interrupt the
+    /// application rate-limits).
+    pub burst: Option<Burst>,
+}
+
+impl EcuBuild {
+    /// The build an ELF holds: [`EcuBuild::Board`] when it has the USART link's
+    /// functions (`ecu::usart_link::…`), else [`EcuBuild::LockStep`].
+    pub fn of_elf(elf: &Path) -> Result<Self, super::WcetError> {
+        use object::{Object, ObjectSymbol};
+        let data = super::read_elf(elf)?;
+        let file = super::parse_elf(elf, &data)?;
+        let board = file
+            .symbols()
+            .filter_map(|s| s.name().ok())
+            .any(|n| super::demangle(n).starts_with("ecu::usart_link::"));
+        Ok(if board { Self::Board } else { Self::LockStep })
+    }
+
+    /// Its name in the reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::LockStep => "lock-step (cargo ecu-lockstep: semihosting)",
+            Self::Board => "board (cargo ecu-board: USART1, the binary you flash)",
+        }
+    }
+
+    /// The tasks and interrupts whose activations the analysis bounds: name and
+    /// handler symbol. `plan` runs in the priority-1 dispatcher, `control` in the
+    /// priority-2 one, the monotonic's timer queue in `SysTick`; the flashed
+    /// build's link in `USART1`.
+    pub fn tasks(self) -> &'static [(&'static str, &'static str)] {
+        match self {
+            Self::LockStep => &[
+                ("control", "USART2"),
+                ("plan", "USART1"),
+                ("systick", "SysTick"),
+            ],
+            Self::Board => &[
+                ("control", "SPI2"),
+                ("plan", "SPI1"),
+                ("link", "USART1"),
+                ("systick", "SysTick"),
+            ],
+        }
+    }
+
+    /// The schedule: the tasks at their periods (= deadlines); SysTick, the
+    /// monotonic's 1 kHz tick (`systick_monotonic!(Mono, 1_000)`), at the
+    /// hardware's most urgent level (rtic-monotonics leaves its reset priority);
+    /// in the flashed build, USART1's interrupt between them
+    /// ([`usart::LINK_INTERRUPT_PRIORITY`]): an entry per byte received, no closer
+    /// than a byte's time, at most [`usart::ENTRIES_PER_BUDGET`] per receive
+    /// budget (one a control period, [`usart::EXTRA_BUDGETS_PER_WINDOW`] more in
+    /// any window), its deadline a byte's time (a byte not read by then is
+    /// overrun by the next).
+    pub fn schedule(self) -> Vec<Scheduled> {
+        let control = firmware::tasks::CONTROL_PERIOD_US as f64;
+        let plan = firmware::tasks::PLAN_PERIOD_US as f64;
+        let task = |name, priority, period_us| Scheduled {
+            name,
+            priority,
+            period_us,
+            deadline_us: period_us,
+            burst: None,
+        };
+        match self {
+            Self::LockStep => vec![
+                task("systick", 3, 1_000.0),
+                task("control", 2, control),
+                task("plan", 1, plan),
+            ],
+            Self::Board => {
+                let byte_us = f64::from(usart::BYTE_TIME_NS) / 1e3;
+                vec![
+                    task("systick", usart::LINK_INTERRUPT_PRIORITY + 1, 1_000.0),
+                    Scheduled {
+                        name: "link",
+                        priority: usart::LINK_INTERRUPT_PRIORITY,
+                        // A transmit entry can follow the last one at once: the
+                        // period is no limit, the budget is.
+                        period_us: 0.0,
+                        deadline_us: byte_us,
+                        burst: Some(Burst {
+                            per_window: usart::ENTRIES_PER_BUDGET,
+                            window_us: control,
+                            extra_windows: usart::EXTRA_BUDGETS_PER_WINDOW,
+                        }),
+                    },
+                    task("control", 2, control),
+                    task("plan", 1, plan),
+                ]
+            }
+        }
+    }
+
+    /// Preemptions of one activation of `task` that meets its deadline: the
+    /// activations of every higher priority within that deadline (each a chance
+    /// for a retry loop to retry once). Faults are not counted: they end the
+    /// activation.
+    pub fn preemptions_of(self, task: &str) -> u64 {
+        let schedule = self.schedule();
+        let Some(me) = schedule.iter().find(|t| t.name == task) else {
+            return 0;
+        };
+        schedule
+            .iter()
+            .filter(|t| t.priority > me.priority)
+            .map(|t| super::rta::arrivals_in(t.period_us, t.burst, me.deadline_us) as u64)
+            .sum()
+    }
+
+    /// Preemptions of one activation of `task` that meets its deadline by the
+    /// monotonic's tick (`systick`) alone.
+    pub fn ticks_of(self, task: &str) -> u64 {
+        let schedule = self.schedule();
+        let (Some(me), Some(tick)) = (
+            schedule.iter().find(|t| t.name == task),
+            schedule.iter().find(|t| t.name == "systick"),
+        ) else {
+            return 0;
+        };
+        if tick.priority > me.priority {
+            super::rta::arrivals_in(tick.period_us, tick.burst, me.deadline_us) as u64
+        } else {
+            0
+        }
+    }
+
+    /// The priority levels, for [`super::stack::analyse_elf`]: thread mode runs
+    /// `main` (init and idle); the priority-1 (`plan`) and priority-2 (`control`)
+    /// async tasks run in their dispatchers (RTIC v2 gives the dispatchers listed
+    /// in `dispatchers = [..]` to the priorities in increasing order: in the
+    /// lock-step disassembly `USART1` calls `Mpc::step_observed`, `USART2`
+    /// `Link::receive`); the flashed build's link interrupt above them;
+    /// `SysTick`, the monotonic's interrupt, is the highest.
+    pub fn priority_levels(self) -> Vec<PriorityLevel> {
+        let level = PriorityLevel::new;
+        match self {
+            Self::LockStep => vec![
+                level("thread (main: init, idle)", &["main"]),
+                level("priority 1 (plan, dispatcher USART1)", &["USART1"]),
+                level("priority 2 (control, dispatcher USART2)", &["USART2"]),
+                level("SysTick (monotonic)", &["SysTick"]),
+            ],
+            Self::Board => vec![
+                level("thread (main: init, idle)", &["main"]),
+                level("priority 1 (plan, dispatcher SPI1)", &["SPI1"]),
+                level("priority 2 (control, dispatcher SPI2)", &["SPI2"]),
+                level("priority 3 (link, USART1 interrupt)", &["USART1"]),
+                level("SysTick (monotonic)", &["SysTick"]),
+            ],
+        }
+    }
+
+    /// The functions that run only with interrupts disabled: the clock set-up,
+    /// the link's opening and the set-up, called from RTIC's `init` before
+    /// interrupts are enabled (their frames are gone when the tasks first run).
+    pub fn masked(self) -> Vec<String> {
+        let open = match self {
+            Self::LockStep => "ecu::app::open_link",
+            Self::Board => "ecu::app::open_usart_link",
+        };
+        vec![
+            "ecu::app::configure_clock".to_string(),
+            "ecu::app::set_up".to_string(),
+            open.to_string(),
+        ]
+    }
+}
 
 /// The tasks' own work, bounded apart (the ECU app keeps them out of line):
 /// section name, symbol, the task it runs in, its budget in cycles (what the ECU's
@@ -46,29 +239,6 @@ pub const ECU_SECTIONS: [(&str, &str, &str, Option<u64>); 5] = [
     ("route_job", "ecu::route_job", "plan", None),
 ];
 
-/// The ECU's schedule: task name, priority (higher preempts), period = deadline
-/// in µs. SysTick is the monotonic's 1 kHz tick (`systick_monotonic!(Mono, 1_000)`
-/// in the ECU app), above both tasks.
-pub const ECU_SCHEDULE: [(&str, u8, u64); 3] = [
-    ("systick", 3, 1_000),
-    ("control", 2, firmware::tasks::CONTROL_PERIOD_US),
-    ("plan", 1, firmware::tasks::PLAN_PERIOD_US),
-];
-
-/// Preemptions of one activation of `task` that meets its deadline:
-/// `Σ_{higher} ⌈D / T_j⌉` over [`ECU_SCHEDULE`] (each a chance for a retry loop to
-/// retry once). Faults are not counted: they end the activation.
-pub fn preemptions_of(task: &str) -> u64 {
-    let Some(&(_, prio, deadline)) = ECU_SCHEDULE.iter().find(|t| t.0 == task) else {
-        return 0;
-    };
-    ECU_SCHEDULE
-        .iter()
-        .filter(|t| t.1 > prio)
-        .map(|t| deadline.div_ceil(t.2))
-        .sum()
-}
-
 /// The ECU's functions counted once in the stack bound: the safe stop's work,
 /// entered with interrupts disabled (the panic handler and HardFault disable them
 /// in a frame of a few bytes, then call `ecu::safe_stop`; the NMI handler calls it
@@ -81,30 +251,42 @@ pub fn ecu_once() -> Vec<String> {
     vec!["ecu::safe_stop_work".to_string()]
 }
 
-/// The ECU's functions that run only with interrupts disabled: the clock set-up
-/// and the set-up, called from RTIC's `init` before interrupts are enabled (their
-/// frames are gone when the tasks first run).
-pub fn ecu_masked() -> Vec<String> {
-    vec![
-        "ecu::app::configure_clock".to_string(),
-        "ecu::app::set_up".to_string(),
-        "ecu::app::open_link".to_string(),
-    ]
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-/// The priority levels of the RTIC application `firmware/src/bin/ecu.rs`, for
-/// [`super::stack::analyse_elf`]: thread mode runs `main` (init and idle); the
-/// priority-1 (`plan`) and priority-2 (`control`) async tasks run in the
-/// dispatchers `USART1` and `USART2` (RTIC v2 gives the dispatchers listed in
-/// `dispatchers = [USART1, USART2]` to the priorities in increasing order: in the
-/// disassembly `USART1` calls `Mpc::step_observed`, `USART2` `Link::receive`);
-/// `SysTick`, the monotonic's interrupt, is the highest.
-pub fn ecu_priority_levels() -> Vec<PriorityLevel> {
-    let level = PriorityLevel::new;
-    vec![
-        level("thread (main: init, idle)", &["main"]),
-        level("priority 1 (plan, dispatcher USART1)", &["USART1"]),
-        level("priority 2 (control, dispatcher USART2)", &["USART2"]),
-        level("SysTick (monotonic)", &["SysTick"]),
-    ]
+    #[test]
+    fn the_flashed_build_puts_its_link_between_the_tasks_and_the_tick() {
+        let board = EcuBuild::Board.schedule();
+        let prio = |s: &[Scheduled], n: &str| s.iter().find(|t| t.name == n).map(|t| t.priority);
+        assert!(prio(&board, "link") > prio(&board, "control"));
+        assert!(prio(&board, "systick") > prio(&board, "link"));
+        assert_eq!(prio(&EcuBuild::LockStep.schedule(), "link"), None);
+        // Every task of the schedule has a handler to bound, and back.
+        for build in [EcuBuild::LockStep, EcuBuild::Board] {
+            let names: Vec<&str> = build.tasks().iter().map(|t| t.0).collect();
+            let scheduled: Vec<&str> = build.schedule().iter().map(|t| t.name).collect();
+            assert_eq!(names.len(), scheduled.len());
+            assert!(scheduled.iter().all(|n| names.contains(n)), "{build:?}");
+        }
+    }
+
+    #[test]
+    fn the_link_preempts_the_control_task_by_its_budgets_not_without_end() {
+        let lock = EcuBuild::LockStep;
+        let board = EcuBuild::Board;
+        // Lock-step: 10 ticks of 1 ms within control's 10 ms, 10 control
+        // activations and 100 ticks within plan's 100 ms.
+        assert_eq!(lock.preemptions_of("control"), 10);
+        assert_eq!(lock.preemptions_of("plan"), 110);
+        assert_eq!(lock.ticks_of("plan"), 100);
+        // Flashed: three receive budgets within one control period (the one in
+        // force, the renewal, a renewal late by the jitter), twelve within a plan
+        // period; the ticks are the same.
+        let per = usart::ENTRIES_PER_BUDGET;
+        assert_eq!(board.preemptions_of("control"), 10 + 3 * per);
+        assert_eq!(board.preemptions_of("plan"), 110 + 12 * per);
+        assert_eq!(board.ticks_of("plan"), 100);
+        assert_eq!(board.ticks_of("systick"), 0);
+    }
 }

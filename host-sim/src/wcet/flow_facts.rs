@@ -109,7 +109,8 @@ fn loop_edges(
 /// The flow facts of an analysis: `facts` (the loops' bounds), `copies.caps` (the
 /// capped lines), `annotations` (for names and sources), `origin` (each loop
 /// fact's stated source) and `retries` (per task, the retries an activation can
-/// make, [`super::ecu_app::preemptions_of`] × the retries per preemption).
+/// make: its preemptions, [`super::ecu_app::EcuBuild::preemptions_of`], × the
+/// retries per preemption, and its ticks × the retries per tick).
 ///
 /// The loops' facts first (in `facts`' order), then the capped lines', then the
 /// shared counters (by group) and the retries.
@@ -120,7 +121,7 @@ pub fn flow_facts(
     copies: &CopySizes,
     annotations: &[Annotation],
     origin: &BTreeMap<(usize, usize), String>,
-    retries: &[(String, u64)],
+    retries: &[(String, ipet::Retries)],
 ) -> Vec<FlowFact> {
     let mut b = FactBuilder {
         program,
@@ -128,6 +129,7 @@ pub fn flow_facts(
         out: Vec::new(),
         groups: BTreeMap::new(),
         retry: retry_fact(retries),
+        tick: tick_fact(retries),
     };
     for fact in facts.iter().filter(|f| f.group.is_none()) {
         b.add_loop_fact(loops, facts, origin, fact);
@@ -149,20 +151,47 @@ struct FactBuilder<'a> {
     groups: BTreeMap<usize, FlowFact>,
     /// The retries an exception can cause, over every retry loop.
     retry: FlowFact,
+    /// The retries the monotonic's tick can cause, over every `per tick` loop.
+    tick: FlowFact,
 }
 
 /// The fact over the retry loops (load/store-exclusive, `per preemption`), before
 /// any member: its bound is each task's `retries` per activation.
-fn retry_fact(retries: &[(String, u64)]) -> FlowFact {
+fn retry_fact(retries: &[(String, ipet::Retries)]) -> FlowFact {
+    let by_task: Vec<(String, u64)> = retries
+        .iter()
+        .map(|(t, r)| (t.clone(), r.preemption))
+        .collect();
     FlowFact {
-        bound_by_task: retries.to_vec(),
+        bound_by_task: by_task.clone(),
         ..FlowFact::unobserved(
             "exception retries".into(),
             "activation".into(),
             "back edges of the retry loops (load/store-exclusive, `per preemption`)".into(),
-            retries.iter().map(|r| r.1).max().unwrap_or(0),
+            by_task.iter().map(|r| r.1).max().unwrap_or(0),
             vec![
                 "one retry per preemption of the activation (an exception clears the exclusive monitor; `wcet-bound: N per preemption`)"
+                    .into(),
+            ],
+            0,
+            activation_counter(),
+        )
+    }
+}
+
+/// The fact over the loops that retry when the monotonic ticks (`per tick`),
+/// before any member: its bound is each task's tick retries per activation.
+fn tick_fact(retries: &[(String, ipet::Retries)]) -> FlowFact {
+    let by_task: Vec<(String, u64)> = retries.iter().map(|(t, r)| (t.clone(), r.tick)).collect();
+    FlowFact {
+        bound_by_task: by_task.clone(),
+        ..FlowFact::unobserved(
+            "tick retries".into(),
+            "activation".into(),
+            "back edges of the loops that retry when the tick count changes (`per tick`)".into(),
+            by_task.iter().map(|r| r.1).max().unwrap_or(0),
+            vec![
+                "retries per SysTick that preempts the activation (the tick count read twice; `wcet-bound: N per tick`)"
                     .into(),
             ],
             0,
@@ -272,6 +301,10 @@ impl FactBuilder<'_> {
                 self.retry.counter.edges.extend(edges);
                 self.retry.members += n;
             }
+            Per::Tick => {
+                self.tick.counter.edges.extend(edges);
+                self.tick.members += n;
+            }
             Per::Counted(g) => {
                 let e = self.group(g);
                 e.counter.edges.extend(edges);
@@ -357,6 +390,9 @@ impl FactBuilder<'_> {
         }
         if self.retry.members > 0 {
             out.push(self.retry);
+        }
+        if self.tick.members > 0 {
+            out.push(self.tick);
         }
         for f in &mut out {
             f.counter.edges.sort_unstable();

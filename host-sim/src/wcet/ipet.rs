@@ -70,6 +70,42 @@ pub enum Per {
     /// loops share one cap, the task's retries per activation (the `retries`
     /// argument of [`task_bound`]); the fact's own bound is not used.
     Preemption,
+    /// A retry loop that retries only when the monotonic's tick came in between:
+    /// all such loops share one cap, the task's tick retries per activation
+    /// ([`Retries::tick`]); the fact's own bound is not used.
+    Tick,
+}
+
+/// The retries one activation of a task can make, by what causes them: the
+/// caps of the loops that retry [`Per::Preemption`] and [`Per::Tick`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Retries {
+    /// Retries any preemption can cause, summed over the activation's
+    /// preemptions.
+    pub preemption: u64,
+    /// Retries a preemption by the monotonic's tick can cause, summed over the
+    /// ticks that preempt the activation.
+    pub tick: u64,
+}
+
+impl From<u64> for Retries {
+    /// Retries any preemption causes, none for the tick alone.
+    fn from(preemption: u64) -> Self {
+        Self {
+            preemption,
+            tick: 0,
+        }
+    }
+}
+
+impl Retries {
+    /// Each cap the larger of the two.
+    pub fn max(self, other: Self) -> Self {
+        Self {
+            preemption: self.preemption.max(other.preemption),
+            tick: self.tick.max(other.tick),
+        }
+    }
 }
 
 /// A bound on one loop.
@@ -277,10 +313,11 @@ pub fn task_bound(
     loops: &[Vec<Loop>],
     root: usize,
     facts: &[LoopFact],
-    retries: u64,
+    retries: impl Into<Retries>,
     copies: &CopySizes,
     cost: Cost,
 ) -> Result<IpetBound, IpetError> {
+    let retries = retries.into();
     if let Some(r) = program.recursions(&[root]).into_iter().next() {
         return Err(IpetError::Recursion(r));
     }
@@ -326,6 +363,8 @@ struct Ipet<'a> {
     /// Retries per preemption: one constraint over all such loops.
     retry_edges: Expression,
     any_retry: bool,
+    tick_edges: Expression,
+    any_tick: bool,
     /// Every block's count, for the copy sites.
     x_all: HashMap<(usize, usize), Variable>,
     /// Per copy function: its loops' back edges weighted by the bytes a trip
@@ -445,6 +484,8 @@ impl<'a> Ipet<'a> {
             per_block: Vec::new(),
             retry_edges: Expression::from(0.0),
             any_retry: false,
+            tick_edges: Expression::from(0.0),
+            any_tick: false,
             x_all: HashMap::new(),
             copy_loops: Default::default(),
             family: FamilyCalls::default(),
@@ -776,6 +817,10 @@ impl<'a> Ipet<'a> {
                 self.retry_edges += back;
                 self.any_retry = true;
             }
+            Per::Tick => {
+                self.tick_edges += back;
+                self.any_tick = true;
+            }
         }
     }
 
@@ -847,17 +892,23 @@ impl<'a> Ipet<'a> {
 
     /// The caps over the whole activation: each activation group's, and the
     /// retries' (`retries` per activation).
-    fn add_activation_caps(&mut self, retries: u64) {
+    fn add_activation_caps(&mut self, retries: Retries) {
         let n_root = self.n_entry[&self.root];
         for (_, (bound, runs)) in std::mem::take(&mut self.group_runs) {
             let bound = bound as f64;
             self.constraints.push(constraint!(runs <= bound * n_root));
         }
         if self.any_retry {
-            let cap = retries as f64;
+            let cap = retries.preemption as f64;
             let retry_edges = std::mem::replace(&mut self.retry_edges, Expression::from(0.0));
             self.constraints
                 .push(constraint!(retry_edges <= cap * n_root));
+        }
+        if self.any_tick {
+            let cap = retries.tick as f64;
+            let tick_edges = std::mem::replace(&mut self.tick_edges, Expression::from(0.0));
+            self.constraints
+                .push(constraint!(tick_edges <= cap * n_root));
         }
     }
 

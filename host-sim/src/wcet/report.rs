@@ -34,7 +34,7 @@ pub mod markdown;
 pub mod pil_runs;
 
 use super::cpi::CpiReport;
-use super::ecu_app::{ecu_masked, ecu_once};
+use super::ecu_app::{ecu_once, EcuBuild};
 use super::stack::{PriorityLevel, StackReport, StackRoot};
 use anyhow::{bail, ensure, Context, Result};
 use elf::{elf_memory, elf_symbols, ElfMemory, ElfSymbols};
@@ -51,7 +51,7 @@ pub struct ReportInputs {
     /// The ECU ELF (`target/thumbv7em-none-eabihf/release/ecu`).
     pub elf: PathBuf,
     /// Priority levels for the stack bound, thread mode first; usually
-    /// [`ecu_priority_levels`].
+    /// [`EcuBuild::priority_levels`].
     pub stack_levels: Vec<PriorityLevel>,
     /// The cycles per instruction of a traced ECU run ([`super::cpi::analyse_log`]):
     /// an average over the code the trace ran, reported for information.
@@ -361,7 +361,7 @@ pub fn build_report(inputs: &ReportInputs) -> Result<WcetReport> {
         &inputs.elf,
         &inputs.stack_levels,
         &ecu_once(),
-        &ecu_masked(),
+        &EcuBuild::of_elf(&inputs.elf)?.masked(),
         &super::indirect::targets_of_elf(&inputs.elf)?,
     )
     .with_context(|| format!("stack bound of {}", inputs.elf.display()))?;
@@ -599,7 +599,6 @@ mod tests {
     use super::pil_runs::{PilReport, Summary};
     use super::*;
     use crate::wcet::cpi::Figures;
-    use crate::wcet::ecu_app::ecu_priority_levels;
     use crate::wcet::stack::{parse_objdump, stack_bound, tests::levels, Counted};
     use std::path::Path;
 
@@ -720,7 +719,7 @@ active_constraints,max_validity_slack_rad";
         ReportInputs {
             run_dirs,
             elf: PathBuf::from("target/ecu"),
-            stack_levels: ecu_priority_levels(),
+            stack_levels: EcuBuild::LockStep.priority_levels(),
             cpi: cpi(1.5),
             statics: StaticSummary {
                 plan: StaticTiming {
@@ -1183,9 +1182,9 @@ active_constraints,max_validity_slack_rad";
         let elf = real_elf();
         let stack = crate::wcet::stack::analyse_elf_once(
             &elf,
-            &ecu_priority_levels(),
+            &EcuBuild::LockStep.priority_levels(),
             &ecu_once(),
-            &ecu_masked(),
+            &EcuBuild::LockStep.masked(),
             &crate::wcet::indirect::targets_of_elf(&elf)?,
         )?;
         for level in &stack.levels {

@@ -43,12 +43,10 @@ pub struct Activity {
     /// the lines it can evict (`wcet::cache::evicting_lines`) at a line fetch
     /// each, at most the whole cache.
     pub refill_cycles: f64,
-    /// At most this many activations in any window of this length, `(count,
-    /// window µs)`, besides the minimum inter-arrival `period_us` (an interrupt
-    /// the application rate-limits: a link's bytes, at most so many a control
-    /// period and no closer than a byte's time at its baud rate); `None`: the
-    /// period alone.
-    pub burst: Option<(u64, f64)>,
+    /// A cap on its activations besides the minimum inter-arrival `period_us`
+    /// (an interrupt the application rate-limits: a link's bytes, at most so many
+    /// a control period); `None`: the period alone.
+    pub burst: Option<Burst>,
     /// Its critical sections: `(ceiling, cycles)`, the highest priority each masks
     /// (a lock's resource ceiling, to which RTIC raises the running priority;
     /// `u8::MAX` with interrupts disabled) and its bound. Each blocks the
@@ -69,16 +67,48 @@ pub struct Response {
     pub blocking_us: f64,
     /// Whether the bound is within the deadline.
     pub meets_deadline: bool,
+    /// When the iteration passed the deadline: its fixed point if there is one
+    /// within [`PAST_DEADLINE_FACTOR`] deadlines (how far the bound misses), µs.
+    pub past_deadline_us: Option<f64>,
 }
 
-/// The most activations of `h` in a window of `r` µs: `⌈r / T⌉`, and with a burst
-/// cap `(k, W)` at most `k · ⌈r / W⌉` of them.
-fn arrivals(h: &Activity, r: f64) -> f64 {
-    let by_period = (r / h.period_us).ceil();
-    match h.burst {
-        Some((k, w)) if w > 0.0 => by_period.min(k as f64 * (r / w).ceil()),
+/// How far past its deadline the iteration goes on to find a missed bound's
+/// fixed point, deadlines.
+pub const PAST_DEADLINE_FACTOR: f64 = 10.0;
+
+/// A rate limit: at most `per_window · (⌈r / window_us⌉ + extra_windows)`
+/// activations in any window of `r` µs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Burst {
+    /// Activations per budget window at most.
+    pub per_window: u64,
+    /// The budget window, µs.
+    pub window_us: f64,
+    /// Budgets a window can draw on besides one per `window_us` it spans (the one
+    /// in force at its start; one more if budgets are renewed with jitter).
+    pub extra_windows: u64,
+}
+
+/// The most activations in a window of `r` µs of an activity released no closer
+/// than `period_us` (`0`: no such limit) and capped by `burst`: `⌈r / T⌉`, and
+/// with a cap at most [`Burst`]'s count.
+pub fn arrivals_in(period_us: f64, burst: Option<Burst>, r: f64) -> f64 {
+    let by_period = if period_us > 0.0 {
+        (r / period_us).ceil()
+    } else {
+        f64::INFINITY
+    };
+    match burst {
+        Some(b) if b.window_us > 0.0 => {
+            by_period.min(b.per_window as f64 * ((r / b.window_us).ceil() + b.extra_windows as f64))
+        }
         _ => by_period,
     }
+}
+
+/// The most activations of `h` in a window of `r` µs ([`arrivals_in`]).
+fn arrivals(h: &Activity, r: f64) -> f64 {
+    arrivals_in(h.period_us, h.burst, r)
 }
 
 /// Response-time bounds of every activity on a core clocked at `clock_hz`.
@@ -101,9 +131,10 @@ pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
             let own = a.wcet_cycles + ENTRY_EXIT_CYCLES + a.refill_cycles + blocking;
             let mut r = us(own);
             let mut result = None;
+            let mut past = None;
             // Each step adds at least one activity's cost or stops: bounded by the
             // deadline over the smallest cost.
-            for _ in 0..100_000 {
+            for _ in 0..1_000_000 {
                 let next = us(own)
                     + higher
                         .iter()
@@ -111,11 +142,15 @@ pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
                             arrivals(h, r) * us(h.wcet_cycles + ENTRY_EXIT_CYCLES + h.refill_cycles)
                         })
                         .sum::<f64>();
-                if next > a.deadline_us {
+                if next > PAST_DEADLINE_FACTOR * a.deadline_us {
                     break;
                 }
                 if next <= r {
-                    result = Some(next);
+                    if next <= a.deadline_us {
+                        result = Some(next);
+                    } else {
+                        past = Some(next);
+                    }
                     break;
                 }
                 r = next;
@@ -126,6 +161,7 @@ pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
                 deadline_us: a.deadline_us,
                 blocking_us: us(blocking),
                 meets_deadline: result.is_some_and(|r| r <= a.deadline_us),
+                past_deadline_us: past,
             }
         })
         .collect()
@@ -234,7 +270,11 @@ mod tests {
         // and the plan task, at 10 M cycles, misses its 100 ms.
         assert!(!free[2].meets_deadline);
         s.pop();
-        s.push(byte(Some((100, 10_000.0))));
+        s.push(byte(Some(Burst {
+            per_window: 100,
+            window_us: 10_000.0,
+            extra_windows: 0,
+        })));
         let capped = response_times(&s, 168e6);
         assert!(capped.iter().all(|x| x.meets_deadline));
         // control's window (< 10 ms) holds at most 100 of them.
@@ -246,6 +286,38 @@ mod tests {
             "{extra}"
         );
         assert!(extra > 0.0);
+    }
+
+    #[test]
+    fn a_budget_caps_the_arrivals_of_a_window_with_its_extra_budgets() {
+        let b = Burst {
+            per_window: 100,
+            window_us: 10_000.0,
+            extra_windows: 2,
+        };
+        // No period: the budget alone; 1 µs and 10 ms hold three budgets, 10.001 ms four.
+        assert_eq!(arrivals_in(0.0, Some(b), 1.0), 300.0);
+        assert_eq!(arrivals_in(0.0, Some(b), 10_000.0), 300.0);
+        assert_eq!(arrivals_in(0.0, Some(b), 10_001.0), 400.0);
+        // A period caps short windows.
+        assert_eq!(arrivals_in(10.0, Some(b), 25.0), 3.0);
+        assert_eq!(arrivals_in(10.0, None, 25.0), 3.0);
+    }
+
+    #[test]
+    fn a_missed_deadline_reports_how_far_it_misses() {
+        let mut s = schedule(1_000.0);
+        // control at 20 k cycles a 10 µs period is over any deadline alone.
+        s[1].wcet_cycles = 2.0e6;
+        s[1].deadline_us = 10_000.0;
+        let r = response_times(&s, 168e6);
+        assert!(!r[1].meets_deadline);
+        assert_eq!(r[1].response_time_bound_us, None);
+        let past = r[1].past_deadline_us.unwrap();
+        assert!(past > 2.0e6 / 168.0 && past < 2.0 * 2.0e6 / 168.0, "{past}");
+        // Within its deadline nothing is past it.
+        let ok = response_times(&schedule(1_000.0), 168e6);
+        assert!(ok.iter().all(|x| x.past_deadline_us.is_none()));
     }
 
     #[test]

@@ -32,13 +32,11 @@ use core::sync::atomic::{AtomicPtr, AtomicU16, Ordering};
 use cortex_m::peripheral::NVIC;
 use firmware::clock_tree;
 use firmware::link::demux::{Channel, Demux};
+use firmware::link::usart::{BAUD, LINK_INTERRUPT_PRIORITY, RX_BUDGET_BYTES, TX_BYTES_PER_ENTRY};
 use firmware::link::{MAX_DOWN_FRAME_BYTES, MAX_DRIVING_DOWN_FRAME_BYTES, MAX_UP_FRAME_BYTES};
 use heapless::spsc::{Consumer, Producer, Queue};
 use stm32f4::stm32f405 as pac;
 use stm32f4::stm32f405::interrupt;
-
-/// Baud rate of the link, bits/s.
-pub const BAUD: u32 = 921_600;
 
 /// USART1's kernel clock (APB2) after the clock tree's set-up, Hz: 84 MHz.
 pub const APB2_HZ: u32 = clock_tree::SYSCLK_HZ / clock_tree::AHB_DIV / clock_tree::APB2_DIV;
@@ -54,10 +52,6 @@ pub const fn brr(apb2_hz: u32) -> u32 {
 pub const BRR: u32 = brr(APB2_HZ);
 const _: () = assert!(BRR == 91);
 
-/// Time of one byte on the line (a start bit, 8 data bits, a stop bit), µs: the
-/// receive interrupt's minimum inter-arrival.
-pub const BYTE_TIME_US: f64 = 10.0 * 1e6 / BAUD as f64;
-
 /// The control task's receive queue, bytes (it holds one less): a sensor frame
 /// and the start of the next.
 pub const CONTROL_RX_BYTES: usize = 2 * MAX_DRIVING_DOWN_FRAME_BYTES;
@@ -69,27 +63,17 @@ pub const ROUTE_RX_BYTES: usize = MAX_DOWN_FRAME_BYTES + 2;
 /// The transmit queue, bytes (it holds one less): one actuation frame.
 pub const TX_BYTES: usize = MAX_UP_FRAME_BYTES + 1;
 
-/// Bytes received per control period at most: a sensor frame and a route frame
-/// (68 + 281 = 349 bytes, 3.8 ms at [`BAUD`]).
-pub const RX_BUDGET_BYTES: u16 = (MAX_DRIVING_DOWN_FRAME_BYTES + MAX_DOWN_FRAME_BYTES) as u16;
-// The budget's bytes take less than a control period on the line.
-const _: () =
-    assert!((RX_BUDGET_BYTES as f64) * BYTE_TIME_US < firmware::timing::CONTROL_PERIOD_US as f64);
-
 /// USART1's NVIC priority, the hardware's encoding (upper 4 bits, lower is
-/// more urgent): RTIC's logical priority 3, above the control task (2) and the
+/// more urgent): RTIC's logical priority [`LINK_INTERRUPT_PRIORITY`] (3), above the control task (2) and the
 /// plan task (1) and above every lock's ceiling (2), so a lock never delays a
 /// received byte. The handler shares no resource with the tasks but its
 /// lock-free queues.
-pub const USART1_PRIORITY: u8 = (16 - 3) << 4;
+pub const USART1_PRIORITY: u8 = (16 - LINK_INTERRUPT_PRIORITY) << 4;
 
 /// Polls of a status flag per byte written by polling at most: a byte's time at
 /// 168 MHz is about 1,820 cycles and a poll a few, so the wait is ample on
 /// silicon; QEMU's transmitter is always ready.
 const POLLS_PER_BYTE: u32 = 100_000;
-
-/// Bytes the interrupt handler sends per entry at most.
-const TX_BYTES_PER_ENTRY: usize = 4;
 
 /// Receive budget left in this control period, bytes.
 static RX_LEFT: AtomicU16 = AtomicU16::new(0);
@@ -136,9 +120,6 @@ struct Storage {
 pub struct Port {
     rx: Consumer<'static, u8, CONTROL_RX_BYTES>,
     tx: Producer<'static, u8, TX_BYTES>,
-    /// Before the tasks run (the set-up) and after a fault: the data register
-    /// polled, not the queues.
-    polled: bool,
 }
 
 /// The plan task's end of the link: its receive queue (the windows of the road).
@@ -148,8 +129,9 @@ pub struct RoutePort {
 
 /// Enables USART1 at [`BAUD`] on PA9/PA10 (clocks, pins, baud rate for the APB2
 /// clock that `RCC_CFGR` says, receiver and transmitter), its interrupts off, and
-/// sets up the queues and the handler's state; the two ends, polled until
-/// [`Port::start`]. `None` if called twice (the queues are taken once).
+/// sets up the queues and the handler's state; the two ends (the set-up polls,
+/// [`Port::next_byte_polled`], [`Port::write_polled`], until [`Port::start`]).
+/// `None` if called twice (the queues are taken once).
 pub fn open(
     rcc: &pac::RCC,
     gpioa: &pac::GPIOA,
@@ -209,7 +191,6 @@ pub fn open(
         Port {
             rx: control_out,
             tx: tx_in,
-            polled: true,
         },
         RoutePort { rx: route_out },
     ))
@@ -246,28 +227,27 @@ fn write_polled(bytes: &[u8]) -> bool {
 }
 
 impl Port {
-    /// The next byte for the control task: while polled (the set-up, before the
-    /// tasks run), the next one on the line, waiting for the host as long as it
-    /// takes; then the next one the interrupt queued, `None` when none is.
+    /// The next byte the interrupt queued for the control task, `None` when none
+    /// is. The tasks' path: it never waits.
     pub fn next_byte(&mut self) -> Option<u8> {
-        if !self.polled {
-            return self.rx.dequeue();
-        }
-        // The set-up waits for the host, as the lock-step build's blocking read.
+        self.rx.dequeue()
+    }
+
+    /// The next byte on the line, polled, waiting for the host as long as it
+    /// takes (as the lock-step build's blocking read): the set-up's path, before
+    /// the interrupt takes over ([`Port::start`]).
+    pub fn next_byte_polled(&mut self) -> u8 {
         loop {
             if let Some(b) = poll_byte() {
-                return Some(b);
+                return b;
             }
         }
     }
 
-    /// Writes a frame's `bytes`: while polled, by polling ([`write_polled`]);
-    /// then into the transmit queue, the interrupt sending them. False (nothing
-    /// queued) when they do not all fit, or the transmitter never became ready.
+    /// Queues a frame's `bytes` for the interrupt to send: the tasks' path, it
+    /// never waits. False (nothing queued) when they do not all fit (the previous
+    /// frame has not left yet).
     pub fn write(&mut self, bytes: &[u8]) -> bool {
-        if self.polled {
-            return write_polled(bytes);
-        }
         if self.tx.capacity() - self.tx.len() < bytes.len() {
             return false;
         }
@@ -282,23 +262,30 @@ impl Port {
         true
     }
 
+    /// Writes a frame's `bytes` by polling ([`write_polled`], each byte's wait
+    /// bounded): the set-up's path and, after [`Port::take_over`], the end of
+    /// the run's and the fault paths'. False if the transmitter never became
+    /// ready.
+    pub fn write_polled(&mut self, bytes: &[u8]) -> bool {
+        write_polled(bytes)
+    }
+
     /// The end of the set-up, interrupts still off (in `init`): the interrupt
     /// takes over, at [`USART1_PRIORITY`], with a first period's receive budget.
     pub fn start(&mut self, nvic: &mut NVIC) {
         // SAFETY: the priority is above every RTIC ceiling and the handler
         // touches no RTIC resource.
         unsafe { nvic.set_priority(pac::Interrupt::USART1, USART1_PRIORITY) };
-        self.polled = false;
         // The line unmasked with the first period's budget.
         rearm_receive();
     }
 
     /// A fault, or the end of the run: interrupts off (the caller's, or this
-    /// call's), the bytes still queued sent by polling ([`flush`]), then polled:
-    /// the caller's next frame goes out after them, whole.
+    /// call's), the bytes still queued sent by polling ([`flush`]): the caller's
+    /// next frame, written with [`Port::write_polled`], goes out after them,
+    /// whole.
     pub fn take_over(&mut self) {
         flush();
-        self.polled = true;
     }
 }
 

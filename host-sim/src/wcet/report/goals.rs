@@ -597,7 +597,7 @@ mod tests {
             let inputs = super::super::ReportInputs {
                 run_dirs: vec![dir.clone()],
                 elf: elf.clone(),
-                stack_levels: crate::wcet::ecu_app::ecu_priority_levels(),
+                stack_levels: crate::wcet::ecu_app::EcuBuild::LockStep.priority_levels(),
                 cpi: crate::commands::wcet::given_cpi(2.6),
                 statics: StaticSummary::default(),
                 plan_period_cycles: 16.8e6,
