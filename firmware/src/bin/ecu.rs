@@ -1148,7 +1148,8 @@ mod app {
         #[cfg(feature = "board-usart")]
         {
             let mut nvic = cx.core.NVIC;
-            link.port.start(&mut nvic);
+            let mut scb = cx.core.SCB;
+            link.port.start(&mut nvic, &mut scb);
         }
         // The timeline starts at the beginning of the monotonic's next tick: the
         // first release of both tasks, which then run at a tick as every later
@@ -1345,9 +1346,14 @@ mod app {
             Mono::delay_until(instant_at(monitor.release_us())).await;
             let release_us = monitor.start();
             let t0 = core_ticks();
-            // A new period's receive budget for the USART's interrupt.
+            // The bytes the USART's interrupt received sorted (this task's
+            // frames, the plan task's road), then a new period's receive budget:
+            // no more than a budget's bytes wait to be sorted.
             #[cfg(feature = "board-usart")]
-            usart_link::rearm_receive();
+            {
+                cx.local.link.port.sort();
+                usart_link::rearm_receive();
+            }
             // A refused sensor frame is never acted on: the period runs on no
             // estimate (the dropout policy: both tasks refuse it, the control task
             // applies the safe actuation) and still answers, saying so. A run of

@@ -23,13 +23,20 @@ const _: () = assert!(
 );
 
 /// The USART1 interrupt's priority in RTIC's logical numbering (higher preempts):
-/// above the control task (2), the plan task (1) and every lock's ceiling (2), so
-/// a lock never delays a received byte; below SysTick, which the monotonic leaves
-/// at the hardware's most urgent level.
-pub const LINK_INTERRUPT_PRIORITY: u8 = 3;
+/// above the control task (2), the plan task (1), every lock's ceiling (2) and
+/// SysTick ([`SYSTICK_PRIORITY`]), so that nothing but an interrupts-disabled
+/// section delays a received byte: a byte not read within a byte's time is
+/// overrun by the next.
+pub const LINK_INTERRUPT_PRIORITY: u8 = 4;
 
-/// Bytes the interrupt handler sends per entry at most.
-pub const TX_BYTES_PER_ENTRY: usize = 4;
+/// SysTick's priority in the flashed build, RTIC's logical numbering: above both
+/// tasks, below the link (its handler, the monotonic's timer queue, runs for
+/// longer than a byte's time).
+pub const SYSTICK_PRIORITY: u8 = 3;
+
+/// Bytes the interrupt handler sends per entry at most: the data register and
+/// the shift register, all silicon can take at once.
+pub const TX_BYTES_PER_ENTRY: usize = 2;
 
 /// Entries of the USART1 interrupt per receive budget at most, the bound the
 /// response-time analysis charges: each entry that reads a byte spends one of the
@@ -39,6 +46,22 @@ pub const TX_BYTES_PER_ENTRY: usize = 4;
 /// transmit queue empty, and the control task's write pends one that may find the
 /// transmitter busy.
 pub const ENTRIES_PER_BUDGET: u64 = RX_BUDGET_BYTES as u64 + 1 + MAX_UP_FRAME_BYTES as u64 + 2;
+
+/// Entries of the USART1 interrupt on silicon are spaced by the line: one reads
+/// a byte that took a byte's time to arrive, one sends into the data register
+/// the previous byte has left for the shift register, so at most two a byte's
+/// time, ns, besides [`ENTRIES_AT_ONCE`]. (QEMU's transmitter takes a byte at
+/// once: there the handler's transmit entries follow each other; the timing
+/// analysis models silicon.)
+pub const ENTRY_SPACING_NS: u32 = BYTE_TIME_NS / 2;
+
+/// Entries that the line does not space, at most, in a window shorter than two
+/// control periods: the first entry of each kind (a byte already waiting, the
+/// data and shift registers both empty), and per receive budget and frame sent
+/// (two of each in such a window) the one that masks the line, the one that
+/// finds the transmit queue empty and the write's pend: 2 + 2 × 3 = 8, and one
+/// for the rounding of two kinds into one spacing.
+pub const ENTRIES_AT_ONCE: u64 = 9;
 
 /// Budgets a window of any length can draw on besides one per control period it
 /// spans: the one in force at its start, and one more because a budget is

@@ -67,7 +67,9 @@ pub struct WcetArgs {
     pub check_trace: Vec<PathBuf>,
     /// Fail when one of these goals of the report is missed, by id (`wcet.json`'s
     /// `goals[].id`, e.g. `control-response-time`, `stack-covered`,
-    /// `plan-job-budget`); the others are reported only.
+    /// `plan-job-budget`); the others are reported only. With --static-only: the
+    /// response times of the build's tasks and interrupts, `TASK-response-time`
+    /// (`control`, `plan`, `systick`, and `link` in the flashed build).
     #[arg(long, num_args = 1..)]
     pub require: Vec<String>,
     /// Keep the QEMU execution traces this command records (`OUT/trace*/qemu-trace.log`,
@@ -540,7 +542,13 @@ fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
             .join(", "),
         path.display()
     );
-    analysis_errors(&analysis, &args.out)
+    analysis_errors(&analysis, &args.out)?;
+    let missed = crate::wcet::analysis::missed_response_times(&analysis.tasks, &args.require)
+        .map_err(|e| anyhow!(e))?;
+    if !missed.is_empty() {
+        bail!("required response times missed:\n  {}", missed.join("\n  "));
+    }
+    Ok(())
 }
 
 /// A line per task of the static analysis, and its totals.

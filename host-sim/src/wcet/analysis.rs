@@ -1682,6 +1682,45 @@ fn loop_coverage(
     super::coverage::coverage(model.program, model.all_loops, &sites, blocks_run, &locate)
 }
 
+/// The response times `required` names (`TASK-response-time`, a task of the
+/// build: `control-response-time`, `link-response-time`, ...) that `tasks` do
+/// not bound within their deadlines, one line each; an id of another form, or
+/// naming no task with a deadline, is an error that says which ids exist.
+pub fn missed_response_times(
+    tasks: &[TaskStatic],
+    required: &[String],
+) -> std::result::Result<Vec<String>, String> {
+    let known: Vec<String> = tasks
+        .iter()
+        .filter(|t| t.deadline_us.is_some())
+        .map(|t| format!("{}-response-time", t.name))
+        .collect();
+    let mut missed = Vec::new();
+    for id in required {
+        let task = id
+            .strip_suffix("-response-time")
+            .and_then(|n| tasks.iter().find(|t| t.name == n && t.deadline_us.is_some()))
+            .ok_or_else(|| {
+                format!(
+                    "`{id}` is no goal of the static analysis: with --static-only, --require takes {}",
+                    known.join(", ")
+                )
+            })?;
+        let deadline = task.deadline_us.unwrap_or(0.0);
+        match task.response_time_bound_us {
+            Some(r) if r <= deadline => {}
+            Some(r) => missed.push(format!("{id}: {r:.2} µs, deadline {deadline:.2} µs")),
+            None => missed.push(format!(
+                "{id}: no bound within its deadline of {deadline:.2} µs{}",
+                task.response_time_past_deadline_us
+                    .map(|p| format!(" (fixed point {p:.2} µs)"))
+                    .unwrap_or_default()
+            )),
+        }
+    }
+    Ok(missed)
+}
+
 impl StaticAnalysis {
     /// True when every reachable loop is bounded, every indirect call resolved and
     /// no function recursive: the analysis gave what it could.
@@ -2031,4 +2070,76 @@ fn candidate_addresses(f: &Function, l: &Loop) -> Vec<u32> {
     }
     out.extend(block_insns(l.header).iter().map(|i| i.address));
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn task(
+        name: &str,
+        deadline: Option<f64>,
+        bound: Option<f64>,
+        past: Option<f64>,
+    ) -> TaskStatic {
+        TaskStatic {
+            name: name.into(),
+            root: String::new(),
+            functions: 0,
+            loops: 0,
+            bounded_loops: 0,
+            excluded_loops: 0,
+            irreducible: Vec::new(),
+            static_bound_instructions: None,
+            static_bound_cycles: None,
+            refused: None,
+            top_functions: Vec::new(),
+            top_functions_entries: Vec::new(),
+            top_blocks: Vec::new(),
+            observed_activations: 0,
+            observed_max_instructions: None,
+            observed_max_cycles: None,
+            tightness: None,
+            budget_cycles: None,
+            response_time_bound_us: bound,
+            response_time_past_deadline_us: past,
+            deadline_us: deadline,
+        }
+    }
+
+    #[test]
+    fn a_required_response_time_fails_only_when_missed_and_a_wrong_id_says_which_exist() {
+        let tasks = [
+            task("control", Some(10_000.0), Some(7_343.0), None),
+            task("plan", Some(100_000.0), None, Some(159_560.0)),
+            task("link", Some(10.85), Some(4.1), None),
+            task("plan_job", None, None, None),
+        ];
+        let req = |ids: &[&str]| ids.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(
+            missed_response_times(
+                &tasks,
+                &req(&["control-response-time", "link-response-time"])
+            ),
+            Ok(Vec::new())
+        );
+        let missed =
+            missed_response_times(&tasks, &req(&["plan-response-time"])).unwrap_or_default();
+        assert_eq!(missed.len(), 1);
+        assert!(missed[0].contains("159560.00"), "{missed:?}");
+        // A section has no deadline; an unknown id is an error naming the known ones.
+        for bad in [
+            "plan_job-response-time",
+            "stack-bound",
+            "brake-response-time",
+        ] {
+            let e = missed_response_times(&tasks, &req(&[bad]))
+                .err()
+                .unwrap_or_default();
+            assert!(
+                e.contains("control-response-time, plan-response-time, link-response-time"),
+                "{e}"
+            );
+        }
+    }
 }

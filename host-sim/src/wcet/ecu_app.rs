@@ -26,6 +26,9 @@ pub enum EcuBuild {
     Board,
 }
 
+/// The control task's priority (RTIC's logical numbering), in both builds.
+const CONTROL_PRIORITY: u8 = 2;
+
 /// One activity of the schedule: a task or an interrupt.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scheduled {
@@ -85,14 +88,14 @@ impl EcuBuild {
     }
 
     /// The schedule: the tasks at their periods (= deadlines); SysTick, the
-    /// monotonic's 1 kHz tick (`systick_monotonic!(Mono, 1_000)`), at the
-    /// hardware's most urgent level (rtic-monotonics leaves its reset priority);
-    /// in the flashed build, USART1's interrupt between them
-    /// ([`usart::LINK_INTERRUPT_PRIORITY`]): an entry per byte received, no closer
-    /// than a byte's time, at most [`usart::ENTRIES_PER_BUDGET`] per receive
-    /// budget (one a control period, [`usart::EXTRA_BUDGETS_PER_WINDOW`] more in
-    /// any window), its deadline a byte's time (a byte not read by then is
-    /// overrun by the next).
+    /// monotonic's 1 kHz tick (`systick_monotonic!(Mono, 1_000)`), above them
+    /// (the lock-step build leaves it at the hardware's most urgent level; the
+    /// flashed build sets [`usart::SYSTICK_PRIORITY`]); in the flashed build,
+    /// USART1's interrupt above all ([`usart::LINK_INTERRUPT_PRIORITY`]): an
+    /// entry a byte, at most [`usart::ENTRIES_PER_BUDGET`] per receive budget
+    /// (one a control period, [`usart::EXTRA_BUDGETS_PER_WINDOW`] more in any
+    /// window), its deadline a byte's time (a byte not read by then is overrun by
+    /// the next).
     pub fn schedule(self) -> Vec<Scheduled> {
         let control = firmware::tasks::CONTROL_PERIOD_US as f64;
         let plan = firmware::tasks::PLAN_PERIOD_US as f64;
@@ -112,21 +115,23 @@ impl EcuBuild {
             Self::Board => {
                 let byte_us = f64::from(usart::BYTE_TIME_NS) / 1e3;
                 vec![
-                    task("systick", usart::LINK_INTERRUPT_PRIORITY + 1, 1_000.0),
+                    task("systick", usart::SYSTICK_PRIORITY, 1_000.0),
                     Scheduled {
                         name: "link",
                         priority: usart::LINK_INTERRUPT_PRIORITY,
-                        // A transmit entry can follow the last one at once: the
-                        // period is no limit, the budget is.
-                        period_us: 0.0,
+                        // Two entries a byte's time on silicon, and a few at once.
+                        period_us: f64::from(usart::ENTRY_SPACING_NS) / 1e3,
                         deadline_us: byte_us,
                         burst: Some(Burst {
                             per_window: usart::ENTRIES_PER_BUDGET,
                             window_us: control,
                             extra_windows: usart::EXTRA_BUDGETS_PER_WINDOW,
+                            // The control task renews the budget at its release.
+                            renewer_priority: Some(CONTROL_PRIORITY),
+                            at_once: usart::ENTRIES_AT_ONCE,
                         }),
                     },
-                    task("control", 2, control),
+                    task("control", CONTROL_PRIORITY, control),
                     task("plan", 1, plan),
                 ]
             }
@@ -145,7 +150,9 @@ impl EcuBuild {
         schedule
             .iter()
             .filter(|t| t.priority > me.priority)
-            .map(|t| super::rta::arrivals_in(t.period_us, t.burst, me.deadline_us) as u64)
+            .map(|t| {
+                super::rta::arrivals_in(t.period_us, t.burst, me.deadline_us, me.priority) as u64
+            })
             .sum()
     }
 
@@ -160,7 +167,7 @@ impl EcuBuild {
             return 0;
         };
         if tick.priority > me.priority {
-            super::rta::arrivals_in(tick.period_us, tick.burst, me.deadline_us) as u64
+            super::rta::arrivals_in(tick.period_us, tick.burst, me.deadline_us, me.priority) as u64
         } else {
             0
         }
@@ -171,8 +178,8 @@ impl EcuBuild {
     /// async tasks run in their dispatchers (RTIC v2 gives the dispatchers listed
     /// in `dispatchers = [..]` to the priorities in increasing order: in the
     /// lock-step disassembly `USART1` calls `Mpc::step_observed`, `USART2`
-    /// `Link::receive`); the flashed build's link interrupt above them;
-    /// `SysTick`, the monotonic's interrupt, is the highest.
+    /// `Link::receive`); `SysTick`, the monotonic's interrupt, above them; the
+    /// flashed build's link interrupt above all.
     pub fn priority_levels(self) -> Vec<PriorityLevel> {
         let level = PriorityLevel::new;
         match self {
@@ -186,8 +193,8 @@ impl EcuBuild {
                 level("thread (main: init, idle)", &["main"]),
                 level("priority 1 (plan, dispatcher SPI1)", &["SPI1"]),
                 level("priority 2 (control, dispatcher SPI2)", &["SPI2"]),
-                level("priority 3 (link, USART1 interrupt)", &["USART1"]),
-                level("SysTick (monotonic)", &["SysTick"]),
+                level("SysTick (monotonic, priority 3)", &["SysTick"]),
+                level("priority 4 (link, USART1 interrupt)", &["USART1"]),
             ],
         }
     }
@@ -259,8 +266,8 @@ mod tests {
     fn the_flashed_build_puts_its_link_between_the_tasks_and_the_tick() {
         let board = EcuBuild::Board.schedule();
         let prio = |s: &[Scheduled], n: &str| s.iter().find(|t| t.name == n).map(|t| t.priority);
-        assert!(prio(&board, "link") > prio(&board, "control"));
-        assert!(prio(&board, "systick") > prio(&board, "link"));
+        assert!(prio(&board, "systick") > prio(&board, "control"));
+        assert!(prio(&board, "link") > prio(&board, "systick"));
         assert_eq!(prio(&EcuBuild::LockStep.schedule(), "link"), None);
         // Every task of the schedule has a handler to bound, and back.
         for build in [EcuBuild::LockStep, EcuBuild::Board] {
@@ -280,12 +287,17 @@ mod tests {
         assert_eq!(lock.preemptions_of("control"), 10);
         assert_eq!(lock.preemptions_of("plan"), 110);
         assert_eq!(lock.ticks_of("plan"), 100);
-        // Flashed: three receive budgets within one control period (the one in
-        // force, the renewal, a renewal late by the jitter), twelve within a plan
-        // period; the ticks are the same.
+        // Flashed: two receive budgets within one control activation (the one in
+        // force, its own renewal), twelve within a plan period (one a control
+        // period, the one in force, a renewal early by the control task's
+        // jitter); within SysTick's 1 ms the line's spacing binds: 185 + 9.
         let per = usart::ENTRIES_PER_BUDGET;
-        assert_eq!(board.preemptions_of("control"), 10 + 3 * per);
+        assert_eq!(board.preemptions_of("control"), 10 + 2 * per);
         assert_eq!(board.preemptions_of("plan"), 110 + 12 * per);
+        assert_eq!(
+            board.preemptions_of("systick"),
+            185 + usart::ENTRIES_AT_ONCE
+        );
         assert_eq!(board.ticks_of("plan"), 100);
         assert_eq!(board.ticks_of("systick"), 0);
     }

@@ -77,7 +77,8 @@ pub struct Response {
 pub const PAST_DEADLINE_FACTOR: f64 = 10.0;
 
 /// A rate limit: at most `per_window · (⌈r / window_us⌉ + extra_windows)`
-/// activations in any window of `r` µs.
+/// activations in any window of `r` µs, and at most `⌈r / T⌉ + at_once` by the
+/// activity's period `T`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Burst {
     /// Activations per budget window at most.
@@ -87,28 +88,41 @@ pub struct Burst {
     /// Budgets a window can draw on besides one per `window_us` it spans (the one
     /// in force at its start; one more if budgets are renewed with jitter).
     pub extra_windows: u64,
+    /// The priority of the task that renews the budget at its start, if one
+    /// does: a window of its own activation draws on one budget less (the next
+    /// renewal comes after it completes).
+    pub renewer_priority: Option<u8>,
+    /// Activations that may come together besides those the period spaces.
+    pub at_once: u64,
 }
 
-/// The most activations in a window of `r` µs of an activity released no closer
-/// than `period_us` (`0`: no such limit) and capped by `burst`: `⌈r / T⌉`, and
-/// with a cap at most [`Burst`]'s count.
-pub fn arrivals_in(period_us: f64, burst: Option<Burst>, r: f64) -> f64 {
+/// The most activations, in a window of `r` µs of the response of an activity
+/// of priority `victim`, of an activity released no closer than `period_us`
+/// (`0`: no such limit) and capped by `burst`: `⌈r / T⌉`, and with a cap at most
+/// [`Burst`]'s counts.
+pub fn arrivals_in(period_us: f64, burst: Option<Burst>, r: f64, victim: u8) -> f64 {
     let by_period = if period_us > 0.0 {
-        (r / period_us).ceil()
+        (r / period_us).ceil() + burst.map_or(0.0, |b| b.at_once as f64)
     } else {
         f64::INFINITY
     };
     match burst {
         Some(b) if b.window_us > 0.0 => {
-            by_period.min(b.per_window as f64 * ((r / b.window_us).ceil() + b.extra_windows as f64))
+            let extra = if b.renewer_priority == Some(victim) {
+                b.extra_windows.saturating_sub(1)
+            } else {
+                b.extra_windows
+            };
+            by_period.min(b.per_window as f64 * ((r / b.window_us).ceil() + extra as f64))
         }
         _ => by_period,
     }
 }
 
-/// The most activations of `h` in a window of `r` µs ([`arrivals_in`]).
-fn arrivals(h: &Activity, r: f64) -> f64 {
-    arrivals_in(h.period_us, h.burst, r)
+/// The most activations of `h` in a window of `r` µs of `victim`'s response
+/// ([`arrivals_in`]).
+fn arrivals(h: &Activity, r: f64, victim: &Activity) -> f64 {
+    arrivals_in(h.period_us, h.burst, r, victim.priority)
 }
 
 /// Response-time bounds of every activity on a core clocked at `clock_hz`.
@@ -139,7 +153,8 @@ pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
                     + higher
                         .iter()
                         .map(|h| {
-                            arrivals(h, r) * us(h.wcet_cycles + ENTRY_EXIT_CYCLES + h.refill_cycles)
+                            arrivals(h, r, a)
+                                * us(h.wcet_cycles + ENTRY_EXIT_CYCLES + h.refill_cycles)
                         })
                         .sum::<f64>();
                 if next > PAST_DEADLINE_FACTOR * a.deadline_us {
@@ -274,6 +289,8 @@ mod tests {
             per_window: 100,
             window_us: 10_000.0,
             extra_windows: 0,
+            renewer_priority: None,
+            at_once: 0,
         })));
         let capped = response_times(&s, 168e6);
         assert!(capped.iter().all(|x| x.meets_deadline));
@@ -294,14 +311,18 @@ mod tests {
             per_window: 100,
             window_us: 10_000.0,
             extra_windows: 2,
+            renewer_priority: Some(2),
+            at_once: 4,
         };
         // No period: the budget alone; 1 µs and 10 ms hold three budgets, 10.001 ms four.
-        assert_eq!(arrivals_in(0.0, Some(b), 1.0), 300.0);
-        assert_eq!(arrivals_in(0.0, Some(b), 10_000.0), 300.0);
-        assert_eq!(arrivals_in(0.0, Some(b), 10_001.0), 400.0);
-        // A period caps short windows.
-        assert_eq!(arrivals_in(10.0, Some(b), 25.0), 3.0);
-        assert_eq!(arrivals_in(10.0, None, 25.0), 3.0);
+        assert_eq!(arrivals_in(0.0, Some(b), 1.0, 1), 300.0);
+        assert_eq!(arrivals_in(0.0, Some(b), 10_000.0, 1), 300.0);
+        assert_eq!(arrivals_in(0.0, Some(b), 10_001.0, 1), 400.0);
+        // The task that renews the budget sees one less.
+        assert_eq!(arrivals_in(0.0, Some(b), 10_000.0, 2), 200.0);
+        // A period caps short windows, with what may come at once.
+        assert_eq!(arrivals_in(10.0, Some(b), 25.0, 1), 7.0);
+        assert_eq!(arrivals_in(10.0, None, 25.0, 1), 3.0);
     }
 
     #[test]

@@ -7,15 +7,16 @@
 //!   data register, and its answer is written by polling, each byte's wait
 //!   bounded.
 //! * **Driving**: interrupt-driven both ways into bounded `heapless` SPSC queues.
-//!   The USART1 interrupt (NVIC priority above both tasks, [`USART1_PRIORITY`])
-//!   takes at most one received byte and sends at most four per entry (QEMU
-//!   7.2's USART raises no transmit-empty interrupt, so the handler pends itself
-//!   again while bytes wait and the transmitter takes them). It
-//!   sorts the received bytes into the control task's queue and the plan task's
-//!   by [`firmware::link::demux`] (sensor and stop frames to the control task, the
-//!   windows of the road to the plan task), as the lock-step build's two host
-//!   files do, and drains the transmit queue the control task fills. It takes at
-//!   most [`RX_BUDGET_BYTES`] per control period: past them it stops reading (on
+//!   The USART1 interrupt (NVIC priority above both tasks and SysTick,
+//!   [`USART1_PRIORITY`]) queues at most one received byte and sends at most
+//!   [`TX_BYTES_PER_ENTRY`] per entry (QEMU 7.2's USART raises no transmit-empty
+//!   interrupt, so the handler pends itself again while bytes wait and the
+//!   transmitter takes them), and drains the transmit queue the control task
+//!   fills. The control task sorts the received bytes at its release
+//!   ([`Port::sort`], [`firmware::link::demux`]: sensor and stop frames for
+//!   itself, the windows of the road into the plan task's queue), as the
+//!   lock-step build's two host files do. The interrupt takes at most
+//!   [`RX_BUDGET_BYTES`] per control period: past them it stops reading (on
 //!   silicon the peripheral then drops bytes, with an overrun; QEMU holds them
 //!   back), so its load is bounded whatever the other end sends; the control
 //!   task re-arms it at each release ([`rearm_receive`]).
@@ -35,6 +36,7 @@ use firmware::link::demux::{Channel, Demux};
 use firmware::link::usart::{BAUD, LINK_INTERRUPT_PRIORITY, RX_BUDGET_BYTES, TX_BYTES_PER_ENTRY};
 use firmware::link::{MAX_DOWN_FRAME_BYTES, MAX_DRIVING_DOWN_FRAME_BYTES, MAX_UP_FRAME_BYTES};
 use heapless::spsc::{Consumer, Producer, Queue};
+use heapless::Deque;
 use stm32f4::stm32f405 as pac;
 use stm32f4::stm32f405::interrupt;
 
@@ -52,8 +54,13 @@ pub const fn brr(apb2_hz: u32) -> u32 {
 pub const BRR: u32 = brr(APB2_HZ);
 const _: () = assert!(BRR == 91);
 
-/// The control task's receive queue, bytes (it holds one less): a sensor frame
-/// and the start of the next.
+/// The received bytes the interrupt queues for the control task to sort, bytes
+/// (it holds one less): a period's receive budget. The control task sorts them
+/// at its release, before it renews the budget, so no more arrive in between.
+pub const RAW_RX_BYTES: usize = RX_BUDGET_BYTES as usize + 1;
+
+/// The control task's sorted bytes, bytes: a sensor frame and the start of the
+/// next.
 pub const CONTROL_RX_BYTES: usize = 2 * MAX_DRIVING_DOWN_FRAME_BYTES;
 
 /// The plan task's receive queue, bytes (it holds one less): one route frame (the
@@ -64,11 +71,18 @@ pub const ROUTE_RX_BYTES: usize = MAX_DOWN_FRAME_BYTES + 2;
 pub const TX_BYTES: usize = MAX_UP_FRAME_BYTES + 1;
 
 /// USART1's NVIC priority, the hardware's encoding (upper 4 bits, lower is
-/// more urgent): RTIC's logical priority [`LINK_INTERRUPT_PRIORITY`] (3), above the control task (2) and the
-/// plan task (1) and above every lock's ceiling (2), so a lock never delays a
+/// more urgent): RTIC's logical priority [`LINK_INTERRUPT_PRIORITY`] (4), above
+/// SysTick ([`SYSTICK_PRIORITY`]), the control task (2), the plan task (1) and
+/// every lock's ceiling (2), so neither a lock nor the monotonic's tick delays a
 /// received byte. The handler shares no resource with the tasks but its
 /// lock-free queues.
 pub const USART1_PRIORITY: u8 = (16 - LINK_INTERRUPT_PRIORITY) << 4;
+
+/// SysTick's priority, the hardware's encoding: RTIC's logical
+/// [`firmware::link::usart::SYSTICK_PRIORITY`] (3), above both tasks, below the
+/// link (the monotonic leaves it at the most urgent level, 0, where its 3.6 k
+/// cycles would outlast a byte's time).
+pub const SYSTICK_PRIORITY: u8 = (16 - firmware::link::usart::SYSTICK_PRIORITY) << 4;
 
 /// Polls of a status flag per byte written by polling at most: a byte's time at
 /// 168 MHz is about 1,820 cycles and a poll a few, so the wait is ample on
@@ -110,16 +124,22 @@ fn cr1_bit(bit: Cr1Bit, on: bool) {
 
 /// The queues and the handler's state, in one static ([`open`]).
 struct Storage {
-    control: Queue<u8, CONTROL_RX_BYTES>,
+    raw: Queue<u8, RAW_RX_BYTES>,
     route: Queue<u8, ROUTE_RX_BYTES>,
     tx: Queue<u8, TX_BYTES>,
     isr: Option<UsartIsr>,
 }
 
-/// The control task's end of the link: its receive queue and the transmit queue.
+/// The control task's end of the link: the received bytes, their sorter into
+/// its own frames and the plan task's, and the transmit queue.
 pub struct Port {
-    rx: Consumer<'static, u8, CONTROL_RX_BYTES>,
+    raw: Consumer<'static, u8, RAW_RX_BYTES>,
+    demux: Demux,
+    control: Deque<u8, CONTROL_RX_BYTES>,
+    route: Producer<'static, u8, ROUTE_RX_BYTES>,
     tx: Producer<'static, u8, TX_BYTES>,
+    /// Bytes dropped because their queue was full, bytes.
+    pub dropped: u32,
 }
 
 /// The plan task's end of the link: its receive queue (the windows of the road).
@@ -139,24 +159,22 @@ pub fn open(
     clock_ok: bool,
 ) -> Option<(Port, RoutePort)> {
     let storage: &'static mut Storage = cortex_m::singleton!(: Storage = Storage {
-        control: Queue::new(),
+        raw: Queue::new(),
         route: Queue::new(),
         tx: Queue::new(),
         isr: None,
     })?;
     let Storage {
-        control,
+        raw,
         route,
         tx,
         isr,
     } = storage;
-    let (control_in, control_out) = control.split();
+    let (raw_in, raw_out) = raw.split();
     let (route_in, route_out) = route.split();
     let (tx_in, tx_out) = tx.split();
     let isr = isr.insert(UsartIsr {
-        demux: Demux::new(),
-        control: control_in,
-        route: route_in,
+        raw: raw_in,
         tx: tx_out,
         dropped: 0,
     });
@@ -189,8 +207,12 @@ pub fn open(
     write_polled(&[0]);
     Some((
         Port {
-            rx: control_out,
+            raw: raw_out,
+            demux: Demux::new(),
+            control: Deque::new(),
+            route: route_in,
             tx: tx_in,
+            dropped: 0,
         },
         RoutePort { rx: route_out },
     ))
@@ -227,10 +249,34 @@ fn write_polled(bytes: &[u8]) -> bool {
 }
 
 impl Port {
-    /// The next byte the interrupt queued for the control task, `None` when none
+    /// Sorts the bytes the interrupt received since the last call
+    /// ([`firmware::link::demux`]): sensor, stop and set-up frames into the
+    /// control task's bytes ([`Port::next_byte`]), the windows of the road into
+    /// the plan task's queue ([`RoutePort::next_byte`]). The control task calls
+    /// it at its release, before it renews the receive budget
+    /// ([`rearm_receive`]): at most a budget's bytes wait. Here rather than in the
+    /// interrupt, so that an entry of the interrupt costs little and the sorting
+    /// runs in a loop that stays in the cache.
+    pub fn sort(&mut self) {
+        // wcet-bound: RX_BUDGET_BYTES
+        while let Some(byte) = self.raw.dequeue() {
+            if let Some(e) = self.demux.push(byte) {
+                // wcet-bound: 4
+                for &b in e.bytes() {
+                    let full = match e.channel {
+                        Channel::Control => self.control.push_back(b).is_err(),
+                        Channel::Route => self.route.enqueue(b).is_err(),
+                    };
+                    self.dropped = self.dropped.wrapping_add(u32::from(full));
+                }
+            }
+        }
+    }
+
+    /// The control task's next sorted byte ([`Port::sort`]), `None` when none
     /// is. The tasks' path: it never waits.
     pub fn next_byte(&mut self) -> Option<u8> {
-        self.rx.dequeue()
+        self.control.pop_front()
     }
 
     /// The next byte on the line, polled, waiting for the host as long as it
@@ -271,11 +317,20 @@ impl Port {
     }
 
     /// The end of the set-up, interrupts still off (in `init`): the interrupt
-    /// takes over, at [`USART1_PRIORITY`], with a first period's receive budget.
-    pub fn start(&mut self, nvic: &mut NVIC) {
+    /// takes over, at [`USART1_PRIORITY`], with a first period's receive budget;
+    /// SysTick below it, at [`SYSTICK_PRIORITY`].
+    pub fn start(&mut self, nvic: &mut NVIC, scb: &mut cortex_m::peripheral::SCB) {
         // SAFETY: the priority is above every RTIC ceiling and the handler
         // touches no RTIC resource.
         unsafe { nvic.set_priority(pac::Interrupt::USART1, USART1_PRIORITY) };
+        // SAFETY: SysTick's handler (the monotonic's timer queue) takes no RTIC
+        // lock; it stays above both tasks.
+        unsafe {
+            scb.set_priority(
+                cortex_m::peripheral::scb::SystemHandler::SysTick,
+                SYSTICK_PRIORITY,
+            );
+        }
         // The line unmasked with the first period's budget.
         rearm_receive();
     }
@@ -296,21 +351,19 @@ impl RoutePort {
     }
 }
 
-/// What the interrupt handler owns: the sorter and its ends of the queues.
+/// What the interrupt handler owns: its ends of the queues.
 pub struct UsartIsr {
-    demux: Demux,
-    control: Producer<'static, u8, CONTROL_RX_BYTES>,
-    route: Producer<'static, u8, ROUTE_RX_BYTES>,
+    raw: Producer<'static, u8, RAW_RX_BYTES>,
     tx: Consumer<'static, u8, TX_BYTES>,
-    /// Bytes dropped because their queue was full, bytes.
+    /// Bytes dropped because the received bytes' queue was full, bytes.
     pub dropped: u32,
 }
 
 impl UsartIsr {
-    /// One interrupt: at most one byte received (sorted into its queue, within
-    /// the period's budget) and [`TX_BYTES_PER_ENTRY`] sent; the transmit
-    /// interrupt off when the queue is empty, the receive one off (and the line
-    /// masked until the next release) when the budget is spent.
+    /// One interrupt: at most one byte received (queued for the control task to
+    /// sort, within the period's budget) and [`TX_BYTES_PER_ENTRY`] sent; the
+    /// transmit interrupt off when the queue is empty, the receive one off (and
+    /// the line masked until the next release) when the budget is spent.
     fn on_interrupt(&mut self) {
         let u = usart();
         let sr = u.sr.read();
@@ -327,22 +380,14 @@ impl UsartIsr {
             } else {
                 RX_LEFT.store(left - 1, Ordering::Relaxed);
                 let byte = u.dr.read().bits() as u8;
-                if let Some(e) = self.demux.push(byte) {
-                    // wcet-bound: 4
-                    for &b in e.bytes() {
-                        let full = match e.channel {
-                            Channel::Control => self.control.enqueue(b).is_err(),
-                            Channel::Route => self.route.enqueue(b).is_err(),
-                        };
-                        self.dropped = self.dropped.wrapping_add(u32::from(full));
-                    }
-                }
+                let full = self.raw.enqueue(byte).is_err();
+                self.dropped = self.dropped.wrapping_add(u32::from(full));
             }
         }
         // Transmission: up to TX_BYTES_PER_ENTRY while the transmitter takes
-        // them (on silicon one or two: the data register and the shift register;
-        // in QEMU every write is sent at once).
-        // wcet-bound: 4
+        // them (on silicon the data register and the shift register; in QEMU
+        // every write is sent at once).
+        // wcet-bound: TX_BYTES_PER_ENTRY
         for _ in 0..TX_BYTES_PER_ENTRY {
             if !u.sr.read().txe().bit_is_set() {
                 break;
@@ -367,7 +412,7 @@ impl UsartIsr {
     }
 }
 
-/// USART1's interrupt: one received byte sorted, up to [`TX_BYTES_PER_ENTRY`]
+/// USART1's interrupt: one received byte queued, up to [`TX_BYTES_PER_ENTRY`]
 /// queued bytes sent.
 #[interrupt]
 fn USART1() {
