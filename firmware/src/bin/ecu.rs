@@ -1097,13 +1097,16 @@ mod app {
         /// The plan `control` follows (swapped in by `plan`); in a static, so init
         /// does not build it on its stack.
         plan: &'static mut Plan<f32>,
-        /// The last plan activation's record, until `control` reports it.
-        plan_event: Option<PlanEventFrame>,
+        /// The last plan activation's record, until `control` reports it; in a
+        /// static, as `plan`.
+        plan_event: &'static mut Option<PlanEventFrame>,
     }
 
     #[local]
     struct Local {
-        control: ControlTask<f32>,
+        /// The control task's state, in a static, so that init does not build
+        /// it on its stack.
+        control: &'static mut ControlTask<f32>,
         link: &'static mut Link,
         planner: &'static mut PlanTask<f32, PATH_CAP>,
         /// The route channel and the next window of the road being received
@@ -1119,6 +1122,8 @@ mod app {
         link_storage: Option<Link> = None,
         route_storage: Option<RouteLink> = None,
         clock_storage: Option<Result<ClockSource, ClockError>> = None,
+        control_storage: Option<ControlTask<f32>> = None,
+        plan_event_storage: Option<PlanEventFrame> = None,
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         paint_stack();
@@ -1143,7 +1148,7 @@ mod app {
             clock.is_ok(),
         );
         let planner = cx.local.planner_storage;
-        let control = set_up(link, planner, clock);
+        let control = set_up(link, planner, clock, cx.local.control_storage);
         // The set-up was polled; from here the USART's interrupt moves the bytes.
         #[cfg(feature = "board-usart")]
         {
@@ -1168,7 +1173,7 @@ mod app {
             Shared {
                 estimate: StateEstimate::zeroed(),
                 plan: cx.local.plan_storage,
-                plan_event: None,
+                plan_event: cx.local.plan_event_storage,
             },
             Local {
                 control,
@@ -1241,13 +1246,17 @@ mod app {
     /// The set-up from the simulator's frames (car, first window, obstacles), then
     /// `Ready`; stops the ECU on a refused set-up, and when the clock set-up
     /// (`clock`) failed (status [`link::SetupError::ClockFailed`], detail the
-    /// [`ClockError`]'s code).
+    /// [`ClockError`]'s code). The control task's state goes into `storage`, not
+    /// through `init`'s frame, which is still on the stack when the tasks first
+    /// run (RTIC enables interrupts at the end of the function `init` is inlined
+    /// into).
     #[inline(never)]
     fn set_up(
         link: &mut Link,
         planner: &mut PlanTask<f32, PATH_CAP>,
         clock: &Result<ClockSource, ClockError>,
-    ) -> ControlTask<f32> {
+        storage: &'static mut Option<ControlTask<f32>>,
+    ) -> &'static mut ControlTask<f32> {
         match *clock {
             Ok(ClockSource::Pll { hse_hz }) => defmt::info!(
                 "ecu: clock: HSE {=u32} Hz -> PLL, {=u32} Hz",
@@ -1310,7 +1319,7 @@ mod app {
             status: 0,
             detail: 0,
         }));
-        control
+        storage.insert(control)
     }
 
     /// Between activations the core sleeps until the next interrupt (the
@@ -1510,7 +1519,7 @@ mod app {
             monitor.next_release(end_us);
             event.end_us = end_us;
             event.timing = monitor.counts().into();
-            cx.shared.plan_event.lock(|p| *p = Some(event));
+            cx.shared.plan_event.lock(|p| **p = Some(event));
         }
     }
 }
