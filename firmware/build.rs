@@ -83,7 +83,7 @@ fn main() -> Result<(), String> {
         let profile_dir = out.ancestors().nth(3).and_then(|p| p.file_name());
         if profile_dir.is_none_or(|d| d != "board") {
             return Err(
-                "the feature `board-usart` builds the flashed ECU binary: build it with `cargo ecu-board` \
+                "the feature `board-usart` builds the flashed ECU binary: build it with `cargo ecu` \
                  (--profile board), so that it does not replace the lock-step binary in release/"
                     .into(),
             );

@@ -1,6 +1,6 @@
 //! The firmware side of the closed loop: the modelled ECU ([`SimulatedEcu`]) behind
 //! the [`Ecu`] trait, its cost model, its deadlines on slow ECUs, when an answer
-//! acts on the plant; and (`real_ecu_*`, ignored: they need `cargo ecu` and fail
+//! acts on the plant; and (`real_ecu_*`, ignored: they need `cargo ecu-lockstep` and fail
 //! without it; `.ci/run` runs them with `cargo test -p host-sim --test ecu --
 //! --ignored`) the ECU application's panic and fault handlers.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
@@ -593,7 +593,7 @@ fn the_host_counts_skipped_releases_from_the_end_of_an_activation() {
 }
 
 // ---------------------------------------------------------------------------
-// The real ECU application (`cargo ecu`): ignored by `cargo test`; `.ci/run`
+// The real ECU application (`cargo ecu-lockstep`): ignored by `cargo test`; `.ci/run`
 // runs them after building it, and they fail when it is missing.
 // ---------------------------------------------------------------------------
 
@@ -602,7 +602,7 @@ fn real_ecu_elf() -> std::path::PathBuf {
         host_sim::pil::built_ecu_elf(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
     assert!(
         elf.is_file(),
-        "build the ECU application first: cargo ecu ({} is missing)",
+        "build the ECU application first: cargo ecu-lockstep ({} is missing)",
         elf.display()
     );
     elf
@@ -699,7 +699,7 @@ fn reachable<'a>(
 }
 
 #[test]
-#[ignore = "needs the ECU application (`cargo ecu`) and llvm-objdump; .ci/run runs it"]
+#[ignore = "needs the ECU application (`cargo ecu-lockstep`) and llvm-objdump; .ci/run runs it"]
 fn real_ecu_panic_and_fault_handlers_cannot_reach_the_panic_handler_again() {
     let elf = real_ecu_elf();
     let out = std::process::Command::new(llvm_objdump())
@@ -763,7 +763,7 @@ fn real_ecu_panic_and_fault_handlers_cannot_reach_the_panic_handler_again() {
 }
 
 #[test]
-#[ignore = "needs the ECU application (`cargo ecu`) and llvm-objdump; .ci/run runs it"]
+#[ignore = "needs the ECU application (`cargo ecu-lockstep`) and llvm-objdump; .ci/run runs it"]
 fn real_ecu_has_hardfault_and_nmi_handlers_of_its_own() {
     let elf = real_ecu_elf();
     let out = std::process::Command::new(llvm_objdump())

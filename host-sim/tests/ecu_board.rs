@@ -1,8 +1,8 @@
-//! The binary you flash (`cargo ecu-board`: the ECU application over USART1,
+//! The binary you flash (`cargo ecu`: the ECU application over USART1,
 //! `defmt` over RTT, no semihosting), checked on its ELF and run in QEMU:
 //!
 //! * it holds no semihosting instruction (`bkpt`) anywhere, where the lock-step
-//!   build (`cargo ecu`) holds them;
+//!   build (`cargo ecu-lockstep`) holds them;
 //! * in QEMU's `netduinoplus2` (no semihosting option, its first `-serial` on
 //!   USART1) it boots through the clock set-up's no-RCC path, takes an
 //!   authenticated set-up over the emulated USART and answers `Ready`, answers
@@ -22,7 +22,7 @@
 //! between are answered as dropouts (`SENSOR_MISSING`), which the test counts but
 //! does not judge.
 //!
-//! They need the binaries built first (`cargo ecu-board`, and `cargo ecu` for the
+//! They need the binaries built first (`cargo ecu`, and `cargo ecu-lockstep` for the
 //! lock-step one) and `qemu-system-arm`, so they are ignored by `cargo test`;
 //! `.ci/run` builds them and runs `cargo test -p host-sim --test ecu_board -- --ignored`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
@@ -55,7 +55,7 @@ fn board_elf() -> PathBuf {
     let elf = host_sim::pil::built_ecu_board_elf(&root());
     assert!(
         elf.exists(),
-        "build the flashed ECU binary first: cargo ecu-board ({} is missing)",
+        "build the flashed ECU binary first: cargo ecu ({} is missing)",
         elf.display()
     );
     elf
@@ -78,7 +78,7 @@ fn bkpt_lines(elf: &Path) -> Vec<String> {
 }
 
 #[test]
-#[ignore = "needs `cargo ecu-board` and `cargo ecu` first (.ci/run)"]
+#[ignore = "needs `cargo ecu` and `cargo ecu-lockstep` first (.ci/run)"]
 fn the_flashed_binary_holds_no_bkpt_and_the_lockstep_one_does() {
     let board = board_elf();
     let text = host_sim::wcet::stack::disassemble(&board).unwrap();
@@ -407,7 +407,7 @@ impl Drive {
 }
 
 #[test]
-#[ignore = "needs `cargo ecu-board` first and qemu-system-arm (.ci/run)"]
+#[ignore = "needs `cargo ecu` first and qemu-system-arm (.ci/run)"]
 fn the_flashed_binary_exchanges_authenticated_frames_over_usart1_in_qemu() {
     let mut ecu = BoardEcu::start(&board_elf());
     // The paper track (its first window), the default car.
@@ -440,7 +440,7 @@ fn the_flashed_binary_exchanges_authenticated_frames_over_usart1_in_qemu() {
 }
 
 #[test]
-#[ignore = "needs `cargo ecu-board` first and qemu-system-arm (.ci/run)"]
+#[ignore = "needs `cargo ecu` first and qemu-system-arm (.ci/run)"]
 fn the_flashed_binary_takes_a_window_of_the_road_on_its_route_channel_over_usart1() {
     // A circuit longer than the ECU's window (Budapest: the next window is sent
     // as the car moves on), the car on its first row.

@@ -306,21 +306,21 @@ fn recursion_is_refused() {
     ));
 }
 
-/// The ECU application (built by `cargo ecu`; CI runs this after building it),
+/// The ECU application (built by `cargo ecu-lockstep`; CI runs this after building it),
 /// failing the test when it was not built.
 fn ecu_elf() -> std::path::PathBuf {
     let elf =
         host_sim::pil::built_ecu_elf(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
     assert!(
         elf.is_file(),
-        "{} is missing: build it with `cargo ecu`",
+        "{} is missing: build it with `cargo ecu-lockstep`",
         elf.display()
     );
     elf
 }
 
 #[test]
-#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+#[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
     let elf = &ecu_elf();
     let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
@@ -410,7 +410,7 @@ fn edited_sources(
 }
 
 #[test]
-#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+#[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_loop_whose_annotation_is_removed_is_refused() {
     let elf = &ecu_elf();
     let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
@@ -451,7 +451,7 @@ fn a_loop_whose_annotation_is_removed_is_refused() {
 /// continuous ones the bound took half of each job and a whole cap per activation,
 /// 2.5 M cycles over the larger job).
 #[test]
-#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+#[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
     let elf = &ecu_elf();
     let cycles = |a: &host_sim::wcet::analysis::StaticAnalysis, name: &str| {
@@ -487,7 +487,7 @@ fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
 /// The QP solver's annotations are read from its own crate (`qp/src`): without its
 /// iteration cap, the solver's main loop is unbounded.
 #[test]
-#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+#[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_qp_loop_whose_annotation_is_removed_is_refused() {
     let elf = &ecu_elf();
     let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
@@ -513,7 +513,7 @@ fn a_qp_loop_whose_annotation_is_removed_is_refused() {
 }
 
 #[test]
-#[ignore = "needs the ECU binary and QEMU: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+#[ignore = "needs the ECU binary and QEMU: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
     let elf = &ecu_elf();
     let out = tempfile::tempdir().unwrap();
@@ -600,7 +600,7 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
 /// so (`// wcet-bound: same loop`): without it the inner loop is refused, with a
 /// message that names the lines it may be written on.
 #[test]
-#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+#[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_split_loop_without_its_own_annotation_is_refused() {
     let elf = &ecu_elf();
     let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
@@ -632,7 +632,7 @@ fn a_split_loop_without_its_own_annotation_is_refused() {
 /// fact about its own line in `rtic-time`, the task's poll cycle on that line by
 /// the line's annotation.
 #[test]
-#[ignore = "needs the ECU binary: `cargo ecu`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+#[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn an_inlined_library_loop_takes_no_bound_of_the_line_it_is_inlined_on() {
     let elf = &ecu_elf();
     let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();

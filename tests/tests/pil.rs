@@ -1,10 +1,10 @@
-//! Processor in the loop: the ECU application (`cargo ecu`) in QEMU against the
+//! Processor in the loop: the ECU application (`cargo ecu-lockstep`) in QEMU against the
 //! simulator's plant. Deterministic (QEMU's `-icount`: the firmware's clock counts
 //! its own instructions), so each assertion is on a reproducible run.
 //!
 //! They need `qemu-system-arm` and the ECU application built first, so they are
 //! ignored by `cargo test`; `.ci/run` builds the application and runs them:
-//! `cargo ecu && cargo test -p end-to-end --test pil -- --ignored`. Run without
+//! `cargo ecu-lockstep && cargo test -p end-to-end --test pil -- --ignored`. Run without
 //! the application they fail, saying how to build it.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
@@ -31,7 +31,7 @@ fn elf() -> PathBuf {
     let elf = host_sim::pil::built_ecu_elf(&root);
     assert!(
         elf.exists(),
-        "build the ECU application first: cargo ecu ({} is missing)",
+        "build the ECU application first: cargo ecu-lockstep ({} is missing)",
         elf.display()
     );
     elf
@@ -130,7 +130,7 @@ fn assert_counts_agree(r: &RunResult, ticks: &TickOverruns) {
 }
 
 #[test]
-#[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
+#[ignore = "needs qemu-system-arm and `cargo ecu-lockstep`; .ci/run runs it"]
 fn the_ecu_in_the_loop_drives_round_the_obstacles_within_its_deadlines() {
     let (r, done, link, ticks) = drive(&Scenario::paper(true), 4, 25.0, "obstacles");
     let s = &r.summary;
@@ -192,7 +192,7 @@ fn the_ecu_in_the_loop_drives_round_the_obstacles_within_its_deadlines() {
 }
 
 #[test]
-#[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
+#[ignore = "needs qemu-system-arm and `cargo ecu-lockstep`; .ci/run runs it"]
 fn an_ecu_too_slow_for_its_tasks_counts_the_misses_as_the_host_does_and_latches_the_safe_actuation()
 {
     // 2^7 = 128 ns per instruction (an ECU ~21× slower than the 168 MHz part at
@@ -241,7 +241,7 @@ fn an_ecu_too_slow_for_its_tasks_counts_the_misses_as_the_host_does_and_latches_
 }
 
 #[test]
-#[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
+#[ignore = "needs qemu-system-arm and `cargo ecu-lockstep`; .ci/run runs it"]
 fn an_ecu_slower_still_skips_control_releases_and_counts_them_as_the_host_does() {
     // 2^10 = 1,024 ns per instruction: the cold start runs for seconds, every plan
     // release it spans is skipped, the watchdog trips, and a control activation
@@ -258,7 +258,7 @@ fn an_ecu_slower_still_skips_control_releases_and_counts_them_as_the_host_does()
 }
 
 #[test]
-#[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
+#[ignore = "needs qemu-system-arm and `cargo ecu-lockstep`; .ci/run runs it"]
 fn a_pil_set_up_with_an_obstacle_that_blocks_the_road_is_refused_with_what_to_change() {
     // The simulator checks every obstacle against the whole track before it sends
     // the ECU its first window (the ECU's own refusal, `SetupError::ObstacleBlocksRoad`,
@@ -341,7 +341,7 @@ fn hairpin_with_boxes(mu: f64) -> Scenario {
 }
 
 #[test]
-#[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
+#[ignore = "needs qemu-system-arm and `cargo ecu-lockstep`; .ci/run runs it"]
 fn a_cold_start_into_braking_is_the_in_process_run_bit_for_bit_from_the_first_activation() {
     // Started at 15 m/s towards a 12 m hairpin at μ 0.5: the first activation has
     // no plan yet and brakes (the safe actuation). Its answer must act from the
@@ -378,7 +378,7 @@ fn a_cold_start_into_braking_is_the_in_process_run_bit_for_bit_from_the_first_ac
 }
 
 #[test]
-#[ignore = "needs qemu-system-arm and `cargo ecu`; .ci/run runs it"]
+#[ignore = "needs qemu-system-arm and `cargo ecu-lockstep`; .ci/run runs it"]
 fn forged_replayed_and_corrupted_sensor_frames_are_refused_by_reason_and_never_acted_on() {
     // The paper scenario with its obstacles; the link fault covers the instant the
     // first window of the road after the start is handed over (the route frames it

@@ -44,10 +44,10 @@
 //! transport, the log's, the end of a run and the fault paths' output) is
 //! chosen by the cargo feature `board-usart`; the tasks, the library calls and
 //! the frames are the same in both:
-//! * without it (`cargo ecu`), the lock-step build above: semihosting, `defmt`
+//! * without it (`cargo ecu-lockstep`), the lock-step build above: semihosting, `defmt`
 //!   over semihosting, RTIC's dispatchers `USART1` and `USART2` (the processor
 //!   in the loop runs this build; the timing analysis reads either);
-//! * with it (`cargo ecu-board`, profile `board`), the binary you flash:
+//! * with it (`cargo ecu`, profile `board`), the binary you flash:
 //!   USART1 (`support/usart_link.rs`), polled during the set-up, then
 //!   interrupt-driven into bounded queues that [`firmware::link::demux`] sorts
 //!   for the two tasks; `defmt` over RTT; no semihosting instruction anywhere;
@@ -100,7 +100,7 @@
 //! static guard sends a second entry straight to the exit: the handlers cannot
 //! re-enter themselves.
 //!
-//! Build: `cargo ecu` (lock-step), `cargo ecu-board` (flashed); run in the loop
+//! Build: `cargo ecu-lockstep` (lock-step), `cargo ecu` (flashed); run in the loop
 //! with the simulator: `host-sim pil` (the lock-step build).
 #![no_std]
 #![no_main]

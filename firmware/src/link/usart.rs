@@ -1,4 +1,4 @@
-//! The flashed build's transport (`cargo ecu-board`): the frames over USART1 at a
+//! The flashed build's transport (`cargo ecu`): the frames over USART1 at a
 //! fixed line rate, one interrupt entry per received byte. The ECU's interrupt
 //! handler (`bin/support/usart_link.rs`) and the timing analysis
 //! (`host-sim wcet`, the link interrupt's interference in the response-time

@@ -43,7 +43,7 @@ pub struct PilCommand {
 /// How `host-sim pil` runs the ECU.
 #[derive(Debug, Clone, clap::Args)]
 pub struct PilEcuArgs {
-    /// The ECU application (build it with `cargo ecu`).
+    /// The ECU application (build it with `cargo ecu-lockstep`).
     #[arg(long, default_value = crate::pil::ECU_ELF)]
     pub elf: PathBuf,
     /// QEMU's `-icount shift`: an instruction takes 2^shift ns of the ECU's virtual

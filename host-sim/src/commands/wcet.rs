@@ -23,9 +23,12 @@ pub struct WcetArgs {
     /// the four paper laps (obstacles none/paper × μ 1/0.5) into OUT/pil-*.
     #[arg(long, num_args = 1..)]
     pub pil: Vec<PathBuf>,
-    /// The ECU application (build it with `cargo ecu`).
-    #[arg(long, default_value = crate::pil::ECU_ELF)]
-    pub elf: PathBuf,
+    /// The ECU binary. Default: with --static-only, the binary you flash (`cargo
+    /// ecu`, target/thumbv7em-none-eabihf/board/ecu); else the lock-step build
+    /// (`cargo ecu-lockstep`, target/thumbv7em-none-eabihf/release/ecu), the one
+    /// the traced PIL runs need (its frames go over semihosting).
+    #[arg(long)]
+    pub elf: Option<PathBuf>,
     /// Simulated seconds of each of the two traced PIL runs: the `paper` lap's start
     /// (its cycles per instruction are reported) and the run towards a box ahead,
     /// whose QP reaches its iteration cap; both traces check the loop bounds and the
@@ -69,7 +72,8 @@ pub struct WcetArgs {
     /// `goals[].id`, e.g. `control-response-time`, `stack-covered`,
     /// `plan-job-budget`); the others are reported only. With --static-only: the
     /// response times of the build's tasks and interrupts, `TASK-response-time`
-    /// (`control`, `plan`, `systick`, and `link` in the flashed build).
+    /// (`control`, `plan`, `systick`, and `link` in the flashed build), and
+    /// `stack-bound` (the stack bound sound and within 8 KiB).
     #[arg(long, num_args = 1..)]
     pub require: Vec<String>,
     /// Keep the QEMU execution traces this command records (`OUT/trace*/qemu-trace.log`,
@@ -88,6 +92,18 @@ pub struct WcetArgs {
 }
 
 impl WcetArgs {
+    /// The ECU binary to analyse: `--elf`, else the default for the mode (see
+    /// [`WcetArgs::elf`]).
+    pub fn elf(&self) -> PathBuf {
+        self.elf.clone().unwrap_or_else(|| {
+            PathBuf::from(if self.static_only {
+                crate::pil::ECU_BOARD_ELF
+            } else {
+                crate::pil::ECU_ELF
+            })
+        })
+    }
+
     /// The firmware crates' source folders under `--workspace`.
     fn sources(&self) -> Vec<crate::wcet::annotations::SourceDir> {
         crate::wcet::annotations::SourceDir::workspace(&self.workspace)
@@ -265,7 +281,7 @@ fn window_trace(args: &WcetArgs) -> Result<PathBuf> {
         &obstacles.to_string_lossy(),
         1.0,
         seconds,
-        &args.elf,
+        &args.elf(),
     );
     a.run.track = track.to_string_lossy().into_owned();
     a.run.open = true;
@@ -288,7 +304,7 @@ fn traced_pil_run(
         obstacles,
         1.0,
         args.trace_seconds,
-        &args.elf,
+        &args.elf(),
     );
     a.run.track = track.into();
     a.run.initial_speed = speed;
@@ -338,16 +354,29 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     if !(args.trace_seconds.is_finite() && args.trace_seconds > 0.0) {
         bail!("--trace-seconds must be a positive number of seconds");
     }
-    if !args.elf.exists() {
+    let elf = args.elf();
+    if !elf.exists() {
+        let build = if args.static_only && args.elf.is_none() {
+            "cargo ecu"
+        } else {
+            "cargo ecu-lockstep"
+        };
         bail!(
-            "the ECU application {} does not exist: build it with `cargo ecu`",
-            args.elf.display()
+            "the ECU binary {} does not exist: build it with `{build}` (or name another with --elf)",
+            elf.display()
         );
     }
     fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     if args.static_only {
         return static_analysis(args, &args.check_trace);
+    }
+    if crate::wcet::ecu_app::EcuBuild::of_elf(&elf)? == crate::wcet::ecu_app::EcuBuild::Board {
+        bail!(
+            "{} is the binary you flash (cargo ecu, frames over USART1): the traced report runs the lock-step PIL, which needs the lock-step build (cargo ecu-lockstep, {}); analyse the flashed binary with --static-only",
+            elf.display(),
+            crate::pil::ECU_ELF
+        );
     }
     let run_dirs = pil_laps(args)?;
     // The given traces, then the ones this command records (removed at the end).
@@ -359,14 +388,14 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     let model = fit_cost_model(&run_dirs)?;
     // The static analysis of the binary, checked against the traced run: the
     // report's bounds.
-    let analysis = crate::wcet::analysis::analyse(&args.elf, &args.sources(), &traces)
-        .with_context(|| format!("static analysis of {}", args.elf.display()))?;
+    let analysis = crate::wcet::analysis::analyse(&args.elf(), &args.sources(), &traces)
+        .with_context(|| format!("static analysis of {}", args.elf().display()))?;
     analysis.write(&args.out)?;
     print_static(&analysis, &args.out);
     let inputs = ReportInputs {
         run_dirs: run_dirs.clone(),
-        elf: args.elf.clone(),
-        stack_levels: crate::wcet::ecu_app::EcuBuild::of_elf(&args.elf)?.priority_levels(),
+        elf: args.elf(),
+        stack_levels: crate::wcet::ecu_app::EcuBuild::of_elf(&args.elf())?.priority_levels(),
         cpi,
         statics: report::StaticSummary::of(&analysis),
         plan_period_cycles: firmware::timing::PLAN_PERIOD_US as f64
@@ -419,7 +448,7 @@ fn pil_laps(args: &WcetArgs) -> Result<Vec<PathBuf>> {
                 obstacles,
                 mu,
                 args.duration,
-                &args.elf,
+                &args.elf(),
             ))?;
             dirs.push(dir);
         }
@@ -513,20 +542,20 @@ fn print_summary(r: &report::WcetReport, out: &Path) {
 /// The static analysis of the ELF (control-flow graphs, loops, IPET), written as
 /// `static.json` and `static.md`, with a line per task.
 fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
-    let analysis = crate::wcet::analysis::analyse(&args.elf, &args.sources(), traces)
-        .with_context(|| format!("static analysis of {}", args.elf.display()))?;
+    let analysis = crate::wcet::analysis::analyse(&args.elf(), &args.sources(), traces)
+        .with_context(|| format!("static analysis of {}", args.elf().display()))?;
     analysis.write(&args.out)?;
     print_static(&analysis, &args.out);
     // The stack bound of the same build: every priority level its schedule has
     // (the flashed build's link interrupt among them) and every fault handler.
     let stack = crate::wcet::stack::analyse_elf_once(
-        &args.elf,
+        &args.elf(),
         &analysis.build.priority_levels(),
         &crate::wcet::ecu_app::ecu_once(),
         &analysis.build.masked(),
-        &crate::wcet::indirect::targets_of_elf(&args.elf)?,
+        &crate::wcet::indirect::targets_of_elf(&args.elf())?,
     )
-    .with_context(|| format!("stack bound of {}", args.elf.display()))?;
+    .with_context(|| format!("stack bound of {}", args.elf().display()))?;
     let path = args.out.join("stack.json");
     std::fs::write(&path, serde_json::to_string_pretty(&stack)?)
         .with_context(|| format!("writing {}", path.display()))?;
@@ -543,10 +572,18 @@ fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
         path.display()
     );
     analysis_errors(&analysis, &args.out)?;
-    let missed = crate::wcet::analysis::missed_response_times(&analysis.tasks, &args.require)
-        .map_err(|e| anyhow!(e))?;
+    let (stack_goal, response_times): (Vec<String>, Vec<String>) = args
+        .require
+        .iter()
+        .cloned()
+        .partition(|id| id == report::goals::STACK_BOUND_GOAL);
+    let mut missed = crate::wcet::analysis::missed_response_times(&analysis.tasks, &response_times)
+        .map_err(|e| anyhow!("{e}, {}", report::goals::STACK_BOUND_GOAL))?;
+    if !stack_goal.is_empty() {
+        missed.extend(report::goals::missed_stack_bound(stack.total_bytes, stack.sound));
+    }
     if !missed.is_empty() {
-        bail!("required response times missed:\n  {}", missed.join("\n  "));
+        bail!("required goals missed:\n  {}", missed.join("\n  "));
     }
     Ok(())
 }

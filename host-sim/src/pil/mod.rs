@@ -60,11 +60,11 @@
 
 use std::path::{Path, PathBuf};
 
-/// Where `cargo ecu` puts the ECU application, relative to the workspace root,
+/// Where `cargo ecu-lockstep` puts the ECU application, relative to the workspace root,
 /// with the default target directory (`host-sim pil` and `wcet`'s `--elf`).
 pub const ECU_ELF: &str = "target/thumbv7em-none-eabihf/release/ecu";
 
-/// The ECU application `cargo ecu` built for the workspace at `root`: under
+/// The ECU application `cargo ecu-lockstep` built for the workspace at `root`: under
 /// `$CARGO_TARGET_DIR` when it is set (relative to `root` unless absolute), else
 /// [`ECU_ELF`].
 pub fn built_ecu_elf(root: &Path) -> PathBuf {
@@ -74,13 +74,13 @@ pub fn built_ecu_elf(root: &Path) -> PathBuf {
     }
 }
 
-/// Where `cargo ecu-board` puts the binary you flash (the same application over
+/// Where `cargo ecu` puts the binary you flash (the same application over
 /// USART1, `defmt` over RTT, no semihosting; its own profile, `board`), relative
 /// to the workspace root, with the default target directory. The processor in
 /// the loop and the timing analysis run the lock-step build, [`ECU_ELF`].
 pub const ECU_BOARD_ELF: &str = "target/thumbv7em-none-eabihf/board/ecu";
 
-/// The flashed ECU binary `cargo ecu-board` built for the workspace at `root`:
+/// The flashed ECU binary `cargo ecu` built for the workspace at `root`:
 /// under `$CARGO_TARGET_DIR` when it is set (relative to `root` unless absolute),
 /// else [`ECU_BOARD_ELF`].
 pub fn built_ecu_board_elf(root: &Path) -> PathBuf {

@@ -234,7 +234,7 @@ impl QemuEcu {
     ) -> Result<Self> {
         if !opts.elf.exists() {
             bail!(
-                "the ECU application {} does not exist: build it with `cargo ecu`",
+                "the ECU application {} does not exist: build it with `cargo ecu-lockstep`",
                 opts.elf.display()
             );
         }

@@ -17,11 +17,11 @@ use std::path::Path;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum EcuBuild {
-    /// `cargo ecu-lockstep` (= `cargo ecu`): frames over semihosting, in
+    /// `cargo ecu-lockstep` (= `cargo ecu-lockstep`): frames over semihosting, in
     /// lock-step with the simulator; the processor in the loop runs it. RTIC's
     /// dispatchers are `USART1` (plan) and `USART2` (control).
     LockStep,
-    /// `cargo ecu-board`: the binary you flash, frames over USART1's interrupt;
+    /// `cargo ecu`: the binary you flash, frames over USART1's interrupt;
     /// the dispatchers are `SPI1` (plan) and `SPI2` (control).
     Board,
 }
@@ -63,7 +63,7 @@ impl EcuBuild {
     pub fn name(self) -> &'static str {
         match self {
             Self::LockStep => "lock-step (cargo ecu-lockstep: semihosting)",
-            Self::Board => "board (cargo ecu-board: USART1, the binary you flash)",
+            Self::Board => "board (cargo ecu: USART1, the binary you flash)",
         }
     }
 

@@ -1133,22 +1133,22 @@ active_constraints,max_validity_slack_rad";
         Ok(())
     }
 
-    /// The real ECU ELF (`cargo ecu`); fails when it has not been built. The
+    /// The real ECU ELF (`cargo ecu-lockstep`); fails when it has not been built. The
     /// `real_ecu_elf_*` tests that read it are ignored by `cargo test`; `.ci/run`
-    /// runs them after `cargo ecu` (`cargo test -p host-sim --lib -- --ignored
+    /// runs them after `cargo ecu-lockstep` (`cargo test -p host-sim --lib -- --ignored
     /// real_ecu_elf`).
     fn real_elf() -> PathBuf {
         let path = crate::pil::built_ecu_elf(&Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
         assert!(
             path.is_file(),
-            "the ECU binary {} is missing: build it first (cargo ecu)",
+            "the ECU binary {} is missing: build it first (cargo ecu-lockstep)",
             path.display()
         );
         path
     }
 
     #[test]
-    #[ignore = "needs the ECU binary: cargo ecu"]
+    #[ignore = "needs the ECU binary: cargo ecu-lockstep"]
     fn real_ecu_elf_memory_and_symbols() -> Result<()> {
         let elf = real_elf();
         let m = elf_memory(&elf)?;
@@ -1176,7 +1176,7 @@ active_constraints,max_validity_slack_rad";
     }
 
     #[test]
-    #[ignore = "needs the ECU binary: cargo ecu"]
+    #[ignore = "needs the ECU binary: cargo ecu-lockstep"]
     fn real_ecu_elf_stack_bound_covers_every_vector_table_handler() -> Result<()> {
         use crate::wcet::stack::{disassemble, parse_objdump, Counted, EXCEPTION_ENTRY_BYTES};
         let elf = real_elf();
@@ -1286,7 +1286,7 @@ active_constraints,max_validity_slack_rad";
     }
 
     #[test]
-    #[ignore = "needs the ECU binary: cargo ecu"]
+    #[ignore = "needs the ECU binary: cargo ecu-lockstep"]
     fn real_ecu_elf_full_report_through_build_report() -> Result<()> {
         let elf = real_elf();
         let tmp = tempfile::tempdir()?;

@@ -24,6 +24,27 @@ pub const GOAL_LOOPS_UNTRACED_PERCENT: f64 = 5.0;
 /// Goal: flash image at most this, in bytes (256 KiB).
 pub const GOAL_FLASH_BYTES: f64 = 262_144.0;
 
+/// The id of the stack-bound goal, in the report and for `--require` with
+/// `--static-only`.
+pub const STACK_BOUND_GOAL: &str = "stack-bound";
+
+/// What `--require stack-bound` says of a stack bound of `total_bytes` (`sound`:
+/// everything reachable analysed) when it misses the goal: unsound, or past
+/// [`GOAL_STACK_BOUND_BYTES`]; `None` when it meets it.
+pub fn missed_stack_bound(total_bytes: u32, sound: bool) -> Option<String> {
+    if !sound {
+        Some(format!(
+            "{STACK_BOUND_GOAL}: {total_bytes} B is not sound (stack.json lists what it leaves out)"
+        ))
+    } else if f64::from(total_bytes) > GOAL_STACK_BOUND_BYTES {
+        Some(format!(
+            "{STACK_BOUND_GOAL}: {total_bytes} B, goal {GOAL_STACK_BOUND_BYTES} B"
+        ))
+    } else {
+        None
+    }
+}
+
 /// One project goal: met when `value ≤ goal`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Goal {
@@ -239,7 +260,7 @@ fn footprint_goals(tasks: &Tasks, memory: &MemoryReport) -> Vec<Goal> {
             "bytes",
         ),
         goal(
-            "stack-bound",
+            STACK_BOUND_GOAL,
             "stack bound",
             Some(memory.stack_bound_bytes as f64),
             GOAL_STACK_BOUND_BYTES,
@@ -293,6 +314,15 @@ mod tests {
         Tasks, WindowTiming,
     };
     use super::*;
+
+    #[test]
+    fn the_static_stack_goal_fails_past_8_kib_or_unsound() {
+        assert_eq!(missed_stack_bound(8_192, true), None);
+        let over = missed_stack_bound(8_193, true).unwrap_or_default();
+        assert!(over.contains("8193 B") && over.contains("8192"), "{over}");
+        let unsound = missed_stack_bound(4_000, false).unwrap_or_default();
+        assert!(unsound.contains("not sound"), "{unsound}");
+    }
 
     #[test]
     fn required_goals_fail_only_when_missed_and_unknown_ids_are_errors(
@@ -566,13 +596,13 @@ mod tests {
         Ok(())
     }
 
-    /// The real ECU ELF (`cargo ecu`); fails when it has not been built.
+    /// The real ECU ELF (`cargo ecu-lockstep`); fails when it has not been built.
     fn real_elf() -> std::path::PathBuf {
         let path =
             crate::pil::built_ecu_elf(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
         assert!(
             path.is_file(),
-            "the ECU binary {} is missing: build it first (cargo ecu)",
+            "the ECU binary {} is missing: build it first (cargo ecu-lockstep)",
             path.display()
         );
         path
@@ -585,7 +615,7 @@ mod tests {
     /// deadline-misses` fails. On its own clock, over the same 2 s, no miss is
     /// counted, but the run does not complete its lap, so no pass is claimed.
     #[test]
-    #[ignore = "needs the ECU binary (cargo ecu) and qemu-system-arm"]
+    #[ignore = "needs the ECU binary (cargo ecu-lockstep) and qemu-system-arm"]
     fn real_ecu_elf_deadline_gate_fails_on_an_injected_overrun() -> anyhow::Result<()> {
         let elf = real_elf();
         let tmp = tempfile::tempdir()?;
