@@ -580,7 +580,10 @@ fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
     let mut missed = crate::wcet::analysis::missed_response_times(&analysis.tasks, &response_times)
         .map_err(|e| anyhow!("{e}, {}", report::goals::STACK_BOUND_GOAL))?;
     if !stack_goal.is_empty() {
-        missed.extend(report::goals::missed_stack_bound(stack.total_bytes, stack.sound));
+        missed.extend(report::goals::missed_stack_bound(
+            stack.total_bytes,
+            stack.sound,
+        ));
     }
     if !missed.is_empty() {
         bail!("required goals missed:\n  {}", missed.join("\n  "));
