@@ -135,6 +135,11 @@ pub struct StaticAnalysis {
     pub elf: String,
     /// Which build of the ECU application it is (its tasks and schedule).
     pub build: EcuBuild,
+    /// The core clock as the binary sets it (frequency, source, the function).
+    pub clock: super::clock::ClockReport,
+    /// The interrupts of the schedule (SysTick, the flashed build's link): what
+    /// the response-time analysis charges every lower priority for them.
+    pub interrupts: Vec<InterruptEntry>,
     /// The processor and memory model the cycles assume.
     pub assumptions: Vec<String>,
     /// Per task.
@@ -167,6 +172,64 @@ pub struct StaticAnalysis {
     /// The indirect transfers the traces took (each checked against its site's
     /// targets): `(site, function, target, times)`.
     pub indirect_calls_traced: Vec<(String, String, String, u64)>,
+}
+
+/// An interrupt of the schedule, as the response-time analysis takes it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct InterruptEntry {
+    /// Its name in the schedule (`systick`, `link`).
+    pub name: String,
+    /// Its handler, the vector table's symbol (`SysTick`, `USART1`).
+    pub handler: String,
+    /// RTIC logical priority (higher preempts).
+    pub priority: u8,
+    /// Static bound of one entry, model cycles (`null`: not bounded).
+    pub static_bound_cycles: Option<u64>,
+    /// Minimum inter-arrival time of its entries, µs: the timer's period, or
+    /// for the link the line's spacing (two entries a byte's time).
+    pub min_interarrival_us: f64,
+    /// Entries that may come together besides those the inter-arrival time
+    /// spaces.
+    pub at_once: u64,
+    /// At most this many entries per budget window (the link's receive budget,
+    /// renewed by the control task), `null` without such a cap.
+    pub per_window: Option<u64>,
+    /// That window, µs.
+    pub window_us: Option<f64>,
+    /// Response-time bound of one entry, µs (`null`: none within its deadline).
+    pub response_time_bound_us: Option<f64>,
+    /// Its deadline, µs (the link's: a byte's time, after which the next byte
+    /// overruns it).
+    pub deadline_us: f64,
+}
+
+/// The interrupts of `build`'s schedule with the bounds `tasks` found for them.
+fn interrupts_of(build: EcuBuild, tasks: &[TaskStatic]) -> Vec<InterruptEntry> {
+    build
+        .schedule()
+        .into_iter()
+        .filter(|s| build.interrupts().contains(&s.name))
+        .map(|s| {
+            let task = tasks.iter().find(|t| t.name == s.name);
+            let handler = build
+                .tasks()
+                .iter()
+                .find(|(n, _)| *n == s.name)
+                .map_or("", |(_, h)| *h);
+            InterruptEntry {
+                name: s.name.to_string(),
+                handler: handler.to_string(),
+                priority: s.priority,
+                static_bound_cycles: task.and_then(|t| t.static_bound_cycles),
+                min_interarrival_us: s.period_us,
+                at_once: s.burst.map_or(0, |b| b.at_once),
+                per_window: s.burst.map(|b| b.per_window),
+                window_us: s.burst.map(|b| b.window_us),
+                response_time_bound_us: task.and_then(|t| t.response_time_bound_us),
+                deadline_us: s.deadline_us,
+            }
+        })
+        .collect()
 }
 
 /// One of the blocks that cost a task's bound the most.
@@ -298,6 +361,8 @@ pub fn analyse(
     let loops: Vec<LoopEntry> = loop_rows.into_values().collect();
     Ok(StaticAnalysis {
         build,
+        clock: super::clock::ClockReport::of_elf(elf)?,
+        interrupts: interrupts_of(build, &tasks),
         traces: traces.iter().map(|t| t.display().to_string()).collect(),
         violations: observed.violations,
         flow_facts,
@@ -1810,6 +1875,38 @@ impl StaticAnalysis {
         }
         let _ = writeln!(
             s,
+            "\nClock: {} Hz, {} (set by `{}`).\n",
+            self.clock.sysclk_hz,
+            self.clock.source,
+            self.clock
+                .configured_in
+                .as_deref()
+                .unwrap_or("no clock set-up in the ELF")
+        );
+        let _ = writeln!(s, "| interrupt | handler | priority | bound, cycles | min inter-arrival, µs | at once | per window / window, µs | response time bound / deadline, µs |");
+        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---|---|");
+        for i in &self.interrupts {
+            let _ = writeln!(
+                s,
+                "| {} | `{}` | {} | {} | {:.3} | {} | {} | {} / {:.2} |",
+                i.name,
+                i.handler,
+                i.priority,
+                i.static_bound_cycles
+                    .map_or("–".to_string(), |c| c.to_string()),
+                i.min_interarrival_us,
+                i.at_once,
+                match (i.per_window, i.window_us) {
+                    (Some(n), Some(w)) => format!("{n} / {w:.0}"),
+                    _ => "–".to_string(),
+                },
+                i.response_time_bound_us
+                    .map_or("**none within**".to_string(), |r| format!("{r:.2}")),
+                i.deadline_us
+            );
+        }
+        let _ = writeln!(
+            s,
             "\n**Unbounded loops:** {}. **Unresolved indirect calls:** {}. **Recursions:** {}.\n",
             self.unbounded_loops,
             self.unresolved_indirect_calls.len(),
@@ -2141,5 +2238,42 @@ mod tests {
                 "{e}"
             );
         }
+    }
+
+    #[test]
+    fn the_interrupts_are_the_schedules_hardware_entries_with_their_bounds() {
+        let mut link = task("link", Some(10.85), Some(4.2), None);
+        link.static_bound_cycles = Some(277);
+        let tasks = [
+            task("control", Some(10_000.0), Some(7_437.0), None),
+            link,
+            task("systick", Some(1_000.0), None, Some(2_000.0)),
+        ];
+        let board = interrupts_of(EcuBuild::Board, &tasks);
+        let names: Vec<&str> = board.iter().map(|i| i.name.as_str()).collect();
+        assert_eq!(names, ["systick", "link"]);
+        let l = &board[1];
+        assert_eq!(l.handler, "USART1");
+        assert_eq!(l.static_bound_cycles, Some(277));
+        assert_eq!(l.response_time_bound_us, Some(4.2));
+        // Two entries a byte's time; the receive budget per control period.
+        let byte_us = f64::from(firmware::link::usart::BYTE_TIME_NS) / 1e3;
+        assert!(
+            (l.min_interarrival_us - byte_us / 2.0).abs() < 1e-3,
+            "{l:?}"
+        );
+        assert_eq!(
+            l.per_window,
+            Some(firmware::link::usart::ENTRIES_PER_BUDGET)
+        );
+        assert_eq!(l.window_us, Some(10_000.0));
+        // SysTick missed its deadline here: no bound, not a made-up one.
+        assert_eq!(board[0].handler, "SysTick");
+        assert_eq!(board[0].response_time_bound_us, None);
+        assert_eq!(board[0].min_interarrival_us, 1_000.0);
+        // The lock-step build has no link interrupt.
+        let lock = interrupts_of(EcuBuild::LockStep, &tasks);
+        assert_eq!(lock.len(), 1);
+        assert_eq!(lock[0].name, "systick");
     }
 }

@@ -87,6 +87,15 @@ impl EcuBuild {
         }
     }
 
+    /// The activities of [`EcuBuild::schedule`] that are interrupts the hardware
+    /// raises (SysTick, and the flashed build's USART1), not software tasks.
+    pub fn interrupts(self) -> &'static [&'static str] {
+        match self {
+            Self::LockStep => &["systick"],
+            Self::Board => &["link", "systick"],
+        }
+    }
+
     /// The schedule: the tasks at their periods (= deadlines); SysTick, the
     /// monotonic's 1 kHz tick (`systick_monotonic!(Mono, 1_000)`), above them
     /// (the lock-step build leaves it at the hardware's most urgent level; the

@@ -16,6 +16,7 @@
 //! | [`flow_facts`] | the bounds over more than one loop entry (per activation, per call, counters, capped lines, retries), each with what it counts, checked on the traces |
 //! | [`ipet`] | implicit path enumeration: a task's bound as a linear program (`good_lp`, `microlp`) |
 //! | [`rta`] | response-time analysis, fixed priorities with RTIC's stack resource policy |
+//! | [`clock`] | the core clock as the binary sets it (`clock` in `static.json` and `wcet.json`) |
 //! | [`ecu_app`] | what the analyses know of the ECU's RTIC application: tasks, sections, schedule, priority levels, functions run once or masked |
 //! | [`analysis`] | the static analysis put together (`static.json`, `static.md`) |
 //! | [`trace_check`] | QEMU execution traces replayed against the graphs: loop trip counts per entry, activation costs with the same block costs |
@@ -35,6 +36,7 @@ pub mod annotations;
 pub mod bounds;
 pub mod cache;
 pub mod cfg;
+pub mod clock;
 pub mod copies;
 pub mod coverage;
 pub mod cpi;

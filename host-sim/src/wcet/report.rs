@@ -26,7 +26,6 @@
 //! | [`expected`] | the CI comparison with a committed `wcet.json` |
 //! | [`clock`] | the core clock, its source and the function that sets it |
 
-pub mod clock;
 pub mod elf;
 pub mod expected;
 pub mod goals;
@@ -113,6 +112,9 @@ pub struct StaticSummary {
     /// IPET bound on a route frame's reception in a plan activation
     /// (`ecu::route_job`, before the plan or the adoption), in instructions.
     pub route_job_static_bound_instructions: Option<u64>,
+    /// The interrupts of the schedule (SysTick, the flashed build's link): each
+    /// entry's bound, inter-arrival time and response time.
+    pub interrupts: Vec<super::analysis::InterruptEntry>,
     /// The loops and what the analysis could not bound.
     #[serde(flatten)]
     pub coverage: Coverage,
@@ -185,6 +187,7 @@ impl StaticSummary {
                 .iter()
                 .find(|t| t.name == "route_job")
                 .and_then(|t| t.static_bound_instructions),
+            interrupts: analysis.interrupts.clone(),
             coverage: Coverage {
                 loops: analysis.loops.clone(),
                 unbounded_loops: analysis.unbounded_loops,
@@ -319,7 +322,7 @@ pub struct WcetReport {
     /// Core clock, in Hz.
     pub clock_hz: u64,
     /// The core clock as the binary sets it: frequency, source, the function.
-    pub clock: clock::ClockReport,
+    pub clock: super::clock::ClockReport,
     /// Cycles per instruction of the traced ECU code (dimensionless): the
     /// worst-case cycles of the blocks that ran over their instructions, an
     /// average over that trace, not a bound for other code.
@@ -328,6 +331,9 @@ pub struct WcetReport {
     pub traced_cpi_method: String,
     /// Timing of both tasks.
     pub tasks: Tasks,
+    /// The interrupts of the schedule: each entry's static bound, minimum
+    /// inter-arrival time and response time.
+    pub interrupts: Vec<super::analysis::InterruptEntry>,
     /// The loops and what the analysis could not bound.
     #[serde(flatten)]
     pub coverage: Coverage,
@@ -366,7 +372,7 @@ pub fn build_report(inputs: &ReportInputs) -> Result<WcetReport> {
     )
     .with_context(|| format!("stack bound of {}", inputs.elf.display()))?;
     let mut report = assemble_report(inputs, &runs, memory, symbols, stack)?;
-    report.clock = clock::ClockReport::of_elf(&inputs.elf)?;
+    report.clock = super::clock::ClockReport::of_elf(&inputs.elf)?;
     Ok(report)
 }
 
@@ -455,10 +461,11 @@ pub fn assemble_report(
     Ok(WcetReport {
         clock_hz: inputs.clock_hz,
         // The function that sets it is read from the ELF by `build_report`.
-        clock: clock::ClockReport::of_firmware(None),
+        clock: super::clock::ClockReport::of_firmware(None),
         traced_cycles_per_instruction: cpi,
         traced_cpi_method: inputs.cpi.justification.clone(),
         tasks,
+        interrupts: inputs.statics.interrupts.clone(),
         coverage: inputs.statics.coverage.clone(),
         memory,
         symbols,

@@ -435,6 +435,7 @@ mod tests {
                     control,
                     window_job_static_bound_cycles: Some(13_000_000),
                     route_job_static_bound_instructions: None,
+                    interrupts: Vec::new(),
                     coverage: Coverage {
                         loops_traced_percent: Some(100.0),
                         jobs_traced: vec![("control_job".into(), 10), ("plan_job".into(), 2)],
