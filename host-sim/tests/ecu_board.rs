@@ -156,6 +156,15 @@ impl BoardEcu {
                     .into_iter()
                     .flat_map(|f| ["-d".into(), "int,unimp,guest_errors".into(), "-D".into(), f]),
             )
+            // ECU_BOARD_QEMU_TRACE=FILE: QEMU's execution trace, the format
+            // `host-sim wcet --static-only --check-trace FILE` replays against the
+            // flashed binary's bounds (.ci/run; run one test at a time: each run
+            // writes the file anew).
+            .args(
+                std::env::var_os("ECU_BOARD_QEMU_TRACE")
+                    .into_iter()
+                    .flat_map(|f| ["-d".into(), "in_asm,exec,nochain".into(), "-D".into(), f]),
+            )
             .arg("-kernel")
             .arg(elf)
             .stdin(Stdio::piped())
