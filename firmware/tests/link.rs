@@ -1529,3 +1529,112 @@ proptest! {
         prop_assert_eq!(crc32(&bytes), reference.checksum(&bytes));
     }
 }
+
+// ---------------------------------------------------------------------------
+// The newest whole frame (the flashed build's real-time receiver)
+// ---------------------------------------------------------------------------
+
+/// Sensor frames `seqs` from one down-stream sender, back to back.
+fn sensor_stream(seqs: &[u32]) -> Vec<u8> {
+    let mut tx = Authenticator::new(Stream::Down);
+    seqs.iter()
+        .flat_map(|&seq| {
+            frame_on(
+                &Down::Sensor(SensorFrame {
+                    seq,
+                    estimate: estimate(u64::from(seq) * 10_000, seq as f32),
+                    route_frames: 0,
+                }),
+                &mut tx,
+            )
+        })
+        .collect()
+}
+
+/// The sequence number of the newest frame `r` holds, decoded by `rx`.
+fn newest_seq<const N: usize>(r: &mut NewestFrameReader<N>, rx: &mut Verifier) -> Option<u32> {
+    let frame = r.take_newest()?;
+    match decode::<Down>(frame, &mut LinkMac::new(&KEY), rx) {
+        Ok(Down::Sensor(f)) => Some(f.seq),
+        other => panic!("not a sensor frame: {other:?}"),
+    }
+}
+
+#[test]
+fn the_newest_whole_frame_supersedes_older_ones_and_a_partial_one_waits() {
+    let bytes = sensor_stream(&[7, 8, 9]);
+    let first_two = bytes.iter().filter(|&&b| b == 0).count();
+    assert_eq!(first_two, 3, "three frames, three delimiters");
+    // Two whole frames and half of the third arrive before a release.
+    let cut = bytes.len() - 10;
+    let mut r: NewestFrameReader<MAX_DRIVING_DOWN_FRAME_BYTES> = NewestFrameReader::new();
+    let mut rx = Verifier::new(Stream::Down);
+    let ended: Vec<_> = bytes[..cut].iter().filter_map(|&b| r.push(b)).collect();
+    assert_eq!(ended, [Ok(()), Ok(())]);
+    // The release takes the newest (8, not 7: the late one is superseded, and
+    // the freshness check accepts the gap).
+    assert_eq!(newest_seq(&mut r, &mut rx), Some(8));
+    assert_eq!(r.take_newest().map(|f| f.len()), None, "taken once");
+    // The rest of the third frame arrives: it was kept whole across the take.
+    for &b in &bytes[cut..] {
+        let _ = r.push(b);
+    }
+    assert_eq!(newest_seq(&mut r, &mut rx), Some(9));
+}
+
+#[test]
+fn an_over_long_newest_frame_leaves_no_frame_to_take() {
+    let good = sensor_stream(&[1]);
+    let mut r: NewestFrameReader<MAX_DRIVING_DOWN_FRAME_BYTES> = NewestFrameReader::new();
+    for &b in &good {
+        let _ = r.push(b);
+    }
+    // A frame longer than the buffer after it: the newest frame is that refused
+    // one, not the older good frame.
+    let long = [0x55u8; MAX_DRIVING_DOWN_FRAME_BYTES + 5];
+    let ended: Vec<_> = long.iter().filter_map(|&b| r.push(b)).collect();
+    assert!(ended.is_empty());
+    assert_eq!(r.push(0), Some(Err(FrameError::TooLong)));
+    assert!(r.take_newest().is_none());
+    // The stream recovers at the next whole frame.
+    let next = sensor_stream(&[1, 2]);
+    for &b in &next[good.len()..] {
+        let _ = r.push(b);
+    }
+    assert_eq!(
+        newest_seq(&mut r, &mut Verifier::new(Stream::Down)),
+        Some(2)
+    );
+    r.reset();
+    assert!(r.take_newest().is_none());
+}
+
+proptest! {
+    /// Whatever the split of a stream of whole frames into releases, each
+    /// release's newest frame is the last one that ended in it.
+    #[test]
+    fn each_release_takes_the_last_frame_that_ended_in_it(
+        cuts in proptest::collection::vec(0usize..400, 0..6),
+    ) {
+        let seqs: Vec<u32> = (1..=5).collect();
+        let bytes = sensor_stream(&seqs);
+        let ends: Vec<usize> = bytes.iter().enumerate().filter(|(_, &b)| b == 0).map(|(i, _)| i).collect();
+        let mut cuts: Vec<usize> = cuts.into_iter().map(|c| c.min(bytes.len())).collect();
+        cuts.push(bytes.len());
+        cuts.sort_unstable();
+        let mut r: NewestFrameReader<MAX_DRIVING_DOWN_FRAME_BYTES> = NewestFrameReader::new();
+        let mut rx = Verifier::new(Stream::Down);
+        let mut from = 0;
+        for cut in cuts {
+            for &b in &bytes[from..cut] {
+                let _ = r.push(b);
+            }
+            let expected = ends
+                .iter()
+                .rposition(|&e| e >= from && e < cut)
+                .map(|k| seqs[k]);
+            prop_assert_eq!(newest_seq(&mut r, &mut rx), expected);
+            from = cut;
+        }
+    }
+}

@@ -221,6 +221,19 @@ impl BoardEcu {
         self.stdin.flush().unwrap();
     }
 
+    /// Sends `msgs` on the control channel's down stream, authenticated, in one
+    /// write: they reach QEMU's USART together.
+    fn send_together(&mut self, msgs: &[Down]) {
+        let mut bytes = Vec::new();
+        for msg in msgs {
+            let mut buf = [0u8; MAX_FRAME_BYTES];
+            let n = link::encode(msg, &mut self.mac, &mut self.down, &mut buf).unwrap();
+            bytes.extend_from_slice(&buf[..n]);
+        }
+        self.stdin.write_all(&bytes).unwrap();
+        self.stdin.flush().unwrap();
+    }
+
     /// Sends `msg` on the route channel's stream, authenticated: the same
     /// USART, the ECU's interrupt sorts it to the plan task.
     fn send_route(&mut self, msg: &Down) {
@@ -501,4 +514,74 @@ fn the_flashed_binary_takes_a_window_of_the_road_on_its_route_channel_over_usart
         d.events.len()
     );
     d.check(&done);
+}
+
+#[test]
+#[ignore = "needs `cargo ecu` first and qemu-system-arm (.ci/run)"]
+fn a_sensor_frame_late_for_its_release_is_superseded_by_the_newer_one() {
+    let mut ecu = BoardEcu::start(&board_elf());
+    let scenario = Scenario::paper(false);
+    let first = RouteFeeder::new(&scenario.track).unwrap().first();
+    let ready = ecu.set_up(&first);
+    assert_eq!((ready.status, ready.detail), (0, 0), "set-up refused");
+    let [x, y, psi] = scenario.start_pose;
+    let est = StateEstimate {
+        x_m: x as f32,
+        y_m: y as f32,
+        psi_rad: psi as f32,
+        vx_mps: scenario.initial_speed_mps as f32,
+        ..StateEstimate::zeroed()
+    };
+    // Frames 1..=10 one at a time, then 11 and 12 together, as a host whose
+    // frame 11 missed its release would have them arrive: both are whole at the
+    // ECU's next release, which must act on 12, the newer (the lock-step rule,
+    // the first frame, would answer 11 and then run a period behind). They go in
+    // one write right after the answer to 10, most of a period before the next
+    // release: they arrive whole before it (136 bytes take about 0.2 ms of the
+    // ECU's time to read).
+    let mut d = ecu.drive(est, 10, u32::MAX, VecDeque::new());
+    let sensor = |seq: u32| {
+        Down::Sensor(SensorFrame {
+            seq,
+            estimate: StateEstimate {
+                stamp_us: u64::from(seq) * 10_000,
+                ..est
+            },
+            route_frames: 0,
+        })
+    };
+    ecu.send_together(&[sensor(11), sensor(12)]);
+    let answer = loop {
+        match ecu.next(Duration::from_secs(10)) {
+            FromEcu::Frame(m) => match *m {
+                Up::Actuation(a) if a.sensor == link::SENSOR_MISSING => d.missing += 1,
+                Up::Actuation(a) => break a,
+                other => panic!("while driving the ECU sent {other:?}"),
+            },
+            FromEcu::Refused(e) => panic!("an ECU frame was refused by the host: {e:?}"),
+            FromEcu::Listening => unreachable!("one Listening"),
+        }
+    };
+    assert_eq!(answer.sensor, 0, "{answer:?}");
+    assert_eq!(
+        answer.seq, 12,
+        "the answer is to the newest frame: {answer:?}"
+    );
+    // And the exchange goes on in step: 13 is answered as 13.
+    ecu.send(&sensor(13));
+    let next = loop {
+        match ecu.next(Duration::from_secs(10)) {
+            FromEcu::Frame(m) => match *m {
+                Up::Actuation(a) if a.sensor == link::SENSOR_MISSING => d.missing += 1,
+                Up::Actuation(a) => break a,
+                other => panic!("while driving the ECU sent {other:?}"),
+            },
+            FromEcu::Refused(e) => panic!("an ECU frame was refused by the host: {e:?}"),
+            FromEcu::Listening => unreachable!("one Listening"),
+        }
+    };
+    assert_eq!((next.sensor, next.seq), (0, 13), "{next:?}");
+    let done = ecu.stop(&mut d);
+    // Frame 11 was superseded, not refused.
+    assert_eq!(done.rejected_frames, 0, "{}", d.summary(&done));
 }

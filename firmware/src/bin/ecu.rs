@@ -126,6 +126,8 @@ use defmt_rtt as _;
 use defmt_semihosting as _;
 use firmware::clock_tree::{self, ClockError, ClockRegisters, ClockSource, Register};
 use firmware::deadline::{self, DeadlineMonitor, PlanWatchdog};
+#[cfg(feature = "board-usart")]
+use firmware::link::NewestFrameReader;
 use firmware::link::{
     self, ActuationFrame, Authenticator, Down, FrameReader, LinkMac, Refusal, RefusalCounts,
     Stream, UpRef, Verifier, LINK_KEY, MAX_DOWN_FRAME_BYTES, MAX_DRIVING_DOWN_FRAME_BYTES,
@@ -290,7 +292,14 @@ pub struct Link {
     /// (`MAX_DRIVING_DOWN_FRAME_BYTES`); a longer one is dropped and counted as
     /// refused. The set-up's larger frames go through a reader of their own, on
     /// the stack of `init` ([`Link::receive`]), not in static RAM for the run.
+    #[cfg(not(feature = "board-usart"))]
     reader: FrameReader<MAX_DRIVING_DOWN_FRAME_BYTES>,
+    /// The frames being received while driving, the newest whole one kept for
+    /// the release ([`Link::receive_sensor`]): a sensor frame fits
+    /// (`MAX_DRIVING_DOWN_FRAME_BYTES`); a longer one is dropped and counted as
+    /// refused. The set-up's larger frames go through a reader of their own.
+    #[cfg(feature = "board-usart")]
+    reader: NewestFrameReader<MAX_DRIVING_DOWN_FRAME_BYTES>,
     #[cfg(not(feature = "board-usart"))]
     rx: [u8; 64],
     #[cfg(not(feature = "board-usart"))]
@@ -414,7 +423,7 @@ impl Link {
         (
             Self {
                 port,
-                reader: FrameReader::new(),
+                reader: NewestFrameReader::new(),
                 mac: LinkMac::new(&LINK_KEY),
                 down_rx: Verifier::new(Stream::Down),
                 up_tx: Authenticator::new(Stream::Up),
@@ -526,45 +535,66 @@ impl Link {
     }
 
     /// The sensor frame of this release, from the bytes the USART interrupt
-    /// queued for the control task since the last release (at most the queue's
-    /// capacity): the first whole frame, decoded (CRC, CMAC) once, as the
-    /// lock-step build does. A refused frame (forged, replayed, corrupt, too long,
-    /// or an authentic frame of another kind) is counted and answered as a
-    /// dropout ([`LinkEnd::Refused`]), never acted on. No whole frame yet is
-    /// [`LinkEnd::Missing`], a dropout too; the bytes of a frame still arriving
-    /// wait in the reader for the next release.
+    /// queued for the control task since the last release (at most
+    /// [`usart_link::CONTROL_RX_BYTES`] a release): the newest whole frame among
+    /// them, decoded (CRC, CMAC) once. The link is not in lock-step with the
+    /// host: a frame that missed its release is whole at the next one with that
+    /// release's own, and the newer one is taken (the older is superseded, not
+    /// decoded: the answer's `seq` says which one was used), so the ECU does not
+    /// answer a period behind from then on. A refused newest frame (forged,
+    /// replayed, corrupt, too long, or an authentic frame of another kind) is
+    /// counted and answered as a dropout ([`LinkEnd::Refused`]), never acted on.
+    /// No whole frame yet is [`LinkEnd::Missing`], a dropout too; the bytes of a
+    /// frame still arriving wait in the reader for the next release.
     #[cfg(feature = "board-usart")]
     pub fn receive_sensor(&mut self) -> Result<link::SensorFrame, LinkEnd> {
+        // The newest frame's framing refusal, when the newest that ended was not a
+        // frame (counted as it ended).
+        let mut malformed = None;
         // wcet-bound: 2 * MAX_DRIVING_DOWN_FRAME_BYTES
         for _ in 0..usart_link::CONTROL_RX_BYTES {
             let Some(byte) = self.next_byte() else {
                 break;
             };
-            let reason = match self.reader.push(byte) {
-                // Inside a frame, or two delimiters in a row (idle).
-                None => continue,
-                Some(Ok(frame)) => {
-                    match link::decode::<Down>(frame, &mut self.mac, &mut self.down_rx) {
-                        Ok(Down::Sensor(f)) => {
-                            self.next_seq = f.seq.wrapping_add(1);
-                            return Ok(f);
-                        }
-                        Ok(Down::Stop) => return Err(LinkEnd::Stop),
-                        Ok(_) => None,
-                        Err(e) => Some(e.refusal()),
-                    }
+            match self.reader.push(byte) {
+                None => {}
+                Some(Ok(())) => malformed = None,
+                Some(Err(e)) => {
+                    self.count_refused(Some(e.refusal()));
+                    malformed = Some(e.refusal());
                 }
-                Some(Err(e)) => Some(e.refusal()),
-            };
-            self.count_refused(reason);
-            let seq = self.next_seq;
-            self.next_seq = seq.wrapping_add(1);
-            return Err(LinkEnd::Refused {
-                code: reason.map_or(link::SENSOR_UNEXPECTED, Refusal::code),
-                seq,
-            });
+            }
         }
-        Err(LinkEnd::Missing { seq: self.next_seq })
+        let reason = match self.reader.take_newest() {
+            Some(frame) => match link::decode::<Down>(frame, &mut self.mac, &mut self.down_rx) {
+                Ok(Down::Sensor(f)) => {
+                    self.next_seq = f.seq.wrapping_add(1);
+                    return Ok(f);
+                }
+                Ok(Down::Stop) => return Err(LinkEnd::Stop),
+                Ok(_) => None,
+                Err(e) => Some(e.refusal()),
+            },
+            None => match malformed {
+                // Refused and counted as it ended.
+                Some(r) => {
+                    let seq = self.next_seq;
+                    self.next_seq = seq.wrapping_add(1);
+                    return Err(LinkEnd::Refused {
+                        code: r.code(),
+                        seq,
+                    });
+                }
+                None => return Err(LinkEnd::Missing { seq: self.next_seq }),
+            },
+        };
+        self.count_refused(reason);
+        let seq = self.next_seq;
+        self.next_seq = seq.wrapping_add(1);
+        Err(LinkEnd::Refused {
+            code: reason.map_or(link::SENSOR_UNEXPECTED, Refusal::code),
+            seq,
+        })
     }
 
     /// The route frames the host announced in an accepted sensor frame (its

@@ -427,6 +427,83 @@ impl<const N: usize> Default for FrameReader<N> {
     }
 }
 
+/// A [`FrameReader`] that keeps the newest whole frame for a reader that takes
+/// one frame per period from a stream that may hold several (a real-time link:
+/// a frame late for its period and the next one's, both whole at the next
+/// release). Two buffers of `N` bytes: one holds the newest whole frame while
+/// the other receives the next, so no byte is copied. Work per byte is
+/// constant.
+pub struct NewestFrameReader<const N: usize> {
+    /// The two buffers.
+    readers: [FrameReader<N>; 2],
+    /// The one receiving the next frame (0 or 1).
+    cur: usize,
+    /// The newest whole frame not taken yet: its buffer and length, bytes.
+    newest: Option<(usize, usize)>,
+}
+
+impl<const N: usize> NewestFrameReader<N> {
+    /// An empty reader (a valid `const` initialiser).
+    pub const fn new() -> Self {
+        Self {
+            readers: [FrameReader::new(), FrameReader::new()],
+            cur: 0,
+            newest: None,
+        }
+    }
+
+    /// Feeds one byte. At a delimiter that ends a whole frame, that frame is now
+    /// the newest (one older, not taken, is dropped) and `Some(Ok(()))`; at one
+    /// that ends an over-long frame, `Some(Err(TooLong))` and no frame is the
+    /// newest (the newest is that refused one); otherwise `None` (inside a frame,
+    /// or two delimiters in a row).
+    pub fn push(&mut self, byte: u8) -> Option<Result<(), FrameError>> {
+        let cur = self.cur & 1;
+        let ended = match self.readers.get_mut(cur)?.push(byte)? {
+            Ok(frame) => Ok(frame.len()),
+            Err(e) => Err(e),
+        };
+        match ended {
+            Ok(len) => {
+                self.newest = Some((cur, len));
+                // The other buffer receives the next frame (what it held, an older
+                // frame, is superseded).
+                self.cur = cur ^ 1;
+                if let Some(next) = self.readers.get_mut(self.cur) {
+                    next.reset();
+                }
+                Some(Ok(()))
+            }
+            Err(e) => {
+                self.newest = None;
+                Some(Err(e))
+            }
+        }
+    }
+
+    /// The newest whole frame pushed since the last call, its bytes for
+    /// [`decode`] (which decodes them in place); `None` when none ended since.
+    /// A frame still arriving is kept for the next call.
+    pub fn take_newest(&mut self) -> Option<&mut [u8]> {
+        let (i, len) = self.newest.take()?;
+        self.readers.get_mut(i)?.buf.get_mut(..len)
+    }
+
+    /// Drops everything received, whole or not.
+    pub fn reset(&mut self) {
+        let [a, b] = &mut self.readers;
+        a.reset();
+        b.reset();
+        self.newest = None;
+    }
+}
+
+impl<const N: usize> Default for NewestFrameReader<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 /// Why [`SequenceCheck::accept`] refused a sequence number.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SequenceError {
