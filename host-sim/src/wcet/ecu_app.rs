@@ -17,7 +17,7 @@ use std::path::Path;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum EcuBuild {
-    /// `cargo ecu-lockstep` (= `cargo ecu-lockstep`): frames over semihosting, in
+    /// `cargo ecu-lockstep`: frames over semihosting, in
     /// lock-step with the simulator; the processor in the loop runs it. RTIC's
     /// dispatchers are `USART1` (plan) and `USART2` (control).
     LockStep,
