@@ -622,6 +622,7 @@ pub fn run_usart(args: &PilArgs) -> Result<()> {
         refused: RefusalCounts::new(),
     });
     let wall_s = wall.elapsed().as_secs_f64();
+    ecu.write_frames()?;
     let hil = ecu.summary(wall_s);
     {
         let s = &mut result.summary;

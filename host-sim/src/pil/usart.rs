@@ -36,23 +36,27 @@
 //! The host does not know the phase of the ECU's releases: it estimates the
 //! offset `host − ECU` as the smallest `arrival − sent_us` over the last
 //! [`OFFSET_WINDOW`] actuation frames (a frame's transfer time is never
-//! negative, and its smallest value is the pipe's latency, tens of µs), first
-//! over [`WARMUP_PERIODS`] dropout answers before the run (the ECU answers every
+//! negative; its smallest value is the link's latency), first over
+//! [`WARMUP_PERIODS`] dropout answers before the run (the ECU answers every
 //! release, a sensor frame or not). The run's time 0 is placed `--hil-lead-us`
-//! before an ECU plan release: each period's sample is sent at the period's
-//! start on the host's clock, that long ahead of the ECU's release while the
-//! two clocks agree. Each sensor frame is stamped with the ECU's clock at the
-//! sample, as estimated (the ECU stamps and ages its plans on it, as on a car).
+//! ([`DEFAULT_LEAD_US`], 8 ms) before an ECU plan release: each period's sample
+//! is sent at the period's start on the host's clock, that long ahead of the
+//! ECU's release while the two clocks agree. The lead is most of a period
+//! because QEMU's USART moves one byte per pass of its main loop, and the next
+//! only once the ECU has read the last: a sensor frame took up to 5 ms to
+//! cross on a loaded host, and one that is not whole at the release is a
+//! dropout. Each sensor frame is stamped with the ECU's clock at the sample, as
+//! estimated (the ECU stamps and ages its plans on it, as on a car).
 //!
-//! At most one sensor frame waits at the ECU: a period sends its sample only
-//! when the last one has been answered (the ECU's USART queue holds two frames;
-//! a backlog would overflow it and make every later frame older). When the
-//! ECU's clock has fallen behind so that no release came since the last frame,
-//! the period sends none (`periods_not_fed`) and the next one does: the ECU's
-//! releases slide through the host's periods, and the time a frame waits for
-//! its release (`lead_at_release_us`) with them; a frame that arrives just
-//! after a release waits for the next one, and that release answers as a
-//! dropout (`sensor_missing_at_ecu`).
+//! At most one sensor frame waits at the ECU: a period sends its sample once
+//! the last one has been answered (the ECU's USART queue holds two frames; a
+//! backlog would overflow it and make every later frame older). When the ECU's
+//! clock has fallen behind, that answer comes after the period's start, and
+//! the sample is sent as soon as it comes (still most of a period ahead of the
+//! ECU's next release); a period in which it does not come at all (no ECU
+//! release in it) sends none (`periods_not_fed`). A frame that was not whole
+//! at a release waits for the next one, and that release answers as a dropout
+//! (`sensor_missing_at_ecu`).
 //!
 //! # The loop
 //!
@@ -69,8 +73,12 @@
 //! sensor frame at the release) and answers that arrive after their period
 //! included; when two arrive in one period the later one acts from its arrival
 //! and the earlier one only until then. Route frames (the next window of the
-//! road) go before the sensor frame of each plan release, on the route
-//! channel's stream of the same USART (the ECU's interrupt sorts them).
+//! road) go on the route channel's stream of the same USART (the ECU's
+//! interrupt sorts them), each right before a sensor frame, which announces it,
+//! and the next only once the ECU's plan task has read the last (a plan event
+//! released at or after the control release that accepted the announcement:
+//! its queue holds one frame, and its activations, on the ECU's clock, are
+//! fewer than the host's plan periods when that clock falls behind).
 //!
 //! # What is counted
 //!
@@ -117,10 +125,12 @@ use crate::pil::frames::{actuation_of, path_chunks, plan_of, setup_refusal};
 use crate::world::route::{RouteFeeder, Window};
 use crate::world::scenario::Scenario;
 
-/// How far ahead of the ECU's release the run's first sensor frame is sent, µs
-/// (the frame's ~70 bytes cross QEMU's USART in tens of µs; the rest is room
-/// for the host's scheduling on a loaded machine).
-pub const DEFAULT_LEAD_US: u64 = 2_000;
+/// How far ahead of the ECU's release the run's first sensor frame is sent, µs.
+/// QEMU's USART takes a byte from its character device per pass of its main
+/// loop, and the next only once the ECU's interrupt has read the last: a sensor
+/// frame's ~70 bytes took up to 5 ms to cross on a loaded two-core host. So the
+/// frames go most of a period ahead.
+pub const DEFAULT_LEAD_US: u64 = 8_000;
 /// Dropout answers the host reads before the run to find the ECU's phase.
 pub const WARMUP_PERIODS: u32 = 20;
 /// Actuation frames over which the clock offset is the smallest transfer.
@@ -246,6 +256,16 @@ impl Offset {
     }
 }
 
+/// A route frame on its way: announced by the sensor frame `seq` (or a later
+/// one, which carries the same total), read by the ECU's plan task at its first
+/// activation released at or after the control release that accepted the
+/// announcement (`release_us`, once its answer came: control runs first).
+#[derive(Clone, Copy, Debug)]
+struct RouteWait {
+    seq: u32,
+    release_us: Option<u64>,
+}
+
 /// The ECU's answer as the host saw it: its frame, and its arrival on the
 /// host's clock (µs since the ECU's start).
 struct Answer {
@@ -279,12 +299,16 @@ pub struct UsartEcu {
     active: Plan<f32>,
     route_frames: u32,
     route_queue: VecDeque<Down>,
+    /// The route frame last sent, until the ECU's plan task has read it.
+    route_wait: Option<RouteWait>,
     last_release_us: Option<u64>,
     plan_counts: EcuTaskCounts,
     /// The ECU's own counts in the last actuation frame.
     pub ecu_counts: Option<EcuCounts>,
     /// The run's link figures.
     pub hil: HilTally,
+    /// Every frame sent and received, one CSV line each (`ecu/frames.csv`).
+    pub events: Vec<String>,
     /// The ECU's frames the host refused, by reason.
     pub host_refused: RefusalCounts,
     /// The ECU's frames the host refused or did not expect.
@@ -413,10 +437,12 @@ impl UsartEcu {
             active: Plan::zeroed(),
             route_frames: 0,
             route_queue: VecDeque::new(),
+            route_wait: None,
             last_release_us: None,
             plan_counts: EcuTaskCounts::default(),
             ecu_counts: None,
             hil: HilTally::default(),
+            events: Vec::new(),
             host_refused: RefusalCounts::new(),
             host_rejected: 0,
         };
@@ -444,13 +470,6 @@ impl UsartEcu {
     /// A host instant (µs) on the simulated timeline.
     fn sim_of_host(&self, host_us: i64) -> u64 {
         (host_us - self.w0_us).max(0) as u64
-    }
-
-    /// The ECU's clock now, µs, as estimated (the smallest offset: never behind
-    /// the ECU's clock by more than the noise of the estimate).
-    fn ecu_now_us(&self) -> u64 {
-        let off = self.offset.get().unwrap_or(0);
-        (self.host_us(Instant::now()) - off).max(0) as u64
     }
 
     fn write(&mut self, bytes: &[u8]) -> Result<()> {
@@ -649,11 +668,24 @@ impl UsartEcu {
         };
         let arrival_us = self.host_us(at);
         self.offset.push(arrival_us - a.sent_us as i64);
+        self.events.push(format!(
+            "recv,{arrival_us},{},{},{},{},{}",
+            a.seq,
+            a.sensor,
+            a.release_us,
+            a.sent_us,
+            self.offset.get().unwrap_or(0)
+        ));
         let h = &mut self.hil;
         h.actuation_frames_received += 1;
         match a.sensor {
             0 => {
                 h.answers += 1;
+                if let Some(w) = self.route_wait.as_mut() {
+                    if w.release_us.is_none() && a.seq.wrapping_sub(w.seq) < u32::MAX / 2 {
+                        w.release_us = Some(a.release_us);
+                    }
+                }
                 if let Some(sent) = self.in_flight.remove(&a.seq) {
                     h.round_trip_us.push((arrival_us - sent) as f64);
                     let off = self.offset.get().unwrap_or(0);
@@ -682,6 +714,12 @@ impl UsartEcu {
         self.last_release_us = Some(a.release_us);
         if let Some(p) = &a.plan {
             h.plan_events += 1;
+            if self
+                .route_wait
+                .is_some_and(|w| w.release_us.is_some_and(|r| p.release_us >= r))
+            {
+                self.route_wait = None;
+            }
             h.plan_response_us
                 .push(p.finish_us.saturating_sub(p.release_us) as f64);
             *skipped += skipped_between(p.release_us, p.end_us, PLAN_PERIOD_US);
@@ -731,6 +769,20 @@ impl UsartEcu {
             route_frames: 0,
             max_validity_slack_rad: None,
         }
+    }
+
+    /// Writes `frames.csv` into the work folder: every sensor frame sent
+    /// (`send`, host µs, seq, the period's start in host µs, its stamp) and
+    /// every actuation frame received (`recv`, host µs, seq, sensor code, release
+    /// and send instants on the ECU's timeline, the offset estimate).
+    pub fn write_frames(&self) -> Result<()> {
+        let path = self.opts.work_dir.join("frames.csv");
+        let mut text = String::from("event,host_us,seq,a,b,c,offset_us\n");
+        for e in &self.events {
+            text.push_str(e);
+            text.push('\n');
+        }
+        fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))
     }
 
     /// Ends the run: `Stop`, the ECU's `Done` (its stack and refused frames).
@@ -817,24 +869,48 @@ impl Ecu<f32> for UsartEcu {
                 }
             }
         }
-        if t_us.is_multiple_of(PLAN_PERIOD_US) {
-            if let Some(f) = self.route_queue.pop_front() {
-                self.send_route(&f)?;
-            }
-        }
         // At most one sensor frame waits at the ECU: a new one is sent once the
         // last one was answered (or the ECU said it refused it), i.e. once the
-        // ECU has had a release since. A period whose start finds the last frame
-        // still waiting sends none: the ECU's clock has fallen a period behind
-        // the host's (module docs). A frame unanswered for 10 periods is given up.
+        // ECU has had a release since; when that answer comes within the period
+        // (the ECU's clock is behind the host's), the period's sample is sent at
+        // once, a period ahead of the ECU's next release; a period without it
+        // sends none (module docs). A frame unanswered for 10 periods is given
+        // up.
         let seq = self.seq.wrapping_add(1);
         self.in_flight
             .retain(|&s, _| seq.wrapping_sub(s) <= STALE_FRAMES);
-        if self.in_flight.is_empty() {
+        let end = self.instant(start + (CONTROL_PERIOD_US - GUARD_US) as i64);
+        let mut send = self.in_flight.is_empty();
+        while !send && !self.in_flight.is_empty() {
+            let now = Instant::now();
+            if now >= end {
+                break;
+            }
+            if let Some((at, m)) = self.next(end - now)? {
+                if let Some(a) = self.take(at, m, &mut plans, &mut skipped) {
+                    self.hil.late_answers += u64::from(a.frame.sensor == 0);
+                    send = self.in_flight.is_empty();
+                    latest = Some(a);
+                }
+            }
+        }
+        if send {
             self.seq = seq;
-            // Stamped with the ECU's clock at the sample, as estimated (its plans
-            // are stamped and aged on it).
-            let stamp = self.ecu_now_us().max(self.last_stamp_us + 1);
+            // A frame of the road before it, announced by it, once the ECU's plan
+            // task has read the last one (its queue holds one).
+            if self.route_wait.is_none() {
+                if let Some(f) = self.route_queue.pop_front() {
+                    self.send_route(&f)?;
+                    self.route_wait = Some(RouteWait {
+                        seq,
+                        release_us: None,
+                    });
+                }
+            }
+            // Stamped with the ECU's clock at the sample (the period's start), as
+            // estimated (its plans are stamped and aged on it).
+            let off = self.offset.get().unwrap_or(0);
+            let stamp = ((start - off).max(0) as u64).max(self.last_stamp_us + 1);
             self.last_stamp_us = stamp;
             let msg = Down::Sensor(SensorFrame {
                 seq,
@@ -845,6 +921,8 @@ impl Ecu<f32> for UsartEcu {
                 route_frames: self.route_frames,
             });
             let sent = self.host_us(Instant::now());
+            self.events
+                .push(format!("send,{sent},{seq},{start},{stamp},,"));
             self.in_flight.insert(seq, sent);
             self.send(&msg)?;
             self.hil.sensor_frames_sent += 1;
@@ -852,7 +930,6 @@ impl Ecu<f32> for UsartEcu {
             self.hil.periods_not_fed += 1;
         }
         // Its answer, until the end of the period.
-        let end = self.instant(start + (CONTROL_PERIOD_US - GUARD_US) as i64);
         loop {
             let now = Instant::now();
             if now >= end {
