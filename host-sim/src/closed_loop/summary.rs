@@ -236,7 +236,8 @@ impl Spread {
 pub struct HilSummary {
     /// QEMU's clock options.
     pub qemu_clock: String,
-    /// How far ahead of the ECU's release each sensor frame was sent, µs.
+    /// How far ahead of an ECU release the run's periods were placed to start,
+    /// µs (the sensor frames' lead while the two clocks agree).
     pub lead_us: u64,
     /// Periods of dropout answers read before the run to find the ECU's phase.
     pub warmup_periods: u64,

@@ -25,9 +25,10 @@
 //!   its count of 1 kHz SysTick interrupts, and ticks that fall due while QEMU's
 //!   vCPU is not running seem to be delivered as one (a pending interrupt is
 //!   pended once, however many times it falls due). On
-//!   an idle host that is rare; on a loaded two-core machine (a build beside
-//!   it) we measured about 9 % of the host's time lost without `-icount` and
-//!   about 24 % with it: the default is the host's clock. The loss is reported
+//!   a loaded two-core machine (builds beside it, load average 3–4) we
+//!   measured 9–15 % of the host's time lost without `-icount` (20 s runs, full
+//!   laps) and about 24 % with it (a 30 s run); the default is the host's
+//!   clock. We have not measured an idle host. The loss is reported
 //!   (`clock_offset_drift_us`), never corrected on the ECU.
 //! * **The ECU's timeline** (µs since its first release, right after `Ready`):
 //!   its releases are the multiples of 10 ms (control) and 100 ms (plan) on it,
