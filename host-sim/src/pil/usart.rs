@@ -46,8 +46,14 @@
 //! because QEMU's USART moves one byte per pass of its main loop, and the next
 //! only once the ECU has read the last: a sensor frame took up to 5 ms to
 //! cross on a loaded host, and one that is not whole at the release is a
-//! dropout. Each sensor frame is stamped with the ECU's clock at the sample, as
-//! estimated (the ECU stamps and ages its plans on it, as on a car).
+//! dropout. Each sensor frame is stamped with its sample's instant: the ECU's clock
+//! at the run's start plus the host's time since. The control task follows its
+//! plans at the estimates' stamps, and the MPC's nodes are physical time: a
+//! stamp on the ECU's own (losing) clock made the plans run slow against the
+//! plant (a 15 % slower reference through the obstacles). So the stamps run
+//! ahead of the ECU's clock by what it lost; the plan task's age check
+//! (`MAX_PLAN_AGE_US`, on the ECU's clock) then finds plans younger than they
+//! are, never older.
 //!
 //! At most one sensor frame waits at the ECU: a period sends its sample once
 //! the last one has been answered (the ECU's USART queue holds two frames; a
@@ -289,8 +295,9 @@ pub struct UsartEcu {
     offset: Offset,
     /// The run's time 0 on the host's clock, µs since `epoch`.
     w0_us: i64,
-    /// The last sensor frame's stamp, µs on the ECU's timeline.
-    last_stamp_us: u64,
+    /// The ECU's clock at the run's time 0, µs (the sensor frames' stamps
+    /// count from it on the host's clock).
+    stamp0_us: u64,
     /// The sensor frames sent and not yet answered: seq → host µs sent.
     in_flight: BTreeMap<u32, i64>,
     /// The actuation the plant holds.
@@ -432,7 +439,7 @@ impl UsartEcu {
             seq: 0,
             offset: Offset::default(),
             w0_us: 0,
-            last_stamp_us: 0,
+            stamp0_us: 0,
             in_flight: BTreeMap::new(),
             held: Actuation::safe(0.0, 0.0),
             active: Plan::zeroed(),
@@ -640,6 +647,7 @@ impl UsartEcu {
         let first = earliest.div_ceil(PLAN_PERIOD_US) * PLAN_PERIOD_US;
         let off = self.offset.get().unwrap_or(0);
         self.w0_us = first as i64 - self.opts.lead_us as i64 + off;
+        self.stamp0_us = first - self.opts.lead_us;
         Ok(())
     }
 
@@ -908,11 +916,9 @@ impl Ecu<f32> for UsartEcu {
                     });
                 }
             }
-            // Stamped with the ECU's clock at the sample (the period's start), as
-            // estimated (its plans are stamped and aged on it).
-            let off = self.offset.get().unwrap_or(0);
-            let stamp = ((start - off).max(0) as u64).max(self.last_stamp_us + 1);
-            self.last_stamp_us = stamp;
+            // Stamped with the sample's instant: the ECU's clock at the run's
+            // start plus the host's time since (module docs).
+            let stamp = self.stamp0_us + t_us;
             let msg = Down::Sensor(SensorFrame {
                 seq,
                 estimate: StateEstimate {
