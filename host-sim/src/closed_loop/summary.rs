@@ -185,6 +185,102 @@ pub struct Summary {
     pub host_frames_refused_replay: Option<u64>,
     /// The ECU's frames the host refused as corrupt, null without an ECU.
     pub host_frames_refused_corrupt: Option<u64>,
+    /// How the ECU was linked to the simulator: `semihosting` (the lock-step
+    /// PIL), `usart` (the real-time HIL over the emulated USART); null for the
+    /// in-process run.
+    #[serde(default)]
+    pub link: Option<String>,
+    /// The real-time HIL's link and timing figures (`--link usart`), null
+    /// otherwise.
+    #[serde(default)]
+    pub hil: Option<HilSummary>,
+}
+
+/// The spread of a measured time over a run, µs (all 0 without samples).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Spread {
+    /// Samples.
+    pub samples: u64,
+    /// Smallest, µs.
+    pub min: f64,
+    /// Median, µs.
+    pub median: f64,
+    /// 99th percentile (nearest rank), µs.
+    pub p99: f64,
+    /// Largest, µs.
+    pub max: f64,
+}
+
+impl Spread {
+    /// The spread of `values`.
+    pub fn of(values: &[f64]) -> Self {
+        use crate::stats::{median, percentile};
+        Self {
+            samples: values.len() as u64,
+            min: if values.is_empty() {
+                0.0
+            } else {
+                values.iter().copied().fold(f64::INFINITY, f64::min)
+            },
+            median: median(values).unwrap_or(0.0),
+            p99: percentile(values, 0.99),
+            max: percentile(values, 1.0),
+        }
+    }
+}
+
+/// What the real-time HIL over the emulated USART adds to the summary
+/// (`crate::pil::usart`): its frames and the spread of its timing. The ECU's
+/// own deadline counts and refused frames are the summary's `ecu_*` fields.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct HilSummary {
+    /// QEMU's clock options.
+    pub qemu_clock: String,
+    /// How far ahead of an ECU release the run's periods were placed to start,
+    /// µs (the sensor frames' lead while the two clocks agree).
+    pub lead_us: u64,
+    /// Periods of dropout answers read before the run to find the ECU's phase.
+    pub warmup_periods: u64,
+    /// Of those, the answers saying no sensor frame had arrived.
+    pub warmup_missing: u64,
+    /// Sensor frames sent (one per 10 ms period).
+    pub sensor_frames_sent: u64,
+    /// Frames of the road sent on the route channel.
+    pub route_frames_sent: u64,
+    /// Actuation frames received during the run.
+    pub actuation_frames_received: u64,
+    /// Of those, answers to a sensor frame the ECU accepted.
+    pub answers: u64,
+    /// Answers saying no whole sensor frame had arrived at the release
+    /// (`SENSOR_MISSING`): the ECU ran the period as a dropout.
+    pub sensor_missing_at_ecu: u64,
+    /// Answers saying the ECU refused the sensor frame (forged, replayed,
+    /// corrupt, unexpected).
+    pub sensor_refused_at_ecu: u64,
+    /// Answers to a sensor frame received after the end of its period (acted
+    /// on from the next period).
+    pub late_answers: u64,
+    /// Periods in which no actuation frame arrived (the last one held).
+    pub periods_without_frame: u64,
+    /// Periods in which no sensor frame was sent: no ECU release fell in them
+    /// (the ECU's clock had fallen a period behind the host's).
+    pub periods_not_fed: u64,
+    /// Plan events received.
+    pub plan_events: u64,
+    /// The ECU's control response times (release → its frame written), µs.
+    pub control_response_us: Spread,
+    /// The ECU's plan response times (release → plan published), µs.
+    pub plan_response_us: Spread,
+    /// The host's round trip, sensor frame written → its answer read, µs.
+    pub round_trip_us: Spread,
+    /// The ECU's release less the instant its sensor frame was sent, µs (through
+    /// the estimated clock offset).
+    pub lead_at_release_us: Spread,
+    /// How much the estimated offset between the ECU's clock and the host's
+    /// moved over the run, µs (positive: the ECU's clock fell behind).
+    pub clock_offset_drift_us: Option<f64>,
+    /// Wall time of the run, s.
+    pub wall_s: f64,
 }
 
 /// The control task's estimate of the car's longitudinal dynamics

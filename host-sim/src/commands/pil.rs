@@ -1,9 +1,11 @@
 //! `host-sim pil`: the ECU application in QEMU against the plant ([`crate::pil`]);
 //! writes what `run` writes plus `pil.json`, and the in-process run beside it for
-//! the comparison.
+//! the comparison. With `--link usart`, the binary you flash in a real-time loop
+//! over its emulated USART instead ([`crate::pil::usart`], [`run_usart`]): what
+//! `run` writes, its summary with `"link": "usart"` and the link's figures.
 
 use std::fs;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use firmware::link::{DoneFrame, LinkKey, RefusalCounts};
@@ -23,6 +25,7 @@ use crate::pil::deadlines::count_mismatches;
 use crate::pil::link_fault::{LinkFault, LinkFaultSpec};
 use crate::pil::qemu::{PilOptions, QemuEcu, ECU_CLOCK_HZ};
 use crate::pil::report::{LinkFaultReport, PilReport};
+use crate::pil::usart::{HilClock, UsartEcu, UsartOptions, DEFAULT_LEAD_US};
 use crate::stats::percentile;
 use crate::world::disturbance::Disturbances;
 use crate::world::faults::{FAULT_KINDS, FAULT_START_S};
@@ -40,12 +43,54 @@ pub struct PilCommand {
     pub ecu: PilEcuArgs,
 }
 
+/// How the ECU talks to the simulator.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum PilLink {
+    /// The lock-step build (`cargo ecu-lockstep`) over semihosting FIFOs,
+    /// `-icount sleep=off`: deterministic, bit-identical to the in-process run.
+    #[default]
+    Semihosting,
+    /// The binary you flash (`cargo ecu`) over its USART1 on QEMU's
+    /// stdio, in real time: QEMU's clock kept with the host's, the plant
+    /// stepped on the host's clock (a hardware-in-the-loop run, as on a bench;
+    /// not deterministic).
+    Usart,
+}
+
+impl PilLink {
+    /// Its name on the command line and in `summary.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Semihosting => "semihosting",
+            Self::Usart => "usart",
+        }
+    }
+}
+
 /// How `host-sim pil` runs the ECU.
 #[derive(Debug, Clone, clap::Args)]
 pub struct PilEcuArgs {
-    /// The ECU application (build it with `cargo ecu-lockstep`).
-    #[arg(long, default_value = crate::pil::ECU_ELF)]
-    pub elf: PathBuf,
+    /// How the ECU is linked: `semihosting` (the lock-step PIL, deterministic)
+    /// or `usart` (the binary you flash, in real time over its emulated USART;
+    /// the comparison with the in-process run, `--trace`, the cost model's check
+    /// and `--link-fault` are lock-step only).
+    #[arg(long, value_enum, default_value_t = PilLink::Semihosting)]
+    pub link: PilLink,
+    /// The ECU binary. Default: with `--link semihosting` the lock-step build
+    /// `target/thumbv7em-none-eabihf/release/ecu` (`cargo ecu-lockstep`); with `--link
+    /// usart` the binary you flash, `target/thumbv7em-none-eabihf/board/ecu`
+    /// (`cargo ecu`; under `$CARGO_TARGET_DIR` when it is set).
+    #[arg(long)]
+    pub elf: Option<PathBuf>,
+    /// With `--link usart`: QEMU's virtual clock (`host`: no `-icount`, the
+    /// host's clock; `icount`: `-icount shift=N,align=on,sleep=on`, 2^N ns per
+    /// instruction, held back to the host's).
+    #[arg(long, value_enum, default_value_t = HilClock::Host)]
+    pub hil_clock: HilClock,
+    /// With `--link usart`: how far ahead of the ECU's control release the
+    /// run's periods start (the sensor frames' lead while the two clocks agree), µs.
+    #[arg(long, default_value_t = DEFAULT_LEAD_US, value_name = "US")]
+    pub hil_lead_us: u64,
     /// QEMU's `-icount shift`: an instruction takes 2^shift ns of the ECU's virtual
     /// time (4: 16 ns, 2.69 cycles at 168 MHz, above the CPI bound).
     #[arg(long, default_value_t = 4)]
@@ -148,11 +193,18 @@ impl PilCommand {
     /// The PIL run's settings (one value of each scenario option, checked).
     pub fn resolve(&self) -> Result<PilArgs> {
         let e = self.ecu.clone();
+        let elf = e.elf.clone().unwrap_or_else(|| match e.link {
+            PilLink::Semihosting => PathBuf::from(crate::pil::ECU_ELF),
+            PilLink::Usart => crate::pil::built_ecu_board_elf(Path::new(".")),
+        });
         Ok(PilArgs {
             run: self.run.resolve("pil")?,
             link_key: e.link_key()?,
             link_fault: e.link_fault()?,
-            elf: e.elf,
+            link: e.link,
+            hil_clock: e.hil_clock,
+            hil_lead_us: e.hil_lead_us,
+            elf,
             icount_shift: e.icount_shift,
             qemu: e.qemu,
             cpi: e.cpi,
@@ -191,6 +243,12 @@ pub struct PilArgs {
     pub link_key: LinkKey,
     /// The link fault, if any.
     pub link_fault: Option<LinkFault>,
+    /// How the ECU is linked.
+    pub link: PilLink,
+    /// With [`PilLink::Usart`]: what keeps QEMU's clock with the host's.
+    pub hil_clock: HilClock,
+    /// With [`PilLink::Usart`]: the sensor frame's lead over the release, µs.
+    pub hil_lead_us: u64,
 }
 
 /// Refuses what a PIL run cannot apply, saying why and where it applies: the
@@ -216,6 +274,24 @@ pub fn check_pil_args(args: &PilArgs) -> Result<()> {
             "--cpi must be a positive number of cycles per instruction, got {}",
             args.cpi
         );
+    }
+    if args.link == PilLink::Usart {
+        // What only the lock-step run measures or injects.
+        if args.trace.is_some() {
+            bail!("--trace: the execution trace is the lock-step PIL's (deterministic instruction counts); drop --link usart to write it");
+        }
+        if args.max_model_underestimate_pct.is_some() {
+            bail!("--max-model-underestimate-pct: the cost model is checked against the lock-step PIL's instruction counts; drop --link usart for that check");
+        }
+        if args.link_fault.is_some() {
+            bail!("--link-fault: injected only in the lock-step PIL so far; drop --link usart");
+        }
+        if !(1..=50_000).contains(&args.hil_lead_us) {
+            bail!(
+                "--hil-lead-us must be in 1..=50000 µs, got {}",
+                args.hil_lead_us
+            );
+        }
     }
     let c = &args.run.conditions;
     if c.noise.0 != 0.0 || c.delay_ms != 0.0 {
@@ -244,6 +320,9 @@ pub fn command(cmd: &PilCommand) -> Result<()> {
 /// `host-sim pil`.
 pub fn run(args: &PilArgs) -> Result<()> {
     check_pil_args(args)?;
+    if args.link == PilLink::Usart {
+        return run_usart(args);
+    }
     // The disturbances are none (checked above): the ECU gets the estimate as is.
     let SetUp {
         scenario,
@@ -287,6 +366,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
         Err(_) => (None, ecu.counters),
     };
     let mut result = result?;
+    result.summary.link = Some(PilLink::Semihosting.name().into());
     let done = done.unwrap_or(DoneFrame {
         stack_high_water_bytes: 0,
         stack_size_bytes: 0,
@@ -493,5 +573,146 @@ pub fn run(args: &PilArgs) -> Result<()> {
             );
         }
     }
+    Ok(())
+}
+
+/// `host-sim pil --link usart`: the binary you flash in QEMU, its USART1 piped to
+/// the simulator, the plant stepped on the host's clock ([`crate::pil::usart`]).
+/// Writes what `run` writes (`summary.json` with `"link": "usart"` and `hil`,
+/// the link's figures); no `pil.json` and no comparison with the in-process run
+/// (a real-time run is not deterministic: it is said, not done).
+pub fn run_usart(args: &PilArgs) -> Result<()> {
+    let SetUp {
+        scenario,
+        nominal: vehicle,
+        plant_car,
+        mut opts,
+        ..
+    } = prepare(&args.run)?;
+    opts.cycles_per_instruction = args.cpi;
+    let usart = UsartOptions {
+        elf: args.elf.clone(),
+        qemu: args.qemu.clone(),
+        clock: args.hil_clock,
+        icount_shift: args.icount_shift,
+        work_dir: args.run.out.join("ecu"),
+        frame_timeout_s: args.frame_timeout,
+        cycles_per_instruction: args.cpi,
+        link_key: args.link_key,
+        lead_us: args.hil_lead_us,
+    };
+    if !args.no_compare {
+        eprintln!("--link usart: a real-time run is not deterministic, so it is not compared with the in-process run (the lock-step PIL is that check)");
+    }
+    let wall = std::time::Instant::now();
+    let mut ecu = UsartEcu::start(&scenario, &vehicle, &opts, &usart)?;
+    let result = timeline::run_with(&scenario, &plant_car, &opts, &mut ecu, |_, _| {});
+    let (done, ecu) = match result {
+        Ok(_) => {
+            let (done, ecu) = ecu.stop()?;
+            (Some(done), ecu)
+        }
+        Err(_) => (None, ecu),
+    };
+    let mut result = result?;
+    let done = done.unwrap_or(DoneFrame {
+        stack_high_water_bytes: 0,
+        stack_size_bytes: 0,
+        rejected_frames: 0,
+        refused: RefusalCounts::new(),
+    });
+    let wall_s = wall.elapsed().as_secs_f64();
+    ecu.write_frames()?;
+    let hil = ecu.summary(wall_s);
+    {
+        let s = &mut result.summary;
+        s.link = Some(PilLink::Usart.name().into());
+        // The host's recount of the control task's misses, from every frame.
+        s.control_deadline_misses = ecu.hil.control_deadline_misses;
+        s.control_skipped_releases = ecu.hil.control_skipped_releases;
+        s.ecu_frames_refused_auth = Some(done.refused.auth.into());
+        s.ecu_frames_refused_replay = Some(done.refused.replay.into());
+        s.ecu_frames_refused_corrupt = Some(done.refused.corrupt.into());
+        s.host_frames_refused_auth = Some(ecu.host_refused.auth.into());
+        s.host_frames_refused_replay = Some(ecu.host_refused.replay.into());
+        s.host_frames_refused_corrupt = Some(ecu.host_refused.corrupt.into());
+        s.hil = Some(hil.clone());
+    }
+    write_outputs(&args.run.out, &scenario, &result, !args.run.no_plots)?;
+    let s = &result.summary;
+    println!("{}", summary_line(&scenario, s));
+    if let Some(line) = plant_line(s) {
+        println!("{line}");
+    }
+    if !s.completed {
+        println!("stopped: {}", s.stop_reason);
+    }
+    let opt = |x: Option<u64>| x.map_or("-".to_string(), |v| v.to_string());
+    let spread = |x: &crate::closed_loop::summary::Spread| {
+        format!(
+            "min {:.0} / median {:.0} / p99 {:.0} / max {:.0} µs",
+            x.min, x.median, x.p99, x.max
+        )
+    };
+    println!(
+        "real-time HIL over the emulated USART ({}, lead {} µs): {} sensor frames sent, {} actuation frames received ({} answers, {} late), {} sensor frames missing at the ECU's release, {} refused by it; {} periods without an actuation frame, {} without an ECU release (not fed); {} plan events",
+        hil.qemu_clock,
+        hil.lead_us,
+        hil.sensor_frames_sent,
+        hil.actuation_frames_received,
+        hil.answers,
+        hil.late_answers,
+        hil.sensor_missing_at_ecu,
+        hil.sensor_refused_at_ecu,
+        hil.periods_without_frame,
+        hil.periods_not_fed,
+        hil.plan_events
+    );
+    println!(
+        "deadlines, the ECU's own count: control misses {}, skipped releases {}; plan misses {}, skipped releases {}; budget overruns control {}, plan {}; watchdog trips {} (host's recount: control misses {}, plan misses {})",
+        opt(s.ecu_control_deadline_misses),
+        opt(s.ecu_control_skipped_releases),
+        opt(s.ecu_plan_deadline_misses),
+        opt(s.ecu_skipped_releases),
+        opt(s.ecu_control_budget_overruns),
+        opt(s.ecu_plan_budget_overruns),
+        opt(s.ecu_watchdog_trips),
+        s.control_deadline_misses,
+        s.plan_deadline_misses,
+    );
+    println!(
+        "control response (ECU): {}",
+        spread(&hil.control_response_us)
+    );
+    println!("plan response (ECU): {}", spread(&hil.plan_response_us));
+    println!(
+        "round trip sensor → actuation (host): {}",
+        spread(&hil.round_trip_us)
+    );
+    println!(
+        "lead at the ECU's release: {}",
+        spread(&hil.lead_at_release_us)
+    );
+    let r = |c: RefusalCounts| {
+        format!(
+            "auth {}, replay {}, corrupt {}",
+            c.auth, c.replay, c.corrupt
+        )
+    };
+    println!(
+        "frames refused by reason: ECU {}; host {}; stack high-water {} of {} B; clock offset drift {} µs",
+        r(done.refused),
+        r(ecu.host_refused),
+        done.stack_high_water_bytes,
+        done.stack_size_bytes,
+        hil.clock_offset_drift_us
+            .map_or("-".to_string(), |d| format!("{d:.0}"))
+    );
+    println!(
+        "HIL wall time {:.1} s for {:.1} s simulated; wrote {}",
+        wall_s,
+        s.duration_s,
+        args.run.out.display()
+    );
     Ok(())
 }

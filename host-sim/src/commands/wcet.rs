@@ -144,6 +144,9 @@ pub(crate) fn pil_args(
         max_model_underestimate_pct: None,
         link_key: firmware::link::LINK_KEY,
         link_fault: None,
+        link: crate::commands::pil::PilLink::Semihosting,
+        hil_clock: Default::default(),
+        hil_lead_us: crate::pil::usart::DEFAULT_LEAD_US,
     }
 }
 

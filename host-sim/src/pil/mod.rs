@@ -55,6 +55,7 @@
 //! | [`deadlines`] | the host's count of the ECU's skipped releases and budget overruns, against the ECU's own |
 //! | [`comparison`] | the PIL run against the in-process one: the first divergence and its cause |
 //! | [`report`] | `pil.json`: what `host-sim pil` adds to `run`'s outputs |
+//! | [`usart`] | `--link usart`: the binary you flash in QEMU, its USART1 piped to the simulator, in a real-time loop (not lock-step); [`UsartEcu`](usart::UsartEcu) as the closed loop's ECU |
 //!
 //! The `pil` command is [`crate::commands::pil`].
 
@@ -96,3 +97,4 @@ pub mod frames;
 pub mod link_fault;
 pub mod qemu;
 pub mod report;
+pub mod usart;
