@@ -624,28 +624,34 @@ fn a_short_real_time_hil_over_the_emulated_usart_drives_the_car_along_its_plan()
     eprintln!("real-time HIL summary: {text}");
     assert_eq!(s.link.as_deref(), Some("usart"));
     let hil = s.hil.clone().expect("the summary's hil figures");
-    // Frames both ways. The ECU's clock may lose time against the host's on a
-    // loaded machine (fewer releases than periods: pil::usart's docs), so the
-    // bounds are fractions of the periods, far below what a run gets.
+    // Frames both ways. How many depends on the machine: the ECU's clock loses
+    // time against the host's when QEMU is late (pil::usart's docs; 37 % on a
+    // loaded CI machine), and a period in which the ECU made no release sends
+    // no sample. So the counts are checked against each other, not against the
+    // host's periods: every sensor frame sent is answered (the last may still
+    // be in flight at the end), and the run exchanged enough to mean something.
     let periods = (s.duration_s / 0.01).round() as u64;
     assert!(periods >= 590, "the run stopped early: {s:?}");
     assert!(
-        hil.sensor_frames_sent >= periods / 2,
+        hil.sensor_frames_sent >= 60,
         "{} sensor frames sent in {periods} periods",
         hil.sensor_frames_sent
     );
     assert!(
-        hil.answers >= periods / 2,
-        "{} sensor frames answered of {} sent in {periods} periods",
+        hil.answers + 1 >= hil.sensor_frames_sent,
+        "{} sensor frames answered of {} sent",
         hil.answers,
         hil.sensor_frames_sent
     );
     assert!(hil.actuation_frames_received >= hil.answers);
-    // Plans made and published by the ECU, reported in its frames.
+    // Plans made and published by the ECU, reported in its frames: one plan
+    // release per ten control releases on its clock (every release answers with
+    // an actuation frame), half of that at least.
     assert!(
-        hil.plan_events >= 20,
-        "{} plan events in {duration_s} s",
-        hil.plan_events
+        hil.plan_events * 20 >= hil.actuation_frames_received,
+        "{} plan events for {} actuation frames",
+        hil.plan_events,
+        hil.actuation_frames_received
     );
     assert!(
         s.plan_failures * 2 < hil.plan_events,
