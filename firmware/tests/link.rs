@@ -464,6 +464,11 @@ fn largest_frames_fit_max_frame_bytes() {
         assert!(n <= frame_bytes_for_payload(p));
         assert!(n <= MAX_UP_FRAME_BYTES);
         largest_up_payload = largest_up_payload.max(p);
+        // An actuation frame without a plan event within its own bound, exact.
+        if name == "Actuation(None)" {
+            assert!(n <= MAX_ACTUATION_FRAME_BYTES);
+            assert_eq!(p, MAX_ACTUATION_PAYLOAD_BYTES);
+        }
     }
     // The compile-time bounds are exact, not loose.
     assert_eq!(largest_down_payload, MAX_DOWN_PAYLOAD_BYTES);
@@ -477,6 +482,8 @@ fn largest_frames_fit_max_frame_bytes() {
     // Version 8: the freshness value and the tag, this period's sensor frame's
     // refusal and the refusal counts (341 bytes in version 7).
     assert_eq!(MAX_UP_FRAME_BYTES, 369);
+    // The plan event is 233 of them (the link's budget per plan period).
+    assert_eq!(MAX_ACTUATION_FRAME_BYTES, 136);
     assert_eq!(largest(&downs[1], Stream::Down).len(), MAX_DOWN_FRAME_BYTES);
     // What the control link carries while driving: `Sensor`, `Stop`; the largest
     // sensor frame is exactly the bound the ECU's receive loop stops at.
@@ -1635,6 +1642,71 @@ proptest! {
                 .map(|k| seqs[k]);
             prop_assert_eq!(newest_seq(&mut r, &mut rx), expected);
             from = cut;
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The USART interrupt's receive budgets (`link::usart::RxBudgets`)
+// ---------------------------------------------------------------------------
+
+#[test]
+fn the_receive_budgets_spend_the_control_periods_first_then_the_plan_periods() {
+    use firmware::link::usart::{RxBudgets, ROUTE_RX_BUDGET_BYTES, SENSOR_RX_BUDGET_BYTES};
+    let b = RxBudgets::new();
+    // Before any renewal the line takes nothing.
+    assert!(!b.spend());
+    b.renew_control();
+    b.renew_plan();
+    let both = u32::from(SENSOR_RX_BUDGET_BYTES) + u32::from(ROUTE_RX_BUDGET_BYTES);
+    assert_eq!(b.left(), both);
+    // A sensor frame's bytes come from the control period's budget: the plan
+    // period's is whole after them.
+    for _ in 0..SENSOR_RX_BUDGET_BYTES {
+        assert!(b.spend());
+    }
+    assert_eq!(b.left(), u32::from(ROUTE_RX_BUDGET_BYTES));
+    // A control release renews its own budget only.
+    b.renew_control();
+    assert_eq!(b.left(), both);
+    let mut taken = 0;
+    while b.spend() {
+        taken += 1;
+    }
+    assert_eq!(taken, both);
+    // A renewal stores, never adds: two in a row give one budget.
+    b.renew_plan();
+    b.renew_plan();
+    assert_eq!(b.left(), u32::from(ROUTE_RX_BUDGET_BYTES));
+}
+
+proptest! {
+    /// Whatever the line sends and whenever the tasks renew, the bytes taken are
+    /// at most one budget per renewal: what the response-time analysis charges
+    /// the link's interrupt (`ENTRIES_PER_BUDGET`, `ENTRIES_PER_PLAN_BUDGET`).
+    #[test]
+    fn the_receive_budgets_admit_no_more_than_their_renewals(
+        ops in proptest::collection::vec(0u8..10, 0..3_000)
+    ) {
+        use firmware::link::usart::{RxBudgets, ROUTE_RX_BUDGET_BYTES, SENSOR_RX_BUDGET_BYTES};
+        let b = RxBudgets::new();
+        let (mut control, mut plan, mut taken) = (0u64, 0u64, 0u64);
+        for op in ops {
+            match op {
+                0 => { b.renew_control(); control += 1; }
+                1 => { b.renew_plan(); plan += 1; }
+                _ => {
+                    let left = b.left();
+                    let took = b.spend();
+                    // A byte is refused only with both budgets spent.
+                    prop_assert_eq!(took, left > 0);
+                    taken += u64::from(took);
+                }
+            }
+            prop_assert!(
+                taken <= control * u64::from(SENSOR_RX_BUDGET_BYTES)
+                    + plan * u64::from(ROUTE_RX_BUDGET_BYTES)
+            );
         }
     }
 }

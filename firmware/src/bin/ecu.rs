@@ -1486,6 +1486,9 @@ mod app {
             Mono::delay_until(instant_at(monitor.release_us())).await;
             activation = activation.wrapping_add(1);
             let release_us = monitor.start();
+            // A new plan period's receive budget (a route frame's bytes).
+            #[cfg(feature = "board-usart")]
+            usart_link::rearm_route_receive();
             let planner = &mut *cx.local.planner;
             // The frames of the road announced since the last activation (by the
             // control task's sensor frames: at a common release it runs first). At

@@ -653,23 +653,29 @@ pub const MAX_DOWN_PAYLOAD_BYTES: usize = TAG_BYTES
             SENSOR_MAX_BYTES,                                 // Sensor
         ),
     );
+/// Largest postcard encoding of an [`ActuationFrame`] without its plan event
+/// (`plan: None`, its tag byte alone), bytes.
+const ACTUATION_MAX_BYTES: usize = U32_MAX_BYTES
+    + 8 * F32_BYTES
+    + 2
+    + U32_MAX_BYTES
+    + 2 * U64_MAX_BYTES
+    + U32_MAX_BYTES
+    + TIMING_MAX_BYTES
+    + U32_MAX_BYTES
+    + 1
+    + REFUSALS_MAX_BYTES
+    + 1;
 /// Largest postcard encoding of an [`Up`], bytes (an `Actuation` with a plan event).
 pub const MAX_UP_PAYLOAD_BYTES: usize = TAG_BYTES
     + max(
         max(1 + U16_MAX_BYTES, 3 * U32_MAX_BYTES + REFUSALS_MAX_BYTES), // Ready, Done
-        U32_MAX_BYTES
-            + 8 * F32_BYTES
-            + 2
-            + U32_MAX_BYTES
-            + 2 * U64_MAX_BYTES
-            + U32_MAX_BYTES
-            + TIMING_MAX_BYTES
-            + U32_MAX_BYTES
-            + 1
-            + REFUSALS_MAX_BYTES
-            + 1
-            + PLAN_EVENT_MAX_BYTES,
+        ACTUATION_MAX_BYTES + PLAN_EVENT_MAX_BYTES,
     );
+/// Largest postcard encoding of an [`Up::Actuation`] that carries no plan event,
+/// bytes (the control task's frame in the nine control periods of ten that no
+/// plan activation finishes in).
+pub const MAX_ACTUATION_PAYLOAD_BYTES: usize = TAG_BYTES + ACTUATION_MAX_BYTES;
 /// Largest encoded [`Down`] frame, bytes, delimiter included.
 pub const MAX_DOWN_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_DOWN_PAYLOAD_BYTES);
 /// Largest encoded frame of the control link while driving (a [`Down::Sensor`]),
@@ -680,6 +686,13 @@ pub const MAX_DRIVING_DOWN_FRAME_BYTES: usize =
     frame_bytes_for_payload(MAX_DRIVING_DOWN_PAYLOAD_BYTES);
 /// Largest encoded [`Up`] frame, bytes, delimiter included.
 pub const MAX_UP_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_UP_PAYLOAD_BYTES);
+/// Largest encoded [`Up::Actuation`] frame without a plan event, bytes,
+/// delimiter included. An actuation frame carries a plan event at most once per
+/// plan activation (the plan task leaves one event for the control task's next
+/// frame; a newer one replaces it), so the link carries at most
+/// [`MAX_UP_FRAME_BYTES`] − [`MAX_ACTUATION_FRAME_BYTES`] more per plan
+/// activation than this per control activation (`link::usart`'s budgets).
+pub const MAX_ACTUATION_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_ACTUATION_PAYLOAD_BYTES);
 
 /// Bytes through the CMAC for a frame of `payload` bytes: the stream's Data ID,
 /// the version byte, the payload and the freshness value (the tag's input, see
@@ -698,6 +711,7 @@ pub const MAX_DRIVING_DOWN_MAC_INPUT_BYTES: usize = mac_input_bytes(MAX_DRIVING_
 const _: () = assert!(MAX_DOWN_FRAME_BYTES <= MAX_FRAME_BYTES);
 const _: () = assert!(MAX_DRIVING_DOWN_FRAME_BYTES <= MAX_DOWN_FRAME_BYTES);
 const _: () = assert!(MAX_UP_FRAME_BYTES <= MAX_FRAME_BYTES);
+const _: () = assert!(MAX_ACTUATION_FRAME_BYTES <= MAX_UP_FRAME_BYTES);
 const _: () = assert!(PATH_CHUNK_ROWS <= u8::MAX as usize);
 const _: () = assert!(MAX_VERTICES <= u8::MAX as usize);
 

@@ -191,11 +191,16 @@ pub struct InterruptEntry {
     /// Entries that may come together besides those the inter-arrival time
     /// spaces.
     pub at_once: u64,
-    /// At most this many entries per budget window (the link's receive budget,
-    /// renewed by the control task), `null` without such a cap.
+    /// At most this many entries per budget window (the link's budget renewed
+    /// by the control task), `null` without such a cap.
     pub per_window: Option<u64>,
     /// That window, µs.
     pub window_us: Option<f64>,
+    /// And at most this many more per second budget's window (the link's budget
+    /// renewed by the plan task, and a plan event's bytes), `null` without one.
+    pub per_slow_window: Option<u64>,
+    /// That window, µs.
+    pub slow_window_us: Option<f64>,
     /// Response-time bound of one entry, µs (`null`: none within its deadline).
     pub response_time_bound_us: Option<f64>,
     /// Its deadline, µs (the link's: a byte's time, after which the next byte
@@ -225,6 +230,8 @@ fn interrupts_of(build: EcuBuild, tasks: &[TaskStatic]) -> Vec<InterruptEntry> {
                 at_once: s.burst.map_or(0, |b| b.at_once),
                 per_window: s.burst.map(|b| b.per_window),
                 window_us: s.burst.map(|b| b.window_us),
+                per_slow_window: s.burst.and_then(|b| b.slow).map(|w| w.per_window),
+                slow_window_us: s.burst.and_then(|b| b.slow).map(|w| w.window_us),
                 response_time_bound_us: task.and_then(|t| t.response_time_bound_us),
                 deadline_us: s.deadline_us,
             }
@@ -1896,8 +1903,14 @@ impl StaticAnalysis {
                     .map_or("–".to_string(), |c| c.to_string()),
                 i.min_interarrival_us,
                 i.at_once,
-                match (i.per_window, i.window_us) {
-                    (Some(n), Some(w)) => format!("{n} / {w:.0}"),
+                match (
+                    i.per_window,
+                    i.window_us,
+                    i.per_slow_window,
+                    i.slow_window_us
+                ) {
+                    (Some(n), Some(w), Some(m), Some(v)) => format!("{n} / {w:.0} + {m} / {v:.0}"),
+                    (Some(n), Some(w), _, _) => format!("{n} / {w:.0}"),
                     _ => "–".to_string(),
                 },
                 i.response_time_bound_us
@@ -2267,6 +2280,11 @@ mod tests {
             Some(firmware::link::usart::ENTRIES_PER_BUDGET)
         );
         assert_eq!(l.window_us, Some(10_000.0));
+        assert_eq!(
+            l.per_slow_window,
+            Some(firmware::link::usart::ENTRIES_PER_PLAN_BUDGET)
+        );
+        assert_eq!(l.slow_window_us, Some(100_000.0));
         // SysTick missed its deadline here: no bound, not a made-up one.
         assert_eq!(board[0].handler, "SysTick");
         assert_eq!(board[0].response_time_bound_us, None);

@@ -5,7 +5,7 @@
 //! numbers come from the firmware's own constants. The targets of its indirect
 //! calls are read from the binary ([`super::indirect`]).
 
-use super::rta::Burst;
+use super::rta::{Burst, Slow};
 use super::stack::PriorityLevel;
 use firmware::link::usart;
 use serde::Serialize;
@@ -101,10 +101,10 @@ impl EcuBuild {
     /// (the lock-step build leaves it at the hardware's most urgent level; the
     /// flashed build sets [`usart::SYSTICK_PRIORITY`]); in the flashed build,
     /// USART1's interrupt above all ([`usart::LINK_INTERRUPT_PRIORITY`]): an
-    /// entry a byte, at most [`usart::ENTRIES_PER_BUDGET`] per receive budget
-    /// (one a control period, [`usart::EXTRA_BUDGETS_PER_WINDOW`] more in any
-    /// window), its deadline a byte's time (a byte not read by then is overrun by
-    /// the next).
+    /// entry a byte, at most [`usart::ENTRIES_PER_BUDGET`] per control period's
+    /// budget and [`usart::ENTRIES_PER_PLAN_BUDGET`] more per plan period's
+    /// ([`usart::EXTRA_BUDGETS_PER_WINDOW`] more of each in any window), its
+    /// deadline a byte's time (a byte not read by then is overrun by the next).
     pub fn schedule(self) -> Vec<Scheduled> {
         let control = firmware::tasks::CONTROL_PERIOD_US as f64;
         let plan = firmware::tasks::PLAN_PERIOD_US as f64;
@@ -138,6 +138,13 @@ impl EcuBuild {
                             // The control task renews the budget at its release.
                             renewer_priority: Some(CONTROL_PRIORITY),
                             at_once: usart::ENTRIES_AT_ONCE,
+                            // The route frame's bytes and a plan event's, once
+                            // a plan period.
+                            slow: Some(Slow {
+                                per_window: usart::ENTRIES_PER_PLAN_BUDGET,
+                                window_us: plan,
+                                extra_windows: usart::EXTRA_BUDGETS_PER_WINDOW,
+                            }),
                         }),
                     },
                     task("control", CONTROL_PRIORITY, control),
@@ -296,13 +303,21 @@ mod tests {
         assert_eq!(lock.preemptions_of("control"), 10);
         assert_eq!(lock.preemptions_of("plan"), 110);
         assert_eq!(lock.ticks_of("plan"), 100);
-        // Flashed: two receive budgets within one control activation (the one in
-        // force, its own renewal), twelve within a plan period (one a control
-        // period, the one in force, a renewal early by the control task's
-        // jitter); within SysTick's 1 ms the line's spacing binds: 185 + 9.
+        // Flashed: within one control activation two control budgets (the one in
+        // force, its own renewal) and three plan budgets (one a plan period, the
+        // one in force, one early by the plan task's jitter) would allow more
+        // than the line's spacing does (1,844 entries in 10 ms and 11 at once);
+        // within a plan period twelve control budgets (one a control period, the
+        // one in force, a renewal early by the control task's jitter) and three
+        // plan budgets; within SysTick's 1 ms the line's spacing binds: 185 + 11.
         let per = usart::ENTRIES_PER_BUDGET;
-        assert_eq!(board.preemptions_of("control"), 10 + 2 * per);
-        assert_eq!(board.preemptions_of("plan"), 110 + 12 * per);
+        let per_plan = usart::ENTRIES_PER_PLAN_BUDGET;
+        assert!(2 * per + 3 * per_plan > 1_844 + usart::ENTRIES_AT_ONCE);
+        assert_eq!(
+            board.preemptions_of("control"),
+            10 + 1_844 + usart::ENTRIES_AT_ONCE
+        );
+        assert_eq!(board.preemptions_of("plan"), 110 + 12 * per + 3 * per_plan);
         assert_eq!(
             board.preemptions_of("systick"),
             185 + usart::ENTRIES_AT_ONCE

@@ -77,8 +77,9 @@ pub struct Response {
 pub const PAST_DEADLINE_FACTOR: f64 = 10.0;
 
 /// A rate limit: at most `per_window · (⌈r / window_us⌉ + extra_windows)`
-/// activations in any window of `r` µs, and at most `⌈r / T⌉ + at_once` by the
-/// activity's period `T`.
+/// activations in any window of `r` µs, plus as many again by the [`Slow`]
+/// budget if there is one, and at most `⌈r / T⌉ + at_once` by the activity's
+/// period `T`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Burst {
     /// Activations per budget window at most.
@@ -94,6 +95,22 @@ pub struct Burst {
     pub renewer_priority: Option<u8>,
     /// Activations that may come together besides those the period spaces.
     pub at_once: u64,
+    /// A second budget, renewed at a longer period, whose activations add to
+    /// the first's (a link's bytes that come once a plan period); `None`: the
+    /// first alone.
+    pub slow: Option<Slow>,
+}
+
+/// The second budget of a [`Burst`]: at most `per_window · (⌈r / window_us⌉ +
+/// extra_windows)` activations more in any window of `r` µs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Slow {
+    /// Activations per budget window at most.
+    pub per_window: u64,
+    /// The budget window, µs.
+    pub window_us: f64,
+    /// Budgets a window can draw on besides one per `window_us` it spans.
+    pub extra_windows: u64,
 }
 
 /// The most activations, in a window of `r` µs of the response of an activity
@@ -113,7 +130,10 @@ pub fn arrivals_in(period_us: f64, burst: Option<Burst>, r: f64, victim: u8) -> 
             } else {
                 b.extra_windows
             };
-            by_period.min(b.per_window as f64 * ((r / b.window_us).ceil() + extra as f64))
+            let slow = b.slow.filter(|s| s.window_us > 0.0).map_or(0.0, |s| {
+                s.per_window as f64 * ((r / s.window_us).ceil() + s.extra_windows as f64)
+            });
+            by_period.min(b.per_window as f64 * ((r / b.window_us).ceil() + extra as f64) + slow)
         }
         _ => by_period,
     }
@@ -291,6 +311,7 @@ mod tests {
             extra_windows: 0,
             renewer_priority: None,
             at_once: 0,
+            slow: None,
         })));
         let capped = response_times(&s, 168e6);
         assert!(capped.iter().all(|x| x.meets_deadline));
@@ -313,6 +334,7 @@ mod tests {
             extra_windows: 2,
             renewer_priority: Some(2),
             at_once: 4,
+            slow: None,
         };
         // No period: the budget alone; 1 µs and 10 ms hold three budgets, 10.001 ms four.
         assert_eq!(arrivals_in(0.0, Some(b), 1.0, 1), 300.0);
@@ -323,6 +345,39 @@ mod tests {
         // A period caps short windows, with what may come at once.
         assert_eq!(arrivals_in(10.0, Some(b), 25.0, 1), 7.0);
         assert_eq!(arrivals_in(10.0, None, 25.0, 1), 3.0);
+    }
+
+    #[test]
+    fn a_slow_budget_adds_its_own_windows_to_the_first_budgets() {
+        let b = Burst {
+            per_window: 100,
+            window_us: 10_000.0,
+            extra_windows: 2,
+            renewer_priority: Some(2),
+            at_once: 4,
+            slow: Some(Slow {
+                per_window: 50,
+                window_us: 100_000.0,
+                extra_windows: 2,
+            }),
+        };
+        // 100 ms: 12 fast budgets (10 + 2) and 3 slow ones (1 + 2).
+        assert_eq!(arrivals_in(0.0, Some(b), 100_000.0, 1), 1_200.0 + 150.0);
+        // 100.001 ms: one more of each.
+        assert_eq!(arrivals_in(0.0, Some(b), 100_001.0, 1), 1_300.0 + 200.0);
+        // The renewer of the fast budget sees one fast budget less, all slow ones.
+        assert_eq!(arrivals_in(0.0, Some(b), 10_000.0, 2), 200.0 + 150.0);
+        // Against one budget of the combined size a period, a plan period holds
+        // 9 × 50 fewer.
+        let one = Burst {
+            per_window: 150,
+            slow: None,
+            ..b
+        };
+        assert_eq!(
+            arrivals_in(0.0, Some(one), 100_000.0, 1) - arrivals_in(0.0, Some(b), 100_000.0, 1),
+            9.0 * 50.0
+        );
     }
 
     #[test]

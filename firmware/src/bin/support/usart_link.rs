@@ -16,10 +16,12 @@
 //!   ([`Port::sort`], [`firmware::link::demux`]: sensor and stop frames for
 //!   itself, the windows of the road into the plan task's queue), as the
 //!   lock-step build's two host files do. The interrupt takes at most
-//!   [`RX_BUDGET_BYTES`] per control period: past them it stops reading (on
+//!   [`firmware::link::usart::SENSOR_RX_BUDGET_BYTES`] per control period and
+//!   [`firmware::link::usart::ROUTE_RX_BUDGET_BYTES`] per plan period: past them it stops reading (on
 //!   silicon the peripheral then drops bytes, with an overrun; QEMU holds them
 //!   back), so its load is bounded whatever the other end sends; the control
-//!   task re-arms it at each release ([`rearm_receive`]).
+//!   task renews its budget at each release ([`rearm_receive`]), the plan task
+//!   its own ([`rearm_route_receive`]).
 //! * **Faults and the end of a run** ([`Port::take_over`], [`exit`]): interrupts off,
 //!   the bytes still queued sent by polling, then the caller's frame by polling,
 //!   every wait bounded; no semihosting, nothing that can trap; then the core
@@ -28,12 +30,14 @@
 //! On a car the same frames would go over CAN-FD (docs/board.md, "Over CAN-FD on
 //! a car").
 
-use core::sync::atomic::{AtomicPtr, AtomicU16, Ordering};
+use core::sync::atomic::{AtomicPtr, Ordering};
 
 use cortex_m::peripheral::NVIC;
 use firmware::clock_tree;
 use firmware::link::demux::{Channel, Demux};
-use firmware::link::usart::{BAUD, LINK_INTERRUPT_PRIORITY, RX_BUDGET_BYTES, TX_BYTES_PER_ENTRY};
+use firmware::link::usart::{
+    RxBudgets, BAUD, LINK_INTERRUPT_PRIORITY, RX_BUDGET_BYTES, TX_BYTES_PER_ENTRY,
+};
 use firmware::link::{MAX_DOWN_FRAME_BYTES, MAX_DRIVING_DOWN_FRAME_BYTES, MAX_UP_FRAME_BYTES};
 use heapless::spsc::{Consumer, Producer, Queue};
 use heapless::Deque;
@@ -55,8 +59,10 @@ pub const BRR: u32 = brr(APB2_HZ);
 const _: () = assert!(BRR == 91);
 
 /// The received bytes the interrupt queues for the control task to sort, bytes
-/// (it holds one less): a period's receive budget. The control task sorts them
-/// at its release, before it renews the budget, so no more arrive in between.
+/// (it holds one less): both receive budgets, what arrives between two of the
+/// control task's releases from a host that sends as it should. The control
+/// task sorts them at its release, before it renews its budget; a byte that
+/// finds the queue full is dropped and counted.
 pub const RAW_RX_BYTES: usize = RX_BUDGET_BYTES as usize + 1;
 
 /// The control task's sorted bytes, bytes: a sensor frame and the start of the
@@ -89,8 +95,9 @@ pub const SYSTICK_PRIORITY: u8 = (16 - firmware::link::usart::SYSTICK_PRIORITY) 
 /// silicon; QEMU's transmitter is always ready.
 const POLLS_PER_BYTE: u32 = 100_000;
 
-/// Receive budget left in this control period, bytes.
-static RX_LEFT: AtomicU16 = AtomicU16::new(0);
+/// The receive budgets left, bytes: the control period's, then the plan
+/// period's.
+static RX_BUDGETS: RxBudgets = RxBudgets::new();
 
 /// The interrupt handler's state (null until [`open`] stored it).
 static ISR: AtomicPtr<UsartIsr> = AtomicPtr::new(core::ptr::null_mut());
@@ -331,7 +338,8 @@ impl Port {
                 SYSTICK_PRIORITY,
             );
         }
-        // The line unmasked with the first period's budget.
+        // The line unmasked with the first periods' budgets.
+        RX_BUDGETS.renew_plan();
         rearm_receive();
     }
 
@@ -361,15 +369,16 @@ pub struct UsartIsr {
 
 impl UsartIsr {
     /// One interrupt: at most one byte received (queued for the control task to
-    /// sort, within the period's budget) and [`TX_BYTES_PER_ENTRY`] sent; the
-    /// transmit interrupt off when the queue is empty, the receive one off (and
-    /// the line masked until the next release) when the budget is spent.
+    /// sort, within the control period's budget, else the plan period's) and
+    /// [`TX_BYTES_PER_ENTRY`] sent; the transmit interrupt off when the queue is
+    /// empty, the receive one off (and the line masked until a task renews a
+    /// budget) when both budgets are spent.
     fn on_interrupt(&mut self) {
         let u = usart();
         let sr = u.sr.read();
         if sr.rxne().bit_is_set() || sr.ore().bit_is_set() {
-            let left = RX_LEFT.load(Ordering::Relaxed);
-            if left == 0 {
+            // The control period's budget first, then the plan period's.
+            if !RX_BUDGETS.spend() {
                 // Spent: leave the byte (QEMU holds the rest back; silicon drops
                 // what comes meanwhile) until the next release re-arms it. The
                 // line is masked too: QEMU 7.2's USART lowers its request only
@@ -378,7 +387,6 @@ impl UsartIsr {
                 cr1_bit(Cr1Bit::RxneIe, false);
                 NVIC::mask(pac::Interrupt::USART1);
             } else {
-                RX_LEFT.store(left - 1, Ordering::Relaxed);
                 let byte = u.dr.read().bits() as u8;
                 let full = self.raw.enqueue(byte).is_err();
                 self.dropped = self.dropped.wrapping_add(u32::from(full));
@@ -425,10 +433,23 @@ fn USART1() {
     }
 }
 
-/// The start of a control period: the receive budget renewed and the receive
-/// interrupt on.
+/// The start of a control period: the control task's receive budget renewed
+/// and the receive interrupt on.
 pub fn rearm_receive() {
-    RX_LEFT.store(RX_BUDGET_BYTES, Ordering::Relaxed);
+    RX_BUDGETS.renew_control();
+    receive_on();
+}
+
+/// The start of a plan period: the plan task's receive budget renewed and the
+/// receive interrupt on.
+pub fn rearm_route_receive() {
+    RX_BUDGETS.renew_plan();
+    receive_on();
+}
+
+/// The receive interrupt on, and the line unmasked (after the handler masked it
+/// with both budgets spent).
+fn receive_on() {
     cr1_bit(Cr1Bit::RxneIe, true);
     // SAFETY: the handler's state is in place (`Port::start` comes first) and it
     // touches no RTIC resource.
