@@ -71,7 +71,7 @@ fn brakes_weaker_or_stronger_than_commanded_are_not_slip() {
         assert_eq!(drop, "false", "gain {gain}: μ̂ min {mu_min}");
         let mu_min: f64 = mu_min.parse().unwrap();
         assert!(mu_min >= 0.99, "gain {gain}: μ̂ min {mu_min}");
-        // The gain found within 10 % (issue 40's goal) by the end of the second
+        // The gain found within 10 % (the estimator's goal) by the end of the second
         // lap, and known to be.
         let (b, u_b): (f64, f64) = (b.parse().unwrap(), u_b.parse().unwrap());
         assert!((b - gain).abs() <= 0.1 * gain, "gain {gain}: b = {b}");

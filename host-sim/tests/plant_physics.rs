@@ -11,7 +11,7 @@ use host_sim::model::tire::{self, TireParams};
 use host_sim::model::vehicle::{VehicleParams, G};
 use indicatif::ProgressBar;
 
-/// The light car of issue 8: 1,090 kg, 2.58 m wheelbase, centre of gravity 0.57 m
+/// A light car: 1,090 kg, 2.58 m wheelbase, centre of gravity 0.57 m
 /// high, a tyre of peak lateral friction 1.05 whatever the load and without the
 /// book tyre's ply-steer offset (so that 1.05 is the whole lateral grip).
 fn light_car() -> VehicleParams {

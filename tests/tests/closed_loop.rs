@@ -117,7 +117,7 @@ fn paper_track_without_obstacles_mu_1() {
     );
     // V_max = min(8, μg)·T_H = 25.6 m/s is nearly reached on the longest straight
     // (24.2 m/s: the traction limit counts the load the car's own acceleration
-    // moves off the driven axle since stop 35; 24.5 m/s before).
+    // moves off the driven axle; 24.5 m/s without it).
     assert!(
         s.max_speed_mps > 0.94 * 25.6,
         "top speed {}",
