@@ -148,6 +148,20 @@ pub const PATH_CAP: usize = firmware::tasks::ECU_PATH_ROWS;
 /// Core clock, Hz (STM32F405 at 168 MHz; QEMU's SysTick counts at this rate of
 /// virtual time).
 pub const SYSCLK_HZ: u32 = firmware::timing::ECU_CLOCK_HZ;
+/// The plan task's caps this binary was built with, for the timing report
+/// (`host-sim wcet` reads them from the ELF): `QP_MAX_ITER` iterations,
+/// `COLD_START_PASSES` passes, `QP_MAX_REFACTORIZATIONS` refactorizations, a
+/// working set of `WS` rows, four little-endian `u32`. In the `.ecu_caps`
+/// section, which `memory.x` keeps out of flash and RAM.
+#[used]
+#[link_section = ".ecu_caps"]
+static ECU_CAPS: [u32; 4] = [
+    firmware::mpc::QP_MAX_ITER,
+    firmware::mpc::COLD_START_PASSES as u32,
+    firmware::mpc::QP_MAX_REFACTORIZATIONS,
+    firmware::mpc::WS as u32,
+];
+
 /// Monotonic tick rate, Hz (1 ms ticks).
 const MONO_HZ: u32 = 1_000;
 /// SysTick reload: core clock ticks per monotonic tick.

@@ -36,7 +36,7 @@ use super::cpi::CpiReport;
 use super::ecu_app::{ecu_once, EcuBuild};
 use super::stack::{PriorityLevel, StackReport, StackRoot};
 use anyhow::{bail, ensure, Context, Result};
-use elf::{elf_memory, elf_symbols, ElfMemory, ElfSymbols};
+use elf::{elf_caps, elf_memory, elf_symbols, Caps, ElfMemory, ElfSymbols};
 use goals::{goals, Goal};
 use pil_runs::{load_pil_run, PilRun, PIL_COMMAND};
 use serde::Serialize;
@@ -341,6 +341,8 @@ pub struct WcetReport {
     pub memory: MemoryReport,
     /// Allocator and software-double symbols.
     pub symbols: ElfSymbols,
+    /// The plan task's caps, read from the binary (`null`: an ELF without them).
+    pub caps: Option<Caps>,
     /// The PIL runs the observations come from.
     pub runs: Vec<RunEntry>,
     /// Deepest painted-stack use over the runs, in bytes.
@@ -373,6 +375,7 @@ pub fn build_report(inputs: &ReportInputs) -> Result<WcetReport> {
     .with_context(|| format!("stack bound of {}", inputs.elf.display()))?;
     let mut report = assemble_report(inputs, &runs, memory, symbols, stack)?;
     report.clock = super::clock::ClockReport::of_elf(&inputs.elf)?;
+    report.caps = elf_caps(&inputs.elf)?;
     Ok(report)
 }
 
@@ -469,6 +472,8 @@ pub fn assemble_report(
         coverage: inputs.statics.coverage.clone(),
         memory,
         symbols,
+        // Read from the ELF by `build_report`.
+        caps: None,
         runs: run_entries,
         stack_high_water_bytes: high_water,
         goals,
@@ -1178,6 +1183,44 @@ active_constraints,max_validity_slack_rad";
             !s.soft_double,
             "soft double linked: {:?}",
             s.soft_double_symbols
+        );
+        // The caps the binary says it was built with are the firmware's.
+        let caps = super::elf::elf_caps(&elf)?
+            .ok_or_else(|| anyhow::anyhow!("the ECU binary has no .ecu_caps section"))?;
+        assert_eq!(
+            caps,
+            super::elf::Caps {
+                qp_max_iterations: firmware::mpc::QP_MAX_ITER,
+                cold_start_passes: u32::from(firmware::mpc::COLD_START_PASSES),
+                qp_max_refactorizations: firmware::mpc::QP_MAX_REFACTORIZATIONS,
+                working_set: firmware::mpc::WS as u32,
+            }
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn caps_are_four_little_endian_words_and_any_other_length_is_refused() -> Result<()> {
+        let mut bytes = Vec::new();
+        for w in [67u32, 1, 1, 48] {
+            bytes.extend_from_slice(&w.to_le_bytes());
+        }
+        let c = super::elf::caps_of(&bytes)?;
+        assert_eq!(
+            (
+                c.qp_max_iterations,
+                c.cold_start_passes,
+                c.qp_max_refactorizations,
+                c.working_set
+            ),
+            (67, 1, 1, 48)
+        );
+        let short = super::elf::caps_of(&bytes[..12]);
+        assert!(
+            short
+                .as_ref()
+                .is_err_and(|e| e.to_string().contains("12 bytes")),
+            "{short:?}"
         );
         Ok(())
     }

@@ -108,6 +108,60 @@ pub fn elf_memory(elf: &Path) -> Result<ElfMemory> {
     Ok(memory)
 }
 
+/// The section the ECU binary keeps its caps in (`firmware/src/bin/ecu.rs`'s
+/// `ECU_CAPS`, not loaded: `memory.x`).
+pub const CAPS_SECTION: &str = ".ecu_caps";
+
+/// The plan task's caps as the ECU binary was built with them: the flow facts
+/// its static bound rests on, read from the binary itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Caps {
+    /// QP iterations per activation, summed over its passes, iterations.
+    pub qp_max_iterations: u32,
+    /// Linearise–solve passes on a cold start, passes.
+    pub cold_start_passes: u32,
+    /// QP refactorizations per activation, refactorizations.
+    pub qp_max_refactorizations: u32,
+    /// The QP's working set, rows.
+    pub working_set: u32,
+}
+
+/// The caps of a [`CAPS_SECTION`]'s bytes: four little-endian `u32` in
+/// [`Caps`]' order.
+pub fn caps_of(bytes: &[u8]) -> Result<Caps> {
+    ensure!(
+        bytes.len() == 16,
+        "{CAPS_SECTION} holds {} bytes, not the 16 of four u32: a binary of another version of firmware/src/bin/ecu.rs",
+        bytes.len()
+    );
+    let word = |k: usize| {
+        let mut w = [0u8; 4];
+        w.copy_from_slice(&bytes[4 * k..4 * k + 4]);
+        u32::from_le_bytes(w)
+    };
+    Ok(Caps {
+        qp_max_iterations: word(0),
+        cold_start_passes: word(1),
+        qp_max_refactorizations: word(2),
+        working_set: word(3),
+    })
+}
+
+/// The ECU binary's caps ([`CAPS_SECTION`]); `None` for an ELF without the
+/// section (not the ECU application).
+pub fn elf_caps(elf: &Path) -> Result<Option<Caps>> {
+    use object::{Object, ObjectSection};
+    let data = read_elf(elf)?;
+    let file = parse_elf(elf, &data)?;
+    let Some(section) = file.section_by_name(CAPS_SECTION) else {
+        return Ok(None);
+    };
+    let bytes = section
+        .data()
+        .map_err(|e| anyhow::anyhow!("{}: {CAPS_SECTION}: {e}", elf.display()))?;
+    caps_of(bytes).map(Some)
+}
+
 /// Allocator and software-double symbols of an ELF.
 pub fn elf_symbols(elf: &Path) -> Result<ElfSymbols> {
     use object::{Object, ObjectSymbol};

@@ -216,7 +216,15 @@ fn render_memory(s: &mut String, r: &WcetReport) -> std::fmt::Result {
             "absent"
         },
         r.symbols.soft_double_symbols
-    )
+    )?;
+    match r.caps {
+        Some(c) => writeln!(
+            s,
+            "Caps the binary was built with (its `.ecu_caps` section): {} QP iterations, {} cold-start pass(es), {} refactorization(s) per plan activation, a working set of {} rows.\n",
+            c.qp_max_iterations, c.cold_start_passes, c.qp_max_refactorizations, c.working_set
+        ),
+        None => writeln!(s, "Caps: the ELF has no `.ecu_caps` section.\n"),
+    }
 }
 
 fn render_stack(s: &mut String, r: &WcetReport) -> std::fmt::Result {
