@@ -484,6 +484,39 @@ fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
     );
 }
 
+/// The control task's activations that carry no plan event (all but one per plan
+/// activation) are bounded apart, with the frame's and the CMAC's byte caps at an
+/// actuation frame's: the event's bytes through the CMAC are AES blocks the light
+/// bound does not hold, and the report says what the light activations leave out.
+#[test]
+#[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
+fn a_control_activation_without_a_plan_event_is_bounded_apart() {
+    use firmware::link;
+    let elf = &ecu_elf();
+    let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    let control = a.tasks.iter().find(|t| t.name == "control").unwrap();
+    let full = control.static_bound_cycles.unwrap();
+    let light = control.light_bound_cycles.unwrap();
+    // At least one AES block of at least 2,000 cycles per 16 bytes of the event.
+    let blocks = (link::MAX_UP_MAC_INPUT_BYTES
+        - link::mac_input_bytes(link::MAX_ACTUATION_PAYLOAD_BYTES))
+        / 16;
+    assert!(blocks >= 10, "{blocks}");
+    assert!(
+        light + blocks as u64 * 2_000 <= full,
+        "light {light}, full {full}, {blocks} blocks"
+    );
+    // No other task or section has light activations.
+    assert!(a
+        .tasks
+        .iter()
+        .filter(|t| t.name != "control")
+        .all(|t| t.light_bound_cycles.is_none()));
+    assert!(a.markdown().contains(&format!(
+        "activations without a plan event in its frame: {light} cycles"
+    )));
+}
+
 /// The QP solver's annotations are read from its own crate (`qp/src`): without its
 /// iteration cap, the solver's main loop is unbounded.
 #[test]

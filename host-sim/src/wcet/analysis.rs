@@ -126,6 +126,12 @@ pub struct TaskStatic {
     pub response_time_past_deadline_us: Option<f64>,
     /// Deadline (= period) of a task, µs; `None` for a section.
     pub deadline_us: Option<f64>,
+    /// A task whose activations are not all alike
+    /// ([`super::ecu_app::LightActivations`]): the bound of those without the
+    /// extra work, cycles (`None`: every activation charged the static bound).
+    pub light_bound_cycles: Option<u64>,
+    /// What those activations leave out.
+    pub light_without: Option<String>,
 }
 
 /// The whole static analysis.
@@ -345,6 +351,13 @@ pub fn analyse(
     };
     let mut units = Units::default();
     units.bound_all(elf, &model, &irreducible, &bounds, &retries)?;
+    for light in build.light_activations() {
+        let cycles = light_bound(&binary, &all_loops, sources, build, &light)?;
+        if let Some(t) = units.tasks.iter_mut().find(|t| t.name == light.task) {
+            t.light_bound_cycles = cycles.zip(t.static_bound_cycles).map(|(l, c)| l.min(c));
+            t.light_without = Some(light.without.to_string());
+        }
+    }
     let (critical_sections, task_reach) = bound_critical_sections(&model, &retries);
     bound_response_times(&model, &mut units.tasks, &critical_sections, &task_reach);
     let mut observed = Observed::default();
@@ -385,6 +398,60 @@ pub fn analyse(
         unresolved_indirect_calls: unresolved,
         recursions,
     })
+}
+
+/// The bound of `light`'s task over its light activations: the loop bounds and
+/// the IPET again, with the annotations evaluated under the tighter constants.
+/// `None` when the task has no bound.
+fn light_bound(
+    binary: &Binary,
+    all_loops: &[Vec<Loop>],
+    sources: &[annotations::SourceDir],
+    build: EcuBuild,
+    light: &super::ecu_app::LightActivations,
+) -> Result<Option<u64>> {
+    let mut constants = annotations::firmware_constants();
+    for &(name, value) in &light.constants {
+        if constants.insert(name, value).is_none() {
+            anyhow::bail!(
+                "the light activations of `{}` bind `{name}`, which is not one of the firmware's constants",
+                light.task
+            );
+        }
+    }
+    let annotations = annotations::scan_sources_with(sources, &constants)
+        .map_err(|e| anyhow::anyhow!("loop annotations: {e}"))?;
+    let dependency_facts = annotations::dependency_facts_with(&constants);
+    let index = AnnotationIndex::new(&annotations, &dependency_facts)?;
+    let copies = copy_sizes(
+        build,
+        &binary.program,
+        &binary.ctx,
+        &annotations,
+        &index.counter_groups,
+    );
+    let bounds = LoopBinder::new(binary, &index, &copies, build).bind_all(all_loops)?;
+    let retries = retries_per_activation(build, &annotations);
+    let model = Model {
+        program: &binary.program,
+        memory: &binary.memory,
+        ctx: &binary.ctx,
+        all_loops,
+        facts: &bounds.facts,
+        copies: &copies,
+        build,
+    };
+    let Some(&(_, symbol)) = build.tasks().iter().find(|(n, _)| *n == light.task) else {
+        anyhow::bail!("no task `{}` in the {} build", light.task, build.name());
+    };
+    let Some(&root) = binary.program.find(symbol).first() else {
+        anyhow::bail!("no function `{symbol}` (task `{}`)", light.task);
+    };
+    let preemptions = retries
+        .iter()
+        .find(|(t, _)| t == light.task)
+        .map_or_else(ipet::Retries::default, |r| r.1);
+    Ok(ipet_figures(&model, root, preemptions).cycles)
 }
 
 /// The ECU program as the analysis reads it from the ELF: its functions' graphs,
@@ -1220,6 +1287,8 @@ impl Units {
                     .iter()
                     .find(|t| t.name == name)
                     .map(|t| t.deadline_us),
+                light_bound_cycles: None,
+                light_without: None,
             });
         }
         Ok(())
@@ -1464,6 +1533,19 @@ fn bound_response_times(
             });
         (lines * program.line_fetch_cycles) as f64
     };
+    // A task whose light activations have a bound of their own.
+    let light_of = |n: &str| {
+        let light = model
+            .build
+            .light_activations()
+            .into_iter()
+            .find(|l| l.task == n)?;
+        let cycles = tasks
+            .iter()
+            .find(|t: &&TaskStatic| t.name == n)?
+            .light_bound_cycles?;
+        Some(light.heavy(cycles))
+    };
     let mut activities = Vec::new();
     let mut complete = true;
     for scheduled in model.build.schedule() {
@@ -1488,6 +1570,7 @@ fn bound_response_times(
             refill_cycles: refill_of(n),
             burst: scheduled.burst,
             critical_sections: sections,
+            heavy: light_of(n),
         });
     }
     if complete {
@@ -1880,6 +1963,19 @@ impl StaticAnalysis {
                 t.refused.as_deref().unwrap_or("")
             );
         }
+        for t in &self.tasks {
+            if let (Some(light), Some(without)) = (t.light_bound_cycles, &t.light_without) {
+                let _ = writeln!(
+                    s,
+                    "\n`{}`'s activations without {without}: {light} cycles. The response-time \
+                     analysis charges each of its preemptions that, and the difference to {} only \
+                     as often as such an activation can come (`wcet::rta::Heavy`).",
+                    t.name,
+                    t.static_bound_cycles
+                        .map_or("its bound".to_string(), |c| c.to_string())
+                );
+            }
+        }
         let _ = writeln!(
             s,
             "\nClock: {} Hz, {} (set by `{}`).\n",
@@ -2214,6 +2310,8 @@ mod tests {
             response_time_bound_us: bound,
             response_time_past_deadline_us: past,
             deadline_us: deadline,
+            light_bound_cycles: None,
+            light_without: None,
         }
     }
 

@@ -225,6 +225,16 @@ pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
 /// matched) and the line the analysis reports for the loop, with why it holds.
 /// Checked against the traces like the firmware's annotations.
 pub fn dependency_facts() -> Vec<Annotation> {
+    dependency_facts_with(&firmware_constants())
+}
+
+/// [`dependency_facts`] with the firmware's `constants` bound as given (a task's
+/// light activations, [`super::ecu_app::LightActivations`]).
+pub fn dependency_facts_with(constants: &BTreeMap<&'static str, u64>) -> Vec<Annotation> {
+    let max_up_frame_bytes = constants
+        .get("MAX_UP_FRAME_BYTES")
+        .copied()
+        .unwrap_or(firmware::link::MAX_UP_FRAME_BYTES as u64);
     // The ECU app's tasks waiting on the monotonic: `control` and `plan`.
     const ASYNC_TASKS: u64 = 2;
     let fact = |file: &str, line: u32, bound: u64, why: &str| Annotation {
@@ -278,7 +288,7 @@ pub fn dependency_facts() -> Vec<Annotation> {
             ..fact(
                 "postcard-1.2.0/src/ser/flavors.rs",
                 123,
-                firmware::link::MAX_UP_FRAME_BYTES as u64,
+                max_up_frame_bytes,
                 "try_extend pushes byte by byte into the link's frame flavor, which refuses the bytes past its MAX_UP_FRAME_BYTES buffer; one frame sent per activation",
             )
         },
@@ -575,7 +585,15 @@ pub fn firmware_source_path(file: &str) -> Option<&str> {
 /// The annotations of every `.rs` file under each folder of `sources`, files
 /// reported under its label (`firmware/src/...`, `qp/src/...`).
 pub fn scan_sources(sources: &[SourceDir]) -> Result<Vec<Annotation>, String> {
-    let constants = firmware_constants();
+    scan_sources_with(sources, &firmware_constants())
+}
+
+/// [`scan_sources`] with the firmware's `constants` bound as given (a task's
+/// light activations, [`super::ecu_app::LightActivations`]).
+pub fn scan_sources_with(
+    sources: &[SourceDir],
+    constants: &BTreeMap<&'static str, u64>,
+) -> Result<Vec<Annotation>, String> {
     let mut out = Vec::new();
     for source in sources {
         let root = source.dir.as_path();
@@ -599,7 +617,7 @@ pub fn scan_sources(sources: &[SourceDir]) -> Result<Vec<Annotation>, String> {
                 .strip_prefix(root)
                 .map(|r| format!("{}/{}", source.label, r.display()))
                 .unwrap_or_else(|_| p.display().to_string());
-            out.extend(parse_source(&rel, &text, &constants)?);
+            out.extend(parse_source(&rel, &text, constants)?);
         }
     }
     Ok(out)

@@ -28,6 +28,45 @@ pub enum EcuBuild {
 
 /// The control task's priority (RTIC's logical numbering), in both builds.
 const CONTROL_PRIORITY: u8 = 2;
+/// The plan task's priority, in both builds.
+const PLAN_PRIORITY: u8 = 1;
+
+/// A task whose activations are not all alike: most are *light*, bounded from
+/// the same root with some of the firmware's constants bound tighter (the
+/// annotations that name them evaluated again), and at most `per_window` per
+/// window of `window_us` (and `extra_windows` more) carry the rest
+/// ([`super::rta::Heavy`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LightActivations {
+    /// The task.
+    pub task: &'static str,
+    /// What its light activations leave out, for the report.
+    pub without: &'static str,
+    /// The constants bound tighter in a light activation: name and value.
+    pub constants: Vec<(&'static str, u64)>,
+    /// Heavy activations per window at most.
+    pub per_window: u64,
+    /// The window, µs.
+    pub window_us: f64,
+    /// Windows a window of any length draws on besides one per `window_us`.
+    pub extra_windows: u64,
+    /// The priority of the task that makes the heavy activations' extra work.
+    pub producer_priority: Option<u8>,
+}
+
+impl LightActivations {
+    /// As the response-time analysis charges it, with the light activations'
+    /// bound, cycles.
+    pub fn heavy(&self, light_cycles: u64) -> super::rta::Heavy {
+        super::rta::Heavy {
+            light_cycles: light_cycles as f64,
+            per_window: self.per_window,
+            window_us: self.window_us,
+            extra_windows: self.extra_windows,
+            producer_priority: self.producer_priority,
+        }
+    }
+}
 
 /// One activity of the schedule: a task or an interrupt.
 #[derive(Debug, Clone, PartialEq)]
@@ -118,8 +157,8 @@ impl EcuBuild {
         match self {
             Self::LockStep => vec![
                 task("systick", 3, 1_000.0),
-                task("control", 2, control),
-                task("plan", 1, plan),
+                task("control", CONTROL_PRIORITY, control),
+                task("plan", PLAN_PRIORITY, plan),
             ],
             Self::Board => {
                 let byte_us = f64::from(usart::BYTE_TIME_NS) / 1e3;
@@ -148,10 +187,40 @@ impl EcuBuild {
                         }),
                     },
                     task("control", CONTROL_PRIORITY, control),
-                    task("plan", 1, plan),
+                    task("plan", PLAN_PRIORITY, plan),
                 ]
             }
         }
+    }
+
+    /// The tasks whose activations are not all alike. In both builds the control
+    /// task's frame carries the plan task's event at most once per plan
+    /// activation (the plan task leaves one for the control task's next frame, a
+    /// newer one replacing it; `firmware/src/bin/ecu.rs`): the other activations
+    /// encode and authenticate an actuation frame without it, at most
+    /// `MAX_ACTUATION_FRAME_BYTES` through the frame's flavor and
+    /// `mac_input_bytes(MAX_ACTUATION_PAYLOAD_BYTES)` through the CMAC. A window
+    /// holds the events of the plan activations released in it, the one waiting
+    /// at its start and one more, as the link's plan budgets
+    /// ([`usart::EXTRA_BUDGETS_PER_WINDOW`]); the plan task's own response holds
+    /// the one waiting and its own.
+    pub fn light_activations(self) -> Vec<LightActivations> {
+        use firmware::link;
+        vec![LightActivations {
+            task: "control",
+            without: "a plan event in its frame",
+            constants: vec![
+                ("MAX_UP_FRAME_BYTES", link::MAX_ACTUATION_FRAME_BYTES as u64),
+                (
+                    "MAX_UP_MAC_INPUT_BYTES",
+                    link::mac_input_bytes(link::MAX_ACTUATION_PAYLOAD_BYTES) as u64,
+                ),
+            ],
+            per_window: 1,
+            window_us: firmware::tasks::PLAN_PERIOD_US as f64,
+            extra_windows: usart::EXTRA_BUDGETS_PER_WINDOW,
+            producer_priority: Some(PLAN_PRIORITY),
+        }]
     }
 
     /// Preemptions of one activation of `task` that meets its deadline: the

@@ -13,6 +13,13 @@
 //! exit ([`ENTRY_EXIT_CYCLES`]) and the refill of the cache lines the preempting
 //! activation can evict ([`Activity::refill_cycles`]), charged to it.
 //! The iteration stops at the fixed point or as soon as `R` exceeds the deadline.
+//!
+//! A task whose activations are not all alike ([`Heavy`]: most are light, a few
+//! per window carry more work) interferes as a generalized multiframe task (Baruah
+//! et al., "Generalized multiframe tasks", Real-Time Systems 17, 1999): each of its
+//! arrivals at the light bound, and the heavy ones' difference at most as often as
+//! they can come, `⌈R / T_j⌉ · C_light + n_heavy(R) · (C_j − C_light)`. Its own
+//! response time is bounded with `C_j`, the heaviest.
 
 #[cfg(test)]
 use super::cache::PREEMPTION_REFILL_CYCLES;
@@ -52,6 +59,51 @@ pub struct Activity {
     /// `u8::MAX` with interrupts disabled) and its bound. Each blocks the
     /// activities of higher priority up to its ceiling.
     pub critical_sections: Vec<(u8, f64)>,
+    /// When its activations are not all alike: the bound of its light ones and
+    /// how often a heavier one (up to `wcet_cycles`) can come; `None`: every
+    /// activation is charged `wcet_cycles`.
+    pub heavy: Option<Heavy>,
+}
+
+/// The activations of an activity that carry more work than the rest, at most
+/// `per_window · (⌈r / window_us⌉ + extra_windows)` in any window of `r` µs
+/// (one less in a window of the producer's own response): a control task's
+/// frames that carry the plan task's event, one per plan activation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Heavy {
+    /// The bound of the other (light) activations, cycles (≤ the activity's
+    /// `wcet_cycles`).
+    pub light_cycles: f64,
+    /// Heavy activations per window at most.
+    pub per_window: u64,
+    /// The window, µs (the producer's period).
+    pub window_us: f64,
+    /// Windows a window of any length can draw on besides one per `window_us`
+    /// it spans (the work waiting at its start; one more if the producer
+    /// finishes up to its response time after its release).
+    pub extra_windows: u64,
+    /// The priority of the task whose activations make the extra work, if one
+    /// does: a window of its own response draws on one window less (its next
+    /// activation's work comes after it completes).
+    pub producer_priority: Option<u8>,
+}
+
+impl Heavy {
+    /// The heavy activations among `arrivals` in a window of `r` µs of the
+    /// response of an activity of priority `victim`.
+    pub fn count(&self, arrivals: f64, r: f64, victim: u8) -> f64 {
+        let extra = if self.producer_priority == Some(victim) {
+            self.extra_windows.saturating_sub(1)
+        } else {
+            self.extra_windows
+        };
+        let windows = if self.window_us > 0.0 {
+            (r / self.window_us).ceil() + extra as f64
+        } else {
+            f64::INFINITY
+        };
+        arrivals.min(self.per_window as f64 * windows)
+    }
 }
 
 /// The response-time bound of one activity.
@@ -145,6 +197,22 @@ fn arrivals(h: &Activity, r: f64, victim: &Activity) -> f64 {
     arrivals_in(h.period_us, h.burst, r, victim.priority)
 }
 
+/// The cycles `h`'s activations take from a window of `r` µs of `victim`'s
+/// response: each arrival its bound and its preemption's overhead, or with
+/// [`Heavy`] activations the light bound for each and the heavy ones' difference
+/// as often as they can come.
+fn interference_cycles(h: &Activity, r: f64, victim: &Activity) -> f64 {
+    let n = arrivals(h, r, victim);
+    let overhead = ENTRY_EXIT_CYCLES + h.refill_cycles;
+    match h.heavy {
+        Some(heavy) => {
+            let light = heavy.light_cycles.min(h.wcet_cycles);
+            n * (light + overhead) + heavy.count(n, r, victim.priority) * (h.wcet_cycles - light)
+        }
+        None => n * (h.wcet_cycles + overhead),
+    }
+}
+
 /// Response-time bounds of every activity on a core clocked at `clock_hz`.
 pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
     let us = |cycles: f64| cycles / clock_hz * 1e6;
@@ -172,10 +240,7 @@ pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
                 let next = us(own)
                     + higher
                         .iter()
-                        .map(|h| {
-                            arrivals(h, r, a)
-                                * us(h.wcet_cycles + ENTRY_EXIT_CYCLES + h.refill_cycles)
-                        })
+                        .map(|h| us(interference_cycles(h, r, a)))
                         .sum::<f64>();
                 if next > PAST_DEADLINE_FACTOR * a.deadline_us {
                     break;
@@ -222,6 +287,7 @@ mod tests {
                 refill_cycles: PREEMPTION_REFILL_CYCLES,
                 burst: None,
                 critical_sections: Vec::new(),
+                heavy: None,
             },
             Activity {
                 name: "control".into(),
@@ -232,6 +298,7 @@ mod tests {
                 refill_cycles: PREEMPTION_REFILL_CYCLES,
                 burst: None,
                 critical_sections: Vec::new(),
+                heavy: None,
             },
             Activity {
                 name: "plan".into(),
@@ -242,6 +309,7 @@ mod tests {
                 refill_cycles: PREEMPTION_REFILL_CYCLES,
                 burst: None,
                 critical_sections: plan_sections,
+                heavy: None,
             },
         ]
     }
@@ -298,6 +366,7 @@ mod tests {
             refill_cycles: PREEMPTION_REFILL_CYCLES,
             burst,
             critical_sections: Vec::new(),
+            heavy: None,
         };
         s.push(byte(None));
         let free = response_times(&s, 168e6);
@@ -377,6 +446,65 @@ mod tests {
         assert_eq!(
             arrivals_in(0.0, Some(one), 100_000.0, 1) - arrivals_in(0.0, Some(b), 100_000.0, 1),
             9.0 * 50.0
+        );
+    }
+
+    #[test]
+    fn heavy_activations_are_charged_as_often_as_they_come_not_at_every_arrival() {
+        let heavy = Heavy {
+            light_cycles: 100_000.0,
+            per_window: 1,
+            window_us: 100_000.0,
+            extra_windows: 2,
+            producer_priority: Some(1),
+        };
+        // A window of 100 ms draws on 1 + 2 windows, its producer's own on one less;
+        // never more than the arrivals.
+        assert_eq!(heavy.count(10.0, 100_000.0, 3), 3.0);
+        assert_eq!(heavy.count(10.0, 100_000.0, 1), 2.0);
+        assert_eq!(heavy.count(1.0, 100_000.0, 3), 1.0);
+        assert_eq!(heavy.count(11.0, 100_001.0, 1), 3.0);
+        // control: 300 k cycles at worst, 100 k without the plan task's event. plan
+        // (10 M cycles) sees ten arrivals of control, two of them heavy (no SysTick
+        // here: its arrivals would follow the bound).
+        let mut s: Vec<Activity> = schedule(0.0).into_iter().skip(1).collect();
+        s[0].wcet_cycles = 300_000.0;
+        let worst = response_times(&s, 168e6);
+        s[0].heavy = Some(heavy);
+        let multiframe = response_times(&s, 168e6);
+        let (w, m) = (
+            worst[1].response_time_bound_us.unwrap(),
+            multiframe[1].response_time_bound_us.unwrap(),
+        );
+        // Each a fixed point: plan's own 10 M and its preemption's overhead, each
+        // arrival of control at 300 k, or at 100 k and two of them 200 k more.
+        let own = 10.0e6 + ENTRY_EXIT_CYCLES + PREEMPTION_REFILL_CYCLES;
+        let overhead = ENTRY_EXIT_CYCLES + PREEMPTION_REFILL_CYCLES;
+        let arrivals = |r: f64| (r / 10_000.0).ceil();
+        let worst_demand = own + arrivals(w) * (300_000.0 + overhead);
+        let light_demand = own + arrivals(m) * (100_000.0 + overhead) + 2.0 * 200_000.0;
+        assert!(
+            (w * 168.0 - worst_demand).abs() < 1e-3,
+            "{w} {worst_demand}"
+        );
+        assert!(
+            (m * 168.0 - light_demand).abs() < 1e-3,
+            "{m} {light_demand}"
+        );
+        assert!(w - m > 6.0 * 200_000.0 / 168.0, "{w} {m}");
+        // control's own bound is its heaviest activation's.
+        assert_eq!(
+            worst[0].response_time_bound_us,
+            multiframe[0].response_time_bound_us
+        );
+        // A light bound above the worst one is the worst one.
+        s[0].heavy = Some(Heavy {
+            light_cycles: 1.0e9,
+            ..heavy
+        });
+        assert_eq!(
+            response_times(&s, 168e6)[1].response_time_bound_us,
+            worst[1].response_time_bound_us
         );
     }
 
