@@ -17,6 +17,35 @@ pub fn skipped_between(release_us: u64, end_us: u64, period_us: u64) -> u32 {
     }
 }
 
+/// The plan events the ECU's frames carry, checked as they come: at most one per
+/// plan activation, in the activations' order. The timing analysis rests on it:
+/// it charges the control task's activations whose frame carries an event at
+/// most once per plan activation (`wcet::ecu_app::EcuBuild::light_activations`),
+/// so a run that shows otherwise stops with the reason.
+#[derive(Debug, Default, Clone)]
+pub struct EventOrder {
+    /// The last event's activation number.
+    last: Option<u32>,
+}
+
+impl EventOrder {
+    /// Records an event of plan `activation`; an error when that activation, or
+    /// a later one, already had its event.
+    pub fn check(&mut self, activation: u32) -> Result<(), String> {
+        if let Some(last) = self.last {
+            if activation <= last {
+                return Err(format!(
+                    "the ECU sent an event of plan activation {activation} after one of activation {last}: \
+                     at most one event per plan activation, in order, is what the timing analysis \
+                     charges the control task's frames for (wcet::ecu_app::EcuBuild::light_activations)"
+                ));
+            }
+        }
+        self.last = Some(activation);
+        Ok(())
+    }
+}
+
 /// Where the ECU's own deadline counts differ from the host's: the summary's
 /// misses and skipped releases (counted by the driver from the frames' stamps)
 /// and the host's count of budget overruns on the ECU's clock; one line each,
@@ -75,4 +104,20 @@ pub struct TickOverruns {
     /// Control activations whose ticks exceeded the control budget, each counted
     /// with its completion, which the next frame reports (as the ECU counts it).
     pub control: u64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_plan_event_repeated_or_out_of_order_is_refused() {
+        let mut order = EventOrder::default();
+        assert!(order.check(0).is_ok());
+        // Activations that published no event in between are fine.
+        assert!(order.check(3).is_ok());
+        assert!(order.check(3).is_err_and(|e| e.contains("activation 3")));
+        assert!(order.check(2).is_err());
+        assert!(order.check(4).is_ok());
+    }
 }

@@ -145,6 +145,8 @@ pub struct QemuEcu {
     last_control_ticks: Option<u32>,
     /// The plan task's counts as of the last plan event.
     plan_counts: EcuTaskCounts,
+    /// The plan events' activations so far: one each, in order.
+    event_order: super::deadlines::EventOrder,
     /// Budget overruns on the ECU's clock, counted by the host from the ticks.
     pub tick_overruns: TickOverruns,
     /// The ECU's own counts in the last actuation frame (response times included).
@@ -335,6 +337,7 @@ impl QemuEcu {
             last_release_us: None,
             last_control_ticks: None,
             plan_counts: Default::default(),
+            event_order: Default::default(),
             tick_overruns: TickOverruns::default(),
             ecu_counts: None,
             mac: LinkMac::new(&opts.link_key),
@@ -689,6 +692,9 @@ impl Ecu<f32> for QemuEcu {
         let mut plans = Vec::new();
         let mut skipped_releases = 0;
         if let Some(p) = &frame.plan {
+            self.event_order
+                .check(p.activation)
+                .map_err(|e| anyhow!("{e}"))?;
             // Releases that fell while this activation ran, up to its end (the
             // route frames it received included), were skipped.
             skipped_releases = skipped_between(p.release_us, p.end_us, PLAN_PERIOD_US);

@@ -311,6 +311,10 @@ pub struct UsartEcu {
     route_wait: Option<RouteWait>,
     last_release_us: Option<u64>,
     plan_counts: EcuTaskCounts,
+    /// The plan events' activations so far: one each, in order; the first
+    /// breach, reported at the next period.
+    event_order: super::deadlines::EventOrder,
+    event_error: Option<String>,
     /// The ECU's own counts in the last actuation frame.
     pub ecu_counts: Option<EcuCounts>,
     /// The run's link figures.
@@ -448,6 +452,8 @@ impl UsartEcu {
             route_wait: None,
             last_release_us: None,
             plan_counts: EcuTaskCounts::default(),
+            event_order: Default::default(),
+            event_error: None,
             ecu_counts: None,
             hil: HilTally::default(),
             events: Vec::new(),
@@ -722,6 +728,10 @@ impl UsartEcu {
         }
         self.last_release_us = Some(a.release_us);
         if let Some(p) = &a.plan {
+            if let Err(e) = self.event_order.check(p.activation) {
+                self.event_error.get_or_insert(e);
+            }
+            let h = &mut self.hil;
             h.plan_events += 1;
             if self
                 .route_wait
@@ -859,6 +869,9 @@ impl UsartEcu {
 
 impl Ecu<f32> for UsartEcu {
     fn control(&mut self, t_us: u64, est: &StateEstimate<f32>) -> Result<ControlOutput<f32>> {
+        if let Some(e) = self.event_error.take() {
+            bail!("{e}");
+        }
         let mut plans = Vec::new();
         let mut skipped = 0u32;
         let mut latest: Option<Answer> = None;
