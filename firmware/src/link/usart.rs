@@ -100,6 +100,8 @@ pub const ENTRIES_AT_ONCE: u64 = 11;
 /// after its release (two renewals less than a period apart). For the plan
 /// events, likewise: the one waiting at the window's start, and one more
 /// because a plan activation finishes up to its response time after its release.
+/// A window of the renewing task's own response draws on one less: its next
+/// renewal (and, for the plan task, its next event) comes after it completes.
 pub const EXTRA_BUDGETS_PER_WINDOW: u64 = 2;
 
 /// The receive budgets the USART1 interrupt spends a byte at a time: the

@@ -183,6 +183,9 @@ impl EcuBuild {
                                 per_window: usart::ENTRIES_PER_PLAN_BUDGET,
                                 window_us: plan,
                                 extra_windows: usart::EXTRA_BUDGETS_PER_WINDOW,
+                                // The plan task renews it at its start and makes
+                                // the event its frames carry.
+                                renewer_priority: Some(PLAN_PRIORITY),
                             }),
                         }),
                     },

@@ -163,6 +163,9 @@ pub struct Slow {
     pub window_us: f64,
     /// Budgets a window can draw on besides one per `window_us` it spans.
     pub extra_windows: u64,
+    /// The priority of the task that renews this budget at its start, if one
+    /// does: a window of its own activation draws on one budget less.
+    pub renewer_priority: Option<u8>,
 }
 
 /// The most activations, in a window of `r` µs of the response of an activity
@@ -183,7 +186,12 @@ pub fn arrivals_in(period_us: f64, burst: Option<Burst>, r: f64, victim: u8) -> 
                 b.extra_windows
             };
             let slow = b.slow.filter(|s| s.window_us > 0.0).map_or(0.0, |s| {
-                s.per_window as f64 * ((r / s.window_us).ceil() + s.extra_windows as f64)
+                let extra = if s.renewer_priority == Some(victim) {
+                    s.extra_windows.saturating_sub(1)
+                } else {
+                    s.extra_windows
+                };
+                s.per_window as f64 * ((r / s.window_us).ceil() + extra as f64)
             });
             by_period.min(b.per_window as f64 * ((r / b.window_us).ceil() + extra as f64) + slow)
         }
@@ -428,12 +436,16 @@ mod tests {
                 per_window: 50,
                 window_us: 100_000.0,
                 extra_windows: 2,
+                renewer_priority: Some(1),
             }),
         };
-        // 100 ms: 12 fast budgets (10 + 2) and 3 slow ones (1 + 2).
-        assert_eq!(arrivals_in(0.0, Some(b), 100_000.0, 1), 1_200.0 + 150.0);
+        // 100 ms: 12 fast budgets (10 + 2) and 3 slow ones (1 + 2); the slow
+        // budget's renewer (priority 1) sees one slow budget less.
+        assert_eq!(arrivals_in(0.0, Some(b), 100_000.0, 3), 1_200.0 + 150.0);
+        assert_eq!(arrivals_in(0.0, Some(b), 100_000.0, 1), 1_200.0 + 100.0);
         // 100.001 ms: one more of each.
-        assert_eq!(arrivals_in(0.0, Some(b), 100_001.0, 1), 1_300.0 + 200.0);
+        assert_eq!(arrivals_in(0.0, Some(b), 100_001.0, 3), 1_300.0 + 200.0);
+        assert_eq!(arrivals_in(0.0, Some(b), 100_001.0, 1), 1_300.0 + 150.0);
         // The renewer of the fast budget sees one fast budget less, all slow ones.
         assert_eq!(arrivals_in(0.0, Some(b), 10_000.0, 2), 200.0 + 150.0);
         // Against one budget of the combined size a period, a plan period holds
@@ -444,7 +456,7 @@ mod tests {
             ..b
         };
         assert_eq!(
-            arrivals_in(0.0, Some(one), 100_000.0, 1) - arrivals_in(0.0, Some(b), 100_000.0, 1),
+            arrivals_in(0.0, Some(one), 100_000.0, 3) - arrivals_in(0.0, Some(b), 100_000.0, 3),
             9.0 * 50.0
         );
     }
