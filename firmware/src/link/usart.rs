@@ -51,10 +51,6 @@ pub const LINK_INTERRUPT_PRIORITY: u8 = 4;
 /// longer than a byte's time).
 pub const SYSTICK_PRIORITY: u8 = 3;
 
-/// Bytes the interrupt handler sends per entry at most: the data register and
-/// the shift register, all silicon can take at once.
-pub const TX_BYTES_PER_ENTRY: usize = 2;
-
 /// Entries of the USART1 interrupt per control period's budget at most, the
 /// bound the response-time analysis charges per control period: each entry
 /// that reads a byte spends one of the [`SENSOR_RX_BUDGET_BYTES`], one more may

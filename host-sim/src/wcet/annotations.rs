@@ -160,7 +160,6 @@ pub fn firmware_constants() -> BTreeMap<&'static str, u64> {
         ("HORIZON", plan::HORIZON as u64),
         // The flashed build's USART link.
         ("RX_BUDGET_BYTES", u64::from(link::usart::RX_BUDGET_BYTES)),
-        ("TX_BYTES_PER_ENTRY", link::usart::TX_BYTES_PER_ENTRY as u64),
         ("NX", firmware::bicycle::NX as u64),
         ("NU", firmware::bicycle::NU as u64),
         ("NV", mpc::NV as u64),

@@ -8,8 +8,8 @@
 //!   bounded.
 //! * **Driving**: interrupt-driven both ways into bounded `heapless` SPSC queues.
 //!   The USART1 interrupt (NVIC priority above both tasks and SysTick,
-//!   [`USART1_PRIORITY`]) queues at most one received byte and sends at most
-//!   [`TX_BYTES_PER_ENTRY`] per entry (QEMU 7.2's USART raises no transmit-empty
+//!   [`USART1_PRIORITY`]) queues one received byte or sends one byte per
+//!   entry (QEMU 7.2's USART raises no transmit-empty
 //!   interrupt, so the handler pends itself again while bytes wait and the
 //!   transmitter takes them), and drains the transmit queue the control task
 //!   fills. The control task sorts the received bytes at its release
@@ -35,9 +35,7 @@ use core::sync::atomic::{AtomicPtr, Ordering};
 use cortex_m::peripheral::NVIC;
 use firmware::clock_tree;
 use firmware::link::demux::{Channel, Demux};
-use firmware::link::usart::{
-    RxBudgets, BAUD, LINK_INTERRUPT_PRIORITY, RX_BUDGET_BYTES, TX_BYTES_PER_ENTRY,
-};
+use firmware::link::usart::{RxBudgets, BAUD, LINK_INTERRUPT_PRIORITY, RX_BUDGET_BYTES};
 use firmware::link::{MAX_DOWN_FRAME_BYTES, MAX_DRIVING_DOWN_FRAME_BYTES, MAX_UP_FRAME_BYTES};
 use heapless::spsc::{Consumer, Producer, Queue};
 use heapless::Deque;
@@ -368,11 +366,14 @@ pub struct UsartIsr {
 }
 
 impl UsartIsr {
-    /// One interrupt: at most one byte received (queued for the control task to
-    /// sort, within the control period's budget, else the plan period's) and
-    /// [`TX_BYTES_PER_ENTRY`] sent; the transmit interrupt off when the queue is
-    /// empty, the receive one off (and the line masked until a task renews a
-    /// budget) when both budgets are spent.
+    /// One interrupt, one byte: a received byte (queued for the control task to
+    /// sort, within the control period's budget, else the plan period's), or
+    /// else one byte sent; the transmit interrupt off when the queue is empty,
+    /// the receive one off (and the line masked until a task renews a budget)
+    /// when both budgets are spent. A byte's work per entry keeps an entry's
+    /// bound that of one byte's path, as the timing analysis counts an entry per
+    /// byte received or sent: with both pending, the transmit-empty request is
+    /// still raised on silicon and the handler runs again at once.
     fn on_interrupt(&mut self) {
         let u = usart();
         let sr = u.sr.read();
@@ -386,20 +387,12 @@ impl UsartIsr {
                 // again and again. The transmission waits with it.
                 cr1_bit(Cr1Bit::RxneIe, false);
                 NVIC::mask(pac::Interrupt::USART1);
-            } else {
-                let byte = u.dr.read().bits() as u8;
-                let full = self.raw.enqueue(byte).is_err();
-                self.dropped = self.dropped.wrapping_add(u32::from(full));
+                return;
             }
-        }
-        // Transmission: up to TX_BYTES_PER_ENTRY while the transmitter takes
-        // them (on silicon the data register and the shift register; in QEMU
-        // every write is sent at once).
-        // wcet-bound: TX_BYTES_PER_ENTRY
-        for _ in 0..TX_BYTES_PER_ENTRY {
-            if !u.sr.read().txe().bit_is_set() {
-                break;
-            }
+            let byte = u.dr.read().bits() as u8;
+            let full = self.raw.enqueue(byte).is_err();
+            self.dropped = self.dropped.wrapping_add(u32::from(full));
+        } else if sr.txe().bit_is_set() {
             match self.tx.dequeue() {
                 // SAFETY: any byte is a valid data register value.
                 Some(b) => u.dr.write(|w| unsafe { w.bits(u32::from(b)) }),
@@ -420,8 +413,7 @@ impl UsartIsr {
     }
 }
 
-/// USART1's interrupt: one received byte queued, up to [`TX_BYTES_PER_ENTRY`]
-/// queued bytes sent.
+/// USART1's interrupt: one received byte queued, or one queued byte sent.
 #[interrupt]
 fn USART1() {
     // SAFETY: set once by `open`, before the interrupt is unmasked, to a static
