@@ -132,6 +132,9 @@ pub struct TaskStatic {
     pub light_bound_cycles: Option<u64>,
     /// What those activations leave out.
     pub light_without: Option<String>,
+    /// The work within a window as long as its deadline (`wcet::rta`): its own,
+    /// then each higher priority's; empty for a section or without a bound.
+    pub demand_at_deadline: Vec<super::rta::Demand>,
 }
 
 /// The whole static analysis.
@@ -1289,6 +1292,7 @@ impl Units {
                     .map(|t| t.deadline_us),
                 light_bound_cycles: None,
                 light_without: None,
+                demand_at_deadline: Vec::new(),
             });
         }
         Ok(())
@@ -1578,6 +1582,7 @@ fn bound_response_times(
             if let Some(t) = tasks.iter_mut().find(|t| t.name == r.name) {
                 t.response_time_bound_us = r.response_time_bound_us;
                 t.response_time_past_deadline_us = r.past_deadline_us;
+                t.demand_at_deadline = r.demand_at_deadline;
             }
         }
     }
@@ -1963,6 +1968,37 @@ impl StaticAnalysis {
                 t.refused.as_deref().unwrap_or("")
             );
         }
+        for t in self
+            .tasks
+            .iter()
+            .filter(|t| t.response_time_past_deadline_us.is_some())
+        {
+            let Some(deadline) = t.deadline_us else {
+                continue;
+            };
+            let total: f64 = t.demand_at_deadline.iter().map(|d| d.cycles).sum();
+            let available = deadline * f64::from(super::CLOCK_HZ) / 1e6;
+            let parts: Vec<String> = t
+                .demand_at_deadline
+                .iter()
+                .map(|d| {
+                    if d.name == t.name {
+                        format!("its own {:.0}", d.cycles)
+                    } else {
+                        format!("`{}` {:.0} ({:.0} arrivals)", d.name, d.cycles, d.arrivals)
+                    }
+                })
+                .collect();
+            let _ = writeln!(
+                s,
+                "\n`{}`'s work within a window of its deadline ({deadline:.0} µs), cycles: {}; \
+                 {total:.0} against the {available:.0} the window holds, {:.0} ({:.2} ms) too many.",
+                t.name,
+                parts.join(", "),
+                total - available,
+                (total - available) / f64::from(super::CLOCK_HZ) * 1e3
+            );
+        }
         for t in &self.tasks {
             if let (Some(light), Some(without)) = (t.light_bound_cycles, &t.light_without) {
                 let _ = writeln!(
@@ -2312,6 +2348,7 @@ mod tests {
             deadline_us: deadline,
             light_bound_cycles: None,
             light_without: None,
+            demand_at_deadline: Vec::new(),
         }
     }
 

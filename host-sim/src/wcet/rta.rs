@@ -122,6 +122,21 @@ pub struct Response {
     /// When the iteration passed the deadline: its fixed point if there is one
     /// within [`PAST_DEADLINE_FACTOR`] deadlines (how far the bound misses), µs.
     pub past_deadline_us: Option<f64>,
+    /// The work that falls within a window as long as the deadline, what the
+    /// bound is compared with: the activity's own (its bound, preemption
+    /// overhead and blocking), then each higher priority's.
+    pub demand_at_deadline: Vec<Demand>,
+}
+
+/// Work within a window of a response-time analysis.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Demand {
+    /// The activity it is of.
+    pub name: String,
+    /// Its activations in the window.
+    pub arrivals: f64,
+    /// Their cycles, preemption overhead included.
+    pub cycles: f64,
 }
 
 /// How far past its deadline the iteration goes on to find a missed bound's
@@ -263,6 +278,17 @@ pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
                 }
                 r = next;
             }
+            let demand_at_deadline = std::iter::once(Demand {
+                name: a.name.clone(),
+                arrivals: 1.0,
+                cycles: own,
+            })
+            .chain(higher.iter().map(|h| Demand {
+                name: h.name.clone(),
+                arrivals: arrivals(h, a.deadline_us, a),
+                cycles: interference_cycles(h, a.deadline_us, a),
+            }))
+            .collect();
             Response {
                 name: a.name.clone(),
                 response_time_bound_us: result,
@@ -270,6 +296,7 @@ pub fn response_times(activities: &[Activity], clock_hz: f64) -> Vec<Response> {
                 blocking_us: us(blocking),
                 meets_deadline: result.is_some_and(|r| r <= a.deadline_us),
                 past_deadline_us: past,
+                demand_at_deadline,
             }
         })
         .collect()
@@ -504,6 +531,17 @@ mod tests {
             "{m} {light_demand}"
         );
         assert!(w - m > 6.0 * 200_000.0 / 168.0, "{w} {m}");
+        // At the deadline: ten arrivals of control, two of them heavy.
+        let at_deadline = &multiframe[1].demand_at_deadline;
+        assert_eq!(at_deadline[0].cycles, own);
+        assert_eq!(
+            (at_deadline[1].name.as_str(), at_deadline[1].arrivals),
+            ("control", 10.0)
+        );
+        assert!(
+            (at_deadline[1].cycles - (10.0 * (100_000.0 + overhead) + 2.0 * 200_000.0)).abs()
+                < 1e-6
+        );
         // control's own bound is its heaviest activation's.
         assert_eq!(
             worst[0].response_time_bound_us,
