@@ -354,15 +354,35 @@ pub fn analyse(
     };
     let mut units = Units::default();
     units.bound_all(elf, &model, &irreducible, &bounds, &retries)?;
-    for light in build.light_activations() {
-        let cycles = light_bound(&binary, &all_loops, sources, build, &light)?;
-        if let Some(t) = units.tasks.iter_mut().find(|t| t.name == light.task) {
-            t.light_bound_cycles = cycles.zip(t.static_bound_cycles).map(|(l, c)| l.min(c));
-            t.light_without = Some(light.without.to_string());
-        }
-    }
+    bound_light_activations(
+        &mut units,
+        &binary,
+        &all_loops,
+        sources,
+        build,
+        &BTreeMap::new(),
+    )?;
     let (critical_sections, task_reach) = bound_critical_sections(&model, &retries);
     bound_response_times(&model, &mut units.tasks, &critical_sections, &task_reach);
+    // Once more with each retry loop's preemptions counted within the task's
+    // response-time bound rather than its deadline: an activation that completes
+    // within that bound is preempted only there, so the bounds computed with
+    // these fewer retries hold, and so does the response time they give (it is
+    // at most the first). A task without a bound within its deadline keeps its
+    // deadline's count. The critical sections keep the first pass's bounds.
+    let windows: BTreeMap<String, f64> = units
+        .tasks
+        .iter()
+        .filter_map(|t| Some((t.name.clone(), t.response_time_bound_us?)))
+        .collect();
+    let refined = retries_within(build, &annotations, &windows);
+    if refined != retries {
+        let mut tighter = Units::default();
+        tighter.bound_all(elf, &model, &irreducible, &bounds, &refined)?;
+        bound_light_activations(&mut tighter, &binary, &all_loops, sources, build, &windows)?;
+        bound_response_times(&model, &mut tighter.tasks, &critical_sections, &task_reach);
+        units = tighter;
+    }
     let mut observed = Observed::default();
     TraceReplay::new(elf, &model, &flow_facts)?.check_all(
         traces,
@@ -403,6 +423,26 @@ pub fn analyse(
     })
 }
 
+/// The light activations' bounds of the build's tasks ([`light_bound`]), with
+/// the retries counted within `windows`, into `units`.
+fn bound_light_activations(
+    units: &mut Units,
+    binary: &Binary,
+    all_loops: &[Vec<Loop>],
+    sources: &[annotations::SourceDir],
+    build: EcuBuild,
+    windows: &BTreeMap<String, f64>,
+) -> Result<()> {
+    for light in build.light_activations() {
+        let cycles = light_bound(binary, all_loops, sources, build, &light, windows)?;
+        if let Some(t) = units.tasks.iter_mut().find(|t| t.name == light.task) {
+            t.light_bound_cycles = cycles.zip(t.static_bound_cycles).map(|(l, c)| l.min(c));
+            t.light_without = Some(light.without.to_string());
+        }
+    }
+    Ok(())
+}
+
 /// The bound of `light`'s task over its light activations: the loop bounds and
 /// the IPET again, with the annotations evaluated under the tighter constants.
 /// `None` when the task has no bound.
@@ -412,6 +452,7 @@ fn light_bound(
     sources: &[annotations::SourceDir],
     build: EcuBuild,
     light: &super::ecu_app::LightActivations,
+    windows: &BTreeMap<String, f64>,
 ) -> Result<Option<u64>> {
     let mut constants = annotations::firmware_constants();
     for &(name, value) in &light.constants {
@@ -434,7 +475,7 @@ fn light_bound(
         &index.counter_groups,
     );
     let bounds = LoopBinder::new(binary, &index, &copies, build).bind_all(all_loops)?;
-    let retries = retries_per_activation(build, &annotations);
+    let retries = retries_within(build, &annotations, windows);
     let model = Model {
         program: &binary.program,
         memory: &binary.memory,
@@ -1144,6 +1185,17 @@ fn retries_per_activation(
     build: EcuBuild,
     annotations: &[annotations::Annotation],
 ) -> Vec<(String, ipet::Retries)> {
+    retries_within(build, annotations, &BTreeMap::new())
+}
+
+/// [`retries_per_activation`] with the preemptions counted within a window of
+/// each task's release: its response-time bound where `windows` has one, else
+/// its deadline.
+fn retries_within(
+    build: EcuBuild,
+    annotations: &[annotations::Annotation],
+    windows: &BTreeMap<String, f64>,
+) -> Vec<(String, ipet::Retries)> {
     let sum = |scope| {
         annotations
             .iter()
@@ -1157,11 +1209,12 @@ fn retries_per_activation(
         .tasks()
         .iter()
         .map(|(n, _)| {
+            let window = windows.get(*n).copied();
             (
                 n.to_string(),
                 ipet::Retries {
-                    preemption: build.preemptions_of(n) * per_preemption,
-                    tick: build.ticks_of(n) * per_tick,
+                    preemption: build.preemptions_within(n, window) * per_preemption,
+                    tick: build.ticks_within(n, window) * per_tick,
                 },
             )
         })

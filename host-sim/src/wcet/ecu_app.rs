@@ -231,22 +231,33 @@ impl EcuBuild {
     /// for a retry loop to retry once). Faults are not counted: they end the
     /// activation.
     pub fn preemptions_of(self, task: &str) -> u64 {
+        self.preemptions_within(task, None)
+    }
+
+    /// [`EcuBuild::preemptions_of`] within `window_us` of the activation's
+    /// release instead of its deadline (a response-time bound), when given.
+    pub fn preemptions_within(self, task: &str, window_us: Option<f64>) -> u64 {
         let schedule = self.schedule();
         let Some(me) = schedule.iter().find(|t| t.name == task) else {
             return 0;
         };
+        let window = window_us.map_or(me.deadline_us, |w| w.min(me.deadline_us));
         schedule
             .iter()
             .filter(|t| t.priority > me.priority)
-            .map(|t| {
-                super::rta::arrivals_in(t.period_us, t.burst, me.deadline_us, me.priority) as u64
-            })
+            .map(|t| super::rta::arrivals_in(t.period_us, t.burst, window, me.priority) as u64)
             .sum()
     }
 
     /// Preemptions of one activation of `task` that meets its deadline by the
     /// monotonic's tick (`systick`) alone.
     pub fn ticks_of(self, task: &str) -> u64 {
+        self.ticks_within(task, None)
+    }
+
+    /// [`EcuBuild::ticks_of`] within `window_us` of the activation's release
+    /// instead of its deadline, when given.
+    pub fn ticks_within(self, task: &str, window_us: Option<f64>) -> u64 {
         let schedule = self.schedule();
         let (Some(me), Some(tick)) = (
             schedule.iter().find(|t| t.name == task),
@@ -254,8 +265,9 @@ impl EcuBuild {
         ) else {
             return 0;
         };
+        let window = window_us.map_or(me.deadline_us, |w| w.min(me.deadline_us));
         if tick.priority > me.priority {
-            super::rta::arrivals_in(tick.period_us, tick.burst, me.deadline_us, me.priority) as u64
+            super::rta::arrivals_in(tick.period_us, tick.burst, window, me.priority) as u64
         } else {
             0
         }
@@ -398,5 +410,18 @@ mod tests {
         );
         assert_eq!(board.ticks_of("plan"), 100);
         assert_eq!(board.ticks_of("systick"), 0);
+        // Within a response-time bound shorter than the deadline, fewer: 5 ms of
+        // control hold 5 ticks and the line's spacing of 5 ms; a window past the
+        // deadline counts the deadline's.
+        assert_eq!(board.ticks_within("control", Some(5_000.0)), 5);
+        assert_eq!(
+            board.preemptions_within("control", Some(5_000.0)),
+            5 + 922 + usart::ENTRIES_AT_ONCE
+        );
+        assert_eq!(
+            board.preemptions_within("plan", Some(150_000.0)),
+            board.preemptions_of("plan")
+        );
+        assert_eq!(lock.preemptions_within("plan", None), 110);
     }
 }
