@@ -682,3 +682,54 @@ fn a_short_real_time_hil_over_the_emulated_usart_drives_the_car_along_its_plan()
     assert_eq!(s.collisions, 0);
     assert!(s.stop_reason.starts_with("time limit"), "{}", s.stop_reason);
 }
+
+/// The flashed build's control task sorts the bytes its interrupt received at
+/// its release, a route frame's among them once a plan period. The analysis
+/// bounds its activations without them (the sort loop at the sensor budget's
+/// bytes) and charges each route byte apart, at the bound's largest step per
+/// byte; with that charge the plan task's response-time bound is within its
+/// deadline.
+#[test]
+#[ignore = "needs `cargo ecu` first (.ci/run)"]
+fn the_control_tasks_route_bytes_are_charged_per_byte_and_the_plan_task_meets_its_deadline() {
+    use firmware::link::usart;
+    let sources = host_sim::wcet::annotations::SourceDir::workspace(&root());
+    let a = host_sim::wcet::analysis::analyse(&board_elf(), &sources, &[]).unwrap();
+    let control = a.tasks.iter().find(|t| t.name == "control").unwrap();
+    let light = control.light_bound_cycles.unwrap();
+    let bytes = control
+        .light_extras
+        .iter()
+        .find(|e| e.unit == "byte")
+        .unwrap_or_else(|| panic!("{:?}", control.light_extras));
+    let route = u64::from(usart::ROUTE_RX_BUDGET_BYTES);
+    assert_eq!(bytes.charge.per_activation, route);
+    assert_eq!(bytes.charge.per_window, route);
+    let [b0, b1, bmax] = bytes.bounds[0];
+    assert_eq!(b0, light);
+    // A byte costs tens of cycles at least (the demultiplexer's state machine
+    // and a queue's push). The first byte's step is the largest, as the IPET's
+    // optimum is concave in a loop's cap (here it is linear: the same step for
+    // each), and it is the charge.
+    let unit = bytes.charge.unit_cycles;
+    assert!((50.0..1_000.0).contains(&unit), "{unit}");
+    assert!(
+        (b1 - b0) * route >= bmax - b0,
+        "{:?}: the first byte's step is below the average",
+        bytes.bounds
+    );
+    assert_eq!(unit, (b1 - b0) as f64);
+    // With every kind of extra work whole, the task's own bound.
+    assert_eq!(
+        control.light_extras.iter().map(|e| e.bounds[1][2]).max(),
+        control.static_bound_cycles
+    );
+    let plan = a.tasks.iter().find(|t| t.name == "plan").unwrap();
+    let r = plan.response_time_bound_us.unwrap_or_else(|| {
+        panic!(
+            "the plan task misses: {:?} µs; {:?}",
+            plan.response_time_past_deadline_us, plan.demand_at_deadline
+        )
+    });
+    assert!(r <= plan.deadline_us.unwrap(), "{r}");
+}

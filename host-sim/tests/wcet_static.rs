@@ -487,7 +487,8 @@ fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
 /// The control task's activations that carry no plan event (all but one per plan
 /// activation) are bounded apart, with the frame's and the CMAC's byte caps at an
 /// actuation frame's: the event's bytes through the CMAC are AES blocks the light
-/// bound does not hold, and the report says what the light activations leave out.
+/// bound does not hold, the event's charge is the step between the two bounds,
+/// and the report says what the light activations leave out.
 #[test]
 #[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_control_activation_without_a_plan_event_is_bounded_apart() {
@@ -506,12 +507,21 @@ fn a_control_activation_without_a_plan_event_is_bounded_apart() {
         light + blocks as u64 * 2_000 <= full,
         "light {light}, full {full}, {blocks} blocks"
     );
+    // The lock-step build's one kind of extra work: the event, once an
+    // activation, charged the whole step from the light bound to the full one.
+    let [event] = control.light_extras.as_slice() else {
+        panic!("{:?}", control.light_extras);
+    };
+    assert_eq!(event.what, "a plan event in its frame");
+    assert_eq!(event.bounds[0], [light, full, full]);
+    assert_eq!(event.charge.unit_cycles, (full - light) as f64);
+    assert_eq!(event.charge.per_activation, 1);
     // No other task or section has light activations.
     assert!(a
         .tasks
         .iter()
         .filter(|t| t.name != "control")
-        .all(|t| t.light_bound_cycles.is_none()));
+        .all(|t| t.light_bound_cycles.is_none() && t.light_extras.is_empty()));
     assert!(a.markdown().contains(&format!(
         "activations without a plan event in its frame: {light} cycles"
     )));

@@ -162,8 +162,8 @@ static ECU_CAPS: [u32; 4] = [
     firmware::mpc::WS as u32,
 ];
 
-/// Monotonic tick rate, Hz (1 ms ticks).
-const MONO_HZ: u32 = 1_000;
+/// Monotonic tick rate, Hz (one tick a control period).
+const MONO_HZ: u32 = (1_000_000 / firmware::timing::MONO_TICK_US) as u32;
 /// SysTick reload: core clock ticks per monotonic tick.
 const TICKS_PER_MONO: u32 = SYSCLK_HZ / MONO_HZ;
 
@@ -185,7 +185,7 @@ static STOPPING: AtomicBool = AtomicBool::new(false);
 static ROUTE_PENDING: AtomicU32 = AtomicU32::new(0);
 /// Route frames the plan task refused, frames.
 static ROUTE_REJECTED: AtomicU32 = AtomicU32::new(0);
-/// Monotonic tick (ms) of the timeline's start: the first `control` release.
+/// Monotonic tick (`MONO_TICK_US`) of the timeline's start: the first `control` release.
 static START_MONO_TICKS: AtomicU32 = AtomicU32::new(0);
 /// Last steering command, `f32` bits (the panic handler holds it).
 static LAST_DELTA_BITS: AtomicU32 = AtomicU32::new(0);
@@ -241,11 +241,11 @@ fn timeline_us(ticks: u64) -> u64 {
     ticks.saturating_sub(epoch_ticks()) * 1_000_000 / SYSCLK_HZ as u64
 }
 
-/// The monotonic's instant of a time on the timeline, `t_us` µs (whole ms).
+/// The monotonic's instant of a time on the timeline, `t_us` µs (whole ticks).
 fn instant_at(t_us: u64) -> <Mono as rtic_monotonics::Monotonic>::Instant {
     let start = START_MONO_TICKS.load(Ordering::Relaxed);
     <Mono as rtic_monotonics::Monotonic>::Instant::from_ticks(
-        start.wrapping_add((t_us / 1_000) as u32),
+        start.wrapping_add((t_us / firmware::timing::MONO_TICK_US) as u32),
     )
 }
 

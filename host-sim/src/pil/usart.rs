@@ -22,7 +22,7 @@
 //!   virtual clock follow the host's while the ECU sleeps, `align=on` holds it
 //!   back when it runs more than 3 ms ahead of the host's. Either way the ECU's
 //!   clock *loses* time against the host's when QEMU is late: its timeline is
-//!   its count of 1 kHz SysTick interrupts, and ticks that fall due while QEMU's
+//!   its count of SysTick interrupts (one a control period), and ticks that fall due while QEMU's
 //!   vCPU is not running seem to be delivered as one (a pending interrupt is
 //!   pended once, however many times it falls due). On
 //!   a loaded two-core machine (builds beside it, load average 3–4) we

@@ -76,6 +76,23 @@ pub struct LoopEntry {
     pub observed_max: Option<u64>,
 }
 
+/// One kind of extra work of a task's heavier activations
+/// ([`super::ecu_app::ExtraWork`]), as the response-time analysis charges it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LightExtra {
+    /// What it is.
+    pub what: String,
+    /// The unit it comes in.
+    pub unit: String,
+    /// The bounds a unit's cost is the largest step of, cycles: without the
+    /// work, with one unit and with an activation's whole, first with the other
+    /// kinds left out, then with them whole (`[[b0, b1, bmax], [b0, b1, bmax]]`).
+    pub bounds: [[u64; 3]; 2],
+    /// The charge: cycles a unit, units per activation and per window.
+    #[serde(flatten)]
+    pub charge: super::rta::Extra,
+}
+
 /// One task's static figures.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TaskStatic {
@@ -130,8 +147,9 @@ pub struct TaskStatic {
     /// ([`super::ecu_app::LightActivations`]): the bound of those without the
     /// extra work, cycles (`None`: every activation charged the static bound).
     pub light_bound_cycles: Option<u64>,
-    /// What those activations leave out.
-    pub light_without: Option<String>,
+    /// The extra work those activations leave out, each kind as the
+    /// response-time analysis charges it.
+    pub light_extras: Vec<LightExtra>,
     /// The work within a window as long as its deadline (`wcet::rta`): its own,
     /// then each higher priority's; empty for a section or without a bound.
     pub demand_at_deadline: Vec<super::rta::Demand>,
@@ -424,7 +442,15 @@ pub fn analyse(
 }
 
 /// The light activations' bounds of the build's tasks ([`light_bound`]), with
-/// the retries counted within `windows`, into `units`.
+/// the retries counted within `windows`, into `units`, and the cost of a unit of
+/// each kind of extra work: the largest step of the task's bound as that work's
+/// constants go from none to one unit, and from none to an activation's whole
+/// (per unit), with the other kinds left out and with them whole. The bound is
+/// an IPET's optimum, in which a loop's cap is a constant of the constraints:
+/// as a maximum over a polytope, it is concave in that constant, so its first
+/// step is the largest (the IPET's integer optimum taken to be its relaxation's,
+/// as the flow graph's constraints make it); the average step covers a bound
+/// that grows faster instead. Either way each unit costs at most the larger.
 fn bound_light_activations(
     units: &mut Units,
     binary: &Binary,
@@ -433,39 +459,112 @@ fn bound_light_activations(
     build: EcuBuild,
     windows: &BTreeMap<String, f64>,
 ) -> Result<()> {
+    let full = annotations::firmware_constants();
     for light in build.light_activations() {
-        let cycles = light_bound(binary, all_loops, sources, build, &light, windows)?;
+        let Some(task_bound) = units
+            .tasks
+            .iter()
+            .find(|t| t.name == light.task)
+            .and_then(|t| t.static_bound_cycles)
+        else {
+            continue;
+        };
+        let mut memo: BTreeMap<Vec<(&'static str, u64)>, Option<u64>> = BTreeMap::new();
+        let mut bound = |amounts: &[u64]| -> Result<Option<u64>> {
+            let constants: Vec<(&'static str, u64)> = light
+                .extras
+                .iter()
+                .zip(amounts)
+                .flat_map(|(e, &u)| e.constants_at(u, &full))
+                .collect();
+            if let Some(&c) = memo.get(&constants) {
+                return Ok(c);
+            }
+            let c = light_bound(
+                binary, all_loops, sources, build, light.task, &constants, windows,
+            )?;
+            memo.insert(constants, c);
+            Ok(c)
+        };
+        let none = vec![0; light.extras.len()];
+        let Some(light_cycles) = bound(&none)? else {
+            continue;
+        };
+        let mut extras = Vec::new();
+        for (k, extra) in light.extras.iter().enumerate() {
+            let mut steps = [[0u64; 3]; 2];
+            let mut unit_cycles = 0.0_f64;
+            for (others_whole, row) in [false, true].into_iter().zip(steps.iter_mut()) {
+                let at = |u: u64| -> Vec<u64> {
+                    light
+                        .extras
+                        .iter()
+                        .enumerate()
+                        .map(|(j, e)| {
+                            if j == k {
+                                u
+                            } else if others_whole {
+                                e.per_activation
+                            } else {
+                                0
+                            }
+                        })
+                        .collect()
+                };
+                let (Some(b0), Some(b1), Some(bmax)) = (
+                    bound(&at(0))?,
+                    bound(&at(1))?,
+                    bound(&at(extra.per_activation))?,
+                ) else {
+                    anyhow::bail!(
+                        "`{}`: no bound with part of {} (its light bound is {light_cycles})",
+                        light.task,
+                        extra.what
+                    );
+                };
+                *row = [b0, b1, bmax];
+                let first = b1.saturating_sub(b0) as f64;
+                let average = bmax.saturating_sub(b0) as f64 / extra.per_activation.max(1) as f64;
+                unit_cycles = unit_cycles.max(first).max(average);
+            }
+            extras.push(LightExtra {
+                what: extra.what.to_string(),
+                unit: extra.unit.to_string(),
+                bounds: steps,
+                charge: extra.charge(unit_cycles),
+            });
+        }
         if let Some(t) = units.tasks.iter_mut().find(|t| t.name == light.task) {
-            t.light_bound_cycles = cycles.zip(t.static_bound_cycles).map(|(l, c)| l.min(c));
-            t.light_without = Some(light.without.to_string());
+            t.light_bound_cycles = Some(light_cycles.min(task_bound));
+            t.light_extras = extras;
         }
     }
     Ok(())
 }
 
-/// The bound of `light`'s task over its light activations: the loop bounds and
-/// the IPET again, with the annotations evaluated under the tighter constants.
-/// `None` when the task has no bound.
+/// The bound of `task` with the annotations evaluated under the tighter
+/// `constants`: the loop bounds and the IPET again. `None` when the task has no
+/// bound.
 fn light_bound(
     binary: &Binary,
     all_loops: &[Vec<Loop>],
     sources: &[annotations::SourceDir],
     build: EcuBuild,
-    light: &super::ecu_app::LightActivations,
+    task: &str,
+    constants: &[(&'static str, u64)],
     windows: &BTreeMap<String, f64>,
 ) -> Result<Option<u64>> {
-    let mut constants = annotations::firmware_constants();
-    for &(name, value) in &light.constants {
-        if constants.insert(name, value).is_none() {
+    let mut values = annotations::firmware_constants();
+    for &(name, value) in constants {
+        if values.insert(name, value).is_none() {
             anyhow::bail!(
-                "the light activations of `{}` bind `{name}`, which is not one of the firmware's constants",
-                light.task
+                "the light activations of `{task}` bind `{name}`, which is not one of the firmware's constants"
             );
         }
     }
-    let annotations = annotations::scan_sources_with(sources, &constants)
+    let annotations = annotations::scan_sources_with(sources, &values)
         .map_err(|e| anyhow::anyhow!("loop annotations: {e}"))?;
-    let dependency_facts = annotations::dependency_facts_with(&constants);
+    let dependency_facts = annotations::dependency_facts_with(&values);
     let index = AnnotationIndex::new(&annotations, &dependency_facts)?;
     let copies = copy_sizes(
         build,
@@ -485,15 +584,15 @@ fn light_bound(
         copies: &copies,
         build,
     };
-    let Some(&(_, symbol)) = build.tasks().iter().find(|(n, _)| *n == light.task) else {
-        anyhow::bail!("no task `{}` in the {} build", light.task, build.name());
+    let Some(&(_, symbol)) = build.tasks().iter().find(|(n, _)| *n == task) else {
+        anyhow::bail!("no task `{task}` in the {} build", build.name());
     };
     let Some(&root) = binary.program.find(symbol).first() else {
-        anyhow::bail!("no function `{symbol}` (task `{}`)", light.task);
+        anyhow::bail!("no function `{symbol}` (task `{task}`)");
     };
     let preemptions = retries
         .iter()
-        .find(|(t, _)| t == light.task)
+        .find(|(t, _)| t == task)
         .map_or_else(ipet::Retries::default, |r| r.1);
     Ok(ipet_figures(&model, root, preemptions).cycles)
 }
@@ -1344,7 +1443,7 @@ impl Units {
                     .find(|t| t.name == name)
                     .map(|t| t.deadline_us),
                 light_bound_cycles: None,
-                light_without: None,
+                light_extras: Vec::new(),
                 demand_at_deadline: Vec::new(),
             });
         }
@@ -1592,16 +1691,11 @@ fn bound_response_times(
     };
     // A task whose light activations have a bound of their own.
     let light_of = |n: &str| {
-        let light = model
-            .build
-            .light_activations()
-            .into_iter()
-            .find(|l| l.task == n)?;
-        let cycles = tasks
-            .iter()
-            .find(|t: &&TaskStatic| t.name == n)?
-            .light_bound_cycles?;
-        Some(light.heavy(cycles))
+        let task = tasks.iter().find(|t: &&TaskStatic| t.name == n)?;
+        Some(super::rta::Heavy {
+            light_cycles: task.light_bound_cycles? as f64,
+            extras: task.light_extras.iter().map(|e| e.charge).collect(),
+        })
     };
     let mut activities = Vec::new();
     let mut complete = true;
@@ -2053,15 +2147,40 @@ impl StaticAnalysis {
             );
         }
         for t in &self.tasks {
-            if let (Some(light), Some(without)) = (t.light_bound_cycles, &t.light_without) {
+            let Some(light) = t.light_bound_cycles else {
+                continue;
+            };
+            let without: Vec<String> = t.light_extras.iter().map(|e| e.what.clone()).collect();
+            let _ = writeln!(
+                s,
+                "\n`{}`'s activations without {}: {light} cycles ({} with all of it). The \
+                 response-time analysis charges each of its preemptions that, and each kind of \
+                 extra work at its cost a unit as often as its units can come \
+                 (`wcet::rta::Heavy`); a unit's cost is the largest step of the bound from none \
+                 to one unit and, per unit, to an activation's whole, with the other kinds left \
+                 out or whole.\n\n\
+                 | extra work | unit | cycles a unit | per activation | per window / window, µs | \
+                 bound with 0, 1, all units, the rest left out | the rest whole |\n\
+                 |---|---|---:|---:|---|---|---|",
+                t.name,
+                without.join(" or "),
+                t.static_bound_cycles
+                    .map_or("no bound".to_string(), |c| c.to_string()),
+            );
+            for e in &t.light_extras {
+                let row = |b: [u64; 3]| format!("{} / {} / {}", b[0], b[1], b[2]);
                 let _ = writeln!(
                     s,
-                    "\n`{}`'s activations without {without}: {light} cycles. The response-time \
-                     analysis charges each of its preemptions that, and the difference to {} only \
-                     as often as such an activation can come (`wcet::rta::Heavy`).",
-                    t.name,
-                    t.static_bound_cycles
-                        .map_or("its bound".to_string(), |c| c.to_string())
+                    "| {} | {} | {:.0} | {} | {} / {:.0} (+{}) | {} | {} |",
+                    e.what,
+                    e.unit,
+                    e.charge.unit_cycles,
+                    e.charge.per_activation,
+                    e.charge.per_window,
+                    e.charge.window_us,
+                    e.charge.extra_windows,
+                    row(e.bounds[0]),
+                    row(e.bounds[1]),
                 );
             }
         }
@@ -2400,7 +2519,7 @@ mod tests {
             response_time_past_deadline_us: past,
             deadline_us: deadline,
             light_bound_cycles: None,
-            light_without: None,
+            light_extras: Vec::new(),
             demand_at_deadline: Vec::new(),
         }
     }
@@ -2476,7 +2595,10 @@ mod tests {
         // SysTick missed its deadline here: no bound, not a made-up one.
         assert_eq!(board[0].handler, "SysTick");
         assert_eq!(board[0].response_time_bound_us, None);
-        assert_eq!(board[0].min_interarrival_us, 1_000.0);
+        assert_eq!(
+            board[0].min_interarrival_us,
+            firmware::timing::MONO_TICK_US as f64
+        );
         // The lock-step build has no link interrupt.
         let lock = interrupts_of(EcuBuild::LockStep, &tasks);
         assert_eq!(lock.len(), 1);

@@ -33,33 +33,70 @@ const PLAN_PRIORITY: u8 = 1;
 
 /// A task whose activations are not all alike: most are *light*, bounded from
 /// the same root with some of the firmware's constants bound tighter (the
-/// annotations that name them evaluated again), and at most `per_window` per
-/// window of `window_us` (and `extra_windows` more) carry the rest
-/// ([`super::rta::Heavy`]).
+/// annotations that name them evaluated again); the rest carry [`ExtraWork`] of
+/// one kind or more, each charged by its units ([`super::rta::Heavy`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LightActivations {
     /// The task.
     pub task: &'static str,
-    /// What its light activations leave out, for the report.
-    pub without: &'static str,
-    /// The constants bound tighter in a light activation: name and value.
+    /// The kinds of extra work a light activation leaves out.
+    pub extras: Vec<ExtraWork>,
+}
+
+/// One kind of extra work of [`LightActivations`]: the constants that bound it
+/// run from their light values (no unit) to the firmware's own
+/// (`per_activation` units), a unit's cost is what one unit adds to the bound at
+/// most, and the units come at most `per_window` per window of `window_us`
+/// (`extra_windows` more in any window; [`super::rta::Extra`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExtraWork {
+    /// What it is, for the report.
+    pub what: &'static str,
+    /// The unit it comes in, for the report.
+    pub unit: &'static str,
+    /// The constants that bound it and their values without it.
     pub constants: Vec<(&'static str, u64)>,
-    /// Heavy activations per window at most.
+    /// Units an activation carries at most (the constants' full values).
+    pub per_activation: u64,
+    /// Units per window at most.
     pub per_window: u64,
     /// The window, µs.
     pub window_us: f64,
     /// Windows a window of any length draws on besides one per `window_us`.
     pub extra_windows: u64,
-    /// The priority of the task that makes the heavy activations' extra work.
+    /// The priority of the task that makes the extra work.
     pub producer_priority: Option<u8>,
 }
 
-impl LightActivations {
-    /// As the response-time analysis charges it, with the light activations'
-    /// bound, cycles.
-    pub fn heavy(&self, light_cycles: u64) -> super::rta::Heavy {
-        super::rta::Heavy {
-            light_cycles: light_cycles as f64,
+impl ExtraWork {
+    /// The values of its constants with `units` of it (`0..=per_activation`):
+    /// from the light value to `full`'s, in proportion, rounded up.
+    pub fn constants_at(
+        &self,
+        units: u64,
+        full: &std::collections::BTreeMap<&'static str, u64>,
+    ) -> Vec<(&'static str, u64)> {
+        let units = units.min(self.per_activation);
+        self.constants
+            .iter()
+            .map(|&(name, light)| {
+                let top = full.get(name).copied().unwrap_or(light).max(light);
+                let span = top - light;
+                let add = if self.per_activation == 0 {
+                    span
+                } else {
+                    (span * units).div_ceil(self.per_activation)
+                };
+                (name, light + add)
+            })
+            .collect()
+    }
+
+    /// As the response-time analysis charges it, `unit_cycles` a unit.
+    pub fn charge(&self, unit_cycles: f64) -> super::rta::Extra {
+        super::rta::Extra {
+            unit_cycles,
+            per_activation: self.per_activation,
             per_window: self.per_window,
             window_us: self.window_us,
             extra_windows: self.extra_windows,
@@ -136,7 +173,7 @@ impl EcuBuild {
     }
 
     /// The schedule: the tasks at their periods (= deadlines); SysTick, the
-    /// monotonic's 1 kHz tick (`systick_monotonic!(Mono, 1_000)`), above them
+    /// monotonic's tick (`firmware::timing::MONO_TICK_US`, one a control period), above them
     /// (the lock-step build leaves it at the hardware's most urgent level; the
     /// flashed build sets [`usart::SYSTICK_PRIORITY`]); in the flashed build,
     /// USART1's interrupt above all ([`usart::LINK_INTERRUPT_PRIORITY`]): an
@@ -156,14 +193,18 @@ impl EcuBuild {
         };
         match self {
             Self::LockStep => vec![
-                task("systick", 3, 1_000.0),
+                task("systick", 3, firmware::timing::MONO_TICK_US as f64),
                 task("control", CONTROL_PRIORITY, control),
                 task("plan", PLAN_PRIORITY, plan),
             ],
             Self::Board => {
                 let byte_us = f64::from(usart::BYTE_TIME_NS) / 1e3;
                 vec![
-                    task("systick", usart::SYSTICK_PRIORITY, 1_000.0),
+                    task(
+                        "systick",
+                        usart::SYSTICK_PRIORITY,
+                        firmware::timing::MONO_TICK_US as f64,
+                    ),
                     Scheduled {
                         name: "link",
                         priority: usart::LINK_INTERRUPT_PRIORITY,
@@ -196,22 +237,31 @@ impl EcuBuild {
         }
     }
 
-    /// The tasks whose activations are not all alike. In both builds the control
-    /// task's frame carries the plan task's event at most once per plan
-    /// activation (the plan task leaves one for the control task's next frame, a
-    /// newer one replacing it; `firmware/src/bin/ecu.rs`): the other activations
-    /// encode and authenticate an actuation frame without it, at most
-    /// `MAX_ACTUATION_FRAME_BYTES` through the frame's flavor and
-    /// `mac_input_bytes(MAX_ACTUATION_PAYLOAD_BYTES)` through the CMAC. A window
-    /// holds the events of the plan activations released in it, the one waiting
-    /// at its start and one more, as the link's plan budgets
-    /// ([`usart::EXTRA_BUDGETS_PER_WINDOW`]); the plan task's own response holds
-    /// the one waiting and its own.
+    /// The tasks whose activations are not all alike: in both builds the control
+    /// task's, with two kinds of extra work (`firmware/src/bin/ecu.rs`).
+    ///
+    /// * **A plan event in its frame**, at most once per plan activation (the
+    ///   plan task leaves one for the control task's next frame, a newer one
+    ///   replacing it): the other activations encode and authenticate an
+    ///   actuation frame without it, at most `MAX_ACTUATION_FRAME_BYTES` through
+    ///   the frame's flavor and `mac_input_bytes(MAX_ACTUATION_PAYLOAD_BYTES)`
+    ///   through the CMAC. A window holds the events of the plan activations
+    ///   released in it, the one waiting at its start and one more, as the link's
+    ///   plan budgets ([`usart::EXTRA_BUDGETS_PER_WINDOW`]); the plan task's own
+    ///   response holds the one waiting and its own.
+    /// * **The route frame's bytes it sorts**, in the flashed build
+    ///   (`Port::sort`, at its release): at most the sensor budget's
+    ///   [`usart::SENSOR_RX_BUDGET_BYTES`] came since its last sort, and the
+    ///   rest are the plan budget's ([`usart::ROUTE_RX_BUDGET_BYTES`] a plan
+    ///   period, renewed by the plan task at its start): the light bound sorts
+    ///   the sensor budget's bytes, each route byte is charged apart. (The
+    ///   lock-step build reads its route channel in the plan task.)
     pub fn light_activations(self) -> Vec<LightActivations> {
         use firmware::link;
-        vec![LightActivations {
-            task: "control",
-            without: "a plan event in its frame",
+        let plan_period = firmware::tasks::PLAN_PERIOD_US as f64;
+        let mut extras = vec![ExtraWork {
+            what: "a plan event in its frame",
+            unit: "event",
             constants: vec![
                 ("MAX_UP_FRAME_BYTES", link::MAX_ACTUATION_FRAME_BYTES as u64),
                 (
@@ -219,10 +269,27 @@ impl EcuBuild {
                     link::mac_input_bytes(link::MAX_ACTUATION_PAYLOAD_BYTES) as u64,
                 ),
             ],
+            per_activation: 1,
             per_window: 1,
-            window_us: firmware::tasks::PLAN_PERIOD_US as f64,
+            window_us: plan_period,
             extra_windows: usart::EXTRA_BUDGETS_PER_WINDOW,
             producer_priority: Some(PLAN_PRIORITY),
+        }];
+        if self == Self::Board {
+            extras.push(ExtraWork {
+                what: "a route frame's bytes to sort",
+                unit: "byte",
+                constants: vec![("RX_BUDGET_BYTES", u64::from(usart::SENSOR_RX_BUDGET_BYTES))],
+                per_activation: u64::from(usart::ROUTE_RX_BUDGET_BYTES),
+                per_window: u64::from(usart::ROUTE_RX_BUDGET_BYTES),
+                window_us: plan_period,
+                extra_windows: usart::EXTRA_BUDGETS_PER_WINDOW,
+                producer_priority: Some(PLAN_PRIORITY),
+            });
+        }
+        vec![LightActivations {
+            task: "control",
+            extras,
         }]
     }
 
@@ -382,11 +449,13 @@ mod tests {
     fn the_link_preempts_the_control_task_by_its_budgets_not_without_end() {
         let lock = EcuBuild::LockStep;
         let board = EcuBuild::Board;
-        // Lock-step: 10 ticks of 1 ms within control's 10 ms, 10 control
-        // activations and 100 ticks within plan's 100 ms.
-        assert_eq!(lock.preemptions_of("control"), 10);
-        assert_eq!(lock.preemptions_of("plan"), 110);
-        assert_eq!(lock.ticks_of("plan"), 100);
+        // The monotonic ticks once a control period. Lock-step: 1 tick within
+        // control's 10 ms, 10 control activations and 10 ticks within plan's
+        // 100 ms.
+        assert_eq!(firmware::timing::MONO_TICK_US, 10_000);
+        assert_eq!(lock.preemptions_of("control"), 1);
+        assert_eq!(lock.preemptions_of("plan"), 20);
+        assert_eq!(lock.ticks_of("plan"), 10);
         // Flashed: within one control activation two control budgets (the one in
         // force, its own renewal) and three plan budgets (one a plan period, the
         // one in force, one early by the plan task's jitter) would allow more
@@ -394,34 +463,34 @@ mod tests {
         // within a plan period twelve control budgets (one a control period, the
         // one in force, a renewal early by the control task's jitter) and two
         // plan budgets (the one in force and the plan task's own renewal: the
-        // next comes after it completes); within SysTick's 1 ms the line's
-        // spacing binds: 185 + 11.
+        // next comes after it completes); within SysTick's 10 ms the line's
+        // spacing binds too.
         let per = usart::ENTRIES_PER_BUDGET;
         let per_plan = usart::ENTRIES_PER_PLAN_BUDGET;
         assert!(2 * per + 3 * per_plan > 1_844 + usart::ENTRIES_AT_ONCE);
         assert_eq!(
             board.preemptions_of("control"),
-            10 + 1_844 + usart::ENTRIES_AT_ONCE
+            1 + 1_844 + usart::ENTRIES_AT_ONCE
         );
-        assert_eq!(board.preemptions_of("plan"), 110 + 12 * per + 2 * per_plan);
+        assert_eq!(board.preemptions_of("plan"), 20 + 12 * per + 2 * per_plan);
         assert_eq!(
             board.preemptions_of("systick"),
-            185 + usart::ENTRIES_AT_ONCE
+            1_844 + usart::ENTRIES_AT_ONCE
         );
-        assert_eq!(board.ticks_of("plan"), 100);
+        assert_eq!(board.ticks_of("plan"), 10);
         assert_eq!(board.ticks_of("systick"), 0);
         // Within a response-time bound shorter than the deadline, fewer: 5 ms of
-        // control hold 5 ticks and the line's spacing of 5 ms; a window past the
+        // control hold 1 tick and the line's spacing of 5 ms; a window past the
         // deadline counts the deadline's.
-        assert_eq!(board.ticks_within("control", Some(5_000.0)), 5);
+        assert_eq!(board.ticks_within("control", Some(5_000.0)), 1);
         assert_eq!(
             board.preemptions_within("control", Some(5_000.0)),
-            5 + 922 + usart::ENTRIES_AT_ONCE
+            1 + 922 + usart::ENTRIES_AT_ONCE
         );
         assert_eq!(
             board.preemptions_within("plan", Some(150_000.0)),
             board.preemptions_of("plan")
         );
-        assert_eq!(lock.preemptions_within("plan", None), 110);
+        assert_eq!(lock.preemptions_within("plan", None), 20);
     }
 }

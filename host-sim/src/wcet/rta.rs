@@ -17,9 +17,10 @@
 //! A task whose activations are not all alike ([`Heavy`]: most are light, a few
 //! per window carry more work) interferes as a generalized multiframe task (Baruah
 //! et al., "Generalized multiframe tasks", Real-Time Systems 17, 1999): each of its
-//! arrivals at the light bound, and the heavy ones' difference at most as often as
-//! they can come, `⌈R / T_j⌉ · C_light + n_heavy(R) · (C_j − C_light)`. Its own
-//! response time is bounded with `C_j`, the heaviest.
+//! arrivals at the light bound, and each kind of extra work ([`Extra`]) at its
+//! cost per unit as often as its units can come,
+//! `⌈R / T_j⌉ · C_light + Σ_k n_k(R) · c_k` (never more than every arrival at
+//! `C_j`). Its own response time is bounded with `C_j`, the heaviest.
 
 #[cfg(test)]
 use super::cache::PREEMPTION_REFILL_CYCLES;
@@ -65,16 +66,30 @@ pub struct Activity {
     pub heavy: Option<Heavy>,
 }
 
-/// The activations of an activity that carry more work than the rest, at most
-/// `per_window · (⌈r / window_us⌉ + extra_windows)` in any window of `r` µs
-/// (one less in a window of the producer's own response): a control task's
-/// frames that carry the plan task's event, one per plan activation.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+/// An activity whose activations are not all alike: each costs at most its light
+/// bound and the [`Extra`] work it carries, which comes in units (a plan event, a
+/// byte of a route frame) at most so many per activation and per window of a
+/// producer's period.
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Heavy {
-    /// The bound of the other (light) activations, cycles (≤ the activity's
-    /// `wcet_cycles`).
+    /// The bound of an activation without any extra work, cycles (≤ the
+    /// activity's `wcet_cycles`).
     pub light_cycles: f64,
-    /// Heavy activations per window at most.
+    /// The kinds of extra work.
+    pub extras: Vec<Extra>,
+}
+
+/// One kind of extra work of a [`Heavy`] activity: at most `per_activation`
+/// units in an activation and `per_window · (⌈r / window_us⌉ + extra_windows)`
+/// in any window of `r` µs (one window less in a window of the producer's own
+/// response), each at most `unit_cycles` more than the light bound.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Extra {
+    /// Cycles a unit adds to an activation at most.
+    pub unit_cycles: f64,
+    /// Units in one activation at most.
+    pub per_activation: u64,
+    /// Units per window at most.
     pub per_window: u64,
     /// The window, µs (the producer's period).
     pub window_us: f64,
@@ -82,14 +97,14 @@ pub struct Heavy {
     /// it spans (the work waiting at its start; one more if the producer
     /// finishes up to its response time after its release).
     pub extra_windows: u64,
-    /// The priority of the task whose activations make the extra work, if one
-    /// does: a window of its own response draws on one window less (its next
-    /// activation's work comes after it completes).
+    /// The priority of the task that makes the extra work, if one does: a window
+    /// of its own response draws on one window less (its next activation's work
+    /// comes after it completes).
     pub producer_priority: Option<u8>,
 }
 
-impl Heavy {
-    /// The heavy activations among `arrivals` in a window of `r` µs of the
+impl Extra {
+    /// The units among `arrivals` activations in a window of `r` µs of the
     /// response of an activity of priority `victim`.
     pub fn count(&self, arrivals: f64, r: f64, victim: u8) -> f64 {
         let extra = if self.producer_priority == Some(victim) {
@@ -102,7 +117,7 @@ impl Heavy {
         } else {
             f64::INFINITY
         };
-        arrivals.min(self.per_window as f64 * windows)
+        (arrivals * self.per_activation as f64).min(self.per_window as f64 * windows)
     }
 }
 
@@ -222,15 +237,21 @@ fn arrivals(h: &Activity, r: f64, victim: &Activity) -> f64 {
 
 /// The cycles `h`'s activations take from a window of `r` µs of `victim`'s
 /// response: each arrival its bound and its preemption's overhead, or with
-/// [`Heavy`] activations the light bound for each and the heavy ones' difference
-/// as often as they can come.
+/// [`Heavy`] activations the light bound for each and each extra work's units as
+/// often as they can come.
 fn interference_cycles(h: &Activity, r: f64, victim: &Activity) -> f64 {
     let n = arrivals(h, r, victim);
     let overhead = ENTRY_EXIT_CYCLES + h.refill_cycles;
-    match h.heavy {
+    match &h.heavy {
         Some(heavy) => {
             let light = heavy.light_cycles.min(h.wcet_cycles);
-            n * (light + overhead) + heavy.count(n, r, victim.priority) * (h.wcet_cycles - light)
+            let extra: f64 = heavy
+                .extras
+                .iter()
+                .map(|e| e.count(n, r, victim.priority) * e.unit_cycles)
+                .sum();
+            // Never more than every arrival at the heaviest.
+            (n * (light + overhead) + extra).min(n * (h.wcet_cycles + overhead))
         }
         None => n * (h.wcet_cycles + overhead),
     }
@@ -490,26 +511,40 @@ mod tests {
 
     #[test]
     fn heavy_activations_are_charged_as_often_as_they_come_not_at_every_arrival() {
-        let heavy = Heavy {
-            light_cycles: 100_000.0,
+        let event = Extra {
+            unit_cycles: 200_000.0,
+            per_activation: 1,
             per_window: 1,
             window_us: 100_000.0,
             extra_windows: 2,
             producer_priority: Some(1),
         };
+        let heavy = Heavy {
+            light_cycles: 100_000.0,
+            extras: vec![event],
+        };
         // A window of 100 ms draws on 1 + 2 windows, its producer's own on one less;
         // never more than the arrivals.
-        assert_eq!(heavy.count(10.0, 100_000.0, 3), 3.0);
-        assert_eq!(heavy.count(10.0, 100_000.0, 1), 2.0);
-        assert_eq!(heavy.count(1.0, 100_000.0, 3), 1.0);
-        assert_eq!(heavy.count(11.0, 100_001.0, 1), 3.0);
+        assert_eq!(event.count(10.0, 100_000.0, 3), 3.0);
+        assert_eq!(event.count(10.0, 100_000.0, 1), 2.0);
+        assert_eq!(event.count(1.0, 100_000.0, 3), 1.0);
+        assert_eq!(event.count(11.0, 100_001.0, 1), 3.0);
+        // Units that an activation can carry many of (bytes) are capped by the
+        // arrivals times that many.
+        let bytes = Extra {
+            per_activation: 300,
+            per_window: 281,
+            ..event
+        };
+        assert_eq!(bytes.count(10.0, 100_000.0, 1), 2.0 * 281.0);
+        assert_eq!(bytes.count(1.0, 100_000.0, 1), 300.0);
         // control: 300 k cycles at worst, 100 k without the plan task's event. plan
         // (10 M cycles) sees ten arrivals of control, two of them heavy (no SysTick
         // here: its arrivals would follow the bound).
         let mut s: Vec<Activity> = schedule(0.0).into_iter().skip(1).collect();
         s[0].wcet_cycles = 300_000.0;
         let worst = response_times(&s, 168e6);
-        s[0].heavy = Some(heavy);
+        s[0].heavy = Some(heavy.clone());
         let multiframe = response_times(&s, 168e6);
         let (w, m) = (
             worst[1].response_time_bound_us.unwrap(),
@@ -547,10 +582,22 @@ mod tests {
             worst[0].response_time_bound_us,
             multiframe[0].response_time_bound_us
         );
-        // A light bound above the worst one is the worst one.
+        // A light bound above the worst one is the worst one, and so is extra
+        // work that would charge an arrival more than the heaviest.
         s[0].heavy = Some(Heavy {
             light_cycles: 1.0e9,
-            ..heavy
+            ..heavy.clone()
+        });
+        assert_eq!(
+            response_times(&s, 168e6)[1].response_time_bound_us,
+            worst[1].response_time_bound_us
+        );
+        s[0].heavy = Some(Heavy {
+            light_cycles: 100_000.0,
+            extras: vec![Extra {
+                unit_cycles: 1.0e9,
+                ..event
+            }],
         });
         assert_eq!(
             response_times(&s, 168e6)[1].response_time_bound_us,
