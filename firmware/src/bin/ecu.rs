@@ -1399,14 +1399,11 @@ mod app {
             Mono::delay_until(instant_at(monitor.release_us())).await;
             let release_us = monitor.start();
             let t0 = core_ticks();
-            // The bytes the USART's interrupt received sorted (this task's
-            // frames, the plan task's road), then a new period's receive budget:
-            // no more than a budget's bytes wait to be sorted.
+            // The bytes the USART's interrupt received since the last release
+            // counted and a new period's receive budget given together, then
+            // those bytes sorted (this task's frames, the plan task's road).
             #[cfg(feature = "board-usart")]
-            {
-                cx.local.link.port.sort();
-                usart_link::rearm_receive();
-            }
+            cx.local.link.port.sort_and_rearm();
             // A refused sensor frame is never acted on: the period runs on no
             // estimate (the dropout policy: both tasks refuse it, the control task
             // applies the safe actuation) and still answers, saying so. A run of

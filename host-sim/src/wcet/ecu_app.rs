@@ -250,11 +250,15 @@ impl EcuBuild {
     ///   plan budgets ([`usart::EXTRA_BUDGETS_PER_WINDOW`]); the plan task's own
     ///   response holds the one waiting and its own.
     /// * **The route frame's bytes it sorts**, in the flashed build
-    ///   (`Port::sort`, at its release): at most the sensor budget's
-    ///   [`usart::SENSOR_RX_BUDGET_BYTES`] came since its last sort, and the
-    ///   rest are the plan budget's ([`usart::ROUTE_RX_BUDGET_BYTES`] a plan
-    ///   period, renewed by the plan task at its start): the light bound sorts
-    ///   the sensor budget's bytes, each route byte is charged apart. (The
+    ///   (`Port::sort_and_rearm`, at its release): it counts the bytes received
+    ///   and renews its receive budget with interrupts off, then sorts exactly
+    ///   those, so at most the sensor budget's
+    ///   [`usart::SENSOR_RX_BUDGET_BYTES`] of them came from the control
+    ///   period's budget (renewed with the last count; a renewal stores, never
+    ///   adds), and the rest are the plan budget's
+    ///   ([`usart::ROUTE_RX_BUDGET_BYTES`] a plan period, renewed by the plan
+    ///   task at its start), never more than the queue holds: the light bound
+    ///   sorts the sensor budget's bytes, each route byte is charged apart. (The
     ///   lock-step build reads its route channel in the plan task.)
     pub fn light_activations(self) -> Vec<LightActivations> {
         use firmware::link;
