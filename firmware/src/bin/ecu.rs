@@ -734,7 +734,7 @@ impl Link {
 pub struct RouteLink {
     #[cfg(not(feature = "board-usart"))]
     fd: usize,
-    /// The USART's queue of the road's frames (sorted by its interrupt).
+    /// The USART's queue of the road's frames (sorted by the control task).
     #[cfg(feature = "board-usart")]
     port: usart_link::RoutePort,
     rx: Verifier,

@@ -81,7 +81,7 @@ impl FrameError {
 /// next freshness value (taken only when the frame is encoded); returns the
 /// frame's length, bytes. A buffer of [`MAX_FRAME_BYTES`] holds any [`Down`] or
 /// [`Up`]. postcard's flavours do the work in one pass: the version byte and the
-/// message through the CMAC ([`SecOcModifier`], which appends the freshness and
+/// message through the CMAC (`SecOcModifier`, which appends the freshness and
 /// the tag), the CRC (appended little-endian) and COBS, into `out`.
 pub fn encode<M: Serialize + ?Sized>(
     msg: &M,
