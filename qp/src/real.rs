@@ -489,22 +489,22 @@ pub mod f32_math {
         #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
         {
             let bits: u32;
-            // SAFETY: the sequence saves `s0` on the stack, computes the root there
-            // and restores it; the operands pass through core registers (stable Rust
-            // has no single-precision register class for this target). It reads and
-            // writes no memory of the program and leaves the flags alone (`VSQRT`
-            // only sets the FPSCR's cumulative exception bits, which nothing reads).
+            // SAFETY: the root is computed in `s0`, which the block declares
+            // clobbered (a clobber names a register outside the classes stable Rust
+            // offers for this target's single-precision FPU, so the operands pass
+            // through core registers). It reads and writes no memory, uses no stack
+            // and leaves the flags alone (`VSQRT` only sets the FPSCR's cumulative
+            // exception bits, which nothing reads).
             #[allow(unsafe_code)]
             unsafe {
                 core::arch::asm!(
-                    "vpush {{s0}}",
                     "vmov s0, {i}",
                     "vsqrt.f32 s0, s0",
                     "vmov {o}, s0",
-                    "vpop {{s0}}",
                     i = in(reg) x.to_bits(),
                     o = lateout(reg) bits,
-                    options(pure, nomem, preserves_flags)
+                    out("s0") _,
+                    options(pure, nomem, nostack, preserves_flags)
                 );
             }
             f32::from_bits(bits)
