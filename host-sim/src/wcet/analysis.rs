@@ -1679,14 +1679,17 @@ fn bound_response_times(
             .find(|t: &&TaskStatic| t.name == n)
             .and_then(|t| t.static_bound_cycles)
     };
-    // A preemption by a task refills at most the cache lines its code can evict.
+    // A preemption by a task refills at most the lines of the instruction cache
+    // and of the data cache (the literal loads the preempted code counted on as
+    // hits, `data_cache`) its code can evict.
     let refill_of = |n: &str| {
-        let lines = task_reach
-            .iter()
-            .find(|(t, _)| t == n)
-            .map_or(super::cache::CACHE_LINES, |(_, reach)| {
+        let lines = task_reach.iter().find(|(t, _)| t == n).map_or(
+            super::cache::CACHE_LINES + u64::from(super::data_cache::DATA_CACHE_LINES),
+            |(_, reach)| {
                 super::cache::evicting_lines(program, reach)
-            });
+                    + super::data_cache::evicting_lines(program, reach)
+            },
+        );
         (lines * program.line_fetch_cycles) as f64
     };
     // A task whose light activations have a bound of their own.

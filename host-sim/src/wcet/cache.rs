@@ -26,10 +26,12 @@ use std::collections::{BTreeSet, HashMap};
 /// Lines of the instruction cache.
 pub const CACHE_LINES: u64 = 64;
 
-/// Cache-related preemption delay: a preempting activation may evict every line
-/// of the preempted task's cache, which then fetches them again, at most 64
+/// Cache-related preemption delay when nothing is known of the preempting
+/// code: it may evict every line of the preempted task's instruction cache and
+/// data cache ([`super::data_cache`]), which then fetches them again, 64 + 8
 /// lines of 6 cycles (5 wait states and the access).
-pub const PREEMPTION_REFILL_CYCLES: f64 = (CACHE_LINES * 6) as f64;
+pub const PREEMPTION_REFILL_CYCLES: f64 =
+    ((CACHE_LINES + super::data_cache::DATA_CACHE_LINES as u64) * 6) as f64;
 
 /// The evicting cache blocks of an activation: the distinct flash lines of the
 /// code the functions `reach` can run, at most [`CACHE_LINES`]: the most lines of

@@ -263,6 +263,9 @@ pub struct Block {
     pub instructions: u64,
     /// Worst-case cycles (see [`MemoryModel`]).
     pub cycles: u64,
+    /// Its literal-pool loads that hit the ART's data cache on every path
+    /// (`data_cache::must_hits`): `cycles` charges them no wait states.
+    pub data_cache_hits: u64,
     /// Of `cycles`, the fetch of the flash lines the block's bytes touch (the
     /// lines of return addresses after calls not included); 0 outside flash.
     pub fetch_cycles: u64,
@@ -296,6 +299,9 @@ pub struct Function {
     pub blocks: Vec<Block>,
     /// `false` when no path returns (panic handlers, `exit`).
     pub returns: bool,
+    /// The flash lines it can read as data (`data_cache::lines_read`; `None`:
+    /// a line not known statically).
+    pub data_lines: Option<std::collections::BTreeSet<u64>>,
 }
 
 impl Function {
@@ -809,9 +815,24 @@ impl Linker<'_> {
                 .collect(),
             pending: p,
         };
-        let blocks = (0..shape.starts.len())
+        let mut blocks: Vec<Block> = (0..shape.starts.len())
             .map(|b| self.build_block(k, f, &shape, b))
             .collect();
+        // Literal-pool loads that hit the ART's data cache on every path pay no
+        // wait states (`data_cache`).
+        let memory = self.memory;
+        let through_registers = memory.flash_data.may_read_flash(f.address);
+        let hits = super::data_cache::must_hits(
+            &f.instructions,
+            &blocks,
+            memory.flash_line_bytes,
+            through_registers,
+        );
+        for (block, h) in blocks.iter_mut().zip(hits) {
+            let saved = h * u64::from(memory.flash_wait_states);
+            block.cycles -= saved.min(block.cycles);
+            block.data_cache_hits = h;
+        }
         Function {
             name: f.name.clone(),
             demangled: self.demangled[k].clone(),
@@ -820,6 +841,11 @@ impl Linker<'_> {
             instructions: f.instructions.clone(),
             blocks,
             returns: self.returns[k],
+            data_lines: super::data_cache::lines_read(
+                &f.instructions,
+                memory.flash_line_bytes,
+                through_registers,
+            ),
         }
     }
 
@@ -866,6 +892,7 @@ impl Linker<'_> {
             problems: unresolved,
             instructions: insns.len() as u64,
             cycles: memory.block_cycles(f.address, insns),
+            data_cache_hits: 0,
             fetch_cycles: lines.map_or(0, |(lo, hi)| (hi - lo + 1) * memory.line_fetch_cycles()),
             lines,
             fall_through,

@@ -58,12 +58,15 @@ impl FlashData {
             FlashData::Anywhere(reasons) if reasons.is_empty() => format!(
                 "Data: every load that is not relative to sp may read flash (literal pools, \
                  .rodata, jump tables, constants): each costs {wait_states} wait states more \
-                 (the ART's data cache assumed to miss). Stack accesses and stores go to \
+                 (the ART's data cache counted on only for a literal-pool line every path has \
+                 just read, its 8 lines replaced least recently used: `wcet::data_cache`). \
+                 Stack accesses and stores go to \
                  zero-wait SRAM."
             ),
             FlashData::Anywhere(reasons) => format!(
                 "Data: every load that is not relative to sp may read flash, {wait_states} wait \
-                 states more each (the ART's data cache assumed to miss), because {}. Stack \
+                 states more each (the ART's data cache counted on only for a literal-pool line \
+                 every path has just read: `wcet::data_cache`), because {}. Stack \
                  accesses and stores go to zero-wait SRAM.",
                 reasons.join("; ")
             ),
@@ -74,7 +77,10 @@ impl FlashData {
                      sections' load images (`.rodata` is copied to SRAM with `.data`), and no \
                      code but the reset handler forms a flash data address: only pc-relative \
                      loads (literal pools) and table branches read flash, {wait_states} wait \
-                     states more each (the ART's data cache assumed to miss); in the {} \
+                     states more each, but a literal-pool load of a line the ART's data \
+                     cache holds on every path to it (its 8 lines replaced least recently \
+                     used, RM0090 3.5.2; an LRU must analysis, `wcet::data_cache`; a \
+                     preemption charged the reload of all 8); in the {} \
                      function(s) that address a constant island with `adr` and in their \
                      callees every load not relative to sp is charged so ({}). Other loads \
                      and all stores go to zero-wait SRAM.",

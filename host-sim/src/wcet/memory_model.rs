@@ -8,9 +8,10 @@ use super::cpi::Class;
 use super::flash_data::FlashData;
 
 /// The memory model under which the block cycles are worst cases: fetch never
-/// overlaps execution, the ART accelerator's data cache is assumed to miss, and its
-/// instruction cache is counted on only where it provably holds a line (the line
-/// just read; a persistent loop's lines, [`super::cache`]).
+/// overlaps execution, and the ART accelerator's caches are counted on only where
+/// they provably hold a line: the instruction cache the line just read and a
+/// persistent loop's lines ([`super::cache`]), the data cache a literal-pool line
+/// every path to the load has read ([`super::data_cache`]).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct MemoryModel {
     /// Flash wait states (5 at 168 MHz and 3.3 V, RM0090 table 10).

@@ -6,6 +6,7 @@
 //! | [`memory_model`] | the processor and memory model the cycles are worst cases under: Cortex-M4 timing, flash lines and wait states, the ART accelerator |
 //! | [`flash_data`] | which data loads can read flash (the ELF's sections, the ways code forms addresses) |
 //! | [`cache`] | the ART accelerator's instruction cache: loops whose lines stay cached fetch each once per entry (persistence) |
+//! | [`data_cache`] | the ART accelerator's data cache: the literal-pool loads that hit on every path (LRU must analysis) |
 //! | [`indirect`] | the targets of indirect calls, read from the binary: the functions whose address its data, literal pools or movw/movt pairs hold |
 //! | [`loops`] | dominators and natural loops; irreducible cycles refused |
 //! | [`graph`] | strongly connected components (recursion, irreducible cycles) |
@@ -41,6 +42,7 @@ pub mod copies;
 pub mod coverage;
 pub mod cpi;
 pub mod critical;
+pub mod data_cache;
 pub mod ecu_app;
 pub mod flash_data;
 pub mod flow_facts;
