@@ -38,6 +38,10 @@ enum Command {
     /// parallel; writes sweep.csv (one row per run), sweep.json (the aggregate),
     /// figures and summary.txt. Exits non-zero when a run could not run.
     Sweep(commands::sweep::SweepArgs),
+    /// Writes the figures of the README and docs/ from the timing report
+    /// (`.ci/wcet-report`'s target/ci/wcet), between their `host-sim docs` markers;
+    /// `--check` fails when they differ instead.
+    Docs(commands::docs::DocsArgs),
     /// Joins the sweep.csv of shards (`sweep --only I/N`) into one sweep's outputs.
     SweepMerge(commands::sweep::MergeArgs),
 }
@@ -52,6 +56,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Wcet(args) => commands::wcet::run(args),
         Command::Sweep(args) => commands::sweep::run(args),
         Command::SweepMerge(args) => commands::sweep::merge(args),
+        Command::Docs(args) => commands::docs::run(args),
     }
 }
 

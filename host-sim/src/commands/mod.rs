@@ -11,7 +11,9 @@
 //! | [`sweep`] | `host-sim sweep` and `sweep-merge`: cross products of runs, in parallel |
 //! | [`pil`] | `host-sim pil`: the same drive with the ECU application in QEMU, `pil.json` |
 //! | [`wcet`] | `host-sim wcet`: the PIL laps, the static analysis and the timing and memory report |
+//! | [`docs`] | `host-sim docs`: the README's and `docs/`'s figures written from the timing report |
 
+pub mod docs;
 pub mod pil;
 pub mod qp_corpus;
 pub mod run;
