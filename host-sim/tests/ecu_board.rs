@@ -523,6 +523,27 @@ fn the_flashed_binary_takes_a_window_of_the_road_on_its_route_channel_over_usart
 #[test]
 #[ignore = "needs `cargo ecu` first and qemu-system-arm (.ci/run)"]
 fn a_sensor_frame_late_for_its_release_is_superseded_by_the_newer_one() {
+    // The two frames must both be whole at the release, which the host's clock
+    // decides (the exchange is not in lock-step): an attempt where the newer one
+    // came after the release cannot judge the rule and is run again, with a
+    // fresh ECU. An ECU that acts on the older frame fails every attempt.
+    const ATTEMPTS: usize = 3;
+    let mut lost = Vec::new();
+    for _ in 0..ATTEMPTS {
+        match late_frame_superseded() {
+            Ok(()) => return,
+            Err(race) => lost.push(race),
+        }
+    }
+    panic!(
+        "in {ATTEMPTS} attempts the ECU never answered the newer of two frames sent \
+         together before a release: {lost:#?}"
+    );
+}
+
+/// One attempt of the test above: `Err` when the ECU answered frame 11, not 12
+/// (the newer one may have come after the release); any other failure panics.
+fn late_frame_superseded() -> Result<(), String> {
     let mut ecu = BoardEcu::start(&board_elf());
     let scenario = Scenario::paper(false);
     let first = RouteFeeder::new(&scenario.track).unwrap().first();
@@ -567,10 +588,15 @@ fn a_sensor_frame_late_for_its_release_is_superseded_by_the_newer_one() {
         }
     };
     assert_eq!(answer.sensor, 0, "{answer:?}");
-    assert_eq!(
-        answer.seq, 12,
-        "the answer is to the newest frame: {answer:?}"
+    assert!(
+        answer.seq == 11 || answer.seq == 12,
+        "the answer is to frame 11 or 12: {answer:?}"
     );
+    if answer.seq != 12 {
+        return Err(format!(
+            "the answer is to frame 11, not the newest: {answer:?}"
+        ));
+    }
     // And the exchange goes on in step: 13 is answered as 13.
     ecu.send(&sensor(13));
     let next = loop {
@@ -588,6 +614,7 @@ fn a_sensor_frame_late_for_its_release_is_superseded_by_the_newer_one() {
     let done = ecu.stop(&mut d);
     // Frame 11 was superseded, not refused.
     assert_eq!(done.rejected_frames, 0, "{}", d.summary(&done));
+    Ok(())
 }
 
 #[test]
