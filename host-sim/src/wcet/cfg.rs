@@ -263,9 +263,6 @@ pub struct Block {
     pub instructions: u64,
     /// Worst-case cycles (see [`MemoryModel`]).
     pub cycles: u64,
-    /// Its literal-pool loads that hit the ART's data cache on every path
-    /// (`data_cache::must_hits`): `cycles` charges them no wait states.
-    pub data_cache_hits: u64,
     /// Of `cycles`, the fetch of the flash lines the block's bytes touch (the
     /// lines of return addresses after calls not included); 0 outside flash.
     pub fetch_cycles: u64,
@@ -831,7 +828,6 @@ impl Linker<'_> {
         for (block, h) in blocks.iter_mut().zip(hits) {
             let saved = h * u64::from(memory.flash_wait_states);
             block.cycles -= saved.min(block.cycles);
-            block.data_cache_hits = h;
         }
         Function {
             name: f.name.clone(),
@@ -892,7 +888,6 @@ impl Linker<'_> {
             problems: unresolved,
             instructions: insns.len() as u64,
             cycles: memory.block_cycles(f.address, insns),
-            data_cache_hits: 0,
             fetch_cycles: lines.map_or(0, |(lo, hi)| (hi - lo + 1) * memory.line_fetch_cycles()),
             lines,
             fall_through,

@@ -26,6 +26,7 @@
 //! cache's refill ([`super::cache::PREEMPTION_REFILL_CYCLES`]).
 
 use super::cfg::{strip_condition, Block, Instruction, Program};
+use super::memory_model::{flash_read, FlashRead};
 use super::stack::parse_imm;
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -94,26 +95,16 @@ pub fn literal_lines(i: &Instruction, line_bytes: u32) -> Option<(u64, u64)> {
 /// What instruction `i` does to the data cache; `through_registers`: its
 /// function's loads not relative to sp or pc may read flash.
 fn access(i: &Instruction, line_bytes: u32, through_registers: bool) -> Access {
-    let base = strip_condition(i.base());
-    if matches!(base, "bl" | "blx") {
+    if matches!(strip_condition(i.base()), "bl" | "blx") {
         return Access::Call;
     }
-    if matches!(base, "tbb" | "tbh") {
-        return Access::Unknown;
-    }
-    let load = base.starts_with("ldr") || base.starts_with("ldm") || base.starts_with("vld");
-    if !load {
-        return Access::None;
-    }
-    if i.operands.contains("[pc") {
-        return literal_lines(i, line_bytes)
-            .map_or(Access::Unknown, |(lo, hi)| Access::Lines(lo, hi));
-    }
-    let from_sp = i.operands.contains("[sp") || i.operands.starts_with("sp") || base == "pop";
-    if through_registers && !from_sp {
-        Access::Unknown
-    } else {
-        Access::None
+    // The reads the memory model charges wait states for, and only those.
+    match flash_read(i, through_registers) {
+        FlashRead::No => Access::None,
+        FlashRead::LiteralPool => {
+            literal_lines(i, line_bytes).map_or(Access::Unknown, |(lo, hi)| Access::Lines(lo, hi))
+        }
+        FlashRead::Table | FlashRead::ThroughRegister => Access::Unknown,
     }
 }
 
@@ -313,7 +304,6 @@ mod tests {
             problems: Vec::new(),
             instructions: (end - first) as u64,
             cycles: 0,
-            data_cache_hits: 0,
             fetch_cycles: 0,
             lines: None,
             fall_through: None,

@@ -84,15 +84,7 @@ impl MemoryModel {
         for i in insns {
             let (class, c) = i.timing();
             cycles += u64::from(c);
-            let loads = matches!(class, Class::Load | Class::LoadMultiple)
-                || (class == Class::FpuLoadStore
-                    && (i.base().starts_with("vldr") || i.base().starts_with("vldm")));
-            let from_pc = class == Class::TableBranch || (loads && i.operands.contains("[pc"));
-            // `pop`, `vpop` and `ldm sp!` read the stack too.
-            let from_sp = i.operands.contains("[sp")
-                || i.operands.starts_with("sp")
-                || matches!(strip_condition(i.base()), "pop" | "vpop");
-            if from_pc || (loads && !from_sp && through_registers) {
+            if classify_flash_read(i, class, through_registers) != FlashRead::No {
                 cycles += u64::from(self.flash_wait_states);
             }
         }
@@ -173,5 +165,51 @@ impl MemoryModel {
                 self.line_of(last.address + last.bytes - 1),
             )
         })
+    }
+}
+
+/// How an instruction may read flash as data, each read paying the wait states
+/// ([`MemoryModel::block_cycles`]) unless the ART's data cache holds its line
+/// ([`super::data_cache`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FlashRead {
+    /// It reads no flash.
+    No,
+    /// A pc-relative load: a literal pool in the code's own lines.
+    LiteralPool,
+    /// A table branch (`tbb`, `tbh`): its table after the instruction.
+    Table,
+    /// A load through a register in a function that may read flash
+    /// ([`FlashData::may_read_flash`]).
+    ThroughRegister,
+}
+
+/// How `i` may read flash as data; `through_registers`: its function's loads
+/// not relative to sp or pc may read flash.
+pub fn flash_read(i: &Instruction, through_registers: bool) -> FlashRead {
+    classify_flash_read(i, i.timing().0, through_registers)
+}
+
+fn classify_flash_read(i: &Instruction, class: Class, through_registers: bool) -> FlashRead {
+    if class == Class::TableBranch {
+        return FlashRead::Table;
+    }
+    let loads = matches!(class, Class::Load | Class::LoadMultiple)
+        || (class == Class::FpuLoadStore
+            && (i.base().starts_with("vldr") || i.base().starts_with("vldm")));
+    if !loads {
+        return FlashRead::No;
+    }
+    if i.operands.contains("[pc") {
+        return FlashRead::LiteralPool;
+    }
+    // `pop`, `vpop` and `ldm sp!` read the stack too.
+    let from_sp = i.operands.contains("[sp")
+        || i.operands.starts_with("sp")
+        || matches!(strip_condition(i.base()), "pop" | "vpop");
+    if through_registers && !from_sp {
+        FlashRead::ThroughRegister
+    } else {
+        FlashRead::No
     }
 }
