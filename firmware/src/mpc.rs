@@ -790,7 +790,7 @@ impl<T: Real> Mpc<T> {
                 QP_MAX_REFACTORIZATIONS.saturating_sub(report.qp_refactorizations);
             self.solver.settings.warm_start = true;
             before(&self.solver);
-            let status = self.solver.solve();
+            let status = self.solver.solve_factored();
             self.keep_working_set();
             let sol = self.solver.solution();
             after(sol);

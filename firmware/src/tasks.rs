@@ -444,7 +444,13 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
                 });
             if let Some(p) = hit {
                 self.obstacle_list[i].s_hint_m = Some(p.s_m);
-                self.obstacle_list.swap(inside, i);
+                // Two disjoint references (inside <= i): `slice::swap` copies
+                // through `memmove`, whose unaligned and backward paths would be
+                // loops of the binary that no activation takes.
+                let (kept, rest) = self.obstacle_list.split_at_mut(i);
+                if let Some(slot) = kept.get_mut(inside) {
+                    core::mem::swap(slot, &mut rest[0]);
+                }
                 inside += 1;
             }
         }

@@ -158,6 +158,34 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
     /// [`QpSolver::solution`]). Consumes `H` and the rows (see
     /// [`QpSolver::problem_mut`]).
     pub fn solve(&mut self) -> QpStatus {
+        self.solve_with(|h, is_factor| {
+            if is_factor {
+                prepare_factor(h)
+            } else {
+                factor_h_counted(h)
+            }
+        })
+    }
+
+    /// [`QpSolver::solve`] for a problem that holds the Hessian as its factor `R`
+    /// ([`QpProblem::h_factor`]); `InvalidInput` if it holds `H`. A caller that
+    /// always builds `R` (the MPC) links no Cholesky factorisation, whose loops
+    /// would otherwise be code of the binary that no activation runs.
+    pub fn solve_factored(&mut self) -> QpStatus {
+        if !self.problem.h_factor {
+            // As a consumed problem: `InvalidInput`, the solution cleared.
+            self.consumed = true;
+        }
+        self.solve_with(|h, _| prepare_factor(h))
+    }
+
+    /// The solve, with `factor` making `R` in place from the problem's `h` (given
+    /// whether `h` holds `R` already): the floored pivots, or `None` when `h` is
+    /// not usable.
+    fn solve_with(
+        &mut self,
+        factor: impl FnOnce(&mut [[T; N]; N], bool) -> Option<u32>,
+    ) -> QpStatus {
         let s = &mut self.solution;
         s.iterations = 0;
         s.added = 0;
@@ -170,11 +198,7 @@ impl<T: Real, const N: usize, const M: usize, const W: usize, const WL: usize>
             match validate(&self.problem, &mut self.work.row_code) {
                 Some(st) => st,
                 None => {
-                    let floored = if self.problem.h_factor {
-                        prepare_factor(&mut self.problem.h)
-                    } else {
-                        factor_h_counted(&mut self.problem.h)
-                    };
+                    let floored = factor(&mut self.problem.h, self.problem.h_factor);
                     self.solution.floored_pivots = floored.unwrap_or(0);
                     if floored.is_none() {
                         QpStatus::NotConvex

@@ -477,3 +477,62 @@ fn infeasible_regression_seed_11089739763387800491() {
     println!("status {st:?} iterations {}", s.solution().iterations);
     assert!(st == QpStatus::Infeasible, "{st:?}");
 }
+
+/// The upper Cholesky factor `R` of `h` (`H = RᵀR`), in a full matrix.
+fn upper_cholesky<const N: usize>(h: &[[f64; N]; N]) -> [[f64; N]; N] {
+    let mut r = [[0.0; N]; N];
+    for j in 0..N {
+        let d = h[j][j] - (0..j).map(|k| r[k][j] * r[k][j]).sum::<f64>();
+        r[j][j] = d.sqrt();
+        for c in j + 1..N {
+            let s = h[j][c] - (0..j).map(|k| r[k][j] * r[k][c]).sum::<f64>();
+            r[j][c] = s / r[j][j];
+        }
+    }
+    r
+}
+
+/// `solve_factored` on `R` finds the optimum `solve` finds on `H`, and refuses a
+/// problem that holds `H` with `InvalidInput` and a cleared solution.
+#[test]
+fn solve_factored_takes_the_factor_and_refuses_the_hessian() {
+    for seed in 0..20u64 {
+        let mut rng = Rng::new(4100 + seed);
+        let mix = Mix {
+            m: M2,
+            p_soft: 0.3,
+            p_degenerate: 0.1,
+            p_eq: 0.05,
+            p_fixed: 0.05,
+            tight: true,
+        };
+        let p = random_problem::<N2, M2>(&mut rng, mix);
+        let mut on_h = Box::new(Medium::new());
+        *on_h.problem_mut() = p.clone();
+        let st = on_h.solve();
+        let mut on_r = Box::new(Medium::new());
+        let mut pr = p.clone();
+        pr.h = upper_cholesky(&p.h);
+        pr.h_factor = true;
+        *on_r.problem_mut() = pr;
+        assert_eq!(on_r.solve_factored(), st, "seed {seed}");
+        if st == QpStatus::Optimal {
+            let dx = on_h
+                .solution()
+                .x
+                .iter()
+                .zip(on_r.solution().x.iter())
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(dx < 1e-7, "seed {seed}: |Δx| {dx:e}");
+        }
+        let mut refused = Box::new(Medium::new());
+        *refused.problem_mut() = p;
+        assert_eq!(
+            refused.solve_factored(),
+            QpStatus::InvalidInput,
+            "seed {seed}"
+        );
+        assert!(refused.solution().x.iter().all(|&v| v == 0.0));
+    }
+}

@@ -704,8 +704,11 @@ fn lin_row_into<T: Real, const K: usize>(
     let u = u_bar.as_flattened();
     let mut acc = T::ZERO;
     let [(s0, c0), (s1, c1), (s2, c2)] = used;
-    match cnt {
-        1 => {
+    // No more terms than `K` (so the single-term rows' copy has no two- or
+    // three-term path); no term at all is the first entry with a zero coefficient:
+    // a zero row (each entry `0·s`, ±0) and its product with ū.
+    match cnt.min(K) {
+        0 | 1 => {
             // wcet-bound: NV
             for j in 0..n {
                 let r = c0 * s0[j];
@@ -721,23 +724,13 @@ fn lin_row_into<T: Real, const K: usize>(
                 acc += r * u[j];
             }
         }
-        3 => {
+        _ => {
             // wcet-bound: NV
             for j in 0..n {
                 let r = (c0 * s0[j] + c1 * s1[j]) + c2 * s2[j];
                 row[j] = r;
                 acc += r * u[j];
             }
-        }
-        _ => {
-            // No nonzero term: a zero row (its tail is zero already), and its
-            // product with ū as the terms' loops would make it.
-            if let Some(head) = row.get_mut(..n) {
-                // WCET: `row` holds NV f32.
-                // wcet-bound: NV * 4 bytes
-                head.fill(T::ZERO);
-            }
-            acc = dot(row, u_bar, n);
         }
     }
     nominal - acc
