@@ -19,7 +19,7 @@ use host_sim::closed_loop::SimOptions;
 use host_sim::model::vehicle::VehicleParams;
 use host_sim::pil::comparison::compare;
 use host_sim::pil::deadlines::{count_mismatches, TickOverruns};
-use host_sim::pil::link_fault::{LinkFault, LinkFaultKind, LinkFaultSpec};
+use host_sim::pil::link_fault::{FaultKinds, LinkChannel, LinkFault, LinkFaultKind, LinkFaultSpec};
 use host_sim::pil::qemu::{InjectedFrames, LinkCounters, PilOptions, QemuEcu};
 use host_sim::world::disturbance::Disturbances;
 use host_sim::world::obstacle_file::{load_obstacles_reader, Obstacle};
@@ -419,7 +419,8 @@ fn forged_replayed_and_corrupted_sensor_frames_are_refused_by_reason_and_never_a
     for kind in LinkFaultKind::ALL {
         let fault = LinkFault {
             spec: LinkFaultSpec {
-                kind,
+                channel: LinkChannel::Sensor,
+                kinds: FaultKinds::One(kind),
                 frames: FRAMES,
             },
             start_us,
@@ -477,7 +478,7 @@ fn forged_replayed_and_corrupted_sensor_frames_are_refused_by_reason_and_never_a
         // the window withheld until after them: nothing else of the injected
         // frames reached the control or the plan.
         let d = Disturbances {
-            dropout: Some(fault.dropout()),
+            dropout: fault.dropout(),
             ..Disturbances::default()
         };
         let mut modelled = DisturbedEcu::<f32>::new(&scenario, &vehicle, &opts, d).unwrap();
@@ -492,4 +493,89 @@ fn forged_replayed_and_corrupted_sensor_frames_are_refused_by_reason_and_never_a
         assert_counts_agree(&r, &ticks);
         assert_eq!(s.collisions, 0);
     }
+}
+
+#[test]
+#[ignore = "needs qemu-system-arm and `cargo ecu-lockstep`; .ci/run runs it"]
+fn forged_replayed_and_corrupted_route_frames_are_refused_and_lose_only_their_window() {
+    // The paper scenario with its obstacles; three frames of the first window
+    // sent while driving replaced, from its third frame (two legitimate ones
+    // before, for the replay).
+    let scenario = Scenario::paper(true);
+    let vehicle = VehicleParams::default();
+    let opts = SimOptions {
+        max_duration_s: 30.0,
+        ..SimOptions::default()
+    };
+    let mut modelled = SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts).unwrap();
+    let clean = run_with(&scenario, &vehicle, &opts, &mut modelled, |_, _| {}).unwrap();
+    let route_releases: Vec<u64> = clean
+        .plan_activations
+        .iter()
+        .filter(|a| a.route_frames > 0)
+        .map(|a| a.release_us)
+        .collect();
+    // The first window's frames: up to the activation that adopts it.
+    let lost = clean
+        .plan_activations
+        .iter()
+        .find(|a| a.window)
+        .expect("a window adopted in the run without the fault")
+        .release_us;
+    let route_releases: Vec<u64> = route_releases.into_iter().filter(|&t| t <= lost).collect();
+    assert!(route_releases.len() > 5, "{route_releases:?}");
+    const FRAMES: u32 = 3;
+    let fault = LinkFault {
+        spec: "route-mix:3".parse().unwrap(),
+        start_us: route_releases[2],
+    };
+    assert_eq!(fault.spec.frames, FRAMES);
+    let pil = PilOptions {
+        link_fault: Some(fault),
+        ..pil_options("route-fault", 4)
+    };
+    let (r, done, link, ticks, mut injected) = drive_pil(&scenario, &opts, &pil);
+    injected.judge_by_counts(&done.refused);
+    println!(
+        "route-mix:3: {injected:?}, ECU {:?} of {}",
+        done.refused, done.rejected_frames
+    );
+    // One frame of each kind, each refused for its reason by the ECU, none
+    // acted on; the window's later frames refused as out of order (counted, with
+    // no reason).
+    let expected = FaultKinds::Mix.refusals(FRAMES);
+    assert_eq!(injected.injected, expected);
+    assert_eq!(done.refused, expected);
+    assert_eq!(injected.refused_as_expected, u64::from(FRAMES));
+    assert_eq!((injected.acted_on, injected.legitimate_refused), (0, 0));
+    let window_frames = route_releases.len() as u32;
+    assert!(
+        done.rejected_frames > FRAMES && done.rejected_frames <= window_frames,
+        "{} rejected of a window of {window_frames} frames",
+        done.rejected_frames
+    );
+    assert_eq!((link.rejected, link.stale), (0, 0));
+    // The window the frames belonged to was never adopted; the next one was,
+    // after it, and the car went on with no more safe actuations than without
+    // the fault.
+    let adopted: Vec<u64> = r
+        .plan_activations
+        .iter()
+        .filter(|a| a.window)
+        .map(|a| a.release_us)
+        .collect();
+    assert!(!adopted.contains(&lost), "{adopted:?}");
+    assert!(adopted.iter().any(|&t| t > lost), "{adopted:?}");
+    assert_eq!(
+        r.summary.control_safe_actuations,
+        clean.summary.control_safe_actuations
+    );
+    assert_eq!(r.summary.collisions, 0);
+    // Bit for bit the in-process run that drops the same frames.
+    let mut modelled = SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts).unwrap();
+    modelled.refuse_route_frames(fault.route_frames().unwrap());
+    let host = run_with(&scenario, &vehicle, &opts, &mut modelled, |_, _| {}).unwrap();
+    let c = compare(&r, &host);
+    assert!(c.identical, "{c:?}");
+    assert_counts_agree(&r, &ticks);
 }

@@ -48,6 +48,7 @@ use crate::closed_loop::summary::CarEstimate;
 use crate::closed_loop::SimOptions;
 use crate::model::vehicle::vehicle_config;
 use crate::model::vehicle::VehicleParams;
+use crate::pil::link_fault::RouteFault;
 use crate::world::obstacle_file::Obstacle;
 use crate::world::route::HOST_PATH_CAP;
 use crate::world::route::{RouteFeeder, Window};
@@ -229,6 +230,9 @@ pub struct SimulatedEcu<T: Real> {
 struct RouteFrame {
     window: usize,
     index: usize,
+    /// Replaced on the way by a link fault: the ECU refuses it and stages
+    /// nothing from it.
+    refused: bool,
 }
 
 /// The route channel as the ECU sees it: the host sends one frame of the road
@@ -253,6 +257,9 @@ struct RouteChannel {
     read: u32,
     /// The window being staged and how many of its frames arrived in order.
     staged: Option<(usize, usize)>,
+    /// The frames a link fault replaces on the way (`host-sim pil --link-fault
+    /// route-…`), and how many it replaced so far.
+    fault: Option<(RouteFault, u32)>,
 }
 
 impl RouteChannel {
@@ -266,7 +273,11 @@ impl RouteChannel {
         let window = self.windows.len();
         self.windows.push(w.clone());
         self.unsent = (0..Self::frames_of(w))
-            .map(|index| RouteFrame { window, index })
+            .map(|index| RouteFrame {
+                window,
+                index,
+                refused: false,
+            })
             .collect();
     }
 
@@ -275,7 +286,13 @@ impl RouteChannel {
     /// its sensor frame is refused (`heard`).
     fn period(&mut self, t_us: u64, heard: bool) {
         if t_us.is_multiple_of(PLAN_PERIOD_US) {
-            if let Some(f) = self.unsent.pop_front() {
+            if let Some(mut f) = self.unsent.pop_front() {
+                if let Some((fault, replaced)) = &mut self.fault {
+                    if fault.replaces(t_us, *replaced) {
+                        f.refused = true;
+                        *replaced += 1;
+                    }
+                }
                 self.in_channel.push_back(f);
                 self.sent += 1;
             }
@@ -298,6 +315,9 @@ impl RouteChannel {
         }
         let f = self.in_channel.pop_front()?;
         self.read += 1;
+        if f.refused {
+            return None;
+        }
         let total = self.windows.get(f.window).map_or(0, Self::frames_of);
         // The first chunk restarts the staging; a frame out of order is refused.
         self.staged = match self.staged {
@@ -405,6 +425,12 @@ impl<T: Real> SimulatedEcu<T> {
         let finish_us = t_us + response_us(cycles, control_cycles, self.ecu_clock_hz).ceil() as u64;
         self.busy_until_us = finish_us;
         (cycles, finish_us)
+    }
+
+    /// The route frames `fault` replaces on the way are refused (a link fault of
+    /// the route channel): their windows never complete.
+    pub fn refuse_route_frames(&mut self, fault: RouteFault) {
+        self.route.fault = Some((fault, 0));
     }
 
     /// This period's sensor frame is refused (a link fault, before

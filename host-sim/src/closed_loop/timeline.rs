@@ -98,6 +98,9 @@ use crate::world::road_friction::{judge, MuSample, RoadFriction};
 use crate::world::road_grade::RoadGrade;
 use crate::world::scenario::Scenario;
 
+/// The stop reason of a run that reached its `--duration` (its `max_duration_s`).
+pub const TIME_LIMIT_REASON: &str = "time limit reached";
+
 /// One row of the 10 ms log.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct LogRow {
@@ -401,7 +404,7 @@ pub fn run_with<T: Real, E: Ecu<T>>(
     let max_steps = (opts.max_duration_s / opts.plant_dt_s).ceil() as u64;
     let mut t_us: u64 = 0;
     let mut step: u64 = 0;
-    let mut stop_reason = String::from("time limit reached");
+    let mut stop_reason = String::from(TIME_LIMIT_REASON);
     while step <= max_steps {
         if t_us.is_multiple_of(CONTROL_PERIOD_US) {
             let st = *plant.state();

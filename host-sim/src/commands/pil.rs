@@ -8,7 +8,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use firmware::link::{DoneFrame, LinkKey, RefusalCounts};
+use firmware::link::{DoneFrame, LinkKey, Refusal, RefusalCounts};
 use firmware::tasks::CONTROL_PERIOD_US;
 
 use crate::closed_loop::cost_model::CostModel;
@@ -116,11 +116,14 @@ pub struct PilEcuArgs {
     #[arg(long)]
     pub max_model_underestimate_pct: Option<f64>,
     /// Replace sensor frames, from the link fault's start: `forge` (a tag under
-    /// another key), `replay` (frames sent before the fault, again) or `corrupt`
-    /// (a bit flipped), each `[:N]` frames (default 20). The ECU must refuse
-    /// each, count it by reason and never act on it (a dropout: the safe
-    /// actuation), and the lap go on; `host-sim pil` fails otherwise.
-    #[arg(long, value_name = "forge|replay|corrupt[:N]")]
+    /// another key), `replay` (frames sent before the fault, again), `corrupt`
+    /// (a bit flipped) or `mix` (the three in turn), each `[:N]` frames (default
+    /// 20). The ECU must refuse each, count it by reason and never act on it (a
+    /// dropout: the safe actuation), and the lap go on; `host-sim pil` fails
+    /// otherwise. With the prefix `route-` (e.g. `route-mix:3`), the next N
+    /// frames of the road on the route channel instead: their window is lost,
+    /// the car plans on the one it holds until the next.
+    #[arg(long, value_name = "[route-]forge|replay|corrupt|mix[:N]")]
     pub link_fault: Option<LinkFaultSpec>,
     /// When the link fault starts, s of simulated time (rounded down to a 10 ms
     /// control period).
@@ -357,10 +360,13 @@ pub fn run(args: &PilArgs) -> Result<()> {
     bar.finish_and_clear();
     let tick_overruns = ecu.tick_overruns;
     let ecu_counts = ecu.ecu_counts;
-    let injected = ecu.injected;
+    let mut injected = ecu.injected;
     let (done, counters) = match &result {
         Ok(_) => {
             let (done, counters) = ecu.stop()?;
+            if args.link_fault.is_some_and(|f| f.route_frames().is_some()) {
+                injected.judge_by_counts(&done.refused);
+            }
             (Some(done), counters)
         }
         Err(_) => (None, ecu.counters),
@@ -398,16 +404,21 @@ pub fn run(args: &PilArgs) -> Result<()> {
     let comparison = if args.no_compare {
         None
     } else {
-        // The link fault's refused frames are, to the ECU, periods without an
-        // estimate: the in-process run has them as a dropout of the same periods.
-        let host = match args.link_fault {
+        // The link fault's refused sensor frames are, to the ECU, periods without
+        // an estimate: the in-process run has them as a dropout of the same
+        // periods. Its refused route frames it drops as the ECU does.
+        let dropout = args.link_fault.and_then(|f| f.dropout());
+        let host = match dropout {
             None => {
                 let mut host_ecu = SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts)?;
+                if let Some(r) = args.link_fault.and_then(|f| f.route_frames()) {
+                    host_ecu.refuse_route_frames(r);
+                }
                 timeline::run_with(&scenario, &plant_car, &opts, &mut host_ecu, |_, _| {})?
             }
-            Some(f) => {
+            Some(dropout) => {
                 let d = Disturbances {
-                    dropout: Some(f.dropout()),
+                    dropout: Some(dropout),
                     ..Disturbances::default()
                 };
                 let mut host_ecu = DisturbedEcu::<f32>::new(&scenario, &vehicle, &opts, d)?;
@@ -536,23 +547,27 @@ pub fn run(args: &PilArgs) -> Result<()> {
     );
     if let Some(f) = args.link_fault {
         let expected = u64::from(injected.injected.total());
+        let counted = Refusal::ALL
+            .iter()
+            .all(|&r| done.refused.of(r) >= injected.injected.of(r));
         if injected.acted_on > 0
             || injected.refused_as_expected != expected
             || injected.legitimate_refused > 0
-            || done.refused.of(f.spec.kind.refusal()) < injected.injected.total()
+            || !counted
         {
             bail!(
-                "link fault {}: of {expected} frames injected, the ECU refused {} for their reason ({} in its own count) and acted on {}; it refused {} legitimate frames (pil.json: link_fault)",
+                "link fault {}: of {expected} frames injected, the ECU refused {} for their reason and acted on {}; it refused {} legitimate frames; its own counts: {:?} against {:?} injected (pil.json: link_fault)",
                 f.spec,
                 injected.refused_as_expected,
-                done.refused.of(f.spec.kind.refusal()),
                 injected.acted_on,
-                injected.legitimate_refused
+                injected.legitimate_refused,
+                done.refused,
+                injected.injected
             );
         }
-        if !s.completed {
+        if !s.completed && s.stop_reason != timeline::TIME_LIMIT_REASON {
             bail!(
-                "link fault {}: the lap did not complete ({}): the dropout policy should carry the car through {} refused frames",
+                "link fault {}: the run stopped before its end ({}): the dropout policy (or, for route frames, the window the ECU holds) should carry the car through {} refused frames",
                 f.spec,
                 s.stop_reason,
                 f.spec.frames

@@ -1,24 +1,32 @@
 //! Faults injected on the link to the ECU (`host-sim pil --link-fault`): from the
-//! fault's start, `N` consecutive sensor frames are replaced by forged, replayed
-//! or corrupted ones, each of which the ECU must refuse and count by its reason
-//! ([`firmware::link::Refusal`]) and never act on: each such period runs as a
-//! dropout (the safe actuation), and the lap goes on.
+//! fault's start, `N` consecutive frames of one channel are replaced by forged,
+//! replayed or corrupted ones, each of which the ECU must refuse and count by its
+//! reason ([`firmware::link::Refusal`]) and never act on, and the lap goes on.
 //!
-//! | fault | the frame the ECU receives instead of the period's sensor frame | refused as |
+//! | fault | the frame the ECU receives instead | refused as |
 //! |---|---|---|
-//! | `forge[:N]` | the period's sensor frame, fresh, its tag computed under another key than the link's (a forger without the key) | `auth` |
-//! | `replay[:N]` | a sensor frame sent, and accepted, before the fault (the last second's, oldest first), bit for bit | `replay` |
-//! | `corrupt[:N]` | the period's sensor frame with one bit flipped on the way (never into a 0x00, which would split the frame) | `corrupt` |
+//! | `forge[:N]` | the frame, fresh, its tag computed under another key than the link's (a forger without the key) | `auth` |
+//! | `replay[:N]` | a frame of the same channel sent, and accepted, before the fault (oldest first), bit for bit | `replay` |
+//! | `corrupt[:N]` | the frame with one bit flipped on the way (never into a 0x00, which would split the frame) | `corrupt` |
+//! | `mix[:N]` | forge, replay, corrupt, in turn | each by its own |
 //!
-//! The in-process run that `host-sim pil` compares with models the same periods
-//! as a `dropout-nan` ([`LinkFault::dropout`]): the ECU runs a period whose
-//! frame it refused on no estimate, as that fault delivers, and learns of the
-//! route frames announced in a refused frame from the next one it accepts.
+//! Plain, the fault replaces the sensor frames of `N` control periods. The
+//! in-process run that `host-sim pil` compares with models those periods as a
+//! `dropout-nan` ([`LinkFault::dropout`]): the ECU runs a period whose frame it
+//! refused on no estimate, as that fault delivers, and learns of the route frames
+//! announced in a refused frame from the next one it accepts.
+//!
+//! With the prefix `route-` it replaces the next `N` frames of the road sent on
+//! the route channel (one per plan release, [`crate::world::route`]). The ECU
+//! refuses each and stages nothing from it; the window it belonged to can no
+//! longer complete (its later chunks come out of order, and are refused as
+//! such), so the car plans on the window it holds until the next one arrives.
+//! The in-process run drops the same frames ([`LinkFault::route_frames`]).
 
 use std::fmt;
 use std::str::FromStr;
 
-use firmware::link::Refusal;
+use firmware::link::{Refusal, RefusalCounts};
 use firmware::tasks::CONTROL_PERIOD_US;
 
 use crate::world::disturbance::{Dropout, DropoutKind};
@@ -64,27 +72,86 @@ impl LinkFaultKind {
     }
 }
 
-/// A link fault on the command line: `KIND[:N]` (module docs), its start apart.
+/// The kinds a link fault gives the frames it replaces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FaultKinds {
+    /// Every frame the same.
+    One(LinkFaultKind),
+    /// Forge, replay, corrupt, in turn from the first.
+    Mix,
+}
+
+impl FaultKinds {
+    /// What the `k`-th replaced frame of a run (from 0) gets.
+    pub fn nth(self, k: u32) -> LinkFaultKind {
+        match self {
+            FaultKinds::One(kind) => kind,
+            FaultKinds::Mix => LinkFaultKind::ALL[k as usize % LinkFaultKind::ALL.len()],
+        }
+    }
+
+    /// Its name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            FaultKinds::One(kind) => kind.name(),
+            FaultKinds::Mix => "mix",
+        }
+    }
+
+    /// What the ECU must refuse `frames` such frames for, by reason.
+    pub fn refusals(self, frames: u32) -> RefusalCounts {
+        let mut c = RefusalCounts::new();
+        for k in 0..frames {
+            c.count(self.nth(k).refusal());
+        }
+        c
+    }
+}
+
+/// The frames a link fault replaces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LinkChannel {
+    /// The sensor frames, one per control period.
+    Sensor,
+    /// The frames of the road on the route channel, one per plan release at most.
+    Route,
+}
+
+/// A link fault on the command line: `[route-]KIND[:N]` (module docs), its start
+/// apart.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LinkFaultSpec {
+    /// The channel whose frames are replaced.
+    pub channel: LinkChannel,
     /// What is done to the frames.
-    pub kind: LinkFaultKind,
-    /// Consecutive sensor frames replaced, frames (≥ 1).
+    pub kinds: FaultKinds,
+    /// Consecutive frames replaced, frames (≥ 1).
     pub frames: u32,
 }
+
+/// The `route-` prefix of a route channel's fault on the command line.
+const ROUTE_PREFIX: &str = "route-";
 
 impl FromStr for LinkFaultSpec {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let (name, n) = match s.split_once(':') {
-            Some((name, n)) => (name, Some(n)),
-            None => (s, None),
+        let (channel, rest) = match s.strip_prefix(ROUTE_PREFIX) {
+            Some(rest) => (LinkChannel::Route, rest),
+            None => (LinkChannel::Sensor, s),
         };
-        let Some(kind) = LinkFaultKind::ALL.into_iter().find(|k| k.name() == name) else {
-            return Err(format!(
-                "unknown link fault {s:?}: forge, replay or corrupt, each with an optional :N (sensor frames, default {DEFAULT_LINK_FAULT_FRAMES})"
-            ));
+        let (name, n) = match rest.split_once(':') {
+            Some((name, n)) => (name, Some(n)),
+            None => (rest, None),
+        };
+        let kinds = match LinkFaultKind::ALL.into_iter().find(|k| k.name() == name) {
+            Some(kind) => FaultKinds::One(kind),
+            None if name == FaultKinds::Mix.name() => FaultKinds::Mix,
+            None => {
+                return Err(format!(
+                    "unknown link fault {s:?}: forge, replay, corrupt or mix, each with an optional :N (frames, default {DEFAULT_LINK_FAULT_FRAMES}), and the prefix {ROUTE_PREFIX} for the route channel's frames"
+                ))
+            }
         };
         let frames = match n {
             None => DEFAULT_LINK_FAULT_FRAMES,
@@ -92,18 +159,26 @@ impl FromStr for LinkFaultSpec {
                 Ok(n) if n >= 1 => n,
                 _ => {
                     return Err(format!(
-                        "link fault {s:?}: N must be a whole number of sensor frames, at least 1"
+                        "link fault {s:?}: N must be a whole number of frames, at least 1"
                     ))
                 }
             },
         };
-        Ok(Self { kind, frames })
+        Ok(Self {
+            channel,
+            kinds,
+            frames,
+        })
     }
 }
 
 impl fmt::Display for LinkFaultSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}:{}", self.kind.name(), self.frames)
+        let prefix = match self.channel {
+            LinkChannel::Sensor => "",
+            LinkChannel::Route => ROUTE_PREFIX,
+        };
+        write!(f, "{prefix}{}:{}", self.kinds.name(), self.frames)
     }
 }
 
@@ -119,23 +194,55 @@ pub struct LinkFault {
 impl LinkFault {
     /// Whether the sensor frame of the control instant `t_us` (µs) is replaced.
     pub fn covers(&self, t_us: u64) -> bool {
-        self.dropout().covers(t_us)
+        self.dropout().is_some_and(|d| d.covers(t_us))
     }
 
-    /// The same periods as a dropout with no estimate (`dropout-nan`), the
-    /// in-process run's model of the refused frames.
-    pub fn dropout(&self) -> Dropout {
-        Dropout {
+    /// For a fault of the sensor frames, the same periods as a dropout with no
+    /// estimate (`dropout-nan`), the in-process run's model of the refused
+    /// frames; `None` for the route channel's.
+    pub fn dropout(&self) -> Option<Dropout> {
+        (self.spec.channel == LinkChannel::Sensor).then_some(Dropout {
             start_us: self.start_us,
             periods: self.spec.frames,
             kind: DropoutKind::Nan,
             withholds_route: true,
-        }
+        })
     }
 
-    /// The instant after the last replaced sensor frame, µs.
+    /// For a fault of the route channel, the frames it replaces: the first
+    /// `frames` sent at or after `start_us` (µs); `None` for the sensor frames'.
+    pub fn route_frames(&self) -> Option<RouteFault> {
+        (self.spec.channel == LinkChannel::Route).then_some(RouteFault {
+            start_us: self.start_us,
+            frames: self.spec.frames,
+        })
+    }
+
+    /// The instant after the last replaced sensor frame, µs (for the route
+    /// channel, the instant the fault starts).
     pub fn end_us(&self) -> u64 {
-        self.start_us + u64::from(self.spec.frames) * CONTROL_PERIOD_US
+        match self.spec.channel {
+            LinkChannel::Sensor => self.start_us + u64::from(self.spec.frames) * CONTROL_PERIOD_US,
+            LinkChannel::Route => self.start_us,
+        }
+    }
+}
+
+/// The route channel's frames a link fault replaces: the first `frames` sent at
+/// or after `start_us`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RouteFault {
+    /// The first instant whose route frame may be replaced, µs.
+    pub start_us: u64,
+    /// Frames replaced.
+    pub frames: u32,
+}
+
+impl RouteFault {
+    /// Whether the route frame sent at `t_us` (µs), with `replaced` frames
+    /// replaced before it, is replaced.
+    pub fn replaces(&self, t_us: u64, replaced: u32) -> bool {
+        t_us >= self.start_us && replaced < self.frames
     }
 }
 
@@ -158,6 +265,7 @@ pub fn flip_bit(frame: &mut [u8], k: u32) {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 
@@ -166,24 +274,70 @@ mod tests {
         assert_eq!(
             "forge".parse::<LinkFaultSpec>(),
             Ok(LinkFaultSpec {
-                kind: LinkFaultKind::Forge,
+                channel: LinkChannel::Sensor,
+                kinds: FaultKinds::One(LinkFaultKind::Forge),
                 frames: DEFAULT_LINK_FAULT_FRAMES
             })
         );
-        for s in ["forge:3", "replay:1", "corrupt:40"] {
+        assert_eq!(
+            "route-mix:4".parse::<LinkFaultSpec>(),
+            Ok(LinkFaultSpec {
+                channel: LinkChannel::Route,
+                kinds: FaultKinds::Mix,
+                frames: 4
+            })
+        );
+        for s in [
+            "forge:3",
+            "replay:1",
+            "corrupt:40",
+            "mix:2",
+            "route-forge:1",
+            "route-corrupt:7",
+        ] {
             let f = s.parse::<LinkFaultSpec>();
             assert_eq!(f.map(|f| f.to_string()), Ok(s.to_string()));
         }
-        for bad in ["forge:0", "replay:-1", "corrupt:2.5", "jam", "forge:x"] {
+        for bad in [
+            "forge:0",
+            "replay:-1",
+            "corrupt:2.5",
+            "jam",
+            "forge:x",
+            "route-",
+            "route-jam:2",
+            "sensor-forge",
+        ] {
             assert!(bad.parse::<LinkFaultSpec>().is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn a_mix_gives_the_three_kinds_in_turn() {
+        let kinds: Vec<LinkFaultKind> = (0..7).map(|k| FaultKinds::Mix.nth(k)).collect();
+        use LinkFaultKind::*;
+        assert_eq!(
+            kinds,
+            vec![Forge, Replay, Corrupt, Forge, Replay, Corrupt, Forge]
+        );
+        let c = FaultKinds::Mix.refusals(7);
+        assert_eq!(
+            (
+                c.of(Refusal::Auth),
+                c.of(Refusal::Replay),
+                c.of(Refusal::Corrupt)
+            ),
+            (3, 2, 2)
+        );
+        assert_eq!(FaultKinds::One(Replay).refusals(3).of(Refusal::Replay), 3);
     }
 
     #[test]
     fn a_link_fault_covers_its_frames_only() {
         let f = LinkFault {
             spec: LinkFaultSpec {
-                kind: LinkFaultKind::Replay,
+                channel: LinkChannel::Sensor,
+                kinds: FaultKinds::One(LinkFaultKind::Replay),
                 frames: 3,
             },
             start_us: 1_000_000,
@@ -194,6 +348,22 @@ mod tests {
             .collect();
         assert_eq!(covered, vec![1_000_000, 1_010_000, 1_020_000]);
         assert_eq!(f.end_us(), 1_030_000);
+        assert!(f.route_frames().is_none());
+    }
+
+    #[test]
+    fn a_route_fault_replaces_route_frames_and_no_sensor_frame() {
+        let f = LinkFault {
+            spec: "route-forge:2".parse().unwrap(),
+            start_us: 1_000_000,
+        };
+        assert!(f.dropout().is_none());
+        assert!((90..110).all(|k| !f.covers(k * CONTROL_PERIOD_US)));
+        let r = f.route_frames().unwrap();
+        assert!(!r.replaces(900_000, 0));
+        assert!(r.replaces(1_000_000, 0));
+        assert!(r.replaces(1_500_000, 1));
+        assert!(!r.replaces(1_600_000, 2));
     }
 
     #[test]

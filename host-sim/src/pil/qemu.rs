@@ -106,10 +106,45 @@ pub struct InjectedFrames {
     pub legitimate_refused: u64,
 }
 
+impl InjectedFrames {
+    /// The route channel's injected frames judged on the ECU's refusal counts
+    /// at the end (`ecu`, its Done frame's): that channel has no answer per
+    /// frame. Of each reason, the frames refused up to the count injected are
+    /// refused as expected, the rest of the injected ones acted on, and refusals
+    /// beyond it legitimate frames refused.
+    pub fn judge_by_counts(&mut self, ecu: &RefusalCounts) {
+        let (mut expected, mut beyond) = (0u64, 0u64);
+        for r in Refusal::ALL {
+            let (injected, refused) = (self.injected.of(r), ecu.of(r));
+            expected += u64::from(injected.min(refused));
+            beyond += u64::from(refused.saturating_sub(injected));
+        }
+        self.refused_as_expected = expected;
+        self.acted_on = u64::from(self.injected.total()) - expected;
+        self.legitimate_refused = beyond;
+    }
+}
+
 enum Incoming {
     Frame(Box<Up>),
     Bad(FrameError),
     Closed,
+}
+
+/// A channel a link fault can replace frames of.
+#[derive(Clone, Copy)]
+enum Channel {
+    Sensor,
+    Route,
+}
+
+impl Channel {
+    fn name(self) -> &'static str {
+        match self {
+            Channel::Sensor => "sensor",
+            Channel::Route => "route",
+        }
+    }
 }
 
 /// Bytes of the legitimate sensor frames sent in the last second, kept for the
@@ -161,7 +196,10 @@ pub struct QemuEcu {
     forger: LinkMac,
     /// The legitimate sensor frames of the last second, oldest first (`replay`).
     history: std::collections::VecDeque<Vec<u8>>,
-    /// Sensor frames replaced so far by the link fault.
+    /// The legitimate route frames of the last windows, oldest first (`replay`
+    /// on the route channel).
+    route_history: std::collections::VecDeque<Vec<u8>>,
+    /// Frames replaced so far by the link fault.
     faulted: u32,
     /// The link fault's frames and what the ECU did with them.
     pub injected: InjectedFrames,
@@ -345,6 +383,7 @@ impl QemuEcu {
             route_tx: Authenticator::new(Stream::Route),
             forger: LinkMac::new(&forger_key),
             history: std::collections::VecDeque::new(),
+            route_history: std::collections::VecDeque::new(),
             faulted: 0,
             injected: InjectedFrames::default(),
             ready: false,
@@ -486,13 +525,18 @@ impl QemuEcu {
         }
     }
 
-    /// Writes a frame on the route channel.
-    fn send_route(&mut self, msg: &Down) -> Result<()> {
-        let mut buf = [0u8; MAX_FRAME_BYTES];
-        let n = link::encode(msg, &mut self.mac, &mut self.route_tx, &mut buf)
-            .map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
+    /// Writes the frame of the road `msg` on the route channel at the plan
+    /// release `t_us` (µs), or, while a link fault of the route channel lasts, a
+    /// forged, replayed or corrupted one in its place.
+    fn send_route(&mut self, msg: &Down, t_us: u64) -> Result<()> {
+        let fault = self.opts.link_fault.and_then(|f| {
+            f.route_frames()
+                .filter(|r| r.replaces(t_us, self.faulted))
+                .map(|_| f.spec.kinds.nth(self.faulted))
+        });
+        let frame = self.faulty_frame(msg, fault, Channel::Route)?;
         self.route
-            .write_all(&buf[..n])
+            .write_all(&frame)
             .context("the ECU closed its route channel")?;
         self.route_frames = self.route_frames.saturating_add(1);
         Ok(())
@@ -507,43 +551,64 @@ impl QemuEcu {
     }
 
     /// The frame the ECU receives for this period's sensor frame `msg`: the
-    /// frame itself, or, while the link fault lasts, a forged, replayed or
-    /// corrupted one in its place (`Some(kind)`).
+    /// frame itself, or, while a link fault of the sensor frames lasts, a forged,
+    /// replayed or corrupted one in its place (`Some(kind)`).
     fn sensor_frame(&mut self, msg: &Down, t_us: u64) -> Result<(Vec<u8>, Option<LinkFaultKind>)> {
         let fault = self
             .opts
             .link_fault
             .filter(|f| f.covers(t_us))
-            .map(|f| f.spec.kind);
+            .map(|f| f.spec.kinds.nth(self.faulted));
+        let frame = self.faulty_frame(msg, fault, Channel::Sensor)?;
+        Ok((frame, fault))
+    }
+
+    /// `msg` encoded on `channel`'s stream as the link fault's `fault` makes it
+    /// (module [`crate::pil::link_fault`]); a legitimate frame is kept for
+    /// replays, a replaced one counted.
+    fn faulty_frame(
+        &mut self,
+        msg: &Down,
+        fault: Option<LinkFaultKind>,
+        channel: Channel,
+    ) -> Result<Vec<u8>> {
+        let encode = |mac: &mut LinkMac, tx: &mut Authenticator| -> Result<Vec<u8>> {
+            let mut buf = [0u8; MAX_FRAME_BYTES];
+            let n = link::encode(msg, mac, tx, &mut buf)
+                .map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
+            Ok(buf[..n].to_vec())
+        };
+        let (tx, history) = match channel {
+            Channel::Sensor => (&mut self.down_tx, &mut self.history),
+            Channel::Route => (&mut self.route_tx, &mut self.route_history),
+        };
         let frame = match fault {
             None => {
-                let frame = self.frame(msg)?;
-                if self.history.len() == REPLAY_HISTORY_FRAMES {
-                    self.history.pop_front();
+                let frame = encode(&mut self.mac, tx)?;
+                if history.len() == REPLAY_HISTORY_FRAMES {
+                    history.pop_front();
                 }
-                self.history.push_back(frame.clone());
+                history.push_back(frame.clone());
                 frame
             }
             Some(LinkFaultKind::Forge) => {
                 // Fresh (the next freshness value of the stream, not taken), its
                 // tag under the forger's key.
-                let mut tx = self.down_tx;
-                let mut buf = [0u8; MAX_FRAME_BYTES];
-                let n = link::encode(msg, &mut self.forger, &mut tx, &mut buf)
-                    .map_err(|e| anyhow!("encoding a forged frame: {e:?}"))?;
-                buf[..n].to_vec()
+                let mut fresh = *tx;
+                encode(&mut self.forger, &mut fresh)?
             }
             Some(LinkFaultKind::Replay) => {
                 let k = self.faulted as usize;
-                match self.history.len() {
+                match history.len() {
                     0 => bail!(
-                        "--link-fault replay: no sensor frame was sent before the fault to replay; start it later (--link-fault-at)"
+                        "--link-fault replay: no {} frame was sent before the fault to replay; start it later (--link-fault-at)",
+                        channel.name()
                     ),
-                    n => self.history[k % n].clone(),
+                    n => history[k % n].clone(),
                 }
             }
             Some(LinkFaultKind::Corrupt) => {
-                let mut frame = self.frame(msg)?;
+                let mut frame = encode(&mut self.mac, tx)?;
                 flip_bit(&mut frame, self.faulted);
                 frame
             }
@@ -552,7 +617,7 @@ impl QemuEcu {
             self.faulted += 1;
             self.injected.injected.count(kind.refusal());
         }
-        Ok((frame, fault))
+        Ok(frame)
     }
 
     /// One control period: sends the estimate at `t_us` (after a frame of the
@@ -561,7 +626,7 @@ impl QemuEcu {
         if est.stamp_us.is_multiple_of(PLAN_PERIOD_US) {
             if let Some(f) = self.route_queue.pop_front() {
                 self.route_releases.insert(est.stamp_us);
-                self.send_route(&f)?;
+                self.send_route(&f, est.stamp_us)?;
                 self.route
                     .flush()
                     .context("the ECU closed its route channel")?;
