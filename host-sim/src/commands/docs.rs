@@ -9,10 +9,16 @@
 //! <!-- end of ecu-figures -->
 //! ```
 //!
-//! `host-sim docs --report DIR` rewrites every fragment of the files from the
-//! report's `static.json` and `wcet.json` (`.ci/wcet-report` writes them to
-//! `target/ci/wcet`); `--check` rewrites nothing and fails when a fragment differs
-//! from what the report gives (CI runs it after the report).
+//! `host-sim docs --report DIR --board-report DIR` rewrites every fragment of the
+//! files from the lock-step build's report (`static.json` and `wcet.json`:
+//! `.ci/wcet-report` writes them to `target/ci/wcet`) and the flashed build's
+//! static analysis (`static.json`, `stack.json`, `memory.json`: `host-sim wcet
+//! --static-only --elf target/thumbv7em-none-eabihf/board/ecu --out
+//! target/ci/wcet-board`); `--check` rewrites nothing and fails when a fragment
+//! differs from what the reports give (CI runs it after both). Only figures that
+//! follow from the binaries and the lock-step runs are generated: the flashed
+//! build's traced figures come from a run paced by the host's clock, and differ
+//! from run to run.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -27,8 +33,13 @@ pub struct DocsArgs {
     /// (`.ci/wcet-report` writes target/ci/wcet).
     #[arg(long, value_name = "DIR", default_value = "target/ci/wcet")]
     pub report: PathBuf,
+    /// The flashed build's static analysis: its `static.json`, `stack.json` and
+    /// `memory.json` (`host-sim wcet --static-only --elf
+    /// target/thumbv7em-none-eabihf/board/ecu --out DIR`).
+    #[arg(long, value_name = "DIR", default_value = "target/ci/wcet-board")]
+    pub board_report: PathBuf,
     /// The Markdown files whose fragments to write.
-    #[arg(long, value_name = "FILE.md", num_args = 1.., default_values = ["README.md", "docs/timing.md"])]
+    #[arg(long, value_name = "FILE.md", num_args = 1.., default_values = ["README.md", "docs/timing.md", "docs/board.md"])]
     pub files: Vec<PathBuf>,
     /// Write nothing; fail when a fragment is not what the report gives.
     #[arg(long)]
@@ -37,10 +48,15 @@ pub struct DocsArgs {
 
 /// `host-sim docs`.
 pub fn run(args: &DocsArgs) -> anyhow::Result<()> {
-    let fragments = render(
-        &read_json(&args.report, "static.json")?,
-        &read_json(&args.report, "wcet.json")?,
-    )?;
+    let lock_step = |name| read_json(&args.report, name, LOCK_STEP_REPORT);
+    let board = |name| read_json(&args.board_report, name, BOARD_REPORT);
+    let fragments = render(&Reports {
+        stat: lock_step("static.json")?,
+        wcet: lock_step("wcet.json")?,
+        board_stat: board("static.json")?,
+        board_stack: board("stack.json")?,
+        board_memory: board("memory.json")?,
+    })?;
     let mut stale = Vec::new();
     for file in &args.files {
         let text = std::fs::read_to_string(file)
@@ -69,11 +85,16 @@ pub fn run(args: &DocsArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn read_json(dir: &Path, name: &str) -> anyhow::Result<Value> {
+/// How to write the lock-step build's report.
+const LOCK_STEP_REPORT: &str = "cargo ecu-lockstep && .ci/wcet-report";
+/// How to write the flashed build's static analysis (to the default folder).
+const BOARD_REPORT: &str = "cargo ecu && host-sim wcet --static-only --elf target/thumbv7em-none-eabihf/board/ecu --out target/ci/wcet-board";
+
+fn read_json(dir: &Path, name: &str, how: &str) -> anyhow::Result<Value> {
     let path = dir.join(name);
     let text = std::fs::read_to_string(&path).with_context(|| {
         format!(
-            "cannot read {} (write the report first: `cargo ecu-lockstep && .ci/wcet-report`)",
+            "cannot read {} (write the report first: `{how}`)",
             path.display()
         )
     })?;
@@ -174,12 +195,178 @@ fn goal(wcet: &Value, id: &str) -> anyhow::Result<(f64, f64)> {
     Ok((number(&g["value"], id)?, number(&g["goal"], id)?))
 }
 
-/// Every fragment, from the report's `static.json` and `wcet.json`.
-pub fn render(stat: &Value, wcet: &Value) -> anyhow::Result<BTreeMap<&'static str, String>> {
+/// The reports the fragments come from.
+pub struct Reports {
+    /// The lock-step build's `static.json`.
+    pub stat: Value,
+    /// The lock-step build's `wcet.json`.
+    pub wcet: Value,
+    /// The flashed build's `static.json`.
+    pub board_stat: Value,
+    /// The flashed build's `stack.json`.
+    pub board_stack: Value,
+    /// The flashed build's `memory.json`.
+    pub board_memory: Value,
+}
+
+/// Every fragment, from the reports.
+pub fn render(r: &Reports) -> anyhow::Result<BTreeMap<&'static str, String>> {
     let mut out = BTreeMap::new();
-    out.insert("ecu-figures", ecu_figures(stat, wcet)?);
-    out.insert("task-bounds", task_bounds(stat)?);
+    out.insert("ecu-figures", ecu_figures(&r.stat, &r.wcet)?);
+    out.insert("task-bounds", task_bounds(&r.stat)?);
+    out.insert("analysis-goals", analysis_goals(&r.wcet)?);
+    out.insert("flashed-bounds", flashed_bounds(r)?);
+    out.insert("flashed-summary", flashed_summary(r)?);
+    out.insert("build-sizes", build_sizes(r)?);
     Ok(out)
+}
+
+/// A task's field of a `static.json`, or `None` when the task is not there
+/// (the lock-step build has no `link`).
+fn field(stat: &Value, name: &str, key: &str) -> Option<f64> {
+    stat["tasks"]
+        .as_array()?
+        .iter()
+        .find(|t| t["name"] == name)?
+        .get(key)?
+        .as_f64()
+}
+
+/// `docs/timing.md`'s table of the lock-step and the flashed builds' bounds.
+fn flashed_bounds(r: &Reports) -> anyhow::Result<String> {
+    let cycles = |stat: &Value, name: &str, key: &str| {
+        field(stat, name, key).map_or("–".to_string(), |c| format!("{} cycles", thousands(c)))
+    };
+    let response = |stat: &Value, name: &str| match (
+        field(stat, name, "response_time_bound_us"),
+        field(stat, name, "deadline_us"),
+    ) {
+        (Some(t), Some(d)) if t < 10.0 => format!("{t:.2} µs of {d:.2}"),
+        (Some(t), Some(d)) => format!("{} µs of {}", thousands(t), thousands(d)),
+        _ => "–".to_string(),
+    };
+    for name in ["control", "plan", "link", "systick"] {
+        task(&r.board_stat, name)?;
+    }
+    let mut s = String::from("| figure | lock-step | flashed |\n|---|---|---|\n");
+    let mut row = |what: String, a: String, b: String| {
+        s.push_str(&format!("| {what} | {a} | {b} |\n"));
+    };
+    for (name, key, what) in [
+        ("control", "static_bound_cycles", "`control` static bound"),
+        (
+            "control",
+            "light_bound_cycles",
+            "`control` without a plan event (and, flashed, without route bytes)",
+        ),
+        ("plan", "static_bound_cycles", "`plan` static bound"),
+        (
+            "link",
+            "static_bound_cycles",
+            "`link` (USART1) static bound",
+        ),
+        ("systick", "static_bound_cycles", "`systick` static bound"),
+    ] {
+        row(
+            what.into(),
+            cycles(&r.stat, name, key),
+            cycles(&r.board_stat, name, key),
+        );
+    }
+    for name in ["control", "plan", "link", "systick"] {
+        row(
+            format!("`{name}` response-time bound"),
+            response(&r.stat, name),
+            response(&r.board_stat, name),
+        );
+    }
+    let (lock_stack, stack_goal) = goal(&r.wcet, "stack-bound")?;
+    let board_stack = number(
+        &r.board_stack["total_bytes"],
+        "the flashed build's stack bound",
+    )?;
+    row(
+        "stack bound".into(),
+        format!("{} B", thousands(lock_stack)),
+        format!(
+            "{} B (goal {})",
+            thousands(board_stack),
+            thousands(stack_goal)
+        ),
+    );
+    Ok(s)
+}
+
+/// The README's sentence on the flashed build's bounds.
+fn flashed_summary(r: &Reports) -> anyhow::Result<String> {
+    let b = &r.board_stat;
+    let us = |name: &str| -> anyhow::Result<f64> {
+        field(b, name, "response_time_bound_us").with_context(|| {
+            format!("the flashed build's static.json has no response time of `{name}`")
+        })
+    };
+    let stack = number(
+        &r.board_stack["total_bytes"],
+        "the flashed build's stack bound",
+    )?;
+    Ok(format!(
+        "The binary you flash (`cargo ecu`, frames over USART1's byte interrupt), from\n\
+         `cargo ecu && cargo run --release -p host-sim -- wcet --static-only --out\n\
+         out/static-board`: the control task's response-time bound is {} µs of 10 ms,\n\
+         the plan task's {:.1} ms of 100 ms (a route frame's bytes charged per byte, the\n\
+         monotonic ticking once a control period; [docs/timing.md](docs/timing.md), \"The\n\
+         flashed build\"), the USART1 handler's {:.2} µs of a byte's {:.2} µs, the stack\n\
+         bound {} B.\n",
+        thousands(us("control")?),
+        us("plan")? / 1e3,
+        us("link")?,
+        field(b, "link", "deadline_us")
+            .context("the flashed build's static.json has no deadline of `link`")?,
+        thousands(stack),
+    ))
+}
+
+/// `docs/board.md`'s table of the two builds' section sizes.
+fn build_sizes(r: &Reports) -> anyhow::Result<String> {
+    let lock = &r.wcet["memory"];
+    let board = &r.board_memory;
+    let bytes = |v: &Value, what: &str| -> anyhow::Result<String> {
+        Ok(format!("{} B", thousands(number(v, what)?)))
+    };
+    let sections = &board["sections"];
+    let rows = [
+        (
+            "`.text`",
+            bytes(&lock["text_bytes"], "memory.text_bytes")?,
+            bytes(&sections["text_bytes"], "sections.text_bytes")?,
+        ),
+        (
+            "`.data` + `.rodata_ram`",
+            bytes(&lock["data_bytes"], "memory.data_bytes")?,
+            bytes(&sections["data_bytes"], "sections.data_bytes")?,
+        ),
+        (
+            "`.bss` + `.uninit`",
+            bytes(&lock["bss_bytes"], "memory.bss_bytes")?,
+            bytes(&sections["bss_bytes"], "sections.bss_bytes")?,
+        ),
+        (
+            "flash",
+            bytes(&lock["flash_bytes"], "memory.flash_bytes")?,
+            bytes(&board["flash_bytes"], "flash_bytes")?,
+        ),
+        (
+            "static RAM",
+            bytes(&lock["static_ram_bytes"], "memory.static_ram_bytes")?,
+            bytes(&board["static_ram_bytes"], "static_ram_bytes")?,
+        ),
+    ];
+    let mut s =
+        String::from("| | lock-step (`release/ecu`) | flashed (`board/ecu`) |\n|---|---|---|\n");
+    for (what, a, b) in rows {
+        s.push_str(&format!("| {what} | {a} | {b} |\n"));
+    }
+    Ok(s)
 }
 
 /// The README's table of the ECU's figures.
@@ -298,6 +485,102 @@ fn task_bounds(stat: &Value) -> anyhow::Result<String> {
     Ok(s)
 }
 
+/// `docs/timing.md`'s table of what the analysis rests on and the goals it is
+/// judged by, from `wcet.json`.
+fn analysis_goals(wcet: &Value) -> anyhow::Result<String> {
+    let count = |key: &str| -> anyhow::Result<f64> {
+        let v = &wcet[key];
+        v.as_array()
+            .map(|a| a.len() as f64)
+            .or_else(|| v.as_f64())
+            .with_context(|| format!("wcet.json has no `{key}`"))
+    };
+    let met = |m: bool| if m { "yes" } else { "**no**" }.to_string();
+    let at_most = |id: &str, unit: &str| -> anyhow::Result<[String; 3]> {
+        let (v, g) = goal(wcet, id)?;
+        Ok([
+            format!("{}{unit}", thousands(v)),
+            format!("≤ {}{unit}", thousands(g)),
+            met(v <= g),
+        ])
+    };
+    let zero = |n: f64| [thousands(n), "0".into(), met(n == 0.0)];
+    let plain = |v: String| [v, "–".into(), "–".into()];
+    let facts = wcet["flow_facts"]
+        .as_array()
+        .context("wcet.json has no `flow_facts`")?;
+    let unexercised = facts.iter().filter(|f| f["observed_max"].is_null()).count();
+    let loops = count("loops")?;
+    let untraced = count("untraced_loops")?;
+    let share = number(&wcet["loops_traced_percent"], "loops_traced_percent")?;
+    let (_, untraced_goal) = goal(wcet, "loops-traced")?;
+    let high_water = number(&wcet["stack_high_water_bytes"], "stack_high_water_bytes")?;
+    let rows: Vec<(&str, [String; 3])> = vec![
+        ("unbounded loops", zero(count("unbounded_loops")?)),
+        (
+            "unresolved indirect calls",
+            zero(count("unresolved_indirect_calls")?),
+        ),
+        ("recursions", zero(count("recursions")?)),
+        ("flow facts", plain(thousands(facts.len() as f64))),
+        (
+            "flow facts below their traced count",
+            zero(goal(wcet, "flow-facts")?.0),
+        ),
+        (
+            "flow facts exercised by no trace (listed in `static.md`)",
+            plain(thousands(unexercised as f64)),
+        ),
+        ("loops", plain(thousands(loops))),
+        (
+            "loops the traces executed",
+            plain(thousands(loops - untraced)),
+        ),
+        (
+            "loops the traces executed, share (`static.md` gives each other loop its reason)",
+            [
+                format!("{share:.1} %"),
+                format!("≥ {:.0} %", 100.0 - untraced_goal),
+                met(share >= 100.0 - untraced_goal),
+            ],
+        ),
+        (
+            "budgeted jobs with no traced call",
+            zero(goal(wcet, "jobs-traced")?.0),
+        ),
+        ("stack, static bound", at_most("stack-bound", " B")?),
+        (
+            "stack, painted high-water",
+            plain(format!("{} B", thousands(high_water))),
+        ),
+        (
+            "plan: warm activation observed max (a warm step and the route frame before it)",
+            at_most("plan-warm-observed", " instructions")?,
+        ),
+        (
+            "control: observed max",
+            at_most("control-observed", " instructions")?,
+        ),
+        (
+            "flash (vector table + text + data's load image)",
+            at_most("flash", " B")?,
+        ),
+        (
+            "static RAM (data, rodata copied to SRAM, bss)",
+            at_most("static-ram", " B")?,
+        ),
+        (
+            "deadline misses over the report's PIL run (ECU's own count = host's)",
+            zero(goal(wcet, "deadline-misses")?.0),
+        ),
+    ];
+    let mut s = String::from("| quantity | value | goal | met |\n|---|---|---|---|\n");
+    for (what, [value, goal, met]) in rows {
+        s.push_str(&format!("| {what} | {value} | {goal} | {met} |\n"));
+    }
+    Ok(s)
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
@@ -358,7 +641,7 @@ mod tests {
              "static_bound_instructions": 1618, "observed_activations": 974,
              "observed_max_instructions": 1497, "observed_max_cycles": 4613, "tightness": 1.07}
         ]});
-        let e = render(&stat, &serde_json::json!({}))
+        let e = ecu_figures(&stat, &serde_json::json!({}))
             .unwrap_err()
             .to_string();
         assert!(e.contains("caps.qp_max_iterations"), "{e}");
@@ -366,9 +649,116 @@ mod tests {
             "caps": {"qp_max_iterations": 67},
             "goals": [{"id": "deadline-misses", "value": 0, "goal": 0}],
         });
-        let e = render(&stat, &wcet).unwrap_err().to_string();
+        let e = ecu_figures(&stat, &wcet).unwrap_err().to_string();
         assert!(e.contains("`control`"), "{e}");
         let t = task_bounds(&stat).unwrap_err().to_string();
         assert!(t.contains("systick"), "{t}");
+    }
+
+    fn board_reports() -> Reports {
+        let task = |name: &str, cycles: f64, us: f64, deadline: f64| {
+            serde_json::json!({"name": name, "static_bound_cycles": cycles,
+                "light_bound_cycles": cycles / 2.0,
+                "response_time_bound_us": us, "deadline_us": deadline})
+        };
+        Reports {
+            stat: serde_json::json!({"tasks": [
+                task("control", 398_351.0, 2_512.86, 10_000.0),
+                task("plan", 12_041_376.0, 86_294.7, 100_000.0),
+                task("systick", 3_490.0, 22.79, 10_000.0),
+            ]}),
+            wcet: serde_json::json!({
+                "goals": [{"id": "stack-bound", "value": 7088, "goal": 8192}],
+                "memory": {"text_bytes": 113_004, "data_bytes": 47_152, "bss_bytes": 1_096,
+                           "flash_bytes": 160_580, "static_ram_bytes": 48_248},
+            }),
+            board_stat: serde_json::json!({"tasks": [
+                task("control", 502_943.0, 5_194.44, 10_000.0),
+                task("plan", 12_084_788.0, 98_029.1, 100_000.0),
+                task("link", 175.0, 3.6309, 10.8452),
+                task("systick", 4_184.0, 74.31, 10_000.0),
+            ]}),
+            board_stack: serde_json::json!({"total_bytes": 7532}),
+            board_memory: serde_json::json!({
+                "sections": {"text_bytes": 113_316, "data_bytes": 47_340, "bss_bytes": 2_412},
+                "flash_bytes": 161_080, "static_ram_bytes": 49_752,
+            }),
+        }
+    }
+
+    #[test]
+    fn the_flashed_builds_figures_come_from_its_analysis_beside_the_lock_step_ones() {
+        let r = board_reports();
+        let t = flashed_bounds(&r).unwrap();
+        assert!(
+            t.contains("| `plan` static bound | 12,041,376 cycles | 12,084,788 cycles |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| `link` (USART1) static bound | – | 175 cycles |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| `link` response-time bound | – | 3.63 µs of 10.85 |"),
+            "{t}"
+        );
+        assert!(
+            t.contains(
+                "| `plan` response-time bound | 86,295 µs of 100,000 | 98,029 µs of 100,000 |"
+            ),
+            "{t}"
+        );
+        assert!(
+            t.contains("| stack bound | 7,088 B | 7,532 B (goal 8,192) |"),
+            "{t}"
+        );
+        let m = flashed_summary(&r).unwrap();
+        assert!(m.contains("5,194 µs of 10 ms"), "{m}");
+        assert!(m.contains("98.0 ms of 100 ms"), "{m}");
+        assert!(m.contains("3.63 µs of a byte's 10.85 µs"), "{m}");
+        let b = build_sizes(&r).unwrap();
+        assert!(b.contains("| static RAM | 48,248 B | 49,752 B |"), "{b}");
+        // The lock-step report given for the flashed one: no `link`, named.
+        let mut wrong = board_reports();
+        wrong.board_stat = wrong.stat.clone();
+        let e = flashed_bounds(&wrong).unwrap_err().to_string();
+        assert!(e.contains("`link`"), "{e}");
+    }
+
+    #[test]
+    fn the_analysis_table_says_which_goal_is_missed() {
+        let goals = |traced_gap: f64| {
+            serde_json::json!({
+                "unbounded_loops": 0, "unresolved_indirect_calls": [], "recursions": [],
+                "flow_facts": [{"observed_max": 3}, {"observed_max": null}],
+                "loops": [1, 2, 3, 4], "untraced_loops": [4],
+                "loops_traced_percent": 75.0, "stack_high_water_bytes": 4456,
+                "goals": [
+                    {"id": "flow-facts", "value": 0, "goal": 0},
+                    {"id": "loops-traced", "value": 25.0, "goal": traced_gap},
+                    {"id": "jobs-traced", "value": 0, "goal": 0},
+                    {"id": "stack-bound", "value": 7088, "goal": 8192},
+                    {"id": "plan-warm-observed", "value": 518809, "goal": 592684},
+                    {"id": "control-observed", "value": 1597, "goal": 2000},
+                    {"id": "flash", "value": 158524, "goal": 262144},
+                    {"id": "static-ram", "value": 48248, "goal": 49152},
+                    {"id": "deadline-misses", "value": 0, "goal": 0},
+                ],
+            })
+        };
+        let missed = analysis_goals(&goals(5.0)).unwrap();
+        assert!(
+            missed.contains("| loops the traces executed, share (`static.md` gives each other loop its reason) | 75.0 % | ≥ 95 % | **no** |"),
+            "{missed}"
+        );
+        assert!(missed
+            .contains("| flow facts exercised by no trace (listed in `static.md`) | 1 | – | – |"));
+        assert!(missed.contains("| stack, static bound | 7,088 B | ≤ 8,192 B | yes |"));
+        let met = analysis_goals(&goals(30.0)).unwrap();
+        assert!(met.contains("| 75.0 % | ≥ 70 % | yes |"), "{met}");
+        let mut no_facts = goals(5.0);
+        no_facts["flow_facts"] = Value::Null;
+        let e = analysis_goals(&no_facts).unwrap_err().to_string();
+        assert!(e.contains("flow_facts"), "{e}");
     }
 }

@@ -13,6 +13,7 @@ use clap::Args;
 use crate::closed_loop::cost_model::CostModel;
 use crate::commands::pil::{self, PilArgs};
 use crate::commands::run::RunArgs;
+use crate::pil::link_fault::{LinkFault, LinkFaultSpec};
 use crate::wcet::cpi::{self, CpiReport};
 use crate::wcet::report::{self, ReportInputs};
 
@@ -249,8 +250,56 @@ const WINDOW_BOX: (f64, f64) = (230.0, 2.5);
 /// control and plan tasks, the window's adoption (`window_job`), the obstacle
 /// placed on the new window.
 fn window_trace(args: &WcetArgs) -> Result<PathBuf> {
+    let frames = firmware::link::route_frames(crate::world::route::WINDOW_ROWS) as f64;
+    let plan_period_s = firmware::timing::PLAN_PERIOD_US as f64 * 1e-6;
+    // The window is due after BEHIND_M + ADVANCE_M at about the run's speed; its
+    // frames go one per plan release on the route channel (at most
+    // `route_frames` of a full window), and the plan activation after the last
+    // adopts it; half a second more leaves a plan on it.
+    let seconds = window_due_s() + frames * plan_period_s + 0.6;
+    straight_trace(args, "trace-window", seconds, None)
+}
+
+/// When the run on [`WINDOW_STRAIGHT`] is due the first window sent while
+/// driving, s: after `BEHIND_M + ADVANCE_M` at about the run's speed.
+fn window_due_s() -> f64 {
     use crate::world::route::{ADVANCE_M, BEHIND_M};
-    let dir = args.out.join("trace-window");
+    (BEHIND_M + ADVANCE_M) / WINDOW_STRAIGHT.2
+}
+
+/// The link fault of the traced run on the route channel's refusals: the
+/// frames of the road replaced, forged, replayed and corrupted in turn, from
+/// this long after the window is due, s (two of its frames sent before, for the
+/// replay).
+const ROUTE_FAULT: (&str, f64) = ("route-mix:3", 0.35);
+
+/// Runs a PIL run on [`WINDOW_STRAIGHT`] whose first window sent while driving
+/// loses three frames to [`ROUTE_FAULT`], until half a second after the last,
+/// with QEMU's execution trace written to a file, and returns the file: the
+/// route frames refused by reason and out of order (`RouteLink::receive`).
+fn route_fault_trace(args: &WcetArgs) -> Result<PathBuf> {
+    let (spec, after_s) = ROUTE_FAULT;
+    let spec: LinkFaultSpec = spec.parse().map_err(|e: String| anyhow!(e))?;
+    let plan_period_s = firmware::timing::PLAN_PERIOD_US as f64 * 1e-6;
+    let start_s = window_due_s() + after_s;
+    let fault = LinkFault {
+        spec,
+        start_us: (start_s * 1e6) as u64,
+    };
+    let seconds = start_s + f64::from(spec.frames + 3) * plan_period_s + 0.5;
+    straight_trace(args, "trace-route-fault", seconds, Some(fault))
+}
+
+/// A traced PIL run of `seconds` on [`WINDOW_STRAIGHT`] with [`WINDOW_BOX`]
+/// beside it and the link fault `fault`, in `args.out/name`; returns the trace's
+/// file.
+fn straight_trace(
+    args: &WcetArgs,
+    name: &str,
+    seconds: f64,
+    fault: Option<LinkFault>,
+) -> Result<PathBuf> {
+    let dir = args.out.join(name);
     fs::create_dir_all(&dir)?;
     let (length, half_width, speed) = WINDOW_STRAIGHT;
     let mut csv = String::from("# x_m,y_m,w_tr_right_m,w_tr_left_m\n");
@@ -272,13 +321,6 @@ fn window_trace(args: &WcetArgs) -> Result<PathBuf> {
     }
     let obstacles = dir.join("box_beside.csv");
     fs::write(&obstacles, boxes)?;
-    // The window is due after BEHIND_M + ADVANCE_M at about `speed`; its frames
-    // go one per plan release on the route channel (at most `route_frames` of a
-    // full window), and the plan activation after the last adopts it; half a
-    // second more leaves a plan on it.
-    let frames = firmware::link::route_frames(crate::world::route::WINDOW_ROWS) as f64;
-    let plan_period_s = firmware::timing::PLAN_PERIOD_US as f64 * 1e-6;
-    let seconds = (BEHIND_M + ADVANCE_M) / speed + frames * plan_period_s + 0.6;
     let mut a = pil_args(
         dir.join("run"),
         &obstacles.to_string_lossy(),
@@ -289,7 +331,18 @@ fn window_trace(args: &WcetArgs) -> Result<PathBuf> {
     a.run.track = track.to_string_lossy().into_owned();
     a.run.open = true;
     a.run.initial_speed = speed;
+    a.link_fault = fault;
     traced_run(a, &dir)
+}
+
+/// Runs a PIL run of `--trace-seconds` on the paper track from standstill, with
+/// QEMU's execution trace written to a file, and returns the file: a cold start
+/// at rest, the MPC's rows of the nodes below the speed the car may not reverse
+/// from (`speed_row`).
+fn standstill_trace(args: &WcetArgs) -> Result<PathBuf> {
+    let dir = args.out.join("trace-standstill");
+    fs::create_dir_all(&dir)?;
+    traced_pil_run(args, &dir, PAPER_TRACK, "paper", 0.0)
 }
 
 /// A PIL run of `--trace-seconds` on `track` at μ 1 with `obstacles`, starting at
@@ -463,7 +516,8 @@ fn pil_laps(args: &WcetArgs) -> Result<Vec<PathBuf>> {
 
 /// The CPI bound (given, else from a traced run) and the QEMU traces the
 /// analysis is checked against, each recorded now and added to `traces`: the QP
-/// at its iteration cap, its working set near full, a window adopted.
+/// at its iteration cap, its working set near full, a window adopted, route
+/// frames refused, a start from standstill.
 fn record_traces(args: &WcetArgs, traces: &mut Vec<PathBuf>) -> Result<CpiReport> {
     let cpi = match args.cpi_bound {
         Some(c) if c.is_finite() && c >= 1.0 => given_cpi(c),
@@ -493,6 +547,16 @@ fn record_traces(args: &WcetArgs, traces: &mut Vec<PathBuf>) -> Result<CpiReport
         "PIL run with QEMU's execution trace on a straight until the first window of the road sent while driving is adopted"
     );
     traces.push(window_trace(args)?);
+    println!(
+        "PIL run with QEMU's execution trace on that straight, frames of its window forged, replayed and corrupted on the route channel ({})",
+        ROUTE_FAULT.0
+    );
+    traces.push(route_fault_trace(args)?);
+    println!(
+        "PIL run with QEMU's execution trace ({} s) on the paper track from standstill",
+        args.trace_seconds
+    );
+    traces.push(standstill_trace(args)?);
     Ok(cpi)
 }
 
@@ -572,6 +636,22 @@ fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
             .map(|l| l.name.as_str())
             .collect::<Vec<_>>()
             .join(", "),
+        path.display()
+    );
+    // The build's section sizes, flash and static RAM, as the report counts them.
+    let memory = report::elf::elf_memory(&args.elf())?;
+    let path = args.out.join("memory.json");
+    let json = serde_json::json!({
+        "sections": memory,
+        "flash_bytes": memory.flash_bytes(),
+        "static_ram_bytes": memory.static_ram_bytes(),
+    });
+    std::fs::write(&path, serde_json::to_string_pretty(&json)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!(
+        "flash {} B, static RAM {} B; wrote {}",
+        memory.flash_bytes(),
+        memory.static_ram_bytes(),
         path.display()
     );
     analysis_errors(&analysis, &args.out)?;
