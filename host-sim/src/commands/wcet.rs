@@ -248,17 +248,34 @@ const WINDOW_BOX: (f64, f64) = (230.0, 2.5);
 /// is `BEHIND_M + ADVANCE_M` into the first window, a frame per plan release), with QEMU's execution trace
 /// written to a file, and returns the file: the route frames received by the
 /// control and plan tasks, the window's adoption (`window_job`), the obstacle
-/// placed on the new window.
+/// placed on the new window. The sensor frame of a plan release halfway through
+/// the window's frames is forged ([`WINDOW_SENSOR_FAULT`]): the control task
+/// refuses it, learns of that release's route frame from the next frame, and
+/// the next plan activation finds two frames announced, reads one and leaves
+/// the other for the one after.
 fn window_trace(args: &WcetArgs) -> Result<PathBuf> {
     let frames = firmware::link::route_frames(crate::world::route::WINDOW_ROWS) as f64;
     let plan_period_s = firmware::timing::PLAN_PERIOD_US as f64 * 1e-6;
     // The window is due after BEHIND_M + ADVANCE_M at about the run's speed; its
     // frames go one per plan release on the route channel (at most
     // `route_frames` of a full window), and the plan activation after the last
-    // adopts it; half a second more leaves a plan on it.
-    let seconds = window_due_s() + frames * plan_period_s + 0.6;
-    straight_trace(args, "trace-window", seconds, None)
+    // adopts it; half a second more (and a period for the refused frame's)
+    // leaves a plan on it.
+    let seconds = window_due_s() + (frames + 1.0) * plan_period_s + 0.6;
+    let (spec, after_s) = WINDOW_SENSOR_FAULT;
+    let release_us = firmware::timing::PLAN_PERIOD_US;
+    let start_us = ((window_due_s() + after_s) * 1e6) as u64 / release_us * release_us;
+    let fault = LinkFault {
+        spec: spec.parse().map_err(|e: String| anyhow!(e))?,
+        start_us,
+    };
+    straight_trace(args, "trace-window", seconds, Some(fault))
 }
+
+/// The link fault of the window's traced run: one sensor frame forged, at the
+/// first plan release this long after the window is due, s (about halfway
+/// through its frames).
+const WINDOW_SENSOR_FAULT: (&str, f64) = ("forge:1", 0.5);
 
 /// When the run on [`WINDOW_STRAIGHT`] is due the first window sent while
 /// driving, s: after `BEHIND_M + ADVANCE_M` at about the run's speed.
