@@ -73,15 +73,19 @@ impl<T: Real> VehicleConfig<T> {
         self.l_f_m + self.l_r_m
     }
 
+    /// The bicycle model's geometry: `l_f` and `l_r`, m.
+    pub fn geometry(&self) -> BicycleGeometry<T> {
+        BicycleGeometry {
+            l_f_m: self.l_f_m,
+            l_r_m: self.l_r_m,
+        }
+    }
+
     /// The MPC's settings: the paper's ([`MpcSettings::paper`]) for this geometry,
     /// steering limit and width, front-wheel drive (the front axle's static share
     /// of the weight on the driven wheels).
     pub fn mpc_settings(&self) -> MpcSettings<T> {
-        let geometry = BicycleGeometry {
-            l_f_m: self.l_f_m,
-            l_r_m: self.l_r_m,
-        };
-        let mut s = MpcSettings::paper(geometry, self.max_steer_rad, self.width_m);
+        let mut s = MpcSettings::paper(self.geometry(), self.max_steer_rad, self.width_m);
         s.driven_load_share = self.l_r_m / self.wheelbase_m();
         s
     }

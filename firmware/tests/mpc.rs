@@ -14,10 +14,7 @@ use firmware::Real;
 const CAP: usize = 1024;
 
 fn geometry<T: Real>() -> BicycleGeometry<T> {
-    BicycleGeometry {
-        l_f_m: T::lit(1.1),
-        l_r_m: T::lit(1.55),
-    }
+    firmware::vehicle_config::VehicleConfig::<T>::reference().geometry()
 }
 
 fn settings<T: Real>() -> MpcSettings<T> {

@@ -199,10 +199,7 @@ proptest! {
 /// `lag_max = 0` (the kinematic model always).
 fn lap_of_a_lagging_car(lag: f64, learn: bool) -> (f64, f64) {
     const R: f64 = 120.0;
-    let geometry = BicycleGeometry {
-        l_f_m: 1.1,
-        l_r_m: 1.55,
-    };
+    let geometry = firmware::vehicle_config::VehicleConfig::reference().geometry();
     let mut settings = MpcSettings::paper(geometry, 0.6, 1.8);
     if !learn {
         settings.sideslip.lag_max = 0.0;

@@ -47,10 +47,7 @@ fn vehicle() -> firmware::vehicle_config::VehicleConfig<f64> {
 }
 
 fn setup() -> (Box<PlanTask<f64, CAP>>, ControlTask<f64>, Car) {
-    let geometry = BicycleGeometry {
-        l_f_m: 1.1,
-        l_r_m: 1.55,
-    };
+    let geometry = firmware::vehicle_config::VehicleConfig::reference().geometry();
     let mut planner = Box::new(PlanTask::new(MpcSettings::paper(geometry, 0.6, 1.8), 1.0));
     let rows: Vec<[f64; 4]> = (0..400)
         .map(|i| [i as f64 * 2.0 - 20.0, 0.0, 4.0, 4.0])

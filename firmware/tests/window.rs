@@ -3,7 +3,6 @@
 //! and the obstacles of each window rebuilt.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-use firmware::bicycle::BicycleGeometry;
 use firmware::mpc::MpcSettings;
 use firmware::obstacles::{Obstacle, ObstacleSettings};
 use firmware::plan::Plan;
@@ -36,10 +35,7 @@ fn arc_lengths(rows: &[[f64; 4]]) -> Vec<f64> {
 }
 
 fn settings() -> MpcSettings<f64> {
-    let geometry = BicycleGeometry {
-        l_f_m: 1.1,
-        l_r_m: 1.55,
-    };
+    let geometry = firmware::vehicle_config::VehicleConfig::reference().geometry();
     MpcSettings::paper(geometry, 0.6, 1.8)
 }
 

@@ -16,19 +16,23 @@ use crate::closed_loop::disturbed_ecu::DisturbedEcu;
 use crate::closed_loop::ecu::SimulatedEcu;
 use crate::closed_loop::plan_activation::PlanActivation;
 use crate::closed_loop::set_up::SetUp;
-use crate::closed_loop::timeline;
+use crate::closed_loop::summary::Summary;
+use crate::closed_loop::timeline::{self, RunResult};
+use crate::closed_loop::SimOptions;
 use crate::closed_loop::{Precision, DEFAULT_CPI_BOUND};
 use crate::commands::run::{friction_line, plant_line, prepare, summary_line, RunArgs, RunCommand};
+use crate::model::vehicle::VehicleParams;
 use crate::output::run_files::write_outputs;
 use crate::pil::comparison::compare;
 use crate::pil::deadlines::count_mismatches;
 use crate::pil::link_fault::{LinkFault, LinkFaultSpec};
-use crate::pil::qemu::{PilOptions, QemuEcu, ECU_CLOCK_HZ};
+use crate::pil::qemu::{InjectedFrames, LinkCounters, PilOptions, QemuEcu, ECU_CLOCK_HZ};
 use crate::pil::report::{LinkFaultReport, PilReport};
 use crate::pil::usart::{HilClock, UsartEcu, UsartOptions, DEFAULT_LEAD_US};
 use crate::stats::percentile;
 use crate::world::disturbance::Disturbances;
 use crate::world::faults::{FAULT_KINDS, FAULT_START_S};
+use crate::world::scenario::Scenario;
 
 /// `host-sim pil`'s command line: `run`'s ([`crate::commands::run::RunCommand`]: the same
 /// scenario options, refused where PIL cannot apply them), and how to run the ECU.
@@ -404,27 +408,7 @@ pub fn run(args: &PilArgs) -> Result<()> {
     let comparison = if args.no_compare {
         None
     } else {
-        // The link fault's refused sensor frames are, to the ECU, periods without
-        // an estimate: the in-process run has them as a dropout of the same
-        // periods. Its refused route frames it drops as the ECU does.
-        let dropout = args.link_fault.and_then(|f| f.dropout());
-        let host = match dropout {
-            None => {
-                let mut host_ecu = SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts)?;
-                if let Some(r) = args.link_fault.and_then(|f| f.route_frames()) {
-                    host_ecu.refuse_route_frames(r);
-                }
-                timeline::run_with(&scenario, &plant_car, &opts, &mut host_ecu, |_, _| {})?
-            }
-            Some(dropout) => {
-                let d = Disturbances {
-                    dropout: Some(dropout),
-                    ..Disturbances::default()
-                };
-                let mut host_ecu = DisturbedEcu::<f32>::new(&scenario, &vehicle, &opts, d)?;
-                timeline::run_with(&scenario, &plant_car, &opts, &mut host_ecu, |_, _| {})?
-            }
-        };
+        let host = in_process_run(args.link_fault, &scenario, &vehicle, &plant_car, &opts)?;
         // The in-process run beside it, for a look at any divergence.
         write_outputs(&args.run.out.join("host"), &scenario, &host, false)?;
         Some(compare(&result, &host))
@@ -463,7 +447,79 @@ pub fn run(args: &PilArgs) -> Result<()> {
         .with_context(|| format!("cannot write {}", pil_path.display()))?;
 
     let s = &result.summary;
-    println!("{}", summary_line(&scenario, s));
+    print_pil(args, &scenario, s, &report, &done, &counters, &injected);
+    if let Some(f) = args.link_fault {
+        check_link_fault(f, s, &done, &injected)?;
+    }
+    if !report.count_mismatches.is_empty() {
+        bail!(
+            "the ECU's own deadline counts differ from the host's: {} (pil.json: count_mismatches)",
+            report.count_mismatches.join("; ")
+        );
+    }
+    if let Some(limit) = args.max_model_underestimate_pct {
+        let e = &report.model_error;
+        if e.max_under_pct > limit {
+            bail!(
+                "the cost model underestimates a measured plan activation by {:.1} % (> {limit} %): refit it (`host-sim wcet` writes cost_model.json) and update CostModel::default",
+                e.max_under_pct
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Fails when a link fault's frames were not all refused for their reason and
+/// counted by the ECU, when a legitimate frame was refused, or when the run
+/// stopped before its end.
+fn check_link_fault(
+    f: LinkFault,
+    s: &Summary,
+    done: &DoneFrame,
+    injected: &InjectedFrames,
+) -> Result<()> {
+    let expected = u64::from(injected.injected.total());
+    let counted = Refusal::ALL
+        .iter()
+        .all(|&r| done.refused.of(r) >= injected.injected.of(r));
+    if injected.acted_on > 0
+        || injected.refused_as_expected != expected
+        || injected.legitimate_refused > 0
+        || !counted
+    {
+        bail!(
+            "link fault {}: of {expected} frames injected, the ECU refused {} for their reason and acted on {}; it refused {} legitimate frames; its own counts: {:?} against {:?} injected (pil.json: link_fault)",
+            f.spec,
+            injected.refused_as_expected,
+            injected.acted_on,
+            injected.legitimate_refused,
+            done.refused,
+            injected.injected
+        );
+    }
+    if !s.completed && s.stop_reason != timeline::TIME_LIMIT_REASON {
+        bail!(
+            "link fault {}: the run stopped before its end ({}): the dropout policy (or, for route frames, the window the ECU holds) should carry the car through {} refused frames",
+            f.spec,
+            s.stop_reason,
+            f.spec.frames
+        );
+    }
+    Ok(())
+}
+
+/// The lines `host-sim pil` prints at the end of a lock-step run: the lap, the
+/// ECU's figures, the comparison, the deadlines, the refusals, the link fault.
+fn print_pil(
+    args: &PilArgs,
+    scenario: &Scenario,
+    s: &Summary,
+    report: &PilReport,
+    done: &DoneFrame,
+    counters: &LinkCounters,
+    injected: &InjectedFrames,
+) {
+    println!("{}", summary_line(scenario, s));
     println!("{}", friction_line(s));
     if let Some(line) = plant_line(s) {
         println!("{line}");
@@ -507,16 +563,16 @@ pub fn run(args: &PilArgs) -> Result<()> {
         opt(s.ecu_skipped_releases),
         s.plan_skipped_releases,
         opt(s.ecu_plan_budget_overruns),
-        tick_overruns.plan,
+        report.tick_overruns.plan,
         opt(s.ecu_control_deadline_misses),
         s.control_deadline_misses,
         opt(s.ecu_control_skipped_releases),
         s.control_skipped_releases,
         opt(s.ecu_control_budget_overruns),
-        tick_overruns.control,
+        report.tick_overruns.control,
         opt(s.ecu_watchdog_trips),
-        opt(ecu_counts.map(|c| c.plan.max_response_us)),
-        opt(ecu_counts.map(|c| c.control.max_response_us)),
+        opt(report.ecu_counts.map(|c| c.plan.max_response_us)),
+        opt(report.ecu_counts.map(|c| c.control.max_response_us)),
     );
     let r = |c: RefusalCounts| {
         format!(
@@ -542,53 +598,39 @@ pub fn run(args: &PilArgs) -> Result<()> {
     }
     println!(
         "PIL wall time {:.1} s; wrote {}",
-        wall_s,
+        report.wall_s,
         args.run.out.display()
     );
-    if let Some(f) = args.link_fault {
-        let expected = u64::from(injected.injected.total());
-        let counted = Refusal::ALL
-            .iter()
-            .all(|&r| done.refused.of(r) >= injected.injected.of(r));
-        if injected.acted_on > 0
-            || injected.refused_as_expected != expected
-            || injected.legitimate_refused > 0
-            || !counted
-        {
-            bail!(
-                "link fault {}: of {expected} frames injected, the ECU refused {} for their reason and acted on {}; it refused {} legitimate frames; its own counts: {:?} against {:?} injected (pil.json: link_fault)",
-                f.spec,
-                injected.refused_as_expected,
-                injected.acted_on,
-                injected.legitimate_refused,
-                done.refused,
-                injected.injected
-            );
+}
+
+/// The in-process run `host-sim pil` compares the ECU's with: the same
+/// scenario, with the link fault's refused sensor frames as a dropout of the
+/// same periods (to the ECU, periods without an estimate) and its refused route
+/// frames dropped as the ECU drops them.
+fn in_process_run(
+    fault: Option<LinkFault>,
+    scenario: &Scenario,
+    vehicle: &VehicleParams,
+    plant_car: &VehicleParams,
+    opts: &SimOptions,
+) -> Result<RunResult> {
+    Ok(match fault.and_then(|f| f.dropout()) {
+        None => {
+            let mut host_ecu = SimulatedEcu::<f32>::new(scenario, vehicle, opts)?;
+            if let Some(r) = fault.and_then(|f| f.route_frames()) {
+                host_ecu.refuse_route_frames(r);
+            }
+            timeline::run_with(scenario, plant_car, opts, &mut host_ecu, |_, _| {})?
         }
-        if !s.completed && s.stop_reason != timeline::TIME_LIMIT_REASON {
-            bail!(
-                "link fault {}: the run stopped before its end ({}): the dropout policy (or, for route frames, the window the ECU holds) should carry the car through {} refused frames",
-                f.spec,
-                s.stop_reason,
-                f.spec.frames
-            );
+        Some(dropout) => {
+            let d = Disturbances {
+                dropout: Some(dropout),
+                ..Disturbances::default()
+            };
+            let mut host_ecu = DisturbedEcu::<f32>::new(scenario, vehicle, opts, d)?;
+            timeline::run_with(scenario, plant_car, opts, &mut host_ecu, |_, _| {})?
         }
-    }
-    if !report.count_mismatches.is_empty() {
-        bail!(
-            "the ECU's own deadline counts differ from the host's: {} (pil.json: count_mismatches)",
-            report.count_mismatches.join("; ")
-        );
-    }
-    if let Some(limit) = args.max_model_underestimate_pct {
-        if e.max_under_pct > limit {
-            bail!(
-                "the cost model underestimates a measured plan activation by {:.1} % (> {limit} %): refit it (`host-sim wcet` writes cost_model.json) and update CostModel::default",
-                e.max_under_pct
-            );
-        }
-    }
-    Ok(())
+    })
 }
 
 /// `host-sim pil --link usart`: the binary you flash in QEMU, its USART1 piped to
