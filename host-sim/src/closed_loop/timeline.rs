@@ -455,31 +455,7 @@ pub fn run_with<T: Real, E: Ecu<T>>(
             ));
             let mut row = meter.measure(t_us, &st, &out, &act, ecu.active_plan(), last_status);
             at_sample = (meter.s_prev, st.vx_mps, t_us);
-            row.road_grade_pct = 100.0
-                * grade
-                    .under_car_rad(meter.s_prev, vehicle.lf_m, vehicle.lr_m)
-                    .tan();
-            row.set_wheel_speeds(st.omega_radps.map(|w| w * vehicle.r_eff_m));
-            row.road_mu = road
-                .wheels_mu(meter.s_prev, vehicle.lf_m, vehicle.lr_m)
-                .into_iter()
-                .fold(f64::INFINITY, f64::min);
-            meter.sum.road_mu_min = meter.sum.road_mu_min.min(row.road_mu);
-            if let Some(mu) = c.friction_mu {
-                row.friction_mu = mu;
-                if mu.is_finite() {
-                    let low = meter.sum.friction_mu_min.map_or(mu, |m: f64| m.min(mu));
-                    meter.sum.friction_mu_min = Some(low);
-                }
-            }
-            if let Some(lag) = c.sideslip_lag {
-                row.sideslip_lag_rad_per_mps2 = lag;
-                meter.sum.sideslip_lag = Some(lag);
-            }
-            if let Some(e) = c.car_estimate {
-                row.set_car_estimate(&e);
-                meter.sum.set_car_estimate(&e);
-            }
+            meter.road_and_estimates(&mut row, &st, &c, (&road, &grade));
             res.log.push(row);
             if let Some(reason) = meter.stop_reason(t_us, &st, &row) {
                 stop_reason = reason;
@@ -513,7 +489,24 @@ pub fn run_with<T: Real, E: Ecu<T>>(
         step += 1;
     }
 
-    let mut sum = meter.finish(t_us, stop_reason, &res);
+    res.summary = finish_summary(meter, t_us, stop_reason, &res, &plant, host_us, wall);
+    Ok(res)
+}
+
+/// The run's summary at its end (`t_us`, µs): the driver's, with the road's
+/// patches, the actuators, the friction estimate's verdict, the wheels' lift and
+/// the host's plan times (`host_us`, µs) and speed since `wall`.
+fn finish_summary(
+    meter: Meter<'_>,
+    t_us: u64,
+    stop_reason: String,
+    res: &RunResult,
+    plant: &Plant,
+    mut host_us: Vec<f64>,
+    wall: Instant,
+) -> Summary {
+    let (scenario, vehicle) = (meter.scenario, meter.vehicle);
+    let mut sum = meter.finish(t_us, stop_reason, res);
     sum.mu_patches = lap_patches::join(&scenario.mu_patches);
     sum.grade_patches = lap_patches::join(&scenario.grade_patches);
     sum.actuators = vehicle.actuators.to_settings_string();
@@ -544,8 +537,7 @@ pub fn run_with<T: Real, E: Ecu<T>>(
     } else {
         0.0
     };
-    res.summary = sum;
-    Ok(res)
+    sum
 }
 
 /// The driver's measurements: the summary being accumulated and what it needs.
@@ -661,6 +653,44 @@ impl<'a> Meter<'a> {
                 sum.plan_failures += 1;
             }
             res.plan_activations.push(p.clone());
+        }
+    }
+
+    /// The road under the car (grade, friction) and the ECU's estimates (μ̂, the
+    /// sideslip lag, the car's) into `row` and the summary; the wheel speeds of
+    /// the plant's state `st`.
+    fn road_and_estimates<T: Real>(
+        &mut self,
+        row: &mut LogRow,
+        st: &State,
+        c: &ControlOutput<T>,
+        (road, grade): (&RoadFriction, &RoadGrade),
+    ) {
+        let vehicle = self.vehicle;
+        row.road_grade_pct = 100.0
+            * grade
+                .under_car_rad(self.s_prev, vehicle.lf_m, vehicle.lr_m)
+                .tan();
+        row.set_wheel_speeds(st.omega_radps.map(|w| w * vehicle.r_eff_m));
+        row.road_mu = road
+            .wheels_mu(self.s_prev, vehicle.lf_m, vehicle.lr_m)
+            .into_iter()
+            .fold(f64::INFINITY, f64::min);
+        self.sum.road_mu_min = self.sum.road_mu_min.min(row.road_mu);
+        if let Some(mu) = c.friction_mu {
+            row.friction_mu = mu;
+            if mu.is_finite() {
+                let low = self.sum.friction_mu_min.map_or(mu, |m: f64| m.min(mu));
+                self.sum.friction_mu_min = Some(low);
+            }
+        }
+        if let Some(lag) = c.sideslip_lag {
+            row.sideslip_lag_rad_per_mps2 = lag;
+            self.sum.sideslip_lag = Some(lag);
+        }
+        if let Some(e) = c.car_estimate {
+            row.set_car_estimate(&e);
+            self.sum.set_car_estimate(&e);
         }
     }
 

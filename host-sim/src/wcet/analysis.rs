@@ -2118,6 +2118,15 @@ impl StaticAnalysis {
                 t.refused.as_deref().unwrap_or("")
             );
         }
+        self.write_past_deadline(s);
+        self.write_light_extras(s);
+        self.write_interrupts(s);
+        self.write_gaps(s);
+    }
+
+    /// Each task whose response time has no bound within its deadline: the work
+    /// within a window of its deadline against what the window holds.
+    fn write_past_deadline(&self, s: &mut String) {
         for t in self
             .tasks
             .iter()
@@ -2149,6 +2158,11 @@ impl StaticAnalysis {
                 (total - available) / f64::from(super::CLOCK_HZ) * 1e3
             );
         }
+    }
+
+    /// Each task's bound without its extra work, and each kind of extra work's
+    /// charge.
+    fn write_light_extras(&self, s: &mut String) {
         for t in &self.tasks {
             let Some(light) = t.light_bound_cycles else {
                 continue;
@@ -2187,6 +2201,10 @@ impl StaticAnalysis {
                 );
             }
         }
+    }
+
+    /// The clock and the interrupts' bounds and response times.
+    fn write_interrupts(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "\nClock: {} Hz, {} (set by `{}`).\n",
@@ -2225,6 +2243,10 @@ impl StaticAnalysis {
                 i.deadline_us
             );
         }
+    }
+
+    /// What the analysis could not bound, and the traces' violations.
+    fn write_gaps(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "\n**Unbounded loops:** {}. **Unresolved indirect calls:** {}. **Recursions:** {}.\n",
