@@ -773,3 +773,68 @@ pub fn run_usart(args: &PilArgs) -> Result<()> {
     );
     Ok(())
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::pil::link_fault::{FaultKinds, LinkChannel, LinkFaultSpec};
+
+    fn fault() -> LinkFault {
+        LinkFault {
+            spec: LinkFaultSpec {
+                channel: LinkChannel::Route,
+                kinds: FaultKinds::Mix,
+                frames: 3,
+            },
+            start_us: 5_800_000,
+        }
+    }
+
+    fn done(refused: RefusalCounts) -> DoneFrame {
+        DoneFrame {
+            stack_high_water_bytes: 0,
+            stack_size_bytes: 0,
+            rejected_frames: refused.total(),
+            refused,
+        }
+    }
+
+    #[test]
+    fn a_link_fault_fails_the_run_when_a_frame_is_taken_or_the_run_stops_early() {
+        let expected = FaultKinds::Mix.refusals(3);
+        let mut injected = InjectedFrames {
+            injected: expected,
+            ..InjectedFrames::default()
+        };
+        injected.judge_by_counts(&expected);
+        let ended = Summary {
+            completed: false,
+            stop_reason: timeline::TIME_LIMIT_REASON.into(),
+            ..Summary::default()
+        };
+        assert!(check_link_fault(fault(), &ended, &done(expected), &injected).is_ok());
+        // A run that stopped before its end fails, saying why.
+        let stopped = Summary {
+            stop_reason: "left the road at 12.0 s".into(),
+            ..ended.clone()
+        };
+        let e = check_link_fault(fault(), &stopped, &done(expected), &injected)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("left the road"), "{e}");
+        // A forged frame the ECU did not refuse fails.
+        let mut short = RefusalCounts::new();
+        short.count(Refusal::Replay);
+        short.count(Refusal::Corrupt);
+        let mut taken = InjectedFrames {
+            injected: expected,
+            ..InjectedFrames::default()
+        };
+        taken.judge_by_counts(&short);
+        let e = check_link_fault(fault(), &ended, &done(short), &taken)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("acted on 1"), "{e}");
+    }
+}

@@ -837,3 +837,51 @@ impl Ecu<f32> for QemuEcu {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn counts(auth: u32, replay: u32, corrupt: u32) -> RefusalCounts {
+        RefusalCounts {
+            auth,
+            replay,
+            corrupt,
+        }
+    }
+
+    #[test]
+    fn route_frames_are_judged_on_the_ecus_counts_by_reason() {
+        let injected = InjectedFrames {
+            injected: counts(1, 1, 1),
+            ..InjectedFrames::default()
+        };
+        // Each refused for its reason.
+        let mut all = injected;
+        all.judge_by_counts(&counts(1, 1, 1));
+        assert_eq!(
+            (
+                all.refused_as_expected,
+                all.acted_on,
+                all.legitimate_refused
+            ),
+            (3, 0, 0)
+        );
+        // The replayed one not refused (taken), a legitimate frame refused as
+        // forged instead.
+        let mut wrong = injected;
+        wrong.judge_by_counts(&counts(2, 0, 1));
+        assert_eq!(
+            (
+                wrong.refused_as_expected,
+                wrong.acted_on,
+                wrong.legitimate_refused
+            ),
+            (2, 1, 1)
+        );
+        // Nothing refused.
+        let mut none = injected;
+        none.judge_by_counts(&RefusalCounts::new());
+        assert_eq!((none.refused_as_expected, none.acted_on), (0, 3));
+    }
+}
