@@ -328,42 +328,25 @@ fn flashed_summary(r: &Reports) -> anyhow::Result<String> {
 
 /// `docs/board.md`'s table of the two builds' section sizes.
 fn build_sizes(r: &Reports) -> anyhow::Result<String> {
-    let lock = &r.wcet["memory"];
-    let board = &r.board_memory;
-    let bytes = |v: &Value, what: &str| -> anyhow::Result<String> {
-        Ok(format!("{} B", thousands(number(v, what)?)))
-    };
-    let sections = &board["sections"];
-    let rows = [
-        (
-            "`.text`",
-            bytes(&lock["text_bytes"], "memory.text_bytes")?,
-            bytes(&sections["text_bytes"], "sections.text_bytes")?,
-        ),
-        (
-            "`.data` + `.rodata_ram`",
-            bytes(&lock["data_bytes"], "memory.data_bytes")?,
-            bytes(&sections["data_bytes"], "sections.data_bytes")?,
-        ),
-        (
-            "`.bss` + `.uninit`",
-            bytes(&lock["bss_bytes"], "memory.bss_bytes")?,
-            bytes(&sections["bss_bytes"], "sections.bss_bytes")?,
-        ),
-        (
-            "flash",
-            bytes(&lock["flash_bytes"], "memory.flash_bytes")?,
-            bytes(&board["flash_bytes"], "flash_bytes")?,
-        ),
-        (
-            "static RAM",
-            bytes(&lock["static_ram_bytes"], "memory.static_ram_bytes")?,
-            bytes(&board["static_ram_bytes"], "static_ram_bytes")?,
-        ),
-    ];
+    // `memory.json` has the keys of `wcet.json`'s `memory`.
+    let (lock, board) = (&r.wcet["memory"], &r.board_memory);
     let mut s =
         String::from("| | lock-step (`release/ecu`) | flashed (`board/ecu`) |\n|---|---|---|\n");
-    for (what, a, b) in rows {
+    for (what, key) in [
+        ("`.text`", "text_bytes"),
+        ("`.data` + `.rodata_ram`", "data_bytes"),
+        ("`.bss` + `.uninit`", "bss_bytes"),
+        ("flash", "flash_bytes"),
+        ("static RAM", "static_ram_bytes"),
+    ] {
+        let bytes = |v: &Value, file: &str| -> anyhow::Result<String> {
+            let n = number(&v[key], &format!("{file}'s {key}"))?;
+            Ok(format!("{} B", thousands(n)))
+        };
+        let (a, b) = (
+            bytes(lock, "wcet.json memory")?,
+            bytes(board, "memory.json")?,
+        );
         s.push_str(&format!("| {what} | {a} | {b} |\n"));
     }
     Ok(s)
@@ -680,7 +663,7 @@ mod tests {
             ]}),
             board_stack: serde_json::json!({"total_bytes": 7532}),
             board_memory: serde_json::json!({
-                "sections": {"text_bytes": 113_316, "data_bytes": 47_340, "bss_bytes": 2_412},
+                "text_bytes": 113_316, "data_bytes": 47_340, "bss_bytes": 2_412,
                 "flash_bytes": 161_080, "static_ram_bytes": 49_752,
             }),
         }

@@ -655,14 +655,13 @@ fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
             .join(", "),
         path.display()
     );
-    // The build's section sizes, flash and static RAM, as the report counts them.
+    // The build's section sizes, flash and static RAM, as the report counts them
+    // (the keys of `wcet.json`'s `memory`).
     let memory = report::elf::elf_memory(&args.elf())?;
     let path = args.out.join("memory.json");
-    let json = serde_json::json!({
-        "sections": memory,
-        "flash_bytes": memory.flash_bytes(),
-        "static_ram_bytes": memory.static_ram_bytes(),
-    });
+    let mut json = serde_json::to_value(memory)?;
+    json["flash_bytes"] = memory.flash_bytes().into();
+    json["static_ram_bytes"] = memory.static_ram_bytes().into();
     std::fs::write(&path, serde_json::to_string_pretty(&json)?)
         .with_context(|| format!("writing {}", path.display()))?;
     println!(

@@ -129,6 +129,16 @@ pub struct LinkFaultSpec {
     pub frames: u32,
 }
 
+impl LinkChannel {
+    /// Its frames' name in messages: `sensor` or `route`.
+    pub fn name(self) -> &'static str {
+        match self {
+            LinkChannel::Sensor => "sensor",
+            LinkChannel::Route => "route",
+        }
+    }
+}
+
 /// The `route-` prefix of a route channel's fault on the command line.
 const ROUTE_PREFIX: &str = "route-";
 

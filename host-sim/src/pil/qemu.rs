@@ -31,7 +31,7 @@ use crate::closed_loop::SimOptions;
 use crate::model::vehicle::VehicleParams;
 use crate::pil::deadlines::{skipped_between, TickOverruns};
 use crate::pil::frames::{actuation_of, path_chunks, plan_of, setup_refusal};
-use crate::pil::link_fault::{flip_bit, LinkFault, LinkFaultKind};
+use crate::pil::link_fault::{flip_bit, LinkChannel, LinkFault, LinkFaultKind};
 use crate::world::route::{RouteFeeder, Window};
 use crate::world::scenario::Scenario;
 
@@ -129,22 +129,6 @@ enum Incoming {
     Frame(Box<Up>),
     Bad(FrameError),
     Closed,
-}
-
-/// A channel a link fault can replace frames of.
-#[derive(Clone, Copy)]
-enum Channel {
-    Sensor,
-    Route,
-}
-
-impl Channel {
-    fn name(self) -> &'static str {
-        match self {
-            Channel::Sensor => "sensor",
-            Channel::Route => "route",
-        }
-    }
 }
 
 /// Bytes of the legitimate sensor frames sent in the last second, kept for the
@@ -534,7 +518,7 @@ impl QemuEcu {
                 .filter(|r| r.replaces(t_us, self.faulted))
                 .map(|_| f.spec.kinds.nth(self.faulted))
         });
-        let frame = self.faulty_frame(msg, fault, Channel::Route)?;
+        let frame = self.faulty_frame(msg, fault, LinkChannel::Route)?;
         self.route
             .write_all(&frame)
             .context("the ECU closed its route channel")?;
@@ -559,7 +543,7 @@ impl QemuEcu {
             .link_fault
             .filter(|f| f.covers(t_us))
             .map(|f| f.spec.kinds.nth(self.faulted));
-        let frame = self.faulty_frame(msg, fault, Channel::Sensor)?;
+        let frame = self.faulty_frame(msg, fault, LinkChannel::Sensor)?;
         Ok((frame, fault))
     }
 
@@ -570,7 +554,7 @@ impl QemuEcu {
         &mut self,
         msg: &Down,
         fault: Option<LinkFaultKind>,
-        channel: Channel,
+        channel: LinkChannel,
     ) -> Result<Vec<u8>> {
         let encode = |mac: &mut LinkMac, tx: &mut Authenticator| -> Result<Vec<u8>> {
             let mut buf = [0u8; MAX_FRAME_BYTES];
@@ -579,8 +563,8 @@ impl QemuEcu {
             Ok(buf[..n].to_vec())
         };
         let (tx, history) = match channel {
-            Channel::Sensor => (&mut self.down_tx, &mut self.history),
-            Channel::Route => (&mut self.route_tx, &mut self.route_history),
+            LinkChannel::Sensor => (&mut self.down_tx, &mut self.history),
+            LinkChannel::Route => (&mut self.route_tx, &mut self.route_history),
         };
         let frame = match fault {
             None => {
