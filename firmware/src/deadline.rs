@@ -226,9 +226,14 @@ impl DeadlineMonitor {
     /// between are skipped and counted (each a deadline miss).
     pub fn next_release(&mut self, end_us: u64) -> NextRelease {
         let first = self.index.saturating_add(1);
-        // The first index j ≥ first with j·period ≥ end_us.
-        let due = end_us.div_ceil(self.period_us);
-        let next = if due > first { due } else { first };
+        // The first index j ≥ first with j·period ≥ end_us: `first` plus the periods
+        // the job ended past that release (none if it ended before), in 32 bits (the M4F's `UDIV`; no 64-bit library division, whose long path is
+        // a loop). Exact for up to 2³² µs (71 min) late; later still counts as that
+        // late, and the next release, then already past, skips the rest.
+        let late = end_us.saturating_sub(first.saturating_mul(self.period_us));
+        let late = u32::try_from(late).unwrap_or(u32::MAX);
+        let period = u32::try_from(self.period_us).unwrap_or(u32::MAX);
+        let next = first.saturating_add(late.div_ceil(period) as u64);
         let skipped = (next - first).min(u32::MAX as u64) as u32;
         if skipped > 0 {
             let c = &mut self.counts;

@@ -307,3 +307,28 @@ fn the_plan_budget_is_the_period_less_its_reserve_at_the_core_clock() {
         PLAN_PERIOD_US - PLAN_RESERVE_US
     );
 }
+
+proptest::proptest! {
+    /// The next release is the first after the current one at or past the job's
+    /// end, `max(index + 1, ⌈end / period⌉)`, whatever the period and however late
+    /// the job ends (within 2³² µs of the release it skipped to).
+    #[test]
+    fn the_next_release_is_the_first_not_yet_past(
+        period in 1u64..10_000_000,
+        start in 0u64..1_000,
+        late in 0u64..(u32::MAX as u64),
+    ) {
+        let mut m = DeadlineMonitor::new(period, 1_000, 0);
+        for _ in 0..start % 7 {
+            let r = m.start();
+            m.next_release(r + 1);
+        }
+        let index = m.release_index();
+        let end = index * period + late;
+        let n = m.next_release(end);
+        let expected = (index + 1).max(end.div_ceil(period));
+        proptest::prop_assert_eq!(n.index, expected);
+        proptest::prop_assert_eq!(n.release_us, expected * period);
+        proptest::prop_assert_eq!(n.skipped as u64, expected - index - 1);
+    }
+}

@@ -135,6 +135,7 @@ use firmware::link::{
 };
 use firmware::low_level::Actuation;
 use firmware::tasks::{ControlTask, PlanTask};
+use firmware::timing;
 #[cfg(not(feature = "board-usart"))]
 use qemu_exit::exit;
 use rtic_monotonics::systick::prelude::*;
@@ -238,14 +239,18 @@ fn now_us() -> u64 {
 /// The instant of a core clock tick count `ticks` ([`core_ticks`]) on the
 /// timeline, µs since its start.
 fn timeline_us(ticks: u64) -> u64 {
-    ticks.saturating_sub(epoch_ticks()) * 1_000_000 / SYSCLK_HZ as u64
+    // A small division (the clock is whole MHz): no 64-bit library division.
+    timing::div_u64_small(ticks.saturating_sub(epoch_ticks()), timing::TICKS_PER_US)
+        .unwrap_or(u64::MAX)
 }
 
 /// The monotonic's instant of a time on the timeline, `t_us` µs (whole ticks).
 fn instant_at(t_us: u64) -> <Mono as rtic_monotonics::Monotonic>::Instant {
     let start = START_MONO_TICKS.load(Ordering::Relaxed);
     <Mono as rtic_monotonics::Monotonic>::Instant::from_ticks(
-        start.wrapping_add((t_us / firmware::timing::MONO_TICK_US) as u32),
+        start.wrapping_add(
+            timing::div_u64_small(t_us, timing::MONO_TICK_US as u32).unwrap_or(0) as u32,
+        ),
     )
 }
 
@@ -1513,11 +1518,14 @@ mod app {
             // The frame of the road first; when it completes a window, the
             // activation adopts it instead of planning (the control task follows
             // the last plan meanwhile): an activation adopts or plans, never both,
-            // on two branches of one test (the task's static bound is then the
-            // larger of the two: a job called on both paths would be charged on
-            // both).
+            // on two branches of one test. The two calls share one count (a flow
+            // fact the traces check), so the task's static bound takes the larger
+            // job, whatever shape the compiler gives the loop: the job ends with
+            // `next_release(now)`, a release not yet past, and the response-time
+            // analysis keeps a job within its period.
             let complete = frames > 0 && route_job(cx.local.route, frames, cx.local.staging);
             let mut event = if complete {
+                // wcet-bound: 1 times per activation, counted in plan_jobs
                 if !window_job(planner, cx.local.staging) {
                     // Counted with the refused route frames (the Done frame's
                     // `rejected_frames`); no logging in a task.
@@ -1531,6 +1539,7 @@ mod app {
             } else {
                 let est = cx.shared.estimate.lock(|e| *e);
                 let friction_mu = f32::from_bits(FRICTION_MU_BITS.load(Ordering::Relaxed));
+                // wcet-bound: 1 times per activation, counted in plan_jobs
                 let result = plan_job(planner, &est, friction_mu);
                 // The record's copy of the plan, taken before the swap, outside the lock.
                 let computed = planner.pending().copied();

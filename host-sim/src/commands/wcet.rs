@@ -719,7 +719,14 @@ fn print_static(analysis: &crate::wcet::analysis::StaticAnalysis, out: &std::pat
                 t.static_bound_cycles,
                 &t.refused
             ) {
-                (Some(i), Some(c), _) => format!("bound {i} instructions, {c} cycles"),
+                (Some(i), Some(c), _) => format!(
+                    "bound {i} instructions, {c} cycles{}",
+                    if t.optimum.as_deref() == Some("relaxation") {
+                        " (a relaxation's: the branch and bound reached its node cap)"
+                    } else {
+                        ""
+                    }
+                ),
                 (_, _, Some(why)) => format!("no bound: {why}"),
                 _ => "no bound".to_string(),
             }

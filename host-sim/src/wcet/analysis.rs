@@ -116,6 +116,11 @@ pub struct TaskStatic {
     pub static_bound_instructions: Option<u64>,
     /// The IPET bound in worst-case cycles of the memory model.
     pub static_bound_cycles: Option<u64>,
+    /// How the cycle bound's program was solved: `integer` (the mixed-integer
+    /// optimum) or `relaxation` (the branch and bound stopped at its node cap: the
+    /// largest open relaxation, at or above the integer optimum: sound, possibly
+    /// pessimistic); none without a bound.
+    pub optimum: Option<String>,
     /// Why there is no bound.
     pub refused: Option<String>,
     /// The bound's top contributors (function, cycles).
@@ -1361,6 +1366,7 @@ struct LoopCount {
 struct IpetFigures {
     instructions: Option<u64>,
     cycles: Option<u64>,
+    optimum: Option<String>,
     top: Vec<(String, f64)>,
     top_entries: Vec<(String, f64)>,
     top_blocks: Vec<TopBlock>,
@@ -1426,6 +1432,7 @@ impl Units {
                 irreducible: count.irreducible,
                 static_bound_instructions: figures.instructions,
                 static_bound_cycles: figures.cycles,
+                optimum: figures.optimum,
                 refused: (!refused.is_empty()).then(|| refused.join("; ")),
                 top_functions: figures.top,
                 top_functions_entries: figures.top_entries,
@@ -1567,6 +1574,7 @@ fn ipet_figures(model: &Model<'_>, root: usize, retries: ipet::Retries) -> IpetF
     match bound(Cost::Cycles) {
         Ok(b) => {
             out.cycles = Some(b.bound);
+            out.optimum = Some(b.optimum.to_string());
             out.top = b.by_function.into_iter().take(TOP_FUNCTIONS).collect();
             out.top_entries = b
                 .entries_by_function
@@ -2531,6 +2539,7 @@ mod tests {
             irreducible: Vec::new(),
             static_bound_instructions: None,
             static_bound_cycles: None,
+            optimum: None,
             refused: None,
             top_functions: Vec::new(),
             top_functions_entries: Vec::new(),

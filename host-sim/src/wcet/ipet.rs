@@ -1008,16 +1008,31 @@ fn solve_relaxation(
             *hi = hi.min(h);
         }
     }
-    let mut bounded = ProblemVariables::new();
-    for (&l, &h) in lo.iter().zip(&hi) {
-        let d = variable().min(l);
-        let _ = bounded.add(if h.is_finite() { d.max(h) } else { d });
+    // `microlp` can meet a singular basis on one order of the rows and not on
+    // another (its pivoting follows the order): the same program is tried with
+    // its rows reversed, then rotated by half, before the failure is reported.
+    let orders: [fn(usize, usize) -> usize; 3] =
+        [|k, _| k, |k, n| n - 1 - k, |k, n| (k + n / 2) % n];
+    let mut last = None;
+    for order in orders {
+        let mut bounded = ProblemVariables::new();
+        for (&l, &h) in lo.iter().zip(&hi) {
+            let d = variable().min(l);
+            let _ = bounded.add(if h.is_finite() { d.max(h) } else { d });
+        }
+        let mut problem = bounded.maximise(objective.clone()).using(good_lp::microlp);
+        let n = constraints.len();
+        for k in 0..n {
+            problem = problem.with(constraints[order(k, n)].clone());
+        }
+        match problem.solve() {
+            Err(e @ (good_lp::ResolutionError::Other(_) | good_lp::ResolutionError::Str(_))) => {
+                last = Some(e)
+            }
+            result => return result,
+        }
     }
-    let mut problem = bounded.maximise(objective.clone()).using(good_lp::microlp);
-    for c in constraints {
-        problem = problem.with(c.clone());
-    }
-    problem.solve()
+    Err(last.unwrap_or(good_lp::ResolutionError::Other("no row order solved")))
 }
 
 /// The mixed-integer optimum: `microlp`'s own branch and bound on `vars`, whose
@@ -1031,17 +1046,33 @@ fn solve_mixed_integer(
     constraints: &[good_lp::Constraint],
     integers: &[Variable],
 ) -> Result<(good_lp::solvers::microlp::MicroLpSolution, &'static str), IpetError> {
-    let mut problem = vars.maximise(objective.clone()).using(good_lp::microlp);
-    for c in constraints {
-        problem = problem.with(c.clone());
+    // `microlp`'s pivoting follows the rows' order, and a singular basis on one
+    // order is often not met on another: the rows as made, then reversed (the same
+    // program, the same optimum).
+    for reversed in [false, true] {
+        let mut problem = vars
+            .clone()
+            .maximise(objective.clone())
+            .using(good_lp::microlp);
+        for k in 0..constraints.len() {
+            let row = if reversed {
+                constraints.len() - 1 - k
+            } else {
+                k
+            };
+            problem = problem.with(constraints[row].clone());
+        }
+        match problem.solve() {
+            Ok(s) => return Ok((s, "integer")),
+            Err(good_lp::ResolutionError::Infeasible | good_lp::ResolutionError::Unbounded) => {
+                return Err(IpetError::Solver(
+                    "the IPET program is infeasible or unbounded".into(),
+                ))
+            }
+            Err(_) => {}
+        }
     }
-    match problem.solve() {
-        Ok(s) => Ok((s, "integer")),
-        Err(good_lp::ResolutionError::Infeasible | good_lp::ResolutionError::Unbounded) => Err(
-            IpetError::Solver("the IPET program is infeasible or unbounded".into()),
-        ),
-        Err(_) => branch_and_bound(relaxed, objective, constraints, integers),
-    }
+    branch_and_bound(relaxed, objective, constraints, integers)
 }
 
 /// The mixed-integer optimum, `integers` whole, by branch and bound over the
@@ -1148,4 +1179,44 @@ fn is_forwarder(caller: &str, callee: &str) -> bool {
             caller,
             "__aeabi_memmove" | "__aeabi_memmove4" | "__aeabi_memmove8"
         )
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    /// `max x + y` with `2x + 2y ≤ 3`: the relaxation's optimum is 1.5, the
+    /// integer one 1.
+    fn half_program() -> (
+        ProblemVariables,
+        Vec<Variable>,
+        Expression,
+        Vec<good_lp::Constraint>,
+    ) {
+        let mut vars = ProblemVariables::new();
+        let x = vars.add(variable().integer().min(0));
+        let y = vars.add(variable().integer().min(0));
+        let objective: Expression = x + y;
+        let rows = vec![constraint!(2 * x + 2 * y <= 3)];
+        (vars, vec![x, y], objective, rows)
+    }
+
+    #[test]
+    fn the_branch_and_bound_reaches_the_integer_optimum_below_the_relaxation() {
+        let (_, ints, objective, rows) = half_program();
+        let root = solve_relaxation(2, &objective, &rows, &[]).unwrap();
+        assert!((root.eval(&objective) - 1.5).abs() < 1e-9);
+        let (s, how) = branch_and_bound(2, &objective, &rows, &ints).unwrap();
+        assert_eq!(how, "integer");
+        assert!((s.eval(&objective) - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_mixed_integer_solve_gives_the_integer_optimum() {
+        let (vars, ints, objective, rows) = half_program();
+        let (s, how) = solve_mixed_integer(vars, 2, &objective, &rows, &ints).unwrap();
+        assert_eq!(how, "integer");
+        assert!((s.eval(&objective) - 1.0).abs() < 1e-9);
+    }
 }
