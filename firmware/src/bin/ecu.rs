@@ -184,7 +184,7 @@ static STOPPING: AtomicBool = AtomicBool::new(false);
 /// Frames the host wrote on the route channel that the plan task has not read
 /// yet (announced by `control` from the sensor frames), frames.
 static ROUTE_PENDING: AtomicU32 = AtomicU32::new(0);
-/// Route frames the plan task refused, frames.
+/// Route frames the plan task refused, frames (the plan task alone writes it).
 static ROUTE_REJECTED: AtomicU32 = AtomicU32::new(0);
 /// Monotonic tick (`MONO_TICK_US`) of the timeline's start: the first `control` release.
 static START_MONO_TICKS: AtomicU32 = AtomicU32::new(0);
@@ -196,7 +196,7 @@ static LAST_DELTA_BITS: AtomicU32 = AtomicU32::new(0);
 /// estimate).
 static FRICTION_MU_BITS: AtomicU32 = AtomicU32::new(0);
 /// Core clock ticks spent in `control` so far, link included (the plan task
-/// subtracts them from its elapsed time).
+/// subtracts them from its elapsed time; the control task alone writes it).
 static CONTROL_TICKS: AtomicU32 = AtomicU32::new(0);
 /// Core clock tick count at the start of the timeline (t = 0): the start of the
 /// monotonic tick of the first release.
@@ -205,23 +205,34 @@ static EPOCH_TICKS: AtomicU32 = AtomicU32::new(0);
 static EPOCH_TICKS_HI: AtomicU32 = AtomicU32::new(0);
 
 /// Core clock ticks since the monotonic started (168 MHz; 64 bits never wrap).
-/// Not inlined: one copy of its retry loops and of the monotonic's wrap check
-/// (which a task sees only if SysTick wrapped and its exception is not yet
-/// taken) instead of one per call site.
+/// Not inlined: one copy of the monotonic's wrap check (which a task sees only if
+/// SysTick wrapped and its exception is not yet taken) instead of one per call
+/// site.
+///
+/// The tick count read on both sides of the SysTick counter: equal, the counter
+/// lies in that tick. Different, a SysTick came between the reads, and the
+/// counter read again after the second lies in its tick: another needs a whole
+/// tick period (10 ms) of preemption within the next few instructions, which the
+/// response-time analysis excludes. No retry loop.
 #[inline(never)]
 fn core_ticks() -> u64 {
-    loop {
-        let a = Mono::now().ticks();
-        let cvr = cortex_m::peripheral::SYST::get_current();
-        let b = Mono::now().ticks();
-        // A retry needs a SysTick between the two reads (no other interrupt
-        // changes the tick count): one per tick that preempts the task.
-        // wcet-bound: 1 per tick
-        if a == b {
-            let within = (TICKS_PER_MONO - 1).saturating_sub(cvr);
-            return a as u64 * TICKS_PER_MONO as u64 + within as u64;
-        }
-    }
+    let a = mono_ticks();
+    let cvr = cortex_m::peripheral::SYST::get_current();
+    let b = mono_ticks();
+    let cvr = if a == b {
+        cvr
+    } else {
+        cortex_m::peripheral::SYST::get_current()
+    };
+    let within = (TICKS_PER_MONO - 1).saturating_sub(cvr);
+    b as u64 * TICKS_PER_MONO as u64 + within as u64
+}
+
+/// The monotonic's tick count. Not inlined: one copy of its wrap check for both
+/// of [`core_ticks`]'s reads.
+#[inline(never)]
+fn mono_ticks() -> u32 {
+    Mono::now().ticks()
 }
 
 fn epoch_ticks() -> u64 {
@@ -746,7 +757,7 @@ pub struct RouteLink {
 }
 
 /// Route frames the plan task refused, by reason (the control task reports them
-/// with its own), frames.
+/// with its own; the plan task alone writes them), frames.
 static ROUTE_REFUSED_AUTH: AtomicU32 = AtomicU32::new(0);
 /// See [`ROUTE_REFUSED_AUTH`].
 static ROUTE_REFUSED_REPLAY: AtomicU32 = AtomicU32::new(0);
@@ -824,7 +835,7 @@ impl RouteLink {
             };
             if outcome != Ok(true) {
                 reader.reset();
-                ROUTE_REJECTED.fetch_add(1, Ordering::Relaxed);
+                add_own(&ROUTE_REJECTED, 1);
             }
             if let Err(reason) = outcome {
                 let count = match reason {
@@ -832,7 +843,7 @@ impl RouteLink {
                     Refusal::Replay => &ROUTE_REFUSED_REPLAY,
                     Refusal::Corrupt => &ROUTE_REFUSED_CORRUPT,
                 };
-                count.fetch_add(1, Ordering::Relaxed);
+                add_own(count, 1);
             }
         }
     }
@@ -1054,7 +1065,18 @@ fn own_ticks(t0: u64, c0: u32) -> u64 {
 /// included) to [`CONTROL_TICKS`], which the plan task subtracts from its own time.
 fn add_control_ticks(t0: u64) {
     let whole = core_ticks().saturating_sub(t0).min(u32::MAX as u64) as u32;
-    CONTROL_TICKS.fetch_add(whole, Ordering::Relaxed);
+    add_own(&CONTROL_TICKS, whole);
+}
+
+/// Adds `n` to a counter that one task alone writes (the others only read it): a
+/// load and a store, with no load/store-exclusive retry loop, since no other
+/// writer can come between them (a preempting reader sees the old or the new
+/// value, both whole words).
+fn add_own(counter: &AtomicU32, n: u32) {
+    counter.store(
+        counter.load(Ordering::Relaxed).wrapping_add(n),
+        Ordering::Relaxed,
+    );
 }
 
 /// An actuation frame: the actuation, its fault code and the activation's own
@@ -1508,11 +1530,11 @@ mod app {
             let planner = &mut *cx.local.planner;
             // The frames of the road announced since the last activation (by the
             // control task's sensor frames: at a common release it runs first). At
-            // most ROUTE_FRAMES per activation; the rest wait for the next.
-            let frames = ROUTE_PENDING.swap(0, Ordering::Relaxed);
-            if frames > ROUTE_FRAMES {
-                ROUTE_PENDING.fetch_add(frames - ROUTE_FRAMES, Ordering::Relaxed);
-            }
+            // most ROUTE_FRAMES per activation; the rest wait for the next. The
+            // control task adds to the count: the frames taken are subtracted,
+            // not the count cleared.
+            let frames = ROUTE_PENDING.load(Ordering::Relaxed).min(ROUTE_FRAMES);
+            ROUTE_PENDING.fetch_sub(frames, Ordering::Relaxed);
             let t0 = core_ticks();
             let c0 = CONTROL_TICKS.load(Ordering::Relaxed);
             // The frame of the road first; when it completes a window, the
@@ -1529,7 +1551,7 @@ mod app {
                 if !window_job(planner, cx.local.staging) {
                     // Counted with the refused route frames (the Done frame's
                     // `rejected_frames`); no logging in a task.
-                    ROUTE_REJECTED.fetch_add(1, Ordering::Relaxed);
+                    add_own(&ROUTE_REJECTED, 1);
                 }
                 let finish_us = now_us();
                 let own = own_ticks(t0, c0);
