@@ -414,30 +414,29 @@ impl<T: Real> BicycleGeometry<T> {
         let dk4 = stage_derivative(&g4, &advance_m(&dk3, dt_s));
 
         let w = dt_s / T::lit(6.0);
-        // Zeroing `a` and `b` (the compiler sets the size far from the call).
-        // wcet-bound: (NX * NX + NX * NU) * 4 bytes
-        let mut out = Discretization {
-            x_next: *x,
-            a: [[T::ZERO; NX]; NX],
-            b: [[T::ZERO; NU]; NX],
+        // Each entry written once, in place (no zeroed matrix, no copy of one):
+        // `∂ξ_next/∂(s, X, Y)` is the identity (see FIRST_LIVE); the other columns
+        // are `I + w·(dk1 + 2·(dk2 + dk3) + dk4)`.
+        let d = |i: usize, j: usize| {
+            ident[i][j] + w * (dk1[i][j] + T::TWO * (dk2[i][j] + dk3[i][j]) + dk4[i][j])
         };
-        // ∂ξ_next/∂(s, X, Y) = I (see FIRST_LIVE).
-        for j in 0..FIRST_LIVE {
-            out.a[j][j] = T::ONE;
+        Discretization {
+            x_next: core::array::from_fn(|i| {
+                x[i] + w * (g1.f[i] + T::TWO * (g2.f[i] + g3.f[i]) + g4.f[i])
+            }),
+            a: core::array::from_fn(|i| {
+                core::array::from_fn(|j| {
+                    if j >= FIRST_LIVE {
+                        d(i, j)
+                    } else if i == j {
+                        T::ONE
+                    } else {
+                        T::ZERO
+                    }
+                })
+            }),
+            b: core::array::from_fn(|i| core::array::from_fn(|j| d(i, NX + j))),
         }
-        for i in 0..NX {
-            out.x_next[i] += w * (g1.f[i] + T::TWO * (g2.f[i] + g3.f[i]) + g4.f[i]);
-            for j in FIRST_LIVE..NX + NU {
-                let d =
-                    ident[i][j] + w * (dk1[i][j] + T::TWO * (dk2[i][j] + dk3[i][j]) + dk4[i][j]);
-                if j < NX {
-                    out.a[i][j] = d;
-                } else {
-                    out.b[i][j - NX] = d;
-                }
-            }
-        }
-        out
     }
 
     /// The state after one [`Self::discretize`] step, bit for bit, without its
