@@ -227,9 +227,10 @@ impl DeadlineMonitor {
     pub fn next_release(&mut self, end_us: u64) -> NextRelease {
         let first = self.index.saturating_add(1);
         // The first index j ≥ first with j·period ≥ end_us: `first` plus the periods
-        // the job ended past that release (none if it ended before), in 32 bits (the M4F's `UDIV`; no 64-bit library division, whose long path is
-        // a loop). Exact for up to 2³² µs (71 min) late; later still counts as that
-        // late, and the next release, then already past, skips the rest.
+        // the job ended past that release (none if it ended before), in 32 bits (the
+        // M4F's `UDIV`; no 64-bit library division, whose long path is a loop).
+        // Exact for up to 2³² µs (71 min) late; later still counts as that late, and
+        // the next release, then already past, skips the rest.
         let late = end_us.saturating_sub(first.saturating_mul(self.period_us));
         let late = u32::try_from(late).unwrap_or(u32::MAX);
         let period = u32::try_from(self.period_us).unwrap_or(u32::MAX);
