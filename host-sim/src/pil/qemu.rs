@@ -125,6 +125,13 @@ impl InjectedFrames {
     }
 }
 
+/// `msg` encoded as a frame of `tx`'s stream, its tag under `mac`'s key.
+fn encode_frame(msg: &Down, mac: &mut LinkMac, tx: &mut Authenticator) -> Result<Vec<u8>> {
+    let mut buf = [0u8; MAX_FRAME_BYTES];
+    let n = link::encode(msg, mac, tx, &mut buf).map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
+    Ok(buf[..n].to_vec())
+}
+
 enum Incoming {
     Frame(Box<Up>),
     Bad(FrameError),
@@ -378,10 +385,7 @@ impl QemuEcu {
 
     /// A frame of the control channel's down stream, encoded and authenticated.
     fn frame(&mut self, msg: &Down) -> Result<Vec<u8>> {
-        let mut buf = [0u8; MAX_FRAME_BYTES];
-        let n = link::encode(msg, &mut self.mac, &mut self.down_tx, &mut buf)
-            .map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
-        Ok(buf[..n].to_vec())
+        encode_frame(msg, &mut self.mac, &mut self.down_tx)
     }
 
     fn send(&mut self, msg: &Down) -> Result<()> {
@@ -556,19 +560,13 @@ impl QemuEcu {
         fault: Option<LinkFaultKind>,
         channel: LinkChannel,
     ) -> Result<Vec<u8>> {
-        let encode = |mac: &mut LinkMac, tx: &mut Authenticator| -> Result<Vec<u8>> {
-            let mut buf = [0u8; MAX_FRAME_BYTES];
-            let n = link::encode(msg, mac, tx, &mut buf)
-                .map_err(|e| anyhow!("encoding a frame: {e:?}"))?;
-            Ok(buf[..n].to_vec())
-        };
         let (tx, history) = match channel {
             LinkChannel::Sensor => (&mut self.down_tx, &mut self.history),
             LinkChannel::Route => (&mut self.route_tx, &mut self.route_history),
         };
         let frame = match fault {
             None => {
-                let frame = encode(&mut self.mac, tx)?;
+                let frame = encode_frame(msg, &mut self.mac, tx)?;
                 if history.len() == REPLAY_HISTORY_FRAMES {
                     history.pop_front();
                 }
@@ -579,7 +577,7 @@ impl QemuEcu {
                 // Fresh (the next freshness value of the stream, not taken), its
                 // tag under the forger's key.
                 let mut fresh = *tx;
-                encode(&mut self.forger, &mut fresh)?
+                encode_frame(msg, &mut self.forger, &mut fresh)?
             }
             Some(LinkFaultKind::Replay) => {
                 let k = self.faulted as usize;
@@ -592,7 +590,7 @@ impl QemuEcu {
                 }
             }
             Some(LinkFaultKind::Corrupt) => {
-                let mut frame = encode(&mut self.mac, tx)?;
+                let mut frame = encode_frame(msg, &mut self.mac, tx)?;
                 flip_bit(&mut frame, self.faulted);
                 frame
             }
@@ -840,32 +838,18 @@ mod tests {
             injected: counts(1, 1, 1),
             ..InjectedFrames::default()
         };
+        // (refused as expected, acted on, legitimate refused) on the ECU's counts.
+        let judged = |ecu: RefusalCounts| {
+            let mut j = injected;
+            j.judge_by_counts(&ecu);
+            (j.refused_as_expected, j.acted_on, j.legitimate_refused)
+        };
         // Each refused for its reason.
-        let mut all = injected;
-        all.judge_by_counts(&counts(1, 1, 1));
-        assert_eq!(
-            (
-                all.refused_as_expected,
-                all.acted_on,
-                all.legitimate_refused
-            ),
-            (3, 0, 0)
-        );
+        assert_eq!(judged(counts(1, 1, 1)), (3, 0, 0));
         // The replayed one not refused (taken), a legitimate frame refused as
         // forged instead.
-        let mut wrong = injected;
-        wrong.judge_by_counts(&counts(2, 0, 1));
-        assert_eq!(
-            (
-                wrong.refused_as_expected,
-                wrong.acted_on,
-                wrong.legitimate_refused
-            ),
-            (2, 1, 1)
-        );
+        assert_eq!(judged(counts(2, 0, 1)), (2, 1, 1));
         // Nothing refused.
-        let mut none = injected;
-        none.judge_by_counts(&RefusalCounts::new());
-        assert_eq!((none.refused_as_expected, none.acted_on), (0, 3));
+        assert_eq!(judged(RefusalCounts::new()), (0, 3, 0));
     }
 }

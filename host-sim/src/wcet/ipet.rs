@@ -1008,19 +1008,39 @@ fn solve_relaxation(
             *hi = hi.min(h);
         }
     }
-    // `microlp` can meet a singular basis on one order of the rows and not on
-    // another (its pivoting follows the order): the same program is tried with
-    // its rows reversed, then rotated by half, before the failure is reported.
-    let orders: [fn(usize, usize) -> usize; 3] =
-        [|k, _| k, |k, n| n - 1 - k, |k, n| (k + n / 2) % n];
-    let mut last = None;
-    for order in orders {
-        let mut bounded = ProblemVariables::new();
+    let bounded = || {
+        let mut vars = ProblemVariables::new();
         for (&l, &h) in lo.iter().zip(&hi) {
             let d = variable().min(l);
-            let _ = bounded.add(if h.is_finite() { d.max(h) } else { d });
+            let _ = vars.add(if h.is_finite() { d.max(h) } else { d });
         }
-        let mut problem = bounded.maximise(objective.clone()).using(good_lp::microlp);
+        vars
+    };
+    solve_in_row_orders(bounded, objective, constraints, &ROW_ORDERS)
+}
+
+/// A position of the `k`-th row added among `n`.
+type RowOrder = fn(usize, usize) -> usize;
+
+/// The orders the rows of a program are given to `microlp` in, in turn: as made,
+/// reversed, rotated by half. Its pivoting follows the rows' order, and a
+/// singular basis met on one order is often not met on another (the same
+/// program, the same optimum).
+const ROW_ORDERS: [RowOrder; 3] = [|k, _| k, |k, n| n - 1 - k, |k, n| (k + n / 2) % n];
+
+/// `max objective` under `constraints` over the variables `vars` makes, by
+/// `microlp`, with the rows in each of `orders` in turn until one does not fail
+/// numerically (an infeasible or unbounded program is that answer on any order);
+/// the last numerical failure when every order fails.
+fn solve_in_row_orders(
+    vars: impl Fn() -> ProblemVariables,
+    objective: &Expression,
+    constraints: &[good_lp::Constraint],
+    orders: &[RowOrder],
+) -> Result<good_lp::solvers::microlp::MicroLpSolution, good_lp::ResolutionError> {
+    let mut last = None;
+    for order in orders {
+        let mut problem = vars().maximise(objective.clone()).using(good_lp::microlp);
         let n = constraints.len();
         for k in 0..n {
             problem = problem.with(constraints[order(k, n)].clone());
@@ -1037,8 +1057,9 @@ fn solve_relaxation(
 
 /// The mixed-integer optimum: `microlp`'s own branch and bound on `vars`, whose
 /// `integers` are declared integer, and should it fail numerically (a singular
-/// basis in one of its nodes), [`branch_and_bound`] over the `relaxed` variables
-/// of the same program, continuous.
+/// basis in one of its nodes) on the rows as made and reversed,
+/// [`branch_and_bound`] over the `relaxed` variables of the same program,
+/// continuous.
 fn solve_mixed_integer(
     vars: ProblemVariables,
     relaxed: usize,
@@ -1046,33 +1067,15 @@ fn solve_mixed_integer(
     constraints: &[good_lp::Constraint],
     integers: &[Variable],
 ) -> Result<(good_lp::solvers::microlp::MicroLpSolution, &'static str), IpetError> {
-    // `microlp`'s pivoting follows the rows' order, and a singular basis on one
-    // order is often not met on another: the rows as made, then reversed (the same
-    // program, the same optimum).
-    for reversed in [false, true] {
-        let mut problem = vars
-            .clone()
-            .maximise(objective.clone())
-            .using(good_lp::microlp);
-        for k in 0..constraints.len() {
-            let row = if reversed {
-                constraints.len() - 1 - k
-            } else {
-                k
-            };
-            problem = problem.with(constraints[row].clone());
-        }
-        match problem.solve() {
-            Ok(s) => return Ok((s, "integer")),
-            Err(good_lp::ResolutionError::Infeasible | good_lp::ResolutionError::Unbounded) => {
-                return Err(IpetError::Solver(
-                    "the IPET program is infeasible or unbounded".into(),
-                ))
-            }
-            Err(_) => {}
-        }
+    // The rows as made, then reversed ([`ROW_ORDERS`]); past those, the branch
+    // and bound.
+    match solve_in_row_orders(|| vars.clone(), objective, constraints, &ROW_ORDERS[..2]) {
+        Ok(s) => Ok((s, "integer")),
+        Err(good_lp::ResolutionError::Infeasible | good_lp::ResolutionError::Unbounded) => Err(
+            IpetError::Solver("the IPET program is infeasible or unbounded".into()),
+        ),
+        Err(_) => branch_and_bound(relaxed, objective, constraints, integers),
     }
-    branch_and_bound(relaxed, objective, constraints, integers)
 }
 
 /// The mixed-integer optimum, `integers` whole, by branch and bound over the
