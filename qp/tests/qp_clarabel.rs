@@ -11,7 +11,7 @@
 mod qp_util;
 
 use qp::{ldl_len, QpProblem, QpSolver, QpStatus};
-use qp_util::{clarabel_solve, kkt_residual, objective, random_problem, Mix, Rng};
+use qp_util::{clarabel_solve, kkt_residual, max_abs_diff, objective, random_problem, Mix, Rng};
 
 const N: usize = 8;
 const M: usize = 24;
@@ -29,13 +29,7 @@ fn compare(p: &QpProblem<f64, N, M>, s: &mut Solver, label: &str) {
     let (ok, xr, objr) = clarabel_solve(p);
     assert!(ok, "{label}: clarabel did not solve");
     let ours = objective(p, s.solution());
-    let dx = s
-        .solution()
-        .x
-        .iter()
-        .zip(&xr)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0, f64::max);
+    let dx = max_abs_diff(&s.solution().x, &xr);
     let xscale = 1.0 + xr.iter().map(|v| v.abs()).fold(0.0, f64::max);
     assert!(dx <= TOL * xscale, "{label}: |x − x_clarabel|∞ = {dx:e}");
     assert!(

@@ -12,7 +12,7 @@ mod qp_util;
 
 use proptest::prelude::*;
 use qp::{ldl_len, QpProblem, QpSolver, QpStatus};
-use qp_util::{kkt_residual, random_problem, Mix, Rng};
+use qp_util::{kkt_residual, max_abs_diff, random_problem, Mix, Rng};
 
 const N: usize = 6;
 const M: usize = 14;
@@ -517,13 +517,7 @@ fn solve_factored_takes_the_factor_and_refuses_the_hessian() {
         *on_r.problem_mut() = pr;
         assert_eq!(on_r.solve_factored(), st, "seed {seed}");
         if st == QpStatus::Optimal {
-            let dx = on_h
-                .solution()
-                .x
-                .iter()
-                .zip(on_r.solution().x.iter())
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
+            let dx = max_abs_diff(&on_h.solution().x, &on_r.solution().x);
             assert!(dx < 1e-7, "seed {seed}: |Δx| {dx:e}");
         }
         let mut refused = Box::new(Medium::new());

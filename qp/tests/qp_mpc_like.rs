@@ -15,7 +15,7 @@
 mod qp_util;
 
 use qp::{ldl_len, QpProblem, QpSolver, QpStatus};
-use qp_util::to_f32_into;
+use qp_util::{max_abs_diff, to_f32_into};
 
 const K: usize = 16;
 const N: usize = 2 * K;
@@ -164,11 +164,7 @@ fn condensed_mpc_receding_horizon() {
             assert!((a - b).abs() < 1e-8, "step {step}: warm/cold f64 differ");
         }
         for s32 in [&cold32, &warm32] {
-            let du = u64_
-                .iter()
-                .zip(s32.solution().x.iter())
-                .map(|(a, b)| (a - *b as f64).abs())
-                .fold(0.0, f64::max);
+            let du = max_abs_diff(&u64_, &s32.solution().x);
             worst_du = worst_du.max(du);
             // Inputs are in m/s² (range ±8): 1e-2 m/s² in f32.
             assert!(du < 1e-2, "step {step}: f32 input differs by {du}");

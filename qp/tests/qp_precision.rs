@@ -11,7 +11,7 @@
 mod qp_util;
 
 use qp::{ldl_len, QpSolver, QpStatus};
-use qp_util::{random_problem, to_f32, Mix, Rng};
+use qp_util::{max_abs_diff, random_problem, to_f32, Mix, Rng};
 
 const N: usize = 10;
 const M: usize = 24;
@@ -52,12 +52,7 @@ fn f32_agrees_with_f64() {
         let x64 = s64.solution().x;
         let x32 = s32.solution().x;
         let scale = 1.0 + x64.iter().map(|v| v.abs()).fold(0.0, f64::max);
-        let dx = x64
-            .iter()
-            .zip(&x32)
-            .map(|(a, b)| (a - *b as f64).abs())
-            .fold(0.0, f64::max)
-            / scale;
+        let dx = max_abs_diff(&x64, &x32) / scale;
         let j64 = s64.solution().objective;
         let dj = (j64 - s32.solution().objective as f64).abs() / (1.0 + j64.abs());
         worst = worst.max(dx).max(dj);
@@ -104,12 +99,7 @@ fn mpc_sized_problems_f32_vs_f64() {
         worst_it = worst_it.max(s32.solution().iterations);
         let x64 = s64.solution().x;
         let scale = 1.0 + x64.iter().map(|v| v.abs()).fold(0.0, f64::max);
-        let dx = x64
-            .iter()
-            .zip(s32.solution().x.iter())
-            .map(|(a, b)| (a - *b as f64).abs())
-            .fold(0.0, f64::max)
-            / scale;
+        let dx = max_abs_diff(&x64, &s32.solution().x) / scale;
         worst = worst.max(dx);
         assert!(dx < TOL32, "seed {seed}: relative |Δx| = {dx:e}");
     }
@@ -157,12 +147,7 @@ fn f32_on_degenerate_problems() {
         }
         let x64 = s64.solution().x;
         let scale = 1.0 + x64.iter().map(|v| v.abs()).fold(0.0, f64::max);
-        let dx = x64
-            .iter()
-            .zip(s32.solution().x.iter())
-            .map(|(a, b)| (a - *b as f64).abs())
-            .fold(0.0, f64::max)
-            / scale;
+        let dx = max_abs_diff(&x64, &s32.solution().x) / scale;
         worst = worst.max(dx);
         assert!(dx < TOL32_DEGENERATE, "seed {seed}: relative |Δx| = {dx:e}");
     }

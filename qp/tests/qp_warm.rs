@@ -13,7 +13,7 @@ mod qp_util;
 
 use proptest::prelude::*;
 use qp::{ldl_len, ActiveConstraint, ConstraintIndex, QpProblem, QpSolver, QpStatus, Side};
-use qp_util::{kkt_residual, random_problem, Mix, Rng};
+use qp_util::{kkt_residual, max_abs_diff, random_problem, Mix, Rng};
 
 const N: usize = 16;
 const M: usize = 40;
@@ -67,13 +67,7 @@ fn warm_start_takes_fewer_iterations_on_drifting_problems() {
             total_cold += solve_checked(&mut cold, &p, &format!("cold seed {seed} k {k}"));
             total_warm += solve_checked(&mut warm, &p, &format!("warm seed {seed} k {k}"));
             // Same optimum either way.
-            let dx = cold
-                .solution()
-                .x
-                .iter()
-                .zip(warm.solution().x.iter())
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
+            let dx = max_abs_diff(&cold.solution().x, &warm.solution().x);
             assert!(dx < 1e-8, "seed {seed} k {k}: cold/warm differ by {dx:e}");
         }
     }

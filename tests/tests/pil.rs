@@ -14,7 +14,7 @@ use firmware::link::{Refusal, RefusalCounts};
 use host_sim::closed_loop::cost_model::CostModel;
 use host_sim::closed_loop::disturbed_ecu::DisturbedEcu;
 use host_sim::closed_loop::ecu::SimulatedEcu;
-use host_sim::closed_loop::timeline::{run_with, RunResult};
+use host_sim::closed_loop::timeline::{run, run_with, RunResult};
 use host_sim::closed_loop::SimOptions;
 use host_sim::model::vehicle::VehicleParams;
 use host_sim::pil::comparison::compare;
@@ -369,8 +369,7 @@ fn a_cold_start_into_braking_is_the_in_process_run_bit_for_bit_from_the_first_ac
     };
     let (pil, _, link, ticks) = drive_with(&scenario, &opts, 4, "hairpin");
     let vehicle = VehicleParams::default();
-    let mut modelled = SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts).unwrap();
-    let host = run_with(&scenario, &vehicle, &opts, &mut modelled, |_, _| {}).unwrap();
+    let host = run::<f32>(&scenario, &vehicle, &opts, |_, _| {}).unwrap();
     // The scenario is the one meant: braking at the first activation.
     let first = &pil.log[0];
     assert_eq!(first.control_mode, "safe");
@@ -402,8 +401,7 @@ fn forged_replayed_and_corrupted_sensor_frames_are_refused_by_reason_and_never_a
         max_duration_s: 12.0,
         ..SimOptions::default()
     };
-    let mut modelled = SimulatedEcu::<f32>::new(&scenario, &vehicle, &probe).unwrap();
-    let clean = run_with(&scenario, &vehicle, &probe, &mut modelled, |_, _| {}).unwrap();
+    let clean = run::<f32>(&scenario, &vehicle, &probe, |_, _| {}).unwrap();
     let first_window_us = clean
         .plan_activations
         .iter()
@@ -434,10 +432,7 @@ fn forged_replayed_and_corrupted_sensor_frames_are_refused_by_reason_and_never_a
         println!("{}: {injected:?}, ECU {:?}", kind.name(), done.refused);
         // Each injected frame refused for its reason, counted by the ECU (its
         // Done frame and its last actuation frame, in summary.json), none acted on.
-        let mut expected = RefusalCounts::new();
-        for _ in 0..FRAMES {
-            expected.count(kind.refusal());
-        }
+        let expected = FaultKinds::One(kind).refusals(FRAMES);
         assert_eq!(injected.injected, expected);
         assert_eq!(injected.refused_as_expected, u64::from(FRAMES));
         assert_eq!(injected.acted_on, 0);
@@ -507,8 +502,7 @@ fn forged_replayed_and_corrupted_route_frames_are_refused_and_lose_only_their_wi
         max_duration_s: 30.0,
         ..SimOptions::default()
     };
-    let mut modelled = SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts).unwrap();
-    let clean = run_with(&scenario, &vehicle, &opts, &mut modelled, |_, _| {}).unwrap();
+    let clean = run::<f32>(&scenario, &vehicle, &opts, |_, _| {}).unwrap();
     let route_releases: Vec<u64> = clean
         .plan_activations
         .iter()

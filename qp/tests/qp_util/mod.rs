@@ -439,3 +439,12 @@ pub fn to_f32<const N: usize, const M: usize>(p: &QpProblem<f64, N, M>) -> QpPro
     to_f32_into(p, &mut q);
     q
 }
+
+/// `max |a_i − b_i|` (0 for empty slices): how far two solutions lie apart, the
+/// second in `f64` or `f32`.
+pub fn max_abs_diff<B: Copy + Into<f64>>(a: &[f64], b: &[B]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - (*y).into()).abs())
+        .fold(0.0, f64::max)
+}
