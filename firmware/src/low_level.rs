@@ -596,6 +596,19 @@ pub fn control<T: Real>(
     control_with_model(cfg, state, plan, est, now_us, &CarModel::configured(cfg))
 }
 
+/// Speed under which the car stands, m/s: the brake hold's
+/// ([`control_with_model`]) and [`crate::tasks::ControlTask::stop_reason`]'s.
+pub const STANDSTILL_MPS: f32 = 0.5;
+
+/// True when the plan's speed now and one plan step ahead (m/s) and the
+/// measured speed `v_mps` (m/s, signed) are all under [`STANDSTILL_MPS`]: the car
+/// stands and is to stand, and its brakes hold it with
+/// [`LowLevelConfig::safe_brake_torque_nm`].
+fn standing<T: Real>(v_ref_now_mps: T, v_ref_ahead_mps: T, v_mps: T) -> bool {
+    let still = T::lit(STANDSTILL_MPS);
+    v_ref_now_mps < still && v_ref_ahead_mps < still && v_mps.abs() < still
+}
+
 /// [`control`] with the feed-forward computed for `car` (e.g. the mass and
 /// resistances estimated by [`crate::longitudinal_estimator`]; a non-finite or
 /// non-positive mass falls back to the configured car's).
@@ -708,7 +721,16 @@ pub fn control_with_model<T: Real>(
         t_max - torque_ff,
     )
     .map_err(|_| ControlFault::Numerical)?;
-    let torque = clamp_within(torque_fb + torque_ff, -b_max, t_max);
+    let torque = if standing(now_ref.v_mps, ahead_ref.v_mps, v) {
+        // The plan stands and so does the car: the brakes hold it, as a driver's
+        // foot does (the speed loop would chase the estimate's noise round 0 with
+        // torques of either sign, and creep), and the speed loop starts afresh
+        // when the plan moves off.
+        speed_pid.reset();
+        -cfg.safe_brake_torque_nm
+    } else {
+        clamp_within(torque_fb + torque_ff, -b_max, t_max)
+    };
     let wheel_torque_nm = if torque > T::ZERO {
         let h = torque * T::HALF;
         [h, h, T::ZERO, T::ZERO]

@@ -95,11 +95,14 @@ pub struct ObstacleSettings<T> {
     pub half_car_length_m: T,
     /// Road half-width on each side used when the path has no widths, m.
     pub default_half_width_m: T,
+    /// Gap the car's front keeps to an obstacle that blocks the road when it
+    /// stops before it, m.
+    pub stop_clearance_m: T,
 }
 
 impl<T: Real> Default for ObstacleSettings<T> {
     /// `c = 0.02 1/m`, half width 0.9 m, buffer 0.3 m, half length 2.3 m,
-    /// default road half-width 3.5 m.
+    /// default road half-width 3.5 m, stop clearance 2 m.
     fn default() -> Self {
         Self {
             steepness_1pm: T::lit(0.02),
@@ -107,6 +110,7 @@ impl<T: Real> Default for ObstacleSettings<T> {
             lateral_buffer_m: T::lit(0.3),
             half_car_length_m: T::lit(2.3),
             default_half_width_m: T::lit(3.5),
+            stop_clearance_m: T::TWO,
         }
     }
 }
@@ -149,6 +153,7 @@ impl<T: Real> ObstacleSettings<T> {
             self.lateral_buffer_m,
             self.half_car_length_m,
             self.default_half_width_m,
+            self.stop_clearance_m,
         ];
         all.iter().all(|v| v.is_finite() && *v >= T::ZERO) && self.steepness_1pm > T::ZERO
     }
@@ -273,6 +278,14 @@ pub struct Parabola<T> {
     /// parabola's own `2c` it bounds the curvature of the way round
     /// ([`obstacle_speed_cap`]).
     pub outside_kappa_1pm: T,
+    /// True when neither side of the obstacle leaves the car the room it needs
+    /// ([`ObstacleError::RoadBlocked`]): the parabola is on the roomier side all
+    /// the same, and the car stops before the obstacle ([`obstacle_speed_cap`]).
+    pub blocks_road: bool,
+    /// `ξ` at which the car's reference point stops before a blocking obstacle, m:
+    /// the nearest vertex's `ξ` less half the car's length and
+    /// [`ObstacleSettings::stop_clearance_m`]. Meaningful when `blocks_road`.
+    pub stop_xi_m: T,
 }
 
 impl<T: Real> Parabola<T> {
@@ -323,10 +336,11 @@ impl<T: Real> Parabola<T> {
     }
 
     /// True when a constraint row is needed at the global point `p` (m): the
-    /// forbidden region reaches the road at the `ξ` of `p`.
+    /// forbidden region reaches the road at the `ξ` of `p` and the obstacle does
+    /// not block the road.
     pub fn is_relevant(&self, p: [T; 2]) -> bool {
         let (xi, _) = self.to_local(p);
-        self.reaches_road && xi >= self.xi_min_m && xi <= self.xi_max_m
+        self.reaches_road && !self.blocks_road && xi >= self.xi_min_m && xi <= self.xi_max_m
     }
 
     /// Path abscissae `[s_begin, s_end]`, m, where the parabola matters
@@ -337,13 +351,14 @@ impl<T: Real> Parabola<T> {
     }
 
     /// True when a node at path abscissa `s_node_m` (m, any lap of a closed path)
-    /// needs a constraint row for this parabola.
+    /// needs a constraint row for this parabola: never for one that blocks the
+    /// road (there is no way round to constrain; the speed cap stops the car).
     pub fn is_relevant_at_s<const CAP: usize>(
         &self,
         path: &ReferencePath<T, CAP>,
         s_node_m: T,
     ) -> bool {
-        if !self.reaches_road {
+        if !self.reaches_road || self.blocks_road {
             return false;
         }
         let s = path.unwrap_s(s_node_m, self.s_m);
@@ -358,7 +373,7 @@ impl<T: Real> Parabola<T> {
         path: &ReferencePath<T, CAP>,
         s_node_m: T,
     ) -> Option<T> {
-        if !self.reaches_road {
+        if !self.reaches_road || self.blocks_road {
             return None;
         }
         let s = path.unwrap_s(s_node_m, self.s_m);
@@ -416,6 +431,9 @@ impl<T: Real> Parabola<T> {
 /// obstacle on the inside of a bend is left on the side the car drifts away from;
 /// on a straight the cap is above `V_max`; an obstacle that needs no swerve caps
 /// nothing.
+///
+/// An obstacle that blocks the road ([`Parabola::blocks_road`]) has no way round:
+/// it caps the speed so that the car stops before it (`stop_curve`).
 pub fn obstacle_speed_cap<T: Real, const CAP: usize>(
     velocity: &VelocityPlannerSettings<T>,
     path: &ReferencePath<T, CAP>,
@@ -435,7 +453,9 @@ pub fn obstacle_speed_cap<T: Real, const CAP: usize>(
             Side::Left => o.eta_apex_m + offset_buffer_m > T::ZERO,
             Side::Right => o.eta_apex_m - offset_buffer_m < T::ZERO,
         };
-        if swerve && o.overlaps_s_window(path, s_node_m, s_node_m + d) {
+        if o.blocks_road {
+            cap = cap.min(stop_curve(path, o, s_node_m, ay_limit_mps2));
+        } else if swerve && o.overlaps_s_window(path, s_node_m, s_node_m + d) {
             let kappa = o.outside_kappa_1pm + T::TWO * o.steepness_1pm;
             if kappa > T::ZERO {
                 cap = cap.min((ay_limit_mps2.max(T::ZERO) / kappa).sqrt());
@@ -443,6 +463,26 @@ pub fn obstacle_speed_cap<T: Real, const CAP: usize>(
         }
     }
     cap
+}
+
+/// Speed cap before an obstacle that blocks the road, m/s: the speed from which
+/// braking at `decel_mps2` (m/s², the validity limit's `a_y,frac·μ·g`, so that
+/// braking takes no more of the tyres than cornering may) stops the car at the
+/// parabola's [`Parabola::stop_xi_m`], `sqrt(2·a·(s_stop − s))`, and 0 from there to
+/// the far end of the parabola's range; `+∞` at a node past that (on a closed
+/// path, the node's abscissa is taken on the lap nearest the obstacle).
+fn stop_curve<T: Real, const CAP: usize>(
+    path: &ReferencePath<T, CAP>,
+    o: &Parabola<T>,
+    s_node_m: T,
+    decel_mps2: T,
+) -> T {
+    let s = path.unwrap_s(s_node_m, o.s_m);
+    if s > o.s_m + o.xi_max_m.max(o.stop_xi_m) {
+        return T::INFINITY;
+    }
+    let gap = (o.s_m + o.stop_xi_m - s).max(T::ZERO);
+    (T::TWO * decel_mps2.max(T::ZERO) * gap).sqrt()
 }
 
 /// Free-function form of [`Parabola::constraint_value_and_gradient`]: `g` (m,
@@ -609,6 +649,8 @@ fn build_inner<T: Real, const CAP: usize>(
         xi_max_m: T::ZERO,
         reaches_road: false,
         outside_kappa_1pm: T::ZERO,
+        blocks_road: false,
+        stop_xi_m: T::ZERO,
     };
     // Local coordinates of the vertices and the lateral extent.
     let mut local: Vec<(T, T), MAX_VERTICES> = Vec::new();
@@ -636,13 +678,17 @@ fn build_inner<T: Real, const CAP: usize>(
     let m_y = settings.lateral_margin_m();
     let m_x = settings.half_car_length_m;
     let mut pts: Vec<(T, T), MAX_POINTS> = Vec::new();
+    let mut xi_near = T::INFINITY;
     // WCET: `local` is a `Vec` of capacity MAX_VERTICES.
     // wcet-bound: MAX_VERTICES
     for &(xi, eta) in local.iter() {
         let e = sigma * eta + m_y;
         let _ = pts.push((xi - m_x, e));
         let _ = pts.push((xi + m_x, e));
+        xi_near = xi_near.min(xi);
     }
+    frame.blocks_road = blocked.is_some();
+    frame.stop_xi_m = xi_near - m_x - settings.stop_clearance_m;
     let c = settings.steepness_1pm;
     let (xi0, a) = minimal_apex(&pts, c).ok_or(ObstacleError::NoVertices { obstacle })?;
     frame.xi0_m = xi0;
@@ -693,8 +739,9 @@ impl<T: Real> ObstacleManager<T> {
     /// Rebuilds the parabolas of `obstacles` against `path`.
     ///
     /// Every obstacle that can be processed gets a parabola, including a blocked
-    /// one (on its roomier side, so the MPC's soft constraint still pushes the
-    /// car away while it brakes). Returns the first error met (by obstacle index);
+    /// one (on its roomier side, marked [`Parabola::blocks_road`]: it adds no
+    /// constraint row, and caps the speed to stop the car before it). Returns the
+    /// first error met (by obstacle index);
     /// obstacles beyond [`MAX_OBSTACLES`] are dropped and reported.
     pub fn update<const CAP: usize>(
         &mut self,

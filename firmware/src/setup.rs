@@ -147,7 +147,7 @@ impl Setup {
                 }
                 _ => failure(SetupError::PathRejected, 0),
             })?;
-        if planner.stats.obstacle_errors > 0 {
+        if planner.stats.obstacle_errors > 0 || planner.stats.blocked_roads > 0 {
             // An obstacle of the first window was refused (the simulator checks every
             // obstacle on the whole track before it starts the ECU, with its reason).
             return Err(failure(SetupError::ObstacleBlocksRoad, 0));

@@ -42,7 +42,7 @@ use crate::low_level::{
     self, Actuation, CarModel, ControlFault, LowLevelConfig, LowLevelState, Mode,
 };
 use crate::mpc::{Mpc, MpcError, MpcReport, MpcSettings};
-use crate::obstacles::{Obstacle, ObstacleManager, ObstacleSettings, MAX_OBSTACLES};
+use crate::obstacles::{Obstacle, ObstacleError, ObstacleManager, ObstacleSettings, MAX_OBSTACLES};
 use crate::plan::{Plan, HORIZON};
 use crate::reference_path::{PathError, ReferencePath, MAX_SEARCH_SEGMENTS};
 use crate::sideslip::SideslipLag;
@@ -124,6 +124,9 @@ pub struct PlanTaskStats {
     /// Obstacles in an adopted window that the obstacle manager refused (their
     /// parabola left out of that window's plans).
     pub obstacle_errors: u32,
+    /// Rebuilds of the parabolas that found an obstacle blocking the road: the
+    /// parabolas are kept and the plans stop the car before it.
+    pub blocked_roads: u32,
 }
 
 /// The `plan` task's local resources: the reference path, the obstacle parabolas,
@@ -190,6 +193,7 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
                 stale: 0,
                 windows: 0,
                 obstacle_errors: 0,
+                blocked_roads: 0,
             },
             obstacle_list: heapless::Vec::new(),
             obstacle_settings: None,
@@ -406,7 +410,9 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
     /// that lie inside the current window of the road: more than 5 m from its ends
     /// (anywhere on a closed path) and within 20 m of its centre line. Returns false,
     /// counting it in `stats.obstacle_errors` and leaving no parabola, when the
-    /// obstacle manager refuses them (e.g. one blocks the road); true otherwise.
+    /// obstacle manager refuses one (invalid, too many); true otherwise. An
+    /// obstacle that blocks the road keeps its parabola, on the roomier side, and
+    /// the plans stop the car before it (counted in `stats.blocked_roads`).
     pub fn rebuild_obstacles(&mut self) -> bool {
         self.obstacles.clear();
         let Some(settings) = self.obstacle_settings else {
@@ -454,16 +460,25 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
                 inside += 1;
             }
         }
-        if self
+        match self
             .obstacles
             .update(&settings, &self.path, &self.obstacle_list[..inside])
-            .is_err()
         {
-            self.obstacles.clear();
-            self.stats.obstacle_errors = self.stats.obstacle_errors.wrapping_add(1);
-            return false;
+            Ok(()) => true,
+            // Every obstacle has its parabola and one leaves no room: the plans
+            // stop the car before it (`obstacle_speed_cap`).
+            Err(ObstacleError::RoadBlocked { .. })
+                if self.obstacles.parabolas().len() == inside =>
+            {
+                self.stats.blocked_roads = self.stats.blocked_roads.wrapping_add(1);
+                true
+            }
+            Err(_) => {
+                self.obstacles.clear();
+                self.stats.obstacle_errors = self.stats.obstacle_errors.wrapping_add(1);
+                false
+            }
         }
-        true
     }
 
     /// [`PlanTask::adopt_window`] from rows `[x_m, y_m, w_right_m, w_left_m]` (the
@@ -527,8 +542,7 @@ pub struct ControlTaskStats {
     pub invalid_plans: u32,
 }
 
-/// Speed under which the car stands, m/s ([`ControlTask::stop_reason`]).
-pub const STANDSTILL_MPS: f32 = 0.5;
+pub use crate::low_level::STANDSTILL_MPS;
 
 /// Why the car stands ([`ControlTask::stop_reason`]): every controlled stop has one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

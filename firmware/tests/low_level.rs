@@ -1582,3 +1582,46 @@ proptest::proptest! {
         }
     }
 }
+
+#[test]
+fn a_plan_that_stands_holds_the_brakes_on_a_standing_car() {
+    let cfg = LowLevelConfig::<f64>::default();
+    let still = f64::from(firmware::low_level::STANDSTILL_MPS);
+    let plan = straight_plan(0, 0.0);
+    // Standing, and the estimate's noise round 0 of either sign: the hold's
+    // torque, whatever the speed loop would have asked.
+    for v in [0.0, 0.3, -0.3, 0.99 * still] {
+        let mut st = LowLevelState::new();
+        let a = control(&cfg, &mut st, &plan, &est(v, 0.0), 0).unwrap();
+        assert!(
+            (a.torque_total_nm + cfg.safe_brake_torque_nm).abs() < 1e-9,
+            "{v} m/s: {}",
+            a.torque_total_nm
+        );
+        assert!(a.wheel_torque_nm.iter().all(|&t| t < 0.0), "{v} m/s");
+        assert_eq!(st.speed_pid.integral, 0.0, "the speed loop starts afresh");
+    }
+    // Moving (or measured moving), or a plan that moves off: the speed loop.
+    for (v_plan, v) in [
+        (0.0, 1.05 * still),
+        (0.0, -1.05 * still),
+        (1.0, 0.0),
+        (5.0, 5.0),
+    ] {
+        let mut st = LowLevelState::new();
+        let a = control(&cfg, &mut st, &straight_plan(0, v_plan), &est(v, 0.0), 0).unwrap();
+        assert!(
+            (a.torque_total_nm + cfg.safe_brake_torque_nm).abs() > 1.0,
+            "plan {v_plan} m/s, car {v} m/s: {}",
+            a.torque_total_nm
+        );
+    }
+    // A plan that stands now and moves within a plan step releases the brakes.
+    let mut moving_off = straight_plan(0, 0.0);
+    for n in moving_off.nodes.iter_mut().skip(1) {
+        n.v_mps = 2.0;
+    }
+    let mut st = LowLevelState::new();
+    let a = control(&cfg, &mut st, &moving_off, &est(0.0, 0.0), 0).unwrap();
+    assert!(a.torque_total_nm >= 0.0, "{}", a.torque_total_nm);
+}

@@ -182,6 +182,48 @@ fn blocked_road_reports_the_obstacle_and_the_missing_room() {
         Err(ObstacleError::RoadBlocked { obstacle: 1, .. })
     ));
     assert_eq!(m.parabolas().len(), 2);
+    // Only the blocking one is marked, with its stop before the near face
+    // (X = 80 m): half the car's length and the stop clearance before it.
+    let [free, blocking] = [m.parabolas()[0], m.parabolas()[1]];
+    assert!(!free.blocks_road);
+    assert!(blocking.blocks_road);
+    let stop_s = blocking.s_m + blocking.stop_xi_m;
+    let want = 180.0 - s.half_car_length_m - s.stop_clearance_m;
+    assert!((stop_s - want).abs() < 1e-9, "{stop_s} vs {want}");
+}
+
+#[test]
+fn a_blocking_obstacle_caps_the_speed_to_a_stop_before_it() {
+    // The box of X 80..82 m across the whole road: s 180..182 m on `straight()`.
+    let path = straight();
+    let v = VelocityPlannerSettings::<f64>::default();
+    let s = ObstacleSettings::default();
+    let mut m = ObstacleManager::new();
+    let r = m.update(&s, &path, &[boxed(80.0, 82.0, -3.0, 3.0)]);
+    assert!(matches!(r, Err(ObstacleError::RoadBlocked { .. })));
+    let par = m.parabolas()[0];
+    let stop = par.s_m + par.stop_xi_m;
+    let (_, far) = par.s_range_m();
+    let decel = 4.0;
+    let cap = |s_node: f64| obstacle_speed_cap(&v, &path, &[par], s_node, 20.0, decel, 0.3);
+    // The braking curve sqrt(2·a·gap) before the stop, 0 from it to the far end
+    // of the parabola's range, nothing past it.
+    for gap in [50.0, 12.5, 2.0, 0.5] {
+        let want = (2.0 * decel * gap).sqrt();
+        assert!((cap(stop - gap) - want).abs() < 1e-9, "{gap} m before");
+    }
+    assert_eq!(cap(stop), 0.0);
+    assert_eq!(cap(181.0), 0.0);
+    assert_eq!(cap(far - 0.01), 0.0);
+    assert_eq!(cap(far + 0.01), f64::INFINITY);
+    // A car too fast to stop is capped at every node all the same (never above
+    // the curve), and the cap falls monotonically towards the stop.
+    let mut last = f64::INFINITY;
+    for k in 0..100 {
+        let c = cap(stop - 100.0 + k as f64);
+        assert!(c <= last, "not monotone at {k}");
+        last = c;
+    }
 }
 
 #[test]
@@ -221,6 +263,10 @@ fn bad_vertices_are_errors() {
         },
         ObstacleSettings {
             lateral_buffer_m: f64::INFINITY,
+            ..s
+        },
+        ObstacleSettings {
+            stop_clearance_m: f64::NAN,
             ..s
         },
     ] {
@@ -473,6 +519,8 @@ fn turned(angle: f64, side: Side) -> Parabola<f64> {
         xi_max_m: 10.0,
         reaches_road: true,
         outside_kappa_1pm: 0.0,
+        blocks_road: false,
+        stop_xi_m: 0.0,
     }
 }
 
@@ -574,6 +622,7 @@ fn exact_settings() -> ObstacleSettings<f64> {
         lateral_buffer_m: 0.25,
         half_car_length_m: 2.0,
         default_half_width_m: 3.5,
+        stop_clearance_m: 2.0,
     }
 }
 

@@ -131,6 +131,11 @@ fn a_sweep_is_deterministic_across_threads_and_shards_and_an_error_is_a_row() {
 }
 
 fn run_fault(track: &str, fault: Fault) -> Vec<(String, String)> {
+    run_fault_noisy(track, fault, 0.0, 0.0)
+}
+
+/// [`run_fault`] with estimate noise of level `noise` and `delay_ms` of delay.
+fn run_fault_noisy(track: &str, fault: Fault, noise: f64, delay_ms: f64) -> Vec<(String, String)> {
     let spec = RunSpec {
         index: 0,
         track: track.into(),
@@ -138,8 +143,8 @@ fn run_fault(track: &str, fault: Fault) -> Vec<(String, String)> {
         mu_planner: 1.0,
         vehicle: None,
         mass_scale: 1.0,
-        noise: 0.0,
-        delay_ms: 0.0,
+        noise,
+        delay_ms,
         fault,
         seed: 0,
     };
@@ -183,4 +188,38 @@ fn a_late_obstacle_is_revealed_and_avoided() {
     assert_eq!(cell(&row, "collisions"), "0");
     assert_eq!(cell(&row, "obstacle_count"), "1");
     assert_eq!(cell(&row, "fault_check"), "pass");
+}
+
+#[test]
+fn a_road_blocked_ahead_stops_the_car_before_it_and_holds_it_there() {
+    // Without noise, and with the README's harshest estimate (noise high, 100 ms
+    // late), on which a speed loop left to chase round 0 creeps on towards the
+    // box here (the brake hold of `low_level::control_with_model` stops that).
+    let track = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/MoscowRaceway.csv");
+    for (noise, delay_ms, min_gap) in [(0.0, 0.0, 1.5), (4.0, 100.0, 1.2)] {
+        let row = run_fault_noisy(track, Fault::BlockedRoad(150.0), noise, delay_ms);
+        let what = format!("noise {noise}, {delay_ms} ms");
+        assert_eq!(cell(&row, "error"), "", "{what}");
+        assert_ne!(cell(&row, "fault_event_s"), "", "{what}: revealed");
+        assert_eq!(cell(&row, "collisions"), "0", "{what}");
+        assert_eq!(cell(&row, "outcome"), "stopped-safely", "{what}");
+        assert_eq!(cell(&row, "fault_check"), "pass", "{what}");
+        // It stops near the 2 m the planner aims at, not far before.
+        let gap: f64 = cell(&row, "min_obstacle_clearance_m").parse().unwrap();
+        assert!(
+            gap > min_gap && gap < 4.0,
+            "{what}: stopped {gap} m before it"
+        );
+    }
+}
+
+#[test]
+fn a_road_blocked_too_late_to_stop_for_fails_its_check() {
+    // Revealed 15 m before it: at the oval's speeds no braking stops the car.
+    let dir = tempfile::tempdir().unwrap();
+    let oval = write_oval(dir.path());
+    let row = run_fault(&oval, Fault::BlockedRoad(15.0));
+    assert_eq!(cell(&row, "error"), "");
+    assert_eq!(cell(&row, "outcome"), "collision");
+    assert_eq!(cell(&row, "fault_check"), "fail");
 }

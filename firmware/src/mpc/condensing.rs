@@ -40,6 +40,9 @@ impl<T: Real> Mpc<T> {
         let ay_limit = validity.ay_limit_mps2();
         let buffer = st.obstacle_offset_buffer_m;
         let cap = |s: T| obstacle_speed_cap(&st.velocity, path, obstacles, s, v0, ay_limit, buffer);
+        // One pass here rather than one per node: a road blocked is rare.
+        // wcet-bound: MAX_OBSTACLES
+        let blocked = obstacles.iter().any(|o| o.blocks_road);
         v_heur[0] = velocity_planner::v_heur(&st.velocity, path, xi0[IS], v0, mu).min(cap(xi0[IS]));
         c.start(st);
         let mut window = CurvatureWindow::new();
@@ -63,7 +66,13 @@ impl<T: Real> Mpc<T> {
             c.road_row(qp, st, &fr);
             c.validity_rows(qp, st, validity, &xbar, &u_bar, ncols);
             c.obstacle_rows(qp, st, path, obstacles, &fr, &u_bar, ncols);
-            c.speed_row(qp, &xbar, &u_bar, ncols);
+            c.speed_row(
+                qp,
+                &xbar,
+                &u_bar,
+                ncols,
+                if blocked { vh } else { T::INFINITY },
+            );
         }
         c.node_first[HORIZON + 1] = qp.m as u8;
         report.rows = qp.m as u32;
@@ -488,21 +497,30 @@ impl<T: Real> Condensing<T> {
 
     /// The car does not reverse (soft, weight [`SPEED_ROW_WEIGHT`]): `V ≥ 0` at a
     /// node whose linearised speed `V̄` is under [`SPEED_ROW_BELOW_MPS`] (`V` is
-    /// exactly linear in the accelerations, so the row is exact). After the obstacle
-    /// rows of the node: when the rows are full, an obstacle keeps its row.
+    /// exactly linear in the accelerations, so the row is exact), and `V ≤ cap`
+    /// (m/s; `+∞` for none): the node's speed reference when an obstacle blocks
+    /// the road ([`obstacle_speed_cap`] then stops the car before it), so that a
+    /// car standing before it does not plan to creep on. After the obstacle rows
+    /// of the node: when the rows are full, an obstacle keeps its row.
     fn speed_row(
         &mut self,
         qp: &mut MpcQpProblem<T>,
         xbar: &[T; NX],
         u_bar: &[[T; NU]; HORIZON],
         ncols: usize,
+        cap: T,
     ) {
         if !xbar[IV].is_finite() || xbar[IV] >= T::lit(SPEED_ROW_BELOW_MPS) {
             return;
         }
         let d = self.lin_row(&[(IV, T::ONE)], xbar[IV], u_bar, ncols);
         let rho = T::lit(SPEED_ROW_WEIGHT);
-        self.push(qp, RowKind::Speed, 0, -d, T::INFINITY, rho);
+        let hi = if cap.is_finite() {
+            cap - d
+        } else {
+            T::INFINITY
+        };
+        self.push(qp, RowKind::Speed, 0, -d, hi, rho);
     }
 
     /// Validity (soft): `±δ ≤ δ_max(V̄) + δ_max'(V̄)(V − V̄) + δ_tol`.

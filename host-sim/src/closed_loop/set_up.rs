@@ -16,7 +16,7 @@ use crate::model::vehicle::VehicleParams;
 use crate::world::disturbance::{run_seed, Disturbances, Dropout, DropoutKind, LateObstacle};
 use crate::world::faults::{Fault, FAULT_START_S};
 use crate::world::obstacle_file::{load_obstacles_path, Obstacle};
-use crate::world::obstacle_placement::{box_at, random_obstacles, RoadCheck};
+use crate::world::obstacle_placement::{box_at, pose_at, random_obstacles, RoadCheck};
 use crate::world::road_friction::{MuPatch, RoadFriction};
 use crate::world::road_grade::{GradePatch, RoadGrade};
 use crate::world::scenario::{self, Scenario, ScenarioError};
@@ -202,6 +202,21 @@ fn late_obstacle_box(scn: &Scenario, check: &RoadCheck) -> Result<Obstacle> {
         .ok_or_else(|| anyhow!("no room for the late obstacle at half the lap"))
 }
 
+/// The blocked-road fault's box: 2 m along the road at half the lap, across its
+/// whole width and 0.5 m past each edge, so that no car finds room beside it.
+fn blocking_box(scn: &Scenario) -> Obstacle {
+    let s = 0.5 * scn.track.length();
+    let (_, _, [w_right, w_left]) = pose_at(&scn.track, s);
+    let centre = 0.5 * (w_left - w_right);
+    box_at(
+        &scn.track,
+        "blocked_road",
+        s,
+        centre,
+        (2.0, w_left + w_right + 1.0),
+    )
+}
+
 /// Sets up the run `spec` (module docs): the track and its patches, the cars, the
 /// options, the fault, the obstacles.
 ///
@@ -253,7 +268,7 @@ pub fn set_up(spec: &RunSpec, setting: &Setting) -> Result<SetUp> {
     };
     let start_us = (FAULT_START_S * 1e6) as u64;
     match spec.fault {
-        Fault::None | Fault::LateObstacle(_) => {}
+        Fault::None | Fault::LateObstacle(_) | Fault::BlockedRoad(_) => {}
         Fault::DropoutNan(n) | Fault::DropoutHold(n) => {
             let kind = if matches!(spec.fault, Fault::DropoutNan(_)) {
                 DropoutKind::Nan
@@ -297,8 +312,13 @@ pub fn set_up(spec: &RunSpec, setting: &Setting) -> Result<SetUp> {
         ObstacleSpec::File(f) => load_obstacles_path(f)?,
     };
     let placed_obstacles = scn.obstacles.len();
-    if let Fault::LateObstacle(dist) = spec.fault {
-        scn.obstacles.push(late_obstacle_box(&scn, road_check()?)?);
+    let late = match spec.fault {
+        Fault::LateObstacle(dist) => Some((late_obstacle_box(&scn, road_check()?)?, dist)),
+        Fault::BlockedRoad(dist) => Some((blocking_box(&scn), dist)),
+        _ => None,
+    };
+    if let Some((o, dist)) = late {
+        scn.obstacles.push(o);
         d.late_obstacle = Some(LateObstacle {
             index: scn.obstacles.len() - 1,
             appear_m: dist,

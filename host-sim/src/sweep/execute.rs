@@ -99,7 +99,9 @@ fn try_execute(spec: &RunSpec, common: &Common) -> Result<Vec<String>> {
         }
     }
     let fault_event_s = match spec.fault {
-        Fault::LateObstacle(_) => ecu.obstacle_appeared_at_us().map(|t| t as f64 * 1e-6),
+        Fault::LateObstacle(_) | Fault::BlockedRoad(_) => {
+            ecu.obstacle_appeared_at_us().map(|t| t as f64 * 1e-6)
+        }
         Fault::DropoutNan(_) | Fault::DropoutHold(_) => Some(FAULT_START_S),
         _ => None,
     };

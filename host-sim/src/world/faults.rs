@@ -10,6 +10,7 @@
 //! | `overrun:MHZ` (MHZ = 20) | the ECU clock at MHZ instead of 168 MHz: the plan activations that cost more than `0.1 s × MHZ` cycles overrun their 100 ms period | misses counted, late plans published or dropped by the late-plan policy, the car keeps following: outcome `deadline-miss` (the lap completes, no collision, no off-road) with at least one miss |
 //! | `mu-high:F` (F = 1.5) | the planner assumes `F × μ` on a road of `μ` | the plan's `a_y ≤ 0.5·F·μ·g` is still within the tyres' `μ·g` for `F < 2`, its acceleration bounds (`0.8·F·μ·g`) are not: the control task's friction check (`firmware::friction`) sees the wheels spin or lock and the planner plans with the lower friction measured; keep following, outcome `ok` (lateral error and consistency degrade, reported; `friction_mu_min` in the summary) |
 //! | `late-obstacle:D` (D = 60 m) | a 2 m × 2 m box half across the centre line at half the lap, given to the planner only when the car is D m before it along the path | replan around it or stop before it: outcome `ok` or `stopped-safely`, and the obstacle was revealed |
+//! | `blocked-road:D` (D = 150 m) | a 2 m box across the whole road at half the lap, given to the planner only when the car is D m before it along the path | no way round: the planner keeps the obstacle and caps the speed to stop before it (`firmware::obstacles::obstacle_speed_cap`); outcome `stopped-safely` (no collision, no off-road), and the obstacle was revealed |
 //! | `steer-rate:R` (R = 0.5 rad/s) | the steering actuator moves at most R rad/s (the firmware does not know) | keep following: outcome `ok` |
 
 use std::fmt;
@@ -35,6 +36,8 @@ pub enum Fault {
     MuHigh(f64),
     /// Distance before the obstacle at which the planner sees it, m.
     LateObstacle(f64),
+    /// Distance before the road-blocking obstacle at which the planner sees it, m.
+    BlockedRoad(f64),
     /// Steering actuator rate limit, rad/s.
     SteerRate(f64),
 }
@@ -75,7 +78,7 @@ pub struct FaultKind {
 }
 
 /// Every fault scenario, `none` first.
-pub const FAULT_KINDS: [FaultKind; 7] = [
+pub const FAULT_KINDS: [FaultKind; 8] = [
     FaultKind {
         name: "none",
         param: None,
@@ -150,6 +153,19 @@ pub const FAULT_KINDS: [FaultKind; 7] = [
         make: Fault::LateObstacle,
     },
     FaultKind {
+        name: "blocked-road",
+        param: Some(FaultParam {
+            placeholder: "D_M",
+            meaning: "distance before it, m",
+            default: 150.0,
+            whole: false,
+        }),
+        what: "a 2 m box across the whole road at half the lap, given to the planner only D_M metres before it",
+        expected: "stop before it: outcome stopped-safely",
+        pil: false,
+        make: Fault::BlockedRoad,
+    },
+    FaultKind {
         name: "steer-rate",
         param: Some(FaultParam {
             placeholder: "RAD_PER_S",
@@ -214,9 +230,11 @@ impl Fault {
         match *self {
             Fault::None => None,
             Fault::DropoutNan(n) | Fault::DropoutHold(n) => Some(f64::from(n)),
-            Fault::Overrun(x) | Fault::MuHigh(x) | Fault::LateObstacle(x) | Fault::SteerRate(x) => {
-                Some(x)
-            }
+            Fault::Overrun(x)
+            | Fault::MuHigh(x)
+            | Fault::LateObstacle(x)
+            | Fault::BlockedRoad(x)
+            | Fault::SteerRate(x) => Some(x),
         }
     }
 
@@ -241,6 +259,9 @@ impl Fault {
             Fault::LateObstacle(_) => {
                 f.fault_event_s.is_some()
                     && matches!(f.outcome, Outcome::Ok | Outcome::StoppedSafely)
+            }
+            Fault::BlockedRoad(_) => {
+                f.fault_event_s.is_some() && f.outcome == Outcome::StoppedSafely
             }
         }
     }
@@ -362,6 +383,7 @@ mod tests {
             ("overrun:30", Fault::Overrun(30.0)),
             ("mu-high", Fault::MuHigh(1.5)),
             ("late-obstacle:45", Fault::LateObstacle(45.0)),
+            ("blocked-road:80", Fault::BlockedRoad(80.0)),
             ("steer-rate:0.3", Fault::SteerRate(0.3)),
         ] {
             assert_eq!(s.parse::<Fault>(), Ok(f));
