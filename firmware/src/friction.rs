@@ -124,7 +124,11 @@
 //! **Standstill**: a car standing ([`FrictionConfig::standstill_mps`], 1 m/s) for
 //! [`FrictionConfig::standstill_s`] (2 s) asks nothing of the road: `μ̂` returns
 //! to `μ_nominal` so that the planner plans a start with the configured friction
-//! (a road still slippery shows as slip again, at low speed).
+//! (a road still slippery shows as slip again, at low speed), unless the car
+//! stands within [`FrictionConfig::standstill_clear_m`] (50 m) of its last slip
+//! event: it stands on the road that slipped, and plans its start, and a swerve
+//! round what stopped it, with the friction that road showed (the recovery still
+//! raises `μ̂` while it stands, on evidence of nothing).
 //!
 //! # Wheel speeds
 //!
@@ -274,6 +278,9 @@ pub struct FrictionConfig<T> {
     pub standstill_mps: T,
     /// Time standing after which `μ̂` returns to `mu_nominal`, s, ≥ 0.
     pub standstill_s: T,
+    /// Distance from the last slip event within which a standing car keeps its
+    /// `μ̂` (it stands on the road that slipped), m, ≥ 0.
+    pub standstill_clear_m: T,
     /// Half the track `t/2`, m, ≥ 0: a wheel's ground speed is `v_x ∓ ψ̇·t/2`
     /// (left, right; [`FrictionConfig::for_car`]: 0).
     pub half_track_m: T,
@@ -349,6 +356,7 @@ impl<T: Real> FrictionConfig<T> {
             max_gap_s: T::lit(0.1),
             standstill_mps: T::ONE,
             standstill_s: T::TWO,
+            standstill_clear_m: T::lit(50.0),
             half_track_m: T::ZERO,
             wheel_slip_ratio: T::lit(0.15),
             wheel_slip_margin_mps: T::ONE,
@@ -397,6 +405,7 @@ impl<T: Real> FrictionConfig<T> {
             && pos(self.max_gap_s)
             && nonneg(self.standstill_mps)
             && nonneg(self.standstill_s)
+            && nonneg(self.standstill_clear_m)
             && nonneg(self.half_track_m)
             && pos(self.wheel_slip_ratio)
             && self.wheel_slip_ratio < T::ONE
@@ -450,6 +459,9 @@ pub struct FrictionEstimator<T> {
     rose: bool,
     /// Time the car has stood, s.
     standing_s: T,
+    /// Distance travelled since the last slip event, m (`+∞` before the first;
+    /// it stops counting at [`FrictionConfig::standstill_clear_m`]).
+    since_slip_m: T,
     /// The car's mass and resistances.
     longitudinal: LongitudinalEstimator<T>,
     /// The wheels at the last estimate (module docs, *Wheel speeds*): a driven
@@ -498,6 +510,7 @@ impl<T: Real> FrictionEstimator<T> {
             patience: T::ONE,
             rose: false,
             standing_s: T::ZERO,
+            since_slip_m: T::INFINITY,
             longitudinal: LongitudinalEstimator::new(),
             wheel_spin: false,
             wheel_lock: false,
@@ -818,6 +831,7 @@ impl<T: Real> FrictionEstimator<T> {
                 self.mu = if new_event { mu } else { larger(self.mu, mu) };
             }
             self.since_slip_s = T::ZERO;
+            self.since_slip_m = T::ZERO;
         } else {
             self.slipping = false;
             // Evidence is gone when the demand is under the one slip is looked for
@@ -828,13 +842,21 @@ impl<T: Real> FrictionEstimator<T> {
         }
         // Standing, the tyres ask nothing of the road: the configured friction
         // again, so that the planner plans a start (a road still slippery shows
-        // as slip again, at low speed).
+        // as slip again, at low speed), unless the car stands where the road
+        // slipped: it starts there, and swerves round what stopped it, with
+        // the friction that road showed (the recovery still raises it).
         self.standing_s = if v.abs() < cfg.standstill_mps {
             self.standing_s + dt
         } else {
             T::ZERO
         };
-        if self.standing_s >= cfg.standstill_s && self.mu < cfg.mu_nominal {
+        if self.since_slip_m < cfg.standstill_clear_m {
+            self.since_slip_m += v.abs() * dt;
+        }
+        if self.standing_s >= cfg.standstill_s
+            && self.mu < cfg.mu_nominal
+            && self.since_slip_m >= cfg.standstill_clear_m
+        {
             self.mu = cfg.mu_nominal;
             self.rose = true;
         }

@@ -672,6 +672,60 @@ pub fn control_with_model<T: Real>(
             s
         }
     };
+    let mut speed_pid = state.speed_pid;
+    let (torque, torque_ff, wheel_torque_nm) =
+        longitudinal(cfg, car, &mut speed_pid, &now_ref, &ahead_ref, v, dt)?;
+    let mut yaw_pid = state.yaw_pid;
+    let (delta_ol, delta, yaw_error) = lateral(
+        cfg,
+        car,
+        state.last_delta_rad,
+        &mut yaw_pid,
+        (plan.dt_s, est),
+        (&now_ref, &ahead_ref),
+        v,
+        dt,
+    )?;
+
+    state.speed_pid = speed_pid;
+    state.yaw_pid = yaw_pid;
+    if new_plan {
+        state.plan_stamp_us = Some(plan.stamp_us);
+        state.plans_seen = state.plans_seen.wrapping_add(1);
+    }
+    state.last_now_us = Some(now_us);
+    state.last_delta_rad = Some(delta);
+
+    Ok(Actuation {
+        wheel_torque_nm,
+        delta_rad: delta,
+        delta_ol_rad: delta_ol,
+        delta_cl_rad: delta - delta_ol,
+        v_ref_mps: now_ref.v_mps,
+        v_mps: v,
+        psi_ref_rad: ahead_ref.psi_rad,
+        yaw_error_rad: yaw_error,
+        torque_total_nm: torque,
+        torque_ff_nm: torque_ff,
+        plan_age_s,
+        mode,
+        new_plan,
+    })
+}
+
+/// The speed loop of [`control_with_model`] at the measured speed `v` (m/s,
+/// signed) over `dt` (s): the total torque (N·m, positive driving), its
+/// feed-forward (N·m) and the four wheels' torques (N·m, FL FR RL RR), the
+/// speed PID's state updated in `speed_pid`.
+fn longitudinal<T: Real>(
+    cfg: &LowLevelConfig<T>,
+    car: &CarModel<T>,
+    speed_pid: &mut PidState<T>,
+    now_ref: &Sample<T>,
+    ahead_ref: &Sample<T>,
+    v: T,
+    dt: T,
+) -> Result<(T, T, [T; 4]), ControlFault> {
     // The car's model, or the configured car where it is not usable.
     let resistance = car.resistance_n + car.drag_n_per_mps2 * v * v;
     // The brakes give `b` of the torque commanded: a braking torque is
@@ -710,10 +764,9 @@ pub fn control_with_model<T: Real>(
     } else {
         T::ZERO
     };
-    let mut speed_pid = state.speed_pid;
     let torque_fb = pid::update_within(
         &cfg.speed_pid,
-        &mut speed_pid,
+        speed_pid,
         now_ref.v_mps,
         v,
         dt,
@@ -743,11 +796,29 @@ pub fn control_with_model<T: Real>(
         let (fl, rl) = (front * l, rear * l);
         [fl, front - fl, rl, rear - rl]
     };
+    Ok((torque, torque_ff, wheel_torque_nm))
+}
 
-    // Lateral.
+/// The steering of [`control_with_model`]: the plan's open-loop steering `δ_ol`
+/// plus the yaw loop's `δ_cl` within the mechanical limit, the rate limit from
+/// `last_delta_rad` (the last command, rad) and the steering hold; returns
+/// `(δ_ol, δ, yaw error)` (rad), the yaw PID's state updated in `yaw_pid`.
+/// `plan_dt_s` (s) is the plan's node spacing, `v` (m/s) the measured speed,
+/// `dt` (s) the PIDs' step.
+#[allow(clippy::too_many_arguments)]
+fn lateral<T: Real>(
+    cfg: &LowLevelConfig<T>,
+    car: &CarModel<T>,
+    last_delta_rad: Option<T>,
+    yaw_pid: &mut PidState<T>,
+    (plan_dt_s, est): (T, &StateEstimate<T>),
+    (now_ref, ahead_ref): (&Sample<T>, &Sample<T>),
+    v: T,
+    dt: T,
+) -> Result<(T, T, T), ControlFault> {
     let lim = cfg.steer_limit_rad;
     let (mut lo, mut hi) = (-lim, lim);
-    if let Some(prev) = state.last_delta_rad {
+    if let Some(prev) = last_delta_rad {
         let step = cfg.steer_rate_limit_radps * dt;
         let prev = clamp_within(prev, -lim, lim);
         // All finite (a validated configuration, a clamped command): plain
@@ -762,9 +833,8 @@ pub fn control_with_model<T: Real>(
         }
     }
     let delta_ol = now_ref.delta_rad;
-    let psi_proj = est.psi_rad + est.yaw_rate_radps * plan.dt_s;
+    let psi_proj = est.psi_rad + est.yaw_rate_radps * plan_dt_s;
     let yaw_error = wrap_pi(psi_proj - ahead_ref.psi_rad);
-    let mut yaw_pid = state.yaw_pid;
     let delta_cl = if v.abs() >= cfg.lateral_min_speed_mps {
         // A jump of the yaw by more than π (an estimator that wrapped) would be a
         // derivative spike: restart the derivative instead.
@@ -773,7 +843,7 @@ pub fn control_with_model<T: Real>(
         }
         pid::update_within(
             &cfg.yaw_pid,
-            &mut yaw_pid,
+            yaw_pid,
             psi_proj - yaw_error,
             psi_proj,
             dt,
@@ -793,29 +863,5 @@ pub fn control_with_model<T: Real>(
         yaw_pid.last_output
     };
     let delta = clamp_within(delta_ol + delta_cl, lo, hi);
-
-    state.speed_pid = speed_pid;
-    state.yaw_pid = yaw_pid;
-    if new_plan {
-        state.plan_stamp_us = Some(plan.stamp_us);
-        state.plans_seen = state.plans_seen.wrapping_add(1);
-    }
-    state.last_now_us = Some(now_us);
-    state.last_delta_rad = Some(delta);
-
-    Ok(Actuation {
-        wheel_torque_nm,
-        delta_rad: delta,
-        delta_ol_rad: delta_ol,
-        delta_cl_rad: delta - delta_ol,
-        v_ref_mps: now_ref.v_mps,
-        v_mps: v,
-        psi_ref_rad: ahead_ref.psi_rad,
-        yaw_error_rad: yaw_error,
-        torque_total_nm: torque,
-        torque_ff_nm: torque_ff,
-        plan_age_s,
-        mode,
-        new_plan,
-    })
+    Ok((delta_ol, delta, yaw_error))
 }

@@ -68,6 +68,10 @@ fn each_setting_out_of_its_range_is_refused_and_each_edge_accepted() {
         ("max gap 0", |c| c.max_gap_s = 0.0),
         ("standstill speed < 0", |c| c.standstill_mps = -1.0),
         ("standstill time < 0", |c| c.standstill_s = -1.0),
+        ("standstill distance < 0", |c| c.standstill_clear_m = -1.0),
+        ("standstill distance NaN", |c| {
+            c.standstill_clear_m = f64::NAN
+        }),
         ("half track < 0", |c| c.half_track_m = -0.8),
         ("wheel slip ratio 0", |c| c.wheel_slip_ratio = 0.0),
         ("wheel slip ratio 1", |c| c.wheel_slip_ratio = 1.0),
@@ -518,7 +522,10 @@ fn a_first_event_after_standing_at_the_configured_friction_is_no_relapse() {
 
 #[test]
 fn a_car_rolling_at_the_standstill_speed_is_not_standing() {
-    let mut r = Rig::new();
+    // (Standing anywhere restores μ̂ here: no distance from the slip.)
+    let mut c = cfg();
+    c.standstill_clear_m = 0.0;
+    let mut r = Rig::with(c);
     r.drive(20.0, -6.0, -1.0, 0.5);
     assert_eq!(r.e.events(), 1);
     let low = r.e.mu();
@@ -765,4 +772,36 @@ fn a_spin_shorter_than_the_wheels_confirmation_is_no_event() {
     let (events, flagged, mu) = run(4);
     assert_eq!((events, flagged), (1, true));
     assert!(mu < MU, "μ̂ = {mu}");
+}
+
+#[test]
+fn a_car_standing_where_the_road_slipped_keeps_its_estimate() {
+    // Locked wheels at 20 m/s, then a braking the tyres deliver (6 m/s², 32 m)
+    // to a stand, 3 s (past the 2 s that restore μ̂ elsewhere): μ̂ stays where
+    // the road showed it. (A recovery hold of 10 s keeps the recovery out of
+    // the picture.)
+    let stop = |r: &mut Rig, v: f64| {
+        let v = r.drive(v, -6.0, -6.0, (v - 0.5) / 6.0);
+        assert!((v - 0.5).abs() < 0.05, "{v} m/s");
+        r.drive(v, 0.0, 0.0, 3.0)
+    };
+    let mut c = cfg();
+    c.hold_s = 10.0;
+    let mut r = Rig::with(c);
+    let v = r.drive(20.0, -6.0, -1.0, 0.5);
+    assert_eq!(r.e.events(), 1);
+    let low = r.e.mu();
+    assert!(low < MU - 0.1, "μ̂ {low}");
+    stop(&mut r, v);
+    assert_eq!(r.e.events(), 1);
+    assert_eq!(r.e.mu(), low);
+    // The same event, then 60 m of road that did not slip (20 m/s, 3 s) before
+    // the braking: the configured friction again.
+    let mut r = Rig::with(c);
+    let v = r.drive(20.0, -6.0, -1.0, 0.5);
+    let v = r.drive(v, 0.0, 0.0, 3.0);
+    assert!(r.e.mu() < MU - 0.1, "μ̂ {}", r.e.mu());
+    stop(&mut r, v);
+    assert_eq!(r.e.events(), 1);
+    assert_eq!(r.e.mu(), MU);
 }
