@@ -791,47 +791,7 @@ impl<T: Real> FrictionEstimator<T> {
         if (wheel && self.wheel_s >= cfg.wheel_confirm_s)
             || (short && self.shortfall_s >= cfg.confirm_s)
         {
-            // A shortfall that returns within `event_gap_s` of the last one
-            // continues its event (the spun wheels braked back to the road's
-            // speed take the brake torque first: not a second slip).
-            let new_event = !self.slipping && self.since_slip_s >= cfg.event_gap_s;
-            // The grip shown since the last event (not counted before the first,
-            // and once the estimate is back at the configured friction): a
-            // relapse lowers μ̂ no further than the road has shown it holds.
-            let shown = if self.mu < cfg.mu_nominal {
-                self.shown
-            } else {
-                T::ZERO
-            };
-            self.slipping = true;
-            if new_event {
-                self.mu_before = self.mu;
-                self.shown = self.peak.0;
-                self.events = self.events.wrapping_add(1);
-                // A relapse (slip again after μ̂ rose): the road is still
-                // slippery; recover more patiently.
-                if self.rose {
-                    self.patience = smaller(self.patience * T::TWO, cfg.patience_max);
-                }
-                self.rose = false;
-            }
-            // Within one event, the best the tyres gave counts: the square root
-            // only when the peak is new to the event.
-            let g = T::lit(crate::G);
-            let mu_g = self.mu * g;
-            if new_event || self.peak.0 > mu_g * mu_g {
-                let best = if shown > self.peak.0 {
-                    shown
-                } else {
-                    self.peak.0
-                };
-                let obs = best.sqrt() * (T::ONE / g);
-                let floor = larger(self.mu_before * cfg.max_drop, cfg.mu_min);
-                let mu = smaller(self.mu_before, larger(obs, floor));
-                self.mu = if new_event { mu } else { larger(self.mu, mu) };
-            }
-            self.since_slip_s = T::ZERO;
-            self.since_slip_m = T::ZERO;
+            self.slip(cfg);
         } else {
             self.slipping = false;
             // Evidence is gone when the demand is under the one slip is looked for
@@ -840,6 +800,70 @@ impl<T: Real> FrictionEstimator<T> {
                 !wheel && (demand < cfg.min_demand_mps2 || shortfall <= cfg.clear_fraction * limit);
             self.recover(cfg, clear, dt);
         }
+        self.standstill(cfg, v, dt);
+        let sample = LongitudinalSample {
+            dt_s: dt,
+            v_mps: v,
+            torque_nm,
+            lateral_mps2: ay,
+            grip_mps2: self.mu * T::lit(crate::G),
+            driven_share: cfg.driven_load_share,
+            slipping: self.slipping || short,
+            slip_mps: self.wheel_slip_mps,
+            wheels_measured: self.wheels_measured,
+        };
+        self.longitudinal.update(&cfg.longitudinal, inv_mr, &sample);
+    }
+
+    /// Slip confirmed this period: a new event (or the continuation of the
+    /// last one, module docs) lowers `μ̂` to the grip the tyres showed.
+    fn slip(&mut self, cfg: &FrictionConfig<T>) {
+        // A shortfall that returns within `event_gap_s` of the last one
+        // continues its event (the spun wheels braked back to the road's
+        // speed take the brake torque first: not a second slip).
+        let new_event = !self.slipping && self.since_slip_s >= cfg.event_gap_s;
+        // The grip shown since the last event (not counted before the first,
+        // and once the estimate is back at the configured friction): a
+        // relapse lowers μ̂ no further than the road has shown it holds.
+        let shown = if self.mu < cfg.mu_nominal {
+            self.shown
+        } else {
+            T::ZERO
+        };
+        self.slipping = true;
+        if new_event {
+            self.mu_before = self.mu;
+            self.shown = self.peak.0;
+            self.events = self.events.wrapping_add(1);
+            // A relapse (slip again after μ̂ rose): the road is still
+            // slippery; recover more patiently.
+            if self.rose {
+                self.patience = smaller(self.patience * T::TWO, cfg.patience_max);
+            }
+            self.rose = false;
+        }
+        // Within one event, the best the tyres gave counts: the square root
+        // only when the peak is new to the event.
+        let g = T::lit(crate::G);
+        let mu_g = self.mu * g;
+        if new_event || self.peak.0 > mu_g * mu_g {
+            let best = if shown > self.peak.0 {
+                shown
+            } else {
+                self.peak.0
+            };
+            let obs = best.sqrt() * (T::ONE / g);
+            let floor = larger(self.mu_before * cfg.max_drop, cfg.mu_min);
+            let mu = smaller(self.mu_before, larger(obs, floor));
+            self.mu = if new_event { mu } else { larger(self.mu, mu) };
+        }
+        self.since_slip_s = T::ZERO;
+        self.since_slip_m = T::ZERO;
+    }
+
+    /// The standstill rule (module docs, *Standstill*) at the measured speed `v`
+    /// (m/s) over `dt` (s).
+    fn standstill(&mut self, cfg: &FrictionConfig<T>, v: T, dt: T) {
         // Standing, the tyres ask nothing of the road: the configured friction
         // again, so that the planner plans a start (a road still slippery shows
         // as slip again, at low speed), unless the car stands where the road
@@ -860,18 +884,6 @@ impl<T: Real> FrictionEstimator<T> {
             self.mu = cfg.mu_nominal;
             self.rose = true;
         }
-        let sample = LongitudinalSample {
-            dt_s: dt,
-            v_mps: v,
-            torque_nm,
-            lateral_mps2: ay,
-            grip_mps2: self.mu * T::lit(crate::G),
-            driven_share: cfg.driven_load_share,
-            slipping: self.slipping || short,
-            slip_mps: self.wheel_slip_mps,
-            wheels_measured: self.wheels_measured,
-        };
-        self.longitudinal.update(&cfg.longitudinal, inv_mr, &sample);
     }
 
     /// No slip this period: `clear` when the evidence of slip is gone (module

@@ -661,7 +661,7 @@ fn obstacle_error_message<T: Real>(
                 .map(|o| o.id.as_str())
                 .unwrap_or("?");
             anyhow!(
-                "obstacle {id:?} blocks the road: the car needs {:.2} m more free width beside it on either side; move it, make it narrower, or widen the track there",
+                "obstacle {id:?} blocks the road: the car needs {:.2} m more free width beside it on either side; move it, make it narrower, or widen the track there (to see the car stop before a blocked road, use --fault blocked-road)",
                 missing_m.to_f64()
             )
         }
