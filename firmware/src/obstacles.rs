@@ -340,7 +340,14 @@ impl<T: Real> Parabola<T> {
     /// not block the road.
     pub fn is_relevant(&self, p: [T; 2]) -> bool {
         let (xi, _) = self.to_local(p);
-        self.reaches_road && !self.blocks_road && xi >= self.xi_min_m && xi <= self.xi_max_m
+        self.has_rows() && xi >= self.xi_min_m && xi <= self.xi_max_m
+    }
+
+    /// True when the parabola adds constraint rows anywhere: it reaches the road
+    /// and does not block it (a blocked road has no way round to constrain; the
+    /// speed cap stops the car).
+    fn has_rows(&self) -> bool {
+        self.reaches_road && !self.blocks_road
     }
 
     /// Path abscissae `[s_begin, s_end]`, m, where the parabola matters
@@ -358,12 +365,7 @@ impl<T: Real> Parabola<T> {
         path: &ReferencePath<T, CAP>,
         s_node_m: T,
     ) -> bool {
-        if !self.reaches_road || self.blocks_road {
-            return false;
-        }
-        let s = path.unwrap_s(s_node_m, self.s_m);
-        let (a, b) = self.s_range_m();
-        s >= a && s <= b
+        self.relevant_s_at(path, s_node_m).is_some()
     }
 
     /// `Some(path.unwrap_s(s_node_m, self.s_m))` when [`Self::is_relevant_at_s`]
@@ -373,7 +375,7 @@ impl<T: Real> Parabola<T> {
         path: &ReferencePath<T, CAP>,
         s_node_m: T,
     ) -> Option<T> {
-        if !self.reaches_road || self.blocks_road {
+        if !self.has_rows() {
             return None;
         }
         let s = path.unwrap_s(s_node_m, self.s_m);
@@ -449,16 +451,20 @@ pub fn obstacle_speed_cap<T: Real, const CAP: usize>(
     // `ObstacleManager::parabolas()`, a `Vec` of capacity MAX_OBSTACLES.
     // wcet-bound: MAX_OBSTACLES
     for o in parabolas {
-        let swerve = match o.side {
-            Side::Left => o.eta_apex_m + offset_buffer_m > T::ZERO,
-            Side::Right => o.eta_apex_m - offset_buffer_m < T::ZERO,
-        };
+        // (One path back to the loop's head, no `continue`: see
+        // `PlanTask::rebuild_obstacles`.)
         if o.blocks_road {
             cap = cap.min(stop_curve(path, o, s_node_m, ay_limit_mps2));
-        } else if swerve && o.overlaps_s_window(path, s_node_m, s_node_m + d) {
-            let kappa = o.outside_kappa_1pm + T::TWO * o.steepness_1pm;
-            if kappa > T::ZERO {
-                cap = cap.min((ay_limit_mps2.max(T::ZERO) / kappa).sqrt());
+        } else {
+            let swerve = match o.side {
+                Side::Left => o.eta_apex_m + offset_buffer_m > T::ZERO,
+                Side::Right => o.eta_apex_m - offset_buffer_m < T::ZERO,
+            };
+            if swerve && o.overlaps_s_window(path, s_node_m, s_node_m + d) {
+                let kappa = o.outside_kappa_1pm + T::TWO * o.steepness_1pm;
+                if kappa > T::ZERO {
+                    cap = cap.min((ay_limit_mps2.max(T::ZERO) / kappa).sqrt());
+                }
             }
         }
     }
