@@ -51,14 +51,14 @@ fn decode_body<M: for<'a> serde::Deserialize<'a>>(frame: &[u8]) -> Result<M, Fra
     decode_fresh::<M>(&mut body)
 }
 
-/// CMAC-AES-128 of `data` under `key`, truncated to the link's tag: the RustCrypto
-/// crates' own buffered interface, independent of `LinkMac`'s block feeding.
+/// Keyed BLAKE2s of `data` under `key`, 8 bytes of output (the link's tag): the
+/// RustCrypto crate's own buffered MAC interface, independent of `LinkMac`'s
+/// block feeding.
 fn ref_tag(key: &LinkKey, data: &[u8]) -> [u8; MAC_BYTES] {
-    use cmac::Mac;
-    let mut mac = <cmac::Cmac<aes::Aes128> as cmac::digest::KeyInit>::new(key.into());
+    use blake2::digest::{consts::U8, KeyInit, Mac};
+    let mut mac = <blake2::Blake2sMac<U8> as KeyInit>::new_from_slice(key).unwrap();
     mac.update(data);
-    let full = mac.finalize().into_bytes();
-    full[..MAC_BYTES].try_into().unwrap()
+    mac.finalize().into_bytes().into()
 }
 
 /// The raw frame (no COBS) built by hand: `version ++ payload ++ freshness ++ tag`
@@ -361,30 +361,30 @@ fn frame_layout_is_version_postcard_freshness_tag_crc_cobs() {
     // The CRC is CRC-32/ISO-HDLC (check value of "123456789").
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
     assert_eq!(crc.checksum(b"123456789"), 0xCBF4_3926);
-    // The CMAC is AES-128-CMAC: NIST SP 800-38B, example 2 (AES-128, a 16-byte
-    // message), its tag's first 8 bytes.
-    let nist_key = [
+    // The tag is keyed BLAKE2s with an 8-byte output (RFC 7693): a value computed
+    // apart (Python's `hashlib.blake2s(msg, key=key, digest_size=8)`).
+    let key = [
         0x2b, 0x7e, 0x15, 0x16, 0x28, 0xae, 0xd2, 0xa6, 0xab, 0xf7, 0x15, 0x88, 0x09, 0xcf, 0x4f,
         0x3c,
     ];
-    let nist_msg = [
+    let msg = [
         0x6b, 0xc1, 0xbe, 0xe2, 0x2e, 0x40, 0x9f, 0x96, 0xe9, 0x3d, 0x7e, 0x11, 0x73, 0x93, 0x17,
         0x2a,
     ];
     assert_eq!(
-        ref_tag(&nist_key, &nist_msg),
-        [0x07, 0x0a, 0x16, 0xb4, 0x6b, 0x4d, 0x41, 0x44]
+        ref_tag(&key, &msg),
+        [0xde, 0x98, 0x71, 0xc0, 0x07, 0x1d, 0x52, 0xe4]
     );
-    // Pinned bytes, computed apart (Python's `cryptography` CMAC and `zlib.crc32`):
-    // `Down::Start` under the development key is version 9, tag 3, freshness 1
-    // (01 00 00 00), the tag 81 75 11 27 f7 ac d7 9b (AES-128-CMAC of
-    // 01 09 03 01 00 00 00: the down stream's Data ID first), the CRC ca 6d 5f a1;
+    // Pinned bytes, computed apart (Python's `hashlib.blake2s` and `zlib.crc32`):
+    // `Down::Start` under the development key is version 10, tag 3, freshness 1
+    // (01 00 00 00), the tag 5e 85 e4 6c 71 7e de 9c (keyed BLAKE2s of
+    // 01 0a 03 01 00 00 00: the down stream's Data ID first), the CRC d9 d1 98 05;
     // stuffed: COBS blocks of 4, 1, 1 and 13 bytes.
     assert_eq!(
         frame_of(&Down::Start),
         [
-            0x04, 0x09, 0x03, 0x01, 0x01, 0x01, 0x0d, 0x81, 0x75, 0x11, 0x27, 0xf7, 0xac, 0xd7,
-            0x9b, 0xca, 0x6d, 0x5f, 0xa1, 0x00
+            0x04, 0x0a, 0x03, 0x01, 0x01, 0x01, 0x0d, 0x5e, 0x85, 0xe4, 0x6c, 0x71, 0x7e, 0xde,
+            0x9c, 0xd9, 0xd1, 0x98, 0x05, 0x00
         ]
     );
 }
@@ -1473,10 +1473,10 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]
 
     /// `LinkMac`'s tags, fed a block at a time (decode) or a byte at a time
-    /// (encode), are the CMAC of the RustCrypto crates' own interface, for every
-    /// length (whole last blocks included).
+    /// (encode), are the keyed BLAKE2s of the RustCrypto crate's own interface, for
+    /// every length (whole last blocks included).
     #[test]
-    fn link_mac_tags_are_the_reference_cmac(
+    fn link_mac_tags_are_the_reference_blake2s(
         input in prop::collection::vec(any::<u8>(), 0..700),
         key in any::<[u8; 16]>(),
     ) {
@@ -1493,8 +1493,8 @@ proptest! {
         }
     }
 
-    /// Frames encoded one after the other (a byte at a time through the CMAC) are
-    /// those built by hand with the reference CMAC, freshness counting up.
+    /// Frames encoded one after the other (a byte at a time through the MAC) are
+    /// those built by hand with the reference MAC, freshness counting up.
     #[test]
     fn encoded_frames_are_the_hand_built_ones(msgs in prop::collection::vec(any_msg(), 1..6)) {
         let mut tx = Authenticator::new(Stream::Up);

@@ -742,15 +742,15 @@ fn real_ecu_panic_and_fault_handlers_cannot_reach_the_panic_handler_again() {
         assert!(parent.len() > 1, "{root} calls nothing: the graph is wrong");
         if root.starts_with("ecu::safe_stop") {
             // It encodes and authenticates the fault frame: the link's encoder (its
-            // CMAC flavour, where `encode` is inlined into the link's send; a trait
-            // impl's name stays mangled in the disassembly) and the cipher are in its
-            // graph.
+            // MAC flavour, where `encode` is inlined into the link's send; a trait
+            // impl's name stays mangled in the disassembly) and BLAKE2s's
+            // compression are in its graph.
             assert!(parent.keys().any(|f| {
                 f.starts_with("firmware::link::framing::encode") || f.contains("SecOcModifier")
             }));
             assert!(parent
                 .keys()
-                .any(|f| f.starts_with("firmware::link::secoc::Aes::encrypt")));
+                .any(|f| f.starts_with("blake2::Blake2sVarCore::compress")));
         }
         if let Some(f) = parent.keys().find(|f| **f != root.as_str() && panicky(f)) {
             let mut chain = vec![*f];

@@ -199,7 +199,7 @@ fn an_ecu_too_slow_for_its_tasks_counts_the_misses_as_the_host_does_and_latches_
     // the CPI bound): a plan activation over ~0.78 M instructions (100 ms),
     // control interference included, finishes past its deadline on the ECU's own
     // clock, and one that runs past the next release skips it. The control
-    // activations that send a plan event with its CMAC (up to ~89 k instructions,
+    // activations that send a plan event with its MAC (up to ~89 k instructions,
     // 11.4 ms here) overrun their 10 ms period too: after CONTROL_MISS_LIMIT
     // consecutive misses the control task latches the safe actuation (zero
     // torque, steering held). The car is not kept on the road by that (see

@@ -27,6 +27,8 @@
 //! period's sensor frame was refused ([`ActuationFrame::sensor`]). Version 9:
 //! the state estimate carries the four wheel speeds
 //! ([`StateEstimate::wheel_speed_mps`], 16 bytes more in a [`SensorFrame`]).
+//! Version 10: the tag is keyed BLAKE2s instead of AES-128-CMAC ([`secoc`]
+//! says why).
 //! Everything here works on fixed buffers: no heap, no `alloc`, no panic; every
 //! refused frame is a [`FrameError`] value the receiver counts.
 //!
@@ -62,7 +64,7 @@
 //!   Three streams, each with its own counter: host → ECU on the control channel
 //!   ([`Stream::Down`]), host → ECU on the route channel ([`Stream::Route`]),
 //!   ECU → host ([`Stream::Up`]).
-//! * **Tag** ([`MAC_BYTES`]): the first 8 bytes of AES-128-CMAC under the link key
+//! * **Tag** ([`MAC_BYTES`]): keyed BLAKE2s with an 8-byte output under the link key
 //!   ([`LINK_KEY`], set at build time) of the stream's Data ID
 //!   ([`Stream::data_id`], one byte, not sent) ++ version ++ payload ++
 //!   freshness ([`secoc`] says why these sizes).
@@ -72,8 +74,8 @@
 //!   whose tag was made without the key (*forged*), which the tag alone cannot.
 //! * **Framing**: consistent-overhead byte stuffing (COBS) of the whole raw frame,
 //!   so the encoded frame holds no 0x00, then one 0x00 delimiter. [`encode`] is
-//!   postcard's `Cobs` and `CrcModifier` flavours under the CMAC's, [`decode`]
-//!   the `cobs` crate's decoder, the `crc` crate's checksum and the CMAC before
+//!   postcard's `Cobs` and `CrcModifier` flavours under the MAC's, [`decode`]
+//!   the `cobs` crate's decoder, the `crc` crate's checksum and the MAC before
 //!   postcard reads the payload. A receiver that lost sync skips to the next
 //!   0x00 ([`FrameReader`]); empty frames (two delimiters in a row) are idle and
 //!   ignored.
@@ -135,7 +137,7 @@ use crate::vehicle_config::VehicleConfig;
 use qp::QpStatus;
 
 /// Version of this wire format, the first byte of every raw frame.
-pub const LINK_VERSION: u8 = 9;
+pub const LINK_VERSION: u8 = 10;
 /// The largest encoded frame, bytes, including its 0x00 delimiter.
 pub const MAX_FRAME_BYTES: usize = 512;
 /// Track rows per [`PathChunkFrame`].
@@ -694,17 +696,17 @@ pub const MAX_UP_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_UP_PAYLOAD_BYT
 /// activation than this per control activation (`link::usart`'s budgets).
 pub const MAX_ACTUATION_FRAME_BYTES: usize = frame_bytes_for_payload(MAX_ACTUATION_PAYLOAD_BYTES);
 
-/// Bytes through the CMAC for a frame of `payload` bytes: the stream's Data ID,
+/// Bytes through the MAC for a frame of `payload` bytes: the stream's Data ID,
 /// the version byte, the payload and the freshness value (the tag's input, see
 /// [`secoc`]).
 pub const fn mac_input_bytes(payload: usize) -> usize {
     1 + 1 + payload + FRESHNESS_BYTES
 }
-/// Largest CMAC input of an [`Up`] frame, bytes.
+/// Largest MAC input of an [`Up`] frame, bytes.
 pub const MAX_UP_MAC_INPUT_BYTES: usize = mac_input_bytes(MAX_UP_PAYLOAD_BYTES);
-/// Largest CMAC input of a [`Down`] frame, bytes.
+/// Largest MAC input of a [`Down`] frame, bytes.
 pub const MAX_DOWN_MAC_INPUT_BYTES: usize = mac_input_bytes(MAX_DOWN_PAYLOAD_BYTES);
-/// Largest CMAC input of a frame of the control link while driving (a
+/// Largest MAC input of a frame of the control link while driving (a
 /// [`Down::Sensor`]), bytes.
 pub const MAX_DRIVING_DOWN_MAC_INPUT_BYTES: usize = mac_input_bytes(MAX_DRIVING_DOWN_PAYLOAD_BYTES);
 

@@ -1,13 +1,13 @@
 //! Authenticated frames, in the manner of AUTOSAR SecOC: every frame carries a
-//! freshness value and a truncated AES-128-CMAC, which [`super::encode`] appends
-//! and [`super::decode`] checks (see [`super`]'s *Wire format*).
+//! freshness value and a truncated MAC, which [`super::encode`] appends and
+//! [`super::decode`] checks (see [`super`]'s *Wire format*).
 //!
 //! # What is authenticated
 //!
 //! ```text
 //! MAC input = data_id ++ version ++ postcard(message) ++ freshness
 //!             1 byte     1 byte     n bytes             4 bytes, little-endian
-//! tag       = the first MAC_BYTES of AES-128-CMAC(key, MAC input)
+//! tag       = BLAKE2s(key, MAC input), keyed, output length MAC_BYTES (RFC 7693)
 //! ```
 //!
 //! * **Data ID** ([`Stream::data_id`], not sent): which stream the frame belongs
@@ -22,11 +22,25 @@
 //!   accepted: a refused frame uses up a value). 32 bits at a stream's 100
 //!   frames a second while driving last 497 days; the sender refuses to send
 //!   past `u32::MAX` ([`FrameError::FreshnessExhausted`]) rather than wrap.
-//! * **Tag** ([`MAC_BYTES`] = 8): the CMAC truncated to 64 bits, the length NIST
-//!   SP 800-38B advises as the least without a limit on verification attempts
-//!   (one forged frame in 2⁶⁴ verifies). On this link (up to
-//!   [`super::MAX_FRAME_BYTES`]-byte frames) the 8 bytes cost little; SecOC's
-//!   shorter tags are for 8-byte CAN frames.
+//! * **Tag** ([`MAC_BYTES`] = 8): keyed BLAKE2s whose output length, a parameter
+//!   of the hash, is 64 bits: one forged frame in 2⁶⁴ verifies, the length NIST
+//!   SP 800-38B advises as the least without a limit on verification attempts.
+//!   On this link (up to [`super::MAX_FRAME_BYTES`]-byte frames) the 8 bytes cost
+//!   little; SecOC's shorter tags are for 8-byte CAN frames.
+//!
+//! # Why BLAKE2s, not AES-128-CMAC
+//!
+//! SecOC leaves the MAC to the crypto stack; AES-128-CMAC is its usual profile,
+//! done by a crypto unit. The STM32F405 has none (the F415 has), and in software
+//! the constant-time AES (the aes crate's fixsliced one) bounded at about 8,400
+//! model cycles per 16 bytes of MAC input in the ECU's static timing analysis:
+//! most of the control task's bound and 11 ms of the plan task's response time.
+//! Keyed BLAKE2s is a PRF made for 32-bit cores (additions, rotations and XORs,
+//! constant time by construction) and, like CMAC, needs no nonce: a freshness
+//! counter that restarts under one key allows replays, which the freshness check
+//! refuses, never a forgery. Its bound is about 3,550 model cycles per 64 bytes
+//! (docs/timing.md, *What did not pay* lists the measurements). A vehicle whose
+//! gateway speaks CMAC would compute it in its crypto unit instead.
 //!
 //! # Order of the checks
 //!
@@ -47,36 +61,28 @@
 //!
 //! # Cost
 //!
-//! [`LinkMac`] holds the AES key schedule (fixsliced round keys, 352 bytes) and
-//! the CMAC's running state: built once per link, not per frame. A tag costs one
-//! AES block per 16 bytes of MAC input, plus one for the CMAC's subkey.
+//! [`LinkMac`] holds BLAKE2s's state after the key's block (compressed once per
+//! link, not per frame) and the running state of a tag. A tag costs one
+//! compression per 64 bytes of MAC input.
 
-use aes::cipher::consts::U1;
-use aes::cipher::inout::InOut;
-use aes::cipher::{
-    Block, BlockBackend, BlockCipher, BlockClosure, BlockEncrypt, BlockSizeUser, KeyInit,
-    ParBlocksSizeUser,
-};
-use aes::Aes128;
-use cmac::digest::core_api::{Buffer, FixedOutputCore, UpdateCore};
-use cmac::digest::crypto_common::InnerInit;
-use cmac::digest::{Output, Reset};
-use cmac::CmacCore;
+use blake2::digest::core_api::{Buffer, UpdateCore, VariableOutputCore};
+use blake2::digest::Output;
+use blake2::Blake2sVarCore;
 use serde::{Deserialize, Serialize};
 use subtle::ConstantTimeEq;
 
 use super::FrameError;
 
-/// Bytes of a link key (AES-128).
+/// Bytes of a link key (BLAKE2s accepts 1 to 32; the link uses 16).
 pub const KEY_BYTES: usize = 16;
 /// Bytes of the freshness value in a frame (a `u32`, little-endian).
 pub const FRESHNESS_BYTES: usize = 4;
-/// Bytes of the truncated CMAC in a frame.
+/// Bytes of the tag in a frame (BLAKE2s's output length).
 pub const MAC_BYTES: usize = 8;
 /// Bytes the authentication adds to a raw frame: freshness and tag.
 pub const SECURED_BYTES: usize = FRESHNESS_BYTES + MAC_BYTES;
 
-/// A link key: the AES-128 key of the CMAC, bytes.
+/// A link key: the key of the keyed BLAKE2s, bytes.
 pub type LinkKey = [u8; KEY_BYTES];
 
 // `LINK_KEY` and `LINK_KEY_FROM_ENV`, written by build.rs.
@@ -107,88 +113,42 @@ impl Stream {
     }
 }
 
-/// AES-128 behind one encryption function, [`Aes::encrypt`]: the CMAC's every
-/// block cipher call (its blocks, its subkey, its last block) goes through it,
-/// so the aes crate's round loop has one caller, inlined there, where the timing
-/// analysis takes its bound. An adapter, not a cipher: the aes crate encrypts.
-#[derive(Clone)]
-struct Aes(Aes128);
+/// Bytes of a BLAKE2s block: the MAC's unit of work, one compression.
+const MAC_BLOCK_BYTES: usize = 64;
 
-impl Aes {
-    /// Encrypts `block` in place with AES-128 (the aes crate's software,
-    /// fixsliced implementation). Not inlined: the one place the cipher runs.
-    #[inline(never)]
-    fn encrypt(&self, block: &mut Block<Aes128>) {
-        // The aes crate's fixsliced AES-128 loop, as the ECU builds it (`--cfg
-        // aes_compact`, .cargo/config.toml): two rounds a pass (1–2, 3–4, 5–6, 7–8),
-        // then round 9 and it leaves (round 10 follows): 5 passes, 4 back edges.
-        // Without `aes_compact` it runs four rounds a pass: 2 back edges, within
-        // this bound.
-        // wcet-bound: 4
-        self.0.encrypt_block(block);
-    }
-}
-
-impl BlockSizeUser for Aes {
-    type BlockSize = <Aes128 as BlockSizeUser>::BlockSize;
-}
-
-impl BlockCipher for Aes {}
-
-impl BlockEncrypt for Aes {
-    fn encrypt_with_backend(&self, f: impl BlockClosure<BlockSize = Self::BlockSize>) {
-        f.call(&mut AesBackend(self));
-    }
-}
-
-/// [`Aes`] as the cipher's backend: one block at a time, through
-/// [`Aes::encrypt`].
-struct AesBackend<'a>(&'a Aes);
-
-impl BlockSizeUser for AesBackend<'_> {
-    type BlockSize = <Aes128 as BlockSizeUser>::BlockSize;
-}
-
-impl ParBlocksSizeUser for AesBackend<'_> {
-    type ParBlocksSize = U1;
-}
-
-impl BlockBackend for AesBackend<'_> {
-    fn proc_block(&mut self, mut block: InOut<'_, '_, Block<Self>>) {
-        let mut b = block.clone_in();
-        self.0.encrypt(&mut b);
-        *block.get_out() = b;
-    }
-}
-
-/// Bytes of an AES block.
-const AES_BLOCK_BYTES: usize = 16;
-
-/// The CMAC engine: AES-128's key schedule and the CMAC's running state (the
-/// cmac crate's block-level CMAC, fed a block at a time from the bytes kept
+/// The MAC engine: keyed BLAKE2s (RFC 7693) with an 8-byte output, its state
+/// after the key's block kept, and the running state of a tag (the blake2
+/// crate's block-level BLAKE2s, fed a block at a time from the bytes kept
 /// here). One serves every stream of a side of the link that runs in one task
 /// (a tag is computed from start to end within a call).
 #[derive(Clone)]
 pub struct LinkMac {
-    /// CMAC over AES-128 under the link key: the chaining state.
-    core: CmacCore<Aes>,
-    /// Bytes of the MAC input not yet through the cipher: the last block is
-    /// kept until the input ends or another byte follows, as CMAC treats a
-    /// whole last block apart.
-    block: [u8; AES_BLOCK_BYTES],
-    /// Bytes of `block` in use, `0..=16`.
+    /// BLAKE2s after its first block, the key padded with zeros (RFC 7693
+    /// §3.3): every tag starts from it. A MAC input is never empty (it starts
+    /// with the Data ID), so the key's block is never the last one.
+    keyed: Blake2sVarCore,
+    /// The tag under way: the chaining state and the byte counter.
+    core: Blake2sVarCore,
+    /// Bytes of the MAC input not yet compressed: the last block is kept until
+    /// the input ends or another byte follows, as BLAKE2 flags the last block.
+    block: [u8; MAC_BLOCK_BYTES],
+    /// Bytes of `block` in use, `0..=64`.
     len: u8,
 }
 
 impl LinkMac {
-    /// The engine for `key` (computes AES's key schedule).
+    /// The engine for `key` (compresses the key's block, once).
     pub fn new(key: &LinkKey) -> Self {
+        let mut keyed = Blake2sVarCore::new_with_params(&[], &[], KEY_BYTES, MAC_BYTES);
+        let mut key_block = [0u8; MAC_BLOCK_BYTES];
+        for (k, &b) in key_block.iter_mut().zip(key.iter()) {
+            *k = b;
+        }
+        keyed.update_blocks(core::slice::from_ref(&key_block.into()));
         Self {
-            // The aes crate's key schedule: loops of 10 rounds (its `0..10` and
-            // `1..11`) and of 2 (its `(8..72).step_by(32)`).
-            // wcet-bound: 10
-            core: CmacCore::inner_init(Aes(Aes128::new(&(*key).into()))),
-            block: [0; AES_BLOCK_BYTES],
+            core: keyed.clone(),
+            keyed,
+            block: [0; MAC_BLOCK_BYTES],
             len: 0,
         }
     }
@@ -196,13 +156,13 @@ impl LinkMac {
     /// Starts a tag on `stream`: the state reset (whatever an interrupted tag
     /// left), then the stream's Data ID.
     pub(super) fn begin(&mut self, stream: Stream) {
-        Reset::reset(&mut self.core);
+        self.core = self.keyed.clone();
         self.block[0] = stream.data_id();
         self.len = 1;
     }
 
-    /// Runs the kept (full) block through the cipher. Not inlined: each caller's
-    /// line is where the timing analysis counts its blocks.
+    /// Compresses the kept (full) block. Not inlined: each caller's line is
+    /// where the timing analysis counts its blocks.
     #[inline(never)]
     fn process_block(&mut self) {
         self.core
@@ -211,17 +171,16 @@ impl LinkMac {
     }
 
     /// Adds one byte to the MAC input ([`super::encode`]: postcard writes a byte
-    /// at a time). A full block goes through the cipher once a byte follows it
-    /// (CMAC treats a whole last block apart).
+    /// at a time). A full block is compressed once a byte follows it (BLAKE2
+    /// flags the last block).
     #[inline(always)]
     pub(super) fn push(&mut self, byte: u8) {
-        if usize::from(self.len) >= AES_BLOCK_BYTES {
-            // A block goes through the cipher when a byte follows 16 held: with the
-            // Data ID held from `begin`, at most (M − 1) / 16 times for a MAC input
-            // of M bytes (the last block goes in `finish`). The control task
-            // encodes one frame (an `Up`) per activation; the plan task encodes
-            // none.
-            // wcet-bound: (MAX_UP_MAC_INPUT_BYTES - 1) / 16 times per activation
+        if usize::from(self.len) >= MAC_BLOCK_BYTES {
+            // A block is compressed when a byte follows 64 held: with the Data ID
+            // held from `begin`, at most (M − 1) / 64 times for a MAC input of M
+            // bytes (the last block goes in `finish`). The control task encodes
+            // one frame (an `Up`) per activation; the plan task encodes none.
+            // wcet-bound: (MAX_UP_MAC_INPUT_BYTES - 1) / 64 times per activation
             self.process_block();
         }
         if let Some(slot) = self.block.get_mut(usize::from(self.len)) {
@@ -236,7 +195,7 @@ impl LinkMac {
     #[inline(always)]
     pub(super) fn update(&mut self, mut bytes: &[u8]) {
         while !bytes.is_empty() {
-            if usize::from(self.len) >= AES_BLOCK_BYTES {
+            if usize::from(self.len) >= MAC_BLOCK_BYTES {
                 self.process_block();
             }
             let free = self
@@ -246,37 +205,38 @@ impl LinkMac {
             let take = free.len().min(bytes.len());
             let (now, later) = bytes.split_at(take);
             // At most a block's bytes.
-            // wcet-bound: 16
+            // wcet-bound: 64
             for (slot, &b) in free.iter_mut().zip(now) {
                 *slot = b;
             }
             // A pass per block of the MAC input (the binary's back edge is on this
             // line): with the Data ID held from `begin`, the first pass fills the
-            // block, each next one takes 16 bytes, so ⌈M / 16⌉ passes for a MAC
+            // block, each next one takes 64 bytes, so ⌈M / 64⌉ passes for a MAC
             // input of M bytes. Frames below MAX_FRAME_BYTES, and in the ECU's
             // tasks at most theirs (decode's bounds).
-            // wcet-bound: MAX_FRAME_BYTES / 16 + 1
-            // wcet-bound in control: (MAX_DRIVING_DOWN_MAC_INPUT_BYTES + 15) / 16
-            // wcet-bound in receive: (MAX_DOWN_MAC_INPUT_BYTES + 15) / 16
+            // wcet-bound: MAX_FRAME_BYTES / 64 + 1
+            // wcet-bound in control: (MAX_DRIVING_DOWN_MAC_INPUT_BYTES + 63) / 64
+            // wcet-bound in receive: (MAX_DOWN_MAC_INPUT_BYTES + 63) / 64
             self.len += take as u8;
             bytes = later;
         }
     }
 
-    /// The truncated tag of what was added since [`Self::begin`]; the state is
-    /// reset.
+    /// The tag of what was added since [`Self::begin`]; the state is reset.
     pub(super) fn finish(&mut self) -> [u8; MAC_BYTES] {
-        let mut last = Buffer::<CmacCore<Aes>>::default();
+        let mut last = Buffer::<Blake2sVarCore>::default();
         last.set(
             self.block.into(),
-            usize::from(self.len).min(AES_BLOCK_BYTES),
+            usize::from(self.len).min(MAC_BLOCK_BYTES),
         );
-        let mut full = Output::<CmacCore<Aes>>::default();
+        let mut full = Output::<Blake2sVarCore>::default();
         // The last block padded: at most a block's bytes zeroed.
-        // wcet-bound: 16 bytes
-        self.core.finalize_fixed_core(&mut last, &mut full);
-        Reset::reset(&mut self.core);
+        // wcet-bound: 64 bytes
+        self.core.finalize_variable_core(&mut last, &mut full);
+        self.core = self.keyed.clone();
         self.len = 0;
+        // The output size is in BLAKE2's parameter block (8 bytes): the tag is
+        // the first 8 bytes of the state (RFC 7693 §3.3, the leftmost `nn`).
         let mut tag = [0u8; MAC_BYTES];
         for (t, f) in tag.iter_mut().zip(full.iter()) {
             *t = *f;

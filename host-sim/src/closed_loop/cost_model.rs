@@ -67,7 +67,7 @@ pub struct CostModel {
 }
 
 /// Receiving one frame of the road on the ECU, instructions: the largest frame
-/// (a `PathChunk`) read, verified (AES-128-CMAC) and staged, as a PIL run with
+/// (a `PathChunk`) read, verified (its MAC) and staged, as a PIL run with
 /// windows of the road measured it.
 fn default_route_frame() -> f64 {
     100_000.0

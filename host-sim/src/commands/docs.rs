@@ -387,7 +387,7 @@ fn ecu_figures(stat: &Value, wcet: &Value) -> anyhow::Result<String> {
     let rows: Vec<(String, (String, String))> = vec![
         ("`control_job` static bound".into(), cycles("control_job")?),
         (
-            "`control` task response-time bound (its frames' AES-128-CMAC included)".into(),
+            "`control` task response-time bound (its frames' MAC included)".into(),
             response("control", false)?,
         ),
         (

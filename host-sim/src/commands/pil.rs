@@ -150,7 +150,7 @@ pub fn parse_link_key(hex: &str, what: &str) -> Result<LinkKey> {
     let hex = hex.trim();
     if hex.len() != 32 || !hex.is_ascii() {
         bail!(
-            "{what}: a link key is 32 hexadecimal digits (AES-128), got {} characters",
+            "{what}: a link key is 32 hexadecimal digits (16 bytes), got {} characters",
             hex.chars().count()
         );
     }

@@ -23,8 +23,8 @@
 //!
 //! # Frames
 //!
-//! See [`firmware::link`]: versioned, authenticated (a freshness value and a
-//! truncated AES-128-CMAC, [`firmware::link::secoc`]), CRC-32, COBS-delimited
+//! See [`firmware::link`]: versioned, authenticated (a freshness value and
+//! an 8-byte keyed BLAKE2s, [`firmware::link::secoc`]), CRC-32, COBS-delimited
 //! postcard frames. Set-up: `Config`, `PathChunk`s, `Obstacle`s, `Start` →
 //! `Ready`; then `Sensor` → `Actuation` every period; `Stop` → `Done`. Forged,
 //! replayed, garbled, short, wrong-version, stale or out-of-order frames are

@@ -177,13 +177,13 @@ pub struct QemuEcu {
     pub tick_overruns: TickOverruns,
     /// The ECU's own counts in the last actuation frame (response times included).
     pub ecu_counts: Option<EcuCounts>,
-    /// AES-128-CMAC under the link key, for the frames the host sends.
+    /// Keyed BLAKE2s under the link key, for the frames the host sends.
     mac: LinkMac,
     /// The control channel's down stream (the set-up, the sensor frames, `Stop`).
     down_tx: Authenticator,
     /// The route channel's stream.
     route_tx: Authenticator,
-    /// A forger's CMAC: under a key that is not the link's (`forge`).
+    /// A forger's MAC: under a key that is not the link's (`forge`).
     forger: LinkMac,
     /// The legitimate sensor frames of the last second, oldest first (`replay`).
     history: std::collections::VecDeque<Vec<u8>>,

@@ -245,7 +245,7 @@ impl EcuBuild {
     ///   replacing it): the other activations encode and authenticate an
     ///   actuation frame without it, at most `MAX_ACTUATION_FRAME_BYTES` through
     ///   the frame's flavor and `mac_input_bytes(MAX_ACTUATION_PAYLOAD_BYTES)`
-    ///   through the CMAC. A window holds the events of the plan activations
+    ///   through the MAC. A window holds the events of the plan activations
     ///   released in it, the one waiting at its start and one more, as the link's
     ///   plan budgets ([`usart::EXTRA_BUDGETS_PER_WINDOW`]); the plan task's own
     ///   response holds the one waiting and its own.
