@@ -39,7 +39,7 @@
 //! constant time by construction) and, like CMAC, needs no nonce: a freshness
 //! counter that restarts under one key allows replays, which the freshness check
 //! refuses, never a forgery. Its bound is about 3,550 model cycles per 64 bytes
-//! (docs/timing.md, *What did not pay* lists the measurements). A vehicle whose
+//! (docs/timing.md, *The flashed build*, gives the measurements). A vehicle whose
 //! gateway speaks CMAC would compute it in its crypto unit instead.
 //!
 //! # Order of the checks
