@@ -181,6 +181,17 @@ impl Rig {
     }
 }
 
+/// A rig configured with `c`, after one slip event: locked wheels at 20 m/s
+/// (−6 m/s² asked, −1 m/s² delivered, for 0.5 s). Returns the rig, the speed
+/// after the event (m/s) and `μ̂` then.
+fn after_locked_wheels(c: FrictionConfig<f64>) -> (Rig, f64, f64) {
+    let mut r = Rig::with(c);
+    let v = r.drive(20.0, -6.0, -1.0, 0.5);
+    assert_eq!(r.e.events(), 1);
+    let low = r.e.mu();
+    (r, v, low)
+}
+
 /// The default car planned at μ = 1: one slip event lowers μ̂ to 0.6 at most.
 fn cfg_mu1() -> FrictionConfig<f64> {
     FrictionConfig::for_car(M, R, 0.585, 0.55 / 2.65, 1.0)
@@ -496,10 +507,7 @@ fn periods_without_demand_count_for_the_recovery_whatever_the_shortfall() {
     // takes a sample (1.2 s after the event) that would explain the gain.
     let mut c = cfg();
     c.hold_s = 0.3;
-    let mut r = Rig::with(c);
-    let v = r.drive(20.0, -6.0, -1.0, 0.5);
-    assert_eq!(r.e.events(), 1);
-    let low = r.e.mu();
+    let (mut r, v, low) = after_locked_wheels(c);
     r.drive(v, 0.0, 0.5, 2.0);
     let mu = r.e.mu();
     assert!(mu > low + 0.02, "μ̂ {low} → {mu}");
@@ -525,10 +533,7 @@ fn a_car_rolling_at_the_standstill_speed_is_not_standing() {
     // (Standing anywhere restores μ̂ here: no distance from the slip.)
     let mut c = cfg();
     c.standstill_clear_m = 0.0;
-    let mut r = Rig::with(c);
-    r.drive(20.0, -6.0, -1.0, 0.5);
-    assert_eq!(r.e.events(), 1);
-    let low = r.e.mu();
+    let (mut r, _, low) = after_locked_wheels(c);
     assert!(low < 0.5, "μ̂ = {low}");
     // 3 s at exactly 1 m/s (the standstill speed): not standing; μ̂ recovers at
     // its rate after the hold, far from the configured friction.
@@ -787,18 +792,14 @@ fn a_car_standing_where_the_road_slipped_keeps_its_estimate() {
     };
     let mut c = cfg();
     c.hold_s = 10.0;
-    let mut r = Rig::with(c);
-    let v = r.drive(20.0, -6.0, -1.0, 0.5);
-    assert_eq!(r.e.events(), 1);
-    let low = r.e.mu();
+    let (mut r, v, low) = after_locked_wheels(c);
     assert!(low < MU - 0.1, "μ̂ {low}");
     stop(&mut r, v);
     assert_eq!(r.e.events(), 1);
     assert_eq!(r.e.mu(), low);
     // The same event, then 60 m of road that did not slip (20 m/s, 3 s) before
     // the braking: the configured friction again.
-    let mut r = Rig::with(c);
-    let v = r.drive(20.0, -6.0, -1.0, 0.5);
+    let (mut r, v, _) = after_locked_wheels(c);
     let v = r.drive(v, 0.0, 0.0, 3.0);
     assert!(r.e.mu() < MU - 0.1, "μ̂ {}", r.e.mu());
     stop(&mut r, v);

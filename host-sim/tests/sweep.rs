@@ -160,15 +160,20 @@ fn run_fault_noisy(track: &str, fault: Fault, noise: f64, delay_ms: f64) -> Vec<
     header().into_iter().skip(10).zip(row.cells).collect()
 }
 
+/// [`run_fault`] on the oval of [`write_oval`], written to a folder of its own.
+fn run_fault_on_oval(fault: Fault) -> Vec<(String, String)> {
+    let dir = tempfile::tempdir().unwrap();
+    let oval = write_oval(dir.path());
+    run_fault(&oval, fault)
+}
+
 fn cell<'a>(row: &'a [(String, String)], name: &str) -> &'a str {
     &row.iter().find(|(h, _)| h == name).unwrap().1
 }
 
 #[test]
 fn a_nan_dropout_brakes_safely_for_its_periods_then_the_car_follows_again() {
-    let dir = tempfile::tempdir().unwrap();
-    let oval = write_oval(dir.path());
-    let row = run_fault(&oval, Fault::DropoutNan(20));
+    let row = run_fault_on_oval(Fault::DropoutNan(20));
     assert_eq!(cell(&row, "error"), "");
     assert_eq!(cell(&row, "outcome"), "ok");
     assert_eq!(cell(&row, "fault_check"), "pass");
@@ -180,9 +185,7 @@ fn a_nan_dropout_brakes_safely_for_its_periods_then_the_car_follows_again() {
 
 #[test]
 fn a_late_obstacle_is_revealed_and_avoided() {
-    let dir = tempfile::tempdir().unwrap();
-    let oval = write_oval(dir.path());
-    let row = run_fault(&oval, Fault::LateObstacle(60.0));
+    let row = run_fault_on_oval(Fault::LateObstacle(60.0));
     assert_eq!(cell(&row, "error"), "");
     assert_ne!(cell(&row, "fault_event_s"), "", "the obstacle was revealed");
     assert_eq!(cell(&row, "collisions"), "0");
@@ -216,9 +219,7 @@ fn a_road_blocked_ahead_stops_the_car_before_it_and_holds_it_there() {
 #[test]
 fn a_road_blocked_too_late_to_stop_for_fails_its_check() {
     // Revealed 15 m before it: at the oval's speeds no braking stops the car.
-    let dir = tempfile::tempdir().unwrap();
-    let oval = write_oval(dir.path());
-    let row = run_fault(&oval, Fault::BlockedRoad(15.0));
+    let row = run_fault_on_oval(Fault::BlockedRoad(15.0));
     assert_eq!(cell(&row, "error"), "");
     assert_eq!(cell(&row, "outcome"), "collision");
     assert_eq!(cell(&row, "fault_check"), "fail");
