@@ -669,44 +669,6 @@ fn a_split_loop_without_its_own_annotation_is_refused() {
     );
 }
 
-/// A dependency's loop inlined into a firmware line does not take the line's
-/// annotation when a loop of the firmware's own code took it: the timer queue's
-/// list walk inlined into the control task's `delay_until` line is bounded by the
-/// fact about its own line in `rtic-time`, the task's poll cycle on that line by
-/// the line's annotation.
-#[test]
-#[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
-fn an_inlined_library_loop_takes_no_bound_of_the_line_it_is_inlined_on() {
-    let elf = &ecu_elf();
-    let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
-    let cycle = a
-        .loops
-        .iter()
-        .find(|l| l.function == "USART2" && l.irreducible)
-        .unwrap();
-    assert!(
-        cycle
-            .source
-            .as_deref()
-            .unwrap_or("")
-            .starts_with("firmware/src/bin/ecu.rs"),
-        "{cycle:?}"
-    );
-    let walks: Vec<_> = a
-        .loops
-        .iter()
-        .filter(|l| l.function == "USART2" && l.file == cycle.file && l.line == cycle.line)
-        .filter(|l| !l.irreducible)
-        .collect();
-    assert!(!walks.is_empty());
-    for w in walks {
-        assert!(
-            w.source.as_deref().unwrap_or("").starts_with("rtic-time-"),
-            "{w:?}"
-        );
-    }
-}
-
 /// An atomic increment: load-exclusive, add, store-exclusive, retry on failure.
 const EXCLUSIVE: &str = "
 08000000 <root>:

@@ -1,5 +1,6 @@
 //! The ECU application (RTIC v2, Cortex-M4F): binds the library's two tasks to
-//! priorities and the monotonic timer, and talks to the simulator.
+//! priorities and the release clock (SysTick, `support/release_clock.rs`), and
+//! talks to the simulator.
 //!
 //! | task | priority | released | does |
 //! |---|---|---|---|
@@ -110,6 +111,8 @@
 #[cfg(not(feature = "board-usart"))]
 #[path = "support/qemu_exit.rs"]
 mod qemu_exit;
+#[path = "support/release_clock.rs"]
+mod release_clock;
 #[cfg(feature = "board-usart")]
 #[path = "support/usart_link.rs"]
 mod usart_link;
@@ -138,7 +141,6 @@ use firmware::tasks::{ControlTask, PlanTask};
 use firmware::timing;
 #[cfg(not(feature = "board-usart"))]
 use qemu_exit::exit;
-use rtic_monotonics::systick::prelude::*;
 #[cfg(feature = "board-usart")]
 use usart_link::exit;
 
@@ -165,10 +167,12 @@ static ECU_CAPS: [u32; 4] = [
 
 /// Monotonic tick rate, Hz (one tick a control period).
 const MONO_HZ: u32 = (1_000_000 / firmware::timing::MONO_TICK_US) as u32;
-/// SysTick reload: core clock ticks per monotonic tick.
+/// Core clock ticks per monotonic tick (SysTick's reload plus one).
 const TICKS_PER_MONO: u32 = SYSCLK_HZ / MONO_HZ;
-
-systick_monotonic!(Mono, MONO_HZ);
+// A whole number of core clock ticks per monotonic tick, within SysTick's
+// 24-bit reload register.
+const _: () = assert!(TICKS_PER_MONO * MONO_HZ == SYSCLK_HZ);
+const _: () = assert!(TICKS_PER_MONO > 1 && TICKS_PER_MONO - 1 <= 0x00FF_FFFF);
 
 /// The control channel (null: not open yet), for the panic handler's frame:
 /// its up stream's CMAC and freshness counter authenticate it as any other.
@@ -205,9 +209,8 @@ static EPOCH_TICKS: AtomicU32 = AtomicU32::new(0);
 static EPOCH_TICKS_HI: AtomicU32 = AtomicU32::new(0);
 
 /// Core clock ticks since the monotonic started (168 MHz; 64 bits never wrap).
-/// Not inlined: one copy of the monotonic's wrap check (which a task sees only if
-/// SysTick wrapped and its exception is not yet taken) instead of one per call
-/// site.
+/// Not inlined: one copy of the monotonic's read (which counts the tick whose
+/// SysTick exception is pending) instead of one per call site.
 ///
 /// The tick count read on both sides of the SysTick counter: equal, the counter
 /// lies in that tick. Different, a SysTick came between the reads, and the
@@ -228,11 +231,11 @@ fn core_ticks() -> u64 {
     b as u64 * TICKS_PER_MONO as u64 + within as u64
 }
 
-/// The monotonic's tick count. Not inlined: one copy of its wrap check for both
-/// of [`core_ticks`]'s reads.
+/// The monotonic's tick count ([`release_clock::now_ticks`]). Not inlined: one
+/// copy for both of [`core_ticks`]'s reads.
 #[inline(never)]
 fn mono_ticks() -> u32 {
-    Mono::now().ticks()
+    release_clock::now_ticks()
 }
 
 fn epoch_ticks() -> u64 {
@@ -255,14 +258,10 @@ fn timeline_us(ticks: u64) -> u64 {
         .unwrap_or(u64::MAX)
 }
 
-/// The monotonic's instant of a time on the timeline, `t_us` µs (whole ticks).
-fn instant_at(t_us: u64) -> <Mono as rtic_monotonics::Monotonic>::Instant {
+/// The monotonic tick of a time on the timeline, `t_us` µs (whole ticks), ticks.
+fn tick_at(t_us: u64) -> u32 {
     let start = START_MONO_TICKS.load(Ordering::Relaxed);
-    <Mono as rtic_monotonics::Monotonic>::Instant::from_ticks(
-        start.wrapping_add(
-            timing::div_u64_small(t_us, timing::MONO_TICK_US as u32).unwrap_or(0) as u32,
-        ),
-    )
+    start.wrapping_add(timing::div_u64_small(t_us, timing::MONO_TICK_US as u32).unwrap_or(0) as u32)
 }
 
 /// Byte runs the control task reads from the down-link per release at most: the
@@ -1205,7 +1204,7 @@ mod app {
             &cx.device.PWR,
             &cx.device.FLASH,
         ));
-        Mono::start(cx.core.SYST, SYSCLK_HZ);
+        release_clock::start(cx.core.SYST, TICKS_PER_MONO - 1);
         // The set-up's work runs in functions of their own, so their frames are gone
         // when `init` returns and the tasks it spawned run on this stack (RTIC
         // enables interrupts before `init`'s caller returns).
@@ -1233,7 +1232,7 @@ mod app {
         // at the beginning of that tick would put the first release up to 1 ms
         // before the tasks first run, and the first actuation would be sent up to
         // 1 ms after its release (and act a plant step later in the loop).
-        let start = Mono::now().ticks().wrapping_add(1);
+        let start = release_clock::now_ticks().wrapping_add(1);
         START_MONO_TICKS.store(start, Ordering::Relaxed);
         let epoch = u64::from(start) * u64::from(TICKS_PER_MONO);
         EPOCH_TICKS.store(epoch as u32, Ordering::Relaxed);
@@ -1423,7 +1422,8 @@ mod app {
             // one job per poll). The first poll enters at the head and crosses one more,
             // the head into the delay of release 0, which is already due: 3.
             // wcet-bound: 3 per activation
-            Mono::delay_until(instant_at(monitor.release_us())).await;
+            release_clock::wait_until(release_clock::Slot::Control, tick_at(monitor.release_us()))
+                .await;
             let release_us = monitor.start();
             let t0 = core_ticks();
             // The bytes the USART's interrupt received since the last release
@@ -1521,7 +1521,8 @@ mod app {
         loop {
             // WCET: as in `control`: two back edges per job, one more in the first poll.
             // wcet-bound: 3 per activation
-            Mono::delay_until(instant_at(monitor.release_us())).await;
+            release_clock::wait_until(release_clock::Slot::Plan, tick_at(monitor.release_us()))
+                .await;
             activation = activation.wrapping_add(1);
             let release_us = monitor.start();
             // A new plan period's receive budget (a route frame's bytes).

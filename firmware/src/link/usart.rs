@@ -47,8 +47,8 @@ const _: () = assert!(
 pub const LINK_INTERRUPT_PRIORITY: u8 = 4;
 
 /// SysTick's priority in the flashed build, RTIC's logical numbering: above both
-/// tasks, below the link (its handler, the monotonic's timer queue, runs for
-/// longer than a byte's time).
+/// tasks, below the link (a byte's time is the link's deadline; SysTick's
+/// handler, the release clock, can wait).
 pub const SYSTICK_PRIORITY: u8 = 3;
 
 /// Entries of the USART1 interrupt per control period's budget at most, the

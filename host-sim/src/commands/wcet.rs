@@ -211,8 +211,21 @@ fn cap_trace(args: &WcetArgs) -> Result<PathBuf> {
 /// sideslip lag, which moved it from 22 m at 15 m/s).
 const FULL_SET_CIRCLE: (f64, f64, f64) = (20.0, 3.5, 14.0);
 
-/// Runs a short PIL run on [`FULL_SET_CIRCLE`], with QEMU's execution trace
-/// written to a file, and returns the file.
+/// The box on the outer edge of [`FULL_SET_CIRCLE`]: the angle of its centre
+/// along the circle from the start, rad, and its centre's offset outwards from
+/// the centre line, m (its half-side is [`FULL_SET_BOX_HALF_M`]). 28 m ahead, it
+/// is within the horizon from the first activation, on the edge the road rows
+/// bind at: its rows nearly repeat theirs, so the QP adds rows that depend on its
+/// working set (the dual null-space step, `qp::active_set`), and the working set
+/// fills at the iteration cap. The path is closed (the circle fits in the ECU's
+/// window), so the obstacles' loops run on a closed path too.
+const FULL_SET_BOX: (f64, f64) = (1.4, 2.5);
+
+/// Half the side of the box of [`FULL_SET_BOX`], m.
+const FULL_SET_BOX_HALF_M: f64 = 0.5;
+
+/// Runs a short PIL run on [`FULL_SET_CIRCLE`] with the box of [`FULL_SET_BOX`],
+/// with QEMU's execution trace written to a file, and returns the file.
 fn full_set_trace(args: &WcetArgs) -> Result<PathBuf> {
     let dir = args.out.join("trace-full-set");
     fs::create_dir_all(&dir)?;
@@ -230,7 +243,25 @@ fn full_set_trace(args: &WcetArgs) -> Result<PathBuf> {
     }
     let track = dir.join("circle.csv");
     fs::write(&track, csv)?;
-    traced_pil_run(args, &dir, &track.to_string_lossy(), "none", speed)
+    let (angle, outwards) = FULL_SET_BOX;
+    let (cx, cy) = (
+        (radius + outwards) * angle.sin(),
+        radius - (radius + outwards) * angle.cos(),
+    );
+    let h = FULL_SET_BOX_HALF_M;
+    let mut boxes = String::from("id,x_m,y_m\n");
+    for (dx, dy) in [(-h, -h), (-h, h), (h, h), (h, -h)] {
+        boxes.push_str(&format!("outer_edge,{:.3},{:.3}\n", cx + dx, cy + dy));
+    }
+    let obstacles = dir.join("box_outer_edge.csv");
+    fs::write(&obstacles, boxes)?;
+    traced_pil_run(
+        args,
+        &dir,
+        &track.to_string_lossy(),
+        &obstacles.to_string_lossy(),
+        speed,
+    )
 }
 
 /// The straight of the traced run that receives and adopts a window of the road:
@@ -556,7 +587,7 @@ fn record_traces(args: &WcetArgs, traces: &mut Vec<PathBuf>) -> Result<CpiReport
     traces.push(cap_trace(args)?);
     let (radius, _, speed) = FULL_SET_CIRCLE;
     println!(
-        "PIL run with QEMU's execution trace ({} s) at {speed} m/s on a circle of {radius} m: the QP's working set near full at its cap",
+        "PIL run with QEMU's execution trace ({} s) at {speed} m/s on a circle of {radius} m, a box on its outer edge: the QP's working set full at its cap, rows that depend on it",
         args.trace_seconds
     );
     traces.push(full_set_trace(args)?);

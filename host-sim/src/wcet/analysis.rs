@@ -1049,28 +1049,19 @@ impl<'a> LoopBinder<'a> {
         candidates: &[u32],
         taken: &[(String, u32)],
     ) -> Option<(String, u32)> {
-        // A loop of a dependency's code inlined into a firmware line takes no
-        // annotation of the firmware's: those bound the line's own loop.
         let library = fl.library_loops[x];
         let annotated = |key: &(String, u32)| self.index.annotation_of(key, &fl.fname).is_some();
-        let firmware_key = keys
+        let chain: Vec<(String, u32)> = candidates
             .iter()
-            .filter(|key| !library || !fl.firmware_taken.contains(*key))
-            .find(|key| annotated(key) && !taken.contains(*key))
-            .cloned();
-        if let (false, Some(key)) = (library, &firmware_key) {
+            .flat_map(|&a| frames(self.ctx, a))
+            .map(|(file, line)| (short_path(&file), line))
+            .collect();
+        let (key, own_line) =
+            choose_line(library, keys, &chain, &fl.firmware_taken, taken, annotated)?;
+        if own_line && !library {
             fl.firmware_taken.insert(key.clone());
         }
-        firmware_key.or_else(|| {
-            // A dependency's loop, inlined or not: the facts about its code
-            // (at any frame of the inlining chain, innermost first).
-            candidates
-                .iter()
-                .flat_map(|&a| frames(self.ctx, a))
-                .map(|(file, line)| (short_path(&file), line))
-                .filter(|key| !library || !fl.firmware_taken.contains(key))
-                .find(|key| annotated(key) && !taken.contains(key))
-        })
+        Some(key)
     }
 
     /// Notes why loop `x`, neither recognised nor annotated, has no bound.
@@ -2478,6 +2469,31 @@ impl StaticAnalysis {
     }
 }
 
+/// The annotated line a loop takes, and whether it is one of its own `keys`
+/// (else a line of its inlining `chain`): the first of its `keys` with an
+/// annotation (`annotated`) that no enclosing loop `taken`, else the first such
+/// line of the `chain` (every frame of its candidate addresses, innermost
+/// first: a dependency's fact about its own code). A loop of a dependency's code
+/// (`library`) inlined into a firmware line takes no line a firmware loop of
+/// the function took (`firmware_taken`): those annotations bound the line's own
+/// loop.
+fn choose_line(
+    library: bool,
+    keys: &[(String, u32)],
+    chain: &[(String, u32)],
+    firmware_taken: &std::collections::BTreeSet<(String, u32)>,
+    taken: &[(String, u32)],
+    annotated: impl Fn(&(String, u32)) -> bool,
+) -> Option<((String, u32), bool)> {
+    let free = |key: &&(String, u32)| {
+        !(library && firmware_taken.contains(*key)) && annotated(key) && !taken.contains(*key)
+    };
+    if let Some(key) = keys.iter().find(free) {
+        return Some((key.clone(), true));
+    }
+    chain.iter().find(free).map(|key| (key.clone(), false))
+}
+
 /// Whether every instruction of loop `l` is a dependency's code (the innermost
 /// frame of its inlining chain outside the firmware's crates): a library loop,
 /// inlined or not, whose bound is a fact about the library's own line.
@@ -2522,6 +2538,38 @@ fn candidate_addresses(f: &Function, l: &Loop) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A firmware line with an annotation bounds the firmware's loop on it; a
+    /// dependency's loop inlined into that line takes the fact about its own line
+    /// in the dependency, or no bound at all, never the firmware line's.
+    #[test]
+    fn an_inlined_library_loop_takes_no_bound_of_the_line_it_is_inlined_on() {
+        let line = |f: &str, l: u32| (f.to_string(), l);
+        let task_line = line("firmware/src/bin/ecu.rs", 1426);
+        let walk = line("rtic-time-2.0.1/src/linked_list.rs", 78);
+        let keys = [task_line.clone()];
+        let chain = [walk.clone(), task_line.clone()];
+        let with_fact = |k: &(String, u32)| *k == task_line || *k == walk;
+        let no_fact = |k: &(String, u32)| *k == task_line;
+        let mut firmware_taken = std::collections::BTreeSet::new();
+        // The firmware's loop (bound first) takes its line.
+        let own = choose_line(false, &keys, &chain, &firmware_taken, &[], with_fact);
+        assert_eq!(own, Some((task_line.clone(), true)));
+        firmware_taken.insert(task_line.clone());
+        // The library loop on the same line: its own line's fact, else nothing.
+        let lib = choose_line(true, &keys, &chain, &firmware_taken, &[], with_fact);
+        assert_eq!(lib, Some((walk.clone(), false)));
+        let lib = choose_line(true, &keys, &chain, &firmware_taken, &[], no_fact);
+        assert_eq!(lib, None);
+        // No firmware loop took the line: the library loop alone is the line's
+        // loop (a checksum's loop on its call's line), and takes it.
+        let none_taken = std::collections::BTreeSet::new();
+        let alone = choose_line(true, &keys, &chain, &none_taken, &[], no_fact);
+        assert_eq!(alone, Some((task_line.clone(), true)));
+        // A line an enclosing loop took is not taken twice.
+        let nested = choose_line(false, &keys, &chain, &none_taken, &keys, no_fact);
+        assert_eq!(nested, None);
+    }
 
     fn task(
         name: &str,

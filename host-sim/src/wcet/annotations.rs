@@ -81,7 +81,7 @@
 //! followed). A loop nested in another loop matched to the same annotation is
 //! refused: it needs its own (a bound, or `same loop`). A loop whose every
 //! instruction is a dependency's code (a library loop inlined into a firmware
-//! line: a timer queue's list walk inside a call, a checksum's loop) takes the
+//! line: a checksum's loop, a list walk inside a call) takes the
 //! line's annotation only when no loop of the firmware's own code in the same
 //! function took it (the annotation is then the library loop's: the checksum's
 //! bytes); else it takes a dependency fact ([`dependency_facts`]) about its own
@@ -234,8 +234,6 @@ pub fn dependency_facts_with(constants: &BTreeMap<&'static str, u64>) -> Vec<Ann
         .get("MAX_UP_FRAME_BYTES")
         .copied()
         .unwrap_or(firmware::link::MAX_UP_FRAME_BYTES as u64);
-    // The ECU app's tasks waiting on the monotonic: `control` and `plan`.
-    const ASYNC_TASKS: u64 = 2;
     let fact = |file: &str, line: u32, bound: u64, why: &str| Annotation {
         file: file.to_string(),
         line,
@@ -246,38 +244,6 @@ pub fn dependency_facts_with(constants: &BTreeMap<&'static str, u64>) -> Vec<Ann
         counter: None,
     };
     let mut facts = vec![
-        fact(
-            "rtic-time-2.0.1/src/linked_list.rs",
-            81,
-            ASYNC_TASKS,
-            "delete walks the timer list: one node per waiting task",
-        ),
-        // The same loop, where the compiler puts its header (`while let ...
-        // next.as_ref()`) or its back edge (`next = next_link.next.load(..)`).
-        fact(
-            "rtic-time-2.0.1/src/linked_list.rs",
-            78,
-            ASYNC_TASKS,
-            "delete walks the timer list: one node per waiting task",
-        ),
-        fact(
-            "rtic-time-2.0.1/src/linked_list.rs",
-            89,
-            ASYNC_TASKS,
-            "delete walks the timer list: one node per waiting task",
-        ),
-        fact(
-            "rtic-time-2.0.1/src/linked_list.rs",
-            143,
-            ASYNC_TASKS,
-            "insert walks the timer list: one node per waiting task",
-        ),
-        fact(
-            "rtic-time-2.0.1/src/timer_queue.rs",
-            123,
-            2 * ASYNC_TASKS + 1,
-            "each pass pops one expired timer or re-arms once after a missed compare",
-        ),
         // Over a whole activation, not per call: the bytes of every field go
         // through this loop, and the control task sends one frame per activation
         // (its actuation, or the Done frame of a stop, which never returns) into

@@ -1,6 +1,6 @@
 //! Critical sections read off the binary: the code a task runs with every
 //! interrupt masked (`cpsid i` up to the `msr primask` or `cpsie i` that ends it:
-//! a `critical_section::with`, the timer queue's list operations) or with the
+//! a `critical_section::with`, the release clock's slots) or with the
 //! base priority raised to a resource's ceiling (`msr basepri_max` up to the
 //! `msr basepri` that restores it: an RTIC lock). Each blocks the activities it
 //! masks for its whole length, so the response-time analysis charges the longest

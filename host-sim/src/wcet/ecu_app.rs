@@ -145,7 +145,7 @@ impl EcuBuild {
 
     /// The tasks and interrupts whose activations the analysis bounds: name and
     /// handler symbol. `plan` runs in the priority-1 dispatcher, `control` in the
-    /// priority-2 one, the monotonic's timer queue in `SysTick`; the flashed
+    /// priority-2 one, the release clock (`firmware/src/bin/support/release_clock.rs`) in `SysTick`; the flashed
     /// build's link in `USART1`.
     pub fn tasks(self) -> &'static [(&'static str, &'static str)] {
         match self {

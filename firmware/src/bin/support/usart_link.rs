@@ -348,7 +348,7 @@ impl Port {
         // SAFETY: the priority is above every RTIC ceiling and the handler
         // touches no RTIC resource.
         unsafe { nvic.set_priority(pac::Interrupt::USART1, USART1_PRIORITY) };
-        // SAFETY: SysTick's handler (the monotonic's timer queue) takes no RTIC
+        // SAFETY: SysTick's handler (the release clock) takes no RTIC
         // lock; it stays above both tasks.
         unsafe {
             scb.set_priority(
