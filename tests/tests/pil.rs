@@ -491,6 +491,60 @@ fn forged_replayed_and_corrupted_sensor_frames_are_refused_by_reason_and_never_a
 
 #[test]
 #[ignore = "needs qemu-system-arm and `cargo ecu-lockstep`; .ci/run runs it"]
+fn line_noise_before_sensor_frames_is_refused_as_a_run_and_the_frames_after_it_are_acted_on() {
+    // The paper scenario with its obstacles; from 1 s, each of 20 sensor frames
+    // comes after a run of noise longer than any frame.
+    let scenario = Scenario::paper(true);
+    let vehicle = VehicleParams::default();
+    const FRAMES: u32 = 20;
+    let fault = LinkFault {
+        spec: format!("noise:{FRAMES}").parse().unwrap(),
+        start_us: 1_000_000,
+    };
+    let opts = SimOptions {
+        max_duration_s: 3.0,
+        ..SimOptions::default()
+    };
+    let pil = PilOptions {
+        link_fault: Some(fault),
+        ..pil_options("noise", 4)
+    };
+    let (r, done, link, ticks, injected) = drive_pil(&scenario, &opts, &pil);
+    let s = &r.summary;
+    // Each run refused as corrupt and counted by the ECU; each frame after it
+    // taken (its answer refuses nothing).
+    let expected = FaultKinds::One(LinkFaultKind::Noise).refusals(FRAMES);
+    assert_eq!(expected.of(Refusal::Corrupt), FRAMES);
+    assert_eq!(injected.injected, expected);
+    assert_eq!(injected.refused_as_expected, u64::from(FRAMES));
+    assert_eq!(injected.acted_on, 0);
+    assert_eq!(injected.legitimate_refused, 0);
+    assert_eq!(done.refused, expected);
+    assert_eq!(
+        s.ecu_frames_refused_corrupt,
+        Some(u64::from(expected.of(Refusal::Corrupt)))
+    );
+    assert_eq!((link.rejected, link.stale), (0, 0));
+    // No dropout: no safe actuation in the noisy periods, and bit for bit the
+    // in-process run without any fault.
+    let at_us = |t_s: f64| (t_s * 1e6).round() as u64;
+    let noisy: Vec<_> = r
+        .log
+        .iter()
+        .filter(|row| fault.covers(at_us(row.t_s)))
+        .collect();
+    assert_eq!(noisy.len(), FRAMES as usize);
+    assert!(noisy.iter().all(|row| row.control_mode != "safe"));
+    assert!(fault.dropout().is_none());
+    let mut host_ecu = SimulatedEcu::<f32>::new(&scenario, &vehicle, &opts).unwrap();
+    let host = run_with(&scenario, &vehicle, &opts, &mut host_ecu, |_, _| {}).unwrap();
+    let c = compare(&r, &host);
+    assert!(c.identical, "{c:?}");
+    assert_counts_agree(&r, &ticks);
+}
+
+#[test]
+#[ignore = "needs qemu-system-arm and `cargo ecu-lockstep`; .ci/run runs it"]
 fn forged_replayed_and_corrupted_route_frames_are_refused_and_lose_only_their_window() {
     // The paper scenario with its obstacles; three frames of the first window
     // sent while driving replaced, from its third frame (two legitimate ones

@@ -126,8 +126,11 @@ pub struct PilEcuArgs {
     /// dropout: the safe actuation), and the lap go on; `host-sim pil` fails
     /// otherwise. With the prefix `route-` (e.g. `route-mix:3`), the next N
     /// frames of the road on the route channel instead: their window is lost,
-    /// the car plans on the one it holds until the next.
-    #[arg(long, value_name = "[route-]forge|replay|corrupt|mix[:N]")]
+    /// the car plans on the one it holds until the next. `noise[:N]` (sensor
+    /// frames only) sends each of N frames after a run of line noise as long as
+    /// the longest sensor frame, without a delimiter: the ECU must refuse the run
+    /// (as `corrupt`) and act on the frame.
+    #[arg(long, value_name = "[route-]forge|replay|corrupt|mix[:N], noise[:N]")]
     pub link_fault: Option<LinkFaultSpec>,
     /// When the link fault starts, s of simulated time (rounded down to a 10 ms
     /// control period).

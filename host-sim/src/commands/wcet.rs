@@ -163,7 +163,14 @@ const PIL_INITIAL_SPEED_MPS: f64 = 15.0;
 fn cpi_from_trace(args: &WcetArgs) -> Result<(CpiReport, PathBuf)> {
     let dir = args.out.join("trace");
     fs::create_dir_all(&dir)?;
-    let log = traced_pil_run(args, &dir, PAPER_TRACK, "paper", PIL_INITIAL_SPEED_MPS)?;
+    let log = traced_pil_run(
+        args,
+        &dir,
+        PAPER_TRACK,
+        "paper",
+        PIL_INITIAL_SPEED_MPS,
+        None,
+    )?;
     let f = File::open(&log).with_context(|| format!("opening {}", log.display()))?;
     let report = cpi::analyse_log(BufReader::with_capacity(1 << 20, f), None, &[])
         .map_err(|e| anyhow!("{e}"))?;
@@ -197,6 +204,7 @@ fn cap_trace(args: &WcetArgs) -> Result<PathBuf> {
         PAPER_TRACK,
         &boxes.to_string_lossy(),
         PIL_INITIAL_SPEED_MPS,
+        None,
     )
 }
 
@@ -261,6 +269,7 @@ fn full_set_trace(args: &WcetArgs) -> Result<PathBuf> {
         &track.to_string_lossy(),
         &obstacles.to_string_lossy(),
         speed,
+        None,
     )
 }
 
@@ -383,25 +392,39 @@ fn straight_trace(
     traced_run(a, &dir)
 }
 
+/// The link fault of the standstill's traced run: line noise before this many
+/// sensor frames (the ECU gives up a run longer than any frame and reads on),
+/// from this far into the run, s.
+const STANDSTILL_NOISE: (u32, f64) = (2, 0.5);
+
 /// Runs a PIL run of `--trace-seconds` on the paper track from standstill, with
 /// QEMU's execution trace written to a file, and returns the file: a cold start
 /// at rest, the MPC's rows of the nodes below the speed the car may not reverse
-/// from (`speed_row`).
+/// from (`speed_row`), and line noise before two sensor frames
+/// ([`STANDSTILL_NOISE`]: the control task's reception of a second run).
 fn standstill_trace(args: &WcetArgs) -> Result<PathBuf> {
     let dir = args.out.join("trace-standstill");
     fs::create_dir_all(&dir)?;
-    traced_pil_run(args, &dir, PAPER_TRACK, "paper", 0.0)
+    let (frames, after_s) = STANDSTILL_NOISE;
+    let fault = LinkFault {
+        spec: format!("noise:{frames}")
+            .parse()
+            .map_err(|e: String| anyhow!(e))?,
+        start_us: (after_s * 1e6) as u64,
+    };
+    traced_pil_run(args, &dir, PAPER_TRACK, "paper", 0.0, Some(fault))
 }
 
 /// A PIL run of `--trace-seconds` on `track` at μ 1 with `obstacles`, starting at
-/// `speed` m/s, its output and QEMU's execution trace in `dir`; returns the
-/// trace's file.
+/// `speed` m/s, with the link fault `fault`, its output and QEMU's execution
+/// trace in `dir`; returns the trace's file.
 fn traced_pil_run(
     args: &WcetArgs,
     dir: &Path,
     track: &str,
     obstacles: &str,
     speed: f64,
+    fault: Option<LinkFault>,
 ) -> Result<PathBuf> {
     let mut a = pil_args(
         dir.join("run"),
@@ -412,6 +435,7 @@ fn traced_pil_run(
     );
     a.run.track = track.into();
     a.run.initial_speed = speed;
+    a.link_fault = fault;
     traced_run(a, dir)
 }
 
@@ -565,7 +589,7 @@ fn pil_laps(args: &WcetArgs) -> Result<Vec<PathBuf>> {
 /// The CPI bound (given, else from a traced run) and the QEMU traces the
 /// analysis is checked against, each recorded now and added to `traces`: the QP
 /// at its iteration cap, its working set near full, a window adopted, route
-/// frames refused, a start from standstill.
+/// frames refused, a start from standstill with line noise before two sensor frames.
 fn record_traces(args: &WcetArgs, traces: &mut Vec<PathBuf>) -> Result<CpiReport> {
     let cpi = match args.cpi_bound {
         Some(c) if c.is_finite() && c >= 1.0 => given_cpi(c),
@@ -601,7 +625,7 @@ fn record_traces(args: &WcetArgs, traces: &mut Vec<PathBuf>) -> Result<CpiReport
     );
     traces.push(route_fault_trace(args)?);
     println!(
-        "PIL run with QEMU's execution trace ({} s) on the paper track from standstill",
+        "PIL run with QEMU's execution trace ({} s) on the paper track from standstill, line noise before two sensor frames",
         args.trace_seconds
     );
     traces.push(standstill_trace(args)?);

@@ -9,12 +9,16 @@
 //! | `replay[:N]` | a frame of the same channel sent, and accepted, before the fault (oldest first), bit for bit | `replay` |
 //! | `corrupt[:N]` | the frame with one bit flipped on the way (never into a 0x00, which would split the frame) | `corrupt` |
 //! | `mix[:N]` | forge, replay, corrupt, in turn | each by its own |
+//! | `noise[:N]` | the frame itself, after a run of line noise as long as the longest sensor frame, without a delimiter (a line that glitched) | the run `corrupt`; the frame after it taken |
 //!
 //! Plain, the fault replaces the sensor frames of `N` control periods. The
 //! in-process run that `host-sim pil` compares with models those periods as a
 //! `dropout-nan` ([`LinkFault::dropout`]): the ECU runs a period whose frame it
 //! refused on no estimate, as that fault delivers, and learns of the route frames
-//! announced in a refused frame from the next one it accepts.
+//! announced in a refused frame from the next one it accepts. Noise replaces no
+//! frame: the ECU skips the run, counts it, and acts on the frame after it, so
+//! the in-process run has no dropout there. It is a fault of the sensor frames
+//! only.
 //!
 //! With the prefix `route-` it replaces the next `N` frames of the road sent on
 //! the route channel (one per plan release, [`crate::world::route`]). The ECU
@@ -43,15 +47,39 @@ pub enum LinkFaultKind {
     Replay,
     /// A frame with one bit flipped.
     Corrupt,
+    /// The frame itself after a run of nonzero bytes as long as the longest
+    /// sensor frame ([`NOISE_BYTES`]): not a replaced frame, the run is refused
+    /// and the frame after it taken.
+    Noise,
+}
+
+/// Bytes of a run of line noise ([`LinkFaultKind::Noise`]): as many as the
+/// longest frame the ECU reads as a sensor frame, so that it gives the run up at
+/// its end and reads the frame after it whole. (A longer run would leave its
+/// tail before the frame, and the ECU would refuse the frame as corrupt too: a
+/// dropout.)
+pub const NOISE_BYTES: usize = firmware::link::MAX_DRIVING_DOWN_FRAME_BYTES;
+
+/// The bytes of a run of line noise: [`NOISE_BYTES`] nonzero bytes (no delimiter).
+pub fn noise_run() -> Vec<u8> {
+    (0..NOISE_BYTES)
+        .map(|i| 0x55 ^ (i as u8).wrapping_mul(29) | 1)
+        .collect()
 }
 
 impl LinkFaultKind {
-    /// Every kind.
+    /// The kinds that replace a frame, in a mix's order.
     pub const ALL: [LinkFaultKind; 3] = [
         LinkFaultKind::Forge,
         LinkFaultKind::Replay,
         LinkFaultKind::Corrupt,
     ];
+
+    /// Whether the ECU must refuse the frame itself (every kind but noise, whose
+    /// frame it takes after refusing the run before it).
+    pub fn replaces_frame(self) -> bool {
+        self != LinkFaultKind::Noise
+    }
 
     /// Its name on the command line.
     pub fn name(self) -> &'static str {
@@ -59,6 +87,7 @@ impl LinkFaultKind {
             LinkFaultKind::Forge => "forge",
             LinkFaultKind::Replay => "replay",
             LinkFaultKind::Corrupt => "corrupt",
+            LinkFaultKind::Noise => "noise",
         }
     }
 
@@ -67,7 +96,7 @@ impl LinkFaultKind {
         match self {
             LinkFaultKind::Forge => Refusal::Auth,
             LinkFaultKind::Replay => Refusal::Replay,
-            LinkFaultKind::Corrupt => Refusal::Corrupt,
+            LinkFaultKind::Corrupt | LinkFaultKind::Noise => Refusal::Corrupt,
         }
     }
 }
@@ -154,12 +183,21 @@ impl FromStr for LinkFaultSpec {
             Some((name, n)) => (name, Some(n)),
             None => (rest, None),
         };
+        let noise = LinkFaultKind::Noise;
         let kinds = match LinkFaultKind::ALL.into_iter().find(|k| k.name() == name) {
             Some(kind) => FaultKinds::One(kind),
             None if name == FaultKinds::Mix.name() => FaultKinds::Mix,
+            None if name == noise.name() && channel == LinkChannel::Sensor => {
+                FaultKinds::One(noise)
+            }
+            None if name == noise.name() => {
+                return Err(format!(
+                    "link fault {s:?}: noise is a fault of the sensor frames only (the route channel reads each frame up to its delimiter, whatever its length): use noise[:N]"
+                ))
+            }
             None => {
                 return Err(format!(
-                    "unknown link fault {s:?}: forge, replay, corrupt or mix, each with an optional :N (frames, default {DEFAULT_LINK_FAULT_FRAMES}), and the prefix {ROUTE_PREFIX} for the route channel's frames"
+                    "unknown link fault {s:?}: forge, replay, corrupt, mix or noise, each with an optional :N (frames, default {DEFAULT_LINK_FAULT_FRAMES}), and the prefix {ROUTE_PREFIX} for the route channel's frames (not noise)"
                 ))
             }
         };
@@ -202,16 +240,22 @@ pub struct LinkFault {
 }
 
 impl LinkFault {
-    /// Whether the sensor frame of the control instant `t_us` (µs) is replaced.
+    /// Whether the fault acts on the sensor frame of the control instant `t_us`
+    /// (µs): replaces it, or sends noise before it.
     pub fn covers(&self, t_us: u64) -> bool {
-        self.dropout().is_some_and(|d| d.covers(t_us))
+        self.spec.channel == LinkChannel::Sensor && t_us >= self.start_us && t_us < self.end_us()
     }
 
-    /// For a fault of the sensor frames, the same periods as a dropout with no
-    /// estimate (`dropout-nan`), the in-process run's model of the refused
-    /// frames; `None` for the route channel's.
+    /// For a fault that replaces sensor frames, the same periods as a dropout
+    /// with no estimate (`dropout-nan`), the in-process run's model of the
+    /// refused frames; `None` for the route channel's, and for noise (the ECU
+    /// acts on the frame after it).
     pub fn dropout(&self) -> Option<Dropout> {
-        (self.spec.channel == LinkChannel::Sensor).then_some(Dropout {
+        let replaces = match self.spec.kinds {
+            FaultKinds::One(kind) => kind.replaces_frame(),
+            FaultKinds::Mix => true,
+        };
+        (self.spec.channel == LinkChannel::Sensor && replaces).then_some(Dropout {
             start_us: self.start_us,
             periods: self.spec.frames,
             kind: DropoutKind::Nan,
@@ -304,6 +348,7 @@ mod tests {
             "mix:2",
             "route-forge:1",
             "route-corrupt:7",
+            "noise:4",
         ] {
             let f = s.parse::<LinkFaultSpec>();
             assert_eq!(f.map(|f| f.to_string()), Ok(s.to_string()));
@@ -317,6 +362,7 @@ mod tests {
             "route-",
             "route-jam:2",
             "sensor-forge",
+            "route-noise:1",
         ] {
             assert!(bad.parse::<LinkFaultSpec>().is_err(), "{bad}");
         }
@@ -359,6 +405,26 @@ mod tests {
         assert_eq!(covered, vec![1_000_000, 1_010_000, 1_020_000]);
         assert_eq!(f.end_us(), 1_030_000);
         assert!(f.route_frames().is_none());
+    }
+
+    #[test]
+    fn noise_covers_its_frames_replaces_none_and_is_a_corrupt_run_each() {
+        let f = LinkFault {
+            spec: "noise:2".parse().unwrap(),
+            start_us: 1_000_000,
+        };
+        let covered: Vec<u64> = (90..110)
+            .map(|k| k * CONTROL_PERIOD_US)
+            .filter(|&t| f.covers(t))
+            .collect();
+        assert_eq!(covered, vec![1_000_000, 1_010_000]);
+        assert!(f.dropout().is_none());
+        assert_eq!(f.spec.kinds.refusals(2).of(Refusal::Corrupt), 2);
+        let run = noise_run();
+        assert_eq!(run.len(), firmware::link::MAX_DRIVING_DOWN_FRAME_BYTES);
+        assert!(run.iter().all(|&b| b != 0));
+        let err = "route-noise".parse::<LinkFaultSpec>().unwrap_err();
+        assert!(err.contains("sensor frames only"), "{err}");
     }
 
     #[test]

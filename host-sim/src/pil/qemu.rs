@@ -31,7 +31,7 @@ use crate::closed_loop::SimOptions;
 use crate::model::vehicle::VehicleParams;
 use crate::pil::deadlines::{skipped_between, TickOverruns};
 use crate::pil::frames::{actuation_of, path_chunks, plan_of, setup_refusal};
-use crate::pil::link_fault::{flip_bit, LinkChannel, LinkFault, LinkFaultKind};
+use crate::pil::link_fault::{flip_bit, noise_run, LinkChannel, LinkFault, LinkFaultKind};
 use crate::world::route::{RouteFeeder, Window};
 use crate::world::scenario::Scenario;
 
@@ -540,7 +540,8 @@ impl QemuEcu {
 
     /// The frame the ECU receives for this period's sensor frame `msg`: the
     /// frame itself, or, while a link fault of the sensor frames lasts, a forged,
-    /// replayed or corrupted one in its place (`Some(kind)`).
+    /// replayed or corrupted one in its place, or the frame after a run of noise
+    /// (`Some(kind)`).
     fn sensor_frame(&mut self, msg: &Down, t_us: u64) -> Result<(Vec<u8>, Option<LinkFaultKind>)> {
         let fault = self
             .opts
@@ -593,6 +594,18 @@ impl QemuEcu {
                 let mut frame = encode_frame(msg, &mut self.mac, tx)?;
                 flip_bit(&mut frame, self.faulted);
                 frame
+            }
+            Some(LinkFaultKind::Noise) => {
+                // The frame itself, a legitimate one (kept for replays), after the
+                // run of noise.
+                let frame = encode_frame(msg, &mut self.mac, tx)?;
+                if history.len() == REPLAY_HISTORY_FRAMES {
+                    history.pop_front();
+                }
+                history.push_back(frame.clone());
+                let mut bytes = noise_run();
+                bytes.extend_from_slice(&frame);
+                bytes
             }
         };
         if let Some(kind) = fault {
@@ -660,10 +673,12 @@ impl QemuEcu {
 
     /// Counts what the ECU said of this period's sensor frame against what was
     /// sent: a replaced frame must be refused for its reason, a legitimate one
-    /// accepted.
+    /// accepted (after noise too: the run refused, the frame taken).
     fn judge_answer(&mut self, a: &link::ActuationFrame, fault: Option<LinkFaultKind>) {
         let refused = Refusal::from_code(a.sensor);
         match fault {
+            Some(LinkFaultKind::Noise) if a.sensor == 0 => self.injected.refused_as_expected += 1,
+            Some(LinkFaultKind::Noise) => self.injected.legitimate_refused += 1,
             Some(kind) if refused == Some(kind.refusal()) => self.injected.refused_as_expected += 1,
             Some(_) if a.sensor == 0 => self.injected.acted_on += 1,
             Some(_) => {}
