@@ -62,10 +62,13 @@
 //! The friction the tyres use is computed every period,
 //!
 //! ```text
-//! μ_used·g = sqrt((a_meas/s_d)² + (V·ψ̇)²),   a_meas = LP(a_cmd) − s
+//! μ_used·g = sqrt((a_t/s_d)² + (V·ψ̇)²),   a_t = a_meas + r(V)/k̂,   a_meas = LP(a_cmd) − s
 //! ```
 //!
-//! with `s_d` the driven axle's share of the weight when driving
+//! (`a_t` the tyres' force per the car's mass: its acceleration plus the
+//! resistances they overcome as estimated, drag, rolling and a grade: a 6 %
+//! descent's pull, 0.59 m/s², is 12 % of `μ·g` at μ 0.5, which the brakes hold
+//! back and the acceleration alone does not show), with `s_d` the driven axle's share of the weight when driving
 //! (`driven_load_share − (h/L)·a_meas/g`: only those wheels push, and the load
 //! moves off the front axle) and 1 when braking (all four brake), `V·ψ̇` the
 //! lateral acceleration; its peak over the last [`FrictionConfig::peak_window_s`]
@@ -155,8 +158,17 @@
 //! goes to the estimator of the car, whose samples count only under
 //! `0.06·|V|` ([`crate::longitudinal_estimator`]: a wheel slipping too little
 //! to flag is not learnt as mass; the default tyre gives 0.8 of its peak force
-//! at 0.06 at μ 1, its linear range). Without wheel speeds (not finite), slip is
-//! read from the shortfall alone.
+//! at 0.06 at μ 1, its linear range). A shortfall while every wheel has been
+//! within that range for as long as the shortfall's filters remember
+//! (`τ_o + τ_f`, 0.6 s) is not slip: a tyre gives the force its torque asks
+//! until it leaves its linear range (a wheel whose tyre cannot turns the torque
+//! into its own rotation, and leaves it within a period or two), so the
+//! shortfall is the estimated car's error (a grade the resistance has not learnt
+//! yet, the mass), which a climb read as slip (μ̂ from 0.5 to 0.3 on Sepang, a
+//! 6 % grade, the car then off the road for a steering limit of 0.3). Wheels
+//! out of the range within that time (a lock the anti-lock limit ended) leave
+//! the shortfall its say. Without wheel speeds (not
+//! finite), slip is read from the shortfall alone.
 //!
 //! The time the wheels spun or locked is kept between interventions and
 //! forgotten at [`WHEEL_FORGET`] (a tenth of the rate it grows): the traction
@@ -477,6 +489,8 @@ pub struct FrictionEstimator<T> {
     wheels_measured: bool,
     /// Time a wheel has spun or locked, s.
     wheel_s: T,
+    /// Time every wheel has been measured within its tyre's linear range, s.
+    grip_s: T,
     /// `1/(m·r_eff)` (1/(kg·m)), `1/τ_o` and `1/τ_f` (1/s), set by
     /// [`FrictionEstimator::start`].
     inverses: [T; 3],
@@ -518,6 +532,7 @@ impl<T: Real> FrictionEstimator<T> {
             wheel_slip_mps: T::ZERO,
             wheels_measured: false,
             wheel_s: T::ZERO,
+            grip_s: T::ZERO,
             inverses: [T::ZERO; 3],
         }
     }
@@ -703,6 +718,7 @@ impl<T: Real> FrictionEstimator<T> {
         self.shortfall_mps2 = T::ZERO;
         self.shortfall_s = T::ZERO;
         self.peak = (T::ZERO, T::ZERO);
+        self.grip_s = T::ZERO;
         self.longitudinal.restart();
     }
 
@@ -735,15 +751,19 @@ impl<T: Real> FrictionEstimator<T> {
         self.shortfall_mps2 += k * (s_raw - self.shortfall_mps2);
         let demand = cmd.abs();
         let shortfall = self.shortfall_mps2 * cmd.signum0();
-        // What the tyres deliver, (μ_obs·g)², kept at its peak over the window.
+        // What the tyres deliver, (μ_obs·g)², kept at its peak over the window:
+        // the car's acceleration plus the resistances the tyres overcome as
+        // estimated (drag and rolling resistance; a climb, or a descent's pull
+        // the brakes hold back), per the car's mass.
         let a_meas = cmd - self.shortfall_mps2;
+        let a_force = a_meas + lon.resistance_mps2(v) * lon.inverse_mass_ratio();
         let a_tyre = if cmd > T::ZERO {
             // Driving: the driven axle alone, its load lowered by the transfer.
             let share = cfg.driven_load_share
                 - cfg.cg_height_over_wheelbase * larger(a_meas, T::ZERO) * T::lit(1.0 / crate::G);
-            a_meas / larger(share, T::lit(0.1))
+            a_force / larger(share, T::lit(0.1))
         } else {
-            a_meas
+            a_force
         };
         let ay = v * yaw_rate;
         let used = a_tyre * a_tyre + ay * ay;
@@ -771,6 +791,17 @@ impl<T: Real> FrictionEstimator<T> {
         // shortfall.
         let moving = v.abs() >= cfg.standstill_mps;
         let wheel = (self.wheel_spin || self.wheels_lock) && moving;
+        // Every wheel measured within its tyre's linear range for as long as the
+        // shortfall's filters remember (`τ_o + τ_f`): the tyres gave the force
+        // the torque asked (a wheel that cannot turns its torque into its own
+        // rotation and leaves that range within a period or two), so the
+        // shortfall is the estimated car's error (a grade, its mass), not slip
+        // (module docs, *Wheel speeds*). A wheel out of the range in that time
+        // (a lock the anti-lock limit ended) leaves the shortfall its say.
+        let in_range = self.wheels_measured
+            && self.wheel_slip_mps <= cfg.longitudinal.max_slip_ratio * v.abs();
+        self.grip_s = if in_range { self.grip_s + dt } else { T::ZERO };
+        let gripping = self.grip_s >= cfg.observer_time_s + cfg.filter_time_s;
         // The wheels' time is kept between interventions, forgotten at a tenth
         // of the rate it grows: the traction control and the anti-lock limit
         // end a spin or a lock within a period or two, and their repeating is
@@ -780,7 +811,8 @@ impl<T: Real> FrictionEstimator<T> {
         } else {
             larger(self.wheel_s - dt * T::lit(WHEEL_FORGET), T::ZERO)
         };
-        let short = wheel || (demand >= cfg.min_demand_mps2 && shortfall > limit && moving);
+        let short =
+            wheel || (demand >= cfg.min_demand_mps2 && shortfall > limit && moving && !gripping);
         self.shortfall_s = if short {
             self.shortfall_s + dt
         } else {
@@ -1015,6 +1047,41 @@ mod tests {
             e.mu()
         );
         assert!(e.mu() >= 0.6 * 0.75);
+    }
+
+    /// 1 s of a 3.5 m/s² demand met, then 1 s of it met by 2.0 m/s² (a climb's
+    /// shortfall, or slip), the driven wheels `before` then `during` m/s faster
+    /// than the ground (NaN: not measured): the slip events.
+    fn events_of_a_shortfall_with_wheels(before: f64, during: f64) -> u32 {
+        let (mut r, mut v) = Rig::learned(1.0);
+        for k in 0..200 {
+            let (wheels, a_meas) = if k < 100 {
+                (before, 3.5)
+            } else {
+                (during, 2.0)
+            };
+            let mut est = StateEstimate::<f64>::zeroed();
+            est.vx_mps = v;
+            est.wheel_speed_mps = [v + wheels, v + wheels, v, v];
+            r.e.read_wheels(&r.c, &est);
+            v = r.drive(v, 3.5, a_meas, 0.0, 0.01);
+        }
+        r.e.events()
+    }
+
+    #[test]
+    fn a_shortfall_with_every_wheel_gripping_is_not_slip() {
+        // Wheels at the ground's speed throughout: the shortfall is the car's.
+        assert_eq!(events_of_a_shortfall_with_wheels(0.0, 0.0), 0);
+        // Not measured: the shortfall alone is slip, as before.
+        assert_eq!(events_of_a_shortfall_with_wheels(f64::NAN, f64::NAN), 1);
+        // Driven wheels 8 % fast at about 20 m/s during the shortfall: past the
+        // linear range (0.06), under the spin threshold: slip.
+        assert_eq!(events_of_a_shortfall_with_wheels(0.0, 1.6), 1);
+        // In range, but only since the shortfall began (a lock that ended): the
+        // filters still hold what the wheels did before, and the shortfall is
+        // slip.
+        assert_eq!(events_of_a_shortfall_with_wheels(1.6, 0.0), 1);
     }
 
     #[test]
