@@ -728,8 +728,10 @@ impl<T: Real> FrictionEstimator<T> {
         // What the torque gives the car as estimated (its mass and resistances),
         // tyres gripping.
         let lon = &self.longitudinal;
-        let a_cmd = (lon.applied_mps2(inv_mr, torque_nm) - lon.resistance_mps2(v))
-            * lon.inverse_mass_ratio();
+        // The resistances at `v` per configured mass, m/s²: in the demand, and
+        // in the force the tyres deliver below.
+        let resistance = lon.resistance_mps2(v);
+        let a_cmd = (lon.applied_mps2(inv_mr, torque_nm) - resistance) * lon.inverse_mass_ratio();
         // V̂ integrates the commanded acceleration and is pulled to the measured
         // speed in `observer_time_s`: (V̂ − V)/τ_o is the shortfall low-passed at
         // τ_o, from the speed itself, not its noisy derivative. Forward Euler
@@ -756,7 +758,7 @@ impl<T: Real> FrictionEstimator<T> {
         // estimated (drag and rolling resistance; a climb, or a descent's pull
         // the brakes hold back), per the car's mass.
         let a_meas = cmd - self.shortfall_mps2;
-        let a_force = a_meas + lon.resistance_mps2(v) * lon.inverse_mass_ratio();
+        let a_force = a_meas + resistance * lon.inverse_mass_ratio();
         let a_tyre = if cmd > T::ZERO {
             // Driving: the driven axle alone, its load lowered by the transfer.
             let share = cfg.driven_load_share

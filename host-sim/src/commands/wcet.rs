@@ -13,7 +13,7 @@ use clap::Args;
 use crate::closed_loop::cost_model::CostModel;
 use crate::commands::pil::{self, PilArgs};
 use crate::commands::run::RunArgs;
-use crate::pil::link_fault::{LinkFault, LinkFaultSpec};
+use crate::pil::link_fault::{FaultKinds, LinkChannel, LinkFault, LinkFaultKind, LinkFaultSpec};
 use crate::wcet::cpi::{self, CpiReport};
 use crate::wcet::report::{self, ReportInputs};
 
@@ -191,13 +191,7 @@ const CAP_BOX_AHEAD_M: f64 = 25.0;
 fn cap_trace(args: &WcetArgs) -> Result<PathBuf> {
     let dir = args.out.join("trace-cap");
     fs::create_dir_all(&dir)?;
-    let boxes = dir.join("box_ahead.csv");
-    let (x, h) = (CAP_BOX_AHEAD_M, 1.0);
-    let mut csv = String::from("id,x_m,y_m\n");
-    for (cx, cy) in [(x - h, -h), (x - h, h), (x + h, h), (x + h, -h)] {
-        csv.push_str(&format!("box_ahead,{cx},{cy}\n"));
-    }
-    fs::write(&boxes, csv)?;
+    let boxes = write_box(&dir, "box_ahead", (CAP_BOX_AHEAD_M, 0.0), 1.0)?;
     traced_pil_run(
         args,
         &dir,
@@ -252,17 +246,11 @@ fn full_set_trace(args: &WcetArgs) -> Result<PathBuf> {
     let track = dir.join("circle.csv");
     fs::write(&track, csv)?;
     let (angle, outwards) = FULL_SET_BOX;
-    let (cx, cy) = (
+    let centre = (
         (radius + outwards) * angle.sin(),
         radius - (radius + outwards) * angle.cos(),
     );
-    let h = FULL_SET_BOX_HALF_M;
-    let mut boxes = String::from("id,x_m,y_m\n");
-    for (dx, dy) in [(-h, -h), (-h, h), (h, h), (h, -h)] {
-        boxes.push_str(&format!("outer_edge,{:.3},{:.3}\n", cx + dx, cy + dy));
-    }
-    let obstacles = dir.join("box_outer_edge.csv");
-    fs::write(&obstacles, boxes)?;
+    let obstacles = write_box(&dir, "box_outer_edge", centre, FULL_SET_BOX_HALF_M)?;
     traced_pil_run(
         args,
         &dir,
@@ -365,19 +353,7 @@ fn straight_trace(
     }
     let track = dir.join("straight.csv");
     fs::write(&track, csv)?;
-    let (bx, by) = WINDOW_BOX;
-    let h = 0.5;
-    let mut boxes = String::from("id,x_m,y_m\n");
-    for (cx, cy) in [
-        (bx - h, by - h),
-        (bx - h, by + h),
-        (bx + h, by + h),
-        (bx + h, by - h),
-    ] {
-        boxes.push_str(&format!("beside,{cx},{cy}\n"));
-    }
-    let obstacles = dir.join("box_beside.csv");
-    fs::write(&obstacles, boxes)?;
+    let obstacles = write_box(&dir, "box_beside", WINDOW_BOX, 0.5)?;
     let mut a = pil_args(
         dir.join("run"),
         &obstacles.to_string_lossy(),
@@ -393,8 +369,8 @@ fn straight_trace(
 }
 
 /// The link fault of the standstill's traced run: line noise before this many
-/// sensor frames (the ECU gives up a run longer than any frame and reads on),
-/// from this far into the run, s.
+/// sensor frames (the ECU gives up a run as long as the longest sensor frame and
+/// reads on), from this far into the run, s.
 const STANDSTILL_NOISE: (u32, f64) = (2, 0.5);
 
 /// Runs a PIL run of `--trace-seconds` on the paper track from standstill, with
@@ -407,12 +383,26 @@ fn standstill_trace(args: &WcetArgs) -> Result<PathBuf> {
     fs::create_dir_all(&dir)?;
     let (frames, after_s) = STANDSTILL_NOISE;
     let fault = LinkFault {
-        spec: format!("noise:{frames}")
-            .parse()
-            .map_err(|e: String| anyhow!(e))?,
+        spec: LinkFaultSpec {
+            channel: LinkChannel::Sensor,
+            kinds: FaultKinds::One(LinkFaultKind::Noise),
+            frames,
+        },
         start_us: (after_s * 1e6) as u64,
     };
     traced_pil_run(args, &dir, PAPER_TRACK, "paper", 0.0, Some(fault))
+}
+
+/// Writes the obstacle file `dir/ID.csv` of one square box `id`: its centre
+/// `(x, y)` and its half-side `h`, m, corners to the mm; returns the file.
+fn write_box(dir: &Path, id: &str, (x, y): (f64, f64), h: f64) -> Result<PathBuf> {
+    let mut csv = String::from("id,x_m,y_m\n");
+    for (dx, dy) in [(-h, -h), (-h, h), (h, h), (h, -h)] {
+        csv.push_str(&format!("{id},{:.3},{:.3}\n", x + dx, y + dy));
+    }
+    let file = dir.join(format!("{id}.csv"));
+    fs::write(&file, csv)?;
+    Ok(file)
 }
 
 /// A PIL run of `--trace-seconds` on `track` at μ 1 with `obstacles`, starting at

@@ -566,7 +566,8 @@ impl QemuEcu {
             LinkChannel::Route => (&mut self.route_tx, &mut self.route_history),
         };
         let frame = match fault {
-            None => {
+            // Noise goes before the legitimate frame itself (kept for replays).
+            None | Some(LinkFaultKind::Noise) => {
                 let frame = encode_frame(msg, &mut self.mac, tx)?;
                 if history.len() == REPLAY_HISTORY_FRAMES {
                     history.pop_front();
@@ -595,18 +596,11 @@ impl QemuEcu {
                 flip_bit(&mut frame, self.faulted);
                 frame
             }
-            Some(LinkFaultKind::Noise) => {
-                // The frame itself, a legitimate one (kept for replays), after the
-                // run of noise.
-                let frame = encode_frame(msg, &mut self.mac, tx)?;
-                if history.len() == REPLAY_HISTORY_FRAMES {
-                    history.pop_front();
-                }
-                history.push_back(frame.clone());
-                let mut bytes = noise_run();
-                bytes.extend_from_slice(&frame);
-                bytes
-            }
+        };
+        let frame = if fault == Some(LinkFaultKind::Noise) {
+            [noise_run(), frame].concat()
+        } else {
+            frame
         };
         if let Some(kind) = fault {
             self.faulted += 1;

@@ -1051,13 +1051,13 @@ impl<'a> LoopBinder<'a> {
     ) -> Option<(String, u32)> {
         let library = fl.library_loops[x];
         let annotated = |key: &(String, u32)| self.index.annotation_of(key, &fl.fname).is_some();
-        let chain: Vec<(String, u32)> = candidates
+        // Read off the line table only if no key of its own is free.
+        let chain = candidates
             .iter()
             .flat_map(|&a| frames(self.ctx, a))
-            .map(|(file, line)| (short_path(&file), line))
-            .collect();
+            .map(|(file, line)| (short_path(&file), line));
         let (key, own_line) =
-            choose_line(library, keys, &chain, &fl.firmware_taken, taken, annotated)?;
+            choose_line(library, keys, chain, &fl.firmware_taken, taken, annotated)?;
         if own_line && !library {
             fl.firmware_taken.insert(key.clone());
         }
@@ -2470,7 +2470,7 @@ impl StaticAnalysis {
 }
 
 /// The annotated line a loop takes, and whether it is one of its own `keys`
-/// (else a line of its inlining `chain`): the first of its `keys` with an
+/// (else a line of its inlining `chain`, read only then): the first of its `keys` with an
 /// annotation (`annotated`) that no enclosing loop `taken`, else the first such
 /// line of the `chain` (every frame of its candidate addresses, innermost
 /// first: a dependency's fact about its own code). A loop of a dependency's code
@@ -2480,7 +2480,7 @@ impl StaticAnalysis {
 fn choose_line(
     library: bool,
     keys: &[(String, u32)],
-    chain: &[(String, u32)],
+    chain: impl IntoIterator<Item = (String, u32)>,
     firmware_taken: &std::collections::BTreeSet<(String, u32)>,
     taken: &[(String, u32)],
     annotated: impl Fn(&(String, u32)) -> bool,
@@ -2491,7 +2491,10 @@ fn choose_line(
     if let Some(key) = keys.iter().find(free) {
         return Some((key.clone(), true));
     }
-    chain.iter().find(free).map(|key| (key.clone(), false))
+    chain
+        .into_iter()
+        .find(|key| free(&key))
+        .map(|key| (key, false))
 }
 
 /// Whether every instruction of loop `l` is a dependency's code (the innermost
@@ -2553,21 +2556,21 @@ mod tests {
         let no_fact = |k: &(String, u32)| *k == task_line;
         let mut firmware_taken = std::collections::BTreeSet::new();
         // The firmware's loop (bound first) takes its line.
-        let own = choose_line(false, &keys, &chain, &firmware_taken, &[], with_fact);
+        let own = choose_line(false, &keys, chain.clone(), &firmware_taken, &[], with_fact);
         assert_eq!(own, Some((task_line.clone(), true)));
         firmware_taken.insert(task_line.clone());
         // The library loop on the same line: its own line's fact, else nothing.
-        let lib = choose_line(true, &keys, &chain, &firmware_taken, &[], with_fact);
+        let lib = choose_line(true, &keys, chain.clone(), &firmware_taken, &[], with_fact);
         assert_eq!(lib, Some((walk.clone(), false)));
-        let lib = choose_line(true, &keys, &chain, &firmware_taken, &[], no_fact);
+        let lib = choose_line(true, &keys, chain.clone(), &firmware_taken, &[], no_fact);
         assert_eq!(lib, None);
         // No firmware loop took the line: the library loop alone is the line's
         // loop (a checksum's loop on its call's line), and takes it.
         let none_taken = std::collections::BTreeSet::new();
-        let alone = choose_line(true, &keys, &chain, &none_taken, &[], no_fact);
+        let alone = choose_line(true, &keys, chain.clone(), &none_taken, &[], no_fact);
         assert_eq!(alone, Some((task_line.clone(), true)));
         // A line an enclosing loop took is not taken twice.
-        let nested = choose_line(false, &keys, &chain, &none_taken, &keys, no_fact);
+        let nested = choose_line(false, &keys, chain.clone(), &none_taken, &keys, no_fact);
         assert_eq!(nested, None);
     }
 

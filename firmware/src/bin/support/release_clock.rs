@@ -118,9 +118,10 @@ impl WaitUntil {
 impl Future for WaitUntil {
     type Output = ();
 
+    // A wait that completes leaves its slot to `Drop`, which runs as the
+    // `.await` completes.
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
         if reached(now_ticks(), self.tick) {
-            self.with_slot(|c| c.set(None));
             return Poll::Ready(());
         }
         let waiting = Waiting {
@@ -131,7 +132,6 @@ impl Future for WaitUntil {
         // A tick between the first look and the slot's write found the slot
         // empty: look again now the slot holds the waker.
         if reached(now_ticks(), self.tick) {
-            self.with_slot(|c| c.set(None));
             return Poll::Ready(());
         }
         Poll::Pending
