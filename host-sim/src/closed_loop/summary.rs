@@ -139,6 +139,10 @@ pub struct Summary {
     pub plan_host_us_max: f64,
     /// Largest QP iterations in one plan activation.
     pub plan_max_qp_iterations: u32,
+    /// QP refactorizations over the run's plan activations: factors rebuilt from
+    /// scratch because rounding had spoiled them (at most
+    /// `firmware::mpc::QP_MAX_REFACTORIZATIONS` per activation).
+    pub plan_qp_refactorizations: u64,
     /// Simulated seconds per wall-clock second.
     pub sim_speed_x_realtime: f64,
     /// Largest distance between where the active plan put the car and where it was, m.

@@ -642,6 +642,7 @@ impl<'a> Meter<'a> {
             if p.cycles > opts.plan_budget_cycles {
                 sum.plan_budget_overruns += 1;
             }
+            sum.plan_qp_refactorizations += u64::from(p.qp_refactorizations);
             if p.published {
                 sum.plan_max_qp_iterations = sum.plan_max_qp_iterations.max(p.qp_iterations);
                 if let Some(slack) = p.max_validity_slack_rad {

@@ -213,15 +213,18 @@ fn cap_trace(args: &WcetArgs) -> Result<PathBuf> {
 /// sideslip lag, which moved it from 22 m at 15 m/s).
 const FULL_SET_CIRCLE: (f64, f64, f64) = (20.0, 3.5, 14.0);
 
-/// The box on the outer edge of [`FULL_SET_CIRCLE`]: the angle of its centre
+/// The box beside the outer edge of [`FULL_SET_CIRCLE`]: the angle of its centre
 /// along the circle from the start, rad, and its centre's offset outwards from
-/// the centre line, m (its half-side is [`FULL_SET_BOX_HALF_M`]). 28 m ahead, it
-/// is within the horizon from the first activation, on the edge the road rows
+/// the centre line, m (its half-side is [`FULL_SET_BOX_HALF_M`]). 20 m ahead, it
+/// is within the horizon from the first activation, near the edge the road rows
 /// bind at: its rows nearly repeat theirs, so the QP adds rows that depend on its
 /// working set (the dual null-space step, `qp::active_set`), and the working set
-/// fills at the iteration cap. The path is closed (the circle fits in the ECU's
-/// window), so the obstacles' loops run on a closed path too.
-const FULL_SET_BOX: (f64, f64) = (1.4, 2.5);
+/// fills at the iteration cap (the heaviest of a grid of angles 0.8–1.8 rad,
+/// offsets 1.5–3.5 m and speeds 13–16 m/s in the PIL's instruction counts:
+/// docs/tuning.md, *Iterations instead of a refactorization*). The path is
+/// closed (the circle fits in the ECU's window), so the obstacles' loops run on
+/// a closed path too.
+const FULL_SET_BOX: (f64, f64) = (1.0, 1.5);
 
 /// Half the side of the box of [`FULL_SET_BOX`], m.
 const FULL_SET_BOX_HALF_M: f64 = 0.5;
