@@ -22,8 +22,12 @@
 //!
 //! started from a prior of `prior_weight` samples at `λ = 0` (the kinematic
 //! model). Samples count only from `min_speed_mps` and with `|a_y| ≥
-//! min_lateral_mps2` (elsewhere the ratio is noise), and not while the friction
-//! check flags a slip (a sliding car is not the linear tyre `λ` describes). The
+//! min_lateral_mps2` (elsewhere the ratio is noise), and not while the tyres
+//! are beyond their linear range (a sliding car is not the linear tyre `λ`
+//! describes): the plan task passes a road found slipperier than configured and
+//! the control task's [`crate::tasks::ControlTask::tyres_linear`] (a saturated or
+//! sliding front, a slip event, a wheel spinning or locking within the last plan
+//! period) as `slipping`. The
 //! clamp keeps a transient (a rear that slides for a moment) from making the plan
 //! steer into it: `lag_max` is 2.5 times what the heaviest car shipped learns
 //! (`host-sim/vehicles/heavy.toml` 30 % over its mass: 0.012 rad per m/s² on

@@ -81,6 +81,13 @@ pub const UNDERSTEER_MIN_MPS2: f32 = 2.0;
 /// s ([`UNDERSTEER_RATIO`]).
 pub const UNDERSTEER_CONFIRM_S: f32 = 0.05;
 
+/// Control periods the tyres must have stayed within their linear range (no
+/// saturated or sliding front, no slip event, no wheel spinning or locking)
+/// before the plan task's sideslip lag counts a sample
+/// ([`ControlTask::tyres_linear`]): a plan period's, so a sample never follows a
+/// sliding moment the plan task did not see.
+pub const TYRES_LINEAR_PERIODS: u8 = (PLAN_PERIOD_US / CONTROL_PERIOD_US) as u8;
+
 /// Front slip angle from which saturated front tyres are held at their steering
 /// angle, rad ([`ControlTask::steering_held`]). The shipped cars' tyres
 /// (`host-sim/examples/tyre_peak.rs`) peak at 0.10–0.11 rad at μ 0.3, 0.15–0.16
@@ -141,6 +148,9 @@ pub struct PlanTask<T, const CAP: usize> {
     /// The `control` task's friction estimate `μ̂` ([`crate::friction`]),
     /// dimensionless, `+∞` when there is none.
     friction_limit: T,
+    /// The `control` task's [`ControlTask::tyres_linear`] at the release: the
+    /// sideslip lag learns only then (true without a control task).
+    tyres_linear: bool,
     /// The reference path (load it once before the first activation).
     pub path: ReferencePath<T, CAP>,
     /// Parabolas of the static obstacles (update after loading the path).
@@ -175,6 +185,7 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
             settings,
             mu,
             friction_limit: T::INFINITY,
+            tyres_linear: true,
             // Its projections near a hint (the car's, the obstacles' vertices')
             // scan a bounded number of segments, not the window.
             path: ReferencePath::with_search_segments(MAX_SEARCH_SEGMENTS),
@@ -209,6 +220,14 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
     /// lowers the acceleration bounds, `V_heur` and `V_max`.
     pub fn set_friction_limit(&mut self, mu: T) {
         self.friction_limit = if mu > T::ZERO { mu } else { T::INFINITY };
+    }
+
+    /// Whether the `control` task found the tyres within their linear range
+    /// ([`ControlTask::tyres_linear`]), read with the state estimate at the
+    /// release: the sideslip lag ([`crate::sideslip`]) counts the activation's
+    /// sample only then, since a sliding car is not the linear tyre it models.
+    pub fn set_tyres_linear(&mut self, linear: bool) {
+        self.tyres_linear = linear;
     }
 
     /// The friction the activations plan with: `min(μ, μ̂)`, dimensionless.
@@ -326,14 +345,15 @@ impl<T: Real, const CAP: usize> PlanTask<T, CAP> {
         };
         let mu = self.planning_mu();
         // The sideslip lag learns while the road grips as configured (a road found
-        // slipperier, `μ̂ < μ`, makes a sliding car, not the linear tyre it models);
-        // from the steering the MPC starts from (the yaw loop's fast share left out).
+        // slipperier, `μ̂ < μ`, makes a sliding car, not the linear tyre it models)
+        // and the control task found the tyres within their linear range; from the
+        // steering the MPC starts from (the yaw loop's fast share left out).
         let cfg = &self.settings.sideslip;
         self.sideslip.update(
             cfg,
             &self.settings.geometry,
             est,
-            self.friction_limit < self.mu,
+            self.friction_limit < self.mu || !self.tyres_linear,
         );
         self.mpc.set_sideslip_lag(self.sideslip.lag(cfg));
         let computed = self.mpc.step_observed(
@@ -577,6 +597,9 @@ pub struct ControlTask<T> {
     stop_reason: Option<StopReason>,
     /// Time the front tyres have shown understeer ([`UNDERSTEER_RATIO`]), s.
     understeer_s: T,
+    /// Control periods the tyres have stayed within their linear range, up to
+    /// [`TYRES_LINEAR_PERIODS`] ([`ControlTask::tyres_linear`]).
+    linear_periods: u8,
     /// `1/L` of the friction settings' wheelbase, 1/m (0 without one).
     inv_wheelbase: T,
     /// True when the front tyres' slip angle, in the steering's direction, is
@@ -627,6 +650,7 @@ impl<T: Real> ControlTask<T> {
             last_fault: None,
             stop_reason: None,
             understeer_s: T::ZERO,
+            linear_periods: 0,
             inv_wheelbase: if friction_config.wheelbase_m > T::ZERO {
                 T::ONE / friction_config.wheelbase_m
             } else {
@@ -661,6 +685,18 @@ impl<T: Real> ControlTask<T> {
     /// friction the steering asks for ([`ControlTask::run`]).
     pub fn front_saturated(&self) -> bool {
         self.understeer_s >= T::lit(UNDERSTEER_CONFIRM_S)
+    }
+
+    /// True when the tyres have stayed within their linear range for
+    /// [`TYRES_LINEAR_PERIODS`] control periods up to the last activation: no
+    /// saturated front ([`ControlTask::front_saturated`]), no front slip angle
+    /// past [`FRONT_SLIP_HOLD_RAD`], no slip event, no wheel spinning or locking
+    /// ([`crate::friction`]), no fault. Give it to the `plan` task
+    /// ([`PlanTask::set_tyres_linear`]) with the state estimate: its sideslip lag
+    /// learns only then (1–2 s of sliding pushed it to its cap, where it stayed
+    /// through ~10 s of cornering).
+    pub fn tyres_linear(&self) -> bool {
+        self.linear_periods >= TYRES_LINEAR_PERIODS
     }
 
     /// True when the steering was held at the last activation: the front tyres
@@ -847,8 +883,14 @@ impl<T: Real> ControlTask<T> {
         let lateral = self.lateral_demand(est);
         // The brakes' left/right shares follow the measured `V·ψ̇`.
         let car = self.car_model(lateral, est.vx_mps * est.yaw_rate_radps);
-        match low_level::control_with_model(&self.config, &mut self.state, plan, est, now_us, &car)
-        {
+        let act = match low_level::control_with_model(
+            &self.config,
+            &mut self.state,
+            plan,
+            est,
+            now_us,
+            &car,
+        ) {
             Ok(a) => {
                 self.last_fault = None;
                 let still = T::lit(STANDSTILL_MPS);
@@ -889,7 +931,21 @@ impl<T: Real> ControlTask<T> {
                 self.stop_reason = Some(StopReason::Fault(fault));
                 safe
             }
-        }
+        };
+        let beyond = self.last_fault.is_some()
+            || self.front_saturated()
+            || self.front_sliding
+            || self.friction.slipping()
+            || self.friction.wheel_spinning()
+            || self.friction.wheel_locking();
+        self.linear_periods = if beyond {
+            0
+        } else {
+            self.linear_periods
+                .saturating_add(1)
+                .min(TYRES_LINEAR_PERIODS)
+        };
+        act
     }
 }
 

@@ -510,3 +510,69 @@ fn a_spinning_or_locked_wheel_halves_the_torque_commanded_at_once() {
     assert!(close(torque(6.0, [20.0, 20.0, 14.0, 20.0]).0, t0));
     assert!(close(torque(-8.0, [26.0, 20.0, 20.0, 20.0]).0, b0));
 }
+
+/// The sideslip lag learns only while the control task finds the tyres within
+/// their linear range. The control task says so after a plan period of them
+/// (`TYRES_LINEAR_PERIODS` control periods) and stops saying so as soon as the
+/// front saturates (a car steered at 0.1 rad at 15 m/s that turns at 4 m/s²);
+/// the plan task's samples (a car at 15 m/s turning at 3 m/s² whose course
+/// points 0.02 rad outwards) raise `λ` only while it does.
+#[test]
+fn the_sideslip_lag_learns_only_while_the_tyres_are_linear() {
+    use firmware::tasks::TYRES_LINEAR_PERIODS;
+    let car = vehicle();
+    let mut plan = Plan::zeroed();
+    plan.dt_s = 0.2;
+    for n in plan.nodes.iter_mut() {
+        n.v_mps = 15.0;
+        n.delta_rad = 0.1;
+    }
+    let mut control = car.control_task(1.0).unwrap();
+    let mut k = 0u64;
+    let mut step = |control: &mut ControlTask<f64>, yaw_rate: f64| {
+        let e = StateEstimate {
+            stamp_us: k * CONTROL_PERIOD_US,
+            vx_mps: 15.0,
+            yaw_rate_radps: yaw_rate,
+            delta_rad: 0.1,
+            ..StateEstimate::zeroed()
+        };
+        control.run(&e, &plan, k * CONTROL_PERIOD_US);
+        k += 1;
+        control.tyres_linear()
+    };
+    let (grip, slide) = (8.0 / 15.0, 4.0 / 15.0);
+    let periods = usize::from(TYRES_LINEAR_PERIODS);
+    assert_eq!(periods, 10);
+    // Gripping: linear from the plan period's last control period on.
+    let first: Vec<bool> = (0..periods).map(|_| step(&mut control, grip)).collect();
+    assert!(first[..periods - 1].iter().all(|l| !l), "{first:?}");
+    assert!(first[periods - 1]);
+    // Understeer: linear until the front is declared saturated, then not.
+    let sliding: Vec<bool> = (0..10).map(|_| step(&mut control, slide)).collect();
+    assert!(control.front_saturated());
+    assert!(sliding[0] && !sliding[9], "{sliding:?}");
+    // Gripping again: a plan period before the tyres count as linear.
+    let again: Vec<bool> = (0..periods).map(|_| step(&mut control, grip)).collect();
+    assert!(again[..periods - 1].iter().all(|l| !l), "{again:?}");
+    assert!(again[periods - 1]);
+
+    let (mut planner, _, car) = setup();
+    let mut t_us = 0;
+    let mut sample = |planner: &mut PlanTask<f64, CAP>, linear: bool| {
+        let mut e = car.estimate(t_us);
+        e.yaw_rate_radps = 0.2;
+        e.vy_mps = -0.3;
+        planner.set_tyres_linear(linear);
+        let _ = planner.run(&e);
+        t_us += PLAN_PERIOD_US;
+        planner.sideslip_lag()
+    };
+    for _ in 0..5 {
+        assert_eq!(sample(&mut planner, false), 0.0);
+    }
+    let learnt = (0..5).map(|_| sample(&mut planner, true)).last().unwrap();
+    assert!(learnt > 0.0, "{learnt}");
+    // Beyond the linear range again: λ held where it was.
+    assert_eq!(sample(&mut planner, false), learnt);
+}

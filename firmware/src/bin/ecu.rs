@@ -199,6 +199,10 @@ static LAST_DELTA_BITS: AtomicU32 = AtomicU32::new(0);
 /// release (a word: no lock; 0 before the first period, which `plan` takes as no
 /// estimate).
 static FRICTION_MU_BITS: AtomicU32 = AtomicU32::new(0);
+/// The control task's [`ControlTask::tyres_linear`](firmware::tasks::ControlTask::tyres_linear),
+/// written by `control` each period and read by `plan` with the estimate at its
+/// release, as [`FRICTION_MU_BITS`] (false before the first period).
+static TYRES_LINEAR: AtomicBool = AtomicBool::new(false);
 /// Core clock ticks spent in `control` so far, link included (the plan task
 /// subtracts them from its elapsed time; the control task alone writes it).
 static CONTROL_TICKS: AtomicU32 = AtomicU32::new(0);
@@ -992,15 +996,18 @@ fn control_job(
 }
 
 /// The plan task's own work: [`PlanTask::run`] on the estimate, planning with
-/// `friction_mu` (the control task's `μ̂`, 0 for none). Not inlined: the timing
-/// analysis bounds it alone, against [`deadline::PLAN_BUDGET_CYCLES`].
+/// `friction_mu` (the control task's `μ̂`, 0 for none), its sideslip lag learning
+/// when `tyres_linear` (the control task's). Not inlined: the timing analysis
+/// bounds it alone, against [`deadline::PLAN_BUDGET_CYCLES`].
 #[inline(never)]
 fn plan_job(
     planner: &mut PlanTask<f32, PATH_CAP>,
     est: &firmware::state_estimate::StateEstimate<f32>,
     friction_mu: f32,
+    tyres_linear: bool,
 ) -> Result<firmware::mpc::MpcReport<f32>, firmware::mpc::MpcError> {
     planner.set_friction_limit(friction_mu);
+    planner.set_tyres_linear(tyres_linear);
     planner.run(est)
 }
 
@@ -1470,6 +1477,7 @@ mod app {
             let mut fault = link::fault_code(control.last_fault);
             watchdog.check(release_us, control.state().plans_seen);
             FRICTION_MU_BITS.store(control.friction_mu().to_bits(), Ordering::Relaxed);
+            TYRES_LINEAR.store(control.tyres_linear(), Ordering::Relaxed);
             let ticks = core_ticks().saturating_sub(t1).min(u32::MAX as u64) as u32;
             // K consecutive misses (the previous activations' late completions and
             // skipped releases): zero torque, the steering held where it was.
@@ -1562,8 +1570,9 @@ mod app {
             } else {
                 let est = cx.shared.estimate.lock(|e| *e);
                 let friction_mu = f32::from_bits(FRICTION_MU_BITS.load(Ordering::Relaxed));
+                let tyres_linear = TYRES_LINEAR.load(Ordering::Relaxed);
                 // wcet-bound: 1 times per activation, counted in plan_jobs
-                let result = plan_job(planner, &est, friction_mu);
+                let result = plan_job(planner, &est, friction_mu, tyres_linear);
                 // The record's copy of the plan, taken before the swap, outside the lock.
                 let computed = planner.pending().copied();
                 // The late-plan policy judges the plan's age now; the completion is

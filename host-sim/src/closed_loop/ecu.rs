@@ -445,6 +445,7 @@ impl<T: Real> SimulatedEcu<T> {
     /// until its modelled finish.
     fn release_plan(&mut self, t_us: u64, est: &StateEstimate<T>, route_instructions: f64) {
         self.planner.set_friction_limit(self.control.friction_mu());
+        self.planner.set_tyres_linear(self.control.tyres_linear());
         let outcome = self.planner.run(est);
         // Charged from the activation's own counters, a failed one's included.
         let report = *self.planner.last_report();

@@ -93,6 +93,9 @@ pub struct Summary {
     /// (`firmware::sideslip`: the plans' course lags the kinematic bicycle's by
     /// `λ·a_y`), null when the ECU does not report it (processor in the loop).
     pub sideslip_lag: Option<f64>,
+    /// The largest sideslip lag `λ` over the run, rad per m/s² (its cap is
+    /// `firmware::sideslip::SideslipConfig::lag_max`), null as `sideslip_lag`.
+    pub sideslip_lag_max: Option<f64>,
     /// The control task's mass ratio `k = m/m₀` at the end of the run
     /// (`firmware::longitudinal_estimator`; this and the five after it null
     /// when the ECU does not report them: processor in the loop).

@@ -688,6 +688,7 @@ impl<'a> Meter<'a> {
         if let Some(lag) = c.sideslip_lag {
             row.sideslip_lag_rad_per_mps2 = lag;
             self.sum.sideslip_lag = Some(lag);
+            self.sum.sideslip_lag_max = Some(self.sum.sideslip_lag_max.map_or(lag, |m| m.max(lag)));
         }
         if let Some(e) = c.car_estimate {
             row.set_car_estimate(&e);
