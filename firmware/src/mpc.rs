@@ -105,17 +105,17 @@ pub const WS: usize = 48;
 /// ([`MpcSettings::qp_max_iter`] of [`MpcSettings::paper`], the ECU's settings):
 /// the flow fact that bounds the plan task's worst case. With [`WS`] 48, one
 /// cold pass and no refactorization, the largest cap whose static bound of the
-/// plan job stays within 75 % of its budget (11.97 M model cycles; about 0.1 M
-/// a further iteration: docs/timing.md, *How the plan task fits its budget*).
-/// A step stopped at the cap gives no plan (the control task follows the last
-/// one) and the next goes on from its working set.
+/// plan job stays within 75 % of its budget (`host-sim wcet --static-only`;
+/// docs/timing.md, *How the plan task fits its budget*). A step stopped at the
+/// cap gives no plan (the control task follows the last one) and the next goes
+/// on from its working set.
 pub const QP_MAX_ITER: u32 = 79;
 /// QP refactorizations one activation may make, summed over its passes (each
 /// pass gets what is left as its [`qp::QpSettings::max_refactorizations`]):
 /// with [`QP_MAX_ITER`], the flow fact that bounds the plan task's worst case. A
 /// refactorization rebuilds the factor of up to [`WS`] rows (about `WS³/6`
-/// multiply-adds and the `WS²/2` products of its rows, 0.8 M model cycles at
-/// 48 rows, about ten iterations). None: the stress sweep fails fewer plan
+/// multiply-adds and the `WS²/2` products of its rows), which the static bound
+/// charges as about ten iterations. None: the stress sweep fails fewer plan
 /// steps with the iterations they buy (docs/tuning.md, *Iterations instead of a
 /// refactorization*). Without one, a dependent row is added by null-space steps
 /// as always, and a solve whose factor has lost the working set's optimality

@@ -693,8 +693,8 @@ impl<T: Real> ControlTask<T> {
     /// past [`FRONT_SLIP_HOLD_RAD`], no slip event, no wheel spinning or locking
     /// ([`crate::friction`]), no fault. Give it to the `plan` task
     /// ([`PlanTask::set_tyres_linear`]) with the state estimate: its sideslip lag
-    /// learns only then (1–2 s of sliding pushed it to its cap, where it stayed
-    /// through ~10 s of cornering).
+    /// learns only then (a sliding car is not the linear tyre the lag models, and
+    /// what it learns stays for the forgetting's memory, about 5 s).
     pub fn tyres_linear(&self) -> bool {
         self.linear_periods >= TYRES_LINEAR_PERIODS
     }
