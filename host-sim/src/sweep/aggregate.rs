@@ -90,6 +90,29 @@ pub struct Aggregate {
     pub bounds: Bounds,
     /// The errors, by run index.
     pub errors: BTreeMap<String, String>,
+    /// Plan activations that published nothing over every run, by why (the
+    /// runs' `plan_failure_kinds` summed: the QP's iteration cap, a full working
+    /// set, ...).
+    pub plan_failures: BTreeMap<String, u64>,
+}
+
+/// The runs' `plan_failure_kinds` (`kind:count;...`) summed by kind; a cell that
+/// does not parse counts as one failure of its own text.
+fn sum_plan_failures<'a>(rows: impl Iterator<Item = &'a Row>) -> BTreeMap<String, u64> {
+    let mut m = BTreeMap::new();
+    for r in rows {
+        for part in r.plan_failure_kinds.split(';').filter(|p| !p.is_empty()) {
+            let (kind, n) = match part.rsplit_once(':') {
+                Some((k, n)) => match n.parse::<u64>() {
+                    Ok(n) => (k, n),
+                    Err(_) => (part, 1),
+                },
+                None => (part, 1),
+            };
+            *m.entry(kind.to_string()).or_insert(0) += n;
+        }
+    }
+    m
 }
 
 fn count_outcomes<'a>(rows: impl Iterator<Item = &'a Row>) -> BTreeMap<&'static str, usize> {
@@ -206,6 +229,7 @@ pub fn aggregate(rows: &[Row], wall_s: Option<f64>) -> Aggregate {
             .filter(|r| !r.error.is_empty())
             .map(|r| (r.factors["index"].clone(), r.error.clone()))
             .collect(),
+        plan_failures: sum_plan_failures(rows.iter()),
     }
 }
 
@@ -257,6 +281,21 @@ pub fn text_summary(a: &Aggregate) -> String {
         t,
         "bounds: lateral error ≤ {} m, |a_y| ≤ {} μg, consistency ≤ {} m, no misses, no false drop of μ̂ (μ̂ fd: runs where μ̂ < 0.9 × the lowest road μ of the last 10 s)",
         a.bounds.lateral_error_m, a.bounds.ay_over_mu_g, a.bounds.consistency_m
+    );
+    let failed: u64 = a.plan_failures.values().sum();
+    let kinds: Vec<String> = a
+        .plan_failures
+        .iter()
+        .map(|(k, n)| format!("{k} {n}"))
+        .collect();
+    let _ = writeln!(
+        t,
+        "plan activations that published nothing: {failed}{}",
+        if kinds.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", kinds.join(", "))
+        }
     );
     for f in &a.faults {
         let _ = writeln!(
@@ -327,5 +366,43 @@ mod tests {
         assert_eq!((b.track.as_str(), b.mu_false_drops), ("b", 0));
         assert!(b.missed.is_empty(), "{:?}", b.missed);
         assert!(text_summary(&agg).contains("μ̂ fd"));
+    }
+
+    #[test]
+    fn failed_plan_steps_are_summed_by_kind() {
+        let h = header();
+        let record = |kinds: &str| -> Vec<String> {
+            h.iter()
+                .map(|c| match c.as_str() {
+                    "track" => "a".into(),
+                    "mu" => "1".into(),
+                    "outcome" => "ok".into(),
+                    "completed" => "true".into(),
+                    "plan_failure_kinds" => kinds.into(),
+                    _ => String::new(),
+                })
+                .collect()
+        };
+        let rows = parse_rows(&[
+            record("qp_iteration_limit:20;qp_working_set_full:4"),
+            record(""),
+            record("qp_iteration_limit:3"),
+            record("odd"),
+        ]);
+        let agg = aggregate(&rows, None);
+        let want: BTreeMap<String, u64> = [
+            ("odd".to_string(), 1),
+            ("qp_iteration_limit".to_string(), 23),
+            ("qp_working_set_full".to_string(), 4),
+        ]
+        .into();
+        assert_eq!(agg.plan_failures, want);
+        assert!(
+            text_summary(&agg).contains(
+                "plan activations that published nothing: 28 (odd 1, qp_iteration_limit 23, qp_working_set_full 4)"
+            ),
+            "{}",
+            text_summary(&agg)
+        );
     }
 }

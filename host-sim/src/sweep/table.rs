@@ -148,6 +148,9 @@ pub struct Row {
     /// The friction check's `μ̂` fell below 0.9 × the road's recent lowest μ
     /// (`mu_false_drop`; false when not judged).
     pub mu_false_drop: bool,
+    /// Plan activations that published nothing, by why (`plan_failure_kinds`:
+    /// `kind:count` pairs joined by `;`).
+    pub plan_failure_kinds: String,
 }
 
 /// Parses `sweep.csv` records (with [`header`]'s columns).
@@ -178,6 +181,7 @@ pub fn parse_rows(records: &[Vec<String>]) -> Vec<Row> {
             misses: (num(r, "plan_deadline_misses") + num(r, "control_deadline_misses")).max(0.0)
                 as u64,
             mu_false_drop: get(r, "mu_false_drop") == "true",
+            plan_failure_kinds: get(r, "plan_failure_kinds"),
         })
         .collect()
 }
