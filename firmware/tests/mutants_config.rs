@@ -68,15 +68,16 @@ fn entry_of(line: &str) -> Option<(String, String)> {
 /// operator, on the one line of `e.function` that holds the anchor; an error
 /// when no line or more than one does.
 fn locate(lines: &[&str], e: &Exclusion) -> Result<(usize, usize), String> {
+    let op = e.anchor.find(&e.operator);
+    // The lines that hold the anchor first; only those look up their function.
     let found: Vec<(usize, usize)> = lines
         .iter()
         .enumerate()
-        .filter(|(i, _)| enclosing_fn(lines, i + 1).as_deref() == Some(e.function.as_str()))
         .flat_map(|(i, l)| {
-            let op = e.anchor.find(&e.operator);
             l.match_indices(e.anchor.as_str())
                 .filter_map(move |(at, _)| Some((i + 1, l[..at + op?].chars().count() + 1)))
         })
+        .filter(|&(line, _)| enclosing_fn(lines, line).as_deref() == Some(e.function.as_str()))
         .collect();
     match found.as_slice() {
         [one] => Ok(*one),
