@@ -12,8 +12,8 @@
 //! the longitudinal one does not: the driven wheels spin accelerating out of curves
 //! (slip ratio 0.7–0.8 measured at `μ_planner = 1.5·μ_road`), the wheels lock under
 //! braking, and with them the tyres' lateral force goes: the car runs straight off
-//! the road. The state estimate carries no wheel speeds, so slip cannot be seen
-//! directly; its effect can.
+//! the road. Without wheel speeds slip cannot be seen directly; its effect can
+//! (with them, *Wheel speeds* below).
 //!
 //! # How
 //!
@@ -137,7 +137,7 @@
 //!
 //! When the state estimate carries the four wheel speeds
 //! ([`StateEstimate::wheel_speed_mps`], as an ABS system measures them), slip is
-//! also read where it happens, per wheel ([`FrictionEstimator::read_wheels`]):
+//! also read where it happens, per wheel ([`FrictionEstimator::read_sensors`]):
 //! each wheel's speed `ω·r` against the ground's under it, `v_x ∓ ψ̇·t/2` (left,
 //! right), the front wheels' times `1 + δ²/2` (rolling along their steered
 //! heading). A driven (front) wheel faster than that by more than
@@ -179,6 +179,35 @@
 //! ([`crate::tasks::ControlTask::car_model`]): while a driven wheel spins, half
 //! the traction grip (a traction control); while a wheel locks, half the
 //! braking grip (an anti-lock system), in the same period.
+//!
+//! # The accelerometer
+//!
+//! When the state estimate carries the accelerometer's specific force along
+//! the car ([`StateEstimate::specific_force_x_mps2`] `f`, as an IMU measures
+//! it: the acceleration plus `g·sin γ` on a grade `γ`), the observer integrates
+//! `a_cmd − a_f` instead of comparing `V̂` with the speed:
+//!
+//! ```text
+//! a_f = f + v_y·ψ̇                     (v̇_x + g·sin γ: the body frame turns)
+//! V̂ − V ← (1 − Δt/τ_o)·(V̂ − V + Δt·(a_cmd − a_f))
+//! ```
+//!
+//! (`f` alone falls short of `a_cmd` in a bend: the steered front's lateral
+//! force has a component `F_yf·sin δ` against the car's `x` axis, about
+//! `(l_r/L)·a_y·δ`, 0.4–0.5 m/s² in a hairpin at `a_y` 4 m/s², which read as
+//! slip; `v_y·ψ̇`, with `v_y ≈ l_r·ψ̇` at the centre of gravity, gives it back,
+//! as the speed does.)
+//!
+//! the same filter of the same shortfall, but of the force the tyres and the
+//! air give per unit mass rather than of the acceleration: a grade is no
+//! longer a shortfall (a 6 % climb is 0.59 m/s² of `g·sin γ` the speed alone
+//! shows as missing acceleration), and the longitudinal estimator learns the
+//! mass and the resistances on `f` too, so `r₀` holds the rolling resistance,
+//! not the grade under the car. The speed's noise no longer enters the
+//! shortfall; the accelerometer's (white, a few 0.01 m/s²) enters low-passed.
+//! `a_meas` in the friction used is then `LP(a_f)`: the tyres' force with the
+//! grade's share in it. A change between the two (the accelerometer lost or
+//! found) restarts the observer, as a gap does.
 //!
 //! # Use
 //!
@@ -439,8 +468,15 @@ pub struct FrictionEstimator<T> {
     torques: [T; TORQUE_HISTORY],
     /// Next slot of `torques` to write.
     head: usize,
-    /// The observer's speed `V̂`, m/s.
+    /// The observer's speed `V̂`, m/s; `V̂ − V` while it reads the
+    /// accelerometer (`accel_mode`).
     v_hat_mps: T,
+    /// The observer integrates the specific force (module docs, *The
+    /// accelerometer*) rather than comparing with the speed.
+    accel_mode: bool,
+    /// The last estimate's specific force along `x` plus `v_y·ψ̇`, m/s² (NaN:
+    /// not measured; module docs, *The accelerometer*).
+    specific_force_mps2: T,
     /// `a_cmd` low-passed at `τ_o` (as the observer low-passes the shortfall),
     /// then at `τ_f`, m/s².
     accel_cmd_mps2: [T; 2],
@@ -511,6 +547,8 @@ impl<T: Real> FrictionEstimator<T> {
             torques: [T::ZERO; TORQUE_HISTORY],
             head: 0,
             v_hat_mps: T::ZERO,
+            accel_mode: false,
+            specific_force_mps2: T::NAN,
             accel_cmd_mps2: [T::ZERO; 2],
             shortfall_mps2: T::ZERO,
             shortfall_s: T::ZERO,
@@ -597,7 +635,8 @@ impl<T: Real> FrictionEstimator<T> {
         self.wheel_slip_mps
     }
 
-    /// Reads the wheel speeds of `est` (module docs, *Wheel speeds*): each
+    /// Reads the accelerometer of `est` (module docs, *The accelerometer*) and
+    /// its wheel speeds (module docs, *Wheel speeds*): each
     /// wheel's speed against its ground speed, `v_x ∓ ψ̇·t/2` (left, right),
     /// the front ones' times `1 + δ²/2` (they roll along their steered heading,
     /// `1/cos δ` of the car's speed to second order). A driven front wheel
@@ -606,7 +645,9 @@ impl<T: Real> FrictionEstimator<T> {
     /// speeds (not measured): neither, and no difference. No division, no loop.
     // Inlined into the control task's one call.
     #[inline(always)]
-    pub fn read_wheels(&mut self, cfg: &FrictionConfig<T>, est: &StateEstimate<T>) {
+    pub fn read_sensors(&mut self, cfg: &FrictionConfig<T>, est: &StateEstimate<T>) {
+        // The body frame turns: `v̇_x = f + v_y·ψ̇` on the level (module docs).
+        self.specific_force_mps2 = est.specific_force_x_mps2 + est.vy_mps * est.yaw_rate_radps;
         let [fl, fr, rl, rr] = est.wheel_speed_mps;
         let vx = est.vx_mps;
         let side = est.yaw_rate_radps * cfg.half_track_m;
@@ -673,7 +714,9 @@ impl<T: Real> FrictionEstimator<T> {
                 // u32 → f32 is one instruction on the ECU (u64 → f32 a call).
                 let us = (stamp_us - stamp).min(u64::from(u32::MAX)) as u32;
                 let dt = T::lit(us as f32) * T::lit(1.0e-6);
-                if dt <= cfg.max_gap_s && back <= TORQUE_HISTORY {
+                // The accelerometer lost or found: the observer restarts.
+                let accel = self.specific_force_mps2.is_finite();
+                if dt <= cfg.max_gap_s && back <= TORQUE_HISTORY && accel == self.accel_mode {
                     let i = (self.head + TORQUE_HISTORY - back) % TORQUE_HISTORY;
                     let applied = self.torques[i];
                     self.step(cfg, v_mps, yaw_rate_radps, applied, dt);
@@ -713,7 +756,8 @@ impl<T: Real> FrictionEstimator<T> {
 
     /// The observer and the filters restart from the speed `v` (not the estimate).
     fn restart(&mut self, v: T) {
-        self.v_hat_mps = v;
+        self.accel_mode = self.specific_force_mps2.is_finite();
+        self.v_hat_mps = if self.accel_mode { T::ZERO } else { v };
         self.accel_cmd_mps2 = [T::ZERO; 2];
         self.shortfall_mps2 = T::ZERO;
         self.shortfall_s = T::ZERO;
@@ -740,8 +784,15 @@ impl<T: Real> FrictionEstimator<T> {
         // corrected: e_j = (1 − k_o)·e_{j−1} + Δt·(a_cmd − a_meas) exactly, the
         // recursion of the first filter on a_cmd below.
         let k_o = smaller(dt * inv_tau_o, T::ONE);
-        let e = self.v_hat_mps + dt * a_cmd - v;
-        self.v_hat_mps = v + (T::ONE - k_o) * e;
+        // With the accelerometer (module docs), `v_hat_mps` holds `V̂ − V`, and
+        // its measured change is `Δt·f`.
+        let f = self.specific_force_mps2;
+        let (e, anchor) = if self.accel_mode {
+            (self.v_hat_mps + dt * (a_cmd - f), T::ZERO)
+        } else {
+            (self.v_hat_mps + dt * a_cmd - v, v)
+        };
+        self.v_hat_mps = anchor + (T::ONE - k_o) * e;
         let s_raw = e * inv_tau_o;
         // a_cmd through the same two filters as the shortfall, so that
         // a_cmd − shortfall is the measured acceleration without a lag between them.
@@ -845,6 +896,7 @@ impl<T: Real> FrictionEstimator<T> {
             slipping: self.slipping || short,
             slip_mps: self.wheel_slip_mps,
             wheels_measured: self.wheels_measured,
+            specific_force_mps2: if self.accel_mode { f } else { T::NAN },
         };
         self.longitudinal.update(&cfg.longitudinal, inv_mr, &sample);
     }
@@ -1065,7 +1117,7 @@ mod tests {
             let mut est = StateEstimate::<f64>::zeroed();
             est.vx_mps = v;
             est.wheel_speed_mps = [v + wheels, v + wheels, v, v];
-            r.e.read_wheels(&r.c, &est);
+            r.e.read_sensors(&r.c, &est);
             v = r.drive(v, 3.5, a_meas, 0.0, 0.01);
         }
         r.e.events()

@@ -57,6 +57,20 @@
 //! its sides, and the speed's white noise reaches `H·V̇` attenuated to about
 //! `0.13·σ_V/τ` (0.09 m/s² at σ_V = 0.2 m/s, τ = 0.3 s) instead of `σ_V/Δt`.
 //!
+//! # The accelerometer
+//!
+//! With the accelerometer's specific force along the car `f` (the acceleration
+//! plus `g·sin γ` on a grade `γ`; [`LongitudinalSample::specific_force_mps2`]
+//! gives `f + v_y·ψ̇`, `v̇_x + g·sin γ`: `crate::friction`, *The accelerometer*),
+//! the model reads `y_d + b·y_b = k·f + r₀ + r₂·(V/V_ref)²`: the force the
+//! tyres give against the mass times the non-gravitational force per unit mass.
+//! The grade is then in `f`, not in `r₀`, which holds the rolling resistance
+//! alone, and a climb taken while accelerating cannot be learnt as mass. `H·f`
+//! (`f` through the same two stages) replaces `H·V̇`; everything else is as
+//! below. Without it (`f` not finite) the grade is a resistance that changes
+//! under the car, which the forgetting follows with lag: the mass ratio takes
+//! what `r₀` has not yet followed (`docs/sweeps.md`, the grade row).
+//!
 //! # Estimator
 //!
 //! Recursive least squares with exponential forgetting (memory
@@ -335,6 +349,12 @@ pub struct LongitudinalSample<T> {
     /// True when the wheel speeds were measured (`slip_mps` read from them):
     /// the demand gate is then [`LongitudinalConfig::measured_demand_fraction`].
     pub wheels_measured: bool,
+    /// The accelerometer's specific force along the car plus `v_y·ψ̇`
+    /// (`v̇_x + g·sin γ`), m/s² (module docs, *The accelerometer*); not finite:
+    /// not measured, the acceleration is read
+    /// from the speed. The caller restarts the estimator
+    /// ([`LongitudinalEstimator::restart`]) when it goes from one to the other.
+    pub specific_force_mps2: T,
 }
 
 /// The estimator's state (module docs): filters, parameters, covariance.
@@ -354,6 +374,8 @@ pub struct LongitudinalEstimator<T> {
     /// The filters' stages: speed (m/s), `y` (m/s²), `(V/V_ref)²`, `y_b` (m/s²):
     /// `[stage 1, stage 2]`.
     v_f: [T; 2],
+    /// The specific force's stages, m/s² (NaN while not measured).
+    f_f: [T; 2],
     y_f: [T; 2],
     q_f: [T; 2],
     yb_f: [T; 2],
@@ -387,6 +409,7 @@ impl<T: Real> LongitudinalEstimator<T> {
             u: [T::ZERO; 2],
             p: [T::ZERO; 6],
             v_f: [T::ZERO; 2],
+            f_f: [T::ZERO; 2],
             y_f: [T::ZERO; 2],
             q_f: [T::ZERO; 2],
             yb_f: [T::ZERO; 2],
@@ -544,6 +567,7 @@ impl<T: Real> LongitudinalEstimator<T> {
         if self.clean_s < T::ZERO {
             // Filters at rest on the first sample.
             self.v_f = [s.v_mps; 2];
+            self.f_f = [s.specific_force_mps2; 2];
             self.y_f = [y; 2];
             self.q_f = [q; 2];
             self.yb_f = [yb; 2];
@@ -554,8 +578,15 @@ impl<T: Real> LongitudinalEstimator<T> {
         let [inv_tau, inv_memory, ..] = self.inverses;
         let kf = at_most(s.dt_s * inv_tau, T::ONE);
         let v1 = self.v_f[0] + kf * (s.v_mps - self.v_f[0]);
-        let accel = (v1 - self.v_f[1]) * inv_tau;
+        let mut accel = (v1 - self.v_f[1]) * inv_tau;
         self.v_f = [v1, self.v_f[1] + kf * (v1 - self.v_f[1])];
+        // With the accelerometer, `H·f` in place of `H·V̇` (module docs).
+        let f1 = self.f_f[0] + kf * (s.specific_force_mps2 - self.f_f[0]);
+        let f2 = self.f_f[1] + kf * (f1 - self.f_f[1]);
+        self.f_f = [f1, f2];
+        if f2.is_finite() {
+            accel = f2;
+        }
         let y1 = self.y_f[0] + kf * (y - self.y_f[0]);
         let y2 = self.y_f[1] + kf * (y1 - self.y_f[1]);
         self.y_f = [y1, y2];
@@ -757,6 +788,10 @@ mod tests {
         brake: f64,
         /// The wheels' slip ratio reported with each sample.
         slip_ratio: f64,
+        /// `sin γ` of the road's grade at time `t` (uphill positive).
+        grade: fn(f64) -> f64,
+        /// The accelerometer's white noise, m/s² (`None`: not measured).
+        accel_sigma: Option<f64>,
         v: f64,
         t: f64,
         sigma: f64,
@@ -771,6 +806,8 @@ mod tests {
                 c2,
                 brake: 1.0,
                 slip_ratio: 0.0,
+                grade: |_| 0.0,
+                accel_sigma: None,
                 v: 20.0,
                 t: 0.0,
                 sigma,
@@ -804,9 +841,13 @@ mod tests {
                 };
                 let force = given / R - self.f0 - self.c2 * self.v * self.v;
                 let lost = slip(self.t, a_cmd);
-                self.v += (force / self.m - lost) * DT;
+                let specific = force / self.m - lost;
+                self.v += (specific - 9.81 * (self.grade)(self.t)) * DT;
                 self.t += DT;
                 let meas = self.v + self.sigma * self.rng.normal();
+                let f = self
+                    .accel_sigma
+                    .map_or(f64::NAN, |s| specific + s * self.rng.normal());
                 e.update(
                     &c,
                     inv_mr,
@@ -825,6 +866,7 @@ mod tests {
                             0.0
                         }),
                         wheels_measured: self.slip_ratio > 0.0,
+                        specific_force_mps2: T::from_f64(f),
                     },
                 );
             }
@@ -923,6 +965,47 @@ mod tests {
         assert!((a - 3.0 / 1.3).abs() < 0.1, "a = {a}");
     }
 
+    /// A 6 % climb and a 6 % descent of 20 s each, then 20 s level, in turn:
+    /// the grade changes while the car accelerates and brakes.
+    fn hills(t: f64) -> f64 {
+        match (t % 60.0) as u32 {
+            0..=19 => 0.06,
+            20..=39 => -0.06,
+            _ => 0.0,
+        }
+    }
+
+    /// A heavier car on hills, 1.3 × the configured mass with rolling
+    /// resistance and drag, speed noise of level 4: what it learns by the end
+    /// of 240 s, `(k, r₀)`, with the accelerometer of noise `accel_sigma`
+    /// (m/s²) or without one (`None`).
+    fn on_hills(accel_sigma: Option<f64>) -> (f64, f64) {
+        let mut e = started();
+        let mut car = Car::new(1.3 * M, 200.0, 0.418, 0.2);
+        car.grade = hills;
+        car.accel_sigma = accel_sigma;
+        car.run(&mut e, 240.0, pattern, |_, _| 0.0);
+        (e.mass_ratio(), e.resistance_terms_mps2()[0])
+    }
+
+    #[test]
+    fn with_the_accelerometer_a_grade_is_neither_mass_nor_resistance() {
+        // The specific force carries `g·sin γ`: the mass and the rolling
+        // resistance (200 N on 1,500 kg configured: 0.133 m/s²) are learnt as
+        // on the level, whatever the grade under the car.
+        let (k, r0) = on_hills(Some(0.05));
+        assert!((k - 1.3).abs() < 0.039, "k = {k}");
+        assert!((r0 - 200.0 / M).abs() < 0.05, "r0 = {r0}");
+        // From the speed alone the grade is a resistance that changes: `r₀`
+        // holds the grade under the car, and the mass ratio takes what `r₀`
+        // has not yet followed.
+        let (k, r0) = on_hills(None);
+        assert!(
+            (k - 1.3).abs() > 0.039 || (r0 - 200.0 / M).abs() > 0.05,
+            "k = {k}, r0 = {r0}"
+        );
+    }
+
     #[test]
     fn speed_noise_at_four_times_level_one_leaves_the_mass_within_five_percent() {
         let mut e = started();
@@ -988,6 +1071,7 @@ mod tests {
                 slipping: false,
                 slip_mps: 0.0,
                 wheels_measured: false,
+                specific_force_mps2: f64::NAN,
             };
             assert!(!e.update(&cfg(), inv, &s));
             assert_eq!(e.mass_ratio(), before.mass_ratio());
@@ -1132,6 +1216,7 @@ mod tests {
                         dt_s: dt, v_mps: v, torque_nm: t, lateral_mps2: lat,
                         grip_mps2: grip, driven_share: share, slipping: slip,
                         slip_mps: kappa, wheels_measured: kappa > 0.0,
+                        specific_force_mps2: if kappa > 0.05 { t / 400.0 } else { f64::NAN },
                     };
                     e.update(&c, inv, &s);
                     let [k, r0, r2] = e.theta;

@@ -28,6 +28,12 @@ pub struct StateEstimate<T> {
     /// friction check then reads slip from the acceleration alone); not part of
     /// [`StateEstimate::is_finite`].
     pub wheel_speed_mps: [T; 4],
+    /// The accelerometer's specific force along the car's `x` axis, m/s²
+    /// (positive forward): the acceleration plus `g·sin γ` on a road of grade
+    /// `γ` (uphill positive), what an IMU reads. Not finite: not measured (the
+    /// friction check and the longitudinal estimator then read the
+    /// acceleration from the speed); not part of [`StateEstimate::is_finite`].
+    pub specific_force_x_mps2: T,
 }
 
 impl<T: Real> Default for StateEstimate<T> {
@@ -38,8 +44,8 @@ impl<T: Real> Default for StateEstimate<T> {
 }
 
 impl<T: Real> StateEstimate<T> {
-    /// An all-zero estimate at time 0, its wheel speeds not measured (NaN); a
-    /// valid `const` initialiser.
+    /// An all-zero estimate at time 0, its wheel speeds and specific force not
+    /// measured (NaN); a valid `const` initialiser.
     pub const fn zeroed() -> Self {
         Self {
             stamp_us: 0,
@@ -51,6 +57,7 @@ impl<T: Real> StateEstimate<T> {
             yaw_rate_radps: T::ZERO,
             delta_rad: T::ZERO,
             wheel_speed_mps: [T::NAN; 4],
+            specific_force_x_mps2: T::NAN,
         }
     }
 
@@ -71,6 +78,7 @@ impl<T: Real> StateEstimate<T> {
             yaw_rate_radps: nan,
             delta_rad: nan,
             wheel_speed_mps: [nan; 4],
+            specific_force_x_mps2: nan,
         }
     }
 
@@ -84,8 +92,9 @@ impl<T: Real> StateEstimate<T> {
         }
     }
 
-    /// True when every field but the wheel speeds is finite (NaN and ±∞ are
-    /// refused by the tasks; [`all_finite`]: no branch per field).
+    /// True when every field but the wheel speeds and the specific force is
+    /// finite (NaN and ±∞ are refused by the tasks; [`all_finite`]: no branch
+    /// per field).
     pub fn is_finite(&self) -> bool {
         all_finite([
             self.x_m,

@@ -879,7 +879,7 @@ impl<T: Real> ControlTask<T> {
     /// no valid plan) it returns the safe actuation and counts it.
     pub fn run(&mut self, est: &StateEstimate<T>, plan: &Plan<T>, now_us: u64) -> Actuation<T> {
         self.stats.activations = self.stats.activations.wrapping_add(1);
-        self.friction.read_wheels(&self.friction_config, est);
+        self.friction.read_sensors(&self.friction_config, est);
         let lateral = self.lateral_demand(est);
         // The brakes' left/right shares follow the measured `V·ψ̇`.
         let car = self.car_model(lateral, est.vx_mps * est.yaw_rate_radps);

@@ -83,6 +83,7 @@ fn estimate(stamp_us: u64, v: f32) -> StateEstimate<f32> {
         yaw_rate_radps: v,
         delta_rad: v,
         wheel_speed_mps: [1.0, 2.0, 3.0, 4.0],
+        specific_force_x_mps2: -0.75,
     }
 }
 

@@ -6,6 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use firmware::friction::{FrictionConfig, FrictionEstimator, TORQUE_HISTORY};
+use firmware::state_estimate::StateEstimate;
 use firmware::timing::CONTROL_PERIOD_US;
 
 const M: f64 = 1500.0;
@@ -165,6 +166,27 @@ impl Rig {
     /// car achieves `a_meas` (m/s²), straight; returns the speed reached.
     fn drive(&mut self, v: f64, a_cmd: f64, a_meas: f64, secs: f64) -> f64 {
         self.drive_turning(v, a_cmd, a_meas, 0.0, secs)
+    }
+
+    /// [`Rig::drive`] with the accelerometer: the estimate carries the
+    /// specific force `f` (m/s²; the acceleration plus the grade's `g·sin γ`),
+    /// the wheel speeds not measured.
+    fn drive_measured(&mut self, v: f64, a_cmd: f64, a_meas: f64, f: f64, secs: f64) -> f64 {
+        let mut v = v;
+        for _ in 0..(secs / P).round() as u32 {
+            let t = self.now_us;
+            let est = StateEstimate {
+                stamp_us: t,
+                vx_mps: v,
+                specific_force_x_mps2: f,
+                ..StateEstimate::zeroed()
+            };
+            self.e.read_sensors(&self.c, &est);
+            self.e.update(&self.c, t, t, v, 0.0, a_cmd * M * R);
+            self.now_us += CONTROL_PERIOD_US;
+            v += a_meas * P;
+        }
+        v
     }
 
     /// [`Rig::drive`] at the lateral acceleration `ay` (m/s²).
@@ -438,6 +460,60 @@ fn a_deceleration_without_torque_is_not_the_driven_axles() {
 }
 
 #[test]
+fn with_the_accelerometer_a_sudden_climb_is_neither_slip_nor_resistance() {
+    // Learnt on the level with the accelerometer (driving, coasting, braking),
+    // then a 15 % climb (1.46 m/s² of `g·sin γ`) under a torque asking 3 m/s²:
+    // the tyres give all of it (the specific force is 3), the car gains 1.54.
+    let grade = 9.81 * 0.15;
+    let run = |accel: bool| {
+        let mut r = Rig::new();
+        let mut v = 20.0;
+        for k in 0..30 {
+            let a = [1.5, 0.0, -1.5][k % 3];
+            v = if accel {
+                r.drive_measured(v, a, a, a, 4.0)
+            } else {
+                r.drive(v, a, a, 4.0)
+            };
+        }
+        assert_eq!(r.e.events(), 0);
+        let _ = if accel {
+            r.drive_measured(v, 3.0, 3.0 - grade, 3.0, 3.0)
+        } else {
+            r.drive(v, 3.0, 3.0 - grade, 3.0)
+        };
+        let [r0, _] = r.e.longitudinal().resistance_terms_mps2();
+        (r.e.events(), r.e.mu(), r0)
+    };
+    let (events, mu, r0) = run(true);
+    assert_eq!((events, mu), (0, MU));
+    assert!(r0.abs() < 0.1, "r0 = {r0}");
+    // From the speed alone, the same climb is a shortfall the estimate does
+    // not explain: slip.
+    let (events, mu, _) = run(false);
+    assert!(events == 1 && mu < MU, "{events} events, mu {mu}");
+}
+
+#[test]
+fn losing_the_accelerometer_restarts_the_observer_and_keeps_the_estimate() {
+    // The accelerometer for 10 s, then not (NaN) for 5 s, then again: each change
+    // starts the observer afresh (no shortfall carried across), the car learnt
+    // is kept, and a grip that holds stays no slip.
+    let mut r = Rig::new();
+    let mut v = r.drive_measured(20.0, 1.5, 1.5, 1.5, 10.0);
+    v = r.drive_measured(v, 1.0, 1.0, f64::NAN, 5.0);
+    r.drive_measured(v, -1.0, -1.0, -1.0, 5.0);
+    assert_eq!(r.e.events(), 0);
+    let k = r.e.longitudinal().mass_ratio();
+    assert!((k - 1.0).abs() < 0.02, "k = {k}");
+    assert!(
+        r.e.shortfall_mps2().abs() < 0.05,
+        "{}",
+        r.e.shortfall_mps2()
+    );
+}
+
+#[test]
 fn a_learned_grade_is_not_slip() {
     // Climbing a grade that costs 0.8 m/s² (under the threshold at 1 m/s² of
     // demand before it is learned): once learned, a torque asking 3 m/s² of the
@@ -626,7 +702,6 @@ fn at_the_fast_ceiling_the_estimate_creeps() {
 /// spins, any wheel below it locks; not measured (NaN), neither.
 #[test]
 fn wheel_speeds_tell_a_rolling_wheel_from_a_spinning_or_locked_one() {
-    use firmware::state_estimate::StateEstimate;
     let mut c = cfg();
     c.half_track_m = 0.65;
     let mut e = FrictionEstimator::new();
@@ -639,7 +714,7 @@ fn wheel_speeds_tell_a_rolling_wheel_from_a_spinning_or_locked_one() {
         ..StateEstimate::zeroed()
     };
     let mut read = |s: StateEstimate<f64>| {
-        e.read_wheels(&c, &s);
+        e.read_sensors(&c, &s);
         (e.wheel_spinning(), e.wheel_locking(), e.wheel_slip_mps())
     };
     // Straight at 20 m/s, rolling.
@@ -687,7 +762,6 @@ fn wheel_speeds_tell_a_rolling_wheel_from_a_spinning_or_locked_one() {
 /// asked: the event lowers the estimate.
 #[test]
 fn a_spinning_wheel_is_slip_whatever_the_shortfall() {
-    use firmware::state_estimate::StateEstimate;
     let c = cfg();
     let mut e = FrictionEstimator::new();
     e.start(&c);
@@ -701,7 +775,7 @@ fn a_spinning_wheel_is_slip_whatever_the_shortfall() {
             wheel_speed_mps: [w, w, v, v],
             ..StateEstimate::zeroed()
         };
-        e.read_wheels(&c, &s);
+        e.read_sensors(&c, &s);
         e.update(&c, t, t, v, 0.0, 0.5 * M * R);
         v += 0.5 * 0.01;
         t += CONTROL_PERIOD_US;
@@ -715,7 +789,6 @@ fn a_spinning_wheel_is_slip_whatever_the_shortfall() {
 /// confirmation.
 #[test]
 fn one_locked_wheel_is_no_slip_event_two_are() {
-    use firmware::state_estimate::StateEstimate;
     let c = cfg();
     let run = |wheels: fn(f64) -> [f64; 4]| {
         let mut e = FrictionEstimator::new();
@@ -731,7 +804,7 @@ fn one_locked_wheel_is_no_slip_event_two_are() {
                 wheel_speed_mps: w,
                 ..StateEstimate::zeroed()
             };
-            e.read_wheels(&c, &s);
+            e.read_sensors(&c, &s);
             e.update(&c, t, t, v, 0.0, -0.5 * M * R);
             v -= 0.5 * 0.01;
             t += CONTROL_PERIOD_US;
@@ -747,7 +820,6 @@ fn one_locked_wheel_is_no_slip_event_two_are() {
 /// the traction-control flag is up from its first period either way.
 #[test]
 fn a_spin_shorter_than_the_wheels_confirmation_is_no_event() {
-    use firmware::state_estimate::StateEstimate;
     let c = cfg();
     let run = |periods: usize| {
         let mut e = FrictionEstimator::new();
@@ -765,7 +837,7 @@ fn a_spin_shorter_than_the_wheels_confirmation_is_no_event() {
                 wheel_speed_mps: [w, w, v, v],
                 ..StateEstimate::zeroed()
             };
-            e.read_wheels(&c, &s);
+            e.read_sensors(&c, &s);
             flagged |= k == 200 && e.wheel_spinning();
             e.update(&c, t, t, v, 0.0, 0.5 * M * R);
             v += 0.5 * 0.01;

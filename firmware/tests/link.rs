@@ -163,6 +163,7 @@ fn estimate(stamp_us: u64, v: f32) -> StateEstimate<f32> {
         yaw_rate_radps: v,
         delta_rad: v,
         wheel_speed_mps: [v, 2.0 * v, -v, 0.5 * v],
+        specific_force_x_mps2: 0.25 * v,
     }
 }
 
@@ -376,15 +377,15 @@ fn frame_layout_is_version_postcard_freshness_tag_crc_cobs() {
         [0xde, 0x98, 0x71, 0xc0, 0x07, 0x1d, 0x52, 0xe4]
     );
     // Pinned bytes, computed apart (Python's `hashlib.blake2s` and `zlib.crc32`):
-    // `Down::Start` under the development key is version 10, tag 3, freshness 1
-    // (01 00 00 00), the tag 5e 85 e4 6c 71 7e de 9c (keyed BLAKE2s of
-    // 01 0a 03 01 00 00 00: the down stream's Data ID first), the CRC d9 d1 98 05;
+    // `Down::Start` under the development key is version 11, tag 3, freshness 1
+    // (01 00 00 00), the tag 09 5c dc 3a 74 5a 93 ce (keyed BLAKE2s of
+    // 01 0b 03 01 00 00 00: the down stream's Data ID first), the CRC d3 2c 7d 6e;
     // stuffed: COBS blocks of 4, 1, 1 and 13 bytes.
     assert_eq!(
         frame_of(&Down::Start),
         [
-            0x04, 0x0a, 0x03, 0x01, 0x01, 0x01, 0x0d, 0x5e, 0x85, 0xe4, 0x6c, 0x71, 0x7e, 0xde,
-            0x9c, 0xd9, 0xd1, 0x98, 0x05, 0x00
+            0x04, 0x0b, 0x03, 0x01, 0x01, 0x01, 0x0d, 0x09, 0x5c, 0xdc, 0x3a, 0x74, 0x5a, 0x93,
+            0xce, 0xd3, 0x2c, 0x7d, 0x6e, 0x00
         ]
     );
 }
@@ -883,7 +884,7 @@ fn any_down() -> impl Strategy<Value = Down> {
     let sensor = (
         any::<u32>(),
         any::<u64>(),
-        prop::array::uniform11(any_f32()),
+        prop::array::uniform12(any_f32()),
         any::<u32>(),
     )
         .prop_map(|(seq, stamp_us, v, route_frames)| {
@@ -900,6 +901,7 @@ fn any_down() -> impl Strategy<Value = Down> {
                     yaw_rate_radps: v[5],
                     delta_rad: v[6],
                     wheel_speed_mps: [v[7], v[8], v[9], v[10]],
+                    specific_force_x_mps2: v[11],
                 },
             })
         });

@@ -28,6 +28,7 @@ fn start_estimate(scenario: &Scenario, v: f64, t_us: u64) -> StateEstimate<f32> 
         delta_rad: 0.0,
         // The wheels rolling at the car's speed.
         wheel_speed_mps: [v as f32; 4],
+        specific_force_x_mps2: f32::NAN,
     }
 }
 

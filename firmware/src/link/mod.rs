@@ -28,7 +28,8 @@
 //! the state estimate carries the four wheel speeds
 //! ([`StateEstimate::wheel_speed_mps`], 16 bytes more in a [`SensorFrame`]).
 //! Version 10: the tag is keyed BLAKE2s instead of AES-128-CMAC ([`secoc`]
-//! says why).
+//! says why). Version 11: the state estimate carries the accelerometer's
+//! specific force ([`StateEstimate::specific_force_x_mps2`], 4 bytes more).
 //! Everything here works on fixed buffers: no heap, no `alloc`, no panic; every
 //! refused frame is a [`FrameError`] value the receiver counts.
 //!
@@ -137,7 +138,7 @@ use crate::vehicle_config::VehicleConfig;
 use qp::QpStatus;
 
 /// Version of this wire format, the first byte of every raw frame.
-pub const LINK_VERSION: u8 = 10;
+pub const LINK_VERSION: u8 = 11;
 /// The largest encoded frame, bytes, including its 0x00 delimiter.
 pub const MAX_FRAME_BYTES: usize = 512;
 /// Track rows per [`PathChunkFrame`].
@@ -621,7 +622,7 @@ const TAG_BYTES: usize = 1;
 /// Largest postcard encoding of a [`VehicleConfig<f32>`] (8 `f32`), bytes.
 const VEHICLE_MAX_BYTES: usize = 8 * F32_BYTES;
 /// Largest postcard encoding of a [`StateEstimate<f32>`], bytes.
-const ESTIMATE_MAX_BYTES: usize = U64_MAX_BYTES + 11 * F32_BYTES;
+const ESTIMATE_MAX_BYTES: usize = U64_MAX_BYTES + 12 * F32_BYTES;
 /// Largest postcard encoding of a [`TaskTimingFrame`] (5 `u32`), bytes.
 const TIMING_MAX_BYTES: usize = 5 * U32_MAX_BYTES;
 /// Largest postcard encoding of a [`RefusalCounts`] (3 `u32`), bytes.

@@ -17,8 +17,8 @@ use crate::closed_loop::ecu::{ControlOutput, Ecu, SimulatedEcu};
 use crate::closed_loop::SimOptions;
 use crate::model::vehicle::{vehicle_config, VehicleParams};
 use crate::world::disturbance::{
-    estimate_biases, Disturbances, DropoutKind, EstimateBias, SplitMix64, LATERAL_NOISE_STREAM,
-    NOISE_STREAM, NOISE_UNIT, WHEEL_NOISE_STREAM,
+    estimate_biases, Disturbances, DropoutKind, EstimateBias, SplitMix64, ACCEL_NOISE_STREAM,
+    LATERAL_NOISE_STREAM, NOISE_STREAM, NOISE_UNIT, WHEEL_NOISE_STREAM,
 };
 use crate::world::route::Window;
 use crate::world::scenario::Scenario;
@@ -47,6 +47,8 @@ pub struct DisturbedEcu<T: Real> {
     rng_lateral: SplitMix64,
     /// Draws of the wheel speeds' noise (a stream of their own).
     rng_wheels: SplitMix64,
+    /// The accelerometer's noise, from a stream of its own.
+    rng_accel: SplitMix64,
     /// The run's biases on the lateral speed and the yaw rate.
     bias: EstimateBias,
     history: VecDeque<StateEstimate<T>>,
@@ -109,6 +111,7 @@ impl<T: Real> DisturbedEcu<T> {
             rng: SplitMix64::new(d.seed ^ NOISE_STREAM),
             rng_lateral: SplitMix64::new(d.seed ^ LATERAL_NOISE_STREAM),
             rng_wheels: SplitMix64::new(d.seed ^ WHEEL_NOISE_STREAM),
+            rng_accel: SplitMix64::new(d.seed ^ ACCEL_NOISE_STREAM),
             bias: estimate_biases(d.seed, d.noise_scale),
             d,
             history: VecDeque::new(),
@@ -154,6 +157,12 @@ impl<T: Real> DisturbedEcu<T> {
             for w in m.wheel_speed_mps.iter_mut() {
                 *w = add(*w, 0.0, n.wheel_speed_mps, &mut self.rng_wheels);
             }
+            m.specific_force_x_mps2 = add(
+                m.specific_force_x_mps2,
+                b.specific_force_mps2,
+                n.specific_force_mps2,
+                &mut self.rng_accel,
+            );
         }
         let keep = self.d.delay_periods() + 1;
         self.history.push_back(m);

@@ -89,7 +89,7 @@ use crate::closed_loop::ecu::{ControlOutput, Ecu, SimulatedEcu};
 use crate::closed_loop::plan_activation::PlanActivation;
 use crate::closed_loop::summary::{CarEstimate, Summary};
 use crate::closed_loop::SimOptions;
-use crate::model::plant::{Inputs, Plant, RoadUnder, State};
+use crate::model::plant::{Inputs, Outputs, Plant, RoadUnder, State};
 use crate::model::vehicle::VehicleParams;
 use crate::model::vehicle::{vehicle_length_m, vehicle_width_m};
 use crate::world::lap_patches;
@@ -276,9 +276,10 @@ fn front_overhang_from_cg_m(v: &VehicleParams) -> f64 {
     v.lf_m + 0.9
 }
 
-/// The plant's true state as an estimate at `t_us` (µs): the measured steering
-/// angle `delta_rad` (rad) and the wheel speeds `ω·r_eff` (`r_eff_m`, m).
-fn estimate<T: Real>(s: &State, delta_rad: f64, t_us: u64, r_eff_m: f64) -> StateEstimate<T> {
+/// The plant's true state as an estimate at `t_us` (µs): with the outputs of its
+/// last step `out`, the measured steering angle and the accelerometer's specific
+/// force; the wheel speeds `ω·r_eff` (`r_eff_m`, m).
+fn estimate<T: Real>(s: &State, out: &Outputs, t_us: u64, r_eff_m: f64) -> StateEstimate<T> {
     StateEstimate {
         stamp_us: t_us,
         x_m: T::from_f64(s.x_m),
@@ -287,8 +288,9 @@ fn estimate<T: Real>(s: &State, delta_rad: f64, t_us: u64, r_eff_m: f64) -> Stat
         vx_mps: T::from_f64(s.vx_mps),
         vy_mps: T::from_f64(s.vy_mps),
         yaw_rate_radps: T::from_f64(s.yaw_rate_radps),
-        delta_rad: T::from_f64(delta_rad),
+        delta_rad: T::from_f64(out.delta_rad),
         wheel_speed_mps: s.omega_radps.map(|w| T::from_f64(w * r_eff_m)),
+        specific_force_x_mps2: T::from_f64(out.specific_force_x_mps2),
     }
 }
 
@@ -409,7 +411,7 @@ pub fn run_with<T: Real, E: Ecu<T>>(
         if t_us.is_multiple_of(CONTROL_PERIOD_US) {
             let st = *plant.state();
             let out = plant.outputs();
-            let est = estimate::<T>(&st, out.delta_rad, t_us, vehicle.r_eff_m);
+            let est = estimate::<T>(&st, &out, t_us, vehicle.r_eff_m);
             if let Some(w) = feeder.update(s_start + meter.progress_m) {
                 ecu.set_window(&w).with_context(|| {
                     format!("window of the road at t = {:.3} s", t_us as f64 * 1e-6)

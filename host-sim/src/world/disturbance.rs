@@ -10,12 +10,17 @@
 //!    0.05 m each, heading 0.005 rad (0.29°), longitudinal speed 0.05 m/s, yaw rate
 //!    0.005 rad/s, lateral speed 0.02 m/s (an RTK-GNSS/INS estimate), each
 //!    wheel's speed 0.03 m/s (an ABS tone wheel's count over 10 ms, from a
-//!    stream of its own: the other channels' draws are those without it). The lateral
+//!    stream of its own: the other channels' draws are those without it), the
+//!    accelerometer's specific force along the car 0.02 m/s² (a MEMS IMU's
+//!    white noise over 10 ms and the body's vibration, from a stream of its
+//!    own too). The lateral
 //!    speed and the yaw rate (what the plan task's sideslip learner reads) also
 //!    carry a **bias**, constant over the run and drawn once from its seed
 //!    ([`estimate_biases`]), of standard deviation `scale ×` 0.02 m/s and
 //!    0.002 rad/s (0.11°/s, a MEMS gyro's after its start-up calibration; 0.46°/s
-//!    at `high`, one without it). The measured steering angle is not disturbed.
+//!    at `high`, one without it); the specific force a bias of `scale ×`
+//!    0.02 m/s² (2 mg, a MEMS accelerometer's after calibration), drawn after
+//!    those two. The measured steering angle is not disturbed.
 //!    Level 0 (`--noise none`, the default) draws nothing.
 //! 2. **Delay**: the tasks see the (noisy) estimate measured `delay` ago, rounded
 //!    to whole control periods (10 ms), stamped with its measurement time, as an
@@ -63,6 +68,10 @@ pub struct NoiseSigmas {
     pub yaw_rate_bias_radps: f64,
     /// Each wheel's speed `ω·r_eff`, m/s.
     pub wheel_speed_mps: f64,
+    /// The accelerometer's specific force along the car, m/s².
+    pub specific_force_mps2: f64,
+    /// The specific force's bias over a run, m/s².
+    pub specific_force_bias_mps2: f64,
 }
 
 /// Noise level 1: an RTK-GNSS/INS-grade estimate.
@@ -75,6 +84,8 @@ pub const NOISE_UNIT: NoiseSigmas = NoiseSigmas {
     lateral_speed_bias_mps: 0.02,
     yaw_rate_bias_radps: 0.002,
     wheel_speed_mps: 0.03,
+    specific_force_mps2: 0.02,
+    specific_force_bias_mps2: 0.02,
 };
 
 /// The biases of a run's estimate (see the module docs).
@@ -84,6 +95,8 @@ pub struct EstimateBias {
     pub lateral_speed_mps: f64,
     /// Added to the yaw rate, rad/s.
     pub yaw_rate_radps: f64,
+    /// Added to the specific force, m/s².
+    pub specific_force_mps2: f64,
 }
 
 /// The biases of a run of seed `seed` at noise level `scale` (0: none, nothing
@@ -97,6 +110,7 @@ pub fn estimate_biases(seed: u64, scale: f64) -> EstimateBias {
     EstimateBias {
         lateral_speed_mps: scale * NOISE_UNIT.lateral_speed_bias_mps * rng.gaussian(),
         yaw_rate_radps: scale * NOISE_UNIT.yaw_rate_bias_radps * rng.gaussian(),
+        specific_force_mps2: scale * NOISE_UNIT.specific_force_bias_mps2 * rng.gaussian(),
     }
 }
 
@@ -108,6 +122,9 @@ pub const LATERAL_NOISE_STREAM: u64 = 0x6C61_7465_7261_6C21;
 
 /// Mixed into a run's seed for the wheel speeds' noise.
 pub const WHEEL_NOISE_STREAM: u64 = 0x7768_6565_6c73_2121;
+
+/// Mixed into a run's seed for the accelerometer's noise.
+pub const ACCEL_NOISE_STREAM: u64 = 0x6163_6365_6c21;
 /// Mixed into a run's seed for the biases.
 pub const BIAS_STREAM: u64 = 0x6269_6173_6573_2121;
 
