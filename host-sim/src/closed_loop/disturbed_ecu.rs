@@ -293,6 +293,7 @@ mod tests {
             vy_mps: 0.1,
             yaw_rate_radps: 0.05,
             wheel_speed_mps: [10.0, 10.1, 9.9, 10.0],
+            specific_force_x_mps2: 0.3,
             ..StateEstimate::zeroed()
         };
         let seen = (0..n)
@@ -346,6 +347,17 @@ mod tests {
             assert!(w_mean.abs() < se * sw, "wheel {i}: mean {w_mean}");
             assert!((w_sd / sw - 1.0).abs() < 0.03, "wheel {i}: σ {w_sd}");
         }
+        // The accelerometer: the run's bias, the level's noise.
+        let (f_mean, f_sd) = mean_and_sd(
+            seen.iter()
+                .map(|m| m.specific_force_x_mps2 - truth.specific_force_x_mps2),
+        );
+        let sf = k * NOISE_UNIT.specific_force_mps2;
+        assert!(
+            (f_mean - bias.specific_force_mps2).abs() < se * sf,
+            "{f_mean} vs {bias:?}"
+        );
+        assert!((f_sd / sf - 1.0).abs() < 0.03, "σ {f_sd}");
         // The same seed, the same draws; level 0, the truth.
         let (_, again) = seen_at_level(k, seed, 100);
         assert_eq!(format!("{:?}", &seen[..100]), format!("{again:?}"));
