@@ -40,7 +40,7 @@ fn program(text: &str) -> Program {
     cfg::build_program(
         &raw,
         &IndirectTargets::default(),
-        &MemoryModel::STM32F405,
+        &host_sim::wcet::ecu_app::STM32F405,
         demangle,
     )
     .unwrap()
@@ -323,7 +323,7 @@ fn ecu_elf() -> std::path::PathBuf {
 #[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
     let elf = &ecu_elf();
-    let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    let a = host_sim::wcet::analyse(elf, &workspace_sources(), &[]).unwrap();
     assert!(
         a.unresolved_indirect_calls.is_empty(),
         "{:?}",
@@ -363,7 +363,7 @@ fn the_ecu_binary_resolves_every_indirect_call_and_has_no_recursion() {
 
 /// The firmware crates' sources in this workspace (`firmware/src`, `qp/src`).
 fn workspace_sources() -> Vec<SourceDir> {
-    SourceDir::workspace(std::path::Path::new(".."))
+    host_sim::wcet::ecu_sources::workspace_sources(std::path::Path::new(".."))
 }
 
 /// A copy of the firmware crates' sources (`firmware/src`, `qp/src`) with `edit`
@@ -405,7 +405,7 @@ fn edited_sources(
         }
     }
     assert!(edited, "no file {file} in the firmware crates' sources");
-    let sources = SourceDir::workspace(dir.path());
+    let sources = host_sim::wcet::ecu_sources::workspace_sources(dir.path());
     (dir, sources)
 }
 
@@ -413,14 +413,14 @@ fn edited_sources(
 #[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_loop_whose_annotation_is_removed_is_refused() {
     let elf = &ecu_elf();
-    let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    let before = host_sim::wcet::analyse(elf, &workspace_sources(), &[]).unwrap();
     let (_dir, edited) = edited_sources("firmware/src/mpc.rs", |t| {
         t.replace(
             "// wcet-bound: COLD_START_PASSES",
             "// (bound removed by a test)",
         )
     });
-    let after = host_sim::wcet::analysis::analyse(elf, &edited, &[]).unwrap();
+    let after = host_sim::wcet::analyse(elf, &edited, &[]).unwrap();
     assert!(
         after.unbounded_loops > before.unbounded_loops,
         "{} -> {}",
@@ -461,7 +461,7 @@ fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
             .and_then(|t| t.static_bound_cycles)
             .unwrap()
     };
-    let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    let a = host_sim::wcet::analyse(elf, &workspace_sources(), &[]).unwrap();
     let (task, plan, window, route) = (
         cycles(&a, "plan"),
         cycles(&a, "plan_job"),
@@ -494,7 +494,7 @@ fn a_plan_activation_is_bounded_by_its_larger_job_not_both() {
 fn a_control_activation_without_a_plan_event_is_bounded_apart() {
     use firmware::link;
     let elf = &ecu_elf();
-    let a = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    let a = host_sim::wcet::analyse(elf, &workspace_sources(), &[]).unwrap();
     let control = a.tasks.iter().find(|t| t.name == "control").unwrap();
     let full = control.static_bound_cycles.unwrap();
     let light = control.light_bound_cycles.unwrap();
@@ -533,7 +533,7 @@ fn a_control_activation_without_a_plan_event_is_bounded_apart() {
 #[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_qp_loop_whose_annotation_is_removed_is_refused() {
     let elf = &ecu_elf();
-    let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    let before = host_sim::wcet::analyse(elf, &workspace_sources(), &[]).unwrap();
     let unbounded_in_qp = |a: &host_sim::wcet::analysis::StaticAnalysis| {
         a.loops
             .iter()
@@ -548,7 +548,7 @@ fn a_qp_loop_whose_annotation_is_removed_is_refused() {
             "// (bound removed by a test)",
         )
     });
-    let after = host_sim::wcet::analysis::analyse(elf, &edited, &[]).unwrap();
+    let after = host_sim::wcet::analyse(elf, &edited, &[]).unwrap();
     assert!(after.unbounded_loops > before.unbounded_loops);
     assert!(unbounded_in_qp(&after) > 0);
     let plan = after.tasks.iter().find(|t| t.name == "plan").unwrap();
@@ -583,8 +583,7 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
         .unwrap();
     assert!(status.success());
     let honest =
-        host_sim::wcet::analysis::analyse(elf, &workspace_sources(), std::slice::from_ref(&trace))
-            .unwrap();
+        host_sim::wcet::analyse(elf, &workspace_sources(), std::slice::from_ref(&trace)).unwrap();
     assert!(honest.violations.is_empty(), "{:?}", honest.violations);
     assert!(honest
         .loops
@@ -593,8 +592,7 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
     let (_dir, edited) = edited_sources("firmware/src/reference_path/loading.rs", |t| {
         t.replace("// wcet-bound: ECU_PATH_ROWS", "// wcet-bound: 10")
     });
-    let wrong =
-        host_sim::wcet::analysis::analyse(elf, &edited, std::slice::from_ref(&trace)).unwrap();
+    let wrong = host_sim::wcet::analyse(elf, &edited, std::slice::from_ref(&trace)).unwrap();
     assert!(!wrong.violations.is_empty());
     assert!(
         wrong
@@ -626,7 +624,7 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
             "// wcet-bound: 1 per activation",
         )
     });
-    let wrong = host_sim::wcet::analysis::analyse(elf, &edited, &[trace]).unwrap();
+    let wrong = host_sim::wcet::analyse(elf, &edited, &[trace]).unwrap();
     assert!(
         wrong
             .violations
@@ -646,7 +644,7 @@ fn an_annotation_below_the_true_trip_count_is_caught_by_a_trace() {
 #[ignore = "needs the ECU binary: `cargo ecu-lockstep`, then `cargo test -p host-sim --test wcet_static -- --ignored`"]
 fn a_split_loop_without_its_own_annotation_is_refused() {
     let elf = &ecu_elf();
-    let before = host_sim::wcet::analysis::analyse(elf, &workspace_sources(), &[]).unwrap();
+    let before = host_sim::wcet::analyse(elf, &workspace_sources(), &[]).unwrap();
     assert_eq!(before.unbounded_loops, 0);
     assert!(before.loops.iter().any(|l| l
         .source
@@ -657,7 +655,7 @@ fn a_split_loop_without_its_own_annotation_is_refused() {
     let (_dir, edited) = edited_sources("firmware/src/obstacles.rs", |t| {
         t.replace("// wcet-bound: same loop", "// (removed by a test)")
     });
-    let after = host_sim::wcet::analysis::analyse(elf, &edited, &[]).unwrap();
+    let after = host_sim::wcet::analyse(elf, &edited, &[]).unwrap();
     let refused: Vec<_> = after.loops.iter().filter(|l| l.bound.is_none()).collect();
     assert_eq!(refused.len(), 1, "{refused:?}");
     let why = refused[0].why_unbounded.as_deref().unwrap_or("");
@@ -1259,10 +1257,10 @@ fn flash_wait_states_follow_where_data_can_be() {
  8000004: 4770         \tbx\tlr
 ";
     let raw = cfg::parse_disassembly(LOADS);
-    let anywhere = MemoryModel::STM32F405;
+    let anywhere = host_sim::wcet::ecu_app::STM32F405;
     let pools = MemoryModel {
         flash_data: cfg::FlashData::ConstantPools(Default::default()),
-        ..MemoryModel::STM32F405
+        ..host_sim::wcet::ecu_app::STM32F405
     };
     let insns = &raw[0].instructions[..2];
     // ldr 2 + ldr 2, one 16-byte flash line (6): 10; each flash read 5 more.
@@ -1271,7 +1269,7 @@ fn flash_wait_states_follow_where_data_can_be() {
     // A function that addresses a constant island is charged as before.
     let listed = MemoryModel {
         flash_data: cfg::FlashData::ConstantPools([(0x0800_0000, "f".into())].into()),
-        ..MemoryModel::STM32F405
+        ..host_sim::wcet::ecu_app::STM32F405
     };
     assert_eq!(listed.block_cycles(0x0800_0000, insns), 10 + 5 + 5);
 }

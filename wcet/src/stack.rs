@@ -59,6 +59,7 @@
 //! HardFault + NMI`, each level its deepest root plus its exception frame, `init`
 //! the thread's depth through the functions run with interrupts masked.
 
+use super::disassembly::parse_imm;
 use super::vector_table::{VectorEntry, HARD_FAULT, NMI, RESET};
 use super::{demangle, WcetError};
 use serde::Serialize;
@@ -414,15 +415,6 @@ fn register_list_bytes(operands: &str) -> Option<u32> {
     Some(bytes)
 }
 
-/// An immediate operand (`#0x10`, `#16`, `16`), unsigned.
-pub(super) fn parse_imm(s: &str) -> Option<u32> {
-    let s = s.trim().trim_start_matches('#');
-    match s.strip_prefix("0x") {
-        Some(hex) => u32::from_str_radix(hex, 16).ok(),
-        None => s.parse().ok(),
-    }
-}
-
 /// The base mnemonic without width qualifier (`.w`, `.n`).
 fn base(mnemonic: &str) -> &str {
     mnemonic.split('.').next().unwrap_or(mnemonic)
@@ -748,6 +740,20 @@ impl PriorityLevel {
             name: name.to_string(),
             roots: roots.iter().map(|r| r.to_string()).collect(),
         }
+    }
+
+    /// One level per root, in increasing priority: `thread` for the first,
+    /// `priority N` for the N-th after it.
+    pub fn numbered(roots: &[&str]) -> Vec<Self> {
+        let name = |i: usize| match i {
+            0 => "thread".to_string(),
+            _ => format!("priority {i}"),
+        };
+        roots
+            .iter()
+            .enumerate()
+            .map(|(i, r)| Self::new(&name(i), &[r]))
+            .collect()
     }
 }
 
@@ -1404,15 +1410,7 @@ pub(crate) mod tests {
 
     /// The thread level with root `roots[0]`, then `priority i` with root `roots[i]`.
     pub(crate) fn levels(roots: &[&str]) -> Vec<PriorityLevel> {
-        let name = |i: usize| match i {
-            0 => "thread".to_string(),
-            _ => format!("priority {i}"),
-        };
-        roots
-            .iter()
-            .enumerate()
-            .map(|(i, r)| PriorityLevel::new(&name(i), &[r]))
-            .collect()
+        PriorityLevel::numbered(roots)
     }
 
     /// The bound of `levels` with a vector table read that lists no handler: only

@@ -12,9 +12,10 @@ use super::cfg::Function;
 use super::cfg::{self, FlashData, MemoryModel, Program};
 pub use super::copies::copy_size_register;
 use super::copies::copy_sizes;
-pub use super::ecu_app::{EcuBuild, ECU_SECTIONS};
 use super::ipet::{self, Cost, LoopFact, Per};
 use super::loops::{self, reverse_post_order, Loop};
+use super::source_lines::SourceLines;
+use super::target::Target;
 use super::{annotations, bounds, demangle};
 use anyhow::{Context, Result};
 use serde::Serialize;
@@ -165,10 +166,17 @@ pub struct TaskStatic {
 pub struct StaticAnalysis {
     /// The ELF analysed.
     pub elf: String,
-    /// Which build of the ECU application it is (its tasks and schedule).
-    pub build: EcuBuild,
+    /// Which build of the target it is (its tasks and schedule):
+    /// [`Target::id`].
+    pub build: &'static str,
+    /// Its name in the reports ([`Target::name`]).
+    #[serde(skip)]
+    pub build_name: &'static str,
+    /// The core clock, Hz ([`Target::clock_hz`]).
+    #[serde(skip)]
+    pub clock_hz: u32,
     /// The core clock as the binary sets it (frequency, source, the function).
-    pub clock: super::clock::ClockReport,
+    pub clock: super::target::ClockReport,
     /// The interrupts of the schedule (SysTick, the flashed build's link): what
     /// the response-time analysis charges every lower priority for them.
     pub interrupts: Vec<InterruptEntry>,
@@ -240,8 +248,8 @@ pub struct InterruptEntry {
     pub deadline_us: f64,
 }
 
-/// The interrupts of `build`'s schedule with the bounds `tasks` found for them.
-fn interrupts_of(build: EcuBuild, tasks: &[TaskStatic]) -> Vec<InterruptEntry> {
+/// The interrupts of the target's schedule with the bounds `tasks` found for them.
+pub fn interrupts_of(build: &Target, tasks: &[TaskStatic]) -> Vec<InterruptEntry> {
     build
         .schedule()
         .into_iter()
@@ -289,47 +297,6 @@ pub struct TopBlock {
     pub cycles: u64,
 }
 
-/// Source location of `address`: the innermost frame in the firmware's own
-/// sources if any, else the innermost frame.
-pub(super) fn location(loader: &addr2line::Loader, address: u32) -> (String, u32) {
-    let chain = frames(loader, address);
-    chain
-        .iter()
-        .find(|(file, _)| annotations::firmware_source_path(file).is_some())
-        .or(chain.first())
-        .cloned()
-        .unwrap_or_else(|| ("?".into(), 0))
-}
-
-/// The source path from the workspace on (`firmware/src/mpc.rs`, `qp/src/factor.rs`),
-/// or the file name with its crate folder for a dependency.
-pub(super) fn short_path(file: &str) -> String {
-    if let Some(p) = annotations::firmware_source_path(file) {
-        return p.to_string();
-    }
-    // A crate from the registry: from its `name-version` folder on.
-    if let Some(i) = file.find("/registry/src/") {
-        if let Some((_, rest)) = file[i + "/registry/src/".len()..].split_once('/') {
-            return rest.to_string();
-        }
-    }
-    let parts: Vec<&str> = file.rsplit('/').take(3).collect();
-    parts.into_iter().rev().collect::<Vec<_>>().join("/")
-}
-
-/// Every frame of `address`'s inlining chain, innermost first.
-pub(super) fn frames(loader: &addr2line::Loader, address: u32) -> Vec<(String, u32)> {
-    let mut out = Vec::new();
-    if let Ok(mut fr) = loader.find_frames(u64::from(address)) {
-        while let Ok(Some(frame)) = fr.next() {
-            if let Some(loc) = frame.location {
-                out.push((loc.file.unwrap_or("?").to_string(), loc.line.unwrap_or(0)));
-            }
-        }
-    }
-    out
-}
-
 /// Runs the analysis on `elf`, with the loop annotations of `sources` (the
 /// firmware crates' source folders, [`annotations::SourceDir::workspace`]).
 ///
@@ -339,13 +306,13 @@ pub(super) fn frames(loader: &addr2line::Loader, address: u32) -> Vec<(String, u
 /// check every bound against the QEMU `traces` and measure their coverage.
 pub fn analyse(
     elf: &Path,
+    build: &Target,
     sources: &[annotations::SourceDir],
     traces: &[PathBuf],
 ) -> Result<StaticAnalysis> {
-    let binary = Binary::load(elf)?;
-    let build = EcuBuild::of_elf(elf)?;
+    let binary = Binary::load(elf, build)?;
     let (all_loops, irreducible) = find_loops(&binary.program);
-    let (annotations, dependency_facts) = read_annotations(sources)?;
+    let (annotations, dependency_facts) = read_annotations(build, sources)?;
     let index = AnnotationIndex::new(&annotations, &dependency_facts)?;
     let copies = copy_sizes(
         build,
@@ -426,8 +393,10 @@ pub fn analyse(
     } = units;
     let loops: Vec<LoopEntry> = loop_rows.into_values().collect();
     Ok(StaticAnalysis {
-        build,
-        clock: super::clock::ClockReport::of_elf(elf)?,
+        build: build.id,
+        build_name: build.name,
+        clock_hz: build.clock_hz,
+        clock: build.clock.clone(),
         interrupts: interrupts_of(build, &tasks),
         traces: traces.iter().map(|t| t.display().to_string()).collect(),
         violations: observed.violations,
@@ -461,10 +430,10 @@ fn bound_light_activations(
     binary: &Binary,
     all_loops: &[Vec<Loop>],
     sources: &[annotations::SourceDir],
-    build: EcuBuild,
+    build: &Target,
     windows: &BTreeMap<String, f64>,
 ) -> Result<()> {
-    let full = annotations::firmware_constants();
+    let full = build.constants.clone();
     for light in build.light_activations() {
         let Some(task_bound) = units
             .tasks
@@ -554,22 +523,22 @@ fn light_bound(
     binary: &Binary,
     all_loops: &[Vec<Loop>],
     sources: &[annotations::SourceDir],
-    build: EcuBuild,
+    build: &Target,
     task: &str,
     constants: &[(&'static str, u64)],
     windows: &BTreeMap<String, f64>,
 ) -> Result<Option<u64>> {
-    let mut values = annotations::firmware_constants();
+    let mut values = build.constants.clone();
     for &(name, value) in constants {
         if values.insert(name, value).is_none() {
             anyhow::bail!(
-                "the light activations of `{task}` bind `{name}`, which is not one of the firmware's constants"
+                "the light activations of `{task}` bind `{name}`, which is not one of the target's constants"
             );
         }
     }
     let annotations = annotations::scan_sources_with(sources, &values)
         .map_err(|e| anyhow::anyhow!("loop annotations: {e}"))?;
-    let dependency_facts = annotations::dependency_facts_with(&values);
+    let dependency_facts = (build.dependency_facts)(&values);
     let index = AnnotationIndex::new(&annotations, &dependency_facts)?;
     let copies = copy_sizes(
         build,
@@ -608,25 +577,25 @@ fn light_bound(
 struct Binary {
     /// The functions' control-flow graphs.
     program: Program,
-    /// The STM32F405's memory model, with the flash data this binary reads.
+    /// The target's memory model, with the flash data this binary reads.
     memory: MemoryModel,
     /// The functions indirect calls and jumps may reach, by function.
     taken: BTreeMap<usize, Vec<super::indirect::Taken>>,
     /// The DWARF line table, for the source lines of addresses.
-    ctx: addr2line::Loader,
+    ctx: SourceLines,
 }
 
 impl Binary {
     /// Loads the program: disassembles `elf`, classifies its flash data, finds the
     /// targets of its indirect calls and builds the control-flow graphs.
-    fn load(elf: &Path) -> Result<Self> {
+    fn load(elf: &Path, target: &Target) -> Result<Self> {
         let text = super::stack::disassemble_with_bytes(elf)?;
         let raw = cfg::parse_disassembly(&text);
         let data = super::read_elf(elf)?;
         let file = super::parse_elf(elf, &data)?;
         let memory = MemoryModel {
-            flash_data: FlashData::classify(&file, &raw, MemoryModel::STM32F405.flash, demangle),
-            ..MemoryModel::STM32F405
+            flash_data: FlashData::classify(&file, &raw, target.memory.flash, demangle),
+            ..target.memory.clone()
         };
         // Indirect calls and jumps may reach every function whose address the binary
         // holds or builds (its data sections, literal pools, movw/movt pairs).
@@ -637,8 +606,7 @@ impl Binary {
             &memory,
             demangle,
         )?;
-        let ctx = addr2line::Loader::new(elf)
-            .map_err(|e| anyhow::anyhow!("DWARF line table of {}: {e}", elf.display()))?;
+        let ctx = SourceLines::new(elf, &target.source_labels)?;
         Ok(Self {
             program,
             memory,
@@ -669,16 +637,17 @@ fn find_loops(program: &Program) -> (Vec<Vec<Loop>>, BTreeMap<usize, Vec<usize>>
 /// Reads the loop annotations of the firmware's `sources`, and the facts stated
 /// about the dependencies' code (which the firmware's sources cannot carry).
 fn read_annotations(
+    build: &Target,
     sources: &[annotations::SourceDir],
 ) -> Result<(Vec<annotations::Annotation>, Vec<annotations::Annotation>)> {
-    let annotations = annotations::scan_sources(sources).map_err(|e| {
+    let annotations = annotations::scan_sources_with(sources, &build.constants).map_err(|e| {
         let dirs: Vec<String> = sources
             .iter()
             .map(|s| s.dir.display().to_string())
             .collect();
         anyhow::anyhow!("loop annotations in {}: {e}", dirs.join(", "))
     })?;
-    Ok((annotations, annotations::dependency_facts()))
+    Ok((annotations, (build.dependency_facts)(&build.constants)))
 }
 
 /// The loop annotations indexed by the source line they bound, the way the loop
@@ -785,11 +754,11 @@ struct LoopBounds {
 /// the annotations of the loops' source lines.
 struct LoopBinder<'a> {
     program: &'a Program,
-    ctx: &'a addr2line::Loader,
+    ctx: &'a SourceLines,
     index: &'a AnnotationIndex<'a>,
     copies: &'a ipet::CopySizes,
     /// The build: its tasks' handlers are named by their tasks.
-    build: EcuBuild,
+    build: &'a Target,
     /// The annotations of one caller's copy some loop took.
     within_used: std::collections::BTreeSet<(String, u32, String)>,
     /// What was found so far.
@@ -819,7 +788,7 @@ impl<'a> LoopBinder<'a> {
         binary: &'a Binary,
         index: &'a AnnotationIndex<'a>,
         copies: &'a ipet::CopySizes,
-        build: EcuBuild,
+        build: &'a Target,
     ) -> Self {
         Self {
             program: &binary.program,
@@ -920,8 +889,8 @@ impl<'a> LoopBinder<'a> {
         let keys: Vec<(String, u32)> = candidates
             .iter()
             .map(|&a| {
-                let (file, line) = location(self.ctx, a);
-                (short_path(&file), line)
+                let (file, line) = self.ctx.location(a);
+                (self.ctx.short_path(&file), line)
             })
             .collect();
         if let Some(key) = keys.iter().find(|(_, line)| *line > 0) {
@@ -1054,8 +1023,8 @@ impl<'a> LoopBinder<'a> {
         // Read off the line table only if no key of its own is free.
         let chain = candidates
             .iter()
-            .flat_map(|&a| frames(self.ctx, a))
-            .map(|(file, line)| (short_path(&file), line));
+            .flat_map(|&a| self.ctx.frames(a))
+            .map(|(file, line)| (self.ctx.short_path(&file), line));
         let (key, own_line) =
             choose_line(library, keys, chain, &fl.firmware_taken, taken, annotated)?;
         if own_line && !library {
@@ -1085,13 +1054,13 @@ impl<'a> LoopBinder<'a> {
         let note = if library {
             let inner = candidates
                 .first()
-                .and_then(|&a| frames(self.ctx, a).into_iter().next())
-                .map(|(f, l)| format!("{}:{l}", short_path(&f)))
+                .and_then(|&a| self.ctx.frames(a).into_iter().next())
+                .map(|(f, l)| format!("{}:{l}", self.ctx.short_path(&f)))
                 .unwrap_or_default();
             format!(
                 "a loop of a dependency's code ({inner}) inlined into a firmware line whose \
                  annotation bounds a loop of the firmware's: state its bound as a dependency \
-                 fact about its own line (host_sim::wcet::annotations::dependency_facts), or \
+                 fact about its own line (the target's dependency facts, Target::dependency_facts), or \
                  annotate a line of its own"
             )
         } else if shares {
@@ -1184,9 +1153,9 @@ impl<'a> LoopBinder<'a> {
             // Per call of the function that holds the loop: sound only if the
             // binary function is that function, not a caller it was inlined into.
             let inlined = candidates.iter().any(|&addr| {
-                let fr = frames(self.ctx, addr);
+                let fr = self.ctx.frames(addr);
                 fr.iter()
-                    .position(|(file, line)| (short_path(file), *line) == *key)
+                    .position(|(file, line)| (self.ctx.short_path(file), *line) == *key)
                     .is_some_and(|at| at + 1 < fr.len())
             });
             if inlined {
@@ -1277,7 +1246,7 @@ fn annotation_origin(a: &annotations::Annotation) -> String {
 /// can do all). Returns, per task, the retries per activation: the caps the
 /// retry loops' back edges share, by cause.
 fn retries_per_activation(
-    build: EcuBuild,
+    build: &Target,
     annotations: &[annotations::Annotation],
 ) -> Vec<(String, ipet::Retries)> {
     retries_within(build, annotations, &BTreeMap::new())
@@ -1287,7 +1256,7 @@ fn retries_per_activation(
 /// each task's release: its response-time bound where `windows` has one, else
 /// its deadline.
 fn retries_within(
-    build: EcuBuild,
+    build: &Target,
     annotations: &[annotations::Annotation],
     windows: &BTreeMap<String, f64>,
 ) -> Vec<(String, ipet::Retries)> {
@@ -1320,12 +1289,12 @@ fn retries_within(
 struct Model<'a> {
     program: &'a Program,
     memory: &'a MemoryModel,
-    ctx: &'a addr2line::Loader,
+    ctx: &'a SourceLines,
     all_loops: &'a [Vec<Loop>],
     facts: &'a [LoopFact],
     copies: &'a ipet::CopySizes,
     /// Which build of the application the ELF is: its tasks and schedule.
-    build: EcuBuild,
+    build: &'a Target,
 }
 
 /// The tasks' and sections' static figures, and what the loops and calls they
@@ -1380,7 +1349,7 @@ impl Units {
             .tasks()
             .iter()
             .map(|&(n, sym)| (n, sym, n, None))
-            .chain(ECU_SECTIONS.iter().copied())
+            .chain(build.sections().iter().copied())
             .collect();
         for (name, symbol, owner, budget) in units {
             let roots = model.program.find(symbol);
@@ -1576,11 +1545,11 @@ fn ipet_figures(model: &Model<'_>, root: usize, retries: ipet::Retries) -> IpetF
                 .by_block
                 .into_iter()
                 .map(|x| {
-                    let (file, line) = location(model.ctx, x.address);
+                    let (file, line) = model.ctx.location(x.address);
                     TopBlock {
                         function: x.function,
                         address: x.address,
-                        file: short_path(&file),
+                        file: model.ctx.short_path(&file),
                         line,
                         count: x.count,
                         cycles: x.cost,
@@ -1646,8 +1615,8 @@ fn bound_critical_sections(
         })
         .collect();
     let locate = |a: u32| {
-        let (file, line) = location(model.ctx, a);
-        format!("{}:{line}", short_path(&file))
+        let (file, line) = model.ctx.location(a);
+        format!("{}:{line}", model.ctx.short_path(&file))
     };
     let critical_sections = super::critical::critical_sections(
         program,
@@ -1686,7 +1655,7 @@ fn bound_response_times(
             super::cache::CACHE_LINES + u64::from(super::data_cache::DATA_CACHE_LINES),
             |(_, reach)| {
                 super::cache::evicting_lines(program, reach)
-                    + super::data_cache::evicting_lines(program, reach)
+                    + super::cache::evicting_data_lines(program, reach)
             },
         );
         (lines * program.line_fetch_cycles) as f64
@@ -1727,7 +1696,7 @@ fn bound_response_times(
         });
     }
     if complete {
-        for r in super::rta::response_times(&activities, f64::from(super::CLOCK_HZ)) {
+        for r in super::rta::response_times(&activities, f64::from(model.build.clock_hz)) {
             if let Some(t) = tasks.iter_mut().find(|t| t.name == r.name) {
                 t.response_time_bound_us = r.response_time_bound_us;
                 t.response_time_past_deadline_us = r.past_deadline_us;
@@ -1781,7 +1750,9 @@ impl<'a> TraceReplay<'a> {
             .collect();
         let counters: Vec<super::trace_check::CounterSpec> =
             flow_facts.iter().map(|f| f.counter.clone()).collect();
-        let sections: Vec<(String, usize)> = ECU_SECTIONS
+        let sections: Vec<(String, usize)> = model
+            .build
+            .sections()
             .iter()
             .filter_map(|(n, sym, _, _)| program.find(sym).first().map(|&f| (n.to_string(), f)))
             .collect();
@@ -1985,8 +1956,8 @@ fn loop_coverage(
         })
         .collect();
     let locate = |a: u32| {
-        let (file, line) = location(model.ctx, a);
-        (short_path(&file), line)
+        let (file, line) = model.ctx.location(a);
+        (model.ctx.short_path(&file), line)
     };
     super::coverage::coverage(model.program, model.all_loops, &sites, blocks_run, &locate)
 }
@@ -2069,7 +2040,7 @@ impl StaticAnalysis {
     /// the violations the traces showed.
     fn write_summary(&self, s: &mut String) {
         let _ = writeln!(s, "# Static worst-case timing analysis of `{}`\n", self.elf);
-        let _ = writeln!(s, "Build: {}.\n", self.build.name());
+        let _ = writeln!(s, "Build: {}.\n", self.build_name);
         let _ = writeln!(
             s,
             "Control-flow graphs from the Thumb-2 disassembly, natural loops, loop bounds \
@@ -2135,7 +2106,7 @@ impl StaticAnalysis {
                 continue;
             };
             let total: f64 = t.demand_at_deadline.iter().map(|d| d.cycles).sum();
-            let available = deadline * f64::from(super::CLOCK_HZ) / 1e6;
+            let available = deadline * f64::from(self.clock_hz) / 1e6;
             let parts: Vec<String> = t
                 .demand_at_deadline
                 .iter()
@@ -2154,7 +2125,7 @@ impl StaticAnalysis {
                 t.name,
                 parts.join(", "),
                 total - available,
-                (total - available) / f64::from(super::CLOCK_HZ) * 1e3
+                (total - available) / f64::from(self.clock_hz) * 1e3
             );
         }
     }
@@ -2500,13 +2471,13 @@ fn choose_line(
 /// Whether every instruction of loop `l` is a dependency's code (the innermost
 /// frame of its inlining chain outside the firmware's crates): a library loop,
 /// inlined or not, whose bound is a fact about the library's own line.
-fn is_library_loop(f: &Function, l: &Loop, ctx: &addr2line::Loader) -> bool {
+fn is_library_loop(f: &Function, l: &Loop, ctx: &SourceLines) -> bool {
     l.blocks.iter().all(|&b| {
         f.blocks.get(b).is_none_or(|blk| {
             f.instructions[blk.first..blk.end].iter().all(|i| {
-                frames(ctx, i.address)
+                ctx.frames(i.address)
                     .first()
-                    .is_none_or(|(file, _)| annotations::firmware_source_path(file).is_none())
+                    .is_none_or(|(file, _)| ctx.source_path(file).is_none())
             })
         })
     })
@@ -2643,50 +2614,5 @@ mod tests {
                 "{e}"
             );
         }
-    }
-
-    #[test]
-    fn the_interrupts_are_the_schedules_hardware_entries_with_their_bounds() {
-        let mut link = task("link", Some(10.85), Some(4.2), None);
-        link.static_bound_cycles = Some(277);
-        let tasks = [
-            task("control", Some(10_000.0), Some(7_437.0), None),
-            link,
-            task("systick", Some(1_000.0), None, Some(2_000.0)),
-        ];
-        let board = interrupts_of(EcuBuild::Board, &tasks);
-        let names: Vec<&str> = board.iter().map(|i| i.name.as_str()).collect();
-        assert_eq!(names, ["systick", "link"]);
-        let l = &board[1];
-        assert_eq!(l.handler, "USART1");
-        assert_eq!(l.static_bound_cycles, Some(277));
-        assert_eq!(l.response_time_bound_us, Some(4.2));
-        // Two entries a byte's time; the receive budget per control period.
-        let byte_us = f64::from(firmware::link::usart::BYTE_TIME_NS) / 1e3;
-        assert!(
-            (l.min_interarrival_us - byte_us / 2.0).abs() < 1e-3,
-            "{l:?}"
-        );
-        assert_eq!(
-            l.per_window,
-            Some(firmware::link::usart::ENTRIES_PER_BUDGET)
-        );
-        assert_eq!(l.window_us, Some(10_000.0));
-        assert_eq!(
-            l.per_slow_window,
-            Some(firmware::link::usart::ENTRIES_PER_PLAN_BUDGET)
-        );
-        assert_eq!(l.slow_window_us, Some(100_000.0));
-        // SysTick missed its deadline here: no bound, not a made-up one.
-        assert_eq!(board[0].handler, "SysTick");
-        assert_eq!(board[0].response_time_bound_us, None);
-        assert_eq!(
-            board[0].min_interarrival_us,
-            firmware::timing::MONO_TICK_US as f64
-        );
-        // The lock-step build has no link interrupt.
-        let lock = interrupts_of(EcuBuild::LockStep, &tasks);
-        assert_eq!(lock.len(), 1);
-        assert_eq!(lock[0].name, "systick");
     }
 }
