@@ -17,7 +17,10 @@ use super::loops::{self, reverse_post_order, Loop};
 use super::source_lines::SourceLines;
 use super::target::Target;
 use super::{annotations, bounds, demangle};
-use anyhow::{Context, Result};
+use crate::WcetError;
+
+/// The analysis's results, or why there is none.
+type Result<T> = std::result::Result<T, WcetError>;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -490,11 +493,10 @@ fn bound_light_activations(
                     bound(&at(1))?,
                     bound(&at(extra.per_activation))?,
                 ) else {
-                    anyhow::bail!(
+                    return Err(WcetError::Analysis(format!(
                         "`{}`: no bound with part of {} (its light bound is {light_cycles})",
-                        light.task,
-                        extra.what
-                    );
+                        light.task, extra.what
+                    )));
                 };
                 *row = [b0, b1, bmax];
                 let first = b1.saturating_sub(b0) as f64;
@@ -531,13 +533,13 @@ fn light_bound(
     let mut values = build.constants.clone();
     for &(name, value) in constants {
         if values.insert(name, value).is_none() {
-            anyhow::bail!(
+            return Err(WcetError::Analysis(format!(
                 "the light activations of `{task}` bind `{name}`, which is not one of the target's constants"
-            );
+            )));
         }
     }
     let annotations = annotations::scan_sources_with(sources, &values)
-        .map_err(|e| anyhow::anyhow!("loop annotations: {e}"))?;
+        .map_err(|e| WcetError::Annotation(format!("loop annotations: {e}")))?;
     let dependency_facts = (build.dependency_facts)(&values);
     let index = AnnotationIndex::new(&annotations, &dependency_facts)?;
     let copies = copy_sizes(
@@ -559,10 +561,15 @@ fn light_bound(
         build,
     };
     let Some(&(_, symbol)) = build.tasks().iter().find(|(n, _)| *n == task) else {
-        anyhow::bail!("no task `{task}` in the {} build", build.name());
+        return Err(WcetError::Analysis(format!(
+            "no task `{task}` in the {} build",
+            build.name()
+        )));
     };
     let Some(&root) = binary.program.find(symbol).first() else {
-        anyhow::bail!("no function `{symbol}` (task `{task}`)");
+        return Err(WcetError::Analysis(format!(
+            "no function `{symbol}` (task `{task}`)"
+        )));
     };
     let preemptions = retries
         .iter()
@@ -625,8 +632,10 @@ fn find_loops(program: &Program) -> (Vec<Vec<Loop>>, BTreeMap<usize, Vec<usize>>
     for (k, f) in program.functions.iter().enumerate() {
         match loops::natural_loops(f) {
             Ok(l) => all_loops.push(l),
-            Err(blocks) => {
-                irreducible.insert(k, blocks);
+            Err(e) => {
+                if let WcetError::Irreducible(blocks) = e {
+                    irreducible.insert(k, blocks);
+                }
                 all_loops.push(Vec::new());
             }
         }
@@ -645,7 +654,7 @@ fn read_annotations(
             .iter()
             .map(|s| s.dir.display().to_string())
             .collect();
-        anyhow::anyhow!("loop annotations in {}: {e}", dirs.join(", "))
+        WcetError::Annotation(format!("loop annotations in {}: {e}", dirs.join(", ")))
     })?;
     Ok((annotations, (build.dependency_facts)(&build.constants)))
 }
@@ -691,7 +700,7 @@ impl<'a> AnnotationIndex<'a> {
             .filter_map(|a| Some(((a.file.clone(), a.line, a.within.clone()?), a)))
             .collect();
         let counter_groups = annotations::counter_groups(annotations)
-            .map_err(|e| anyhow::anyhow!("loop annotations: {e}"))?;
+            .map_err(|e| WcetError::Annotation(format!("loop annotations: {e}")))?;
         Ok(Self {
             by_line,
             within_line,
@@ -724,13 +733,11 @@ fn check_activation_caps(
         if a.scope == annotations::Scope::Runs
             && !copies.caps.iter().any(|c| c.activation_group == Some(k))
         {
-            anyhow::bail!(
+            return Err(WcetError::Analysis(format!(
                 "{}:{}: `// wcet-bound: {} times per activation` matches no call the tasks make: \
                  put it on the line of the call it caps (a function that is not inlined)",
-                a.file,
-                a.line,
-                a.expression
-            );
+                a.file, a.line, a.expression
+            )));
         }
     }
     Ok(())
@@ -815,12 +822,12 @@ impl<'a> LoopBinder<'a> {
             .keys()
             .find(|key| !self.within_used.contains(*key))
         {
-            anyhow::bail!(
+            return Err(WcetError::Analysis(format!(
                 "{file}:{line}: `{}{w}:` matches no loop of a function named `{w}` \
                  (or of the handler of the task `{w}`): the function was renamed or \
                  the line is no longer inlined into it",
                 annotations::WITHIN_MARKER
-            );
+            )));
         }
         Ok(self.out)
     }
@@ -1354,10 +1361,10 @@ impl Units {
         for (name, symbol, owner, budget) in units {
             let roots = model.program.find(symbol);
             let Some(&root) = roots.first() else {
-                anyhow::bail!(
+                return Err(WcetError::Analysis(format!(
                     "no function `{symbol}` (task `{name}`) in {}: is it the ECU application?",
                     elf.display()
-                );
+                )));
             };
             // What a completing activation can run: the stop and fault paths excluded.
             let reach = model.program.completing_reachable(&[root]);
@@ -1524,7 +1531,9 @@ fn ipet_figures(model: &Model<'_>, root: usize, retries: ipet::Retries) -> IpetF
     match bound(Cost::Instructions) {
         Ok(b) => out.instructions = Some(b.bound),
         Err(e) => out.refused.push(match e {
-            ipet::IpetError::Unbounded(l) => format!("{} loop(s) without a bound", l.len()),
+            WcetError::Ipet(ipet::IpetError::Unbounded(l)) => {
+                format!("{} loop(s) without a bound", l.len())
+            }
             other => other.to_string(),
         }),
     }
@@ -1789,8 +1798,10 @@ impl<'a> TraceReplay<'a> {
         observed: &mut Observed,
     ) -> Result<()> {
         let program = self.model.program;
-        let file = std::fs::File::open(trace)
-            .with_context(|| format!("opening the QEMU trace {}", trace.display()))?;
+        let file = std::fs::File::open(trace).map_err(|source| WcetError::Io {
+            path: trace.to_path_buf(),
+            source,
+        })?;
         let check = super::trace_check::replay_trace(
             std::io::BufReader::with_capacity(1 << 20, file),
             program,
@@ -1966,10 +1977,7 @@ fn loop_coverage(
 /// build: `control-response-time`, `link-response-time`, ...) that `tasks` do
 /// not bound within their deadlines, one line each; an id of another form, or
 /// naming no task with a deadline, is an error that says which ids exist.
-pub fn missed_response_times(
-    tasks: &[TaskStatic],
-    required: &[String],
-) -> std::result::Result<Vec<String>, String> {
+pub fn missed_response_times(tasks: &[TaskStatic], required: &[String]) -> Result<Vec<String>> {
     let known: Vec<String> = tasks
         .iter()
         .filter(|t| t.deadline_us.is_some())
@@ -1981,10 +1989,10 @@ pub fn missed_response_times(
             .strip_suffix("-response-time")
             .and_then(|n| tasks.iter().find(|t| t.name == n && t.deadline_us.is_some()))
             .ok_or_else(|| {
-                format!(
+                WcetError::Analysis(format!(
                     "`{id}` is no goal of the static analysis: with --static-only, --require takes {}",
                     known.join(", ")
-                )
+                ))
             })?;
         let deadline = task.deadline_us.unwrap_or(0.0);
         match task.response_time_bound_us {
@@ -2430,12 +2438,13 @@ impl StaticAnalysis {
 
     /// Writes `static.json` and `static.md` into `dir`.
     pub fn write(&self, dir: &Path) -> Result<()> {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let written = |path: PathBuf| move |source| WcetError::Write { path, source };
+        std::fs::create_dir_all(dir).map_err(written(dir.to_path_buf()))?;
         let json = serde_json::to_string_pretty(self)?;
-        std::fs::write(dir.join("static.json"), json)
-            .with_context(|| format!("writing {}", dir.join("static.json").display()))?;
-        std::fs::write(dir.join("static.md"), self.markdown())
-            .with_context(|| format!("writing {}", dir.join("static.md").display()))?;
+        let path = dir.join("static.json");
+        std::fs::write(&path, json).map_err(written(path.clone()))?;
+        let path = dir.join("static.md");
+        std::fs::write(&path, self.markdown()).map_err(written(path.clone()))?;
         Ok(())
     }
 }
@@ -2593,8 +2602,9 @@ mod tests {
             missed_response_times(
                 &tasks,
                 &req(&["control-response-time", "link-response-time"])
-            ),
-            Ok(Vec::new())
+            )
+            .ok(),
+            Some(Vec::new())
         );
         let missed =
             missed_response_times(&tasks, &req(&["plan-response-time"])).unwrap_or_default();
@@ -2608,6 +2618,7 @@ mod tests {
         ] {
             let e = missed_response_times(&tasks, &req(&[bad]))
                 .err()
+                .map(|e| e.to_string())
                 .unwrap_or_default();
             assert!(
                 e.contains("control-response-time, plan-response-time, link-response-time"),

@@ -87,6 +87,7 @@
 //! bytes); else it takes a dependency fact ([`crate::target::Target::dependency_facts`]) about its own
 //! source line, or none.
 
+use crate::WcetError;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -153,7 +154,7 @@ pub struct Annotation {
 }
 
 /// Evaluates an annotation's expression.
-pub fn evaluate(expr: &str, constants: &BTreeMap<&'static str, u64>) -> Result<u64, String> {
+pub fn evaluate(expr: &str, constants: &BTreeMap<&'static str, u64>) -> Result<u64, WcetError> {
     #[derive(Debug, Clone, PartialEq)]
     enum Tok {
         Num(u64),
@@ -172,7 +173,10 @@ pub fn evaluate(expr: &str, constants: &BTreeMap<&'static str, u64>) -> Result<u
                 i += 1;
             }
             let s: String = chars[start..i].iter().filter(|&&c| c != '_').collect();
-            toks.push(Tok::Num(s.parse().map_err(|e| format!("`{s}`: {e}"))?));
+            toks.push(Tok::Num(
+                s.parse()
+                    .map_err(|e| WcetError::Annotation(format!("`{s}`: {e}")))?,
+            ));
         } else if c.is_ascii_alphabetic() || c == '_' {
             let start = i;
             while i < chars.len() && (chars[i].is_ascii_alphanumeric() || chars[i] == '_') {
@@ -180,17 +184,19 @@ pub fn evaluate(expr: &str, constants: &BTreeMap<&'static str, u64>) -> Result<u
             }
             let name: String = chars[start..i].iter().collect();
             let v = constants.get(name.as_str()).ok_or_else(|| {
-                format!(
+                WcetError::Annotation(format!(
                     "unknown constant `{name}` (known: {})",
                     constants.keys().copied().collect::<Vec<_>>().join(", ")
-                )
+                ))
             })?;
             toks.push(Tok::Num(*v));
         } else if "+-*/()".contains(c) {
             toks.push(Tok::Op(c));
             i += 1;
         } else {
-            return Err(format!("unexpected `{c}` in `{expr}`"));
+            return Err(WcetError::Annotation(format!(
+                "unexpected `{c}` in `{expr}`"
+            )));
         }
     }
     // Shunting-yard to reverse Polish notation, then evaluation.
@@ -205,7 +211,9 @@ pub fn evaluate(expr: &str, constants: &BTreeMap<&'static str, u64>) -> Result<u
                 match ops.pop() {
                     Some('(') => break,
                     Some(o) => out.push(Tok::Op(o)),
-                    None => return Err(format!("unbalanced `)` in `{expr}`")),
+                    None => {
+                        return Err(WcetError::Annotation(format!("unbalanced `)` in `{expr}`")))
+                    }
                 }
             },
             Tok::Op(o) => {
@@ -223,7 +231,7 @@ pub fn evaluate(expr: &str, constants: &BTreeMap<&'static str, u64>) -> Result<u
     }
     while let Some(o) = ops.pop() {
         if o == '(' {
-            return Err(format!("unbalanced `(` in `{expr}`"));
+            return Err(WcetError::Annotation(format!("unbalanced `(` in `{expr}`")));
         }
         out.push(Tok::Op(o));
     }
@@ -233,7 +241,9 @@ pub fn evaluate(expr: &str, constants: &BTreeMap<&'static str, u64>) -> Result<u
             Tok::Num(v) => stack.push(v),
             Tok::Op(o) => {
                 let (Some(b), Some(a)) = (stack.pop(), stack.pop()) else {
-                    return Err(format!("malformed expression `{expr}`"));
+                    return Err(WcetError::Annotation(format!(
+                        "malformed expression `{expr}`"
+                    )));
                 };
                 stack.push(
                     match o {
@@ -242,14 +252,20 @@ pub fn evaluate(expr: &str, constants: &BTreeMap<&'static str, u64>) -> Result<u
                         '*' => a.checked_mul(b),
                         _ => (b != 0).then(|| a.div_ceil(b)),
                     }
-                    .ok_or_else(|| format!("`{expr}` overflows, goes negative or divides by 0"))?,
+                    .ok_or_else(|| {
+                        WcetError::Annotation(format!(
+                            "`{expr}` overflows, goes negative or divides by 0"
+                        ))
+                    })?,
                 );
             }
         }
     }
     match stack.as_slice() {
         [v] => Ok(*v),
-        _ => Err(format!("malformed expression `{expr}`")),
+        _ => Err(WcetError::Annotation(format!(
+            "malformed expression `{expr}`"
+        ))),
     }
 }
 
@@ -265,7 +281,7 @@ pub fn parse_source(
     file: &str,
     text: &str,
     constants: &BTreeMap<&'static str, u64>,
-) -> Result<Vec<Annotation>, String> {
+) -> Result<Vec<Annotation>, WcetError> {
     let lines: Vec<&str> = text.lines().collect();
     let mut out = Vec::new();
     for (k, line) in lines.iter().enumerate() {
@@ -274,17 +290,17 @@ pub fn parse_source(
         } else if let Some(pos) = line.find(WITHIN_MARKER) {
             let rest = &line[pos + WITHIN_MARKER.len()..];
             let (name, spec) = rest.split_once(':').ok_or_else(|| {
-                format!(
+                WcetError::Annotation(format!(
                     "{file}:{}: `{WITHIN_MARKER}NAME: EXPR` lacks its `:`",
                     k + 1
-                )
+                ))
             })?;
             let name = name.trim();
             if name.is_empty() || !name.chars().all(|c| c.is_alphanumeric() || c == '_') {
-                return Err(format!(
+                return Err(WcetError::Annotation(format!(
                     "{file}:{}: `{WITHIN_MARKER}{name}:` names no function (one identifier)",
                     k + 1
-                ));
+                )));
             }
             (pos, spec.trim(), Some(name.to_string()))
         } else {
@@ -294,10 +310,10 @@ pub fn parse_source(
             Some((head, name)) => {
                 let name = name.trim();
                 if name.is_empty() || !name.chars().all(|c| c.is_alphanumeric() || c == '_') {
-                    return Err(format!(
+                    return Err(WcetError::Annotation(format!(
                         "{file}:{}: `counted in {name}` names no counter (one identifier)",
                         k + 1
-                    ));
+                    )));
                 }
                 (head.trim(), Some(name.to_string()))
             }
@@ -322,18 +338,19 @@ pub fn parse_source(
         } else {
             (spec, Scope::Entry)
         };
-        let bound = evaluate(expr, constants).map_err(|e| format!("{file}:{}: {e}", k + 1))?;
+        let bound = evaluate(expr, constants)
+            .map_err(|e| WcetError::Annotation(format!("{file}:{}: {e}", k + 1)))?;
         if within.is_some() && !matches!(scope, Scope::Entry | Scope::Call | Scope::Activation) {
-            return Err(format!(
+            return Err(WcetError::Annotation(format!(
                 "{file}:{}: `{WITHIN_MARKER}NAME:` bounds a loop (per entry, per call or per activation), not a call or a copy",
                 k + 1
-            ));
+            )));
         }
         if counter.is_some() && !matches!(scope, Scope::Activation | Scope::Runs) {
-            return Err(format!(
+            return Err(WcetError::Annotation(format!(
                 "{file}:{}: `counted in NAME` shares a bound per activation: write it after `per activation` or `times per activation`",
                 k + 1
-            ));
+            )));
         }
         let alone = line[..pos].trim().is_empty();
         let target = if alone {
@@ -343,7 +360,9 @@ pub fn parse_source(
                     let t = lines[j].trim();
                     !t.is_empty() && !t.starts_with("//") && !t.starts_with("#[")
                 })
-                .ok_or_else(|| format!("{file}:{}: annotation before no code", k + 1))?
+                .ok_or_else(|| {
+                    WcetError::Annotation(format!("{file}:{}: annotation before no code", k + 1))
+                })?
         } else {
             k
         };
@@ -363,7 +382,7 @@ pub fn parse_source(
 /// Each counter's group, by name: the index of the first annotation counted in
 /// it (every other annotation is a group of its own, its index). Fails when two
 /// annotations of one counter give different bounds.
-pub fn counter_groups(annotations: &[Annotation]) -> Result<BTreeMap<String, usize>, String> {
+pub fn counter_groups(annotations: &[Annotation]) -> Result<BTreeMap<String, usize>, WcetError> {
     let mut first: BTreeMap<String, usize> = BTreeMap::new();
     for (k, a) in annotations.iter().enumerate() {
         let Some(name) = a.counter.as_deref() else {
@@ -371,10 +390,10 @@ pub fn counter_groups(annotations: &[Annotation]) -> Result<BTreeMap<String, usi
         };
         let head = &annotations[*first.entry(name.to_string()).or_insert(k)];
         if head.bound != a.bound {
-            return Err(format!(
+            return Err(WcetError::Annotation(format!(
                 "{}:{}: counted in `{name}` with the bound `{}` = {}, but {}:{} gives it `{}` = {}: one counter has one bound",
                 a.file, a.line, a.expression, a.bound, head.file, head.line, head.expression, head.bound
-            ));
+            )));
         }
     }
     Ok(first)
@@ -398,14 +417,15 @@ pub struct SourceDir {
 pub fn scan_sources_with(
     sources: &[SourceDir],
     constants: &BTreeMap<&'static str, u64>,
-) -> Result<Vec<Annotation>, String> {
+) -> Result<Vec<Annotation>, WcetError> {
     let mut out = Vec::new();
     for source in sources {
         let root = source.dir.as_path();
         let mut files: Vec<PathBuf> = Vec::new();
         let mut dirs = vec![root.to_path_buf()];
         while let Some(d) = dirs.pop() {
-            let entries = std::fs::read_dir(&d).map_err(|e| format!("{}: {e}", d.display()))?;
+            let entries = std::fs::read_dir(&d)
+                .map_err(|e| WcetError::Annotation(format!("{}: {e}", d.display())))?;
             for e in entries.flatten() {
                 let p = e.path();
                 if p.is_dir() {
@@ -417,7 +437,8 @@ pub fn scan_sources_with(
         }
         files.sort();
         for p in files {
-            let text = std::fs::read_to_string(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+            let text = std::fs::read_to_string(&p)
+                .map_err(|e| WcetError::Annotation(format!("{}: {e}", p.display())))?;
             let rel = p
                 .strip_prefix(root)
                 .map(|r| format!("{}/{}", source.label, r.display()))
@@ -438,7 +459,7 @@ mod tests {
     }
 
     #[test]
-    fn an_annotation_for_one_callers_copy() -> Result<(), String> {
+    fn an_annotation_for_one_callers_copy() -> Result<(), WcetError> {
         let c = firmware_constants();
         let text = "fn f() {\n    // wcet-bound: WS\n    // wcet-bound in rebuild: WS * (WS - 1) / 2 per call\n    for l in 0..n {}\n}\n";
         let t = parse_source("qp/src/factor.rs", text, &c)?;
@@ -450,18 +471,18 @@ mod tests {
             (4, ws * (ws - 1) / 2, Scope::Call, Some("rebuild"))
         );
         let bad = parse_source("f.rs", "// wcet-bound in a b: 3\nfor x in y {}\n", &c);
-        assert!(bad.is_err_and(|e| e.contains("names no function")));
+        assert!(bad.is_err_and(|e| e.to_string().contains("names no function")));
         let cap = parse_source(
             "f.rs",
             "// wcet-bound in g: 3 times per activation\nf();\n",
             &c,
         );
-        assert!(cap.is_err_and(|e| e.contains("bounds a loop")));
+        assert!(cap.is_err_and(|e| e.to_string().contains("bounds a loop")));
         Ok(())
     }
 
     #[test]
-    fn a_counter_shares_one_bound_per_activation() -> Result<(), String> {
+    fn a_counter_shares_one_bound_per_activation() -> Result<(), WcetError> {
         let c = firmware_constants();
         let text = "loop { // wcet-bound: 30 per activation, counted in iters\n}\n\
                     // wcet-bound: 30 times per activation, counted in iters\nf();\n\
@@ -490,27 +511,30 @@ mod tests {
              // wcet-bound: 31 times per activation, counted in iters\nf();\n",
             &c,
         )?;
-        let e = counter_groups(&two).err().unwrap_or_default();
+        let e = counter_groups(&two)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
         assert!(e.contains("x.rs:4") && e.contains("x.rs:1"), "{e}");
         // A counter is per activation: not on a bound per entry, nor unnamed.
         let per_entry = parse_source("x.rs", "loop { // wcet-bound: 3, counted in i\n", &c);
-        assert!(per_entry.is_err_and(|e| e.contains("per activation")));
+        assert!(per_entry.is_err_and(|e| e.to_string().contains("per activation")));
         let unnamed = parse_source(
             "x.rs",
             "loop { // wcet-bound: 3 per activation, counted in a b\n",
             &c,
         );
-        assert!(unnamed.is_err_and(|e| e.contains("names no counter")));
+        assert!(unnamed.is_err_and(|e| e.to_string().contains("names no counter")));
         Ok(())
     }
 
     #[test]
     fn expressions() {
         let c = firmware_constants();
-        assert_eq!(evaluate("HORIZON", &c), Ok(16));
-        assert_eq!(evaluate("HORIZON * NU + 1", &c), Ok(33));
-        assert_eq!(evaluate("(HORIZON + 1) * 2", &c), Ok(34));
-        assert_eq!(evaluate("17 / 4", &c), Ok(5));
+        assert_eq!(evaluate("HORIZON", &c).ok(), Some(16));
+        assert_eq!(evaluate("HORIZON * NU + 1", &c).ok(), Some(33));
+        assert_eq!(evaluate("(HORIZON + 1) * 2", &c).ok(), Some(34));
+        assert_eq!(evaluate("17 / 4", &c).ok(), Some(5));
         assert!(evaluate("HORIZONS", &c).is_err());
         assert!(evaluate("1 - 2", &c).is_err());
         assert!(evaluate("(1 + 2", &c).is_err());

@@ -11,6 +11,8 @@
 //! | module | concept |
 //! |---|---|
 //! | [`target`] | the target description: roots, schedule, clock, memory model, flow facts' constants |
+//! | [`error`] | the crate's one error type, [`WcetError`] (an IPET's refusal, [`IpetError`], is one of its kinds) |
+//! | [`disassembly`] | the `llvm-objdump` disassembly parsed: functions, instructions, the data between them |
 //! | [`cfg`] | control-flow graphs from the Thumb-2 disassembly; per-block worst-case cycles |
 //! | [`memory_model`] | the processor and memory model the cycles are worst cases under: Cortex-M4 timing, flash lines and wait states, the flash accelerator |
 //! | [`flash_data`] | which data loads can read flash (the ELF's sections, the ways code forms addresses) |
@@ -45,6 +47,7 @@ pub mod cpi;
 pub mod critical;
 pub mod data_cache;
 pub mod disassembly;
+pub mod error;
 pub mod flash_data;
 pub mod flow_facts;
 pub mod graph;
@@ -59,66 +62,9 @@ pub mod target;
 pub mod trace_check;
 pub mod vector_table;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-/// What went wrong in a worst-case analysis, phrased so that whoever reads it knows
-/// what to fix.
-#[derive(Debug, thiserror::Error)]
-pub enum WcetError {
-    /// `llvm-objdump` of the `llvm-tools` rustup component was not found.
-    #[error(
-        "llvm-objdump not found at {searched}: install it with `rustup component add llvm-tools`"
-    )]
-    ObjdumpMissing {
-        /// Where it was looked for.
-        searched: PathBuf,
-    },
-    /// An external tool could not be started or failed.
-    #[error("running {tool} failed: {message}")]
-    Tool {
-        /// The tool's name.
-        tool: String,
-        /// What it reported (its stderr, or the OS error).
-        message: String,
-    },
-    /// A file could not be read.
-    #[error("cannot read {path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
-    },
-    /// A root function asked for is not in the disassembly.
-    #[error("no function named or starting with `{0}` in the disassembly: check the symbol name (demangled without hash, or mangled) with `llvm-nm -C`")]
-    UnknownRoot(String),
-    /// The ELF's DWARF line table could not be read.
-    #[error("DWARF line table of {path}: {message}")]
-    Dwarf {
-        /// The file.
-        path: PathBuf,
-        /// The reader's message.
-        message: String,
-    },
-    /// The ELF file could not be parsed.
-    #[error("{path} is not a readable ELF file: {message}")]
-    Elf {
-        /// The file.
-        path: PathBuf,
-        /// The parser's message.
-        message: String,
-    },
-    /// A line of a QEMU log does not have the expected format.
-    #[error("QEMU log line {line}: {message}: `{text}` (expected `-d in_asm,exec,nochain` output of qemu-system-arm)")]
-    LogFormat {
-        /// 1-based line number in the log.
-        line: u64,
-        /// What was expected.
-        message: String,
-        /// The offending line, shortened.
-        text: String,
-    },
-}
+pub use error::{IpetError, WcetError};
 
 /// The bytes of an ELF file.
 pub fn read_elf(elf: &Path) -> Result<Vec<u8>, WcetError> {

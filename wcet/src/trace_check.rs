@@ -260,7 +260,7 @@ Disassembly of section .text:
         let loops = program
             .functions
             .iter()
-            .map(|f| natural_loops(f).map_err(|c| format!("irreducible {c:?}")))
+            .map(natural_loops)
             .collect::<Result<Vec<_>, _>>()?;
         let plan = program.at(0x0800_0100).ok_or("no USART1")?;
         let control = program.at(0x0800_0200).ok_or("no USART2")?;

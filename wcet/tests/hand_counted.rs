@@ -6,7 +6,7 @@
 use wcet::cfg::{self, IndirectTargets, MemoryModel, Program};
 use wcet::flash_data::FlashData;
 use wcet::ipet::{self, Cost, IpetError, LoopFact, Per};
-use wcet::{bounds, demangle, loops};
+use wcet::{bounds, demangle, loops, WcetError};
 
 /// The memory model the hand counts assume: 5 flash wait states, 16-byte
 /// lines, flash at 0x0800_0000 (a Cortex-M4 behind an STM32F4's flash).
@@ -291,7 +291,7 @@ fn a_loop_without_a_bound_is_refused() {
         &Default::default(),
         Cost::Instructions,
     ) {
-        Err(IpetError::Unbounded(l)) => assert_eq!(l.len(), 1, "{l:?}"),
+        Err(WcetError::Ipet(IpetError::Unbounded(l))) => assert_eq!(l.len(), 1, "{l:?}"),
         other => panic!("expected a refusal, got {other:?}"),
     }
 }
@@ -304,7 +304,7 @@ fn recursion_is_refused() {
     assert_eq!(p.recursions(&[a]).len(), 1);
     assert!(matches!(
         ipet::task_bound(&p, &ls, a, &[], 0, &Default::default(), Cost::Instructions),
-        Err(IpetError::Recursion(_))
+        Err(WcetError::Ipet(IpetError::Recursion(_)))
     ));
 }
 
@@ -438,7 +438,7 @@ fn block_copies_are_bounded_by_the_bytes_of_their_call_sites() {
     unknown.sites[1].bytes = None;
     assert!(matches!(
         ipet::task_bound(&p, &ls, root, &facts, 0, &unknown, Cost::Instructions),
-        Err(IpetError::Unbounded(_))
+        Err(WcetError::Ipet(IpetError::Unbounded(_)))
     ));
 }
 

@@ -37,5 +37,5 @@ pub fn analyse(
     traces: &[PathBuf],
 ) -> anyhow::Result<analysis::StaticAnalysis> {
     let target = ecu_app::EcuBuild::of_elf(elf)?.target_of_elf(elf)?;
-    analysis::analyse(elf, &target, sources, traces)
+    Ok(analysis::analyse(elf, &target, sources, traces)?)
 }
