@@ -1,8 +1,9 @@
-//! The static worst-case timing analysis of the ECU ELF, put together: control-flow
-//! graphs ([`super::cfg`]), natural loops ([`super::loops`]), loop bounds recognised
-//! from the binary ([`super::bounds`]), source locations from the DWARF line table,
-//! and the IPET bound of each task ([`super::ipet`]) when every loop it reaches is
-//! bounded. Written as `static.json` and `static.md` beside the timing report.
+//! The static worst-case timing analysis of an ELF against its target
+//! description, put together: control-flow graphs ([`super::cfg`]), natural
+//! loops ([`super::loops`]), loop bounds recognised from the binary
+//! ([`super::bounds`]), source locations from the DWARF line table, and the IPET
+//! bound of each task ([`super::ipet`]) when every loop it reaches is bounded.
+//! Written as `static.json` and `static.md` beside the timing report.
 //!
 //! What it refuses, it says: a loop without a bound, an irreducible cycle (two
 //! entries, no header to bound), an indirect call no rule resolves, a recursion.
@@ -81,7 +82,7 @@ pub struct LoopEntry {
 }
 
 /// One kind of extra work of a task's heavier activations
-/// ([`super::ecu_app::ExtraWork`]), as the response-time analysis charges it.
+/// ([`super::target::ExtraWork`]), as the response-time analysis charges it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LightExtra {
     /// What it is.
@@ -153,7 +154,7 @@ pub struct TaskStatic {
     /// Deadline (= period) of a task, µs; `None` for a section.
     pub deadline_us: Option<f64>,
     /// A task whose activations are not all alike
-    /// ([`super::ecu_app::LightActivations`]): the bound of those without the
+    /// ([`super::target::LightActivations`]): the bound of those without the
     /// extra work, cycles (`None`: every activation charged the static bound).
     pub light_bound_cycles: Option<u64>,
     /// The extra work those activations leave out, each kind as the
@@ -300,8 +301,9 @@ pub struct TopBlock {
     pub cycles: u64,
 }
 
-/// Runs the analysis on `elf`, with the loop annotations of `sources` (the
-/// firmware crates' source folders, [`annotations::SourceDir::workspace`]).
+/// Runs the analysis on `elf`, the program `build` describes, with the loop
+/// annotations of `sources` (the target's source folders, under its
+/// [`Target::source_labels`]).
 ///
 /// The phases, in order: load the program, find its loops, read and index the
 /// annotations, bound every loop, derive the flow facts, bound each task and
@@ -1341,7 +1343,7 @@ struct IpetFigures {
 }
 
 impl Units {
-    /// Bounds every task and section of the ECU application (each its root's
+    /// Bounds every task and section of the target (each its root's
     /// completing activation); refuses a root the ELF lacks.
     fn bound_all(
         &mut self,
@@ -1362,7 +1364,7 @@ impl Units {
             let roots = model.program.find(symbol);
             let Some(&root) = roots.first() else {
                 return Err(WcetError::Analysis(format!(
-                    "no function `{symbol}` (task `{name}`) in {}: is it the ECU application?",
+                    "no function `{symbol}` (task `{name}`) in {}: is it the program the target describes?",
                     elf.display()
                 )));
             };
@@ -1640,7 +1642,7 @@ fn bound_critical_sections(
 }
 
 /// Response times: each task's and interrupt's static bound at its place in the
-/// build's schedule ([`EcuBuild::schedule`]), the critical sections of lower
+/// build's schedule ([`Target::schedule`]), the critical sections of lower
 /// priorities as blocking. Written into `tasks` only when every task and section
 /// has a bound.
 fn bound_response_times(
