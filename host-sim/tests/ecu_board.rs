@@ -720,8 +720,8 @@ fn a_short_real_time_hil_over_the_emulated_usart_drives_the_car_along_its_plan()
 #[ignore = "needs `cargo ecu` first (.ci/run)"]
 fn the_control_tasks_route_bytes_are_charged_per_byte_and_the_plan_task_meets_its_deadline() {
     use firmware::link::usart;
-    let sources = host_sim::wcet::annotations::SourceDir::workspace(&root());
-    let a = host_sim::wcet::analysis::analyse(&board_elf(), &sources, &[]).unwrap();
+    let sources = host_sim::wcet::ecu_sources::workspace_sources(&root());
+    let a = host_sim::wcet::analyse(&board_elf(), &sources, &[]).unwrap();
     let control = a.tasks.iter().find(|t| t.name == "control").unwrap();
     let light = control.light_bound_cycles.unwrap();
     let bytes = control

@@ -107,7 +107,7 @@ impl WcetArgs {
 
     /// The firmware crates' source folders under `--workspace`.
     fn sources(&self) -> Vec<crate::wcet::annotations::SourceDir> {
-        crate::wcet::annotations::SourceDir::workspace(&self.workspace)
+        crate::wcet::ecu_sources::workspace_sources(&self.workspace)
     }
 }
 
@@ -509,7 +509,7 @@ pub fn run(args: &WcetArgs) -> Result<()> {
     let model = fit_cost_model(&run_dirs)?;
     // The static analysis of the binary, checked against the traced run: the
     // report's bounds.
-    let analysis = crate::wcet::analysis::analyse(&args.elf(), &args.sources(), &traces)
+    let analysis = crate::wcet::analyse(&args.elf(), &args.sources(), &traces)
         .with_context(|| format!("static analysis of {}", args.elf().display()))?;
     analysis.write(&args.out)?;
     print_static(&analysis, &args.out);
@@ -674,17 +674,19 @@ fn print_summary(r: &report::WcetReport, out: &Path) {
 /// The static analysis of the ELF (control-flow graphs, loops, IPET), written as
 /// `static.json` and `static.md`, with a line per task.
 fn static_analysis(args: &WcetArgs, traces: &[PathBuf]) -> Result<()> {
-    let analysis = crate::wcet::analysis::analyse(&args.elf(), &args.sources(), traces)
+    let analysis = crate::wcet::analyse(&args.elf(), &args.sources(), traces)
         .with_context(|| format!("static analysis of {}", args.elf().display()))?;
     analysis.write(&args.out)?;
     print_static(&analysis, &args.out);
     // The stack bound of the same build: every priority level its schedule has
     // (the flashed build's link interrupt among them) and every fault handler.
+    let build = crate::wcet::ecu_app::EcuBuild::of_id(analysis.build)
+        .with_context(|| format!("no ECU build named `{}`", analysis.build))?;
     let stack = crate::wcet::stack::analyse_elf_once(
         &args.elf(),
-        &analysis.build.priority_levels(),
+        &build.priority_levels(),
         &crate::wcet::ecu_app::ecu_once(),
-        &analysis.build.masked(),
+        &build.masked(),
         &crate::wcet::indirect::targets_of_elf(&args.elf())?,
     )
     .with_context(|| format!("stack bound of {}", args.elf().display()))?;

@@ -3,28 +3,11 @@
 //! the function that sets it as the ELF's symbol table names it, and what the
 //! same sequence does on QEMU's `netduinoplus2`, whose RCC reads 0.
 
-use crate::wcet::{demangle, parse_elf, read_elf};
+pub use ::wcet::target::ClockReport;
+use ::wcet::{demangle, parse_elf, read_elf};
 use anyhow::Result;
 use firmware::clock_tree::{self, ClockRegisters, Register};
-use serde::Serialize;
 use std::path::Path;
-
-/// The core clock and where the binary sets it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct ClockReport {
-    /// SYSCLK = HCLK, the core's clock, in Hz.
-    pub sysclk_hz: u64,
-    /// What drives it on silicon, e.g. `HSE 25 MHz → PLL (M 25, N 336, P 2, Q 7)`.
-    pub source: String,
-    /// The function that sets it (`firmware::clock_tree::configure`), when the
-    /// ELF defines it; `null` when the ELF has no such function (not read, or an
-    /// ECU without the clock set-up).
-    pub configured_in: Option<String>,
-    /// What that function returns on QEMU's `netduinoplus2` (the library's
-    /// sequence run here against its RCC, which reads 0): `Ok(Fixed)`, the
-    /// machine's fixed 168 MHz, nothing written.
-    pub in_qemu: String,
-}
 
 /// QEMU 7.2's `netduinoplus2`: RCC, PWR and the flash interface are unimplemented
 /// devices, whose reads return 0 and whose writes do nothing.
@@ -46,39 +29,37 @@ pub fn configure_fn() -> &'static str {
     name.split('<').next().unwrap_or(name)
 }
 
-impl ClockReport {
-    /// From the firmware's constants; `configured_in` as given.
-    pub fn of_firmware(configured_in: Option<String>) -> Self {
-        let pll = clock_tree::PLL;
-        Self {
-            sysclk_hz: u64::from(clock_tree::SYSCLK_HZ),
-            source: format!(
-                "HSE {} MHz → PLL (M {}, N {}, P {}, Q {})",
-                f64::from(clock_tree::HSE_HZ) / 1e6,
-                pll.m,
-                pll.n,
-                pll.p,
-                pll.q
-            ),
-            configured_in,
-            in_qemu: format!("{:?}", clock_tree::configure(&mut QemuUnimplemented)),
-        }
+/// From the firmware's constants; `configured_in` as given.
+pub fn of_firmware(configured_in: Option<String>) -> ClockReport {
+    let pll = clock_tree::PLL;
+    ClockReport {
+        sysclk_hz: u64::from(clock_tree::SYSCLK_HZ),
+        source: format!(
+            "HSE {} MHz → PLL (M {}, N {}, P {}, Q {})",
+            f64::from(clock_tree::HSE_HZ) / 1e6,
+            pll.m,
+            pll.n,
+            pll.p,
+            pll.q
+        ),
+        configured_in,
+        in_qemu: format!("{:?}", clock_tree::configure(&mut QemuUnimplemented)),
     }
+}
 
-    /// From the firmware's constants and the ELF: `configured_in` is
-    /// [`configure_fn`] when the ELF defines a function of that name.
-    pub fn of_elf(elf: &Path) -> Result<Self> {
-        use object::{Object, ObjectSymbol, SymbolKind};
-        let data = read_elf(elf)?;
-        let file = parse_elf(elf, &data)?;
-        let wanted = configure_fn();
-        let defined = file.symbols().any(|s| {
-            s.is_definition()
-                && s.kind() == SymbolKind::Text
-                && s.name().is_ok_and(|n| demangle(n) == wanted)
-        });
-        Ok(Self::of_firmware(defined.then(|| wanted.to_string())))
-    }
+/// From the firmware's constants and the ELF: `configured_in` is
+/// [`configure_fn`] when the ELF defines a function of that name.
+pub fn of_elf(elf: &Path) -> Result<ClockReport> {
+    use object::{Object, ObjectSymbol, SymbolKind};
+    let data = read_elf(elf)?;
+    let file = parse_elf(elf, &data)?;
+    let wanted = configure_fn();
+    let defined = file.symbols().any(|s| {
+        s.is_definition()
+            && s.kind() == SymbolKind::Text
+            && s.name().is_ok_and(|n| demangle(n) == wanted)
+    });
+    Ok(of_firmware(defined.then(|| wanted.to_string())))
 }
 
 #[cfg(test)]
@@ -87,7 +68,7 @@ mod tests {
 
     #[test]
     fn the_clock_is_the_firmwares_and_qemu_takes_the_fixed_path() {
-        let c = ClockReport::of_firmware(None);
+        let c = of_firmware(None);
         assert_eq!(c.sysclk_hz, 168_000_000);
         assert_eq!(c.source, "HSE 25 MHz → PLL (M 25, N 336, P 2, Q 7)");
         assert_eq!(c.in_qemu, "Ok(Fixed)");
@@ -111,13 +92,13 @@ mod tests {
         // This test binary defines it, called here: found by its demangled name,
         // as in the ECU's ELF.
         let _ = clock_tree::configure(&mut Opaque);
-        let c = ClockReport::of_elf(&std::env::current_exe()?)?;
+        let c = of_elf(&std::env::current_exe()?)?;
         assert_eq!(c.configured_in.as_deref(), Some(configure_fn()));
         // A file that is not an ELF is an error, not a missing function.
         let tmp = tempfile::tempdir()?;
         let text = tmp.path().join("not-an-elf");
         std::fs::write(&text, "text")?;
-        assert!(ClockReport::of_elf(&text).is_err());
+        assert!(of_elf(&text).is_err());
         Ok(())
     }
 }

@@ -3,10 +3,15 @@
 //! the plan swap) with their budgets, the schedule, and for the stack bound its
 //! priority levels and the functions that run once or with interrupts masked. The
 //! numbers come from the firmware's own constants. The targets of its indirect
-//! calls are read from the binary ([`super::indirect`]).
+//! calls are read from the binary ([`super::indirect`]). [`EcuBuild::target`]
+//! puts it together as the analyser's target description ([`Target`]).
 
+use super::memory_model::MemoryModel;
 use super::rta::{Burst, Slow};
 use super::stack::PriorityLevel;
+use ::wcet::flash_data::FlashData;
+use ::wcet::target::{ClockReport, Target};
+pub use ::wcet::target::{ExtraWork, LightActivations, Scheduled};
 use firmware::link::usart;
 use serde::Serialize;
 use std::path::Path;
@@ -31,100 +36,10 @@ const CONTROL_PRIORITY: u8 = 2;
 /// The plan task's priority, in both builds.
 const PLAN_PRIORITY: u8 = 1;
 
-/// A task whose activations are not all alike: most are *light*, bounded from
-/// the same root with some of the firmware's constants bound tighter (the
-/// annotations that name them evaluated again); the rest carry [`ExtraWork`] of
-/// one kind or more, each charged by its units ([`super::rta::Heavy`]).
-#[derive(Debug, Clone, PartialEq)]
-pub struct LightActivations {
-    /// The task.
-    pub task: &'static str,
-    /// The kinds of extra work a light activation leaves out.
-    pub extras: Vec<ExtraWork>,
-}
-
-/// One kind of extra work of [`LightActivations`]: the constants that bound it
-/// run from their light values (no unit) to the firmware's own
-/// (`per_activation` units), a unit's cost is what one unit adds to the bound at
-/// most, and the units come at most `per_window` per window of `window_us`
-/// (`extra_windows` more in any window; [`super::rta::Extra`]).
-#[derive(Debug, Clone, PartialEq)]
-pub struct ExtraWork {
-    /// What it is, for the report.
-    pub what: &'static str,
-    /// The unit it comes in, for the report.
-    pub unit: &'static str,
-    /// The constants that bound it and their values without it.
-    pub constants: Vec<(&'static str, u64)>,
-    /// Units an activation carries at most (the constants' full values).
-    pub per_activation: u64,
-    /// Units per window at most.
-    pub per_window: u64,
-    /// The window, µs.
-    pub window_us: f64,
-    /// Windows a window of any length draws on besides one per `window_us`.
-    pub extra_windows: u64,
-    /// The priority of the task that makes the extra work.
-    pub producer_priority: Option<u8>,
-}
-
-impl ExtraWork {
-    /// The values of its constants with `units` of it (`0..=per_activation`):
-    /// from the light value to `full`'s, in proportion, rounded up.
-    pub fn constants_at(
-        &self,
-        units: u64,
-        full: &std::collections::BTreeMap<&'static str, u64>,
-    ) -> Vec<(&'static str, u64)> {
-        let units = units.min(self.per_activation);
-        self.constants
-            .iter()
-            .map(|&(name, light)| {
-                let top = full.get(name).copied().unwrap_or(light).max(light);
-                let span = top - light;
-                let add = if self.per_activation == 0 {
-                    span
-                } else {
-                    (span * units).div_ceil(self.per_activation)
-                };
-                (name, light + add)
-            })
-            .collect()
-    }
-
-    /// As the response-time analysis charges it, `unit_cycles` a unit.
-    pub fn charge(&self, unit_cycles: f64) -> super::rta::Extra {
-        super::rta::Extra {
-            unit_cycles,
-            per_activation: self.per_activation,
-            per_window: self.per_window,
-            window_us: self.window_us,
-            extra_windows: self.extra_windows,
-            producer_priority: self.producer_priority,
-        }
-    }
-}
-
-/// One activity of the schedule: a task or an interrupt.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Scheduled {
-    /// Name (a task of [`EcuBuild::tasks`]).
-    pub name: &'static str,
-    /// RTIC logical priority (higher preempts).
-    pub priority: u8,
-    /// Period, or minimum inter-arrival time, µs.
-    pub period_us: f64,
-    /// Relative deadline, µs.
-    pub deadline_us: f64,
-    /// A cap on its activations in a window besides the period (an interrupt the
-    /// application rate-limits).
-    pub burst: Option<Burst>,
-}
-
 impl EcuBuild {
     /// The build an ELF holds: [`EcuBuild::Board`] when it has the USART link's
     /// functions (`ecu::usart_link::…`), else [`EcuBuild::LockStep`].
-    pub fn of_elf(elf: &Path) -> Result<Self, super::WcetError> {
+    pub fn of_elf(elf: &Path) -> Result<Self, ::wcet::WcetError> {
         use object::{Object, ObjectSymbol};
         let data = super::read_elf(elf)?;
         let file = super::parse_elf(elf, &data)?;
@@ -297,53 +212,6 @@ impl EcuBuild {
         }]
     }
 
-    /// Preemptions of one activation of `task` that meets its deadline: the
-    /// activations of every higher priority within that deadline (each a chance
-    /// for a retry loop to retry once). Faults are not counted: they end the
-    /// activation.
-    pub fn preemptions_of(self, task: &str) -> u64 {
-        self.preemptions_within(task, None)
-    }
-
-    /// [`EcuBuild::preemptions_of`] within `window_us` of the activation's
-    /// release instead of its deadline (a response-time bound), when given.
-    pub fn preemptions_within(self, task: &str, window_us: Option<f64>) -> u64 {
-        let schedule = self.schedule();
-        let Some(me) = schedule.iter().find(|t| t.name == task) else {
-            return 0;
-        };
-        let window = window_us.map_or(me.deadline_us, |w| w.min(me.deadline_us));
-        schedule
-            .iter()
-            .filter(|t| t.priority > me.priority)
-            .map(|t| super::rta::arrivals_in(t.period_us, t.burst, window, me.priority) as u64)
-            .sum()
-    }
-
-    /// Preemptions of one activation of `task` that meets its deadline by the
-    /// monotonic's tick (`systick`) alone.
-    pub fn ticks_of(self, task: &str) -> u64 {
-        self.ticks_within(task, None)
-    }
-
-    /// [`EcuBuild::ticks_of`] within `window_us` of the activation's release
-    /// instead of its deadline, when given.
-    pub fn ticks_within(self, task: &str, window_us: Option<f64>) -> u64 {
-        let schedule = self.schedule();
-        let (Some(me), Some(tick)) = (
-            schedule.iter().find(|t| t.name == task),
-            schedule.iter().find(|t| t.name == "systick"),
-        ) else {
-            return 0;
-        };
-        let window = window_us.map_or(me.deadline_us, |w| w.min(me.deadline_us));
-        if tick.priority > me.priority {
-            super::rta::arrivals_in(tick.period_us, tick.burst, window, me.priority) as u64
-        } else {
-            0
-        }
-    }
-
     /// The priority levels, for [`super::stack::analyse_elf`]: thread mode runs
     /// `main` (init and idle); the priority-1 (`plan`) and priority-2 (`control`)
     /// async tasks run in their dispatchers (RTIC v2 gives the dispatchers listed
@@ -383,6 +251,64 @@ impl EcuBuild {
             "ecu::app::set_up".to_string(),
             open.to_string(),
         ]
+    }
+}
+
+/// The STM32F405 at 168 MHz: the wait states the ECU's clock set-up writes
+/// (`firmware::clock_tree::FLASH_LATENCY_WS`, 5), 16-byte lines, flash at
+/// 0x0800_0000.
+pub const STM32F405: MemoryModel = MemoryModel {
+    flash_wait_states: firmware::clock_tree::FLASH_LATENCY_WS,
+    flash_line_bytes: 16,
+    flash: (0x0800_0000, 0x0810_0000),
+    flash_data: FlashData::Anywhere(Vec::new()),
+    accelerator_setup: "the ECU's clock set-up, firmware::clock_tree::configure,",
+};
+
+impl EcuBuild {
+    /// The target description of this build: its tasks, schedule, sections,
+    /// stack levels, the STM32F405's memory model, the firmware's constants and
+    /// the dependencies' loop bounds, with `clock` as the binary sets it.
+    pub fn target(self, clock: ClockReport) -> Target {
+        Target {
+            id: self.id(),
+            name: self.name(),
+            tasks: self.tasks().to_vec(),
+            interrupts: self.interrupts().to_vec(),
+            tick: "systick",
+            schedule: self.schedule(),
+            light_activations: self.light_activations(),
+            sections: ECU_SECTIONS.to_vec(),
+            priority_levels: self.priority_levels(),
+            masked: self.masked(),
+            once: ecu_once(),
+            clock_hz: super::CLOCK_HZ,
+            clock,
+            memory: STM32F405,
+            constants: super::ecu_sources::firmware_constants(),
+            dependency_facts: super::ecu_sources::dependency_facts_with,
+            source_labels: super::ecu_sources::FIRMWARE_CRATE_SOURCES.to_vec(),
+        }
+    }
+
+    /// [`EcuBuild::target`] with the clock as `elf` sets it.
+    pub fn target_of_elf(self, elf: &Path) -> anyhow::Result<Target> {
+        Ok(self.target(super::clock::of_elf(elf)?))
+    }
+
+    /// Its identifier in `static.json` (`build`).
+    pub fn id(self) -> &'static str {
+        match self {
+            Self::LockStep => "lock-step",
+            Self::Board => "board",
+        }
+    }
+
+    /// The build a `static.json`'s `build` names ([`EcuBuild::id`]).
+    pub fn of_id(id: &str) -> Option<Self> {
+        [Self::LockStep, Self::Board]
+            .into_iter()
+            .find(|b| b.id() == id)
     }
 }
 
@@ -433,6 +359,10 @@ pub fn ecu_once() -> Vec<String> {
 mod tests {
     use super::*;
 
+    fn target(build: EcuBuild) -> Target {
+        build.target(super::super::clock::of_firmware(None))
+    }
+
     #[test]
     fn the_flashed_build_puts_its_link_between_the_tasks_and_the_tick() {
         let board = EcuBuild::Board.schedule();
@@ -451,8 +381,8 @@ mod tests {
 
     #[test]
     fn the_link_preempts_the_control_task_by_its_budgets_not_without_end() {
-        let lock = EcuBuild::LockStep;
-        let board = EcuBuild::Board;
+        let lock = target(EcuBuild::LockStep);
+        let board = target(EcuBuild::Board);
         // The monotonic ticks once a control period. Lock-step: 1 tick within
         // control's 10 ms, 10 control activations and 10 ticks within plan's
         // 100 ms.
@@ -496,5 +426,85 @@ mod tests {
             board.preemptions_of("plan")
         );
         assert_eq!(lock.preemptions_within("plan", None), 20);
+    }
+
+    fn task_static(
+        name: &str,
+        deadline: Option<f64>,
+        bound: Option<f64>,
+        past: Option<f64>,
+    ) -> ::wcet::analysis::TaskStatic {
+        ::wcet::analysis::TaskStatic {
+            name: name.into(),
+            root: String::new(),
+            functions: 0,
+            loops: 0,
+            bounded_loops: 0,
+            excluded_loops: 0,
+            irreducible: Vec::new(),
+            static_bound_instructions: None,
+            static_bound_cycles: None,
+            optimum: None,
+            refused: None,
+            top_functions: Vec::new(),
+            top_functions_entries: Vec::new(),
+            top_blocks: Vec::new(),
+            observed_activations: 0,
+            observed_max_instructions: None,
+            observed_max_cycles: None,
+            tightness: None,
+            budget_cycles: None,
+            response_time_bound_us: bound,
+            response_time_past_deadline_us: past,
+            deadline_us: deadline,
+            light_bound_cycles: None,
+            light_extras: Vec::new(),
+            demand_at_deadline: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_interrupts_are_the_schedules_hardware_entries_with_their_bounds() {
+        let mut link = task_static("link", Some(10.85), Some(4.2), None);
+        link.static_bound_cycles = Some(277);
+        let tasks = [
+            task_static("control", Some(10_000.0), Some(7_437.0), None),
+            link,
+            task_static("systick", Some(1_000.0), None, Some(2_000.0)),
+        ];
+        let board = ::wcet::analysis::interrupts_of(&target(EcuBuild::Board), &tasks);
+        let names: Vec<&str> = board.iter().map(|i| i.name.as_str()).collect();
+        assert_eq!(names, ["systick", "link"]);
+        let l = &board[1];
+        assert_eq!(l.handler, "USART1");
+        assert_eq!(l.static_bound_cycles, Some(277));
+        assert_eq!(l.response_time_bound_us, Some(4.2));
+        // Two entries a byte's time; the receive budget per control period.
+        let byte_us = f64::from(firmware::link::usart::BYTE_TIME_NS) / 1e3;
+        assert!(
+            (l.min_interarrival_us - byte_us / 2.0).abs() < 1e-3,
+            "{l:?}"
+        );
+        assert_eq!(
+            l.per_window,
+            Some(firmware::link::usart::ENTRIES_PER_BUDGET)
+        );
+        assert_eq!(l.window_us, Some(10_000.0));
+        assert_eq!(
+            l.per_slow_window,
+            Some(firmware::link::usart::ENTRIES_PER_PLAN_BUDGET)
+        );
+        assert_eq!(l.slow_window_us, Some(100_000.0));
+        // SysTick missed its deadline here: no bound, not a made-up one.
+        assert_eq!(board[0].handler, "SysTick");
+        assert_eq!(board[0].response_time_bound_us, None);
+        assert_eq!(
+            board[0].min_interarrival_us,
+            firmware::timing::MONO_TICK_US as f64
+        );
+        // The lock-step build has no link interrupt.
+        let lock = ::wcet::analysis::interrupts_of(&target(EcuBuild::LockStep), &tasks);
+        assert_eq!(lock.len(), 1);
+        assert_eq!(lock[0].name, "systick");
     }
 }

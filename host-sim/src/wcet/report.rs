@@ -374,7 +374,7 @@ pub fn build_report(inputs: &ReportInputs) -> Result<WcetReport> {
     )
     .with_context(|| format!("stack bound of {}", inputs.elf.display()))?;
     let mut report = assemble_report(inputs, &runs, memory, symbols, stack)?;
-    report.clock = super::clock::ClockReport::of_elf(&inputs.elf)?;
+    report.clock = super::clock::of_elf(&inputs.elf)?;
     report.caps = elf_caps(&inputs.elf)?;
     Ok(report)
 }
@@ -464,7 +464,7 @@ pub fn assemble_report(
     Ok(WcetReport {
         clock_hz: inputs.clock_hz,
         // The function that sets it is read from the ELF by `build_report`.
-        clock: super::clock::ClockReport::of_firmware(None),
+        clock: super::clock::of_firmware(None),
         traced_cycles_per_instruction: cpi,
         traced_cpi_method: inputs.cpi.justification.clone(),
         tasks,
@@ -611,8 +611,13 @@ mod tests {
     use super::pil_runs::{PilReport, Summary};
     use super::*;
     use crate::wcet::cpi::Figures;
-    use crate::wcet::stack::{parse_objdump, stack_bound, tests::levels, Counted};
+    use crate::wcet::stack::{parse_objdump, stack_bound, Counted, PriorityLevel};
+
     use std::path::Path;
+
+    fn levels(roots: &[&str]) -> Vec<PriorityLevel> {
+        PriorityLevel::numbered(roots)
+    }
 
     const HEADER: &str = "activation,release_us,finish_us,instructions,cycles,status,published,\
 deadline_miss,passes,warm,qp_iterations,qp_added,qp_removed,qp_refactorizations,rows,\

@@ -430,7 +430,7 @@ pub fn critical_sections(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::wcet::cfg::{build_program, parse_disassembly, IndirectTargets};
+    use crate::cfg::{build_program, parse_disassembly, IndirectTargets};
 
     /// `task`: a section with interrupts disabled around two instructions, then a
     /// call outside it; a lock at ceiling 2 (`BASEPRI` 0xe0) around a call of
@@ -463,7 +463,7 @@ Disassembly of section .text:
 
     #[test]
     fn sections_are_priced_from_their_start_to_their_end_calls_included() -> Result<(), String> {
-        let memory = MemoryModel::STM32F405;
+        let memory = MemoryModel::TEST;
         let program = build_program(
             &parse_disassembly(TASK),
             &IndirectTargets::default(),

@@ -24,8 +24,7 @@
 //! * `add rN, pc` (position-independent code), or an indirect call in a function
 //!   that forms a flash address with `adr` (the pointer could reach any callee).
 
-use super::cfg::RawFunction;
-use super::stack::parse_imm;
+use super::disassembly::{parse_imm, RawFunction};
 use object::{Object, ObjectSection, SectionKind};
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet};

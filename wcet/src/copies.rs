@@ -3,9 +3,9 @@
 //! the binary sets before the call or the `bytes` annotation at its source line.
 //! [`super::ipet`] bounds their loops by those bytes.
 
-use super::analysis::{frames, location, short_path};
 use super::cfg::{Exit, Program};
-use super::ecu_app::EcuBuild;
+use super::source_lines::SourceLines;
+use super::target::Target;
 use super::{annotations, bounds, ipet, loops};
 use std::collections::BTreeMap;
 
@@ -31,9 +31,9 @@ pub fn copy_size_register(name: &str) -> Option<&'static str> {
 /// sizes: a constant move into the size register before the call, else the
 /// `bytes` annotation at the call's source line.
 pub(super) fn copy_sizes(
-    build: EcuBuild,
+    build: &Target,
     program: &Program,
-    ctx: &addr2line::Loader,
+    ctx: &SourceLines,
     annotations: &[annotations::Annotation],
     counter_groups: &BTreeMap<String, usize>,
 ) -> ipet::CopySizes {
@@ -87,8 +87,8 @@ pub(super) fn copy_sizes(
                 let Some(reg) = copy_size_register(&program.functions[callee].demangled) else {
                     continue;
                 };
-                let (file, line) = location(ctx, ins.address);
-                let key = (short_path(&file), line);
+                let (file, line) = ctx.location(ins.address);
+                let key = (ctx.short_path(&file), line);
                 let bytes = bounds::constant_before(func, &preds, b, i, reg, 4)
                     .or_else(|| bytes_at.get(&key).copied());
                 sites.push(ipet::CopySite {
@@ -130,8 +130,8 @@ pub(super) fn copy_sizes(
                 let hit = func.instructions[block.first..block.end]
                     .iter()
                     .filter(|i| i.base().starts_with("bl"))
-                    .flat_map(|i| frames(ctx, i.address))
-                    .find_map(|(file, line)| capped.get(&(short_path(&file), line)).copied());
+                    .flat_map(|i| ctx.frames(i.address))
+                    .find_map(|(file, line)| capped.get(&(ctx.short_path(&file), line)).copied());
                 let Some((bound, group, annotation)) = hit else {
                     continue;
                 };

@@ -109,7 +109,7 @@ fn loop_edges(
 /// The flow facts of an analysis: `facts` (the loops' bounds), `copies.caps` (the
 /// capped lines), `annotations` (for names and sources), `origin` (each loop
 /// fact's stated source) and `retries` (per task, the retries an activation can
-/// make: its preemptions, [`super::ecu_app::EcuBuild::preemptions_of`], × the
+/// make: its preemptions, [`crate::target::Target::preemptions_of`], × the
 /// retries per preemption, and its ticks × the retries per tick).
 ///
 /// The loops' facts first (in `facts`' order), then the capped lines', then the

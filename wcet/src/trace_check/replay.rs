@@ -3,14 +3,14 @@
 //! entries and back edges per frame, and per-root activation costs (the rules are
 //! in [`super`]'s documentation).
 
-use super::tb_stream::Resolved;
-use super::{
+use super::observations::{
     CounterObservation, CounterScope, CounterSpec, IndirectObservation, LoopObservation,
     RootObservation, SectionObservation, TraceCheck, LARGEST_KEPT, MAX_EXAMPLES,
 };
-use crate::wcet::cache::Persistence;
-use crate::wcet::cfg::{Instruction, Program};
-use crate::wcet::loops::Loop;
+use super::tb_stream::Resolved;
+use crate::cache::Persistence;
+use crate::cfg::{Instruction, Program};
+use crate::loops::Loop;
 use std::collections::{BTreeMap, HashMap};
 
 /// What an instruction does to the call stack.

@@ -25,9 +25,8 @@
 //! ([`evicting_lines`], at most the whole data cache) besides the instruction
 //! cache's refill ([`super::cache::PREEMPTION_REFILL_CYCLES`]).
 
-use super::cfg::{strip_condition, Block, Instruction, Program};
+use super::disassembly::{parse_imm, strip_condition, Instruction};
 use super::memory_model::{flash_read, FlashRead};
-use super::stack::parse_imm;
 use std::collections::{BTreeMap, BTreeSet};
 
 /// Lines of the ART's data cache (RM0090 §3.5.2: 8 lines of 128 bits).
@@ -177,20 +176,6 @@ pub fn lines_read(
     Some(lines)
 }
 
-/// The data-cache lines an activation that can run the functions `reach` can
-/// evict: the distinct lines they read, at most [`DATA_CACHE_LINES`] (all when
-/// one reads a line not known statically).
-pub fn evicting_lines(program: &Program, reach: &[usize]) -> u64 {
-    let mut lines = BTreeSet::new();
-    for &f in reach {
-        match &program.functions[f].data_lines {
-            None => return u64::from(DATA_CACHE_LINES),
-            Some(l) => lines.extend(l.iter().copied()),
-        }
-    }
-    (lines.len() as u64).min(u64::from(DATA_CACHE_LINES))
-}
-
 /// Per instruction, whether an IT instruction before it makes it conditional
 /// (`it` covers one, `itt`/`ite` two, up to four).
 fn in_it_blocks(instructions: &[Instruction]) -> Vec<bool> {
@@ -217,13 +202,21 @@ fn join(a: &State, b: &State) -> State {
         .collect()
 }
 
+/// A block of a function's graph as the must analysis walks it.
+pub trait BlockShape {
+    /// The indices of its instructions in the function's.
+    fn instructions(&self) -> std::ops::Range<usize>;
+    /// The blocks control may pass to after it.
+    fn successors(&self) -> &[usize];
+}
+
 /// Per block of a function, how many of its pc-relative loads hit the data
 /// cache on every path (the must analysis of the module docs). `instructions`
 /// and `blocks` are the function's; `through_registers`: its loads through a
 /// register may read flash.
-pub fn must_hits(
+pub fn must_hits<B: BlockShape>(
     instructions: &[Instruction],
-    blocks: &[Block],
+    blocks: &[B],
     line_bytes: u32,
     through_registers: bool,
 ) -> Vec<u64> {
@@ -232,7 +225,7 @@ pub fn must_hits(
     let accesses: Vec<Vec<(Access, bool)>> = blocks
         .iter()
         .map(|b| {
-            (b.first..b.end)
+            b.instructions()
                 .map(|x| {
                     let a = access(&instructions[x], line_bytes, through_registers);
                     (a, conditional[x])
@@ -254,7 +247,7 @@ pub fn must_hits(
         for a in &accesses[b] {
             step(&mut state, a);
         }
-        for &s in &blocks[b].successors {
+        for &s in blocks[b].successors() {
             let next = match &input[s] {
                 None => state.clone(),
                 Some(old) => join(old, &state),
@@ -281,7 +274,6 @@ pub fn must_hits(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::wcet::cfg::Exit;
 
     fn insn(address: u32, mnemonic: &str, operands: &str) -> Instruction {
         Instruction {
@@ -293,22 +285,19 @@ mod tests {
         }
     }
 
-    fn block(first: usize, end: usize, successors: Vec<usize>) -> Block {
-        Block {
-            start: 0,
-            first,
-            end,
-            successors,
-            calls: Vec::new(),
-            exit: Exit::Internal,
-            problems: Vec::new(),
-            instructions: (end - first) as u64,
-            cycles: 0,
-            fetch_cycles: 0,
-            lines: None,
-            fall_through: None,
-            fall_through_saving: (0, 0),
+    struct Shape(usize, usize, Vec<usize>);
+
+    impl BlockShape for Shape {
+        fn instructions(&self) -> std::ops::Range<usize> {
+            self.0..self.1
         }
+        fn successors(&self) -> &[usize] {
+            &self.2
+        }
+    }
+
+    fn block(first: usize, end: usize, successors: Vec<usize>) -> Shape {
+        Shape(first, end, successors)
     }
 
     #[test]

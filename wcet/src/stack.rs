@@ -59,6 +59,7 @@
 //! HardFault + NMI`, each level its deepest root plus its exception frame, `init`
 //! the thread's depth through the functions run with interrupts masked.
 
+use super::disassembly::{parse_disassembly, parse_imm, Instruction};
 use super::vector_table::{VectorEntry, HARD_FAULT, NMI, RESET};
 use super::{demangle, WcetError};
 use serde::Serialize;
@@ -316,70 +317,22 @@ fn objdump(elf: &Path, args: &[&str]) -> Result<String, WcetError> {
     Ok(String::from_utf8_lossy(&out.stdout).to_string())
 }
 
-/// One instruction line of the disassembly.
-struct Insn<'a> {
-    address: u32,
-    mnemonic: &'a str,
-    /// Operands without the trailing `@ comment`.
-    operands: &'a str,
-}
-
-fn parse_header(line: &str) -> Option<(u32, &str)> {
-    let rest = line.strip_suffix(">:")?;
-    let (addr, name) = rest.split_once(" <")?;
-    Some((u32::from_str_radix(addr.trim(), 16).ok()?, name))
-}
-
-fn parse_insn(line: &str) -> Option<Insn<'_>> {
-    if !line.starts_with(' ') {
-        return None;
-    }
-    let mut fields = line.splitn(3, '\t');
-    let head = fields.next()?;
-    let (addr, _) = head.trim_start().split_once(':')?;
-    let address = u32::from_str_radix(addr, 16).ok()?;
-    let mnemonic = fields.next()?.trim();
-    let rest = fields.next().unwrap_or("");
-    let operands = rest.split('@').next().unwrap_or("").trim();
-    Some(Insn {
-        address,
-        mnemonic,
-        operands,
-    })
-}
-
-/// Parses `llvm-objdump -d` text into functions with frames, calls and indirect
-/// jumps. Symbols at one address printed once are known only by that name; add
-/// the others with [`Program::add_alias`].
+/// Parses `llvm-objdump -d` text (with or without raw bytes) into functions
+/// with frames, calls and indirect jumps: the functions and instructions of
+/// [`parse_disassembly`], the parser the control-flow graphs read too. Symbols
+/// at one address printed once are known only by that name; add the others with
+/// [`Program::add_alias`].
 pub fn parse_objdump(text: &str) -> Program {
     let mut program = Program::default();
-    // Headers seen since the last instruction: aliases of the next body.
-    let mut pending: Vec<(u32, String)> = Vec::new();
-    let mut body: Vec<Insn<'_>> = Vec::new();
-    let mut flush = |pending: &mut Vec<(u32, String)>, body: &mut Vec<Insn<'_>>| {
-        if let Some((address, name)) = pending.last().cloned() {
-            let index = program.functions.len();
-            program.functions.push(analyse_body(&name, address, body));
-            for (_, alias) in pending.iter() {
-                program.names.entry(alias.clone()).or_insert(index);
-            }
-        }
-        pending.clear();
-        body.clear();
-    };
-    for line in text.lines() {
-        if let Some((address, name)) = parse_header(line) {
-            if !body.is_empty() {
-                flush(&mut pending, &mut body);
-            }
-            pending.push((address, name.to_string()));
-        } else if let Some(insn) = parse_insn(line) {
-            if !pending.is_empty() {
-                body.push(insn);
-            }
+    for f in parse_disassembly(text) {
+        let index = program.functions.len();
+        program
+            .functions
+            .push(analyse_body(&f.name, f.address, &f.instructions));
+        for name in f.aliases.iter().chain(std::iter::once(&f.name)) {
+            program.names.entry(name.clone()).or_insert(index);
         }
     }
-    flush(&mut pending, &mut body);
     program
 }
 
@@ -412,15 +365,6 @@ fn register_list_bytes(operands: &str) -> Option<u32> {
         bytes += size * count;
     }
     Some(bytes)
-}
-
-/// An immediate operand (`#0x10`, `#16`, `16`), unsigned.
-pub(super) fn parse_imm(s: &str) -> Option<u32> {
-    let s = s.trim().trim_start_matches('#');
-    match s.strip_prefix("0x") {
-        Some(hex) => u32::from_str_radix(hex, 16).ok(),
-        None => s.parse().ok(),
-    }
 }
 
 /// The base mnemonic without width qualifier (`.w`, `.n`).
@@ -459,7 +403,7 @@ fn target_symbol(operands: &str) -> Option<(&str, bool)> {
     })
 }
 
-fn analyse_body(name: &str, address: u32, body: &[Insn<'_>]) -> Function {
+fn analyse_body(name: &str, address: u32, body: &[Instruction]) -> Function {
     let mut known: u32 = 0;
     let mut unknown: Option<String> = None;
     let mut calls = Vec::new();
@@ -467,10 +411,11 @@ fn analyse_body(name: &str, address: u32, body: &[Insn<'_>]) -> Function {
     // Constants moved into registers (movw/movt/mov #imm), for `sub sp, rX`.
     let mut regs: HashMap<&str, u32> = HashMap::new();
     for insn in body {
-        let m = base(insn.mnemonic);
-        let ops: Vec<&str> = insn.operands.split(',').map(str::trim).collect();
+        let (mnemonic, operands) = (insn.mnemonic.as_str(), insn.operands.as_str());
+        let m = base(mnemonic);
+        let ops: Vec<&str> = operands.split(',').map(str::trim).collect();
         let first = ops.first().copied().unwrap_or("");
-        let here = || format!("{:#x}: {} {}", insn.address, insn.mnemonic, insn.operands);
+        let here = || format!("{:#x}: {} {}", insn.address, mnemonic, operands);
         let mut decrement = |bytes: Option<u32>| match bytes {
             Some(b) => known = known.saturating_add(b),
             None => {
@@ -478,9 +423,9 @@ fn analyse_body(name: &str, address: u32, body: &[Insn<'_>]) -> Function {
             }
         };
         match m {
-            "push" | "vpush" => decrement(register_list_bytes(insn.operands)),
+            "push" | "vpush" => decrement(register_list_bytes(operands)),
             "stmdb" | "vstmdb" | "stmfd" if first == "sp!" => {
-                decrement(register_list_bytes(insn.operands))
+                decrement(register_list_bytes(operands))
             }
             "sub" | "subw" | "subs" if first == "sp" => {
                 // `sub sp, #N`, `sub sp, sp, #N`, `sub sp, sp, rX`, `sub sp, rX`;
@@ -499,8 +444,8 @@ fn analyse_body(name: &str, address: u32, body: &[Insn<'_>]) -> Function {
                 }
             }
             _ if m.starts_with("str")
-                && insn.operands.contains("[sp, #-")
-                && insn.operands.ends_with("]!") =>
+                && operands.contains("[sp, #-")
+                && operands.ends_with("]!") =>
             {
                 let imm = insn
                     .operands
@@ -549,8 +494,8 @@ fn analyse_body(name: &str, address: u32, body: &[Insn<'_>]) -> Function {
         }
         // Calls and indirect jumps.
         let register_operand = first.starts_with('r') || first == "ip" || first == "lr";
-        if let Some(is_call) = branch(insn.mnemonic) {
-            if let Some((target, _)) = target_symbol(insn.operands) {
+        if let Some(is_call) = branch(mnemonic) {
+            if let Some((target, _)) = target_symbol(operands) {
                 if is_call || target != name {
                     calls.push(Call {
                         target: target.to_string(),
@@ -562,7 +507,7 @@ fn analyse_body(name: &str, address: u32, body: &[Insn<'_>]) -> Function {
                 indirect.push(here());
             }
         } else if (m == "mov" && first == "pc")
-            || (m.starts_with("ldr") && first == "pc" && !insn.operands.contains("[sp"))
+            || (m.starts_with("ldr") && first == "pc" && !operands.contains("[sp"))
         {
             indirect.push(here());
         }
@@ -748,6 +693,20 @@ impl PriorityLevel {
             name: name.to_string(),
             roots: roots.iter().map(|r| r.to_string()).collect(),
         }
+    }
+
+    /// One level per root, in increasing priority: `thread` for the first,
+    /// `priority N` for the N-th after it.
+    pub fn numbered(roots: &[&str]) -> Vec<Self> {
+        let name = |i: usize| match i {
+            0 => "thread".to_string(),
+            _ => format!("priority {i}"),
+        };
+        roots
+            .iter()
+            .enumerate()
+            .map(|(i, r)| Self::new(&name(i), &[r]))
+            .collect()
     }
 }
 
@@ -1404,15 +1363,7 @@ pub(crate) mod tests {
 
     /// The thread level with root `roots[0]`, then `priority i` with root `roots[i]`.
     pub(crate) fn levels(roots: &[&str]) -> Vec<PriorityLevel> {
-        let name = |i: usize| match i {
-            0 => "thread".to_string(),
-            _ => format!("priority {i}"),
-        };
-        roots
-            .iter()
-            .enumerate()
-            .map(|(i, r)| PriorityLevel::new(&name(i), &[r]))
-            .collect()
+        PriorityLevel::numbered(roots)
     }
 
     /// The bound of `levels` with a vector table read that lists no handler: only

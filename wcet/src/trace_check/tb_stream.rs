@@ -4,7 +4,7 @@
 //! before it ran is dropped, one rewound by `cpu_io_recompile` counts up to the
 //! rewound instruction) applied before an execution is handed out.
 
-use crate::wcet::WcetError;
+use crate::WcetError;
 use std::collections::{HashMap, VecDeque};
 use std::io::BufRead;
 

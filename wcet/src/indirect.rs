@@ -287,8 +287,8 @@ pub fn unexpected_targets(program: &Program, check: &TraceCheck) -> Vec<String> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::wcet::cfg::{build_program, parse_disassembly, MemoryModel};
-    use crate::wcet::trace_check::IndirectObservation;
+    use crate::cfg::{build_program, parse_disassembly, MemoryModel};
+    use crate::trace_check::IndirectObservation;
 
     /// `wake` jumps to its argument (a value: a built address may be there);
     /// `caller` calls through a vtable's slot (loaded: any taken address); `pend`
@@ -354,10 +354,8 @@ Disassembly of section .text:
         assert_eq!(of("caller"), vec!["wake", "pend", "slot"]);
         assert!(of("pend").is_empty());
         // The graph has them: a trace to `never` is unexpected, to `pend` not.
-        let program = build_program(&raw, &rules, &MemoryModel::STM32F405, |s: &str| {
-            s.to_string()
-        })
-        .map_err(|e| e.to_string())?;
+        let program = build_program(&raw, &rules, &MemoryModel::TEST, |s: &str| s.to_string())
+            .map_err(|e| e.to_string())?;
         let at = |a: u32| program.at(a).ok_or("no function");
         let observed = |target: usize| TraceCheck {
             loops: Vec::new(),

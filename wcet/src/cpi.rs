@@ -920,7 +920,7 @@ Trace 0: 0x7f0000000300 [00800408/08000200/00000010/ff020200] SysTick
         );
     }
 
-    /// Tool, not a check: `CPI_LOG=/path/to/qemu.log cargo test --release -p host-sim
+    /// Tool, not a check: `CPI_LOG=/path/to/qemu.log cargo test --release -p wcet
     /// --lib cpi::tests::analyse_the_log_in_cpi_log -- --ignored --nocapture` prints
     /// the analysis of a saved `-d in_asm,exec,nochain` log (`/dev/stdin` works).
     #[test]

@@ -8,6 +8,7 @@
 //! has no header to bound and is refused.
 
 use super::cfg::Function;
+use super::WcetError;
 use std::collections::BTreeSet;
 
 /// A natural loop.
@@ -128,8 +129,9 @@ fn dominates(idom: &[Option<usize>], a: usize, mut b: usize) -> bool {
     }
 }
 
-/// The loops of a function, or the blocks of an irreducible cycle.
-pub fn natural_loops(f: &Function) -> Result<Vec<Loop>, Vec<usize>> {
+/// The loops of a function, or the blocks of an irreducible cycle
+/// ([`WcetError::Irreducible`]).
+pub fn natural_loops(f: &Function) -> Result<Vec<Loop>, WcetError> {
     let idom = immediate_dominators(f);
     let rpo = reverse_post_order(f);
     let reachable: BTreeSet<usize> = rpo.iter().copied().collect();
@@ -210,7 +212,7 @@ pub fn natural_loops(f: &Function) -> Result<Vec<Loop>, Vec<usize>> {
         });
     }
     if let Some(cycle) = forward_cycle(f, &reachable, &back) {
-        return Err(cycle);
+        return Err(WcetError::Irreducible(cycle));
     }
     // Nesting: the smallest loop strictly containing each loop.
     let sets: Vec<BTreeSet<usize>> = loops

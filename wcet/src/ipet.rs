@@ -273,19 +273,7 @@ pub struct BlockShare {
     pub cost: u64,
 }
 
-/// Why no bound could be computed.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum IpetError {
-    /// Loops reachable from the task without a bound.
-    #[error("{} loop(s) without a bound: {}", .0.len(), .0.join("; "))]
-    Unbounded(Vec<String>),
-    /// The call graph is recursive.
-    #[error("recursion: {}", .0.join(" -> "))]
-    Recursion(Vec<String>),
-    /// The linear program could not be solved.
-    #[error("the IPET linear program failed: {0}")]
-    Solver(String),
-}
+pub use crate::error::IpetError;
 
 /// Adds `runs` to activation group `g`'s sum, whose bound is the smallest any of
 /// its members gives (`bound` for this one).
@@ -316,10 +304,10 @@ pub fn task_bound(
     retries: impl Into<Retries>,
     copies: &CopySizes,
     cost: Cost,
-) -> Result<IpetBound, IpetError> {
+) -> Result<IpetBound, crate::WcetError> {
     let retries = retries.into();
     if let Some(r) = program.recursions(&[root]).into_iter().next() {
-        return Err(IpetError::Recursion(r));
+        return Err(IpetError::Recursion(r).into());
     }
     let reach = program.completing_reachable(&[root]);
     let mut lp = Ipet::new(program, loops, root, facts, copies, cost, &reach);
@@ -330,7 +318,7 @@ pub fn task_bound(
     lp.add_copy_budgets(&sites);
     lp.add_activation_caps(retries);
     lp.add_call_counts(&reach);
-    lp.solve(&reach)
+    Ok(lp.solve(&reach)?)
 }
 
 /// The integer linear program of one task's activation, built one function at a

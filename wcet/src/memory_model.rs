@@ -1,10 +1,10 @@
 //! The processor and memory model of the cycle bounds: per-instruction worst
-//! cases of the Cortex-M4 (TRM), the STM32F405's flash (wait states, 128-bit lines,
+//! cases of the Cortex-M4 (TRM), the target's flash (wait states, 128-bit lines,
 //! the ART accelerator as the ECU sets it up) and which loads may read flash. Its
 //! assumptions are stated in the report ([`MemoryModel::assumptions`]).
 
-use super::cfg::{strip_condition, Instruction};
 use super::cpi::Class;
+use super::disassembly::{strip_condition, Instruction};
 use super::flash_data::FlashData;
 
 /// The memory model under which the block cycles are worst cases: fetch never
@@ -23,17 +23,22 @@ pub struct MemoryModel {
     /// Which data loads may read flash ([`FlashData::classify`] decides it for a
     /// binary; [`FlashData::Anywhere`] assumes nothing).
     pub flash_data: FlashData,
+    /// What sets the flash accelerator up so (prefetch off, instruction cache
+    /// on), for the report: e.g. `the ECU's clock set-up, firmware::clock_tree::configure,`.
+    #[serde(skip)]
+    pub accelerator_setup: &'static str,
 }
 
 impl MemoryModel {
-    /// The STM32F405 at 168 MHz: the wait states the ECU's clock set-up writes
-    /// (`firmware::clock_tree::FLASH_LATENCY_WS`, 5), 16-byte lines, flash at
-    /// 0x0800_0000.
-    pub const STM32F405: MemoryModel = MemoryModel {
-        flash_wait_states: firmware::clock_tree::FLASH_LATENCY_WS,
+    /// A hand-made model for the crate's tests: 5 wait states, 16-byte lines,
+    /// flash at 0x0800_0000 (the figures the hand-counted cycles assume).
+    #[cfg(test)]
+    pub(crate) const TEST: MemoryModel = MemoryModel {
+        flash_wait_states: 5,
         flash_line_bytes: 16,
         flash: (0x0800_0000, 0x0810_0000),
         flash_data: FlashData::Anywhere(Vec::new()),
+        accelerator_setup: "the test's",
     };
 
     /// The assumptions, for the report.
@@ -49,8 +54,8 @@ impl MemoryModel {
             ),
             format!(
                 "Instruction fetch: from flash with {} wait states, {}-byte lines, the ART \
-                 accelerator's prefetch off and its instruction cache on (the ECU's clock set-up, \
-                 firmware::clock_tree::configure, sets FLASH_ACR so). Each line a block touches costs {} cycles, added to (not \
+                 accelerator's prefetch off and its instruction cache on ({} \
+                 sets FLASH_ACR so). Each line a block touches costs {} cycles, added to (not \
                  overlapped with) the block's execution, and once more after each call (the \
                  return address's line); a fall-through into the line the previous block \
                  ended in is not charged again (the flash interface's 128-bit line buffer, \
@@ -61,6 +66,7 @@ impl MemoryModel {
                  preemption is charged a refill of the whole cache.",
                 self.flash_wait_states,
                 self.flash_line_bytes,
+                self.accelerator_setup,
                 self.flash_wait_states + 1
             ),
             self.flash_data.describe(self.flash_wait_states),

@@ -20,6 +20,7 @@
 //! so at most that many of them are evicted and fetched again.
 
 use super::cfg::Program;
+use super::data_cache::DATA_CACHE_LINES;
 use super::loops::Loop;
 use std::collections::{BTreeSet, HashMap};
 
@@ -30,8 +31,21 @@ pub const CACHE_LINES: u64 = 64;
 /// code: it may evict every line of the preempted task's instruction cache and
 /// data cache ([`super::data_cache`]), which then fetches them again, 64 + 8
 /// lines of 6 cycles (5 wait states and the access).
-pub const PREEMPTION_REFILL_CYCLES: f64 =
-    ((CACHE_LINES + super::data_cache::DATA_CACHE_LINES as u64) * 6) as f64;
+pub const PREEMPTION_REFILL_CYCLES: f64 = ((CACHE_LINES + DATA_CACHE_LINES as u64) * 6) as f64;
+
+/// The data-cache lines ([`super::data_cache`]) an activation that can run the functions `reach` can
+/// evict: the distinct lines they read, at most [`DATA_CACHE_LINES`] (all when
+/// one reads a line not known statically).
+pub fn evicting_data_lines(program: &Program, reach: &[usize]) -> u64 {
+    let mut lines = BTreeSet::new();
+    for &f in reach {
+        match &program.functions[f].data_lines {
+            None => return u64::from(DATA_CACHE_LINES),
+            Some(l) => lines.extend(l.iter().copied()),
+        }
+    }
+    (lines.len() as u64).min(u64::from(DATA_CACHE_LINES))
+}
 
 /// The evicting cache blocks of an activation: the distinct flash lines of the
 /// code the functions `reach` can run, at most [`CACHE_LINES`]: the most lines of

@@ -1,8 +1,9 @@
-//! The static worst-case timing analysis of the ECU ELF, put together: control-flow
-//! graphs ([`super::cfg`]), natural loops ([`super::loops`]), loop bounds recognised
-//! from the binary ([`super::bounds`]), source locations from the DWARF line table,
-//! and the IPET bound of each task ([`super::ipet`]) when every loop it reaches is
-//! bounded. Written as `static.json` and `static.md` beside the timing report.
+//! The static worst-case timing analysis of an ELF against its target
+//! description, put together: control-flow graphs ([`super::cfg`]), natural
+//! loops ([`super::loops`]), loop bounds recognised from the binary
+//! ([`super::bounds`]), source locations from the DWARF line table, and the IPET
+//! bound of each task ([`super::ipet`]) when every loop it reaches is bounded.
+//! Written as `static.json` and `static.md` beside the timing report.
 //!
 //! What it refuses, it says: a loop without a bound, an irreducible cycle (two
 //! entries, no header to bound), an indirect call no rule resolves, a recursion.
@@ -12,11 +13,15 @@ use super::cfg::Function;
 use super::cfg::{self, FlashData, MemoryModel, Program};
 pub use super::copies::copy_size_register;
 use super::copies::copy_sizes;
-pub use super::ecu_app::{EcuBuild, ECU_SECTIONS};
 use super::ipet::{self, Cost, LoopFact, Per};
 use super::loops::{self, reverse_post_order, Loop};
+use super::source_lines::SourceLines;
+use super::target::Target;
 use super::{annotations, bounds, demangle};
-use anyhow::{Context, Result};
+use crate::WcetError;
+
+/// The analysis's results, or why there is none.
+type Result<T> = std::result::Result<T, WcetError>;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -77,7 +82,7 @@ pub struct LoopEntry {
 }
 
 /// One kind of extra work of a task's heavier activations
-/// ([`super::ecu_app::ExtraWork`]), as the response-time analysis charges it.
+/// ([`super::target::ExtraWork`]), as the response-time analysis charges it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LightExtra {
     /// What it is.
@@ -149,7 +154,7 @@ pub struct TaskStatic {
     /// Deadline (= period) of a task, µs; `None` for a section.
     pub deadline_us: Option<f64>,
     /// A task whose activations are not all alike
-    /// ([`super::ecu_app::LightActivations`]): the bound of those without the
+    /// ([`super::target::LightActivations`]): the bound of those without the
     /// extra work, cycles (`None`: every activation charged the static bound).
     pub light_bound_cycles: Option<u64>,
     /// The extra work those activations leave out, each kind as the
@@ -165,10 +170,17 @@ pub struct TaskStatic {
 pub struct StaticAnalysis {
     /// The ELF analysed.
     pub elf: String,
-    /// Which build of the ECU application it is (its tasks and schedule).
-    pub build: EcuBuild,
+    /// Which build of the target it is (its tasks and schedule):
+    /// [`Target::id`].
+    pub build: &'static str,
+    /// Its name in the reports ([`Target::name`]).
+    #[serde(skip)]
+    pub build_name: &'static str,
+    /// The core clock, Hz ([`Target::clock_hz`]).
+    #[serde(skip)]
+    pub clock_hz: u32,
     /// The core clock as the binary sets it (frequency, source, the function).
-    pub clock: super::clock::ClockReport,
+    pub clock: super::target::ClockReport,
     /// The interrupts of the schedule (SysTick, the flashed build's link): what
     /// the response-time analysis charges every lower priority for them.
     pub interrupts: Vec<InterruptEntry>,
@@ -240,8 +252,8 @@ pub struct InterruptEntry {
     pub deadline_us: f64,
 }
 
-/// The interrupts of `build`'s schedule with the bounds `tasks` found for them.
-fn interrupts_of(build: EcuBuild, tasks: &[TaskStatic]) -> Vec<InterruptEntry> {
+/// The interrupts of the target's schedule with the bounds `tasks` found for them.
+pub fn interrupts_of(build: &Target, tasks: &[TaskStatic]) -> Vec<InterruptEntry> {
     build
         .schedule()
         .into_iter()
@@ -289,49 +301,9 @@ pub struct TopBlock {
     pub cycles: u64,
 }
 
-/// Source location of `address`: the innermost frame in the firmware's own
-/// sources if any, else the innermost frame.
-pub(super) fn location(loader: &addr2line::Loader, address: u32) -> (String, u32) {
-    let chain = frames(loader, address);
-    chain
-        .iter()
-        .find(|(file, _)| annotations::firmware_source_path(file).is_some())
-        .or(chain.first())
-        .cloned()
-        .unwrap_or_else(|| ("?".into(), 0))
-}
-
-/// The source path from the workspace on (`firmware/src/mpc.rs`, `qp/src/factor.rs`),
-/// or the file name with its crate folder for a dependency.
-pub(super) fn short_path(file: &str) -> String {
-    if let Some(p) = annotations::firmware_source_path(file) {
-        return p.to_string();
-    }
-    // A crate from the registry: from its `name-version` folder on.
-    if let Some(i) = file.find("/registry/src/") {
-        if let Some((_, rest)) = file[i + "/registry/src/".len()..].split_once('/') {
-            return rest.to_string();
-        }
-    }
-    let parts: Vec<&str> = file.rsplit('/').take(3).collect();
-    parts.into_iter().rev().collect::<Vec<_>>().join("/")
-}
-
-/// Every frame of `address`'s inlining chain, innermost first.
-pub(super) fn frames(loader: &addr2line::Loader, address: u32) -> Vec<(String, u32)> {
-    let mut out = Vec::new();
-    if let Ok(mut fr) = loader.find_frames(u64::from(address)) {
-        while let Ok(Some(frame)) = fr.next() {
-            if let Some(loc) = frame.location {
-                out.push((loc.file.unwrap_or("?").to_string(), loc.line.unwrap_or(0)));
-            }
-        }
-    }
-    out
-}
-
-/// Runs the analysis on `elf`, with the loop annotations of `sources` (the
-/// firmware crates' source folders, [`annotations::SourceDir::workspace`]).
+/// Runs the analysis on `elf`, the program `build` describes, with the loop
+/// annotations of `sources` (the target's source folders, under its
+/// [`Target::source_labels`]).
 ///
 /// The phases, in order: load the program, find its loops, read and index the
 /// annotations, bound every loop, derive the flow facts, bound each task and
@@ -339,13 +311,13 @@ pub(super) fn frames(loader: &addr2line::Loader, address: u32) -> Vec<(String, u
 /// check every bound against the QEMU `traces` and measure their coverage.
 pub fn analyse(
     elf: &Path,
+    build: &Target,
     sources: &[annotations::SourceDir],
     traces: &[PathBuf],
 ) -> Result<StaticAnalysis> {
-    let binary = Binary::load(elf)?;
-    let build = EcuBuild::of_elf(elf)?;
+    let binary = Binary::load(elf, build)?;
     let (all_loops, irreducible) = find_loops(&binary.program);
-    let (annotations, dependency_facts) = read_annotations(sources)?;
+    let (annotations, dependency_facts) = read_annotations(build, sources)?;
     let index = AnnotationIndex::new(&annotations, &dependency_facts)?;
     let copies = copy_sizes(
         build,
@@ -426,8 +398,10 @@ pub fn analyse(
     } = units;
     let loops: Vec<LoopEntry> = loop_rows.into_values().collect();
     Ok(StaticAnalysis {
-        build,
-        clock: super::clock::ClockReport::of_elf(elf)?,
+        build: build.id,
+        build_name: build.name,
+        clock_hz: build.clock_hz,
+        clock: build.clock.clone(),
         interrupts: interrupts_of(build, &tasks),
         traces: traces.iter().map(|t| t.display().to_string()).collect(),
         violations: observed.violations,
@@ -461,10 +435,10 @@ fn bound_light_activations(
     binary: &Binary,
     all_loops: &[Vec<Loop>],
     sources: &[annotations::SourceDir],
-    build: EcuBuild,
+    build: &Target,
     windows: &BTreeMap<String, f64>,
 ) -> Result<()> {
-    let full = annotations::firmware_constants();
+    let full = build.constants.clone();
     for light in build.light_activations() {
         let Some(task_bound) = units
             .tasks
@@ -521,11 +495,10 @@ fn bound_light_activations(
                     bound(&at(1))?,
                     bound(&at(extra.per_activation))?,
                 ) else {
-                    anyhow::bail!(
+                    return Err(WcetError::Analysis(format!(
                         "`{}`: no bound with part of {} (its light bound is {light_cycles})",
-                        light.task,
-                        extra.what
-                    );
+                        light.task, extra.what
+                    )));
                 };
                 *row = [b0, b1, bmax];
                 let first = b1.saturating_sub(b0) as f64;
@@ -554,22 +527,22 @@ fn light_bound(
     binary: &Binary,
     all_loops: &[Vec<Loop>],
     sources: &[annotations::SourceDir],
-    build: EcuBuild,
+    build: &Target,
     task: &str,
     constants: &[(&'static str, u64)],
     windows: &BTreeMap<String, f64>,
 ) -> Result<Option<u64>> {
-    let mut values = annotations::firmware_constants();
+    let mut values = build.constants.clone();
     for &(name, value) in constants {
         if values.insert(name, value).is_none() {
-            anyhow::bail!(
-                "the light activations of `{task}` bind `{name}`, which is not one of the firmware's constants"
-            );
+            return Err(WcetError::Analysis(format!(
+                "the light activations of `{task}` bind `{name}`, which is not one of the target's constants"
+            )));
         }
     }
     let annotations = annotations::scan_sources_with(sources, &values)
-        .map_err(|e| anyhow::anyhow!("loop annotations: {e}"))?;
-    let dependency_facts = annotations::dependency_facts_with(&values);
+        .map_err(|e| WcetError::Annotation(format!("loop annotations: {e}")))?;
+    let dependency_facts = (build.dependency_facts)(&values);
     let index = AnnotationIndex::new(&annotations, &dependency_facts)?;
     let copies = copy_sizes(
         build,
@@ -590,10 +563,15 @@ fn light_bound(
         build,
     };
     let Some(&(_, symbol)) = build.tasks().iter().find(|(n, _)| *n == task) else {
-        anyhow::bail!("no task `{task}` in the {} build", build.name());
+        return Err(WcetError::Analysis(format!(
+            "no task `{task}` in the {} build",
+            build.name()
+        )));
     };
     let Some(&root) = binary.program.find(symbol).first() else {
-        anyhow::bail!("no function `{symbol}` (task `{task}`)");
+        return Err(WcetError::Analysis(format!(
+            "no function `{symbol}` (task `{task}`)"
+        )));
     };
     let preemptions = retries
         .iter()
@@ -608,25 +586,25 @@ fn light_bound(
 struct Binary {
     /// The functions' control-flow graphs.
     program: Program,
-    /// The STM32F405's memory model, with the flash data this binary reads.
+    /// The target's memory model, with the flash data this binary reads.
     memory: MemoryModel,
     /// The functions indirect calls and jumps may reach, by function.
     taken: BTreeMap<usize, Vec<super::indirect::Taken>>,
     /// The DWARF line table, for the source lines of addresses.
-    ctx: addr2line::Loader,
+    ctx: SourceLines,
 }
 
 impl Binary {
     /// Loads the program: disassembles `elf`, classifies its flash data, finds the
     /// targets of its indirect calls and builds the control-flow graphs.
-    fn load(elf: &Path) -> Result<Self> {
+    fn load(elf: &Path, target: &Target) -> Result<Self> {
         let text = super::stack::disassemble_with_bytes(elf)?;
         let raw = cfg::parse_disassembly(&text);
         let data = super::read_elf(elf)?;
         let file = super::parse_elf(elf, &data)?;
         let memory = MemoryModel {
-            flash_data: FlashData::classify(&file, &raw, MemoryModel::STM32F405.flash, demangle),
-            ..MemoryModel::STM32F405
+            flash_data: FlashData::classify(&file, &raw, target.memory.flash, demangle),
+            ..target.memory.clone()
         };
         // Indirect calls and jumps may reach every function whose address the binary
         // holds or builds (its data sections, literal pools, movw/movt pairs).
@@ -637,8 +615,7 @@ impl Binary {
             &memory,
             demangle,
         )?;
-        let ctx = addr2line::Loader::new(elf)
-            .map_err(|e| anyhow::anyhow!("DWARF line table of {}: {e}", elf.display()))?;
+        let ctx = SourceLines::new(elf, &target.source_labels)?;
         Ok(Self {
             program,
             memory,
@@ -657,8 +634,10 @@ fn find_loops(program: &Program) -> (Vec<Vec<Loop>>, BTreeMap<usize, Vec<usize>>
     for (k, f) in program.functions.iter().enumerate() {
         match loops::natural_loops(f) {
             Ok(l) => all_loops.push(l),
-            Err(blocks) => {
-                irreducible.insert(k, blocks);
+            Err(e) => {
+                if let WcetError::Irreducible(blocks) = e {
+                    irreducible.insert(k, blocks);
+                }
                 all_loops.push(Vec::new());
             }
         }
@@ -669,16 +648,17 @@ fn find_loops(program: &Program) -> (Vec<Vec<Loop>>, BTreeMap<usize, Vec<usize>>
 /// Reads the loop annotations of the firmware's `sources`, and the facts stated
 /// about the dependencies' code (which the firmware's sources cannot carry).
 fn read_annotations(
+    build: &Target,
     sources: &[annotations::SourceDir],
 ) -> Result<(Vec<annotations::Annotation>, Vec<annotations::Annotation>)> {
-    let annotations = annotations::scan_sources(sources).map_err(|e| {
+    let annotations = annotations::scan_sources_with(sources, &build.constants).map_err(|e| {
         let dirs: Vec<String> = sources
             .iter()
             .map(|s| s.dir.display().to_string())
             .collect();
-        anyhow::anyhow!("loop annotations in {}: {e}", dirs.join(", "))
+        WcetError::Annotation(format!("loop annotations in {}: {e}", dirs.join(", ")))
     })?;
-    Ok((annotations, annotations::dependency_facts()))
+    Ok((annotations, (build.dependency_facts)(&build.constants)))
 }
 
 /// The loop annotations indexed by the source line they bound, the way the loop
@@ -722,7 +702,7 @@ impl<'a> AnnotationIndex<'a> {
             .filter_map(|a| Some(((a.file.clone(), a.line, a.within.clone()?), a)))
             .collect();
         let counter_groups = annotations::counter_groups(annotations)
-            .map_err(|e| anyhow::anyhow!("loop annotations: {e}"))?;
+            .map_err(|e| WcetError::Annotation(format!("loop annotations: {e}")))?;
         Ok(Self {
             by_line,
             within_line,
@@ -755,13 +735,11 @@ fn check_activation_caps(
         if a.scope == annotations::Scope::Runs
             && !copies.caps.iter().any(|c| c.activation_group == Some(k))
         {
-            anyhow::bail!(
+            return Err(WcetError::Analysis(format!(
                 "{}:{}: `// wcet-bound: {} times per activation` matches no call the tasks make: \
                  put it on the line of the call it caps (a function that is not inlined)",
-                a.file,
-                a.line,
-                a.expression
-            );
+                a.file, a.line, a.expression
+            )));
         }
     }
     Ok(())
@@ -785,11 +763,11 @@ struct LoopBounds {
 /// the annotations of the loops' source lines.
 struct LoopBinder<'a> {
     program: &'a Program,
-    ctx: &'a addr2line::Loader,
+    ctx: &'a SourceLines,
     index: &'a AnnotationIndex<'a>,
     copies: &'a ipet::CopySizes,
     /// The build: its tasks' handlers are named by their tasks.
-    build: EcuBuild,
+    build: &'a Target,
     /// The annotations of one caller's copy some loop took.
     within_used: std::collections::BTreeSet<(String, u32, String)>,
     /// What was found so far.
@@ -819,7 +797,7 @@ impl<'a> LoopBinder<'a> {
         binary: &'a Binary,
         index: &'a AnnotationIndex<'a>,
         copies: &'a ipet::CopySizes,
-        build: EcuBuild,
+        build: &'a Target,
     ) -> Self {
         Self {
             program: &binary.program,
@@ -846,12 +824,12 @@ impl<'a> LoopBinder<'a> {
             .keys()
             .find(|key| !self.within_used.contains(*key))
         {
-            anyhow::bail!(
+            return Err(WcetError::Analysis(format!(
                 "{file}:{line}: `{}{w}:` matches no loop of a function named `{w}` \
                  (or of the handler of the task `{w}`): the function was renamed or \
                  the line is no longer inlined into it",
                 annotations::WITHIN_MARKER
-            );
+            )));
         }
         Ok(self.out)
     }
@@ -920,8 +898,8 @@ impl<'a> LoopBinder<'a> {
         let keys: Vec<(String, u32)> = candidates
             .iter()
             .map(|&a| {
-                let (file, line) = location(self.ctx, a);
-                (short_path(&file), line)
+                let (file, line) = self.ctx.location(a);
+                (self.ctx.short_path(&file), line)
             })
             .collect();
         if let Some(key) = keys.iter().find(|(_, line)| *line > 0) {
@@ -1054,8 +1032,8 @@ impl<'a> LoopBinder<'a> {
         // Read off the line table only if no key of its own is free.
         let chain = candidates
             .iter()
-            .flat_map(|&a| frames(self.ctx, a))
-            .map(|(file, line)| (short_path(&file), line));
+            .flat_map(|&a| self.ctx.frames(a))
+            .map(|(file, line)| (self.ctx.short_path(&file), line));
         let (key, own_line) =
             choose_line(library, keys, chain, &fl.firmware_taken, taken, annotated)?;
         if own_line && !library {
@@ -1085,13 +1063,13 @@ impl<'a> LoopBinder<'a> {
         let note = if library {
             let inner = candidates
                 .first()
-                .and_then(|&a| frames(self.ctx, a).into_iter().next())
-                .map(|(f, l)| format!("{}:{l}", short_path(&f)))
+                .and_then(|&a| self.ctx.frames(a).into_iter().next())
+                .map(|(f, l)| format!("{}:{l}", self.ctx.short_path(&f)))
                 .unwrap_or_default();
             format!(
                 "a loop of a dependency's code ({inner}) inlined into a firmware line whose \
                  annotation bounds a loop of the firmware's: state its bound as a dependency \
-                 fact about its own line (host_sim::wcet::annotations::dependency_facts), or \
+                 fact about its own line (the target's dependency facts, Target::dependency_facts), or \
                  annotate a line of its own"
             )
         } else if shares {
@@ -1184,9 +1162,9 @@ impl<'a> LoopBinder<'a> {
             // Per call of the function that holds the loop: sound only if the
             // binary function is that function, not a caller it was inlined into.
             let inlined = candidates.iter().any(|&addr| {
-                let fr = frames(self.ctx, addr);
+                let fr = self.ctx.frames(addr);
                 fr.iter()
-                    .position(|(file, line)| (short_path(file), *line) == *key)
+                    .position(|(file, line)| (self.ctx.short_path(file), *line) == *key)
                     .is_some_and(|at| at + 1 < fr.len())
             });
             if inlined {
@@ -1277,7 +1255,7 @@ fn annotation_origin(a: &annotations::Annotation) -> String {
 /// can do all). Returns, per task, the retries per activation: the caps the
 /// retry loops' back edges share, by cause.
 fn retries_per_activation(
-    build: EcuBuild,
+    build: &Target,
     annotations: &[annotations::Annotation],
 ) -> Vec<(String, ipet::Retries)> {
     retries_within(build, annotations, &BTreeMap::new())
@@ -1287,7 +1265,7 @@ fn retries_per_activation(
 /// each task's release: its response-time bound where `windows` has one, else
 /// its deadline.
 fn retries_within(
-    build: EcuBuild,
+    build: &Target,
     annotations: &[annotations::Annotation],
     windows: &BTreeMap<String, f64>,
 ) -> Vec<(String, ipet::Retries)> {
@@ -1320,12 +1298,12 @@ fn retries_within(
 struct Model<'a> {
     program: &'a Program,
     memory: &'a MemoryModel,
-    ctx: &'a addr2line::Loader,
+    ctx: &'a SourceLines,
     all_loops: &'a [Vec<Loop>],
     facts: &'a [LoopFact],
     copies: &'a ipet::CopySizes,
     /// Which build of the application the ELF is: its tasks and schedule.
-    build: EcuBuild,
+    build: &'a Target,
 }
 
 /// The tasks' and sections' static figures, and what the loops and calls they
@@ -1365,7 +1343,7 @@ struct IpetFigures {
 }
 
 impl Units {
-    /// Bounds every task and section of the ECU application (each its root's
+    /// Bounds every task and section of the target (each its root's
     /// completing activation); refuses a root the ELF lacks.
     fn bound_all(
         &mut self,
@@ -1380,15 +1358,15 @@ impl Units {
             .tasks()
             .iter()
             .map(|&(n, sym)| (n, sym, n, None))
-            .chain(ECU_SECTIONS.iter().copied())
+            .chain(build.sections().iter().copied())
             .collect();
         for (name, symbol, owner, budget) in units {
             let roots = model.program.find(symbol);
             let Some(&root) = roots.first() else {
-                anyhow::bail!(
-                    "no function `{symbol}` (task `{name}`) in {}: is it the ECU application?",
+                return Err(WcetError::Analysis(format!(
+                    "no function `{symbol}` (task `{name}`) in {}: is it the program the target describes?",
                     elf.display()
-                );
+                )));
             };
             // What a completing activation can run: the stop and fault paths excluded.
             let reach = model.program.completing_reachable(&[root]);
@@ -1555,7 +1533,9 @@ fn ipet_figures(model: &Model<'_>, root: usize, retries: ipet::Retries) -> IpetF
     match bound(Cost::Instructions) {
         Ok(b) => out.instructions = Some(b.bound),
         Err(e) => out.refused.push(match e {
-            ipet::IpetError::Unbounded(l) => format!("{} loop(s) without a bound", l.len()),
+            WcetError::Ipet(ipet::IpetError::Unbounded(l)) => {
+                format!("{} loop(s) without a bound", l.len())
+            }
             other => other.to_string(),
         }),
     }
@@ -1576,11 +1556,11 @@ fn ipet_figures(model: &Model<'_>, root: usize, retries: ipet::Retries) -> IpetF
                 .by_block
                 .into_iter()
                 .map(|x| {
-                    let (file, line) = location(model.ctx, x.address);
+                    let (file, line) = model.ctx.location(x.address);
                     TopBlock {
                         function: x.function,
                         address: x.address,
-                        file: short_path(&file),
+                        file: model.ctx.short_path(&file),
                         line,
                         count: x.count,
                         cycles: x.cost,
@@ -1646,8 +1626,8 @@ fn bound_critical_sections(
         })
         .collect();
     let locate = |a: u32| {
-        let (file, line) = location(model.ctx, a);
-        format!("{}:{line}", short_path(&file))
+        let (file, line) = model.ctx.location(a);
+        format!("{}:{line}", model.ctx.short_path(&file))
     };
     let critical_sections = super::critical::critical_sections(
         program,
@@ -1662,7 +1642,7 @@ fn bound_critical_sections(
 }
 
 /// Response times: each task's and interrupt's static bound at its place in the
-/// build's schedule ([`EcuBuild::schedule`]), the critical sections of lower
+/// build's schedule ([`Target::schedule`]), the critical sections of lower
 /// priorities as blocking. Written into `tasks` only when every task and section
 /// has a bound.
 fn bound_response_times(
@@ -1686,7 +1666,7 @@ fn bound_response_times(
             super::cache::CACHE_LINES + u64::from(super::data_cache::DATA_CACHE_LINES),
             |(_, reach)| {
                 super::cache::evicting_lines(program, reach)
-                    + super::data_cache::evicting_lines(program, reach)
+                    + super::cache::evicting_data_lines(program, reach)
             },
         );
         (lines * program.line_fetch_cycles) as f64
@@ -1727,7 +1707,7 @@ fn bound_response_times(
         });
     }
     if complete {
-        for r in super::rta::response_times(&activities, f64::from(super::CLOCK_HZ)) {
+        for r in super::rta::response_times(&activities, f64::from(model.build.clock_hz)) {
             if let Some(t) = tasks.iter_mut().find(|t| t.name == r.name) {
                 t.response_time_bound_us = r.response_time_bound_us;
                 t.response_time_past_deadline_us = r.past_deadline_us;
@@ -1781,7 +1761,9 @@ impl<'a> TraceReplay<'a> {
             .collect();
         let counters: Vec<super::trace_check::CounterSpec> =
             flow_facts.iter().map(|f| f.counter.clone()).collect();
-        let sections: Vec<(String, usize)> = ECU_SECTIONS
+        let sections: Vec<(String, usize)> = model
+            .build
+            .sections()
             .iter()
             .filter_map(|(n, sym, _, _)| program.find(sym).first().map(|&f| (n.to_string(), f)))
             .collect();
@@ -1818,8 +1800,10 @@ impl<'a> TraceReplay<'a> {
         observed: &mut Observed,
     ) -> Result<()> {
         let program = self.model.program;
-        let file = std::fs::File::open(trace)
-            .with_context(|| format!("opening the QEMU trace {}", trace.display()))?;
+        let file = std::fs::File::open(trace).map_err(|source| WcetError::Io {
+            path: trace.to_path_buf(),
+            source,
+        })?;
         let check = super::trace_check::replay_trace(
             std::io::BufReader::with_capacity(1 << 20, file),
             program,
@@ -1985,8 +1969,8 @@ fn loop_coverage(
         })
         .collect();
     let locate = |a: u32| {
-        let (file, line) = location(model.ctx, a);
-        (short_path(&file), line)
+        let (file, line) = model.ctx.location(a);
+        (model.ctx.short_path(&file), line)
     };
     super::coverage::coverage(model.program, model.all_loops, &sites, blocks_run, &locate)
 }
@@ -1995,10 +1979,7 @@ fn loop_coverage(
 /// build: `control-response-time`, `link-response-time`, ...) that `tasks` do
 /// not bound within their deadlines, one line each; an id of another form, or
 /// naming no task with a deadline, is an error that says which ids exist.
-pub fn missed_response_times(
-    tasks: &[TaskStatic],
-    required: &[String],
-) -> std::result::Result<Vec<String>, String> {
+pub fn missed_response_times(tasks: &[TaskStatic], required: &[String]) -> Result<Vec<String>> {
     let known: Vec<String> = tasks
         .iter()
         .filter(|t| t.deadline_us.is_some())
@@ -2010,10 +1991,10 @@ pub fn missed_response_times(
             .strip_suffix("-response-time")
             .and_then(|n| tasks.iter().find(|t| t.name == n && t.deadline_us.is_some()))
             .ok_or_else(|| {
-                format!(
+                WcetError::Analysis(format!(
                     "`{id}` is no goal of the static analysis: with --static-only, --require takes {}",
                     known.join(", ")
-                )
+                ))
             })?;
         let deadline = task.deadline_us.unwrap_or(0.0);
         match task.response_time_bound_us {
@@ -2069,7 +2050,7 @@ impl StaticAnalysis {
     /// the violations the traces showed.
     fn write_summary(&self, s: &mut String) {
         let _ = writeln!(s, "# Static worst-case timing analysis of `{}`\n", self.elf);
-        let _ = writeln!(s, "Build: {}.\n", self.build.name());
+        let _ = writeln!(s, "Build: {}.\n", self.build_name);
         let _ = writeln!(
             s,
             "Control-flow graphs from the Thumb-2 disassembly, natural loops, loop bounds \
@@ -2135,7 +2116,7 @@ impl StaticAnalysis {
                 continue;
             };
             let total: f64 = t.demand_at_deadline.iter().map(|d| d.cycles).sum();
-            let available = deadline * f64::from(super::CLOCK_HZ) / 1e6;
+            let available = deadline * f64::from(self.clock_hz) / 1e6;
             let parts: Vec<String> = t
                 .demand_at_deadline
                 .iter()
@@ -2154,7 +2135,7 @@ impl StaticAnalysis {
                 t.name,
                 parts.join(", "),
                 total - available,
-                (total - available) / f64::from(super::CLOCK_HZ) * 1e3
+                (total - available) / f64::from(self.clock_hz) * 1e3
             );
         }
     }
@@ -2459,12 +2440,13 @@ impl StaticAnalysis {
 
     /// Writes `static.json` and `static.md` into `dir`.
     pub fn write(&self, dir: &Path) -> Result<()> {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let written = |path: PathBuf| move |source| WcetError::Write { path, source };
+        std::fs::create_dir_all(dir).map_err(written(dir.to_path_buf()))?;
         let json = serde_json::to_string_pretty(self)?;
-        std::fs::write(dir.join("static.json"), json)
-            .with_context(|| format!("writing {}", dir.join("static.json").display()))?;
-        std::fs::write(dir.join("static.md"), self.markdown())
-            .with_context(|| format!("writing {}", dir.join("static.md").display()))?;
+        let path = dir.join("static.json");
+        std::fs::write(&path, json).map_err(written(path.clone()))?;
+        let path = dir.join("static.md");
+        std::fs::write(&path, self.markdown()).map_err(written(path.clone()))?;
         Ok(())
     }
 }
@@ -2500,13 +2482,13 @@ fn choose_line(
 /// Whether every instruction of loop `l` is a dependency's code (the innermost
 /// frame of its inlining chain outside the firmware's crates): a library loop,
 /// inlined or not, whose bound is a fact about the library's own line.
-fn is_library_loop(f: &Function, l: &Loop, ctx: &addr2line::Loader) -> bool {
+fn is_library_loop(f: &Function, l: &Loop, ctx: &SourceLines) -> bool {
     l.blocks.iter().all(|&b| {
         f.blocks.get(b).is_none_or(|blk| {
             f.instructions[blk.first..blk.end].iter().all(|i| {
-                frames(ctx, i.address)
+                ctx.frames(i.address)
                     .first()
-                    .is_none_or(|(file, _)| annotations::firmware_source_path(file).is_none())
+                    .is_none_or(|(file, _)| ctx.source_path(file).is_none())
             })
         })
     })
@@ -2622,8 +2604,9 @@ mod tests {
             missed_response_times(
                 &tasks,
                 &req(&["control-response-time", "link-response-time"])
-            ),
-            Ok(Vec::new())
+            )
+            .ok(),
+            Some(Vec::new())
         );
         let missed =
             missed_response_times(&tasks, &req(&["plan-response-time"])).unwrap_or_default();
@@ -2637,56 +2620,12 @@ mod tests {
         ] {
             let e = missed_response_times(&tasks, &req(&[bad]))
                 .err()
+                .map(|e| e.to_string())
                 .unwrap_or_default();
             assert!(
                 e.contains("control-response-time, plan-response-time, link-response-time"),
                 "{e}"
             );
         }
-    }
-
-    #[test]
-    fn the_interrupts_are_the_schedules_hardware_entries_with_their_bounds() {
-        let mut link = task("link", Some(10.85), Some(4.2), None);
-        link.static_bound_cycles = Some(277);
-        let tasks = [
-            task("control", Some(10_000.0), Some(7_437.0), None),
-            link,
-            task("systick", Some(1_000.0), None, Some(2_000.0)),
-        ];
-        let board = interrupts_of(EcuBuild::Board, &tasks);
-        let names: Vec<&str> = board.iter().map(|i| i.name.as_str()).collect();
-        assert_eq!(names, ["systick", "link"]);
-        let l = &board[1];
-        assert_eq!(l.handler, "USART1");
-        assert_eq!(l.static_bound_cycles, Some(277));
-        assert_eq!(l.response_time_bound_us, Some(4.2));
-        // Two entries a byte's time; the receive budget per control period.
-        let byte_us = f64::from(firmware::link::usart::BYTE_TIME_NS) / 1e3;
-        assert!(
-            (l.min_interarrival_us - byte_us / 2.0).abs() < 1e-3,
-            "{l:?}"
-        );
-        assert_eq!(
-            l.per_window,
-            Some(firmware::link::usart::ENTRIES_PER_BUDGET)
-        );
-        assert_eq!(l.window_us, Some(10_000.0));
-        assert_eq!(
-            l.per_slow_window,
-            Some(firmware::link::usart::ENTRIES_PER_PLAN_BUDGET)
-        );
-        assert_eq!(l.slow_window_us, Some(100_000.0));
-        // SysTick missed its deadline here: no bound, not a made-up one.
-        assert_eq!(board[0].handler, "SysTick");
-        assert_eq!(board[0].response_time_bound_us, None);
-        assert_eq!(
-            board[0].min_interarrival_us,
-            firmware::timing::MONO_TICK_US as f64
-        );
-        // The lock-step build has no link interrupt.
-        let lock = interrupts_of(EcuBuild::LockStep, &tasks);
-        assert_eq!(lock.len(), 1);
-        assert_eq!(lock[0].name, "systick");
     }
 }
