@@ -138,6 +138,15 @@
 use crate::Real;
 use qp::real::{at_most, clamp_within, larger, smaller};
 
+/// The filter's two first-order stages `[stage 1, stage 2]` advanced by the
+/// input `x` with the gain `k` (forward Euler): stage 1 towards `x`, stage 2
+/// towards the new stage 1.
+#[inline(always)]
+fn two_stages<T: Real>(stages: [T; 2], x: T, k: T) -> [T; 2] {
+    let s1 = stages[0] + k * (x - stages[0]);
+    [s1, stages[1] + k * (s1 - stages[1])]
+}
+
 /// `x` within `[lo, hi]` (not NaN, `lo <= hi`), a NaN `x` passed through, for
 /// the caller to refuse (`Real::clamp` gives `lo`); one comparison per bound.
 #[inline(always)]
@@ -577,25 +586,20 @@ impl<T: Real> LongitudinalEstimator<T> {
         // Two first-order stages; H·V̇ = (v₁ − v₂)/τ after stage 1, before stage 2.
         let [inv_tau, inv_memory, ..] = self.inverses;
         let kf = at_most(s.dt_s * inv_tau, T::ONE);
-        let v1 = self.v_f[0] + kf * (s.v_mps - self.v_f[0]);
-        let mut accel = (v1 - self.v_f[1]) * inv_tau;
-        self.v_f = [v1, self.v_f[1] + kf * (v1 - self.v_f[1])];
+        let v_f = two_stages(self.v_f, s.v_mps, kf);
+        let mut accel = (v_f[0] - self.v_f[1]) * inv_tau;
+        self.v_f = v_f;
         // With the accelerometer, `H·f` in place of `H·V̇` (module docs).
-        let f1 = self.f_f[0] + kf * (s.specific_force_mps2 - self.f_f[0]);
-        let f2 = self.f_f[1] + kf * (f1 - self.f_f[1]);
-        self.f_f = [f1, f2];
-        if f2.is_finite() {
-            accel = f2;
+        self.f_f = two_stages(self.f_f, s.specific_force_mps2, kf);
+        if self.f_f[1].is_finite() {
+            accel = self.f_f[1];
         }
-        let y1 = self.y_f[0] + kf * (y - self.y_f[0]);
-        let y2 = self.y_f[1] + kf * (y1 - self.y_f[1]);
-        self.y_f = [y1, y2];
-        let q1 = self.q_f[0] + kf * (q - self.q_f[0]);
-        let q2 = self.q_f[1] + kf * (q1 - self.q_f[1]);
-        self.q_f = [q1, q2];
-        let b1 = self.yb_f[0] + kf * (yb - self.yb_f[0]);
-        let b2 = self.yb_f[1] + kf * (b1 - self.yb_f[1]);
-        self.yb_f = [b1, b2];
+        self.y_f = two_stages(self.y_f, y, kf);
+        self.q_f = two_stages(self.q_f, q, kf);
+        self.yb_f = two_stages(self.yb_f, yb, kf);
+        let [_, y2] = self.y_f;
+        let [_, q2] = self.q_f;
+        let [b1, b2] = self.yb_f;
 
         // The gate, over the filters' memory.
         let applied = y + (self.brake[0] - T::ONE) * yb;
