@@ -436,30 +436,10 @@ mod tests {
     ) -> ::wcet::analysis::TaskStatic {
         ::wcet::analysis::TaskStatic {
             name: name.into(),
-            root: String::new(),
-            functions: 0,
-            loops: 0,
-            bounded_loops: 0,
-            excluded_loops: 0,
-            irreducible: Vec::new(),
-            static_bound_instructions: None,
-            static_bound_cycles: None,
-            optimum: None,
-            refused: None,
-            top_functions: Vec::new(),
-            top_functions_entries: Vec::new(),
-            top_blocks: Vec::new(),
-            observed_activations: 0,
-            observed_max_instructions: None,
-            observed_max_cycles: None,
-            tightness: None,
-            budget_cycles: None,
             response_time_bound_us: bound,
             response_time_past_deadline_us: past,
             deadline_us: deadline,
-            light_bound_cycles: None,
-            light_extras: Vec::new(),
-            demand_at_deadline: Vec::new(),
+            ..Default::default()
         }
     }
 
