@@ -1083,6 +1083,27 @@ proptest! {
     }
 
     #[test]
+    fn the_frames_cobs_is_postcards_cobs_flavour_on_the_same_bytes(msg in any_msg()) {
+        // `encode` encodes COBS in place; postcard's `Cobs` flavour (which the
+        // frames were written with before) on the raw bytes gives the same frame,
+        // long runs of non-zero bytes (random floats) and block ends included.
+        let frame = msg.frame();
+        let mut raw = vec![0u8; frame.len()];
+        let n = cobs::decode(&frame[..frame.len() - 1], &mut raw).expect("valid COBS");
+        raw.truncate(n);
+        let mut buf = vec![0u8; MAX_FRAME_BYTES];
+        let mut flavour = postcard::ser_flavors::Cobs::try_new(
+            postcard::ser_flavors::Slice::new(&mut buf),
+        )
+        .expect("room");
+        for &b in &raw {
+            postcard::ser_flavors::Flavor::try_push(&mut flavour, b).expect("room");
+        }
+        let reference = postcard::ser_flavors::Flavor::finalize(flavour).expect("room");
+        prop_assert_eq!(&frame[..], &reference[..]);
+    }
+
+    #[test]
     fn arbitrary_bytes_never_decode(mut bytes in prop::collection::vec(any::<u8>(), 0..700)) {
         let mut copy = bytes.clone();
         prop_assert!(decode_fresh::<Down>(&mut bytes).is_err());

@@ -80,140 +80,135 @@ impl FrameError {
 /// delimiter included, authenticated on `tx`'s stream with `mac` and the stream's
 /// next freshness value (taken only when the frame is encoded); returns the
 /// frame's length, bytes. A buffer of [`MAX_FRAME_BYTES`] holds any [`Down`] or
-/// [`Up`]. postcard's flavours do the work in one pass: the version byte and the
-/// message through the CMAC (`SecOcModifier`, which appends the freshness and
-/// the tag), the CRC (appended little-endian) and COBS, into `out`.
+/// [`Up`]. In three passes over `out`, no other buffer: postcard writes the
+/// version byte and the message a little way into it (past the room COBS adds,
+/// [`cobs_lead`]), the freshness value follows, then the tag of those bytes
+/// (the MAC takes them a block at a time) and the CRC of all of them; COBS then
+/// encodes them forward in place ([`cobs_encode_in_place`]). Each pass is one
+/// short loop over the bytes, where a flavour chain would take each byte
+/// through every stage in turn. Not inlined: one function in every build, whose
+/// loops the timing analysis bounds by the ECU's largest frame (it sends only
+/// `Up` frames).
+#[inline(never)]
 pub fn encode<M: Serialize + ?Sized>(
     msg: &M,
     mac: &mut LinkMac,
     tx: &mut Authenticator,
     out: &mut [u8],
 ) -> Result<usize, FrameError> {
-    use postcard::ser_flavors::Cobs;
     let freshness = tx.next()?;
-    let cobs = Cobs::try_new(FrameBuffer::new(out)).map_err(|_| FrameError::BufferTooSmall)?;
-    mac.begin(tx.stream());
-    let flavor = SecOcModifier {
-        inner: cobs,
-        mac,
-        crc: CRC32_INIT,
-        freshness,
-    };
+    let lead = cobs_lead(out.len());
+    let body = out.get_mut(lead..).ok_or(FrameError::BufferTooSmall)?;
     // postcard writes a `u8` as its one byte: the tuple is the version byte, then
     // the message.
-    match postcard::serialize_with_flavor(&(LINK_VERSION, msg), flavor) {
-        Ok(len) => {
-            tx.commit(freshness);
-            Ok(len)
-        }
-        Err(postcard::Error::SerializeBufferFull) => Err(FrameError::BufferTooSmall),
-        Err(_) => Err(FrameError::Malformed),
+    let n = match postcard::serialize_with_flavor(&(LINK_VERSION, msg), Plain::new(body)) {
+        Ok(n) => n,
+        Err(postcard::Error::SerializeBufferFull) => return Err(FrameError::BufferTooSmall),
+        Err(_) => return Err(FrameError::Malformed),
+    };
+    let raw_len = n + SECURED_BYTES + CRC_BYTES;
+    let raw = body.get_mut(..raw_len).ok_or(FrameError::BufferTooSmall)?;
+    // No slicing or copy that can panic: the panic path sends through here.
+    let (input, trailer) = raw
+        .split_at_mut_checked(n + FRESHNESS_BYTES)
+        .ok_or(FrameError::BufferTooSmall)?;
+    let (fresh_tag, check) = trailer
+        .split_at_mut_checked(MAC_BYTES)
+        .ok_or(FrameError::BufferTooSmall)?;
+    for (d, s) in input.iter_mut().skip(n).zip(freshness.to_le_bytes()) {
+        *d = s;
     }
+    for (d, s) in fresh_tag.iter_mut().zip(mac.tag(tx.stream(), input)) {
+        *d = s;
+    }
+    let mut crc = CRC32_INIT;
+    // The version, the message and the freshness value, then the tag: at most a
+    // frame's bytes, and the control task encodes one frame (an `Up`) per
+    // activation; the plan task encodes none.
+    // wcet-bound: MAX_UP_FRAME_BYTES per activation
+    crc32_update!(crc, input.iter());
+    // wcet-bound: 8
+    crc32_update!(crc, fresh_tag.iter());
+    for (d, s) in check.iter_mut().zip((!crc).to_le_bytes()) {
+        *d = s;
+    }
+    let len = cobs_encode_in_place(out, lead, raw_len)?;
+    tx.commit(freshness);
+    Ok(len)
 }
 
-/// The flavour that authenticates and checksums a frame as postcard writes it:
-/// each byte (the version, then the message) goes through the CMAC (begun on the
-/// stream by [`encode`]) and the CRC, and on to `inner` (COBS, into the frame's
-/// buffer); at the end the freshness value (through the CMAC and the CRC), the
-/// tag (through the CRC), then the CRC. postcard hands most fields over as
-/// slices ([`Flavor::try_extend`]): the CRC takes each slice at once, the CMAC and
-/// COBS a byte at a time (one pass over the bytes, not a chain of per-byte calls
-/// through three flavours).
-///
-/// [`Flavor::try_extend`]: postcard::ser_flavors::Flavor::try_extend
-struct SecOcModifier<'m, B> {
-    /// COBS, into the frame's buffer.
-    inner: B,
-    /// The CMAC, begun on the frame's stream.
-    mac: &'m mut LinkMac,
-    /// The CRC of the bytes so far.
-    crc: u32,
-    /// The frame's freshness value.
-    freshness: u32,
+/// Bytes ahead of the raw frame in a buffer of `buf_len` bytes from which
+/// [`cobs_encode_in_place`] encodes it forward: COBS writes one code byte
+/// before the data and one more per 254 bytes of data without a zero, so the
+/// output is never more than that many bytes ahead of the input (one, and one
+/// per 254 bytes of a raw frame shorter than the buffer).
+pub const fn cobs_lead(buf_len: usize) -> usize {
+    1 + buf_len.saturating_sub(1) / 254
 }
 
-impl<B: postcard::ser_flavors::Flavor> postcard::ser_flavors::Flavor for SecOcModifier<'_, B> {
-    type Output = B::Output;
+// The largest frames fit with their lead: the raw frame of the largest payload
+// and its lead within the frame's size.
+const _: () = {
+    let up_raw = 1 + MAX_UP_PAYLOAD_BYTES + SECURED_BYTES + CRC_BYTES;
+    assert!(cobs_lead(MAX_UP_FRAME_BYTES) + up_raw <= MAX_UP_FRAME_BYTES);
+    let down_raw = 1 + MAX_DOWN_PAYLOAD_BYTES + SECURED_BYTES + CRC_BYTES;
+    assert!(cobs_lead(MAX_DOWN_FRAME_BYTES) + down_raw <= MAX_DOWN_FRAME_BYTES);
+};
 
-    fn try_push(&mut self, data: u8) -> postcard::Result<()> {
-        self.mac.push(data);
-        self.crc = crc32_byte(self.crc, data);
-        self.inner.try_push(data)
-    }
-
-    fn try_extend(&mut self, data: &[u8]) -> postcard::Result<()> {
-        // The bytes of every slice of the frame: at most a frame's (the output
-        // buffer refuses the bytes past it), and the control task encodes one
-        // frame (an `Up`) per activation; the plan task encodes none.
-        // wcet-bound: MAX_UP_FRAME_BYTES per activation
-        crc32_update!(self.crc, data);
-        // As above: a byte of the frame per pass.
-        // wcet-bound: MAX_UP_FRAME_BYTES per activation
-        for &b in data {
-            self.mac.push(b);
-            self.inner.try_push(b)?;
+/// COBS-encodes the `len` bytes at `buf[lead..]` into `buf` from its start, the
+/// delimiter appended (the `cobs` crate's encoder state, as postcard's `Cobs`
+/// flavour drives it: the same bytes); returns the frame's length with the
+/// delimiter, bytes. With `lead` from [`cobs_lead`] the output never overtakes
+/// the input: each byte is read before its place is written.
+fn cobs_encode_in_place(buf: &mut [u8], lead: usize, len: usize) -> Result<usize, FrameError> {
+    use cobs::PushResult;
+    let mut state = cobs::EncoderState::default();
+    // Index 0 holds the first block's code byte, written when the block ends.
+    let mut write = 1;
+    // A byte of the frame per pass, at most a frame's, one frame per
+    // activation of the control task (as `encode`'s CRC).
+    // wcet-bound: MAX_UP_FRAME_BYTES per activation
+    for read in lead..lead.saturating_add(len) {
+        let byte = *buf.get(read).ok_or(FrameError::BufferTooSmall)?;
+        let (at, code, data) = match state.push(byte) {
+            PushResult::AddSingle(b) => (None, 0, Some(b)),
+            PushResult::ModifyFromStartAndSkip((i, code)) => (Some(i), code, None),
+            PushResult::ModifyFromStartAndPushAndSkip((i, code, b)) => (Some(i), code, Some(b)),
+        };
+        if let Some(i) = at {
+            *buf.get_mut(i).ok_or(FrameError::BufferTooSmall)? = code;
         }
-        Ok(())
-    }
-
-    fn finalize(self) -> postcard::Result<B::Output> {
-        let Self {
-            mut inner,
-            mac,
-            mut crc,
-            freshness,
-        } = self;
-        let freshness = freshness.to_le_bytes();
-        // The freshness value's bytes (FRESHNESS_BYTES).
-        // wcet-bound: 4
-        for b in freshness {
-            mac.push(b);
+        if let Some(b) = data {
+            *buf.get_mut(write).ok_or(FrameError::BufferTooSmall)? = b;
+            write += 1;
         }
-        let tag = mac.finish();
-        let mut trailer = [0u8; SECURED_BYTES + CRC_BYTES];
-        let (secured, check) = trailer.split_at_mut(SECURED_BYTES);
-        let (f, t) = secured.split_at_mut(FRESHNESS_BYTES);
-        f.copy_from_slice(&freshness);
-        t.copy_from_slice(&tag);
-        // The freshness value and the tag (SECURED_BYTES).
-        // wcet-bound: 12
-        crc32_update!(crc, secured.iter());
-        check.copy_from_slice(&(!crc).to_le_bytes());
-        // The freshness value, the tag and the CRC (SECURED_BYTES + CRC_BYTES).
-        // wcet-bound: 16
-        for b in trailer {
-            inner.try_push(b)?;
-        }
-        inner.finalize()
+        // A block ended: the next block's code byte is the next place.
+        write += usize::from(at.is_some());
     }
+    let (i, code) = state.finalize();
+    *buf.get_mut(i).ok_or(FrameError::BufferTooSmall)? = code;
+    *buf.get_mut(write).ok_or(FrameError::BufferTooSmall)? = 0;
+    Ok(write + 1)
 }
 
-/// The output of [`encode`]: bytes pushed into a fixed buffer, a push past its end
-/// refused. postcard's `Cobs` flavour also rewrites the code byte of each block
-/// through `IndexMut`, always at an index it pushed before; an index past the end
-/// reaches a spare byte instead of panicking (postcard's `Slice` would panic,
-/// which puts the panic handler, which sends a frame, on its own path).
-struct FrameBuffer<'a> {
+/// The output of [`encode`]'s first pass: postcard's bytes into a fixed buffer,
+/// a push past its end refused. Its `try_extend` copies a byte per pass, so the
+/// timing analysis bounds the bytes of every slice postcard hands over together.
+struct Plain<'a> {
     /// The frame's bytes.
     buf: &'a mut [u8],
-    /// Bytes pushed.
+    /// Bytes written.
     len: usize,
-    /// What an index past the end reads and writes.
-    spare: u8,
 }
 
-impl<'a> FrameBuffer<'a> {
+impl<'a> Plain<'a> {
     fn new(buf: &'a mut [u8]) -> Self {
-        Self {
-            buf,
-            len: 0,
-            spare: 0,
-        }
+        Self { buf, len: 0 }
     }
 }
 
-impl postcard::ser_flavors::Flavor for FrameBuffer<'_> {
-    /// The frame's length, bytes.
+impl postcard::ser_flavors::Flavor for Plain<'_> {
+    /// The bytes written.
     type Output = usize;
 
     fn try_push(&mut self, data: u8) -> postcard::Result<()> {
@@ -226,25 +221,19 @@ impl postcard::ser_flavors::Flavor for FrameBuffer<'_> {
         Ok(())
     }
 
+    fn try_extend(&mut self, data: &[u8]) -> postcard::Result<()> {
+        // The bytes of every slice of the frame: at most a frame's, one frame
+        // per activation of the control task (as `encode`'s CRC). A push per
+        // byte, not a block copy of a length the analysis cannot see.
+        // wcet-bound: MAX_UP_FRAME_BYTES per activation
+        for &b in data {
+            self.try_push(b)?;
+        }
+        Ok(())
+    }
+
     fn finalize(self) -> postcard::Result<usize> {
         Ok(self.len)
-    }
-}
-
-impl core::ops::Index<usize> for FrameBuffer<'_> {
-    type Output = u8;
-
-    fn index(&self, i: usize) -> &u8 {
-        self.buf.get(i).unwrap_or(&self.spare)
-    }
-}
-
-impl core::ops::IndexMut<usize> for FrameBuffer<'_> {
-    fn index_mut(&mut self, i: usize) -> &mut u8 {
-        match self.buf.get_mut(i) {
-            Some(b) => b,
-            None => &mut self.spare,
-        }
     }
 }
 

@@ -170,27 +170,8 @@ impl LinkMac {
         self.len = 0;
     }
 
-    /// Adds one byte to the MAC input ([`super::encode`]: postcard writes a byte
-    /// at a time). A full block is compressed once a byte follows it (BLAKE2
-    /// flags the last block).
-    #[inline(always)]
-    pub(super) fn push(&mut self, byte: u8) {
-        if usize::from(self.len) >= MAC_BLOCK_BYTES {
-            // A block is compressed when a byte follows 64 held: with the Data ID
-            // held from `begin`, at most (M − 1) / 64 times for a MAC input of M
-            // bytes (the last block goes in `finish`). The control task encodes
-            // one frame (an `Up`) per activation; the plan task encodes none.
-            // wcet-bound: (MAX_UP_MAC_INPUT_BYTES - 1) / 64 times per activation
-            self.process_block();
-        }
-        if let Some(slot) = self.block.get_mut(usize::from(self.len)) {
-            *slot = byte;
-            self.len += 1;
-        }
-    }
-
-    /// Adds `bytes` to the MAC input ([`super::decode`]: the frame is whole), a
-    /// block per pass. Always inlined: the bound on its loop is the caller's
+    /// Adds `bytes` to the MAC input ([`super::decode`] and [`super::encode`]:
+    /// the frame is whole), a block per pass. Always inlined: the bound on its loop is the caller's
     /// frame (`decode`'s, inlined in turn).
     #[inline(always)]
     pub(super) fn update(&mut self, mut bytes: &[u8]) {
@@ -217,6 +198,7 @@ impl LinkMac {
             // wcet-bound: MAX_FRAME_BYTES / 64 + 1
             // wcet-bound in control: (MAX_DRIVING_DOWN_MAC_INPUT_BYTES + 63) / 64
             // wcet-bound in receive: (MAX_DOWN_MAC_INPUT_BYTES + 63) / 64
+            // wcet-bound in encode: (MAX_UP_MAC_INPUT_BYTES + 63) / 64
             self.len += take as u8;
             bytes = later;
         }

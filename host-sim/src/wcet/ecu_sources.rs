@@ -83,12 +83,10 @@ pub fn dependency_facts() -> Vec<Annotation> {
 }
 
 /// [`dependency_facts`] with the firmware's `constants` bound as given (a task's
-/// light activations, [`super::ecu_app::LightActivations`]).
-pub fn dependency_facts_with(constants: &BTreeMap<&'static str, u64>) -> Vec<Annotation> {
-    let max_up_frame_bytes = constants
-        .get("MAX_UP_FRAME_BYTES")
-        .copied()
-        .unwrap_or(firmware::link::MAX_UP_FRAME_BYTES as u64);
+/// light activations, [`super::ecu_app::LightActivations`]): none of today's
+/// facts depends on them (the link's encoder, whose bound did, is the firmware's
+/// own code, annotated there).
+pub fn dependency_facts_with(_constants: &BTreeMap<&'static str, u64>) -> Vec<Annotation> {
     let fact = |file: &str, line: u32, bound: u64, why: &str| Annotation {
         file: file.to_string(),
         line,
@@ -98,27 +96,12 @@ pub fn dependency_facts_with(constants: &BTreeMap<&'static str, u64>) -> Vec<Ann
         within: None,
         counter: None,
     };
-    let mut facts = vec![
-        // Over a whole activation, not per call: the bytes of every field go
-        // through this loop, and the control task sends one frame per activation
-        // (its actuation, or the Done frame of a stop, which never returns) into
-        // a buffer of MAX_UP_FRAME_BYTES whose flavor refuses the bytes past it.
-        Annotation {
-            scope: Scope::Activation,
-            ..fact(
-                "postcard-1.2.0/src/ser/flavors.rs",
-                123,
-                max_up_frame_bytes,
-                "try_extend pushes byte by byte into the link's frame flavor, which refuses the bytes past its MAX_UP_FRAME_BYTES buffer; one frame sent per activation",
-            )
-        },
-        fact(
-            "crc-3.4.0/src/crc32.rs",
-            150,
-            15,
-            "the bytes left after the 16-byte slices",
-        ),
-    ];
+    let mut facts = vec![fact(
+        "crc-3.4.0/src/crc32.rs",
+        150,
+        15,
+        "the bytes left after the 16-byte slices",
+    )];
     // compiler_builtins' u64 division (`u64_div_rem`, the delegate algorithm):
     // restoring long division, one quotient bit per step, the bit `pow_lo`
     // (`1 << shl`, shl < 32) shifted right each step, returning before it reaches
