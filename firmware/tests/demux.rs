@@ -3,7 +3,9 @@
 //! whatever the frames around it, and garbage only costs the frame it hits.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-use firmware::link::demux::{channel_of_message, Channel, Demux, PATH_CHUNK_TAG, WINDOW_TAG};
+use firmware::link::demux::{
+    channel_of_message, Channel, Demux, Sorter, PATH_CHUNK_TAG, WINDOW_TAG,
+};
 use firmware::link::*;
 use firmware::state_estimate::StateEstimate;
 use firmware::vehicle_config::VehicleConfig;
@@ -162,7 +164,71 @@ fn a_frame_shorter_than_its_head_goes_to_control_and_the_stream_goes_on() {
     assert_eq!(messages(&route, Channel::Route), (vec![chunk], 0));
 }
 
+/// The stream sorted by a [`Sorter`] in batches of the given sizes (cycled), its
+/// held bytes taken after each batch as the ECU does: after each batch, the
+/// bytes of the stream so far and each channel's; and the most bytes held after
+/// a push.
+#[allow(clippy::type_complexity)]
+fn sort_one_by_one(stream: &[u8], batches: &[usize]) -> (Vec<(usize, Vec<u8>, Vec<u8>)>, usize) {
+    let mut s = Sorter::new();
+    let (mut control, mut route) = (Vec::new(), Vec::new());
+    let mut snapshots = Vec::new();
+    let mut most_held = 0;
+    let mut done = 0;
+    for &n in batches.iter().cycle() {
+        if done == stream.len() {
+            break;
+        }
+        let end = (done + n.max(1)).min(stream.len());
+        let mut handed = Vec::new();
+        for &b in &stream[done..end] {
+            handed.extend(s.push(b));
+            let mut probe = s;
+            let mut held = 0;
+            while probe.take_held().is_some() {
+                held += 1;
+            }
+            most_held = most_held.max(held);
+        }
+        for _ in 0..Sorter::MAX_HELD_AFTER_PUSH {
+            handed.extend(s.take_held());
+        }
+        assert!(
+            s.take_held().is_none(),
+            "more held than MAX_HELD_AFTER_PUSH"
+        );
+        for (c, b) in handed {
+            match c {
+                Channel::Control => control.push(b),
+                Channel::Route => route.push(b),
+            }
+        }
+        done = end;
+        snapshots.push((done, control.clone(), route.clone()));
+    }
+    (snapshots, most_held)
+}
+
 proptest! {
+    /// The sorter that hands over a byte per byte gives each channel the same
+    /// bytes as the demultiplexer, whatever the stream (garbage, short frames,
+    /// runs of delimiters, route tags) and however it is cut into batches, and
+    /// holds at most two bytes after a push.
+    #[test]
+    fn one_byte_per_byte_sorting_gives_each_channel_the_same_bytes(
+        stream in prop::collection::vec(
+            prop_oneof![Just(0u8), Just(1u8), Just(2u8), Just(PATH_CHUNK_TAG), Just(WINDOW_TAG), any::<u8>()],
+            0..400,
+        ),
+        batches in prop::collection::vec(1usize..80, 1..8),
+    ) {
+        let (snapshots, most_held) = sort_one_by_one(&stream, &batches);
+        for (done, control, route) in snapshots {
+            prop_assert_eq!((control, route), sort(&stream[..done]));
+        }
+        prop_assert!(most_held <= Sorter::MAX_HELD_AFTER_PUSH, "{} held", most_held);
+    }
+
     /// Any sequence of frames: each channel decodes exactly its frames, in order.
     #[test]
     fn every_frame_reaches_its_channel_whole_and_in_order(

@@ -137,6 +137,88 @@ impl Demux {
     }
 }
 
+/// A [`Demux`] that hands over one byte per byte pushed, at most: the bytes it
+/// gives at once (a frame's head when its channel is told, a short frame and its
+/// delimiter) wait and leave one per push, and [`Sorter::take_held`] hands over
+/// what still waits (at most [`Sorter::MAX_HELD_AFTER_PUSH`]) once a batch of
+/// bytes is pushed. Each channel gets the same bytes in the same order as from
+/// the [`Demux`] alone, only in the batch's last steps rather than at once, so
+/// that the work per byte is one hand-over (the flashed ECU's sorting loop,
+/// whose timing bound is then one queue push per byte, not a head's three).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Sorter {
+    /// Where the frames' bytes are told.
+    demux: Demux,
+    /// The bytes told and waiting, the next in the low byte: at most three
+    /// (a head of three is told with nothing waiting; a short frame of `h`
+    /// head bytes and its delimiter, with at most `2 − h` waiting).
+    held: u32,
+    /// Bit `k` set: the `k`-th waiting byte is the route channel's.
+    route: u32,
+    /// How many wait, `0..=3`.
+    len: u32,
+}
+
+impl Default for Sorter {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Sorter {
+    /// Bytes waiting after a push at most: each push adds a byte to the head or
+    /// to the waiting ones and, when some were waiting, hands one over, so the
+    /// two hold two at most together (a head of three is told at once, with
+    /// nothing waiting: the two bytes before the tag were the head).
+    pub const MAX_HELD_AFTER_PUSH: usize = 2;
+
+    /// Nothing held (a valid `const` initialiser).
+    pub const fn new() -> Self {
+        Self {
+            demux: Demux::new(),
+            held: 0,
+            route: 0,
+            len: 0,
+        }
+    }
+
+    /// Feeds one byte of the stream: the next byte to hand to a channel, if any.
+    /// Branch-free bookkeeping: the told bytes join the waiting ones as a word.
+    pub fn push(&mut self, byte: u8) -> Option<(Channel, u8)> {
+        if let Some(e) = self.demux.push(byte) {
+            // At most three bytes, and at most three wait with them (the
+            // invariant above): the shifts stay within the word.
+            let n = e.len.min(3) as u32;
+            let mask = (1u32 << (8 * n)) - 1;
+            let shift = 8 * self.len.min(3);
+            self.held |= (u32::from_le_bytes(e.bytes) & mask) << shift;
+            let to_route = u32::from(e.channel == Channel::Route);
+            self.route |= (((1u32 << n) - 1) * to_route) << self.len.min(3);
+            self.len += n;
+        }
+        self.take_held()
+    }
+
+    /// The next byte told and not yet handed over, if any: after a batch of
+    /// pushes, call it until `None` (at most [`Self::MAX_HELD_AFTER_PUSH`]
+    /// times) to hand over every byte whose channel is told.
+    pub fn take_held(&mut self) -> Option<(Channel, u8)> {
+        if self.len == 0 {
+            return None;
+        }
+        let b = self.held as u8;
+        let channel = if self.route & 1 == 1 {
+            Channel::Route
+        } else {
+            Channel::Control
+        };
+        self.held >>= 8;
+        self.route >>= 1;
+        self.len -= 1;
+        Some((channel, b))
+    }
+}
+
 /// The channel [`Demux`] gives a frame of `msg` (its route frames to the plan
 /// task, the others to the control task).
 pub fn channel_of_message(msg: &Down) -> Channel {

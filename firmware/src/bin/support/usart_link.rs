@@ -35,7 +35,7 @@ use core::sync::atomic::{AtomicPtr, Ordering};
 
 use cortex_m::peripheral::NVIC;
 use firmware::clock_tree;
-use firmware::link::demux::{Channel, Demux};
+use firmware::link::demux::{Channel, Sorter};
 use firmware::link::usart::{RxBudgets, BAUD, LINK_INTERRUPT_PRIORITY, RX_BUDGET_BYTES};
 use firmware::link::{MAX_DOWN_FRAME_BYTES, MAX_DRIVING_DOWN_FRAME_BYTES, MAX_UP_FRAME_BYTES};
 use heapless::spsc::{Consumer, Producer, Queue};
@@ -141,7 +141,7 @@ struct Storage {
 /// its own frames and the plan task's, and the transmit queue.
 pub struct Port {
     raw: Consumer<'static, u8, RAW_RX_BYTES>,
-    demux: Demux,
+    sorter: Sorter,
     control: Deque<u8, CONTROL_RX_BYTES>,
     route: Producer<'static, u8, ROUTE_RX_BYTES>,
     tx: Producer<'static, u8, TX_BYTES>,
@@ -215,7 +215,7 @@ pub fn open(
     Some((
         Port {
             raw: raw_out,
-            demux: Demux::new(),
+            sorter: Sorter::new(),
             control: Deque::new(),
             route: route_in,
             tx: tx_in,
@@ -260,7 +260,9 @@ impl Port {
     /// the last call are counted and the control task's receive budget renewed
     /// together, with interrupts off for those few instructions (no byte is
     /// received between the two), the line unmasked, and then exactly the
-    /// counted bytes sorted ([`firmware::link::demux`]): sensor, stop and set-up
+    /// counted bytes sorted ([`firmware::link::demux::Sorter`], a byte handed
+    /// over per byte received, the head of a frame held over at most two
+    /// bytes and handed over at the end): sensor, stop and set-up
     /// frames into the control task's bytes ([`Port::next_byte`]), the windows
     /// of the road into the plan task's queue ([`RoutePort::next_byte`]). Bytes
     /// received while it sorts wait for the next period. So the bytes sorted at
@@ -285,17 +287,30 @@ impl Port {
             let Some(byte) = self.raw.dequeue() else {
                 break;
             };
-            if let Some(e) = self.demux.push(byte) {
-                // wcet-bound: 4
-                for &b in e.bytes() {
-                    let full = match e.channel {
-                        Channel::Control => self.control.push_back(b).is_err(),
-                        Channel::Route => self.route.enqueue(b).is_err(),
-                    };
-                    self.dropped = self.dropped.wrapping_add(u32::from(full));
-                }
+            if let Some((channel, b)) = self.sorter.push(byte) {
+                self.hand_over(channel, b);
             }
         }
+        // The bytes told and still held (a frame's head handed over one per
+        // byte): at most two.
+        // wcet-bound: 2
+        for _ in 0..Sorter::MAX_HELD_AFTER_PUSH {
+            let Some((channel, b)) = self.sorter.take_held() else {
+                break;
+            };
+            self.hand_over(channel, b);
+        }
+    }
+
+    /// One sorted byte to its channel; a byte that finds it full is dropped and
+    /// counted.
+    #[inline(always)]
+    fn hand_over(&mut self, channel: Channel, b: u8) {
+        let full = match channel {
+            Channel::Control => self.control.push_back(b).is_err(),
+            Channel::Route => self.route.enqueue(b).is_err(),
+        };
+        self.dropped = self.dropped.wrapping_add(u32::from(full));
     }
 
     /// The control task's next sorted byte ([`Port::sort_and_rearm`]), `None` when none
