@@ -175,10 +175,7 @@ impl LinkMac {
     /// frame (`decode`'s, inlined in turn).
     #[inline(always)]
     pub(super) fn update(&mut self, mut bytes: &[u8]) {
-        while !bytes.is_empty() {
-            if usize::from(self.len) >= MAC_BLOCK_BYTES {
-                self.process_block();
-            }
+        loop {
             let free = self
                 .block
                 .get_mut(usize::from(self.len)..)
@@ -190,17 +187,24 @@ impl LinkMac {
             for (slot, &b) in free.iter_mut().zip(now) {
                 *slot = b;
             }
-            // A pass per block of the MAC input (the binary's back edge is on this
-            // line): with the Data ID held from `begin`, the first pass fills the
-            // block, each next one takes 64 bytes, so ⌈M / 64⌉ passes for a MAC
-            // input of M bytes. Frames below MAX_FRAME_BYTES, and in the ECU's
-            // tasks at most theirs (decode's bounds).
-            // wcet-bound: MAX_FRAME_BYTES / 64 + 1
-            // wcet-bound in control: (MAX_DRIVING_DOWN_MAC_INPUT_BYTES + 63) / 64
-            // wcet-bound in receive: (MAX_DOWN_MAC_INPUT_BYTES + 63) / 64
-            // wcet-bound in encode: (MAX_UP_MAC_INPUT_BYTES + 63) / 64
             self.len += take as u8;
             bytes = later;
+            if bytes.is_empty() {
+                // The last block waits for `finish` (BLAKE2 flags it).
+                break;
+            }
+            // More bytes follow the full block: it is compressed, and the next
+            // pass fills the next one. With the Data ID held from `begin`, the
+            // first pass fills the block and each next one takes 64 bytes, so a
+            // MAC input of M bytes compresses here (M − 1) / 64 times, and the
+            // binary's back edge is on this line. Frames below MAX_FRAME_BYTES,
+            // and in the ECU's tasks at most theirs (decode's and encode's
+            // bounds).
+            // wcet-bound: (MAX_FRAME_BYTES - 1) / 64
+            // wcet-bound in control: (MAX_DRIVING_DOWN_MAC_INPUT_BYTES - 1) / 64
+            // wcet-bound in receive: (MAX_DOWN_MAC_INPUT_BYTES - 1) / 64
+            // wcet-bound in encode: (MAX_UP_MAC_INPUT_BYTES - 1) / 64
+            self.process_block();
         }
     }
 
