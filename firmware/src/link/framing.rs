@@ -223,9 +223,10 @@ impl postcard::ser_flavors::Flavor for Plain<'_> {
 
     fn try_extend(&mut self, data: &[u8]) -> postcard::Result<()> {
         // The bytes of every slice of the frame: at most a frame's, one frame
-        // per activation of the control task (as `encode`'s CRC). A push per
-        // byte, not a block copy of a length the analysis cannot see.
-        // wcet-bound: MAX_UP_FRAME_BYTES per activation
+        // per activation of the control task (as `encode`'s CRC), summed over
+        // the copies of this loop in postcard's field writers (one counter). A
+        // push per byte, not a block copy of a length the analysis cannot see.
+        // wcet-bound: MAX_UP_FRAME_BYTES per activation, counted in frame_slices
         for &b in data {
             self.try_push(b)?;
         }
