@@ -43,8 +43,9 @@ fn channel_of(head: [u8; 3]) -> Channel {
     }
 }
 
-/// Bytes to hand to one channel after a byte was pushed: at most four (a frame's
-/// head of three and the byte after it, or a short frame and its delimiter).
+/// Bytes to hand to one channel after a byte was pushed: at most three (a frame's
+/// head of three when its third byte arrives, or a short frame's head of at most
+/// two and its delimiter); `bytes` has room for four.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Emit {
     /// Their channel.
