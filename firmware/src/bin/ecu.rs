@@ -408,6 +408,15 @@ fn sh_read(fd: usize, buf: &mut [u8]) -> usize {
     n.saturating_sub(left)
 }
 
+/// Counts a refused frame in `rejected` and, with its reason (`Some`; `None`:
+/// an authentic frame not expected here), in `refused`.
+fn count_refused(rejected: &mut u32, refused: &mut RefusalCounts, reason: Option<Refusal>) {
+    *rejected = rejected.wrapping_add(1);
+    if let Some(r) = reason {
+        refused.count(r);
+    }
+}
+
 impl Link {
     /// Opens `ecu.down` for reading, `ecu.up` for writing and `ecu.route` for
     /// reading, in that order (the simulator opens them in the same order), and
@@ -476,10 +485,7 @@ impl Link {
     /// Counts a refused frame (`Some(reason)`; `None`: an authentic frame not
     /// expected here).
     fn count_refused(&mut self, reason: Option<Refusal>) {
-        self.rejected = self.rejected.wrapping_add(1);
-        if let Some(r) = reason {
-            self.refused.count(r);
-        }
+        count_refused(&mut self.rejected, &mut self.refused, reason);
     }
 
     /// The next host frame of the set-up, read with `reader` (every `Down`
@@ -568,9 +574,10 @@ impl Link {
     }
 
     /// The sensor frame of this release, from the bytes the USART interrupt
-    /// queued for the control task since the last release (at most
-    /// [`usart_link::CONTROL_RX_BYTES`] a release): the newest whole frame among
-    /// them, decoded (CRC, CMAC) once. The link is not in lock-step with the
+    /// received since the last release, sorted at this call
+    /// ([`usart_link::Port::sort_and_rearm`]: the control task's bytes straight
+    /// into its frame reader, the road's into the plan task's queue): the newest
+    /// whole frame among them, decoded (CRC, CMAC) once. The link is not in lock-step with the
     /// host: a frame that missed its release is whole at the next one with that
     /// release's own, and the newer one is taken (the older is superseded, not
     /// decoded: the answer's `seq` says which one was used), so the ECU does not
@@ -584,20 +591,15 @@ impl Link {
         // The newest frame's framing refusal, when the newest that ended was not a
         // frame (counted as it ended).
         let mut malformed = None;
-        // wcet-bound: 2 * MAX_DRIVING_DOWN_FRAME_BYTES
-        for _ in 0..usart_link::CONTROL_RX_BYTES {
-            let Some(byte) = self.next_byte() else {
-                break;
-            };
-            match self.reader.push(byte) {
-                None => {}
-                Some(Ok(())) => malformed = None,
-                Some(Err(e)) => {
-                    self.count_refused(Some(e.refusal()));
-                    malformed = Some(e.refusal());
-                }
+        let (reader, rejected, refused) = (&mut self.reader, &mut self.rejected, &mut self.refused);
+        self.port.sort_and_rearm(|byte| match reader.push(byte) {
+            None => {}
+            Some(Ok(())) => malformed = None,
+            Some(Err(e)) => {
+                count_refused(rejected, refused, Some(e.refusal()));
+                malformed = Some(e.refusal());
             }
-        }
+        });
         let reason = match self.reader.take_newest() {
             Some(frame) => match link::decode::<Down>(frame, &mut self.mac, &mut self.down_rx) {
                 Ok(Down::Sensor(f)) => {
@@ -652,13 +654,6 @@ impl Link {
         let byte = *self.rx.get(self.rx_pos)?;
         self.rx_pos += 1;
         Some(byte)
-    }
-
-    /// The next byte the interrupt queued for the control task (`None`: none
-    /// yet).
-    #[cfg(feature = "board-usart")]
-    fn next_byte(&mut self) -> Option<u8> {
-        self.port.next_byte()
     }
 
     /// The next byte of the set-up, waiting for it; `None` when the host closed
@@ -1433,11 +1428,10 @@ mod app {
                 .await;
             let release_us = monitor.start();
             let t0 = core_ticks();
-            // The bytes the USART's interrupt received since the last release
-            // counted and a new period's receive budget given together, then
-            // those bytes sorted (this task's frames, the plan task's road).
-            #[cfg(feature = "board-usart")]
-            cx.local.link.port.sort_and_rearm();
+            // In the flashed build, the bytes the USART's interrupt received since
+            // the last release are counted and a new period's receive budget given
+            // together, then those bytes sorted (this task's frames, the plan
+            // task's road), as the sensor frame is read.
             // A refused sensor frame is never acted on: the period runs on no
             // estimate (the dropout policy: both tasks refuse it, the control task
             // applies the safe actuation) and still answers, saying so. A run of

@@ -37,9 +37,8 @@ use cortex_m::peripheral::NVIC;
 use firmware::clock_tree;
 use firmware::link::demux::{Channel, Sorter};
 use firmware::link::usart::{RxBudgets, BAUD, LINK_INTERRUPT_PRIORITY, RX_BUDGET_BYTES};
-use firmware::link::{MAX_DOWN_FRAME_BYTES, MAX_DRIVING_DOWN_FRAME_BYTES, MAX_UP_FRAME_BYTES};
+use firmware::link::{MAX_DOWN_FRAME_BYTES, MAX_UP_FRAME_BYTES};
 use heapless::spsc::{Consumer, Producer, Queue};
-use heapless::Deque;
 use stm32f4::stm32f405 as pac;
 use stm32f4::stm32f405::interrupt;
 
@@ -64,10 +63,6 @@ const _: () = assert!(BRR == 91);
 /// ([`Port::sort_and_rearm`]); a byte that finds the queue full is dropped and
 /// counted.
 pub const RAW_RX_BYTES: usize = RX_BUDGET_BYTES as usize + 1;
-
-/// The control task's sorted bytes, bytes: a sensor frame and the start of the
-/// next.
-pub const CONTROL_RX_BYTES: usize = 2 * MAX_DRIVING_DOWN_FRAME_BYTES;
 
 /// The plan task's receive queue, bytes (it holds one less): one route frame (the
 /// host sends at most one per plan period) and its delimiter.
@@ -142,10 +137,9 @@ struct Storage {
 pub struct Port {
     raw: Consumer<'static, u8, RAW_RX_BYTES>,
     sorter: Sorter,
-    control: Deque<u8, CONTROL_RX_BYTES>,
     route: Producer<'static, u8, ROUTE_RX_BYTES>,
     tx: Producer<'static, u8, TX_BYTES>,
-    /// Bytes dropped because their queue was full, bytes.
+    /// Bytes of the road dropped because the plan task's queue was full, bytes.
     pub dropped: u32,
 }
 
@@ -216,7 +210,6 @@ pub fn open(
         Port {
             raw: raw_out,
             sorter: Sorter::new(),
-            control: Deque::new(),
             route: route_in,
             tx: tx_in,
             dropped: 0,
@@ -263,7 +256,7 @@ impl Port {
     /// counted bytes sorted ([`firmware::link::demux::Sorter`], a byte handed
     /// over per byte received, the head of a frame held over at most two
     /// bytes and handed over at the end): sensor, stop and set-up
-    /// frames into the control task's bytes ([`Port::next_byte`]), the windows
+    /// frames to `control` (the control task's frame reader), the windows
     /// of the road into the plan task's queue ([`RoutePort::next_byte`]). Bytes
     /// received while it sorts wait for the next period. So the bytes sorted at
     /// a release are those received between the last release's count and this
@@ -274,7 +267,7 @@ impl Port {
     /// apart on that premise (`host-sim`'s `EcuBuild::light_activations`). Here
     /// rather than in the interrupt, so that an entry of the interrupt costs
     /// little and the sorting runs in a loop that stays in the cache.
-    pub fn sort_and_rearm(&mut self) {
+    pub fn sort_and_rearm(&mut self, mut control: impl FnMut(u8)) {
         let count = cortex_m::interrupt::free(|_| {
             let count = self.raw.len();
             RX_BUDGETS.renew_control();
@@ -288,7 +281,7 @@ impl Port {
                 break;
             };
             if let Some((channel, b)) = self.sorter.push(byte) {
-                self.hand_over(channel, b);
+                self.hand_over(channel, b, &mut control);
             }
         }
         // The bytes told and still held (a frame's head handed over one per
@@ -298,25 +291,22 @@ impl Port {
             let Some((channel, b)) = self.sorter.take_held() else {
                 break;
             };
-            self.hand_over(channel, b);
+            self.hand_over(channel, b, &mut control);
         }
     }
 
-    /// One sorted byte to its channel; a byte that finds it full is dropped and
-    /// counted.
+    /// One sorted byte to its channel: the control task's to `control` (its
+    /// frame reader), the plan task's into its queue (a byte that finds it full
+    /// is dropped and counted).
     #[inline(always)]
-    fn hand_over(&mut self, channel: Channel, b: u8) {
-        let full = match channel {
-            Channel::Control => self.control.push_back(b).is_err(),
-            Channel::Route => self.route.enqueue(b).is_err(),
-        };
-        self.dropped = self.dropped.wrapping_add(u32::from(full));
-    }
-
-    /// The control task's next sorted byte ([`Port::sort_and_rearm`]), `None` when none
-    /// is. The tasks' path: it never waits.
-    pub fn next_byte(&mut self) -> Option<u8> {
-        self.control.pop_front()
+    fn hand_over(&mut self, channel: Channel, b: u8, control: &mut impl FnMut(u8)) {
+        match channel {
+            Channel::Control => control(b),
+            Channel::Route => {
+                let full = self.route.enqueue(b).is_err();
+                self.dropped = self.dropped.wrapping_add(u32::from(full));
+            }
+        }
     }
 
     /// The next byte on the line, polled, waiting for the host as long as it
