@@ -1,24 +1,12 @@
 //! No function of the crate is longer than [`MAX_LINES`] lines, from its `fn`
 //! line to its closing brace: a longer one is split into its phases.
 
-use std::path::{Path, PathBuf};
+mod support;
+
+use std::path::Path;
 
 /// The longest a function may be, lines.
 const MAX_LINES: usize = 150;
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for e in entries.flatten() {
-        let p = e.path();
-        if p.is_dir() {
-            rust_files(&p, out);
-        } else if p.extension().is_some_and(|x| x == "rs") {
-            out.push(p);
-        }
-    }
-}
 
 /// The functions of `text` as `(name, first line, lines)`: a line whose code
 /// starts with `fn` (after `pub`, `pub(crate)`, `const`, ...) up to the first
@@ -58,9 +46,7 @@ fn functions(text: &str) -> Vec<(String, usize, usize)> {
 #[test]
 fn no_function_is_longer_than_its_phases_need() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = Vec::new();
-    rust_files(&src, &mut files);
-    files.sort();
+    let files = support::rust_files(&src);
     let mut long = Vec::new();
     let mut count = 0;
     for file in &files {

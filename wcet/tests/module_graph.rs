@@ -6,24 +6,12 @@
 //! import; comments are not read.
 
 use std::collections::{BTreeMap, BTreeSet};
+mod support;
+
 use std::path::{Path, PathBuf};
 
 /// A module's path from the crate root, `""` for the root (`lib.rs`).
 type Module = String;
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for e in entries.flatten() {
-        let p = e.path();
-        if p.is_dir() {
-            rust_files(&p, out);
-        } else if p.extension().is_some_and(|x| x == "rs") {
-            out.push(p);
-        }
-    }
-}
 
 /// The module a file under `src` defines: `lib.rs` the root, `a.rs` and
 /// `a/mod.rs` the module `a`, `a/b.rs` the module `a::b`.
@@ -225,9 +213,7 @@ fn graph() -> BTreeMap<Module, BTreeSet<Module>> {
     let src = std::env::var_os("MODULE_GRAPH_SRC")
         .map(PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("src"));
-    let mut files = Vec::new();
-    rust_files(&src, &mut files);
-    files.sort();
+    let files = support::rust_files(&src);
     let modules: BTreeSet<Module> = files.iter().map(|f| module_of(&src, f)).collect();
     let mut edges: BTreeMap<Module, BTreeSet<Module>> = BTreeMap::new();
     for file in &files {
