@@ -190,11 +190,11 @@ impl Sorter {
             // At most three bytes, and at most three wait with them (the
             // invariant above): the shifts stay within the word.
             let n = e.len.min(3) as u32;
+            let at = self.len.min(3);
             let mask = (1u32 << (8 * n)) - 1;
-            let shift = 8 * self.len.min(3);
-            self.held |= (u32::from_le_bytes(e.bytes) & mask) << shift;
+            self.held |= (u32::from_le_bytes(e.bytes) & mask) << (8 * at);
             let to_route = u32::from(e.channel == Channel::Route);
-            self.route |= (((1u32 << n) - 1) * to_route) << self.len.min(3);
+            self.route |= (((1u32 << n) - 1) * to_route) << at;
             self.len += n;
         }
         self.take_held()

@@ -109,26 +109,25 @@ pub fn encode<M: Serialize + ?Sized>(
     let raw_len = n + SECURED_BYTES + CRC_BYTES;
     let raw = body.get_mut(..raw_len).ok_or(FrameError::BufferTooSmall)?;
     // No slicing or copy that can panic: the panic path sends through here.
-    let (input, trailer) = raw
-        .split_at_mut_checked(n + FRESHNESS_BYTES)
+    let (body, check) = raw
+        .split_at_mut_checked(n + SECURED_BYTES)
         .ok_or(FrameError::BufferTooSmall)?;
-    let (fresh_tag, check) = trailer
-        .split_at_mut_checked(MAC_BYTES)
+    let (input, tag) = body
+        .split_at_mut_checked(n + FRESHNESS_BYTES)
         .ok_or(FrameError::BufferTooSmall)?;
     for (d, s) in input.iter_mut().skip(n).zip(freshness.to_le_bytes()) {
         *d = s;
     }
-    for (d, s) in fresh_tag.iter_mut().zip(mac.tag(tx.stream(), input)) {
+    for (d, s) in tag.iter_mut().zip(mac.tag(tx.stream(), input)) {
         *d = s;
     }
     let mut crc = CRC32_INIT;
-    // The version, the message and the freshness value, then the tag: at most a
-    // frame's bytes, and the control task encodes one frame (an `Up`) per
-    // activation; the plan task encodes none.
+    // The version, the message, the freshness value and the tag (what
+    // `decode` checks the CRC over): at most a frame's bytes, and the control
+    // task encodes one frame (an `Up`) per activation; the plan task encodes
+    // none.
     // wcet-bound: MAX_UP_FRAME_BYTES per activation
-    crc32_update!(crc, input.iter());
-    // wcet-bound: 8
-    crc32_update!(crc, fresh_tag.iter());
+    crc32_update!(crc, body.iter());
     for (d, s) in check.iter_mut().zip((!crc).to_le_bytes()) {
         *d = s;
     }
