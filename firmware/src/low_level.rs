@@ -596,6 +596,10 @@ pub fn control<T: Real>(
     control_with_model(cfg, state, plan, est, now_us, &CarModel::configured(cfg))
 }
 
+/// Longest age of a state estimate its heading is projected over, s (an older one
+/// is projected over this much).
+pub const MAX_PROJECTED_AGE_S: f32 = 0.3;
+
 /// Speed under which the car stands, m/s: the brake hold's
 /// ([`control_with_model`]) and [`crate::tasks::ControlTask::stop_reason`]'s.
 pub const STANDSTILL_MPS: f32 = 0.5;
@@ -676,12 +680,18 @@ pub fn control_with_model<T: Real>(
     let (torque, torque_ff, wheel_torque_nm) =
         longitudinal(cfg, car, &mut speed_pid, &now_ref, &ahead_ref, v, dt)?;
     let mut yaw_pid = state.yaw_pid;
+    // The estimate's age at `now_us` (its stamp is when it was measured): the
+    // heading is projected over it too.
+    let est_age_s = smaller(
+        at_least(signed_seconds::<T>(now_us, est.stamp_us), T::ZERO),
+        T::lit(MAX_PROJECTED_AGE_S),
+    );
     let (delta_ol, delta, yaw_error) = lateral(
         cfg,
         car,
         state.last_delta_rad,
         &mut yaw_pid,
-        plan.dt_s,
+        plan.dt_s + est_age_s,
         est,
         &now_ref,
         &ahead_ref,

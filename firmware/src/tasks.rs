@@ -611,6 +611,50 @@ pub struct ControlTask<T> {
     /// share `1 − s` ([`LowLevelConfig::brake_front_share`]): the anti-lock
     /// limit's axle loads per brake share without a division per period.
     inv_brake_shares: [T; 2],
+    /// The traction limit held for a driven wheel that spun ([`WheelLimit`]).
+    spin_limit: WheelLimit,
+    /// The braking limit held for a wheel that locked.
+    lock_limit: WheelLimit,
+}
+
+/// A torque limit lowered while a wheel slips, for as long as the estimates
+/// cannot yet show what the lowering did ([`ControlTask::car_model`]): it
+/// starts at the release whose estimate shows the wheel slipping, and ends at
+/// the first estimate measured at or after that release that shows it rolling. An estimate `d` old shows
+/// the wheel `d` ago: without the wait, each of the `d` of estimates measured
+/// before the halving took effect would lift it again while the wheel was still
+/// slipping, and a wheel that slips under the full torque would slip again.
+/// With fresh estimates (measured at their release) it ends at the next one
+/// that shows the wheel rolling.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct WheelLimit {
+    /// The release (µs) whose estimate first showed the wheel slipping; `None`
+    /// when the limit is whole.
+    since_us: Option<u64>,
+}
+
+/// Share of the braking limit while a wheel's lock awaits an estimate measured
+/// after the braking was halved ([`WheelLimit`]): the estimates in between show
+/// the wheel rolling, but from before the halving took effect.
+pub const LOCK_WAIT_BRAKING_SHARE: f32 = 0.75;
+
+impl WheelLimit {
+    /// True while the limit is held (since a slip was seen, until an estimate
+    /// measured after that shows the wheel rolling).
+    fn held(self) -> bool {
+        self.since_us.is_some()
+    }
+
+    /// The estimate measured at `stamp_us` (µs) shows the wheel slipping
+    /// (`slipping`) at the release `now_us` (µs); true while the limit is halved.
+    fn update(&mut self, slipping: bool, stamp_us: u64, now_us: u64) -> bool {
+        self.since_us = match self.since_us {
+            _ if slipping => Some(self.since_us.unwrap_or(now_us)),
+            Some(since) if stamp_us < since => Some(since),
+            _ => None,
+        };
+        self.since_us.is_some()
+    }
 }
 
 impl<T: Real> ControlTask<T> {
@@ -657,6 +701,8 @@ impl<T: Real> ControlTask<T> {
                 T::ZERO
             },
             front_sliding: false,
+            spin_limit: WheelLimit::default(),
+            lock_limit: WheelLimit::default(),
             front_axle_m: friction_config.wheelbase_m * (T::ONE - friction_config.front_load_share),
             inv_brake_shares: [
                 T::ONE / larger(config.brake_front_share, T::lit(0.01)),
@@ -780,7 +826,9 @@ impl<T: Real> ControlTask<T> {
     /// `lateral_mps2` (m/s²; the friction ellipse `sqrt(1 − (a_y/grip)²)`, at least
     /// 0.3; half of it while slip is flagged; half the traction's while a driven
     /// wheel spins, half the braking's while a wheel locks, by the wheel speeds
-    /// of the last estimate) ([`TORQUE_GRIP_FRACTION`] of it:
+    /// of the last estimate, and after it as long as the estimates were measured
+    /// before the halving took effect: the traction's halved, the braking's at
+    /// [`LOCK_WAIT_BRAKING_SHARE`]) ([`TORQUE_GRIP_FRACTION`] of it:
     /// of the driven axle's share for traction, as much as its inside wheel
     /// carries under the lateral load transfer and less the load the car's own
     /// acceleration moves off the driven front axle, for the lightest mass the
@@ -806,8 +854,19 @@ impl<T: Real> ControlTask<T> {
         let slipping = self.friction.slipping();
         let grip = if slipping { grip * T::HALF } else { grip };
         let half = |on: bool| if on && !slipping { T::HALF } else { T::ONE };
-        let traction_half = half(self.friction.wheel_spinning());
-        let braking_half = half(self.friction.wheel_locking());
+        // A late estimate (`WheelLimit`): the traction stays halved until an
+        // estimate measured after the halving shows the wheels rolling; the
+        // braking, halved while the estimate shows a wheel locking, is held at
+        // LOCK_WAIT_BRAKING_SHARE of its limit meanwhile (halved through the
+        // wait, the stopping distance grew by metres: docs/tuning.md).
+        let traction_half = half(self.spin_limit.held());
+        let braking_half = if self.friction.wheel_locking() {
+            half(true)
+        } else if self.lock_limit.held() && !slipping {
+            T::lit(LOCK_WAIT_BRAKING_SHARE)
+        } else {
+            T::ONE
+        };
         // The friction ellipse: what the lateral acceleration leaves, at least 0.3
         // of it (a car sliding sideways still brakes): `grip·sqrt(1 − (a_y/grip)²)`
         // as `sqrt(grip² − a_y²)`, no division (`grip > 0`).
@@ -880,6 +939,11 @@ impl<T: Real> ControlTask<T> {
     pub fn run(&mut self, est: &StateEstimate<T>, plan: &Plan<T>, now_us: u64) -> Actuation<T> {
         self.stats.activations = self.stats.activations.wrapping_add(1);
         self.friction.read_sensors(&self.friction_config, est);
+        let spinning = self.friction.wheel_spinning();
+        let locking = self.friction.wheel_locking();
+        // Whether each limit is held is read back by `car_model`.
+        let _ = self.spin_limit.update(spinning, est.stamp_us, now_us);
+        let _ = self.lock_limit.update(locking, est.stamp_us, now_us);
         let lateral = self.lateral_demand(est);
         // The brakes' left/right shares follow the measured `V·ψ̇`.
         let car = self.car_model(lateral, est.vx_mps * est.yaw_rate_radps);
@@ -951,11 +1015,50 @@ impl<T: Real> ControlTask<T> {
 
 #[cfg(test)]
 mod tests {
-    use super::PLAN_DT_US;
+    use super::{WheelLimit, PLAN_DT_US};
     use crate::plan::PLAN_DT_S;
 
     #[test]
     fn plan_step_in_microseconds_matches_the_plan_step() {
         assert_eq!(PLAN_DT_US, (f64::from(PLAN_DT_S) * 1e6).round() as u64);
+    }
+
+    /// Releases every 10 ms from `t0` (µs), estimates `delay_us` old, the wheel
+    /// slipping in those measured in `slipping_at` (µs, a half-open range): the
+    /// releases at which the limit is halved.
+    fn halved(delay_us: u64, slipping_at: core::ops::Range<u64>) -> Vec<u64> {
+        let mut limit = WheelLimit::default();
+        (0..40u64)
+            .map(|k| 1_000_000 + 10_000 * k)
+            .filter(|&now| {
+                let stamp = now - delay_us;
+                limit.update(slipping_at.contains(&stamp), stamp, now)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn fresh_estimates_halve_the_limit_while_they_show_the_wheel_slipping() {
+        // Measured at their release: halved exactly at the releases that see it.
+        assert_eq!(
+            halved(0, 1_100_000..1_130_000),
+            [1_100_000, 1_110_000, 1_120_000]
+        );
+    }
+
+    #[test]
+    fn late_estimates_keep_the_limit_halved_until_one_measured_after_it_shows_the_wheel_rolling() {
+        // 100 ms late: the slip measured over 30 ms is seen from 1.2 s on; the
+        // estimates measured before 1.2 s (seen until 1.29 s) cannot show what
+        // the halving did, so it lasts until the one measured at 1.2 s, seen at
+        // 1.3 s, shows the wheel rolling.
+        let h = halved(100_000, 1_100_000..1_130_000);
+        assert_eq!(h.first(), Some(&1_200_000));
+        assert_eq!(h.last(), Some(&1_290_000));
+        assert_eq!(h.len(), 10);
+        // Still slipping when measured after the halving: halved until an
+        // estimate measured after its start shows it rolling again.
+        let h = halved(100_000, 1_100_000..1_250_000);
+        assert_eq!((h.first(), h.last()), (Some(&1_200_000), Some(&1_340_000)));
     }
 }

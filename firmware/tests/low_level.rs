@@ -8,7 +8,7 @@
 )]
 
 use firmware::low_level::{
-    control, control_with_model, safe_actuation, wrap_pi, Actuation, CarModel, ControlFault,
+    self, control, control_with_model, safe_actuation, wrap_pi, Actuation, CarModel, ControlFault,
     LowLevelConfig, LowLevelConfigError, LowLevelState, Mode,
 };
 use firmware::pid::{self, PidState};
@@ -1272,8 +1272,48 @@ fn the_yaw_reference_is_interpolated_one_step_ahead() {
     let mut st = LowLevelState::new();
     let mut e = est(10.0, 0.025);
     e.yaw_rate_radps = 0.5;
+    e.stamp_us = 50_000;
     let a = control(&cfg, &mut st, &plan, &e, 50_000).unwrap();
     assert!((a.psi_ref_rad - 0.125).abs() < 1e-12, "{}", a.psi_ref_rad);
+    assert!(a.yaw_error_rad.abs() < 1e-12, "{}", a.yaw_error_rad);
+}
+
+#[test]
+fn a_late_estimates_heading_is_projected_over_its_age() {
+    // ψ^r rising 0.1 rad per node (0.5 rad/s). At t = 0.15 s the car's estimate
+    // is 100 ms old (stamped 0.05 s, on the plan then: 0.025 rad, yawing at
+    // 0.5 rad/s): projected over its age and one plan step (0.3 s), it is on the
+    // reference one step ahead (node 1.75, 0.175 rad): no error. Read as if
+    // measured now, it would be 0.05 rad behind and steer the car off its plan.
+    let cfg = cfg_no_ff();
+    let mut plan = straight_plan(0, 10.0);
+    for (k, n) in plan.nodes.iter_mut().enumerate() {
+        n.psi_rad = 0.1 * k as f64;
+    }
+    let mut e = est(10.0, 0.025);
+    e.yaw_rate_radps = 0.5;
+    e.stamp_us = 50_000;
+    let a = control(&cfg, &mut LowLevelState::new(), &plan, &e, 150_000).unwrap();
+    assert!((a.psi_ref_rad - 0.175).abs() < 1e-12, "{}", a.psi_ref_rad);
+    assert!(a.yaw_error_rad.abs() < 1e-12, "{}", a.yaw_error_rad);
+    // An estimate older than MAX_PROJECTED_AGE_S is projected over that much only:
+    // stamped 0.5 s before t = 0.6 s, on the plan then (0.25 rad), it lands
+    // 0.5 rad/s × (0.3 + 0.2 s) later, against the reference at node 4 (0.4 rad).
+    let mut e = est(10.0, 0.25);
+    e.yaw_rate_radps = 0.5;
+    e.stamp_us = 100_000;
+    let a = control(&cfg, &mut LowLevelState::new(), &plan, &e, 600_000).unwrap();
+    let projected = 0.25 + 0.5 * (f64::from(low_level::MAX_PROJECTED_AGE_S) + 0.2);
+    assert!(
+        (a.yaw_error_rad - (projected - 0.4)).abs() < 1e-6,
+        "{}",
+        a.yaw_error_rad
+    );
+    // A stamp after `now` (clocks out of step) is an age of 0.
+    let mut e = est(10.0, 0.025);
+    e.yaw_rate_radps = 0.5;
+    e.stamp_us = 90_000;
+    let a = control(&cfg, &mut LowLevelState::new(), &plan, &e, 50_000).unwrap();
     assert!(a.yaw_error_rad.abs() < 1e-12, "{}", a.yaw_error_rad);
 }
 
