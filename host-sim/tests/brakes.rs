@@ -9,7 +9,6 @@
 use host_sim::closed_loop::set_up::{RunSpec, Setting};
 use host_sim::model::actuator::ActuatorSetting;
 use host_sim::sweep::execute::{execute, Common};
-use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
 
 /// Two laps of the oval at μ 1 with the brakes' gain `gain`, as the sweep runs
@@ -41,14 +40,10 @@ fn oval<const N: usize>(gain: f64, names: [&str; N]) -> [String; N] {
         log_dir: None,
     };
     let row = execute(&spec, &common);
-    let cells: Vec<(String, String)> = header().into_iter().skip(10).zip(row.cells).collect();
     let cell = |name: &str| {
-        cells
-            .iter()
-            .find(|(h, _)| h == name)
+        row.cell(name)
             .unwrap_or_else(|| panic!("no column {name}"))
-            .1
-            .clone()
+            .to_string()
     };
     assert_eq!(cell("error"), "");
     names.map(cell)

@@ -6,7 +6,6 @@
 
 use host_sim::closed_loop::set_up::{ObstacleSpec, RunSpec, Setting};
 use host_sim::sweep::execute::{execute, Common};
-use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
 
 /// `track` (a file of `tests/data`) with 3 random boxes per km of seed `seed`, at
@@ -38,8 +37,11 @@ fn run(track: &str, seed: u32, noise: f64, delay_ms: f64, duration_s: f64) -> [S
         log_dir: None,
     };
     let row = execute(&spec, &common);
-    let cells: Vec<(String, String)> = header().into_iter().skip(10).zip(row.cells).collect();
-    let cell = |name: &str| cells.iter().find(|(h, _)| h == name).unwrap().1.clone();
+    let cell = |name: &str| {
+        row.cell(name)
+            .unwrap_or_else(|| panic!("no column {name}"))
+            .to_string()
+    };
     // A run cut short by `duration_s` says so; no other error.
     let error = cell("error");
     assert!(

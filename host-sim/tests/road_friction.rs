@@ -10,7 +10,6 @@ use host_sim::closed_loop::{Precision, SimOptions};
 use host_sim::model::plant::{Inputs, Plant, State};
 use host_sim::model::vehicle::VehicleParams;
 use host_sim::sweep::execute::{execute, Common, LogRuns};
-use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
 use host_sim::world::road_friction::MuPatch;
 use host_sim::world::scenario::{Scenario, PAPER_HALF_WIDTH_M};
@@ -181,8 +180,11 @@ fn the_sweeps_false_drop_column_follows_its_definition_on_the_runs_trace() {
         log_dir: Some((dir.path().to_path_buf(), LogRuns::All)),
     };
     let row = execute(&spec, &common);
-    let cells: Vec<(String, String)> = header().into_iter().skip(10).zip(row.cells).collect();
-    let cell = |name: &str| cells.iter().find(|(h, _)| h == name).unwrap().1.clone();
+    let cell = |name: &str| {
+        row.cell(name)
+            .unwrap_or_else(|| panic!("no column {name}"))
+            .to_string()
+    };
     assert_eq!(cell("error"), "");
     let log = read_log(&dir.path().join("0").join("log.csv"));
     assert!(log.iter().any(|r| r.road_mu == 0.3));

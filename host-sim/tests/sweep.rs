@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::Command;
 
 use host_sim::closed_loop::set_up::{RunSpec, Setting};
-use host_sim::sweep::execute::{execute, Common};
+use host_sim::sweep::execute::{execute, Common, RunRow};
 use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
 use host_sim::world::track::{Track, TrackPiece};
@@ -130,12 +130,12 @@ fn a_sweep_is_deterministic_across_threads_and_shards_and_an_error_is_a_row() {
     assert_eq!(json["outcomes"]["failed"], 1);
 }
 
-fn run_fault(track: &str, fault: Fault) -> Vec<(String, String)> {
+fn run_fault(track: &str, fault: Fault) -> RunRow {
     run_fault_noisy(track, fault, 0.0, 0.0)
 }
 
 /// [`run_fault`] with estimate noise of level `noise` and `delay_ms` of delay.
-fn run_fault_noisy(track: &str, fault: Fault, noise: f64, delay_ms: f64) -> Vec<(String, String)> {
+fn run_fault_noisy(track: &str, fault: Fault, noise: f64, delay_ms: f64) -> RunRow {
     let spec = RunSpec {
         index: 0,
         track: track.into(),
@@ -156,19 +156,18 @@ fn run_fault_noisy(track: &str, fault: Fault, noise: f64, delay_ms: f64) -> Vec<
         obstacle_dir: None,
         log_dir: None,
     };
-    let row = execute(&spec, &common);
-    header().into_iter().skip(10).zip(row.cells).collect()
+    execute(&spec, &common)
 }
 
 /// [`run_fault`] on the oval of [`write_oval`], written to a folder of its own.
-fn run_fault_on_oval(fault: Fault) -> Vec<(String, String)> {
+fn run_fault_on_oval(fault: Fault) -> RunRow {
     let dir = tempfile::tempdir().unwrap();
     let oval = write_oval(dir.path());
     run_fault(&oval, fault)
 }
 
-fn cell<'a>(row: &'a [(String, String)], name: &str) -> &'a str {
-    &row.iter().find(|(h, _)| h == name).unwrap().1
+fn cell<'a>(row: &'a RunRow, name: &str) -> &'a str {
+    row.cell(name).unwrap()
 }
 
 #[test]

@@ -10,7 +10,6 @@
 
 use host_sim::closed_loop::set_up::{RunSpec, Setting};
 use host_sim::sweep::execute::{execute, Common};
-use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
 use host_sim::world::road_friction::MuPatch;
 
@@ -41,8 +40,11 @@ fn lap(track: &str, mu: f64, noise: f64, delay_ms: f64, patches: Vec<MuPatch>) -
         log_dir: None,
     };
     let row = execute(&spec, &common);
-    let cells: Vec<(String, String)> = header().into_iter().skip(10).zip(row.cells).collect();
-    let cell = |name: &str| cells.iter().find(|(h, _)| h == name).unwrap().1.clone();
+    let cell = |name: &str| {
+        row.cell(name)
+            .unwrap_or_else(|| panic!("no column {name}"))
+            .to_string()
+    };
     assert_eq!(cell("error"), "", "{track}");
     [
         cell("outcome"),

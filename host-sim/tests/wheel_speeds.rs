@@ -9,7 +9,6 @@
 
 use host_sim::closed_loop::set_up::{RunSpec, Setting};
 use host_sim::sweep::execute::{execute, Common};
-use host_sim::sweep::table::header;
 use host_sim::world::faults::Fault;
 
 /// One lap of `track` (a file of `tests/data`) at μ 1 under `fault`, at the
@@ -53,14 +52,10 @@ fn lap_seeded<const N: usize>(
         log_dir: None,
     };
     let row = execute(&spec, &common);
-    let cells: Vec<(String, String)> = header().into_iter().skip(10).zip(row.cells).collect();
     let cell = |name: &str| {
-        cells
-            .iter()
-            .find(|(h, _)| h == name)
+        row.cell(name)
             .unwrap_or_else(|| panic!("no column {name}"))
-            .1
-            .clone()
+            .to_string()
     };
     assert_eq!(cell("error"), "", "{track}");
     names.map(cell)

@@ -41,6 +41,19 @@ pub struct RunRow {
     pub cells: Vec<String>,
 }
 
+impl RunRow {
+    /// The cell of column `name` of `sweep.csv` (a result column or a summary
+    /// field), `None` for a factor column or a name that is no column.
+    pub fn cell(&self, name: &str) -> Option<&str> {
+        let i = RESULT_COLUMNS
+            .iter()
+            .map(|c| c.to_string())
+            .chain(summary_header())
+            .position(|c| c == name)?;
+        self.cells.get(i).map(String::as_str)
+    }
+}
+
 /// Settings shared by every run of a sweep.
 #[derive(Clone, Debug)]
 pub struct Common {
